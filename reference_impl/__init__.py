@@ -1,0 +1,1 @@
+"""robogs reference_impl."""

@@ -1,0 +1,102 @@
+"""Image and video codecs: 16-bit label PNGs and colour videos (via OpenCV)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .errors import FormatError
+
+__all__ = ["encode_label_png", "decode_label_png", "iter_video_frames", "video_frame_count", "VideoWriter"]
+
+MAX_PIXELS = 100_000_000
+
+
+def encode_label_png(labels: np.ndarray) -> bytes:
+    """Encode an [H, W] array of label ids (0..65535) as a lossless 16-bit PNG."""
+    if labels.ndim != 2 or labels.min(initial=0) < 0 or labels.max(initial=0) > 65535:
+        raise FormatError(f"label image must be [H, W] with ids in 0..65535, got {labels.shape}")
+    ok, buf = cv2.imencode(".png", labels.astype(np.uint16))
+    if not ok:
+        raise FormatError("PNG encoding failed")
+    return buf.tobytes()
+
+
+def decode_label_png(blob: bytes, *, path: str | Path | None = None, where: str | None = None) -> np.ndarray:
+    """Decode a label PNG into an [H, W] uint16 array."""
+    if not blob:
+        raise FormatError("empty label image", path=path, where=where)
+    arr = np.frombuffer(blob, np.uint8)
+    img = cv2.imdecode(arr, cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise FormatError("label image is not a decodable PNG", path=path, where=where,
+                          hint="labels are 16-bit single-channel PNGs")
+    if img.ndim != 2:
+        raise FormatError(f"label image must be single-channel, has shape {img.shape}", path=path, where=where)
+    return img.astype(np.uint16, copy=False)
+
+
+def _open_capture(path: Path) -> cv2.VideoCapture:
+    if not Path(path).is_file():
+        raise FormatError("video file is missing", path=path)
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        raise FormatError("video cannot be opened (unknown container or codec)", path=path,
+                          hint="re-encode as mp4 (mp4v or H.264) or mkv")
+    return cap
+
+
+def video_frame_count(path: str | Path, *, exact: bool = False) -> int:
+    """Number of frames: from the container header, or by decoding every frame if ``exact``."""
+    cap = _open_capture(Path(path))
+    try:
+        if not exact:
+            return int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        n = 0
+        while cap.grab():
+            n += 1
+        return n
+    finally:
+        cap.release()
+
+
+def iter_video_frames(path: str | Path) -> Iterator[np.ndarray]:
+    """Yield frames as RGB uint8 arrays [H, W, 3] in file order."""
+    cap = _open_capture(Path(path))
+    try:
+        while True:
+            ok, frame = cap.read()
+            if not ok:
+                break
+            yield cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
+    finally:
+        cap.release()
+
+
+class VideoWriter:
+    """Write RGB frames to an mp4 (MPEG-4 part 2, 'mp4v') file."""
+
+    def __init__(self, path: str | Path, width: int, height: int, fps: float) -> None:
+        if width * height > MAX_PIXELS or width <= 0 or height <= 0:
+            raise FormatError(f"refusing video size {width}x{height}", path=path)
+        self.path = Path(path)
+        self._w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (int(width), int(height)))
+        if not self._w.isOpened():
+            raise FormatError("cannot open video writer (OpenCV built without mp4v?)", path=path)
+        self.count = 0
+
+    def write(self, rgb: np.ndarray) -> None:
+        self._w.write(cv2.cvtColor(np.ascontiguousarray(rgb, dtype=np.uint8), cv2.COLOR_RGB2BGR))
+        self.count += 1
+
+    def close(self) -> None:
+        self._w.release()
+
+    def __enter__(self) -> VideoWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
