@@ -1,1 +1,1 @@
-"""robogs reference_impl."""
+"""Reference implementations built on the robogs format: reconstruction and physics."""

@@ -57,9 +57,12 @@ __all__ = [
 ]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
+_NP_TYPES = (np.ndarray, np.generic)
 
 
 def _to_torch(x: Any) -> Any:
+    if isinstance(x, np.generic):
+        x = np.asarray(x)
     if isinstance(x, np.ndarray):
         if x.dtype == np.float32:
             return torch.from_numpy(np.ascontiguousarray(x))
@@ -80,8 +83,8 @@ def _numpy_compatible(fn: _F) -> _F:
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        is_np = any(isinstance(a, np.ndarray) for a in args) or any(
-            isinstance(v, np.ndarray) for v in kwargs.values()
+        is_np = any(isinstance(a, _NP_TYPES) for a in args) or any(
+            isinstance(v, _NP_TYPES) for v in kwargs.values()
         )
         if not is_np:
             return fn(*args, **kwargs)

@@ -1,0 +1,1 @@
+"""The ``robogs`` command line."""

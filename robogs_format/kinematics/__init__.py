@@ -1,0 +1,26 @@
+"""Forward kinematics: URDF trees (:class:`Chain`) and modified-DH tables (:class:`MDHTable`).
+
+Conventions are in ``design.md`` next to this file.
+"""
+
+from robogs_format.kinematics.chain import JOINT_TYPES, Chain
+from robogs_format.kinematics.mdh import (
+    MDH_CONVENTION,
+    MDHTable,
+    load_mdh_json,
+    mdh_transform,
+    save_mdh_json,
+)
+from robogs_format.kinematics.presets import UR5_JOINT_NAMES, ur5_mdh
+
+__all__ = [
+    "Chain",
+    "JOINT_TYPES",
+    "MDHTable",
+    "MDH_CONVENTION",
+    "mdh_transform",
+    "load_mdh_json",
+    "save_mdh_json",
+    "ur5_mdh",
+    "UR5_JOINT_NAMES",
+]
