@@ -87,6 +87,9 @@ def _safe_parser() -> etree.XMLParser:
 
 def _parse_xml_bytes(data: bytes, path: Path, what: str) -> etree._Element:
     """Parse XML with entities refused; raise FormatError on anything unsafe or malformed."""
+    doctype = data.find(b"<!DOCTYPE")
+    if doctype >= 0 and b"<!ENTITY" in data[doctype:]:
+        _raise_entities(path, what)
     try:
         root = etree.fromstring(data, parser=_safe_parser())
     except etree.XMLSyntaxError as exc:
@@ -102,13 +105,17 @@ def _parse_xml_bytes(data: bytes, path: Path, what: str) -> etree._Element:
     dtd = docinfo.internalDTD
     entities = list(dtd.iterentities()) if dtd is not None else []
     if entities or docinfo.system_url or _has_entity_nodes(root):
-        raise FormatError(
-            f"{what} declares XML entities or an external DTD, which robogs refuses to expand",
-            path=path,
-            where="<!DOCTYPE>",
-            hint="remove the DOCTYPE/ENTITY declarations (xacro output never needs them)",
-        )
+        _raise_entities(path, what)
     return root
+
+
+def _raise_entities(path: Path, what: str) -> None:
+    raise FormatError(
+        f"{what} declares XML entities or an external DTD, which robogs refuses to expand",
+        path=path,
+        where="<!DOCTYPE>",
+        hint="remove the DOCTYPE/ENTITY declarations (xacro output never needs them)",
+    )
 
 
 def _has_entity_nodes(root: etree._Element) -> bool:
@@ -451,6 +458,27 @@ def _check_dae(path: Path) -> None:
         _parse_xml_bytes(_read_limited(path, "COLLADA mesh"), path, "COLLADA mesh")
 
 
+class _CheckedURDF(yourdfpy.URDF):
+    """yourdfpy.URDF that refuses mesh files which load as empty (trimesh skips broken ones)."""
+
+    def __init__(self, *args, robogs_path: Path, robogs_uris: Mapping[str, str], **kwargs) -> None:
+        self._robogs_path = robogs_path
+        self._robogs_uris = robogs_uris
+        super().__init__(*args, **kwargs)
+
+    def _geometry2trimeshscene(self, geometry, load_file, force_mesh, skip_materials):  # noqa: ANN001, ANN202
+        scene = super()._geometry2trimeshscene(geometry, load_file, force_mesh, skip_materials)
+        if geometry.mesh is not None and load_file and (scene is None or not scene.geometry):
+            uri = geometry.mesh.filename
+            raise FormatError(
+                "mesh file holds no readable geometry",
+                path=self._robogs_path,
+                where=f"mesh '{uri}' ({self._robogs_uris.get(uri, '?')})",
+                hint="the file may be corrupt or empty; re-export it",
+            )
+        return scene
+
+
 def load_urdf(
     path: str | os.PathLike[str],
     *,
@@ -519,8 +547,10 @@ def load_urdf(
         return mapping[fname]
 
     try:
-        urdf = yourdfpy.URDF(
+        urdf = _CheckedURDF(
             robot=robot,
+            robogs_path=path,
+            robogs_uris=mapping,
             build_scene_graph=True,
             build_collision_scene_graph=load_meshes,
             load_meshes=load_meshes,

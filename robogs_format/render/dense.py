@@ -9,8 +9,6 @@ per-pixel loop of the 3DGS reference ``renderCUDA``, vectorised over pixels only
 
 from __future__ import annotations
 
-import math
-
 import torch
 import torch.nn.functional as F
 
@@ -71,7 +69,8 @@ def render_dense(
     W_rot = torch.linalg.inv(T_wc)[:3, :3]  # world -> camera rotation
     T_cw = torch.linalg.inv(T_wc)
     p_c = (T_cw[:3, :3] @ g.means.T).T + T_cw[:3, 3]
-    z = p_c[:, 2]
+    in_depth = (p_c[:, 2] > camera.near) & (p_c[:, 2] < camera.far)
+    z = torch.where(in_depth, p_c[:, 2], torch.ones_like(p_c[:, 2]))  # culled rows stay finite
     fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
     R = quat_to_rotmat(g.quats)
     s = torch.exp(g.log_scales)
@@ -135,7 +134,7 @@ def render_dense(
     rgb_g = eval_sh(g.sh, dirs, config.sh_degree)
     extra_g = g.extra if g.extra is not None else g.means.new_zeros((len(g), 0))
 
-    alive = (z > camera.near) & (z < camera.far) & (o >= ALPHA_THRESHOLD)
+    alive = in_depth & (o >= ALPHA_THRESHOLD)
     order = torch.nonzero(alive).flatten()
     order = order[torch.argsort(z.detach()[order], stable=True)]
 
@@ -179,5 +178,3 @@ def render_dense(
         radii=radii,
     )
 
-
-_ = math  # the module documents math-based constants through .constants

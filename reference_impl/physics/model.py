@@ -1,0 +1,416 @@
+"""Batched rigid-box model: a box on a table, pushed by or attached to the end effector.
+
+Dynamics (per step ``dt``, default 1 ms), for ``M`` parameter sets x ``T`` trajectories at once:
+
+* **Free motion** - Newton-Euler for the CoM position (3-D) and the yaw angle, integrated with
+  semi-implicit (symplectic) Euler: velocities first, then positions with the mean of the old
+  and new velocity (exact for constant acceleration). Roll and pitch are not simulated: the box
+  stays flat on one face (documented limitation; enough for pushing, sliding, lifting, placing).
+* **Table contact** - a velocity-level impulse (speculative: it may close the remaining gap in
+  the step), with Newton restitution ``e`` above ``bounce_min_speed``. Friction is an impulse on
+  the planar twist ``xi = (vx, vy, c_r * w)`` with the ellipsoidal limit surface of Howe &
+  Cutkosky (1996): force ``-mu N xi/|xi|`` (torque limit ``mu N c_r``, ``c_r`` = mean distance
+  of the footprint from its centre). The box sticks exactly when the impulse needed to stop it
+  lies inside the static cone ``mu_s N dt``; otherwise the dynamic impulse ``mu_d N dt`` is
+  applied without reversing the motion (Stewart & Trinkle 1996 style velocity-level Coulomb).
+* **Pusher** - the end-effector link as a sphere of radius ``r`` moving kinematically along the
+  measured EE positions. It touches the box sides (planar contact while the sphere centre is
+  within the box height). A frictionless, perfectly inelastic, speculative impulse keeps the
+  gap non-negative: ``lambda = max(0, (-gap/dt - gap_rate) / k_eff)`` with the effective inverse
+  mass ``k_eff = 1/m + (r x n)^2 / I`` (Catto's sequential-impulse formulation, one pass after
+  friction).
+* **Grasp** - while the grasp flag is set, the object follows the EE with the relative transform
+  it had when the flag rose; when it falls, the object is free with the EE velocity.
+
+Measurement effects (time offset, frame error) act on the sampled poses; see
+:func:`simulate`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import torch
+
+from reference_impl.physics.effects import Effect, overrides
+from reference_impl.physics.space import BASE, ParamSpace
+
+__all__ = ["BoxScene", "Body", "Drive", "FreeState", "Slip", "SimResult", "simulate", "yaw_rotate"]
+
+
+@dataclass(frozen=True)
+class BoxScene:
+    """Constants of the scene (nominal physics.json values).
+
+    Attributes:
+        size: box edge lengths (x, y, z) [m], object frame = box centre.
+        mass: [kg].
+        inertia_z: yaw inertia about the CoM [kg m^2].
+        com: CoM offset (x, y) in the object frame [m].
+        friction_static, friction_dynamic: Coulomb coefficients box-table [-].
+        restitution: Newton restitution box-table [-].
+        damping_linear: viscous damping of the CoM velocity [1/s] (acceleration -c v).
+        table_z: height of the table plane [m], world frame.
+        pusher_radius: radius of the end-effector sphere [m].
+        gravity: magnitude of gravity along -z [m/s^2].
+        dt: integration step [s].
+        bounce_min_speed: approach speeds below this give a plastic impact [m/s].
+    """
+
+    size: tuple[float, float, float]
+    mass: float
+    inertia_z: float
+    com: tuple[float, float] = (0.0, 0.0)
+    friction_static: float = 0.5
+    friction_dynamic: float = 0.4
+    restitution: float = 0.0
+    damping_linear: float = 0.0
+    table_z: float = 0.0
+    pusher_radius: float = 0.01
+    gravity: float = 9.81
+    dt: float = 1e-3
+    bounce_min_speed: float = 0.05
+
+    @cached_property
+    def friction_radius(self) -> float:
+        """Mean distance of the footprint from its centre [m] (midpoint rule, 200x200)."""
+        n = 200
+        gx = (np.arange(n) + 0.5) / n - 0.5
+        xx, yy = np.meshgrid(gx * self.size[0], gx * self.size[1], indexing="ij")
+        return float(np.mean(np.hypot(xx, yy)))
+
+
+@dataclass
+class Body:
+    """Per-parameter-set body constants, tensors of shape [M, 1] (``com``: [M, 1, 2])."""
+
+    mass: torch.Tensor
+    inertia_z: torch.Tensor
+    com: torch.Tensor
+    mu_s: torch.Tensor
+    mu_d: torch.Tensor
+    restitution: torch.Tensor
+    damping: torch.Tensor
+
+
+@dataclass
+class FreeState:
+    """What an ``accel`` hook sees: velocities [M, T, 3] m/s, yaw rate and yaw [M, T]."""
+
+    v: torch.Tensor
+    w: torch.Tensor
+    yaw: torch.Tensor
+    on_table: torch.Tensor
+    body: Body
+
+
+@dataclass
+class Slip:
+    """What a ``friction`` hook sees: planar CoM velocity [M, T] m/s, its norm, the yaw."""
+
+    vx: torch.Tensor
+    vy: torch.Tensor
+    speed: torch.Tensor
+    yaw: torch.Tensor
+
+
+@dataclass
+class Drive:
+    """Measured inputs of T trajectories resampled on the simulation grid of S steps.
+
+    Attributes:
+        dt: step [s].
+        pusher: EE (sphere centre) positions [T, S, 3] m, world.
+        pusher_vel: forward-difference EE velocities [T, S, 3] m/s.
+        ee_yaw: EE yaw [T, S] rad (unwrapped); ee_yaw_rate [T, S] rad/s.
+        grasp: grasp flags [T, S] bool.
+        init_pos: measured initial object position [T, 3] m (sensor frame).
+        init_yaw: measured initial object yaw [T] rad (sensor frame).
+        obs_t: object-pose stamps [T, N] s from the trajectory start; obs_mask [T, N] valid.
+    """
+
+    dt: float
+    pusher: torch.Tensor
+    pusher_vel: torch.Tensor
+    ee_yaw: torch.Tensor
+    ee_yaw_rate: torch.Tensor
+    grasp: torch.Tensor
+    init_pos: torch.Tensor
+    init_yaw: torch.Tensor
+    obs_t: torch.Tensor
+    obs_mask: torch.Tensor
+
+    @property
+    def n_traj(self) -> int:
+        return int(self.pusher.shape[0])
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.pusher.shape[1])
+
+    def subset(self, idx: list[int]) -> Drive:
+        """The drive of a subset of trajectories."""
+        ii = torch.as_tensor(idx, dtype=torch.long, device=self.pusher.device)
+        return Drive(
+            self.dt,
+            *(getattr(self, f)[ii] for f in ("pusher", "pusher_vel", "ee_yaw", "ee_yaw_rate", "grasp")),
+            *(getattr(self, f)[ii] for f in ("init_pos", "init_yaw", "obs_t", "obs_mask")),
+        )
+
+
+@dataclass
+class SimResult:
+    """Sampled predictions in the sensor frame: pos [M, T, N, 3] m, yaw [M, T, N] rad.
+
+    ``dense_pos`` [M, T, S, 3] / ``dense_yaw`` [M, T, S] hold the object-frame pose at every
+    step (world frame, model clock).
+    """
+
+    pos: torch.Tensor
+    yaw: torch.Tensor
+    dense_pos: torch.Tensor
+    dense_yaw: torch.Tensor
+
+
+def yaw_rotate(x: torch.Tensor, y: torch.Tensor, yaw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Rotate planar vectors (x, y) by ``yaw`` [rad] about z."""
+    c, s = torch.cos(yaw), torch.sin(yaw)
+    return c * x - s * y, s * x + c * y
+
+
+def _base_body(scene: BoxScene, theta: torch.Tensor, space: ParamSpace) -> Body:
+    m = theta.shape[0]
+
+    def const(v: float) -> torch.Tensor:
+        return torch.full((m, 1), float(v), dtype=theta.dtype, device=theta.device)
+
+    base = space.theta_dict(theta, BASE)
+    mu_d = base.get("friction_dynamic", const(scene.friction_dynamic))
+    mu_s = base.get("friction_static", const(scene.friction_static))
+    mu_s = torch.maximum(mu_s, mu_d)
+    com = torch.tensor(scene.com, dtype=theta.dtype, device=theta.device).view(1, 1, 2).expand(m, 1, 2)
+    return Body(
+        mass=base.get("mass", const(scene.mass)),
+        inertia_z=const(scene.inertia_z),
+        com=com,
+        mu_s=mu_s,
+        mu_d=mu_d,
+        restitution=base.get("restitution", const(scene.restitution)),
+        damping=base.get("damping_linear", const(scene.damping_linear)),
+    )
+
+
+def simulate(
+    theta: torch.Tensor,
+    space: ParamSpace,
+    drive: Drive,
+    scene: BoxScene,
+) -> SimResult:
+    """Roll out M parameter sets over T trajectories and sample the object poses.
+
+    Args:
+        theta: [M, Q] parameter sets over ``space`` (float64 recommended).
+        space: slots (base parameters + effects); effects with ``model="rigid"`` act.
+        drive: measured inputs on the simulation grid.
+        scene: nominal constants.
+
+    Returns:
+        Object poses at the measurement stamps, as the sensor would report them.
+    """
+    dev, dt_ = theta.device, theta.dtype
+    m_sets, n_t, n_s = theta.shape[0], drive.n_traj, drive.n_steps
+    dt = drive.dt
+    effects: list[tuple[Effect, dict[str, torch.Tensor]]] = [
+        (e, space.theta_dict(theta, e.name)) for e in space.effects if e.model == "rigid"
+    ]
+    body = _base_body(scene, theta, space)
+    for e, th in effects:
+        if overrides(e, "body"):
+            body = e.body(th, body)
+    accel_fx = [(e, th) for e, th in effects if overrides(e, "accel")]
+    fric_fx = [(e, th) for e, th in effects if overrides(e, "friction")]
+    sensor_fx = [(e, th) for e, th in effects if e.family == "sensor"]
+
+    hx, hy, hz = (0.5 * s for s in scene.size)
+    z_rest = scene.table_z + hz
+    c_r = scene.friction_radius
+    mass, inertia = body.mass, body.inertia_z
+    kr = mass * c_r**2 / inertia  # [M, 1]
+    com_x, com_y = body.com[..., 0], body.com[..., 1]  # [M, 1]
+
+    pusher = drive.pusher.to(dev, dt_)
+    pvel = drive.pusher_vel.to(dev, dt_)
+    ee_yaw = drive.ee_yaw.to(dev, dt_)
+    ee_rate = drive.ee_yaw_rate.to(dev, dt_)
+    grasp = drive.grasp.to(dev)
+    grasp_np = grasp.cpu().numpy()
+    grasp_any = grasp_np.any(axis=0)
+    onset_np = np.zeros_like(grasp_np)
+    onset_np[:, 1:] = grasp_np[:, 1:] & ~grasp_np[:, :-1]
+    onset_np[:, 0] = grasp_np[:, 0]
+    onset_any = onset_np.any(axis=0)
+    onset = torch.as_tensor(onset_np, device=dev)
+    # steps where some pusher could touch a box resting on the table or lifted by < 5 box heights
+    pz = drive.pusher[..., 2].cpu().numpy()
+    pusher_low = (pz < z_rest + 10 * hz + scene.pusher_radius).any(axis=0)
+
+    # initial state: measured pose -> world (inverse sensor effects, last first)
+    ipos = drive.init_pos.to(dev, dt_).unsqueeze(0).expand(m_sets, n_t, 3)
+    iyaw = drive.init_yaw.to(dev, dt_).unsqueeze(0).expand(m_sets, n_t)
+    for e, th in reversed(sensor_fx):
+        ipos, iyaw = e.from_sensor(th, ipos, iyaw)
+    ox, oy = yaw_rotate(com_x, com_y, iyaw)
+    p = torch.stack([ipos[..., 0] + ox, ipos[..., 1] + oy, ipos[..., 2]], dim=-1)
+    yaw = iyaw.clone()
+    v = torch.zeros_like(p)
+    w = torch.zeros_like(yaw)
+    rel_p = torch.zeros_like(p)
+    rel_yaw = torch.zeros_like(yaw)
+    g = scene.gravity
+    e_rest = body.restitution
+    damping = body.damping
+    has_damping = bool((damping != 0).any())
+
+    traj_p = [p]
+    traj_y = [yaw]
+    for k in range(n_s - 1):
+        if onset_any[k + 1]:
+            # relative transform of the object in the EE frame at grasp onset (yaw-only EE frame)
+            on = onset[:, k + 1].view(1, n_t)
+            d = p - pusher[:, k].unsqueeze(0)
+            rx, ry = yaw_rotate(d[..., 0], d[..., 1], -ee_yaw[:, k].unsqueeze(0))
+            new_rel = torch.stack([rx, ry, d[..., 2]], dim=-1)
+            rel_p = torch.where(on.unsqueeze(-1), new_rel, rel_p)
+            rel_yaw = torch.where(on, yaw - ee_yaw[:, k].unsqueeze(0), rel_yaw)
+
+        # ---- free dynamics: external accelerations --------------------------------------
+        gap = p[..., 2] - z_rest
+        acc = torch.zeros_like(v)
+        alpha = torch.zeros_like(w)
+        if has_damping:
+            acc = acc - damping.unsqueeze(-1) * v
+        if accel_fx:
+            st = FreeState(v=v, w=w, yaw=yaw, on_table=gap < 1e-4, body=body)
+            for e, th in accel_fx:
+                out = e.accel(th, st)
+                if out is not None:
+                    a_e, al_e = out
+                    if a_e is not None:
+                        acc = acc + a_e
+                    if al_e is not None:
+                        alpha = alpha + al_e
+        vx = v[..., 0] + dt * acc[..., 0]
+        vy = v[..., 1] + dt * acc[..., 1]
+        vz = v[..., 2] + dt * (acc[..., 2] - g)
+        wf = w + dt * alpha
+
+        # ---- table: normal impulse (per unit mass, m/s) -----------------------------------
+        approach = -vz
+        contact = (gap + dt * vz) <= 0.0
+        bounce = approach > scene.bounce_min_speed
+        target = torch.where(bounce, e_rest * approach, -gap.clamp(min=0.0) / dt)
+        lam_n = torch.where(contact, (target - vz).clamp(min=0.0), torch.zeros_like(vz))
+        vz = vz + lam_n
+
+        # ---- table: friction on the twist (vx, vy, c_r w) --------------------------------
+        speed2 = vx * vx + vy * vy
+        speed = torch.sqrt(speed2 + 1e-18)
+        mu_s, mu_d = body.mu_s, body.mu_d
+        if fric_fx:
+            slip = Slip(vx=vx, vy=vy, speed=speed, yaw=yaw)
+            for e, th in fric_fx:
+                mu_s, mu_d = e.friction(th, mu_s, mu_d, slip)
+        cw = c_r * wf
+        stop_norm = torch.sqrt(speed2 + (cw / kr) ** 2)
+        xi = torch.sqrt(speed2 + cw * cw) + 1e-15
+        stick = stop_norm <= mu_s * lam_n
+        budget = mu_d * lam_n
+        f_t = torch.where(stick, torch.zeros_like(xi), (1.0 - budget / xi).clamp(min=0.0))
+        f_r = torch.where(stick, torch.zeros_like(xi), (1.0 - budget * kr / xi).clamp(min=0.0))
+        f_t = torch.where(contact, f_t, torch.ones_like(f_t))
+        f_r = torch.where(contact, f_r, torch.ones_like(f_r))
+        vx = vx * f_t
+        vy = vy * f_t
+        wf = wf * f_r
+
+        # ---- pusher: frictionless inelastic speculative contact on the box sides ------------
+        if pusher_low[k]:
+            cpos = pusher[:, k].unsqueeze(0)
+            cvel = pvel[:, k].unsqueeze(0)
+            offx, offy = yaw_rotate(com_x, com_y, yaw)
+            ox_, oy_ = p[..., 0] - offx, p[..., 1] - offy
+            dx, dy, dz = cpos[..., 0] - ox_, cpos[..., 1] - oy_, cpos[..., 2] - p[..., 2]
+            lx, ly = yaw_rotate(dx, dy, -yaw)
+            qx, qy = lx.clamp(-hx, hx), ly.clamp(-hy, hy)
+            ex, ey = lx - qx, ly - qy
+            dist_c = torch.sqrt(ex * ex + ey * ey)
+            outside = dist_c > 1e-9
+            pen_x, pen_y = hx - lx.abs(), hy - ly.abs()
+            use_x = pen_x < pen_y
+            one = torch.ones_like(lx)
+            nlx = torch.where(outside, ex / dist_c.clamp(min=1e-12), torch.where(use_x, torch.sign(lx), 0 * one))
+            nly = torch.where(outside, ey / dist_c.clamp(min=1e-12), torch.where(use_x, 0 * one, torch.sign(ly)))
+            gap_p = torch.where(outside, dist_c, -torch.minimum(pen_x, pen_y)) - scene.pusher_radius
+            nx, ny = yaw_rotate(nlx, nly, yaw)
+            qwx, qwy = yaw_rotate(qx, qy, yaw)
+            rcx, rcy = ox_ + qwx - p[..., 0], oy_ + qwy - p[..., 1]
+            vptx, vpty = vx - wf * rcy, vy + wf * rcx
+            rate = (cvel[..., 0] - vptx) * nx + (cvel[..., 1] - vpty) * ny
+            rxn = rcx * ny - rcy * nx
+            k_eff = 1.0 / mass + rxn * rxn / inertia
+            band = (dz.abs() <= hz) & ~grasp[:, k].unsqueeze(0)
+            lam = torch.where(band, ((-gap_p / dt - rate) / k_eff).clamp(min=0.0), torch.zeros_like(rate))
+            vx = vx - lam * nx / mass
+            vy = vy - lam * ny / mass
+            wf = wf - lam * rxn / inertia
+
+        v_new = torch.stack([vx, vy, vz], dim=-1)
+        p = p + 0.5 * dt * (v + v_new)
+        yaw = yaw + 0.5 * dt * (w + wf)
+        v, w = v_new, wf
+
+        if grasp_any[k + 1]:
+            att = grasp[:, k + 1].view(1, n_t)
+            ey_ = ee_yaw[:, k + 1].unsqueeze(0)
+            rx, ry = yaw_rotate(rel_p[..., 0], rel_p[..., 1], ey_)
+            cp = pusher[:, k + 1].unsqueeze(0)
+            p_att = torch.stack([cp[..., 0] + rx, cp[..., 1] + ry, cp[..., 2] + rel_p[..., 2]], dim=-1)
+            rate_ = ee_rate[:, k + 1].unsqueeze(0)
+            cv = pvel[:, k].unsqueeze(0)
+            v_att = torch.stack([cv[..., 0] - rate_ * ry, cv[..., 1] + rate_ * rx, cv[..., 2]], dim=-1)
+            p = torch.where(att.unsqueeze(-1), p_att, p)
+            v = torch.where(att.unsqueeze(-1), v_att, v)
+            yaw = torch.where(att, ey_ + rel_yaw, yaw)
+            w = torch.where(att, rate_.expand_as(w), w)
+        traj_p.append(p)
+        traj_y.append(yaw)
+
+    dense_p = torch.stack(traj_p, dim=2)  # CoM [M, T, S, 3]
+    dense_y = torch.stack(traj_y, dim=2)
+    offx, offy = yaw_rotate(com_x.unsqueeze(-1), com_y.unsqueeze(-1), dense_y)
+    dense_o = torch.stack([dense_p[..., 0] - offx, dense_p[..., 1] - offy, dense_p[..., 2]], dim=-1)
+
+    # ---- observation: sample at (effect-mapped) stamps, then map into the sensor frame --------
+    t_q = drive.obs_t.to(dev, dt_).unsqueeze(0).expand(m_sets, n_t, -1)
+    for e, th in sensor_fx:
+        t_q = e.sample_times(_lift(th), t_q)
+    fidx = (t_q / dt).clamp(0.0, n_s - 1 - 1e-9)
+    i0 = fidx.floor().long()
+    frac = fidx - i0
+    i1 = (i0 + 1).clamp(max=n_s - 1)
+    idx0 = i0.unsqueeze(-1).expand(-1, -1, -1, 3)
+    idx1 = i1.unsqueeze(-1).expand(-1, -1, -1, 3)
+    pos = torch.gather(dense_o, 2, idx0) * (1 - frac).unsqueeze(-1) + torch.gather(
+        dense_o, 2, idx1
+    ) * frac.unsqueeze(-1)
+    yaw_s = torch.gather(dense_y, 2, i0) * (1 - frac) + torch.gather(dense_y, 2, i1) * frac
+    for e, th in sensor_fx:
+        pos, yaw_s = e.to_sensor(_lift(th), pos, yaw_s)
+    return SimResult(pos=pos, yaw=yaw_s, dense_pos=dense_o, dense_yaw=dense_y)
+
+
+def _lift(th: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Parameters [M, 1] -> [M, 1, 1] so that they broadcast against [M, T, N] samples."""
+    return {k: v.unsqueeze(-1) for k, v in th.items()}

@@ -1,0 +1,1 @@
+"""Visual QA: HTML reports with plots, and Rerun recordings."""

@@ -1,0 +1,55 @@
+"""Differentiable tile-based rasterizer of 3D Gaussians (3DGS) and 2D surfels (2DGS).
+
+Pure torch; runs on CPU and CUDA (the device of the inputs). See ``design.md`` for the layers
+and conventions.
+"""
+
+from __future__ import annotations
+
+from .backends import available_backends, register_backend
+from .camera import Camera
+from .config import RenderConfig
+from .dense import render_dense
+from .gaussians import Gaussians
+from .output import RenderOutput
+from .pipeline import render
+from .sh import eval_sh, rgb_to_sh_dc
+from .tiled import render_tiled
+from .validation import (
+    InputProblem,
+    RenderInputError,
+    validate_camera,
+    validate_gaussians,
+)
+
+__all__ = [
+    "Camera",
+    "Gaussians",
+    "RenderConfig",
+    "RenderOutput",
+    "render",
+    "available_backends",
+    "register_backend",
+    "validate_gaussians",
+    "validate_camera",
+    "InputProblem",
+    "RenderInputError",
+    "eval_sh",
+    "rgb_to_sh_dc",
+]
+
+
+def _register_builtins() -> None:
+    register_backend("torch", render_tiled)
+    register_backend("dense", lambda g, c, cfg: render_dense(g, c, cfg))
+    try:
+        from .fused import render_fused
+    except ImportError as exc:
+        from .backends import mark_unavailable
+
+        mark_unavailable("numba", f"needs numba ({exc}); install with pip install numba")
+    else:
+        register_backend("numba", render_fused)
+
+
+_register_builtins()

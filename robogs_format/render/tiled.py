@@ -1,0 +1,78 @@
+"""The default ``torch`` backend: project, cull, sort, bin into tiles, composite per tile."""
+
+from __future__ import annotations
+
+import torch
+
+from .binning import bin_tiles
+from .camera import Camera
+from .composite import composite_tiles
+from .config import RenderConfig
+from .gaussians import Gaussians
+from .output import RenderOutput
+from .projection import project
+
+__all__ = ["render_tiled"]
+
+
+def render_tiled(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> RenderOutput:
+    """Render a pinhole camera with the tile-chunk rasterizer (CPU or CUDA, differentiable).
+
+    Args:
+        gaussians: N Gaussians, world frame; all outputs are on their device and dtype.
+        camera: the camera; distortion is ignored here (see ``render``).
+        config: render options.
+
+    Returns:
+        The render.
+    """
+    H, W = camera.height, camera.width
+    proj = project(gaussians, camera, config)
+    bins = bin_tiles(proj.bbox, proj.depth, proj.visible, W, H, config.tile_size)
+    ones = torch.ones_like(proj.depth)[:, None]
+    feats = torch.cat([proj.rgb, ones, proj.normals, proj.extra], dim=1)
+    img = composite_tiles(proj, bins, feats, W, H, chunk=config.chunk, near=camera.near)
+    return finish_output(
+        img.features, img.depth, img.median, proj.means2d, proj.bbox, proj.visible, config
+    )
+
+
+def finish_output(
+    features: torch.Tensor,
+    depth_sum: torch.Tensor,
+    median: torch.Tensor,
+    means2d: torch.Tensor,
+    bbox: torch.Tensor,
+    visible: torch.Tensor,
+    config: RenderConfig,
+) -> RenderOutput:
+    """Normalise accumulated images into a :class:`RenderOutput`.
+
+    Args:
+        features: [H, W, 7 + C] accumulated (rgb, alpha, normals, extra).
+        depth_sum: [H, W] accumulated w z.
+        median: [H, W] median depth.
+        means2d: [N, 2] projected means, px.
+        bbox: [N, 4] support boxes, px.
+        visible: [N] bool.
+        config: render options (background).
+    """
+    rgb = features[..., 0:3]
+    alpha = features[..., 3]
+    normals = features[..., 4:7]
+    extra = features[..., 7:]
+    has = alpha > 0
+    inv = 1.0 / torch.where(has, alpha, torch.ones_like(alpha))
+    bg = torch.tensor(config.background, dtype=features.dtype, device=features.device)
+    radii = torch.stack([bbox[:, 1] - bbox[:, 0], bbox[:, 3] - bbox[:, 2]], dim=-1) * 0.5
+    vis = visible[:, None]
+    return RenderOutput(
+        rgb=rgb + (1.0 - alpha)[..., None] * bg,
+        alpha=alpha,
+        depth_expected=torch.where(has, depth_sum * inv, 0.0),
+        depth_median=median,
+        normals=torch.where(has[..., None], normals * inv[..., None], 0.0),
+        extra=extra,
+        means2d=torch.where(vis, means2d, 0.0),
+        radii=torch.where(vis, radii, 0.0),
+    )
