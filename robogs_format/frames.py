@@ -606,4 +606,3 @@ def world_zup_to_yup(T_zup_x: torch.Tensor) -> torch.Tensor:
     """
     T = _as_float(T_zup_x)
     return _const_like(_T_YUP_ZUP, T) @ T
-

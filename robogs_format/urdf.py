@@ -26,6 +26,7 @@ import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import yourdfpy
 from lxml import etree
@@ -46,6 +47,7 @@ MESH_SUFFIXES: frozenset[str] = frozenset({".dae", ".stl", ".obj", ".ply", ".glb
 """Mesh file suffixes (lower case) that :func:`load_urdf` accepts."""
 
 _MAX_XML_BYTES = 64 * 1024 * 1024
+_MAX_MESH_BYTES = 1024 * 1024 * 1024
 _MAX_SEARCH_DEPTH = 8
 _MAX_SEARCH_DIRS = 20000
 _SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]*)://")
@@ -122,7 +124,7 @@ def _has_entity_nodes(root: etree._Element) -> bool:
     return any(isinstance(n, etree._Entity) for n in root.iter(etree.Entity))
 
 
-def _read_limited(path: Path, what: str) -> bytes:
+def _read_limited(path: Path, what: str, limit: int = _MAX_XML_BYTES) -> bytes:
     try:
         size = path.stat().st_size
     except FileNotFoundError:
@@ -131,11 +133,11 @@ def _read_limited(path: Path, what: str) -> bytes:
         raise InputError(f"cannot read {what}: {exc.strerror}", path=path) from None
     if not path.is_file():
         raise InputError(f"{what} is not a regular file", path=path)
-    if size > _MAX_XML_BYTES:
+    if size > limit:
         raise FormatError(
-            f"{what} is {size} bytes, over the {_MAX_XML_BYTES} byte limit",
+            f"{what} is {size} bytes, over the {limit} byte limit",
             path=path,
-            hint="URDF and COLLADA files this large are not supported",
+            hint="files this large are not supported",
         )
     return path.read_bytes()
 
@@ -384,15 +386,11 @@ def resolve_mesh_uri(
         rest = uri[len(m.group(0)) :]
         name, _, sub = rest.partition("/")
         if not name or not sub:
-            raise FormatError(
-                "package URI needs package://NAME/path", path=urdf_path, where=uri
-            )
+            raise FormatError("package URI needs package://NAME/path", path=urdf_path, where=uri)
         if package_roots is not None and name in package_roots:
             base = Path(package_roots[name]).resolve()
             if not base.is_dir():
-                raise InputError(
-                    f"package root for '{name}' is not a folder", path=base, where=uri
-                )
+                raise InputError(f"package root for '{name}' is not a folder", path=base, where=uri)
         else:
             if _cache is not None and name in _cache:
                 base = _cache[name]
@@ -451,22 +449,31 @@ def mesh_refs(robot: yourdfpy.Robot | yourdfpy.URDF) -> list[MeshRef]:
 
 
 def _check_dae(path: Path) -> None:
-    """COLLADA is XML: refuse entity declarations before pycollada parses it."""
-    with path.open("rb") as fh:
-        head = fh.read(1 << 16)
-    if b"<!DOCTYPE" in head or b"<!ENTITY" in head:
-        _parse_xml_bytes(_read_limited(path, "COLLADA mesh"), path, "COLLADA mesh")
+    """COLLADA is XML and pycollada expands entities: refuse them before it parses the file."""
+    data = _read_limited(path, "COLLADA mesh", _MAX_MESH_BYTES)
+    suspicious = (
+        data[:2] in (b"\xff\xfe", b"\xfe\xff")  # UTF-16: byte search below would miss markup
+        or b"\x00" in data[:64]
+        or b"<!DOCTYPE" in data
+        or b"<!ENTITY" in data
+    )
+    if suspicious:
+        _parse_xml_bytes(data, path, "COLLADA mesh")
 
 
 class _CheckedURDF(yourdfpy.URDF):
     """yourdfpy.URDF that refuses mesh files which load as empty (trimesh skips broken ones)."""
 
-    def __init__(self, *args, robogs_path: Path, robogs_uris: Mapping[str, str], **kwargs) -> None:
+    def __init__(
+        self, *args: Any, robogs_path: Path, robogs_uris: Mapping[str, str], **kwargs: Any
+    ) -> None:
         self._robogs_path = robogs_path
         self._robogs_uris = robogs_uris
         super().__init__(*args, **kwargs)
 
-    def _geometry2trimeshscene(self, geometry, load_file, force_mesh, skip_materials):  # noqa: ANN001, ANN202
+    def _geometry2trimeshscene(
+        self, geometry: yourdfpy.Geometry, load_file: bool, force_mesh: bool, skip_materials: bool
+    ) -> Any:
         scene = super()._geometry2trimeshscene(geometry, load_file, force_mesh, skip_materials)
         if geometry.mesh is not None and load_file and (scene is None or not scene.geometry):
             uri = geometry.mesh.filename

@@ -1,33 +1,17 @@
 """Model-versus-measurement engine for rigid objects: simulate, compare, diagnose, fit, report.
 
-The public entry points are imported lazily so that ``import reference_impl.physics`` stays
-cheap; see :mod:`reference_impl.physics.api`.
+The user-facing functions live in :mod:`reference_impl.physics.api` (``compare``,
+``diagnose``, ``fit_dataset``, ``report``, ``revert``); the registry of effects in
+:mod:`reference_impl.physics.effects`. Submodules are imported lazily.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-__all__ = [
-    "compare",
-    "diagnose",
-    "fit",
-    "report",
-    "revert",
-    "load_recording",
-    "register_effect",
-    "available_effects",
-    "get_effect",
-    "Effect",
-    "Param",
-]
+__all__ = ["register_effect", "available_effects", "get_effect", "Effect", "Param", "load_recording"]
 
 _LAZY = {
-    "compare": "reference_impl.physics.api",
-    "diagnose": "reference_impl.physics.api",
-    "fit": "reference_impl.physics.api",
-    "report": "reference_impl.physics.api",
-    "revert": "reference_impl.physics.api",
     "load_recording": "reference_impl.physics.recording",
     "register_effect": "reference_impl.physics.effects",
     "available_effects": "reference_impl.physics.effects",

@@ -3,9 +3,10 @@
 Dynamics (per step ``dt``, default 1 ms), for ``M`` parameter sets x ``T`` trajectories at once:
 
 * **Free motion** - Newton-Euler for the CoM position (3-D) and the yaw angle, integrated with
-  semi-implicit (symplectic) Euler: velocities first, then positions with the mean of the old
-  and new velocity (exact for constant acceleration). Roll and pitch are not simulated: the box
-  stays flat on one face (documented limitation; enough for pushing, sliding, lifting, placing).
+  semi-implicit (symplectic) Euler: velocities first (forces, then contact impulses), then
+  positions with the new velocity, which is what the velocity-level contacts assume. Roll and
+  pitch are not simulated: the box stays flat on one face (documented limitation; enough for
+  pushing, sliding, lifting, placing).
 * **Table contact** - a velocity-level impulse (speculative: it may close the remaining gap in
   the step), with Newton restitution ``e`` above ``bounce_min_speed``. Friction is an impulse on
   the planar twist ``xi = (vx, vy, c_r * w)`` with the ellipsoidal limit surface of Howe &
@@ -129,6 +130,7 @@ class Drive:
         init_pos: measured initial object position [T, 3] m (sensor frame).
         init_yaw: measured initial object yaw [T] rad (sensor frame).
         obs_t: object-pose stamps [T, N] s from the trajectory start; obs_mask [T, N] valid.
+        init_vel: optional initial CoM velocity [T, 3] m/s (default: at rest).
     """
 
     dt: float
@@ -141,6 +143,7 @@ class Drive:
     init_yaw: torch.Tensor
     obs_t: torch.Tensor
     obs_mask: torch.Tensor
+    init_vel: torch.Tensor | None = None
 
     @property
     def n_traj(self) -> int:
@@ -157,6 +160,7 @@ class Drive:
             self.dt,
             *(getattr(self, f)[ii] for f in ("pusher", "pusher_vel", "ee_yaw", "ee_yaw_rate", "grasp")),
             *(getattr(self, f)[ii] for f in ("init_pos", "init_yaw", "obs_t", "obs_mask")),
+            None if self.init_vel is None else self.init_vel[ii],
         )
 
 
@@ -207,6 +211,7 @@ def simulate(
     space: ParamSpace,
     drive: Drive,
     scene: BoxScene,
+    init_offset: torch.Tensor | None = None,
 ) -> SimResult:
     """Roll out M parameter sets over T trajectories and sample the object poses.
 
@@ -215,6 +220,8 @@ def simulate(
         space: slots (base parameters + effects); effects with ``model="rigid"`` act.
         drive: measured inputs on the simulation grid.
         scene: nominal constants.
+        init_offset: [M, T, 3] corrections (dx [m], dy [m], dyaw [rad]) of the measured
+            initial pose, the per-trajectory nuisance parameters of the fitter.
 
     Returns:
         Object poses at the measurement stamps, as the sensor would report them.
@@ -259,12 +266,18 @@ def simulate(
     # initial state: measured pose -> world (inverse sensor effects, last first)
     ipos = drive.init_pos.to(dev, dt_).unsqueeze(0).expand(m_sets, n_t, 3)
     iyaw = drive.init_yaw.to(dev, dt_).unsqueeze(0).expand(m_sets, n_t)
+    if init_offset is not None:
+        off = init_offset.to(dev, dt_)
+        ipos = ipos + torch.nn.functional.pad(off[..., :2], (0, 1))
+        iyaw = iyaw + off[..., 2]
     for e, th in reversed(sensor_fx):
         ipos, iyaw = e.from_sensor(th, ipos, iyaw)
     ox, oy = yaw_rotate(com_x, com_y, iyaw)
     p = torch.stack([ipos[..., 0] + ox, ipos[..., 1] + oy, ipos[..., 2]], dim=-1)
     yaw = iyaw.clone()
     v = torch.zeros_like(p)
+    if drive.init_vel is not None:
+        v = v + drive.init_vel.to(dev, dt_).unsqueeze(0)
     w = torch.zeros_like(yaw)
     rel_p = torch.zeros_like(p)
     rel_yaw = torch.zeros_like(yaw)
@@ -272,6 +285,13 @@ def simulate(
     e_rest = body.restitution
     damping = body.damping
     has_damping = bool((damping != 0).any())
+
+    if onset_any[0]:
+        on = onset[:, 0].view(1, n_t)
+        d = p - pusher[:, 0].unsqueeze(0)
+        rx, ry = yaw_rotate(d[..., 0], d[..., 1], -ee_yaw[:, 0].unsqueeze(0))
+        rel_p = torch.where(on.unsqueeze(-1), torch.stack([rx, ry, d[..., 2]], dim=-1), rel_p)
+        rel_yaw = torch.where(on, yaw - ee_yaw[:, 0].unsqueeze(0), rel_yaw)
 
     traj_p = [p]
     traj_y = [yaw]
@@ -367,8 +387,8 @@ def simulate(
             wf = wf - lam * rxn / inertia
 
         v_new = torch.stack([vx, vy, vz], dim=-1)
-        p = p + 0.5 * dt * (v + v_new)
-        yaw = yaw + 0.5 * dt * (w + wf)
+        p = p + dt * v_new
+        yaw = yaw + dt * wf
         v, w = v_new, wf
 
         if grasp_any[k + 1]:
@@ -379,7 +399,7 @@ def simulate(
             p_att = torch.stack([cp[..., 0] + rx, cp[..., 1] + ry, cp[..., 2] + rel_p[..., 2]], dim=-1)
             rate_ = ee_rate[:, k + 1].unsqueeze(0)
             cv = pvel[:, k].unsqueeze(0)
-            v_att = torch.stack([cv[..., 0] - rate_ * ry, cv[..., 1] + rate_ * rx, cv[..., 2]], dim=-1)
+            v_att = torch.stack([cv[..., 0] - rate_ * ry, cv[..., 1] + rate_ * rx, cv[..., 2].expand_as(rx)], dim=-1)
             p = torch.where(att.unsqueeze(-1), p_att, p)
             v = torch.where(att.unsqueeze(-1), v_att, v)
             yaw = torch.where(att, ey_ + rel_yaw, yaw)

@@ -26,6 +26,7 @@ class PhaseLabels:
         vel: smoothed object velocity [N, 3] m/s; yaw_rate [N] rad/s.
         height: object height above its resting height [N] m.
         pusher_gap: distance from the pusher sphere to the box [N] m (inf if unknown).
+        moving: [N] bool, smoothed speed above the noise-dependent threshold.
     """
 
     label: np.ndarray
@@ -33,6 +34,7 @@ class PhaseLabels:
     yaw_rate: np.ndarray
     height: np.ndarray
     pusher_gap: np.ndarray
+    moving: np.ndarray
 
     def names(self) -> list[str]:
         return [PHASES[i] for i in self.label]
@@ -108,7 +110,7 @@ def segment_phases(
     grasp = np.interp(tr.t_ns, tr.ee_t_ns, tr.grasp.astype(float)) > 0.5
     gap = _box_gap(tr, size, pusher_radius)
     label = np.zeros(len(t), dtype=np.int64)  # rest
-    moving = np.hypot(vel[:, 0], vel[:, 1]) > v_thr
+    moving = (np.hypot(vel[:, 0], vel[:, 1]) > v_thr) | (np.abs(vel[:, 2]) > v_thr)
     label[moving] = PHASES.index("sliding")
     label[gap < contact_margin + 2 * sigma_pos] = PHASES.index("contact")
     airborne = height > z_thr
@@ -118,4 +120,4 @@ def segment_phases(
         lo, hi = max(a, b - 1), min(len(t), b + 2)
         label[lo:hi] = PHASES.index("impact")
     label[grasp] = PHASES.index("grasp")
-    return PhaseLabels(label=label, vel=vel, yaw_rate=yaw_rate, height=height, pusher_gap=gap)
+    return PhaseLabels(label=label, vel=vel, yaw_rate=yaw_rate, height=height, pusher_gap=gap, moving=moving)

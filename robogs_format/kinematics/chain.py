@@ -224,7 +224,11 @@ class Chain:
         c = self._cache.get(key)
         if c is None:
             R_o = self.origins[:, :3, :3]
-            K = np.stack([_skew_np(a) for a in self.axes]) if len(self.axes) else np.zeros((0, 3, 3))
+            K = (
+                np.stack([_skew_np(a) for a in self.axes])
+                if len(self.axes)
+                else np.zeros((0, 3, 3))
+            )
             is_rev = np.array([t in ("revolute", "continuous") for t in self.joint_types])
             is_pri = np.array([t == "prismatic" for t in self.joint_types])
 

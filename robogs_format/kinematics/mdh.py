@@ -275,7 +275,9 @@ class MDHTable:
                 hint=f"use '{MDH_CONVENTION}' (or convert with MDHTable.from_standard_dh)",
             )
         missing = [
-            k for k in ("joint_names", "a_m", "alpha_rad", "d_m", "theta_offset_rad") if k not in data
+            k
+            for k in ("joint_names", "a_m", "alpha_rad", "d_m", "theta_offset_rad")
+            if k not in data
         ]
         if missing:
             raise FormatError(f"MDH table misses fields {missing}", path=path)

@@ -1,17 +1,26 @@
 """Tile-chunk front-to-back compositing, vectorised over tiles, pixels and Gaussians.
 
-All tiles still in work advance together: each step takes the next ``chunk`` Gaussians of every
-active tile ([A, chunk]), evaluates every pixel of the tile against them ([A, P, chunk]) and
-composites with a cumulative product of (1 - alpha) along the chunk. The exponent of each pair is a
-quadratic polynomial in the pixel's tile-local coordinates, so it is evaluated for a whole step
-by one matrix product of the [P, 6] monomials with [A, 6, chunk] per-pair coefficients (3DGS);
-the 2DGS splat point h(x, y) is affine in the pixel and is obtained the same way.
+All tiles of a batch advance together: each step takes the next ``chunk`` Gaussians of every
+active tile ([A, K]), evaluates every pixel of the tile against them ([A, P, K]) and composites
+with a cumulative product of (1 - alpha) along the chunk:
 
-Stop rule (3DGS reference, ``renderCUDA``): a Gaussian is composited only if the transmittance
-after it stays >= 1e-4; the first one that would push it lower ends the pixel. A pixel that has
-ended gets T = 0, so later chunks add nothing to it. Tiles whose pixels have all ended or whose
-lists are exhausted leave the active set. Everything is out-of-place, so eager autograd
-differentiates the loop.
+- The 3DGS exponent ln o - sigma of a pair is a quadratic polynomial in the pixel's tile-local
+  coordinates, so a whole step is one matrix product of the [P, 6] monomials with [A, 6, K]
+  per-pair coefficients. The 2DGS splat point h(x, y) is affine in the pixel and is obtained the
+  same way (see ``projection.py``).
+- A masked (alpha = 0) column is put in front of every chunk, so the cumulative product
+  c = cumprod(1 - alpha) holds both the transmittance before (c[k - 1]) and after (c[k]) each
+  pair, and the weight is w_k = T (c[k - 1] - c[k]) = T c[k - 1] alpha_k without a copy.
+- Stop rule (3DGS reference ``renderCUDA``): a pair is composited only if the transmittance after
+  it stays >= 1e-4; the first one that would push it lower ends the pixel. An ended pixel gets
+  T = 0, so later chunks add nothing to it.
+- Median depth: the pixel's one pair with T_before > 0.5 >= T_after. Only the few pixels that
+  cross 0.5 in a step are searched.
+- Tiles whose pixels have all ended or whose lists are exhausted leave the active set. Tiles are
+  processed in batches so that the per-step tensors stay in cache on CPUs.
+
+Without autograd the step works in place; with autograd every op is out-of-place so eager
+autograd differentiates the loop.
 """
 
 from __future__ import annotations
@@ -22,7 +31,7 @@ from dataclasses import dataclass
 import torch
 
 from .binning import TileBins
-from .constants import LOWPASS_2DGS_INV_SQ, MAX_ALPHA, MEDIAN_TRANSMITTANCE, TRANSMITTANCE_THRESHOLD
+from .constants import MAX_ALPHA, MEDIAN_TRANSMITTANCE, TRANSMITTANCE_THRESHOLD
 from .projection import Projected
 
 __all__ = ["CompositeImages", "composite_tiles"]
@@ -53,68 +62,64 @@ def _tile_monomials(tile_size: int, dtype: torch.dtype, device: torch.device) ->
     return torch.stack([torch.ones_like(lx), lx, ly, lx * lx, lx * ly, ly * ly], dim=-1)
 
 
-def _coefficients_3dgs(
-    proj: Projected, gid: torch.Tensor, ox: torch.Tensor, oy: torch.Tensor
-) -> torch.Tensor:
+def _pack(proj: Projected, features: torch.Tensor) -> tuple[torch.Tensor, int]:
+    """Per-Gaussian rows gathered once per step: kernel parameters, then features.
+
+    3DGS: (mx, my, A, B, C, ln o, exp_min, z, features...).
+    2DGS: (mx, my, ln o, exp_min, z, Px, Py, Pa, Tw (3 each), features...).
+    """
+    head = [proj.means2d, proj.log_opacity[:, None], proj.exp_min[:, None], proj.depth[:, None]]
+    if proj.kind == "3dgs":
+        head = [proj.means2d, proj.conic] + head[1:]  # type: ignore[list-item]
+    else:
+        head = head + [proj.ray.reshape(-1, 12)]  # type: ignore[union-attr]
+    packed = torch.cat(head + [features], dim=1)
+    return packed, packed.shape[1] - features.shape[1]
+
+
+def _coefficients_3dgs(gp: torch.Tensor, ox: torch.Tensor, oy: torch.Tensor) -> torch.Tensor:
     """[A, 6, K] coefficients of e = ln o - sigma in the tile-local monomials."""
-    m = proj.means2d[gid]
-    cA, cB, cC = proj.conic[gid].unbind(-1)  # type: ignore[index]
-    ex = m[..., 0] - ox
-    ey = m[..., 1] - oy
+    ex = gp[..., 0] - ox
+    ey = gp[..., 1] - oy
+    cA, cB, cC = gp[..., 2], gp[..., 3], gp[..., 4]
     k1 = cA * ex + cB * ey
     k2 = cB * ex + cC * ey
-    k0 = proj.log_opacity[gid] - 0.5 * (k1 * ex + k2 * ey)
+    k0 = gp[..., 5] - 0.5 * (k1 * ex + k2 * ey)
     return torch.stack([k0, k1, k2, -0.5 * cA, -cB, -0.5 * cC], dim=1)
 
 
-def _coefficients_2dgs(
-    proj: Projected, gid: torch.Tensor, ox: torch.Tensor, oy: torch.Tensor
-) -> torch.Tensor:
-    """[A, 6, 5 K] coefficients of (h0, h1, h2, Tw.h, rho_2d) in the tile-local monomials."""
-    ray = proj.ray[gid]  # type: ignore[index]  # [A, K, 4, 3]
-    Px, Py, Pa, Tw = ray.unbind(-2)
-    c0 = Pa + ox[..., None] * Px + oy[..., None] * Py  # h at the tile origin
-    h_const, h_x, h_y = c0, Px, Py
-    zc = (Tw * h_const).sum(-1)
-    zx = (Tw * h_x).sum(-1)
-    zy = (Tw * h_y).sum(-1)
-    m = proj.means2d[gid]
-    ex = m[..., 0] - ox
-    ey = m[..., 1] - oy
-    s = LOWPASS_2DGS_INV_SQ
-    zero = torch.zeros_like(ex)
-    # rho_2d = s((lx - ex)^2 + (ly - ey)^2)
-    rho = torch.stack([s * (ex * ex + ey * ey), -2 * s * ex, -2 * s * ey, zero + s, zero, zero + s], dim=1)
-    cols = [
-        torch.stack([h_const[..., i], h_x[..., i], h_y[..., i], zero, zero, zero], dim=1) for i in range(3)
-    ]
-    cols.append(torch.stack([zc, zx, zy, zero, zero, zero], dim=1))
-    cols.append(rho)
-    return torch.cat(cols, dim=2)  # [A, 6, 5K]
-
-
-def _pair_exponent_2dgs(
-    q: torch.Tensor, log_o: torch.Tensor, depth_c: torch.Tensor, near: float
+def _exponent_2dgs(
+    mono: torch.Tensor, gp: torch.Tensor, ox: torch.Tensor, oy: torch.Tensor, near: float, s: float
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Exponent ln o - rho/2 and depth of each 2DGS pair from the evaluated polynomials.
+    """Exponent ln o - rho / 2 and depth of every 2DGS pair, [A, P, K] each.
 
-    Args:
-        q: [A, P, 5, K] (h0, h1, h2, Tw.h, rho_2d).
-        log_o: [A, 1, K] log opacity.
-        depth_c: [A, 1, K] depth of the surfel centre.
-        near: near plane, m.
+    rho = min(u^2 + v^2, 2 |x - c|^2) with (u, v) from the ray-splat intersection (Huang et al.
+    2024, Eq. 8-10); the intersection counts only in front of the near plane. The depth is that
+    of the intersection, or of the centre where the low-pass term wins.
     """
-    h0, h1, h2, zn, rho2 = q.unbind(2)
-    ok = h2 != 0
-    h2s = torch.where(ok, h2, torch.ones_like(h2))
-    u = h0 / h2s
-    v = h1 / h2s
+    ray = gp[..., 5:17].unflatten(-1, (4, 3))
+    Px, Py, Pa, Tw = ray.unbind(-2)
+    h0 = Pa + ox[..., None] * Px + oy[..., None] * Py  # h at the tile origin, [A, K, 3]
+    zero = torch.zeros_like(ox.expand_as(gp[..., 0]))
+    ex = gp[..., 0] - ox
+    ey = gp[..., 1] - oy
+    cols = [torch.stack([h0[..., i], Px[..., i], Py[..., i], zero, zero, zero], dim=1) for i in range(3)]
+    cols.append(
+        torch.stack([(Tw * h0).sum(-1), (Tw * Px).sum(-1), (Tw * Py).sum(-1), zero, zero, zero], dim=1)
+    )
+    cols.append(torch.stack([s * (ex * ex + ey * ey), -2 * s * ex, -2 * s * ey, zero + s, zero, zero + s], dim=1))
+    q = torch.matmul(mono, torch.cat(cols, dim=2)).unflatten(2, (5, -1))  # [A, P, 5, K]
+    h0_, h1_, h2_, zn, rho2 = q.unbind(2)
+    ok = h2_ != 0
+    h2s = torch.where(ok, h2_, torch.ones_like(h2_))
+    u = h0_ / h2s
+    v = h1_ / h2s
     zhit = zn / h2s
     rho3 = u * u + v * v
     use3 = ok & (zhit > near) & (rho3 <= rho2)
     rho = torch.where(use3, rho3, rho2)
-    z = torch.where(use3, zhit, depth_c)
-    return log_o - 0.5 * rho, z
+    z = torch.where(use3, zhit, gp[:, None, :, 4])
+    return gp[:, None, :, 2] - 0.5 * rho, z
 
 
 def composite_tiles(
@@ -126,6 +131,7 @@ def composite_tiles(
     *,
     chunk: int,
     near: float,
+    tile_batch: int | None = None,
 ) -> CompositeImages:
     """Composite the binned Gaussians front to back into [H, W] images.
 
@@ -137,99 +143,139 @@ def composite_tiles(
         height: image height, px.
         chunk: Gaussians per tile and step.
         near: near plane, m (2DGS intersections closer than this are ignored).
+        tile_batch: tiles composited together (None: all at once).
 
     Returns:
         The accumulated images.
     """
-    dtype, device = features.dtype, features.device
+    device = features.device
+    ts = bins.tile_size
+    D = features.shape[1]
+    packed, n_head = _pack(proj, features)
+    grad = torch.is_grad_enabled() and packed.requires_grad
+    mono = _tile_monomials(ts, features.dtype, device)
+    tiles = torch.nonzero(bins.counts > 0).flatten()
+    # longest lists first: batches then hold tiles of similar work
+    tiles = tiles[torch.argsort(bins.counts[tiles], descending=True, stable=True)]
+    batch = tiles.numel() if not tile_batch else tile_batch
+    ids: list[torch.Tensor] = []
+    rows: list[torch.Tensor] = []
+    for b0 in range(0, tiles.numel(), max(batch, 1)):
+        t_ids, t_rows = _composite_batch(
+            tiles[b0 : b0 + batch], packed, n_head, D, proj, mono, bins, width, height, chunk, near, grad
+        )
+        ids += t_ids
+        rows += t_rows
+    num_tiles = bins.tiles_x * bins.tiles_y
+    out = features.new_zeros((num_tiles, ts * ts, D + 2))
+    if ids:
+        out = out.index_copy(0, torch.cat(ids), torch.cat(rows))
+    img = out.reshape(bins.tiles_y, bins.tiles_x, ts, ts, D + 2).permute(0, 2, 1, 3, 4)
+    img = img.reshape(bins.tiles_y * ts, bins.tiles_x * ts, D + 2)[:height, :width]
+    return CompositeImages(features=img[..., :D], depth=img[..., D], median=img[..., D + 1])
+
+
+def _composite_batch(
+    tiles: torch.Tensor,
+    packed: torch.Tensor,
+    n_head: int,
+    D: int,
+    proj: Projected,
+    mono: torch.Tensor,
+    bins: TileBins,
+    width: int,
+    height: int,
+    chunk: int,
+    near: float,
+    grad: bool,
+) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+    """Run the chunk loop over one batch of tiles; returns finished tile ids and their rows
+    [A, P, D + 2] (features, depth sum, median)."""
+    dtype, device = packed.dtype, packed.device
     ts = bins.tile_size
     P = ts * ts
-    D = features.shape[1]
-    num_tiles = bins.tiles_x * bins.tiles_y
-    is_2dgs = proj.kind == "2dgs"
-    mono = _tile_monomials(ts, dtype, device)
-    counts = bins.counts
-    tiles = torch.nonzero(counts > 0).flatten()
+    K1 = chunk + 1
+    is_3dgs = proj.kind == "3dgs"
+    inv_sq = proj.lowpass_inv_sq
     start = bins.offsets[tiles]
     end = bins.offsets[tiles + 1]
-    ox_t = ((tiles % bins.tiles_x) * ts).to(dtype)
-    oy_t = ((tiles // bins.tiles_x) * ts).to(dtype)
-    # pixels outside the image start as "ended"
+    ox = ((tiles % bins.tiles_x) * ts).to(dtype)[:, None]
+    oy = ((tiles // bins.tiles_x) * ts).to(dtype)[:, None]
     local = torch.arange(ts, device=device)
-    px = ox_t.long()[:, None, None] + local[None, None, :]
-    py = oy_t.long()[:, None, None] + local[None, :, None]
-    T = ((px < width) & (py < height)).reshape(-1, P).to(dtype)
-    acc = features.new_zeros((tiles.numel(), P, D))
-    dep = features.new_zeros((tiles.numel(), P))
-    med = features.new_zeros((tiles.numel(), P))
-    done_tiles: list[torch.Tensor] = []
-    done_parts: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = []
-    ar = torch.arange(chunk, device=device)
-    depth_all = proj.depth
+    px = ox.long()[:, :, None] + local[None, None, :]
+    py = oy.long()[:, :, None] + local[None, :, None]
+    T = ((px < width) & (py < height)).reshape(-1, P).to(dtype)  # pixels off the image: ended
+    acc = packed.new_zeros((tiles.numel(), P, D + 2))
+    ar = torch.arange(-1, chunk, device=device)  # column -1 is the masked leading column
+    done_ids: list[torch.Tensor] = []
+    done_rows: list[torch.Tensor] = []
     step = 0
     while tiles.numel() > 0:
         idx = start[:, None] + step * chunk + ar
-        valid = idx < end[:, None]
+        valid = (idx < end[:, None]) & (ar >= 0)
         gid = bins.gaussian_ids[torch.where(valid, idx, start[:, None])]
-        ox = ox_t[:, None]
-        oy = oy_t[:, None]
-        exp_min = torch.where(valid, proj.exp_min[gid], torch.full_like(ox_t[:, None].expand_as(idx), math.inf))[:, None, :]
-        if is_2dgs:
-            coef = _coefficients_2dgs(proj, gid, ox, oy)
-            q = torch.matmul(mono, coef).unflatten(2, (5, chunk))
-            e, zp = _pair_exponent_2dgs(q, proj.log_opacity[gid][:, None, :], depth_all[gid][:, None, :], near)
+        gp = packed[gid]  # [A, K1, Q]
+        exp_min = gp[..., 6 if is_3dgs else 3].masked_fill(~valid, math.inf)
+        feats = gp[:, 1:, n_head:]
+        if is_3dgs:
+            e = torch.matmul(mono, _coefficients_3dgs(gp, ox, oy))
+            zp = None
         else:
-            coef = _coefficients_3dgs(proj, gid, ox, oy)
-            e = torch.matmul(mono, coef)
-        e = torch.where(e >= exp_min, e.clamp_max(_LOG_MAX_ALPHA), -math.inf)
-        alpha = torch.exp(e)
-        Ta = T[:, :, None] * torch.cumprod(1.0 - alpha, dim=-1)
-        Tb = torch.cat([T[:, :, None], Ta[:, :, :-1]], dim=-1)
-        w = torch.where(Ta >= TRANSMITTANCE_THRESHOLD, alpha * Tb, 0.0)
-        acc = acc + torch.matmul(w, features[gid])
-        # median: the one pair where T crosses 0.5 (T is non-increasing along the chunk)
-        n_above = (Ta > MEDIAN_TRANSMITTANCE).sum(-1, keepdim=True)
-        found = (T[:, :, None] > MEDIAN_TRANSMITTANCE) & (n_above < chunk)
-        cross = n_above.clamp_max(chunk - 1)
-        if is_2dgs:
-            dep = dep + (w * zp).sum(-1)
-            z_cross = torch.gather(zp, 2, cross)
+            e, zp = _exponent_2dgs(mono, gp, ox, oy, near, inv_sq)
+        off = e < exp_min[:, None, :]
+        if grad:
+            c = torch.cumprod(1.0 - torch.exp(e.clamp_max(_LOG_MAX_ALPHA)).masked_fill(off, 0.0), dim=-1)
         else:
-            dep = dep + torch.matmul(w, depth_all[gid][:, :, None]).squeeze(-1)
-            z_cross = torch.gather(depth_all[gid][:, None, :].expand(-1, P, -1), 2, cross)
-        med = med + torch.where(found, z_cross, 0.0).squeeze(-1)
-        T_last = Ta[:, :, -1]
-        T = torch.where(T_last < TRANSMITTANCE_THRESHOLD, 0.0, T_last)
+            c = e.clamp_max_(_LOG_MAX_ALPHA).exp_().masked_fill_(off, 0.0)
+            c = torch.cumprod(torch.sub(1.0, c, out=c), dim=-1, out=c)
+        # keep pair k iff T c[k] >= 1e-4; ended pixels (T = 0) keep nothing
+        limit = torch.where(T > 0, TRANSMITTANCE_THRESHOLD / T.clamp_min(1e-38), math.inf)
+        drop = c[..., 1:] < limit[..., None]
+        if grad:
+            w = (c[..., :-1] - c[..., 1:]).masked_fill(drop, 0.0)
+        else:
+            w = torch.sub(c[..., :-1], c[..., 1:]).masked_fill_(drop, 0.0)
+        inc = torch.matmul(w, feats)  # [A, P, D]
+        if is_3dgs:
+            dsum = torch.matmul(w, gp[:, 1:, 7:8])[..., 0]
+        else:
+            dsum = (w * zp[..., 1:]).sum(-1)  # type: ignore[index]
+        T_raw = T * c[..., -1]
+        med = _median_step(T, T_raw, c, gp, zp, is_3dgs)
+        acc = acc + torch.cat([T[..., None] * inc, (T * dsum)[..., None], med[..., None]], dim=-1)
+        T = torch.where(T_raw < TRANSMITTANCE_THRESHOLD, 0.0, T_raw)
         step += 1
         alive = (start + step * chunk < end) & (T > 0).any(dim=1)
         if not bool(alive.all()):
             gone = ~alive
-            done_tiles.append(tiles[gone])
-            done_parts.append((acc[gone], dep[gone], med[gone]))
+            done_ids.append(tiles[gone])
+            done_rows.append(acc[gone])
             keep = torch.nonzero(alive).flatten()
-            tiles, start, end = tiles[keep], start[keep], end[keep]
-            ox_t, oy_t = ox_t[keep], oy_t[keep]
-            T, acc, dep, med = T[keep], acc[keep], dep[keep], med[keep]
-    return _assemble(done_tiles, done_parts, bins, features, width, height)
+            tiles, start, end, ox, oy = tiles[keep], start[keep], end[keep], ox[keep], oy[keep]
+            T, acc = T[keep], acc[keep]
+    return done_ids, done_rows
 
 
-def _assemble(
-    done_tiles: list[torch.Tensor],
-    done_parts: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]],
-    bins: TileBins,
-    features: torch.Tensor,
-    width: int,
-    height: int,
-) -> CompositeImages:
-    ts = bins.tile_size
-    P = ts * ts
-    D = features.shape[1]
-    num_tiles = bins.tiles_x * bins.tiles_y
-    packed = features.new_zeros((num_tiles, P, D + 2))
-    if done_tiles:
-        ids = torch.cat(done_tiles)
-        rows = torch.cat([torch.cat([a, d[..., None], m[..., None]], dim=-1) for a, d, m in done_parts])
-        packed = packed.index_copy(0, ids, rows)
-    img = packed.reshape(bins.tiles_y, bins.tiles_x, ts, ts, D + 2).permute(0, 2, 1, 3, 4)
-    img = img.reshape(bins.tiles_y * ts, bins.tiles_x * ts, D + 2)[:height, :width]
-    return CompositeImages(features=img[..., :D], depth=img[..., D], median=img[..., D + 1])
+def _median_step(
+    T: torch.Tensor,
+    T_raw: torch.Tensor,
+    c: torch.Tensor,
+    gp: torch.Tensor,
+    zp: torch.Tensor | None,
+    is_3dgs: bool,
+) -> torch.Tensor:
+    """[A, P] depth of the pair at which T crosses 0.5 in this step (0 elsewhere)."""
+    cross = (T > MEDIAN_TRANSMITTANCE) & (T_raw <= MEDIAN_TRANSMITTANCE)
+    sel = torch.nonzero(cross.flatten()).flatten()
+    out = T.new_zeros(T.numel())
+    if sel.numel() == 0:
+        return out.reshape(T.shape)
+    K1 = c.shape[-1]
+    P = T.shape[1]
+    crow = c.reshape(-1, K1)[sel, 1:]
+    k = ((T.flatten()[sel, None] * crow) > MEDIAN_TRANSMITTANCE).sum(-1) + 1  # column index
+    if is_3dgs:
+        z = gp[sel // P, k, 7]
+    else:
+        z = zp.reshape(-1, K1)[sel, k]  # type: ignore[union-attr]
+    return out.index_put((sel,), z).reshape(T.shape)

@@ -96,7 +96,7 @@ def render_dense(
         J[:, 1, 1] = fy / z
         J[:, 1, 2] = -fy * ty / (z * z)
         cov2 = J @ W_rot @ cov3 @ W_rot.T @ J.transpose(1, 2)
-        cov2_lp = cov2 + LOWPASS_3DGS_PX2 * torch.eye(2, dtype=dtype, device=device)
+        cov2_lp = cov2 + LOWPASS_3DGS_PX2 * config.lowpass_scale**2 * torch.eye(2, dtype=dtype, device=device)
         if config.antialiased:
             o = o * torch.sqrt(torch.linalg.det(cov2).clamp_min(0) / torch.linalg.det(cov2_lp))
         conic = torch.linalg.inv(cov2_lp)
@@ -121,7 +121,7 @@ def render_dense(
         v = (rel * a_v[None]).sum(-1) / (s[:, 1] ** 2)[None]
         rho3 = u * u + v * v
         dd = pix[:, None, :] - centre[None, :, :]
-        rho2 = LOWPASS_2DGS_INV_SQ * (dd * dd).sum(-1)
+        rho2 = LOWPASS_2DGS_INV_SQ / config.lowpass_scale**2 * (dd * dd).sum(-1)
         use3 = ok & (t > camera.near) & (rho3 <= rho2)
         power = 0.5 * torch.where(use3, rho3, rho2)
         depth = torch.where(use3, t, z[None, :].expand(n_pix, -1))

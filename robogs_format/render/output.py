@@ -28,7 +28,8 @@ class RenderOutput:
         extra: [H, W, C] sum_i w_i e_i (no background); C = 0 without extra channels.
         means2d: [N, 2] projected means, px, on the render grid (the pinhole grid for distorted
             cameras); rows of culled Gaussians are 0. Differentiable (for densification).
-        radii: [N, 2] half extents of the screen-space bounding box, px; 0 where culled.
+        radii: [N, 2] half extents of the screen-space support box, px; 0 where culled (and
+            everywhere for the dense oracle, which needs no boxes).
     """
 
     rgb: torch.Tensor

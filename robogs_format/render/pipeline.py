@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import torch
 
 from .backends import get_backend
@@ -46,7 +48,7 @@ def render(
         >>> g = Gaussians(means=torch.tensor([[0.0, 0.0, 2.0]]), quats=torch.tensor([[1.0, 0, 0, 0]]),
         ...               log_scales=torch.full((1, 3), -3.0), opacity_logits=torch.tensor([5.0]),
         ...               sh=torch.zeros(1, 1, 3))
-        >>> cam = Camera(width=32, height=24, fx=30.0, fy=30.0, cx=16.0, cy=12.0, T_world_cam=torch.eye(4))
+        >>> cam = Camera(width=32, height=24, fx=30.0, fy=30.0, cx=16.5, cy=12.5, T_world_cam=torch.eye(4))
         >>> out = render(g, cam)
         >>> round(float(out.alpha[12, 16]), 2), round(float(out.depth_median[12, 16]), 3)
         (0.99, 2.0)
@@ -59,7 +61,7 @@ def render(
     if not camera.is_distorted:
         return fn(gaussians, camera, config)
     pin_cam, grid, ok = pinhole_render_camera(camera, config.undistort_scale)
-    out = fn(gaussians, pin_cam, config)
+    out = fn(gaussians, pin_cam, replace(config, lowpass_scale=config.lowpass_scale * config.undistort_scale))
     return _warp(out, grid.to(out.alpha.device), ok.to(out.alpha.device), config)
 
 
@@ -67,8 +69,10 @@ def _config_problems(config: RenderConfig) -> list[InputProblem]:
     problems = []
     if config.kind not in ("3dgs", "2dgs"):
         problems.append(InputProblem("config.kind", f"is {config.kind!r}", 'use "3dgs" or "2dgs"'))
-    if not isinstance(config.tile_size, int) or config.tile_size <= 0:
-        problems.append(InputProblem("config.tile_size", f"is {config.tile_size!r}", "use a positive int (8 or 16)"))
+    if config.tile_size is not None and (not isinstance(config.tile_size, int) or config.tile_size <= 0):
+        problems.append(InputProblem("config.tile_size", f"is {config.tile_size!r}", "use None or a positive int (8 or 16)"))
+    if config.tile_batch is not None and (not isinstance(config.tile_batch, int) or config.tile_batch <= 0):
+        problems.append(InputProblem("config.tile_batch", f"is {config.tile_batch!r}", "use None or a positive int"))
     if not isinstance(config.chunk, int) or config.chunk <= 0:
         problems.append(InputProblem("config.chunk", f"is {config.chunk!r}", "use a positive int (16 or 32)"))
     if len(config.background) != 3:

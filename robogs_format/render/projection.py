@@ -40,7 +40,7 @@ from .gaussians import Gaussians
 from .rotation import quat_to_rotmat
 from .sh import eval_sh
 
-__all__ = ["Projected", "project"]
+__all__ = ["Projected", "project", "lowpass_inv_sq"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,6 +49,7 @@ class Projected:
 
     Attributes:
         kind: "3dgs" or "2dgs".
+        lowpass_inv_sq: 2DGS screen filter coefficient k of rho_2d = k |x - c|^2.
         means2d: [N, 2] projected means, px.
         depth: [N] camera-frame z of the means, m (the sort key).
         log_opacity: [N] log of the (possibly anti-aliased) opacity.
@@ -65,6 +66,7 @@ class Projected:
     """
 
     kind: str
+    lowpass_inv_sq: float
     means2d: torch.Tensor
     depth: torch.Tensor
     log_opacity: torch.Tensor
@@ -135,9 +137,10 @@ def project(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> Proje
         ).reshape(-1, 2, 3)
         JM = J @ (R_c * scales[:, None, :])
         cov = JM @ JM.transpose(1, 2)
-        a = cov[:, 0, 0] + LOWPASS_3DGS_PX2
+        lowpass = LOWPASS_3DGS_PX2 * config.lowpass_scale**2
+        a = cov[:, 0, 0] + lowpass
         b = cov[:, 0, 1]
-        c = cov[:, 1, 1] + LOWPASS_3DGS_PX2
+        c = cov[:, 1, 1] + lowpass
         det = a * c - b * b
         det_safe = det.clamp_min(1e-30)
         if config.antialiased:
@@ -161,7 +164,7 @@ def project(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> Proje
         )
         with torch.no_grad():
             s_max = _exponent_range(log_o)
-            bbox = _surfel_bbox(Tm.detach(), means2d.detach(), 2.0 * s_max, camera)
+            bbox = _surfel_bbox(Tm.detach(), means2d.detach(), 2.0 * s_max, camera, lowpass_inv_sq(config))
             ok = torch.ones_like(in_depth)
 
     with torch.no_grad():
@@ -178,6 +181,7 @@ def project(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> Proje
         visible &= torch.isfinite(bbox).all(dim=1)
     return Projected(
         kind=config.kind,
+        lowpass_inv_sq=lowpass_inv_sq(config),
         means2d=means2d,
         depth=z,
         log_opacity=log_o,
@@ -210,7 +214,14 @@ def _apply_K(v: torch.Tensor, camera: Camera) -> torch.Tensor:
     )
 
 
-def _surfel_bbox(Tm: torch.Tensor, centre: torch.Tensor, rho_max: torch.Tensor, camera: Camera) -> torch.Tensor:
+def lowpass_inv_sq(config: RenderConfig) -> float:
+    """Coefficient of the 2DGS screen filter rho_2d = k |x - c|^2 on the render grid."""
+    return LOWPASS_2DGS_INV_SQ / config.lowpass_scale**2
+
+
+def _surfel_bbox(
+    Tm: torch.Tensor, centre: torch.Tensor, rho_max: torch.Tensor, camera: Camera, inv_sq: float
+) -> torch.Tensor:
     """Bounding box of {rho <= rho_max}: the projected disk u^2 + v^2 <= rho_max joined with the
     low-pass circle 2 |x - c|^2 <= rho_max. Disks reaching behind the camera get the full screen."""
     r2 = rho_max[:, None, None]
@@ -222,7 +233,7 @@ def _surfel_bbox(Tm: torch.Tensor, centre: torch.Tensor, rho_max: torch.Tensor, 
     xc, yc = D[:, 0, 2] / d22s, D[:, 1, 2] / d22s
     hx = torch.sqrt((xc * xc - D[:, 0, 0] / d22s).clamp_min(0))
     hy = torch.sqrt((yc * yc - D[:, 1, 1] / d22s).clamp_min(0))
-    rl = torch.sqrt(rho_max / LOWPASS_2DGS_INV_SQ)
+    rl = torch.sqrt(rho_max / inv_sq)
     box = torch.stack(
         [
             torch.minimum(xc - hx, centre[:, 0] - rl),

@@ -14,6 +14,12 @@ from .projection import project
 
 __all__ = ["render_tiled"]
 
+#: default tiles per batch on CPU (keeps a step's [tiles, pixels, chunk] tensors in cache)
+_CPU_TILE_BATCH = 256
+#: default tile edges, px
+_CPU_TILE_SIZE = 8
+_GPU_TILE_SIZE = 16
+
 
 def render_tiled(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> RenderOutput:
     """Render a pinhole camera with the tile-chunk rasterizer (CPU or CUDA, differentiable).
@@ -28,10 +34,17 @@ def render_tiled(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> 
     """
     H, W = camera.height, camera.width
     proj = project(gaussians, camera, config)
-    bins = bin_tiles(proj.bbox, proj.depth, proj.visible, W, H, config.tile_size)
+    on_cpu = proj.depth.device.type == "cpu"
+    tile_size = config.tile_size or (_CPU_TILE_SIZE if on_cpu else _GPU_TILE_SIZE)
+    bins = bin_tiles(proj.bbox, proj.depth, proj.visible, W, H, tile_size)
     ones = torch.ones_like(proj.depth)[:, None]
     feats = torch.cat([proj.rgb, ones, proj.normals, proj.extra], dim=1)
-    img = composite_tiles(proj, bins, feats, W, H, chunk=config.chunk, near=camera.near)
+    batch = config.tile_batch
+    if batch is None and on_cpu:
+        batch = _CPU_TILE_BATCH
+    img = composite_tiles(
+        proj, bins, feats, W, H, chunk=config.chunk, near=camera.near, tile_batch=batch
+    )
     return finish_output(
         img.features, img.depth, img.median, proj.means2d, proj.bbox, proj.visible, config
     )

@@ -69,27 +69,39 @@ def test_forward_matches_yourdfpy_scene_graph(name: str) -> None:
 def test_planar_two_link_closed_form(tmp_path: Path) -> None:
     l1, l2, h = 0.4, 0.3, 0.1
     body = links("base", "l1", "l2", "ee") + joint("j1", "base", "l1", xyz=f"0 0 {h}")
-    body += joint("j2", "l1", "l2", xyz=f"{l1} 0 0") + joint("fix", "l2", "ee", "fixed", xyz=f"{l2} 0 0")
+    body += joint("j2", "l1", "l2", xyz=f"{l1} 0 0") + joint(
+        "fix", "l2", "ee", "fixed", xyz=f"{l2} 0 0"
+    )
     chain = chain_of(tmp_path, body)
     q = torch.tensor([[0.3, -1.1], [2.5, 0.7], [0.0, 0.0]], dtype=torch.float64)
     T = chain.forward(q)[:, chain.link_index("ee")]
     q1, q2 = q[:, 0], q[:, 1]
     expect = torch.stack(
-        [l1 * torch.cos(q1) + l2 * torch.cos(q1 + q2), l1 * torch.sin(q1) + l2 * torch.sin(q1 + q2), torch.full_like(q1, h)],
+        [
+            l1 * torch.cos(q1) + l2 * torch.cos(q1 + q2),
+            l1 * torch.sin(q1) + l2 * torch.sin(q1 + q2),
+            torch.full_like(q1, h),
+        ],
         dim=-1,
     )
     assert torch.abs(T[:, :3, 3] - expect).max() < 1e-15
     yaw = torch.atan2(T[:, 1, 0], T[:, 0, 0])
-    assert torch.abs(torch.remainder(yaw - (q1 + q2) + math.pi, 2 * math.pi) - math.pi).max() < 1e-14
+    assert (
+        torch.abs(torch.remainder(yaw - (q1 + q2) + math.pi, 2 * math.pi) - math.pi).max() < 1e-14
+    )
 
 
 def test_prismatic_mimic_and_continuous(tmp_path: Path) -> None:
     body = links("base", "hand", "fl", "fr", "wheel", "flap")
     body += joint("turn", "base", "hand", "continuous", xyz="0 0 0.5", axis="0 0 2")
     body += joint("f1", "hand", "fl", "prismatic", xyz="0 0 0.1", axis="0 1 0")
-    body += joint("f2", "hand", "fr", "prismatic", xyz="0 0 0.1", axis="0 -1 0", extra='<mimic joint="f1"/>')
+    body += joint(
+        "f2", "hand", "fr", "prismatic", xyz="0 0 0.1", axis="0 -1 0", extra='<mimic joint="f1"/>'
+    )
     body += joint("w", "hand", "wheel", axis="1 0 0")
-    body += joint("m", "hand", "flap", axis="1 0 0", extra='<mimic joint="w" multiplier="-2" offset="0.1"/>')
+    body += joint(
+        "m", "hand", "flap", axis="1 0 0", extra='<mimic joint="w" multiplier="-2" offset="0.1"/>'
+    )
     chain = chain_of(tmp_path, body)
     assert chain.joint_names == ["turn", "f1", "w"]
     assert np.isinf(chain.joint_lower[0]) and chain.joint_lower[1] == -3
@@ -126,14 +138,24 @@ def _tx(x: float) -> torch.Tensor:
 
 
 def test_unsupported_joints_and_bad_mimic(tmp_path: Path) -> None:
-    body = links("a", "b", "c") + joint("free", "a", "b", "floating", xyz="1 2 3") + joint("j", "b", "c")
+    body = (
+        links("a", "b", "c")
+        + joint("free", "a", "b", "floating", xyz="1 2 3")
+        + joint("j", "b", "c")
+    )
     with pytest.raises(FormatError, match="floating_as_fixed"):
         chain_of(tmp_path, body)
     chain = chain_of(tmp_path, body, floating_as_fixed=True)
     assert chain.joint_names == ["j"]
     T = chain.forward(torch.zeros(1, dtype=torch.float64))
-    assert torch.equal(T[chain.link_index("b"), :3, 3], torch.tensor([1.0, 2.0, 3.0], dtype=torch.float64))
-    bad = links("a", "b", "c") + joint("fx", "a", "b", "fixed") + joint("m", "b", "c", extra='<mimic joint="fx"/>')
+    assert torch.equal(
+        T[chain.link_index("b"), :3, 3], torch.tensor([1.0, 2.0, 3.0], dtype=torch.float64)
+    )
+    bad = (
+        links("a", "b", "c")
+        + joint("fx", "a", "b", "fixed")
+        + joint("m", "b", "c", extra='<mimic joint="fx"/>')
+    )
     with pytest.raises(FormatError, match="mimic"):
         chain_of(tmp_path, bad)
     zero_axis = links("a", "b") + joint("j", "a", "b", axis="0 0 0")
@@ -158,7 +180,9 @@ def test_bad_q_shapes(tmp_path: Path) -> None:
 UR5_BODY = (
     links("base_link", "shoulder", "upper", "fore", "w1", "w2", "w3", "tool0")
     + joint("pan", "base_link", "shoulder", xyz="0 0 0.089159")
-    + joint("lift", "shoulder", "upper", xyz="0 0.13585 0", rpy="0 1.5707963267948966 0", axis="0 1 0")
+    + joint(
+        "lift", "shoulder", "upper", xyz="0 0.13585 0", rpy="0 1.5707963267948966 0", axis="0 1 0"
+    )
     + joint("elbow", "upper", "fore", xyz="0 -0.1197 0.425", axis="0 1 0")
     + joint("wr1", "fore", "w1", xyz="0 0 0.39225", rpy="0 1.5707963267948966 0", axis="0 1 0")
     + joint("wr2", "w1", "w2", xyz="0 0.093 0")
@@ -178,7 +202,10 @@ def test_batched_shapes_dtypes_devices(tmp_path: Path, device: str) -> None:
     T32 = chain.forward(q.float())
     assert T32.dtype == torch.float32
     assert torch.abs(T32.double() - T).max() < 5e-6
-    assert torch.equal(T[..., 3, :], torch.tensor([0, 0, 0, 1.0], dtype=torch.float64, device=device).expand(4, 5, 8, 4))
+    assert torch.equal(
+        T[..., 3, :],
+        torch.tensor([0, 0, 0, 1.0], dtype=torch.float64, device=device).expand(4, 5, 8, 4),
+    )
 
 
 def test_jacobian_autograd_matches_finite_differences(tmp_path: Path) -> None:
@@ -194,6 +221,12 @@ def test_jacobian_autograd_matches_finite_differences(tmp_path: Path) -> None:
         q = torch.tensor(rng.uniform(-3, 3, 6), dtype=torch.float64)
         J = torch.autograd.functional.jacobian(f, q)
         h = 1e-6
-        J_fd = torch.stack([(f(q + h * e) - f(q - h * e)) / (2 * h) for e in torch.eye(6, dtype=torch.float64)], dim=1)
+        J_fd = torch.stack(
+            [(f(q + h * e) - f(q - h * e)) / (2 * h) for e in torch.eye(6, dtype=torch.float64)],
+            dim=1,
+        )
         assert torch.abs(J - J_fd).max() < 1e-8
-    assert torch.autograd.gradcheck(lambda q: chain.forward(q)[..., tool, :3, 3], (torch.rand(2, 6, dtype=torch.float64, requires_grad=True),))
+    assert torch.autograd.gradcheck(
+        lambda q: chain.forward(q)[..., tool, :3, 3],
+        (torch.rand(2, 6, dtype=torch.float64, requires_grad=True),),
+    )

@@ -63,7 +63,9 @@ def test_multiply_conjugate_inverse_rotate(rots: Rotation) -> None:
     v = np.random.default_rng(0).normal(size=(250, 3))
     assert np.abs(F.quat_rotate(wxyz(a), v) - a.apply(v)).max() < 1e-14
     # rotate == matrix product
-    assert np.abs(F.quat_rotate(wxyz(a), v) - np.einsum("nij,nj->ni", a.as_matrix(), v)).max() < 1e-14
+    assert (
+        np.abs(F.quat_rotate(wxyz(a), v) - np.einsum("nij,nj->ni", a.as_matrix(), v)).max() < 1e-14
+    )
     assert same_rotation(F.quat_conjugate(wxyz(a)), wxyz(a.inv())) < 1e-15
     q = 2.0 * wxyz(a)
     ident = F.quat_multiply(q, F.quat_inverse(q))
@@ -96,7 +98,11 @@ def test_slerp_closed_form_and_shortest_arc() -> None:
 def test_slerp_matches_scipy_and_near_parallel(rots: Rotation) -> None:
     key = Rotation.concatenate([rots[0], rots[1]])
     ref = Slerp([0.0, 1.0], key)(np.array([0.25, 0.5, 0.9]))
-    out = F.quat_slerp(wxyz(rots[0])[None].repeat(3, 0), wxyz(rots[1])[None].repeat(3, 0), np.array([0.25, 0.5, 0.9]))
+    out = F.quat_slerp(
+        wxyz(rots[0])[None].repeat(3, 0),
+        wxyz(rots[1])[None].repeat(3, 0),
+        np.array([0.25, 0.5, 0.9]),
+    )
     assert same_rotation(out, wxyz(ref)) < 1e-13
     q = wxyz(rots[2])
     q_close = wxyz(rots[2] * Rotation.from_rotvec([1e-9, 0, 0]))
@@ -108,10 +114,15 @@ def test_slerp_matches_scipy_and_near_parallel(rots: Rotation) -> None:
 def test_axis_angle_and_rotvec(rots: Rotation) -> None:
     rv = rots.as_rotvec()
     angle = np.linalg.norm(rv, axis=-1)
-    assert np.abs(F.axis_angle_to_matrix(rv / angle[:, None], angle) - rots.as_matrix()).max() < 1e-14
+    assert (
+        np.abs(F.axis_angle_to_matrix(rv / angle[:, None], angle) - rots.as_matrix()).max() < 1e-14
+    )
     assert np.abs(F.rotvec_to_matrix(rv) - rots.as_matrix()).max() < 1e-14
     small = np.array([[1e-10, -2e-10, 3e-11], [0.0, 0.0, 0.0], [1e-5, 0, 0]])
-    assert np.abs(F.rotvec_to_matrix(small) - Rotation.from_rotvec(small).as_matrix()).max() < 1e-16 + 1e-15
+    assert (
+        np.abs(F.rotvec_to_matrix(small) - Rotation.from_rotvec(small).as_matrix()).max()
+        < 1e-16 + 1e-15
+    )
     assert np.abs(F.matrix_to_rotvec(rots.as_matrix()) - rv).max() < 1e-13
     assert np.abs(F.matrix_to_rotvec(Rotation.from_rotvec(small).as_matrix()) - small).max() < 1e-15
     assert np.abs(F.rotation_angle(rots.as_matrix()) - rots.magnitude()).max() < 1e-14
@@ -132,7 +143,9 @@ def test_rpy_and_elementary_rotations() -> None:
     ref = Rotation.from_euler("xyz", rpy).as_matrix()  # extrinsic x, y, z = Rz Ry Rx
     assert np.abs(F.rpy_to_matrix(rpy) - ref).max() < 1e-14
     a = 0.7
-    assert np.abs(F.rot_x(np.float64(a)) - Rotation.from_rotvec([a, 0, 0]).as_matrix()).max() < 1e-15
+    assert (
+        np.abs(F.rot_x(np.float64(a)) - Rotation.from_rotvec([a, 0, 0]).as_matrix()).max() < 1e-15
+    )
     assert np.abs(F.rot_y(np.array(a)) - Rotation.from_rotvec([0, a, 0]).as_matrix()).max() < 1e-15
     assert np.abs(F.rot_z(np.array(a)) - Rotation.from_rotvec([0, 0, a]).as_matrix()).max() < 1e-15
 

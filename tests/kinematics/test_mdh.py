@@ -60,11 +60,23 @@ def test_planar_closed_form_and_frames() -> None:
     assert torch.equal(frames[:, 0], torch.eye(4, dtype=torch.float64).expand(2, 4, 4))
     q1, q2 = q[:, 0], q[:, 1]
     tip = frames[:, 3, :3, 3]
-    expect = torch.stack([l1 * torch.cos(q1) + l2 * torch.cos(q1 + q2), l1 * torch.sin(q1) + l2 * torch.sin(q1 + q2), 0 * q1], -1)
+    expect = torch.stack(
+        [
+            l1 * torch.cos(q1) + l2 * torch.cos(q1 + q2),
+            l1 * torch.sin(q1) + l2 * torch.sin(q1 + q2),
+            0 * q1,
+        ],
+        -1,
+    )
     assert torch.abs(tip - expect).max() < 1e-15
     # a theta offset is the same as adding it to q
     shifted = MDHTable(**{**_fields(table), "theta_offset_rad": [0.2, 0.0, 0.0]})
-    assert torch.abs(shifted.forward(q) - table.forward(q + torch.tensor([0.2, 0, 0], dtype=torch.float64))).max() < 1e-15
+    assert (
+        torch.abs(
+            shifted.forward(q) - table.forward(q + torch.tensor([0.2, 0, 0], dtype=torch.float64))
+        ).max()
+        < 1e-15
+    )
 
 
 def _fields(t: MDHTable) -> dict:
@@ -85,7 +97,13 @@ def test_from_standard_dh_preserves_the_tool_pose() -> None:
         q = rng.uniform(-3, 3, n)
         ref = T_base.copy()
         for i in range(n):  # standard DH: RotZ TransZ TransX RotX
-            ref = ref @ rot(F.rot_z(q[i] + off[i])) @ trans(z=d[i]) @ trans(x=a[i]) @ rot(F.rot_x(alpha[i]))
+            ref = (
+                ref
+                @ rot(F.rot_z(q[i] + off[i]))
+                @ trans(z=d[i])
+                @ trans(x=a[i])
+                @ rot(F.rot_x(alpha[i]))
+            )
         ref = ref @ T_tool
         assert np.abs(table.tool_pose(torch.from_numpy(q)).numpy() - ref).max() < 1e-13
 
@@ -150,7 +168,9 @@ def test_ur5_table_matches_inline_urdf(tmp_path: Path) -> None:
 @pytest.mark.realdata
 def test_ur5_table_matches_real_urdf() -> None:
     path, root, pkgs = real_urdf_args("ur5")
-    _check_ur5_agreement(Chain.from_urdf(load_urdf(path, root=root, package_roots=pkgs, load_meshes=False)), 200, 6)
+    _check_ur5_agreement(
+        Chain.from_urdf(load_urdf(path, root=root, package_roots=pkgs, load_meshes=False)), 200, 6
+    )
 
 
 def test_mdh_gradients_and_dtype() -> None:
@@ -164,7 +184,9 @@ def test_mdh_gradients_and_dtype() -> None:
 
 def test_json_round_trip(tmp_path: Path) -> None:
     table = ur5_mdh()
-    table.T_tool = F.make_T(F.rotvec_to_matrix(np.array([0.1, -0.2, 0.3])), np.array([0.01, 0.02, 0.1]))
+    table.T_tool = F.make_T(
+        F.rotvec_to_matrix(np.array([0.1, -0.2, 0.3])), np.array([0.01, 0.02, 0.1])
+    )
     p = tmp_path / "mdh.json"
     save_mdh_json(table, p)
     back = load_mdh_json(p)
@@ -174,7 +196,16 @@ def test_json_round_trip(tmp_path: Path) -> None:
     q = torch.rand(4, 6, dtype=torch.float64)
     assert torch.equal(back.tool_pose(q), table.tool_pose(q))
     data = json.loads(p.read_text())
-    assert set(data) == {"convention", "joint_names", "a_m", "alpha_rad", "d_m", "theta_offset_rad", "T_base", "T_tool"}
+    assert set(data) == {
+        "convention",
+        "joint_names",
+        "a_m",
+        "alpha_rad",
+        "d_m",
+        "theta_offset_rad",
+        "T_base",
+        "T_tool",
+    }
     # optional transforms default to identity
     del data["T_base"], data["T_tool"], data["convention"]
     assert np.array_equal(MDHTable.from_dict(data).T_base, np.eye(4))
@@ -185,7 +216,10 @@ def test_json_round_trip(tmp_path: Path) -> None:
     [
         (lambda d: d.pop("d_m"), "misses"),
         (lambda d: d.update(a_m=d["a_m"][:-1]), "entries"),
-        (lambda d: d.update(T_base=[[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]), "rigid"),
+        (
+            lambda d: d.update(T_base=[[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]),
+            "rigid",
+        ),
         (lambda d: d.update(T_tool=[[1, 0, 0], [0, 1, 0], [0, 0, 1]]), "4x4"),
         (lambda d: d.update(convention="standard_dh"), "convention"),
         (lambda d: d.update(alpha_rad=["x"] * 6), "non-numeric"),

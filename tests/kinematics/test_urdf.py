@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import collections
-import os
 import re
 from pathlib import Path
 
@@ -11,7 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from robogs_format.errors import FormatError, InputError, PathEscapeError, RobogsError
+from robogs_format.errors import FormatError, InputError, PathEscapeError
 from robogs_format.urdf import default_allowed_root, load_urdf, mesh_refs, resolve_mesh_uri
 
 from .conftest import REAL_URDFS, real_urdf_args
@@ -131,7 +130,10 @@ def test_package_found_by_folder_name_and_explicit_map(tmp_path: Path) -> None:
     pkg = tmp_path / "robot" / "pkgA"
     (pkg / "m").mkdir(parents=True)
     urdf_path = tmp_path / "robot" / "r.urdf"
-    assert resolve_mesh_uri("package://pkgA/m/x.stl", urdf_path, tmp_path) == (pkg / "m/x.stl").resolve()
+    assert (
+        resolve_mesh_uri("package://pkgA/m/x.stl", urdf_path, tmp_path)
+        == (pkg / "m/x.stl").resolve()
+    )
     other = tmp_path / "elsewhere"
     other.mkdir()
     got = resolve_mesh_uri("package://pkgA/x.stl", urdf_path, tmp_path, {"pkgA": other})
@@ -181,7 +183,6 @@ def test_uri_escapes_are_refused(tmp_path: Path, uri: str) -> None:
     assert ei.value.path == str(p) and uri in ei.value.where
 
 
-@pytest.mark.skipif(not hasattr(os, "symlink"), reason="platform without symlinks")
 def test_symlinks_out_of_root_are_refused(tmp_path: Path) -> None:
     outside = tmp_path / "outside"
     outside.mkdir()
@@ -227,8 +228,12 @@ def test_entity_declarations_are_refused(tmp_path: Path, text: str) -> None:
         load_urdf(p)
 
 
-def test_entity_in_collada_is_refused(tmp_path: Path) -> None:
-    (tmp_path / "m.dae").write_text(BILLION_LAUGHS.replace("robot", "COLLADA"))
+@pytest.mark.parametrize("padding", [0, 100_000])
+def test_entity_in_collada_is_refused(tmp_path: Path, padding: int) -> None:
+    evil = BILLION_LAUGHS.replace("robot", "COLLADA")
+    head, _, rest = evil.partition("\n")
+    # a long comment before the DOCTYPE must not hide it
+    (tmp_path / "m.dae").write_text(head + "\n<!--" + "x" * padding + "-->\n" + rest)
     p = tmp_path / "r.urdf"
     p.write_text(urdf_text("m.dae"))
     with pytest.raises(FormatError, match="entities"):
@@ -255,10 +260,19 @@ def test_truncated_and_wrong_xml(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("extra", "match"),
     [
-        ('<joint name="j2" type="fixed"><parent link="arm"/><child link="ghost"/></joint>', "unknown link"),
+        (
+            '<joint name="j2" type="fixed"><parent link="arm"/><child link="ghost"/></joint>',
+            "unknown link",
+        ),
         ('<link name="floating_island"/>', "exactly one root"),
-        ('<joint name="j2" type="fixed"><parent link="base"/><child link="arm"/></joint>', "child of two"),
-        ('<joint name="j2" type="hinge"><parent link="arm"/><child link="x"/></joint><link name="x"/>', "unknown joint type"),
+        (
+            '<joint name="j2" type="fixed"><parent link="base"/><child link="arm"/></joint>',
+            "child of two",
+        ),
+        (
+            '<joint name="j2" type="hinge"><parent link="arm"/><child link="x"/></joint><link name="x"/>',
+            "unknown joint type",
+        ),
         ('<joint name="j2" type="fixed"><parent link="arm"/></joint>', "child link"),
         ('<link name="arm"/>', "duplicate link"),
     ],
@@ -287,10 +301,15 @@ def test_corrupt_mesh_is_a_format_error(tmp_path: Path) -> None:
 
 
 def test_mesh_refs_lists_visual_then_collision(tmp_path: Path) -> None:
-    extra = '<link name="c"><collision><geometry><mesh filename="c.stl"/></geometry></collision></link>'
+    extra = (
+        '<link name="c"><collision><geometry><mesh filename="c.stl"/></geometry></collision></link>'
+    )
     extra += '<joint name="jc" type="fixed"><parent link="arm"/><child link="c"/></joint>'
     p = tmp_path / "r.urdf"
     p.write_text(urdf_text("v.stl", extra=extra))
     urdf = load_urdf(p, load_meshes=False)
     refs = mesh_refs(urdf)
-    assert [(r.link, r.kind, r.uri) for r in refs] == [("base", "visual", "v.stl"), ("c", "collision", "c.stl")]
+    assert [(r.link, r.kind, r.uri) for r in refs] == [
+        ("base", "visual", "v.stl"),
+        ("c", "collision", "c.stl"),
+    ]

@@ -1,0 +1,246 @@
+"""Export the robot as a URDF that carries the dataset's physics, plus one URDF per object.
+
+Output folder::
+
+    OUT/<robot>.urdf             the dataset URDF, edited (see below)
+    OUT/<robot>.contact.json     what URDF cannot hold: contact friction/restitution, armature
+    OUT/meshes/...               every mesh the URDF references, copied; paths are relative
+    OUT/objects/<name>/<name>.urdf, mesh.<ext>   one single-link URDF per scene object
+
+Edits to the dataset URDF (parsed with lxml, so transmissions, Gazebo tags and anything else
+are kept as they were):
+
+* ``<inertial>`` of a link is replaced when ``physics.json`` gives that link a mass
+  (``com_m``, ``inertia_kgm2``);
+* ``<dynamics damping friction>`` of every non-fixed joint from ``physics.json`` ``joints``
+  (URDF units: N·m·s/rad and N·m, or N·s/m and N for prismatic joints);
+* a link with visual geometry but no collision gets its visual geometry as collision;
+* mesh ``filename`` attributes point at the copies under ``meshes/``.
+
+The sidecar schema is documented in ``docs/exports.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from copy import deepcopy
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lxml import etree
+
+from robogs_format import Dataset
+from robogs_format.errors import FormatError, InputError
+
+from . import ExportReport, register_exporter
+from .physics_model import (
+    BodyInertia,
+    contact_material,
+    joint_dynamics,
+    link_inertias,
+    scene_objects,
+)
+
+__all__ = ["CONTACT_FORMAT", "export_urdf"]
+
+CONTACT_FORMAT = "robogs.contact"
+_SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
+
+
+def _fmt(v: float) -> str:
+    return repr(float(v))
+
+
+def _rpy(R: np.ndarray) -> tuple[float, float, float]:
+    """URDF roll-pitch-yaw (fixed-axis XYZ: R = Rz(y) Ry(p) Rx(r)) of a rotation matrix."""
+    pitch = float(np.arcsin(-np.clip(R[2, 0], -1.0, 1.0)))
+    if abs(R[2, 0]) < 1.0 - 1e-12:
+        roll = float(np.arctan2(R[2, 1], R[2, 2]))
+        yaw = float(np.arctan2(R[1, 0], R[0, 0]))
+    else:  # gimbal lock: put everything in yaw
+        roll = 0.0
+        yaw = float(np.arctan2(-R[0, 1], R[1, 1]))
+    return roll, pitch, yaw
+
+
+def _inertial_element(inertia: BodyInertia) -> etree._Element:
+    el = etree.Element("inertial")
+    xyz = " ".join(_fmt(v) for v in inertia.frame[:3, 3])
+    rpy = " ".join(_fmt(v) for v in _rpy(inertia.frame[:3, :3]))
+    etree.SubElement(el, "origin", xyz=xyz, rpy=rpy)
+    etree.SubElement(el, "mass", value=_fmt(inertia.mass))
+    I = inertia.inertia_in_frame
+    etree.SubElement(
+        el, "inertia",
+        ixx=_fmt(I[0, 0]), ixy=_fmt(I[0, 1]), ixz=_fmt(I[0, 2]),
+        iyy=_fmt(I[1, 1]), iyz=_fmt(I[1, 2]), izz=_fmt(I[2, 2]),
+    )  # fmt: skip
+    return el
+
+
+class _MeshCopier:
+    """Copies mesh files under ``OUT/meshes`` with unique, safe names."""
+
+    def __init__(self, out: Path) -> None:
+        self.out = out
+        self.by_source: dict[Path, str] = {}
+        self.used: set[str] = set()
+
+    def add(self, src: Path) -> str:
+        src = src.resolve()
+        if src in self.by_source:
+            return self.by_source[src]
+        stem = _SAFE.sub("_", src.stem) or "mesh"
+        name, k = f"{stem}{src.suffix.lower()}", 1
+        while name in self.used:
+            name, k = f"{stem}_{k}{src.suffix.lower()}", k + 1
+        self.used.add(name)
+        rel = f"meshes/{name}"
+        (self.out / "meshes").mkdir(exist_ok=True)
+        shutil.copyfile(src, self.out / rel)
+        self.by_source[src] = rel
+        return rel
+
+
+def _parse(path: Path) -> etree._Element:
+    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, remove_blank_text=True)
+    try:
+        return etree.parse(str(path), parser).getroot()
+    except etree.XMLSyntaxError as exc:  # ds.urdf() parsed it already; this is a race or a bug
+        raise FormatError(f"URDF is not well-formed XML ({exc.msg})", path=path) from None
+
+
+def _object_urdf(name: str, inertia: BodyInertia | None, mesh_rel: str | None) -> etree._Element:
+    robot = etree.Element("robot", name=name)
+    link = etree.SubElement(robot, "link", name=name)
+    if inertia is not None:
+        link.append(_inertial_element(inertia))
+    if mesh_rel is not None:
+        for tag in ("visual", "collision"):
+            g = etree.SubElement(etree.SubElement(link, tag), "geometry")
+            etree.SubElement(g, "mesh", filename=mesh_rel)
+    return robot
+
+
+def _write_xml(root: etree._Element, path: Path) -> None:
+    path.write_bytes(etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True))
+
+
+def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
+    """Write the robot URDF with physics, its meshes, the contact sidecar and object URDFs.
+
+    Args:
+        ds: the dataset (must have a robot).
+        out: output folder (exists, empty).
+        objects: also write one single-link URDF per scene object of ``physics.json``.
+
+    Returns:
+        The report; ``facts`` has ``links``, ``joints`` and ``objects`` counts.
+
+    Raises:
+        InputError: the dataset has no robot.
+    """
+    if not (ds.manifest.get("robot") or {}).get("urdf"):
+        raise InputError("dataset has no robot (manifest 'robot.urdf' is missing)", path=ds.manifest_path,
+                         hint="the urdf export needs robot/robot.urdf")
+    urdf = ds.urdf(load_meshes=True)
+    physics = ds.physics() if ds.manifest.get("physics") else None
+    root = _parse(ds.urdf_path)
+    robot_name = _SAFE.sub("_", root.get("name") or "robot")
+    meshes = _MeshCopier(out)
+    uri_to_path = {ref.uri: ref.path for ref in urdf.robogs_mesh_refs if ref.path is not None}
+
+    inertias = link_inertias(urdf, physics)
+    overrides = set((physics or {}).get("objects", {})) & {lk.name for lk in urdf.robot.links}
+    for link in root.findall("link"):
+        name = link.get("name")
+        if name in overrides and name in inertias and "mass_kg" in physics["objects"][name]:
+            old = link.find("inertial")
+            new = _inertial_element(inertias[name])
+            if old is not None:
+                link.replace(old, new)
+            else:
+                link.insert(0, new)
+        if link.find("collision") is None:
+            for vis in link.findall("visual"):
+                col = etree.SubElement(link, "collision")
+                if vis.get("name"):
+                    col.set("name", vis.get("name"))
+                for child in vis:
+                    if child.tag in ("origin", "geometry"):
+                        col.append(deepcopy(child))
+    for mesh in root.iter("mesh"):
+        uri = mesh.get("filename", "")
+        src = uri_to_path.get(uri)
+        if src is None:
+            raise FormatError("mesh URI was not resolved by the loader", path=ds.urdf_path, where=uri)
+        mesh.set("filename", meshes.add(src))
+
+    dynamics = joint_dynamics(urdf, physics)
+    for joint in root.findall("joint"):
+        dyn = dynamics.get(joint.get("name", ""))
+        if dyn is None or (dyn.damping is None and dyn.friction is None):
+            continue
+        el = joint.find("dynamics")
+        if el is None:
+            el = etree.SubElement(joint, "dynamics")
+        el.set("damping", _fmt(dyn.damping or 0.0))
+        el.set("friction", _fmt(dyn.friction or 0.0))
+    _write_xml(root, out / f"{robot_name}.urdf")
+
+    objs = scene_objects(ds, physics, {lk.name for lk in urdf.robot.links})
+    contact: dict[str, Any] = {
+        "format": CONTACT_FORMAT,
+        "version": 1,
+        "robot": robot_name,
+        "urdf": f"{robot_name}.urdf",
+        "units": {
+            "friction_static": "1 (Coulomb coefficient)",
+            "friction_dynamic": "1 (Coulomb coefficient)",
+            "restitution": "1",
+            "armature": "kg·m² (revolute) | kg (prismatic)",
+            "gravity_mps2": "m/s², world frame, z up",
+        },
+        "gravity_mps2": list((physics or {}).get("gravity_mps2", [0.0, 0.0, -9.81])),
+        "links": {},
+        "joints": {},
+        "objects": {},
+        "contacts": dict((physics or {}).get("contacts", {})),
+        "source": {"dataset": ds.name, "physics_revision": (physics or {}).get("revision")},
+    }
+    for link in urdf.robot.links:
+        mat = contact_material((physics or {}).get("objects", {}).get(link.name)).as_dict()
+        if mat:
+            contact["links"][link.name] = mat
+    for jname, dyn in dynamics.items():
+        if dyn.armature is not None:
+            contact["joints"][jname] = {"armature": dyn.armature}
+    files = [f"{robot_name}.urdf", f"{robot_name}.contact.json"]
+    for obj in objs:
+        entry: dict[str, Any] = {"equation": obj.equation, **obj.material.as_dict()}
+        if objects:
+            folder = out / "objects" / _SAFE.sub("_", obj.name)
+            folder.mkdir(parents=True)
+            mesh_rel = None
+            if obj.mesh_path is not None:
+                mesh_rel = f"mesh{obj.mesh_path.suffix.lower()}"
+                shutil.copyfile(obj.mesh_path, folder / mesh_rel)
+            rel = f"objects/{folder.name}/{folder.name}.urdf"
+            _write_xml(_object_urdf(obj.name, obj.inertia, mesh_rel), out / rel)
+            entry["urdf"] = rel
+            files.append(rel)
+        contact["objects"][obj.name] = entry
+    (out / f"{robot_name}.contact.json").write_text(json.dumps(contact, indent=2, ensure_ascii=False) + "\n")
+    files += sorted(meshes.by_source.values())
+    return ExportReport(
+        out=out,
+        files=files,
+        facts={"links": len(urdf.robot.links), "joints": len(urdf.robot.joints), "objects": len(objs)},
+    )
+
+
+register_exporter("urdf", export_urdf, output="folder",
+                  help="URDF with inertials, joint dynamics, collision meshes + contact sidecar")

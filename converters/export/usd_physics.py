@@ -1,0 +1,431 @@
+"""Export the scene as an OpenUSD stage with UsdPhysics (usd-core ``pxr``).
+
+Stage: ``upAxis = Z``, ``metersPerUnit = 1``, ``kilogramsPerUnit = 1``; all angles in degrees
+(UsdPhysics convention), everything else SI. Prims::
+
+    /World                                   default prim
+    /World/PhysicsScene                      UsdPhysics.Scene (gravity from physics.json)
+    /World/PhysicsMaterials/<body>           UsdShade.Material + PhysicsMaterialAPI
+    /World/<robot>                           Xform + ArticulationRootAPI
+    /World/<robot>/<link>                    Xform at T_world_link (rest configuration) +
+                                             RigidBodyAPI + MassAPI
+    /World/<robot>/<link>/visuals/mesh_<i>   UsdGeom.Mesh (render)
+    /World/<robot>/<link>/collisions/mesh_<i>  UsdGeom.Mesh (guide) + CollisionAPI +
+                                             MeshCollisionAPI(convexHull) + physics material
+    /World/<robot>/joints/<joint>            Revolute/Prismatic/FixedJoint
+    /World/<robot>/joints/root_fixed         FixedJoint world -> root link (fixed base)
+    /World/Objects/<name>                    rigid: RigidBodyAPI + MassAPI; kinematic:
+                                             kinematicEnabled; static: collider only
+
+Mapping follows newton-physics/urdf-usd-converter (``docs/concept_mapping.md``): a joint's
+frame is its URDF origin in the parent body, turned so that the joint axis is the USD axis
+(X, Y or Z; an axis that is none of them is realised by rotating the joint frame onto X);
+``localPos1/localRot1`` is that frame in the child body at q = 0, so with the bodies placed at
+the rest configuration the joint reads q_rest. Revolute limits are in degrees, prismatic in
+metres. The inertia tensor is written as ``diagonalInertia`` + ``principalAxes``
+(eigen-decomposition). A massless link attached by a fixed joint (a frame such as a tool
+flange) is not a body: it becomes an Xform nested in its parent's body. Passive joint
+damping becomes a zero-stiffness force drive (damping per degree for revolute joints); URDF
+damping, friction, armature and effort/velocity limits are also kept as ``robogs:*``
+attributes in SI units, since core UsdPhysics has no place for them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, UsdShade, UsdValidation, Vt
+
+from robogs_format import Dataset
+from robogs_format.errors import InputError
+from robogs_format.frames import matrix_to_quat, quat_to_matrix
+from robogs_format.kinematics import Chain
+from robogs_format.qa.rerun_log import rest_joint_positions, robot_link_meshes
+
+from . import ExportReport, register_exporter
+from .physics_model import (
+    BodyInertia,
+    ContactMaterial,
+    contact_material,
+    joint_dynamics,
+    link_inertias,
+    principal_axes,
+    scene_objects,
+)
+
+__all__ = ["USD_VALIDATORS", "UsdIssue", "export_usd", "validate_usd"]
+
+#: validators run on the exported stage (those present in this usd-core are used)
+USD_VALIDATORS: tuple[str, ...] = (
+    "usdPhysicsValidators:RigidBodyChecker",
+    "usdPhysicsValidators:ColliderChecker",
+    "usdPhysicsValidators:PhysicsJointChecker",
+    "usdPhysicsValidators:ArticulationChecker",
+    "usdGeomValidators:StageMetadataChecker",
+    "usdGeomValidators:EncapsulationChecker",
+    "usdValidation:StageMetadataChecker",
+    "usdValidation:CompositionErrorTest",
+    "usdValidation:AttributeTypeMismatch",
+    "usdShadeValidators:MaterialBindingApiAppliedValidator",
+    "usdShadeValidators:MaterialBindingRelationships",
+)
+
+
+@dataclass(frozen=True)
+class UsdIssue:
+    """One validator report: ``kind`` is ``error``, ``warning`` or ``info``."""
+
+    validator: str
+    name: str
+    kind: str
+    message: str
+    sites: tuple[str, ...] = ()
+
+
+def validate_usd(path: str | Path) -> list[UsdIssue]:
+    """Run usd-core's validators (:data:`USD_VALIDATORS`) on a stage file."""
+    reg = UsdValidation.ValidationRegistry()
+    names = [n for n in USD_VALIDATORS if reg.HasValidator(n)]
+    stage = Usd.Stage.Open(str(path))
+    errors = UsdValidation.ValidationContext(reg.GetOrLoadValidatorsByName(names)).Validate(stage)
+    kinds = {UsdValidation.ValidationErrorType.Error: "error", UsdValidation.ValidationErrorType.Warn: "warning"}
+    out = []
+    for e in errors:
+        if e.HasNoError():
+            continue
+        sites = tuple(str(s.GetPrim().GetPath()) if s.IsPrim() else str(s.GetPropertyPath()) for s in e.GetSites())
+        out.append(UsdIssue(e.GetValidator().GetMetadata().name if e.GetValidator() else "", e.GetName(),
+                            kinds.get(e.GetType(), "info"), e.GetMessage(), sites))
+    return out
+
+
+def _name(raw: str, used: set[str]) -> str:
+    base = Tf.MakeValidIdentifier(raw)
+    name, k = base, 1
+    while name in used:
+        name, k = f"{base}_{k}", k + 1
+    used.add(name)
+    return name
+
+
+def _quatd(R: np.ndarray) -> Gf.Quatd:
+    q = np.asarray(matrix_to_quat(np.asarray(R, dtype=np.float64)))
+    return Gf.Quatd(float(q[0]), Gf.Vec3d(*(float(v) for v in q[1:])))
+
+
+def _quatf(R: np.ndarray) -> Gf.Quatf:
+    q = np.asarray(matrix_to_quat(np.asarray(R, dtype=np.float64)))
+    return Gf.Quatf(float(q[0]), Gf.Vec3f(*(float(v) for v in q[1:])))
+
+
+def _set_pose(prim: Usd.Prim, T: np.ndarray) -> None:
+    x = UsdGeom.Xformable(prim)
+    x.ClearXformOpOrder()
+    x.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*(float(v) for v in T[:3, 3])))
+    x.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(_quatd(T[:3, :3]))
+
+
+def _define_mesh(stage: Usd.Stage, path: Sdf.Path, mesh: Any, *, guide: bool) -> UsdGeom.Mesh:
+    m = UsdGeom.Mesh.Define(stage, path)
+    faces = np.asarray(mesh.faces, dtype=np.int32)
+    m.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.asarray(mesh.vertices, dtype=np.float32)))
+    m.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32)))
+    m.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.reshape(-1)))
+    m.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    lo, hi = np.asarray(mesh.bounds, dtype=np.float32)
+    m.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))]))
+    if guide:
+        m.CreatePurposeAttr(UsdGeom.Tokens.guide)
+    return m
+
+
+@dataclass
+class _Builder:
+    stage: Usd.Stage
+    root: Sdf.Path
+    materials: dict[str, UsdShade.Material] = field(default_factory=dict)
+    material_names: set[str] = field(default_factory=set)
+    notes: list[str] = field(default_factory=list)
+
+    def material(self, body: str, mat: ContactMaterial) -> UsdShade.Material | None:
+        if not mat.as_dict():
+            return None
+        if body not in self.materials:
+            folder = UsdGeom.Scope.Define(self.stage, self.root.AppendChild("PhysicsMaterials")).GetPath()
+            path = folder.AppendChild(_name(body, self.material_names))
+            material = UsdShade.Material.Define(self.stage, path)
+            api = UsdPhysics.MaterialAPI.Apply(material.GetPrim())
+            if mat.friction_static is not None:
+                api.CreateStaticFrictionAttr(float(mat.friction_static))
+            if mat.friction_dynamic is not None:
+                api.CreateDynamicFrictionAttr(float(mat.friction_dynamic))
+            if mat.restitution is not None:
+                api.CreateRestitutionAttr(float(mat.restitution))
+            self.materials[body] = material
+        return self.materials[body]
+
+    def colliders(self, parent: Sdf.Path, meshes: list[Any], material: UsdShade.Material | None,
+                  approximation: str) -> None:
+        folder = UsdGeom.Scope.Define(self.stage, parent.AppendChild("collisions")).GetPath()
+        for i, mesh in enumerate(meshes):
+            m = _define_mesh(self.stage, folder.AppendChild(f"mesh_{i}"), mesh, guide=True)
+            prim = m.GetPrim()
+            UsdPhysics.CollisionAPI.Apply(prim)
+            UsdPhysics.MeshCollisionAPI.Apply(prim).CreateApproximationAttr(approximation)
+            if material is not None:
+                UsdShade.MaterialBindingAPI.Apply(prim).Bind(
+                    material, UsdShade.Tokens.weakerThanDescendants, "physics"
+                )
+
+    def visuals(self, parent: Sdf.Path, meshes: list[Any]) -> None:
+        folder = UsdGeom.Scope.Define(self.stage, parent.AppendChild("visuals")).GetPath()
+        for i, mesh in enumerate(meshes):
+            _define_mesh(self.stage, folder.AppendChild(f"mesh_{i}"), mesh, guide=False)
+
+    def mass(self, prim: Usd.Prim, inertia: BodyInertia, where: str) -> None:
+        api = UsdPhysics.MassAPI.Apply(prim)
+        api.CreateMassAttr(float(inertia.mass))
+        api.CreateCenterOfMassAttr(Gf.Vec3f(*(float(v) for v in inertia.com)))
+        d, R = principal_axes(inertia.inertia, where=where)
+        api.CreateDiagonalInertiaAttr(Gf.Vec3f(*(float(v) for v in d)))
+        api.CreatePrincipalAxesAttr(_quatf(R))
+
+
+def _axis_frame(axis: np.ndarray) -> tuple[str, np.ndarray]:
+    """USD axis token and rotation ``Ra`` with ``Ra @ e_token == axis`` (identity when aligned)."""
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    for token, e in zip("XYZ", np.eye(3), strict=True):
+        if np.allclose(a, e, atol=1e-12):
+            return token, np.eye(3)
+    x = np.array([1.0, 0.0, 0.0])
+    v = np.cross(x, a)
+    s, c = np.linalg.norm(v), float(np.dot(x, a))
+    if s < 1e-12:  # a == -x: half turn about z
+        return "X", np.diag([-1.0, -1.0, 1.0])
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]]) / s
+    ang = math.atan2(s, c)
+    return "X", np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * (K @ K)
+
+
+def _set_joint_frames(joint: UsdPhysics.Joint, T0: np.ndarray, T1: np.ndarray) -> None:
+    joint.CreateLocalPos0Attr(Gf.Vec3f(*(float(v) for v in T0[:3, 3])))
+    joint.CreateLocalRot0Attr(_quatf(T0[:3, :3]))
+    joint.CreateLocalPos1Attr(Gf.Vec3f(*(float(v) for v in T1[:3, 3])))
+    joint.CreateLocalRot1Attr(_quatf(T1[:3, :3]))
+
+
+def _custom(prim: Usd.Prim, name: str, value: float | None) -> None:
+    if value is not None and math.isfinite(value):
+        prim.CreateAttribute(f"robogs:{name}", Sdf.ValueTypeNames.Double, custom=True).Set(float(value))
+
+
+def _object_rest_pose(ds: Dataset, name: str) -> np.ndarray:
+    """T_world_object at rest: the splats' rest pose, else the first sample, else identity."""
+    T = np.eye(4)
+    rest = (((ds.assets.get(name) or {}).get("splats") or {}).get("rest") or {}).get("object_poses", {})
+    pose = rest.get(name)
+    if pose is None:
+        for ep in ds.episodes:
+            if ep.has("object_poses"):
+                tab = ep.table("object_poses")
+                idx = [i for i, n in enumerate(tab.column("object").to_pylist()) if n == name]
+                if idx:
+                    row = {c: tab.column(c)[idx[0]].as_py() for c in ("x", "y", "z", "qw", "qx", "qy", "qz")}
+                    pose = [row[c] for c in ("x", "y", "z", "qw", "qx", "qy", "qz")]
+                    break
+    if pose is not None:
+        T[:3, :3] = np.asarray(quat_to_matrix(np.asarray(pose[3:7], dtype=np.float64)))
+        T[:3, 3] = pose[:3]
+    return T
+
+
+def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
+    """Write the robot (and scene objects) as a UsdPhysics stage; suffix picks usda/usdc.
+
+    Args:
+        ds: the dataset (must have a robot).
+        out: output ``.usda``, ``.usdc`` or ``.usd`` file.
+        objects: include the ``physics.json`` scene objects.
+
+    Returns:
+        The report; ``facts["validator_errors"]`` counts errors from :func:`validate_usd`.
+    """
+    if not (ds.manifest.get("robot") or {}).get("urdf"):
+        raise InputError("dataset has no robot (manifest 'robot.urdf' is missing)", path=ds.manifest_path,
+                         hint="the usd export needs robot/robot.urdf")
+    if out.suffix.lower() not in (".usda", ".usdc", ".usd"):
+        raise InputError(f"USD output must end in .usda, .usdc or .usd, not {out.suffix!r}", path=out)
+    urdf = ds.urdf(load_meshes=True)
+    physics = ds.physics() if ds.manifest.get("physics") else None
+    chain = Chain.from_urdf(urdf, floating_as_fixed=True)
+    q_rest = rest_joint_positions(ds, chain)
+    T_world = chain.forward(torch.from_numpy(q_rest)).numpy()  # [L, 4, 4]
+
+    stage = Usd.Stage.CreateNew(str(out))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdPhysics.SetStageKilogramsPerUnit(stage, 1.0)
+    world = UsdGeom.Xform.Define(stage, "/World")
+    stage.SetDefaultPrim(world.GetPrim())
+    b = _Builder(stage, world.GetPath())
+
+    scene = UsdPhysics.Scene.Define(stage, "/World/PhysicsScene")
+    g = np.asarray((physics or {}).get("gravity_mps2", (0.0, 0.0, -9.81)), dtype=np.float64)
+    gn = float(np.linalg.norm(g))
+    scene.CreateGravityDirectionAttr(Gf.Vec3f(*(g / gn if gn > 0 else (0.0, 0.0, -1.0)).tolist()))
+    scene.CreateGravityMagnitudeAttr(gn)
+
+    used: set[str] = {"PhysicsScene", "PhysicsMaterials", "Objects"}
+    robot_path = world.GetPath().AppendChild(_name(urdf.robot.name or "robot", used))
+    robot = UsdGeom.Xform.Define(stage, robot_path)
+    UsdPhysics.ArticulationRootAPI.Apply(robot.GetPrim())
+    inertias = link_inertias(urdf, physics)
+    visuals = robot_link_meshes(urdf)
+    collisions = robot_link_meshes(urdf, collision=True)
+    objects_phys = (physics or {}).get("objects", {})
+    joint_by_child = {j.child: j for j in urdf.robot.joints}
+
+    body_of: dict[str, str] = {}  # link -> link name of the rigid body it belongs to
+    T_body_link: dict[str, np.ndarray] = {}
+    prim_path: dict[str, Sdf.Path] = {}
+    link_used: set[str] = {"joints"}
+    for k, link in enumerate(chain.link_names):
+        j = joint_by_child.get(link)
+        merged = j is not None and j.type == "fixed" and link not in inertias
+        if merged:
+            parent = j.parent
+            body_of[link] = body_of[parent]
+            origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=np.float64)
+            T_body_link[link] = T_body_link[parent] @ origin
+            path = prim_path[parent].AppendChild(_name(link, set()))
+            prim = UsdGeom.Xform.Define(stage, path).GetPrim()
+            _set_pose(prim, origin)
+        else:
+            body_of[link], T_body_link[link] = link, np.eye(4)
+            path = robot_path.AppendChild(_name(link, link_used))
+            prim = UsdGeom.Xform.Define(stage, path).GetPrim()
+            _set_pose(prim, T_world[k])
+            UsdPhysics.RigidBodyAPI.Apply(prim)
+            if link in inertias:
+                b.mass(prim, inertias[link], where=f"link {link}")
+            else:
+                b.notes.append(f"link {link} has no inertial: its mass is left to the simulator (density)")
+        prim_path[link] = path
+        if visuals.get(link):
+            b.visuals(path, visuals[link])
+        cols = collisions.get(link) or visuals.get(link) or []
+        if cols:
+            mat = b.material(body_of[link], contact_material(objects_phys.get(body_of[link])))
+            b.colliders(path, cols, mat, UsdPhysics.Tokens.convexHull)
+
+    joints_path = robot_path.AppendChild("joints")
+    UsdGeom.Scope.Define(stage, joints_path)
+    root_link = chain.link_names[0]
+    fixed = UsdPhysics.FixedJoint.Define(stage, joints_path.AppendChild("root_fixed"))
+    fixed.CreateBody1Rel().SetTargets([prim_path[root_link]])
+    _set_joint_frames(fixed, T_world[0], np.eye(4))
+    dynamics = joint_dynamics(urdf, physics)
+    jused: set[str] = {"root_fixed"}
+    n_joints = 0
+    for j in urdf.robot.joints:
+        if body_of.get(j.child) != j.child:  # merged frame link
+            continue
+        origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=np.float64)
+        T0 = T_body_link[j.parent] @ origin
+        path = joints_path.AppendChild(_name(j.name, jused))
+        if j.type in ("revolute", "continuous", "prismatic"):
+            token, Ra = _axis_frame(np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0)))
+            Ta = np.eye(4)
+            Ta[:3, :3] = Ra
+            if j.type == "prismatic":
+                joint = UsdPhysics.PrismaticJoint.Define(stage, path)
+                scale, drive = 1.0, "linear"
+            else:
+                joint = UsdPhysics.RevoluteJoint.Define(stage, path)
+                scale, drive = 180.0 / math.pi, "angular"
+            joint.CreateAxisAttr(token)
+            if j.type != "continuous" and j.limit is not None:
+                if j.limit.lower is not None:
+                    joint.CreateLowerLimitAttr(float(j.limit.lower) * scale)
+                if j.limit.upper is not None:
+                    joint.CreateUpperLimitAttr(float(j.limit.upper) * scale)
+            _set_joint_frames(joint, T0 @ Ta, Ta)
+            dyn = dynamics.get(j.name)
+            prim = joint.GetPrim()
+            if dyn is not None:
+                _custom(prim, "damping", dyn.damping)
+                _custom(prim, "friction", dyn.friction)
+                _custom(prim, "armature", dyn.armature)
+                if dyn.damping:
+                    api = UsdPhysics.DriveAPI.Apply(prim, drive)
+                    api.CreateTypeAttr(UsdPhysics.Tokens.force)
+                    api.CreateStiffnessAttr(0.0)
+                    api.CreateDampingAttr(float(dyn.damping) / scale)
+                    api.CreateTargetVelocityAttr(0.0)
+            if j.limit is not None:
+                _custom(prim, "effortLimit", j.limit.effort)
+                _custom(prim, "velocityLimit", j.limit.velocity)
+        elif j.type == "fixed":
+            joint = UsdPhysics.FixedJoint.Define(stage, path)
+            _set_joint_frames(joint, T0, np.eye(4))
+        else:
+            b.notes.append(f"joint {j.name}: type {j.type!r} is not exported (no UsdPhysics equivalent)")
+            continue
+        joint.CreateBody0Rel().SetTargets([prim_path[body_of[j.parent]]])
+        joint.CreateBody1Rel().SetTargets([prim_path[j.child]])
+        n_joints += 1
+
+    n_objects = 0
+    if objects:
+        objs = scene_objects(ds, physics, set(chain.link_names))
+        if objs:
+            folder = UsdGeom.Scope.Define(stage, world.GetPath().AppendChild("Objects")).GetPath()
+        oused: set[str] = set()
+        for obj in objs:
+            path = folder.AppendChild(_name(obj.name, oused))
+            prim = UsdGeom.Xform.Define(stage, path).GetPrim()
+            _set_pose(prim, _object_rest_pose(ds, obj.name))
+            if obj.equation in ("rigid", "kinematic", "articulated"):
+                body = UsdPhysics.RigidBodyAPI.Apply(prim)
+                if obj.equation == "kinematic":
+                    body.CreateKinematicEnabledAttr(True)
+                if obj.inertia is not None:
+                    b.mass(prim, obj.inertia, where=f"object {obj.name}")
+            for key in ("damping_linear", "damping_angular"):
+                _custom(prim, key, obj.params.get(key))
+            if obj.mesh_path is not None:
+                mesh = ds.mesh(obj.name)
+                b.visuals(path, [mesh])
+                approx = UsdPhysics.Tokens.none if obj.equation == "static" else UsdPhysics.Tokens.convexHull
+                b.colliders(path, [mesh], b.material(obj.name, obj.material), approx)
+            else:
+                b.notes.append(f"object {obj.name} has no mesh: exported without collider")
+            n_objects += 1
+    stage.GetRootLayer().Save()
+    del stage
+    issues = validate_usd(out)
+    errors = [i for i in issues if i.kind == "error"]
+    b.notes += [f"USD validator {i.kind}: {i.name}: {i.message}" for i in issues]
+    return ExportReport(
+        out=out,
+        files=[out.name],
+        notes=b.notes,
+        facts={
+            "bodies": sum(1 for link in chain.link_names if body_of[link] == link) + n_objects,
+            "joints": n_joints + 1,
+            "objects": n_objects,
+            "validators_run": [n for n in USD_VALIDATORS if UsdValidation.ValidationRegistry().HasValidator(n)],
+            "validator_errors": len(errors),
+            "validator_issues": len(issues),
+        },
+    )
+
+
+register_exporter("usd", export_usd, output="file", suffix=".usda",
+                  help="OpenUSD stage with UsdPhysics bodies, masses, colliders, materials and joints")

@@ -1,0 +1,190 @@
+"""ROS 1 ``.bag`` files and ROS 2 bag folders, read with ``rosbags``.
+
+``rosbags.highlevel.AnyReader`` (https://gitlab.com/ternaris/rosbags) reads both and registers
+the message types from the definitions stored in the bag, so custom types decode without a
+ROS installation. For a ROS 2 folder whose storage is not compressed, the storage files
+(``.db3`` / ``.mcap``) named in ``metadata.yaml`` are opened directly: rosbags matches a
+folder's connections to ``metadata.yaml`` including QoS, and real recorders write QoS there that
+differs from the storage file, which would make the folder yield no messages at all. The
+counts in ``metadata.yaml`` are compared with the storage's and differences are recorded.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import struct
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from robogs_format.errors import InputError, RobogsError
+
+from ..registry import register_converter
+from .context import IngestContext
+from .messages import MessageIngest, TopicInfo
+
+__all__ = ["convert_ros1", "convert_ros2", "detect_ros1", "detect_ros2"]
+
+_MAX_META_BYTES = 8 << 20
+
+
+def detect_ros1(path: Path) -> bool:
+    """A ROS 1 bag: a ``.bag`` file."""
+    return path.is_file() and path.suffix.lower() == ".bag"
+
+
+def detect_ros2(path: Path) -> bool:
+    """A ROS 2 bag: a folder with ``metadata.yaml`` (sqlite3 or mcap storage)."""
+    return path.is_dir() and (path / "metadata.yaml").is_file()
+
+
+def _reader_errors() -> tuple[type[BaseException], ...]:
+    from rosbags.highlevel import AnyReaderError
+    from rosbags.rosbag1 import ReaderError as R1
+    from rosbags.rosbag2 import ReaderError as R2
+
+    errs: list[type[BaseException]] = [AnyReaderError, R1, R2, OSError, ValueError, struct.error, EOFError,
+                                       KeyError, IndexError, sqlite3.Error, RuntimeError, AssertionError]
+    try:
+        from rosbags.typesys import TypesysError
+
+        errs.append(TypesysError)
+    except ImportError:  # pragma: no cover - older rosbags
+        pass
+    return tuple(errs)
+
+
+def _read_metadata(folder: Path) -> dict[str, Any]:
+    meta = folder / "metadata.yaml"
+    try:
+        if meta.stat().st_size > _MAX_META_BYTES:
+            raise InputError("metadata.yaml is too large", path=meta)
+        doc = yaml.safe_load(meta.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise InputError(f"cannot read metadata.yaml ({exc.strerror})", path=meta) from None
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise InputError(f"metadata.yaml is not valid YAML ({str(exc).splitlines()[0]})", path=meta) from None
+    info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
+    if not isinstance(info, dict):
+        raise InputError("metadata.yaml has no rosbag2_bagfile_information", path=meta,
+                         hint="is this a ROS 2 bag folder?")
+    return info
+
+
+def _ros2_paths(folder: Path, ctx: IngestContext) -> list[Path]:
+    info = _read_metadata(folder)
+    mode = str(info.get("compression_mode") or "").strip().lower()
+    files = [folder / Path(str(f)).name for f in info.get("relative_file_paths") or []]
+    ctx.provenance.extra["storage"] = str(info.get("storage_identifier", ""))
+    ctx.provenance.extra["ros_distro"] = str(info.get("ros_distro", "")) or None
+    if not files:
+        raise InputError("metadata.yaml lists no storage files", path=folder / "metadata.yaml")
+    missing = [f.name for f in files if not f.is_file()]
+    if missing:
+        raise InputError(f"storage files missing: {', '.join(missing)}", path=folder,
+                         hint="copy the whole bag folder")
+    if mode in ("", "none") and all(f.suffix in (".db3", ".mcap") for f in files):
+        expected = {}
+        for t in info.get("topics_with_message_count") or []:
+            try:
+                expected[str(t["topic_metadata"]["name"])] = int(t["message_count"])
+            except (KeyError, TypeError, ValueError):
+                continue
+        ctx.provenance.extra["metadata_counts"] = expected
+        ctx.provenance.note("storage files read directly; metadata.yaml used for its listing only")
+        return files
+    return [folder]
+
+
+def _open(paths: list[Path]):
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    return AnyReader(paths, default_typestore=get_typestore(Stores.LATEST))
+
+
+def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
+    errors = _reader_errors()
+    reader = None
+    where = "while opening"
+    try:
+        reader = _open(paths)
+        reader.open()
+    except RobogsError:
+        raise
+    except errors as exc:
+        raise InputError(f"cannot open bag ({type(exc).__name__}: {exc})", path=src,
+                         hint="the file is truncated, empty, not a bag, or uses an unknown compression") from None
+    try:
+        count = reader.message_count
+        start, end = reader.start_time, reader.end_time
+        time_range = (start, end) if count and start <= end else None
+        topics = []
+        for name, ti in reader.topics.items():
+            if ti.msgtype is None:
+                ctx.provenance.note(f"{name}: several message types on one topic; skipped")
+                ctx.provenance.topic(name, "mixed", "ignore").messages = ti.msgcount
+                ctx.provenance.drop(name, "several message types on one topic", ti.msgcount)
+                continue
+            topics.append(TopicInfo(name, ti.msgtype, ti.msgcount))
+        expected = ctx.provenance.extra.get("metadata_counts")
+        if expected:
+            for t in topics:
+                if t.topic in expected and expected[t.topic] != t.count:
+                    ctx.provenance.note(f"{t.topic}: metadata.yaml says {expected[t.topic]} messages, "
+                                        f"the storage holds {t.count}")
+        ingest = MessageIngest(ctx, time_range=time_range)
+        static, main = ingest.plan(topics)
+        where = "before the first message"
+        try:
+            for group, label in ((static, "static topics"), (main, src.name)):
+                if not group:
+                    continue
+                conns = [c for c in reader.connections if c.topic in set(group)]
+                total = sum(ingest.counts[t] for t in group)
+                ctx.progress.start(f"reading {label}", total)
+                for conn, log_time, raw in reader.messages(connections=conns):
+                    where = f"after topic {conn.topic} log time {log_time}"
+                    try:
+                        msg = reader.deserialize(raw, conn.msgtype)
+                    except RobogsError:
+                        raise
+                    except errors + (TypeError, UnicodeDecodeError) as exc:
+                        ingest.note_undecodable(conn.topic, log_time, f"{type(exc).__name__}: {exc}")
+                        ctx.progress.advance()
+                        continue
+                    ingest.handle(conn.topic, log_time, msg)
+                    ctx.progress.advance()
+                ctx.progress.stop()
+            ingest.finish()
+        except BaseException:
+            ingest.abort()
+            raise
+    except RobogsError:
+        raise
+    except errors as exc:
+        raise InputError(f"bag is corrupt ({type(exc).__name__}: {exc})", path=src, where=where,
+                         hint="the file may be truncated; re-record or reindex it") from None
+    finally:
+        ctx.progress.stop()
+        try:
+            reader.close()
+        except Exception:  # noqa: BLE001 - closing a broken reader must not hide the first error
+            pass
+
+
+def convert_ros1(src: Path, ctx: IngestContext) -> None:
+    """Convert a ROS 1 bag (bz2/lz4 chunks handled by rosbags)."""
+    ctx.provenance.extra["storage"] = "rosbag1"
+    _convert([src], src, ctx)
+
+
+def convert_ros2(src: Path, ctx: IngestContext) -> None:
+    """Convert a ROS 2 bag folder (sqlite3 or mcap storage, split files merged by time)."""
+    _convert(_ros2_paths(src, ctx), src, ctx)
+
+
+register_converter("ros1", detect_ros1, convert_ros1, description="ROS 1 .bag file (rosbags)", priority=50)
+register_converter("ros2", detect_ros2, convert_ros2,
+                   description="ROS 2 bag folder with metadata.yaml (sqlite3 or mcap storage)", priority=100)

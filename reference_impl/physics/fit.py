@@ -1,0 +1,339 @@
+"""Bounded nonlinear least squares on batched rollouts (Levenberg-Marquardt, many problems at once).
+
+A *problem* fits some global slots of a :class:`~reference_impl.physics.space.ParamSpace`
+(the others stay at their zero values) plus per-trajectory *local* nuisance parameters (the
+initial pose corrections), minimising the sum of squared weighted residuals over a subset of
+trajectories. All problems advance together: each iteration runs ONE batched rollout holding,
+for every unfinished problem, its trial point and the finite-difference perturbations there.
+Local parameters of different trajectories never interact, so one perturbed rollout row gives
+their Jacobian columns for all trajectories at once (block-sparse finite differences).
+
+Steps are Levenberg-Marquardt with Marquardt's diagonal scaling (More 1978), projected on the
+bounds; the Jacobian at an accepted trial point is already computed ("speculative" FD). The
+covariance is ``s^2 (J^T J)^-1`` with ``s^2 = chi2 / (n - p)``, marginalised over the local
+parameters; a parameter whose Fisher information is near-singular is flagged unidentifiable.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from reference_impl.physics.space import ParamSpace
+
+__all__ = ["Problem", "FitOutcome", "fit_problems", "jacobian_fd", "ResidualFn"]
+
+ResidualFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+"""``fn(theta [M, Q], local [M, T, L]) -> weighted residuals [M, T, K]`` (zero where invalid)."""
+
+
+@dataclass
+class Problem:
+    """One least-squares problem.
+
+    Attributes:
+        free: columns of the parameter space that are fitted.
+        traj: [T] bool, trajectories in the objective (all by default).
+        theta0: [Q] start (default: the space's zero values).
+        fit_local: whether the local (per-trajectory) parameters are fitted.
+    """
+
+    free: list[int]
+    traj: np.ndarray | None = None
+    theta0: np.ndarray | None = None
+    fit_local: bool = True
+
+
+@dataclass
+class FitOutcome:
+    """Result of one problem.
+
+    Attributes:
+        theta: [Q] fitted parameter vector (non-free slots at their start value).
+        local: [T, L] fitted local parameters.
+        cost: chi^2 (sum of squared weighted residuals) over the problem's trajectories.
+        n: number of non-zero-weight residuals in the objective.
+        resid: [T, K] residuals at the optimum, for all trajectories.
+        jac: [T, K, P] Jacobian of the residuals wrt the free parameters (all trajectories).
+        jac_local: [T, K, L] Jacobian wrt each trajectory's own local parameters.
+        std: [P] standard deviations of the free parameters (inf if unidentifiable).
+        cov: [P, P] covariance (local parameters marginalised).
+        cond: condition number of the scaled Fisher information of the free parameters.
+        identifiable: False when the Fisher information is near-singular.
+        iterations, converged: optimiser bookkeeping.
+    """
+
+    theta: np.ndarray
+    local: np.ndarray
+    cost: float
+    n: int
+    resid: np.ndarray
+    jac: np.ndarray
+    jac_local: np.ndarray
+    std: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    cond: float = 1.0
+    identifiable: bool = True
+    iterations: int = 0
+    converged: bool = False
+
+
+@dataclass
+class _State:
+    prob: Problem
+    theta: np.ndarray
+    local: np.ndarray
+    resid: np.ndarray | None = None
+    jac: np.ndarray | None = None
+    jac_local: np.ndarray | None = None
+    cost: float = np.inf
+    lam: float = 1e-3
+    it: int = 0
+    done: bool = False
+    converged: bool = False
+    trial_theta: np.ndarray | None = None
+    trial_local: np.ndarray | None = None
+
+
+def _fd_steps(space: ParamSpace, cols: Sequence[int], theta: np.ndarray, rel: float) -> np.ndarray:
+    h = rel * space.scale[list(cols)]
+    up = theta[list(cols)] + h > space.upper[list(cols)]
+    return np.where(up, -h, h)
+
+
+def _rows_for(
+    space: ParamSpace, st: _State, theta: np.ndarray, local: np.ndarray, rel: float, local_h: np.ndarray
+) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """Rollout rows: base point, one per free column, one per local dimension."""
+    thetas, locals_ = [theta], [local]
+    hs = _fd_steps(space, st.prob.free, theta, rel)
+    for j, c in enumerate(st.prob.free):
+        t = theta.copy()
+        t[c] += hs[j]
+        thetas.append(t)
+        locals_.append(local)
+    if st.prob.fit_local:
+        for d in range(local.shape[1]):
+            loc = local.copy()
+            loc[:, d] += local_h[d]
+            thetas.append(theta)
+            locals_.append(loc)
+    return thetas, locals_, hs
+
+
+def jacobian_fd(
+    fn: ResidualFn,
+    space: ParamSpace,
+    theta: np.ndarray,
+    local: np.ndarray,
+    cols: Sequence[int],
+    *,
+    rel: float = 1e-3,
+    local_h: Sequence[float] = (1e-4, 1e-4, 1e-3),
+    fit_local: bool = True,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Residuals and forward-difference Jacobians from one batched rollout.
+
+    Returns:
+        r [T, K], J [T, K, P] (free columns), J_local [T, K, L].
+    """
+    st = _State(Problem(list(cols), fit_local=fit_local), theta.copy(), local.copy())
+    lh = np.asarray(local_h, dtype=float)
+    thetas, locals_, hs = _rows_for(space, st, theta, local, rel, lh)
+    out = _run(fn, thetas, locals_)
+    return _assemble(out, 0, len(cols), hs, lh, fit_local, local.shape[1])
+
+
+def _run(fn: ResidualFn, thetas: list[np.ndarray], locals_: list[np.ndarray]) -> np.ndarray:
+    th = torch.as_tensor(np.stack(thetas), dtype=torch.float64)
+    lo = torch.as_tensor(np.stack(locals_), dtype=torch.float64)
+    with torch.no_grad():
+        return fn(th, lo).cpu().numpy()
+
+
+def _assemble(
+    out: np.ndarray, start: int, n_free: int, hs: np.ndarray, lh: np.ndarray, fit_local: bool, n_local: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r = out[start]
+    jac = np.stack([(out[start + 1 + j] - r) / hs[j] for j in range(n_free)], axis=-1) if n_free else r[..., None][..., :0]
+    if fit_local:
+        base = start + 1 + n_free
+        jl = np.stack([(out[base + d] - r) / lh[d] for d in range(n_local)], axis=-1)
+    else:
+        jl = np.zeros(r.shape + (n_local,))
+    return r, jac, jl
+
+
+def _normal_equations(
+    st: _State, mask_t: np.ndarray, n_local: int
+) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Dense J^T J and J^T r over [free globals | locals of the selected trajectories]."""
+    p = len(st.prob.free)
+    tsel = np.flatnonzero(mask_t)
+    nl = n_local if st.prob.fit_local else 0
+    dim = p + nl * len(tsel)
+    a = np.zeros((dim, dim))
+    g = np.zeros(dim)
+    for k, t in enumerate(tsel):
+        r = st.resid[t]
+        jg = st.jac[t]
+        a[:p, :p] += jg.T @ jg
+        g[:p] += jg.T @ r
+        if nl:
+            jl = st.jac_local[t]
+            sl = slice(p + nl * k, p + nl * (k + 1))
+            a[:p, sl] += jg.T @ jl
+            a[sl, :p] += jl.T @ jg
+            a[sl, sl] += jl.T @ jl
+            g[sl] += jl.T @ r
+    return a, g, list(tsel)
+
+
+def _step(st: _State, space: ParamSpace, mask_t: np.ndarray, n_local: int) -> tuple[np.ndarray, np.ndarray]:
+    a, g, tsel = _normal_equations(st, mask_t, n_local)
+    d = np.diag(a).copy()
+    d = np.where(d > 0, d, 1.0)
+    lhs = a + st.lam * np.diag(d) + 1e-12 * np.eye(len(d)) * d.max()
+    try:
+        delta = -np.linalg.solve(lhs, g)
+    except np.linalg.LinAlgError:
+        delta = -g / np.diag(lhs)
+    p = len(st.prob.free)
+    theta = st.theta.copy()
+    theta[st.prob.free] = np.clip(
+        theta[st.prob.free] + delta[:p], space.lower[st.prob.free], space.upper[st.prob.free]
+    )
+    local = st.local.copy()
+    if st.prob.fit_local:
+        for k, t in enumerate(tsel):
+            local[t] += delta[p + n_local * k : p + n_local * (k + 1)]
+    return theta, local
+
+
+def _cost(resid: np.ndarray, mask_t: np.ndarray) -> float:
+    return float(np.sum(resid[mask_t] ** 2))
+
+
+def fit_problems(
+    fn: ResidualFn,
+    space: ParamSpace,
+    problems: Sequence[Problem],
+    *,
+    n_traj: int,
+    n_local: int = 3,
+    max_iter: int = 30,
+    rel_step: float = 1e-3,
+    local_h: Sequence[float] = (1e-4, 1e-4, 1e-3),
+    ftol: float = 1e-7,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[FitOutcome]:
+    """Solve all ``problems`` together (see module docstring).
+
+    Args:
+        fn: weighted residual function.
+        space: parameter space.
+        problems: the problems.
+        n_traj: number of trajectories T.
+        n_local: local parameters per trajectory L.
+        max_iter: LM iterations at most.
+        rel_step: FD step as a fraction of each slot's scale.
+        local_h: FD steps of the local parameters.
+        ftol: stop when an accepted step lowers chi^2 by less than ``ftol * chi^2``.
+        progress: called with (iteration, unfinished problems).
+    """
+    lh = np.asarray(local_h, dtype=float)
+    states: list[_State] = []
+    for pr in problems:
+        th0 = space.zero.copy() if pr.theta0 is None else np.asarray(pr.theta0, float).copy()
+        states.append(_State(pr, th0, np.zeros((n_traj, n_local))))
+    masks = [np.ones(n_traj, bool) if s.prob.traj is None else np.asarray(s.prob.traj, bool) for s in states]
+    # iteration 0: evaluate everything at the start points
+    pending = [(i, s.theta, s.local) for i, s in enumerate(states)]
+    it = 0
+    while pending:
+        rows_t: list[np.ndarray] = []
+        rows_l: list[np.ndarray] = []
+        meta = []
+        for i, th, lo in pending:
+            ts, ls, hs = _rows_for(space, states[i], th, lo, rel_step, lh)
+            meta.append((i, len(rows_t), hs, th, lo))
+            rows_t += ts
+            rows_l += ls
+        out = _run(fn, rows_t, rows_l)
+        nxt = []
+        for i, start, hs, th, lo in meta:
+            st = states[i]
+            r, jac, jl = _assemble(out, start, len(st.prob.free), hs, lh, st.prob.fit_local, n_local)
+            c = _cost(r, masks[i])
+            first = st.resid is None
+            if first or c < st.cost:
+                improve = (st.cost - c) / max(c, 1e-300) if not first else np.inf
+                st.theta, st.local, st.resid, st.jac, st.jac_local, st.cost = th, lo, r, jac, jl, c
+                if not first:
+                    st.lam = max(st.lam / 3.0, 1e-9)
+                if not first and improve < ftol:
+                    st.done, st.converged = True, True
+            else:
+                st.lam *= 4.0
+                if st.lam > 1e8:
+                    st.done, st.converged = True, True
+            st.it += 1
+            if not st.done and st.it >= max_iter:
+                st.done = True
+            if not st.done:
+                nt, nl = _step(st, space, masks[i], n_local)
+                if np.allclose(nt, st.theta, rtol=0, atol=1e-12) and np.allclose(nl, st.local, rtol=0, atol=1e-12):
+                    st.done, st.converged = True, True
+                else:
+                    nxt.append((i, nt, nl))
+        pending = nxt
+        it += 1
+        if progress is not None:
+            progress(it, len(pending))
+    return [_finish(st, masks[i], n_local, space) for i, st in enumerate(states)]
+
+
+def _finish(st: _State, mask_t: np.ndarray, n_local: int, space: ParamSpace) -> FitOutcome:
+    n = int(np.count_nonzero(st.resid[mask_t]))
+    p = len(st.prob.free)
+    out = FitOutcome(
+        theta=st.theta,
+        local=st.local,
+        cost=st.cost,
+        n=n,
+        resid=st.resid,
+        jac=st.jac,
+        jac_local=st.jac_local,
+        iterations=st.it,
+        converged=st.converged,
+    )
+    if p == 0:
+        return out
+    a, _, _ = _normal_equations(st, mask_t, n_local)
+    dof = max(n - a.shape[0], 1)
+    s2 = st.cost / dof
+    sc = space.scale[st.prob.free]
+    agg = a[:p, :p]
+    dg = np.sqrt(np.maximum(np.diag(agg), 0.0))
+    try:
+        inv = np.linalg.pinv(a, rcond=1e-13, hermitian=True)
+        cov = s2 * inv[:p, :p]
+        # marginal information of the globals, correlation-scaled, for the condition number
+        marg = np.linalg.pinv(inv[:p, :p], rcond=1e-15, hermitian=True)
+        dm = np.sqrt(np.maximum(np.diag(marg), 1e-300))
+        ev = np.linalg.eigvalsh(marg / np.outer(dm, dm))
+        cond = float(ev.max() / max(ev.min(), 1e-300))
+    except np.linalg.LinAlgError:
+        cov = np.full((p, p), np.inf)
+        cond = np.inf
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    insensitive = dg * sc < 1e-6 * max(float(np.sqrt(max(st.cost, 1e-300))), 1.0)
+    span = space.upper[st.prob.free] - space.lower[st.prob.free]
+    identifiable = bool(cond < 1e8 and not insensitive.any() and np.all(1.96 * std < span))
+    if not identifiable:
+        std = np.where(insensitive | (1.96 * std >= span) | (cond >= 1e8), np.inf, std)
+    out.std, out.cov, out.cond, out.identifiable = std, cov, cond, identifiable
+    return out

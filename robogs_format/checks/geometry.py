@@ -1,0 +1,650 @@
+"""Geometry checks (G0xx): URDF sanity, units, joint limits, kinematics and boxes.
+
+Measured values are in the units of the budgets: mm for lengths, px for image
+boxes, rad (or m for prismatic joints) for joint limits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..errors import FormatError, RobogsError
+from ..findings import Finding
+from .context import MM_SUSPECT_EXTENT_M, CheckContext, InputReported
+from .registry import Check, check
+
+__all__: list[str] = []
+
+_MM = 1000.0
+_FK_CHUNK = 65536
+
+
+# --------------------------------------------------------------------------- shared helpers
+
+
+def quat_to_matrix_np(q: np.ndarray) -> np.ndarray:
+    """[N, 4] (w, x, y, z) quaternions (normalised here) -> [N, 3, 3] rotation matrices."""
+    q = np.asarray(q, np.float64)
+    q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty((*q.shape[:-1], 3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - w * z)
+    R[..., 0, 2] = 2 * (x * z + w * y)
+    R[..., 1, 0] = 2 * (x * y + w * z)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - w * x)
+    R[..., 2, 0] = 2 * (x * z - w * y)
+    R[..., 2, 1] = 2 * (y * z + w * x)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def inertia_problem(inertia: np.ndarray, rel: float) -> str | None:
+    """Why a 3x3 inertia tensor (kg m^2) is not physical, or None.
+
+    A rigid body's inertia is symmetric positive definite and its principal
+    moments satisfy the triangle inequality ``I_a + I_b >= I_c``; ``rel`` is the
+    slack relative to the trace.
+    """
+    inertia = np.asarray(inertia, np.float64)
+    if inertia.shape != (3, 3) or not np.all(np.isfinite(inertia)):
+        return "inertia is not a finite 3x3 matrix"
+    scale = max(float(np.abs(np.trace(inertia))), 1e-300)
+    if np.max(np.abs(inertia - inertia.T)) > rel * scale:
+        return "inertia is not symmetric"
+    ev = np.linalg.eigvalsh(0.5 * (inertia + inertia.T))
+    if ev[0] <= 0:
+        return f"inertia is not positive definite (principal moments {_fmt3(ev)} kg m^2)"
+    if ev[0] + ev[1] < ev[2] - rel * scale:
+        return f"principal moments {_fmt3(ev)} kg m^2 violate the triangle inequality I1 + I2 >= I3"
+    return None
+
+
+def _fmt3(v: np.ndarray) -> str:
+    return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
+
+
+def hull_distance_outside(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Distance (m) of points outside the convex hull of ``vertices`` (0 inside).
+
+    Uses the largest signed distance to the hull's facet planes, a lower bound of
+    the Euclidean distance that is exact where the nearest feature is a facet.
+
+    Args:
+        vertices: [V, 3] points spanning the hull, metres.
+        points: [P, 3] query points, same frame.
+    """
+    import trimesh
+
+    hull = trimesh.convex.convex_hull(np.asarray(vertices, np.float64))
+    normals = np.asarray(hull.face_normals)
+    offsets = np.einsum("fj,fj->f", normals, np.asarray(hull.triangles_center))
+    d = np.asarray(points, np.float64) @ normals.T - offsets
+    return np.maximum(d.max(axis=1), 0.0)
+
+
+@dataclass(frozen=True)
+class _LinkGeometry:
+    """Vertices of one link's geometry in the link frame, and where they came from."""
+
+    link: str
+    vertices: np.ndarray  # [V, 3] link frame, metres
+    sources: tuple[str, ...]
+    mm_problem: str | None
+
+
+def _load_mesh_file(path: Path, scale: Any) -> np.ndarray:
+    import trimesh
+
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types on bad files
+        raise FormatError(f"unreadable mesh ({type(exc).__name__}: {str(exc)[:200]})", path=path,
+                          hint="re-export the mesh as STL, OBJ, PLY, GLB or DAE") from None
+    v = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), np.float64)
+    if scale is not None:
+        v = v * np.broadcast_to(np.asarray(scale, np.float64), (3,))
+    return v
+
+
+def _mesh_vertices(ctx: CheckContext, path: Path, scale: Any) -> np.ndarray:
+    key = ("mesh-file", str(path))
+    if key not in ctx._cache:
+        ctx._cache[key] = _load_mesh_file(path, None)
+    v = ctx._cache[key]
+    return v * np.broadcast_to(np.asarray(scale, np.float64), (3,)) if scale is not None else v
+
+
+def _primitive_vertices(geom: Any) -> np.ndarray | None:
+    import trimesh
+
+    if geom.box is not None:
+        return np.asarray(trimesh.creation.box(extents=geom.box.size).vertices)
+    if geom.cylinder is not None:
+        return np.asarray(trimesh.creation.cylinder(radius=geom.cylinder.radius, height=geom.cylinder.length,
+                                                    sections=16).vertices)
+    if geom.sphere is not None:
+        return np.asarray(trimesh.creation.icosphere(subdivisions=1, radius=geom.sphere.radius).vertices)
+    return None
+
+
+def link_geometry(ctx: CheckContext) -> dict[str, _LinkGeometry]:
+    """Per link: collision geometry (visual if none) as link-frame vertices (cached)."""
+    key = ("link-geometry",)
+    if key in ctx._cache:
+        return ctx._cache[key]
+    from ..urdf import MESH_SUFFIXES, resolve_mesh_uri
+
+    urdf = ctx.urdf()
+    urdf_path = ctx.urdf_path()
+    uri_cache: dict[str, Path] = {}
+    out: dict[str, _LinkGeometry] = {}
+    for link in urdf.robot.links:
+        for kind in ("collision", "visual"):
+            items = link.collisions if kind == "collision" else link.visuals
+            parts: list[np.ndarray] = []
+            sources: list[str] = []
+            problem = None
+            for item in items:
+                geom = item.geometry
+                if geom is None:
+                    continue
+                if geom.mesh is not None:
+                    where = f"link '{link.name}' {kind} mesh '{geom.mesh.filename}'"
+                    try:
+                        path = resolve_mesh_uri(geom.mesh.filename, urdf_path, ctx.root, _cache=uri_cache)
+                    except RobogsError as exc:
+                        raise type(exc)(exc.message, path=urdf_path, where=where, hint=exc.hint) from None
+                    if not path.is_file() or path.suffix.lower() not in MESH_SUFFIXES:
+                        raise FormatError("mesh file not found or of an unsupported type", path=urdf_path,
+                                          where=where, hint=f"use an existing {sorted(MESH_SUFFIXES)} file")
+                    v = _mesh_vertices(ctx, path, geom.mesh.scale)
+                    sources.append(ctx.rel(path) or str(path))
+                    if v.size:
+                        ext = float(np.max(np.ptp(v, axis=0)))
+                        if ext > MM_SUSPECT_EXTENT_M:
+                            problem = f"{kind} mesh {sources[-1]} spans {ext:.4g} m"
+                else:
+                    v = _primitive_vertices(geom)
+                    if v is None:
+                        continue
+                    sources.append(f"{kind} primitive")
+                if v.size == 0:
+                    continue
+                T = np.asarray(item.origin if item.origin is not None else np.eye(4), np.float64)
+                parts.append(v @ T[:3, :3].T + T[:3, 3])
+            if parts:
+                out[link.name] = _LinkGeometry(link.name, np.concatenate(parts), tuple(sources), problem)
+                break
+    ctx._cache[key] = out
+    return out
+
+
+def _robot_or_skip(ctx: CheckContext) -> None:
+    if not ctx.has_robot():
+        raise InputReported("robot")
+
+
+# --------------------------------------------------------------------------- URDF sanity
+
+
+def _moving_links(ctx: CheckContext) -> set[str]:
+    return {j.child for j in ctx.urdf().robot.joints if j.type not in ("fixed",)}
+
+
+@check("G001", group="geometry", severity="error", title="the robot URDF and its meshes load",
+       quantity="load errors",
+       hint="fix the URDF element or mesh named in the message; mesh paths stay inside the dataset")
+def _urdf_loads(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    _robot_or_skip(ctx)
+    rel = ctx.manifest["robot"]["urdf"]
+    ctx.existing(rel)
+    try:
+        ctx.chain()
+        link_geometry(ctx)
+    except RobogsError as exc:
+        yield chk.finding(exc.message, file=ctx.rel(exc.path) if exc.path else rel, where=exc.where,
+                          hint=exc.hint or chk.hint)
+
+
+@check("G002", group="geometry", severity="error", title="URDF link masses are positive",
+       quantity="link mass", unit="kg",
+       hint="give every moving link an <inertial> with mass > 0 kg (not grams)")
+def _link_mass(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    _robot_or_skip(ctx)
+    urdf_rel = ctx.manifest["robot"]["urdf"]
+    moving = _moving_links(ctx)
+    for link in ctx.urdf().robot.links:
+        inertial = link.inertial
+        where = f"link '{link.name}'"
+        if inertial is None or inertial.mass is None:
+            if link.name in moving:
+                yield chk.finding("moving link has no <inertial>; dynamics cannot be simulated",
+                                  severity="warning", file=urdf_rel, where=where, link=link.name)
+            continue
+        m = float(inertial.mass)
+        if not np.isfinite(m) or m <= 0:
+            yield chk.finding(f"mass is {m:g} kg", value=m, budget=0, file=urdf_rel, where=where, link=link.name)
+
+
+@check("G003", group="geometry", severity="error",
+       title="URDF link inertias are positive definite and satisfy the triangle inequality",
+       quantity="inertia tensor", budget="geometry.inertia_rel",
+       hint="take the inertia from the mesh and density (or a CAD tool); ixx, iyy, izz are > 0 kg m^2")
+def _link_inertia(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    _robot_or_skip(ctx)
+    urdf_rel = ctx.manifest["robot"]["urdf"]
+    rel = ctx.budget("geometry.inertia_rel")
+    for link in ctx.urdf().robot.links:
+        inertial = link.inertial
+        if inertial is None or inertial.inertia is None:
+            continue
+        problem = inertia_problem(np.asarray(inertial.inertia), rel)
+        if problem:
+            yield chk.finding(problem, file=urdf_rel, where=f"link '{link.name}' <inertia>", link=link.name)
+
+
+@check("G004", group="geometry", severity="error", title="URDF link CoM lies inside the link's geometry",
+       quantity="CoM distance outside the convex hull", unit="mm", budget="geometry.com_outside_mm",
+       hint="the <inertial><origin> is in the link frame, in metres; check its sign and units")
+def _link_com(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    _robot_or_skip(ctx)
+    urdf_rel = ctx.manifest["robot"]["urdf"]
+    budget = ctx.budget("geometry.com_outside_mm")
+    geoms = link_geometry(ctx)
+    for link in ctx.urdf().robot.links:
+        g = geoms.get(link.name)
+        if link.inertial is None or g is None or g.mm_problem or len(g.vertices) < 4:
+            continue
+        T = np.asarray(link.inertial.origin if link.inertial.origin is not None else np.eye(4))
+        com = T[:3, 3]
+        try:
+            d_mm = float(hull_distance_outside(g.vertices, com[None])[0]) * _MM
+        except Exception:  # flat geometry has no volume hull
+            continue
+        if d_mm > budget:
+            yield chk.finding(f"CoM {_fmt3(com)} m is {d_mm:.4g} mm outside the link's geometry",
+                              value=d_mm, budget=budget, file=urdf_rel, where=f"link '{link.name}' <inertial>",
+                              link=link.name)
+
+
+@check("G005", group="geometry", severity="error", title="URDF meshes are in metres",
+       quantity="mesh extent", unit="m",
+       hint="the mesh was exported in millimetres: rescale it by 0.001 or set <mesh scale=\"0.001 0.001 0.001\">")
+def _link_units(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    _robot_or_skip(ctx)
+    urdf_rel = ctx.manifest["robot"]["urdf"]
+    for name, g in sorted(link_geometry(ctx).items()):
+        if g.mm_problem:
+            ext = float(np.max(np.ptp(g.vertices, axis=0)))
+            yield chk.finding(f"{g.mm_problem}: looks like millimetres", value=ext, budget=MM_SUSPECT_EXTENT_M,
+                              file=urdf_rel, where=f"link '{name}'", link=name)
+
+
+@check("G006", group="geometry", severity="error", title="asset meshes load and are in metres",
+       quantity="mesh extent", unit="m",
+       hint="the mesh was exported in millimetres: rescale its vertices by 0.001")
+def _asset_units(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    for name in ctx.asset_names():
+        try:
+            problem = ctx.mesh_unit_problem(name)
+        except InputReported:
+            continue
+        except RobogsError as exc:
+            yield chk.finding(exc.message, file=ctx.rel(exc.path), where=exc.where, object=name,
+                              hint=exc.hint or "re-export the mesh as PLY, OBJ, STL or GLB")
+            continue
+        if problem:
+            ext = float(np.max(np.ptp(ctx.asset_hull_vertices(name), axis=0)))
+            yield chk.finding(f"{problem}: looks like millimetres", value=ext, budget=MM_SUSPECT_EXTENT_M,
+                              file=ctx.manifest["assets"][name]["mesh"], object=name)
+
+
+# --------------------------------------------------------------------------- joints and kinematics
+
+
+def _ordered_stamps(t: np.ndarray) -> np.ndarray:
+    if t.size == 0 or not np.all(np.diff(t) > 0):
+        raise InputReported("stamps")  # reported by T001
+    return t
+
+
+def joint_positions(ctx: CheckContext, ep: Any, stream: str, joints: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """([N] int64 t_ns, [N, J] positions) of the named joints from a joint_states stream."""
+    rel = ep.streams[stream]["path"]
+    names = ctx.footer(rel).schema.to_arrow_schema().names
+    cols = [f"position.{j}" for j in joints]
+    if any(c not in names for c in cols) or "t_ns" not in names:
+        raise InputReported("joint columns")  # reported by S003/S007
+    tab = ctx.table(rel, columns=("t_ns", *cols))
+    t = np.array(tab.column("t_ns").to_numpy(zero_copy_only=False), dtype=np.int64)
+    q = np.stack([tab.column(c).to_numpy(zero_copy_only=False) for c in cols], axis=1) if cols else np.zeros((t.size, 0))
+    return t, q.astype(np.float64, copy=False)
+
+
+@check("G007", group="geometry", severity="error", title="recorded joints stay within their URDF limits",
+       quantity="excess beyond the limit", unit="rad", budget="geometry.joint_limit_rad",
+       hint="check the joint offset/sign convention and the URDF <limit>; prismatic joints are in metres")
+def _joint_limits(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    _robot_or_skip(ctx)
+    budget = ctx.budget("geometry.joint_limit_rad")
+    chain = ctx.chain()
+    urdf_rel = ctx.manifest["robot"]["urdf"]
+    for ep, name, st in ctx.streams(("joint_states",)):
+        rel = st.get("path")
+        try:
+            names = ctx.footer(rel).schema.to_arrow_schema().names
+        except InputReported:
+            continue
+        present = [j for j in chain.joint_names if f"position.{j}" in names]
+        if not present or "t_ns" not in names:
+            continue
+        t, q = joint_positions(ctx, ep, name, present)
+        idx = [chain.joint_names.index(j) for j in present]
+        lo, hi = chain.joint_lower[idx], chain.joint_upper[idx]
+        excess = np.maximum(lo[None] - q, q - hi[None])  # [N, J]
+        excess = np.where(np.isfinite(excess), excess, 0.0)
+        for k, j in enumerate(present):
+            col = excess[:, k]
+            i = int(np.argmax(col))
+            if col[i] > budget:
+                n = int(np.sum(col > budget))
+                unit = "m" if chain.joint_types[chain.tree_joint_names.index(j)] == "prismatic" else "rad"
+                yield chk.finding(
+                    f"joint {j!r} reaches {q[i, k]:.6g} {unit}, outside [{lo[k]:.6g}, {hi[k]:.6g}] "
+                    f"({urdf_rel}) in {n} samples", value=float(col[i]), budget=budget, unit=unit,
+                    file=rel, episode=ep.id, stream=name, link=j, t_ns=int(t[i]), where=f"row {i}")
+
+
+def _world_from_root(ctx: CheckContext, T_root: torch.Tensor, chain: Any) -> torch.Tensor:
+    """Re-express FK poses (root frame) in the world frame, whose origin is the robot base."""
+    robot = ctx.manifest.get("robot") or {}
+    base = robot.get("base_link")
+    if not isinstance(base, str) or base == chain.link_names[0] or base not in chain.link_names:
+        return T_root
+    T_root_base = T_root[..., chain.link_index(base), :, :]
+    return torch.linalg.inv(T_root_base)[..., None, :, :] @ T_root
+
+
+@check("G008", group="geometry", severity="error", title="recorded end-effector poses match forward kinematics",
+       quantity="position error |FK(q(t)) - recorded|", unit="mm", budget="geometry.fk_ee_mm",
+       hint="check the URDF (link lengths, joint offsets), the joint sign convention and the ee_poses link frame")
+def _fk_ee(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    from ..interp import interp_linear
+
+    _robot_or_skip(ctx)
+    budget = ctx.budget("geometry.fk_ee_mm")
+    chain = ctx.chain()
+    for ep, name, st in ctx.streams(("ee_poses",)):
+        js = ctx.find_stream(ep, "joint_states")
+        rel = st.get("path")
+        if js is None or not isinstance(rel, str):
+            continue
+        try:
+            t_js, q = joint_positions(ctx, ep, js, list(chain.joint_names))
+            t_js = _ordered_stamps(t_js)
+            tab = ctx.table(rel, columns=("t_ns", "link", "x", "y", "z", "qw", "qx", "qy", "qz"))
+        except InputReported:
+            continue
+        links = tab.column("link").to_numpy(zero_copy_only=False).astype(str)
+        t_all = tab.column("t_ns").to_numpy(zero_copy_only=False).astype(np.int64)
+        xyz_all = np.stack([tab.column(c).to_numpy(zero_copy_only=False) for c in "xyz"], axis=1)
+        quat_all = np.stack([tab.column(c).to_numpy(zero_copy_only=False) for c in ("qw", "qx", "qy", "qz")], axis=1)
+        for link in sorted(set(links.tolist())):
+            if link not in chain.link_names:
+                continue  # reported by S007
+            rows = np.flatnonzero(links == link)
+            t = t_all[rows]
+            if not np.all(np.diff(t) > 0):
+                continue  # reported by T001
+            inside = (t >= t_js[0]) & (t <= t_js[-1])
+            rows, t = rows[inside], t[inside]
+            if t.size == 0:
+                continue
+            k = chain.link_index(link)
+            err_mm = np.empty(t.size)
+            ang_deg = np.empty(t.size)
+            for s in range(0, t.size, _FK_CHUNK):
+                sl = slice(s, s + _FK_CHUNK)
+                qi = torch.as_tensor(interp_linear(t[sl], t_js, q), dtype=torch.float64)
+                T = _world_from_root(ctx, chain.forward(qi), chain)[:, k].numpy()
+                err_mm[sl] = np.linalg.norm(T[:, :3, 3] - xyz_all[rows[sl]], axis=1) * _MM
+                R_rec = quat_to_matrix_np(quat_all[rows[sl]])
+                cos = (np.einsum("nij,nij->n", T[:, :3, :3], R_rec) - 1.0) / 2.0
+                ang_deg[sl] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+            i = int(np.argmax(err_mm))
+            if err_mm[i] > budget:
+                n = int(np.sum(err_mm > budget))
+                yield chk.finding(
+                    f"link {link!r}: FK differs from the recorded pose by up to {err_mm[i]:.4g} mm "
+                    f"(median {np.median(err_mm):.3g} mm, {n} of {t.size} samples over budget; "
+                    f"orientation up to {ang_deg.max():.3g} deg)",
+                    value=float(err_mm[i]), budget=budget, file=rel, episode=ep.id, stream=name, link=link,
+                    t_ns=int(t[i]), where=f"row {int(rows[i])}")
+
+
+# --------------------------------------------------------------------------- boxes and objects
+
+
+@check("G009", group="geometry", severity="error", title="2D boxes match the labelled pixels",
+       quantity="largest box edge offset from the label's pixel bounds", unit="px", budget="geometry.box2d_px",
+       hint="2D boxes are pixel edges with x_max/y_max exclusive; re-derive them from the label images")
+def _boxes2d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    budget = ctx.budget("geometry.box2d_px")
+    for ep, name, st in ctx.streams(("boxes2d",)):
+        rel = st.get("path")
+        try:
+            boxes = ctx.table(rel, columns=("t_ns", "camera", "frame_index", "label_id",
+                                            "x_min", "y_min", "x_max", "y_max"))
+        except InputReported:
+            continue
+        cam_col = boxes.column("camera").to_numpy(zero_copy_only=False).astype(str)
+        for sname, cst in ep.streams.items():
+            if not isinstance(cst, dict) or cst.get("kind") != "camera" or not isinstance(cst.get("labels"), str):
+                continue
+            rows = np.flatnonzero(cam_col == cst.get("camera"))
+            if rows.size == 0:
+                continue
+            try:
+                lb = ctx.label_boxes(ep, sname)
+            except InputReported:
+                continue
+            yield from _compare_boxes(chk, ctx, boxes, rows, lb, budget, rel, ep.id, name)
+
+
+def _compare_boxes(chk: Check, ctx: CheckContext, boxes: Any, rows: np.ndarray, lb: Any, budget: float,
+                   rel: str, ep_id: str, stream: str) -> Iterator[Finding]:
+    def col(c: str) -> np.ndarray:
+        return boxes.column(c).to_numpy(zero_copy_only=False)[rows]
+
+    fi, lid = col("frame_index").astype(np.int64), col("label_id").astype(np.int64)
+    labelled = np.isin(fi, lb.frames)
+    key_l = lb.frame_index * 65536 + lb.label_id
+    order = np.argsort(key_l)
+    key_b = fi * 65536 + lid
+    pos = np.clip(np.searchsorted(key_l[order], key_b), 0, max(key_l.size - 1, 0))
+    found = (key_l.size > 0) & (key_l[order][pos] == key_b) if key_l.size else np.zeros(fi.size, bool)
+    found = np.asarray(found, bool) & labelled
+    absent = labelled & ~found
+    loc = {"file": rel, "episode": ep_id, "stream": stream}
+    if absent.any():
+        k = int(np.flatnonzero(absent)[0])
+        yield chk.finding(f"{int(absent.sum())} boxes name labels absent from their label image "
+                          f"(first: label {int(lid[k])})", frame=int(fi[k]), t_ns=int(col("t_ns")[k]),
+                          where=f"row {int(rows[k])}", **loc)
+    if not found.any():
+        return
+    j = order[pos[found]]
+    diff = np.stack([
+        col("x_min")[found] - lb.x_min[j], col("y_min")[found] - lb.y_min[j],
+        col("x_max")[found] - lb.x_max[j], col("y_max")[found] - lb.y_max[j],
+    ], axis=1)
+    err = np.abs(diff).max(axis=1)
+    k = int(np.argmax(err))
+    if err[k] > budget:
+        idx = np.flatnonzero(found)[k]
+        yield chk.finding(
+            f"{int(np.sum(err > budget))} boxes differ from their label's pixel bounds by more than the budget; "
+            f"worst: label {int(lid[idx])} edges off by {_fmt3(diff[k])[1:-1]} px (x_min, y_min, x_max, y_max)",
+            value=float(err[k]), budget=budget, frame=int(fi[idx]), t_ns=int(col("t_ns")[idx]),
+            where=f"row {int(rows[idx])}", **loc)
+
+
+def object_poses(ctx: CheckContext, ep: Any, obj: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """([N] t_ns, [N, 3] position m, [N, 4] wxyz) of one object in an episode, or None."""
+    stream = ctx.find_stream(ep, "object_poses")
+    if stream is None:
+        return None
+    tab = ctx.stream_table(ep, stream, columns=("t_ns", "object", "x", "y", "z", "qw", "qx", "qy", "qz"))
+    key = ("object-rows", ep.id, stream)
+    if key not in ctx._cache:
+        names = tab.column("object").to_numpy(zero_copy_only=False).astype(str)
+        ctx._cache[key] = {n: np.flatnonzero(names == n) for n in np.unique(names)}
+    rows = ctx._cache[key].get(obj)
+    if rows is None or rows.size == 0:
+        return None
+
+    def cols(cs: tuple[str, ...]) -> np.ndarray:
+        return np.stack([tab.column(c).to_numpy(zero_copy_only=False)[rows] for c in cs], axis=1)
+
+    t = np.array(tab.column("t_ns").to_numpy(zero_copy_only=False)[rows], dtype=np.int64)
+    if not np.all(np.diff(t) > 0):
+        raise InputReported("object stamps")  # reported by T001
+    return t, cols(("x", "y", "z")), cols(("qw", "qx", "qy", "qz"))
+
+
+def _usable_mesh(ctx: CheckContext, name: str) -> np.ndarray | None:
+    try:
+        if ctx.mesh_unit_problem(name):
+            return None  # reported by G006
+        return ctx.asset_hull_vertices(name)
+    except InputReported:
+        return None
+
+
+@check("G010", group="geometry", severity="error", title="3D boxes contain their object's mesh",
+       quantity="mesh protrusion beyond the box", unit="mm", budget="geometry.box3d_mm",
+       hint="boxes3d hold the centre pose and full edge lengths in metres; re-derive them from the mesh and pose")
+def _boxes3d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    from ..interp import interp_pose
+
+    budget = ctx.budget("geometry.box3d_mm")
+    for ep, name, st in ctx.streams(("boxes3d",)):
+        rel = st.get("path")
+        try:
+            boxes = ctx.table(rel)
+        except InputReported:
+            continue
+        objs = boxes.column("object").to_numpy(zero_copy_only=False).astype(str)
+        for obj in sorted(set(objs.tolist())):
+            verts = _usable_mesh(ctx, obj)
+            try:
+                poses = object_poses(ctx, ep, obj) if verts is not None else None
+            except InputReported:
+                continue
+            if poses is None:
+                continue
+            rows = np.flatnonzero(objs == obj)
+
+            def col(c: str, rows: np.ndarray = rows, boxes: Any = boxes) -> np.ndarray:
+                return boxes.column(c).to_numpy(zero_copy_only=False)[rows]
+
+            t = col("t_ns").astype(np.int64)
+            p, qo = interp_pose(t, poses[0], poses[1], poses[2], outside="nan")
+            ok = np.all(np.isfinite(p), axis=1)
+            if not ok.any():
+                continue
+            R_o = quat_to_matrix_np(qo[ok])
+            world = np.einsum("nij,vj->nvi", R_o, verts) + p[ok][:, None, :]  # [N, V, 3]
+            c = np.stack([col("x"), col("y"), col("z")], axis=1)[ok]
+            R_b = quat_to_matrix_np(np.stack([col("qw"), col("qx"), col("qy"), col("qz")], axis=1)[ok])
+            local = np.einsum("nji,nvj->nvi", R_b, world - c[:, None, :])
+            half = 0.5 * np.stack([col("size_x"), col("size_y"), col("size_z")], axis=1)[ok]
+            out_mm = (np.abs(local) - half[:, None, :]).max(axis=(1, 2)) * _MM
+            k = int(np.argmax(out_mm))
+            if out_mm[k] > budget:
+                idx = np.flatnonzero(ok)[k]
+                yield chk.finding(
+                    f"object {obj!r} sticks out of its 3D box by up to {out_mm[k]:.4g} mm "
+                    f"({int(np.sum(out_mm > budget))} of {out_mm.size} boxes)",
+                    value=float(out_mm[k]), budget=budget, file=rel, episode=ep.id, stream=name, object=obj,
+                    t_ns=int(t[idx]), where=f"row {int(rows[idx])}")
+
+
+def _rest_pose(ctx: CheckContext, name: str) -> np.ndarray | None:
+    """[7] (x, y, z, qw, qx, qy, qz) of a static object from a splat entry's rest state, if declared."""
+    entries = [(ctx.manifest.get("robot") or {}).get("splats")]
+    entries += [a.get("splats") for a in (ctx.manifest.get("assets") or {}).values() if isinstance(a, dict)]
+    for e in entries:
+        pose = ((e or {}).get("rest") or {}).get("object_poses", {}).get(name) if isinstance(e, dict) else None
+        if isinstance(pose, list) and len(pose) == 7:
+            return np.asarray(pose, np.float64)
+    return None
+
+
+def _table_top(ctx: CheckContext, ep: Any, table: str) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """(top z in m, xy min, xy max) of a table asset in the world.
+
+    The table is static: its pose is the first ``object_poses`` sample, else the
+    rest pose declared with the splats, else the identity.
+    """
+    verts = _usable_mesh(ctx, table)
+    if verts is None:
+        return None
+    poses = object_poses(ctx, ep, table)
+    if poses is not None:
+        pose = np.concatenate([poses[1][0], poses[2][0]])
+    else:
+        pose = _rest_pose(ctx, table)
+    if pose is not None:
+        verts = verts @ quat_to_matrix_np(pose[None, 3:])[0].T + pose[:3]
+    return float(verts[:, 2].max()), verts[:, :2].min(axis=0), verts[:, :2].max(axis=0)
+
+
+@check("G011", group="geometry", severity="error", title="objects do not sink into the table",
+       quantity="depth of the object's lowest point below the table top", unit="mm",
+       budget="geometry.penetration_mm",
+       hint="the object pose or mesh origin is off (or the table pose); objects rest on the top, not in it")
+def _penetration(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    budget = ctx.budget("geometry.penetration_mm")
+    tables = ctx.asset_names(("table",))
+    for ep in ctx.episodes:
+        stream = ctx.find_stream(ep, "object_poses")
+        if stream is None:
+            continue
+        rel = ep.streams[stream]["path"]
+        for table in tables:
+            try:
+                top = _table_top(ctx, ep, table)
+            except InputReported:
+                continue
+            if top is None:
+                continue
+            z_top, xy_lo, xy_hi = top
+            for obj in ctx.asset_names(("object",)):
+                verts = _usable_mesh(ctx, obj)
+                try:
+                    poses = object_poses(ctx, ep, obj) if verts is not None else None
+                except InputReported:
+                    continue
+                if poses is None:
+                    continue
+                t, p, q = poses
+                R = quat_to_matrix_np(q)
+                zmin = (np.einsum("nj,vj->nv", R[:, 2, :], verts) + p[:, 2:3]).min(axis=1)
+                over = np.all((p[:, :2] >= xy_lo) & (p[:, :2] <= xy_hi), axis=1)
+                depth_mm = np.where(over, (z_top - zmin) * _MM, -np.inf)
+                k = int(np.argmax(depth_mm))
+                if depth_mm[k] > budget:
+                    yield chk.finding(
+                        f"object {obj!r} is {depth_mm[k]:.4g} mm below the top of {table!r} "
+                        f"(z_top {z_top:.4g} m) in {int(np.sum(depth_mm > budget))} of {t.size} poses",
+                        value=float(depth_mm[k]), budget=budget, file=rel, episode=ep.id, stream=stream,
+                        object=obj, t_ns=int(t[k]))

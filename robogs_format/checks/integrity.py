@@ -1,0 +1,218 @@
+"""Integrity checks (I0xx): the folder holds exactly the files the manifest lists, unchanged.
+
+Paths that leave the dataset root are reported by ``I007`` and never opened by
+any check (the context refuses them).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from ..dataset import MANIFEST_NAME
+from ..errors import FormatError, PathEscapeError, RobogsError
+from ..findings import Finding
+from ..paths import resolve_inside
+from ..writer import sha256_file
+from .context import CheckContext, InputReported
+from .registry import Check, check
+
+__all__: list[str] = []
+
+_REWRITE = "re-create the dataset with the writer, or restore the file from a backup"
+
+
+def _inside(p: Path, root: Path) -> bool:
+    target, base = p.resolve(), root.resolve()
+    return target == base or base in target.parents
+
+
+def _listed(ctx: CheckContext) -> Iterator[tuple[str, dict, Path]]:
+    """(rel, manifest entry, absolute path) for every safe listed file."""
+    for rel, entry in sorted(ctx.files.items()):
+        if not isinstance(entry, dict):
+            continue
+        try:
+            yield rel, entry, ctx.path(rel)
+        except InputReported:
+            continue
+
+
+@check("I001", group="integrity", severity="error", title="listed files exist",
+       needs_full=False, needs_valid_manifest=False, quantity="missing files", hint=_REWRITE)
+def _missing(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    for rel, _entry, path in _listed(ctx):
+        if not path.is_file():
+            what = "is not a regular file" if path.exists() else "is missing"
+            yield chk.finding(f"file listed in the manifest {what}", file=rel)
+
+
+@check("I002", group="integrity", severity="error", title="no files besides those listed",
+       needs_full=False, needs_valid_manifest=False, quantity="unlisted files",
+       hint="remove the file, or add it through the writer so the manifest lists it")
+def _extra(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    listed = set(ctx.files)
+    root = ctx.root
+    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
+        here = Path(dirpath)
+        dirnames.sort()
+        for name in [*sorted(filenames), *[d for d in dirnames if (here / d).is_symlink()]]:
+            p = here / name
+            rel = p.relative_to(root).as_posix()
+            if rel == MANIFEST_NAME or rel in listed:
+                continue
+            if p.is_symlink() and not _inside(p, root):
+                continue  # reported by I007, never opened
+            elif (here / name).is_dir() and not p.is_symlink():
+                continue
+            yield chk.finding("file is in the dataset folder but not in the manifest", file=rel)
+
+
+@check("I003", group="integrity", severity="error", title="file sizes match the manifest",
+       needs_full=False, quantity="size difference", unit="bytes", hint=_REWRITE)
+def _size(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    for rel, entry, path in _listed(ctx):
+        if path.is_file() and isinstance(entry.get("size"), int):
+            size = path.stat().st_size
+            if size != entry["size"]:
+                yield chk.finding(f"file is {size} bytes, the manifest says {entry['size']}",
+                                  file=rel, value=size - entry["size"], budget=0)
+
+
+@check("I004", group="integrity", severity="error", title="file contents match their sha256",
+       quantity="hash mismatch",
+       hint="the file was edited after the manifest was written; " + _REWRITE)
+def _sha(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    todo = [(rel, entry, path) for rel, entry, path in _listed(ctx)
+            if path.is_file() and isinstance(entry.get("sha256"), str)
+            and entry.get("size") == path.stat().st_size]
+    ctx.progress(f"hashing {len(todo)} files")
+    with ThreadPoolExecutor(max_workers=max(1, ctx.label_threads)) as pool:
+        digests = pool.map(lambda item: sha256_file(item[2]), todo)
+        for (rel, entry, _path), digest in zip(todo, digests, strict=True):
+            if digest != entry["sha256"]:
+                yield chk.finding(f"sha256 is {digest[:12]}..., the manifest says {entry['sha256'][:12]}...",
+                                  file=rel)
+
+
+def _parquet_rels(ctx: CheckContext) -> list[str]:
+    rels = {rel for rel in ctx.files if rel.endswith(".parquet")}
+    for _ep, _name, st in ctx.streams():
+        for fld in ("path", "frames", "labels", "extrinsics"):
+            if isinstance(st.get(fld), str):
+                rels.add(st[fld])
+    return sorted(rels)
+
+
+@check("I005", group="integrity", severity="error", title="table row counts match the manifest",
+       needs_full=False, quantity="row difference", unit="rows", hint=_REWRITE)
+def _rows(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    for rel, entry, _path in _listed(ctx):
+        if not rel.endswith(".parquet") or not isinstance(entry.get("rows"), int):
+            continue
+        try:
+            rows = ctx.footer(rel).num_rows
+        except InputReported:
+            continue
+        if rows != entry["rows"]:
+            yield chk.finding(f"table has {rows} rows, the manifest says {entry['rows']}",
+                              file=rel, value=rows - entry["rows"], budget=0)
+
+
+@check("I006", group="integrity", severity="error", title="parquet tables are readable",
+       needs_full=False, quantity="unreadable tables",
+       hint="the file is truncated or not parquet; re-export it")
+def _readable(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    for rel in _parquet_rels(ctx):
+        try:
+            path = ctx.existing(rel)
+        except InputReported:
+            continue
+        try:
+            ctx.footer(rel)
+        except InputReported as exc:
+            cause = exc.__cause__
+            msg = cause.message if isinstance(cause, RobogsError) else "unreadable parquet footer"
+            yield chk.finding(msg, file=rel)
+            continue
+        if ctx.quick:
+            continue
+        try:  # stream the body without keeping it, so corruption past the footer shows up here
+            for _batch in pq.ParquetFile(path).iter_batches(batch_size=1 << 16):
+                pass
+        except (pa.ArrowException, OSError, ValueError) as exc:
+            yield chk.finding(f"table body is unreadable ({str(exc).splitlines()[0][:200]})", file=rel)
+
+
+@check("I007", group="integrity", severity="error", title="paths stay inside the dataset root",
+       needs_full=False, needs_valid_manifest=False, quantity="escaping paths",
+       hint="paths are relative to the dataset root, with '/' separators, no '..', no URI, no symlink out")
+def _escapes(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    seen: set[str] = set()
+    for ref in ctx.path_refs():
+        exc = ctx.unsafe_paths.get(ref.rel)
+        if exc is None or (ref.rel, ref.where) in seen:
+            continue
+        seen.add((ref.rel, ref.where))
+        yield chk.finding(f"{exc.message}; it was not opened", file=MANIFEST_NAME, where=ref.where,
+                          hint=exc.hint or chk.hint)
+    root = ctx.root.resolve()
+    for dirpath, dirnames, filenames in os.walk(ctx.root, followlinks=False):
+        here = Path(dirpath)
+        for name in sorted([*filenames, *dirnames]):
+            p = here / name
+            if not p.is_symlink():
+                continue
+            if not _inside(p, root):
+                yield chk.finding("symbolic link leads outside the dataset root; it was not opened",
+                                  file=p.relative_to(ctx.root).as_posix(),
+                                  hint="replace the link with the file itself")
+    if not ctx.quick:
+        yield from _urdf_mesh_escapes(chk, ctx)
+
+
+def _urdf_mesh_escapes(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    from ..urdf import mesh_refs, parse_urdf_robot, resolve_mesh_uri
+
+    robot = ctx.manifest.get("robot")
+    rel = robot.get("urdf") if isinstance(robot, dict) else None
+    if not isinstance(rel, str):
+        return
+    try:
+        path = ctx.existing(rel)
+        refs = mesh_refs(parse_urdf_robot(path))
+    except (InputReported, RobogsError):
+        return  # a broken URDF is reported by the geometry checks
+    cache: dict[str, Path] = {}
+    for ref in refs:
+        try:
+            resolve_mesh_uri(ref.uri, path, ctx.root, _cache=cache)
+        except PathEscapeError as exc:
+            yield chk.finding(f"{exc.message}; it was not opened", file=rel,
+                              where=f"link '{ref.link}' {ref.kind} mesh '{ref.uri}'", link=ref.link,
+                              hint=exc.hint or chk.hint)
+        except FormatError:
+            continue  # unknown package etc.: reported when the URDF is loaded
+
+
+@check("I008", group="integrity", severity="error", title="files named by the manifest are listed in files",
+       needs_full=False, needs_valid_manifest=False, quantity="unlisted references",
+       hint="add the file through the writer so it is hashed and listed")
+def _unlisted(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    listed = set(ctx.files)
+    seen: set[str] = set()
+    for ref in ctx.path_refs():
+        if ref.role == "file" or ref.rel in listed or ref.rel in ctx.unsafe_paths or ref.rel in seen:
+            continue
+        seen.add(ref.rel)
+        try:
+            exists = resolve_inside(ctx.root, ref.rel).is_file()
+        except PathEscapeError:
+            continue
+        state = "exists but is not listed" if exists else "is neither listed nor present"
+        yield chk.finding(f"{ref.rel!r} {state} in the manifest's files", file=MANIFEST_NAME, where=ref.where)

@@ -1,0 +1,139 @@
+"""ROS 2 MCAP ingest: tables equal the messages written (stamps exact, values to 1e-9)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from converters.ingest import ConvertOptions, convert_path
+from robogs_format.errors import InputError
+from robogs_format.validate import validate
+
+
+def _errors(path: Path) -> list[str]:
+    return [f"{f.code}: {f.message}" for f in validate(path).findings if f.severity == "error"]
+
+
+def _table(ds, name):
+    return ds.episode().table(name).to_pydict()
+
+
+@pytest.fixture(scope="module")
+def converted(tmp_path_factory, synth) -> tuple[object, object, Path]:
+    d = tmp_path_factory.mktemp("mcap")
+    sc = synth.write_ros2_mcap(d / "scene.mcap")
+    ds = convert_path(d / "scene.mcap", d / "out")
+    return ds, sc, d / "out"
+
+
+def test_joint_states_exact(converted) -> None:
+    ds, sc, _ = converted
+    js = _table(ds, "joint_states")
+    assert js["t_ns"] == sc.joint_t  # header stamps, exact to the ns
+    for k, j in enumerate(sc.joints):
+        np.testing.assert_allclose(js[f"position.{j}"], [p[k] for p in sc.joint_pos], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(js[f"velocity.{j}"], [p[k] for p in sc.joint_vel], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(js[f"effort.{j}"], [p[k] for p in sc.joint_eff], rtol=0, atol=1e-9)
+    st = ds.episode().stream("joint_states")
+    assert st["stamp_source"] == "sensor_header" and st["source"] == "/joint_states"
+    assert st["nominal_rate_hz"] == pytest.approx(500.0, rel=1e-6)
+
+
+def test_poses_and_wrenches_exact(converted) -> None:
+    ds, sc, _ = converted
+    for name, kind, col, truth in (("object_poses", "object_poses", "object", sc.poses["box"]),
+                                   ("ee_poses", "ee_poses", "link", sc.ee["tool0"])):
+        t = _table(ds, name)
+        assert set(t[col]) == {"box" if kind == "object_poses" else "tool0"}
+        assert t["t_ns"] == [r[0] for r in truth]
+        vals = np.array([t[c] for c in ("x", "y", "z", "qw", "qx", "qy", "qz")]).T
+        np.testing.assert_allclose(vals, np.array([r[1] for r in truth]), rtol=0, atol=1e-9)
+    w = _table(ds, "wrenches")
+    assert set(w["frame"]) == {"ft_sensor"}
+    assert w["t_ns"] == [r[0] for r in sc.wrench]
+    np.testing.assert_allclose(np.array([w[c] for c in ("fx", "fy", "fz", "tx", "ty", "tz")]).T,
+                               np.array([r[1] for r in sc.wrench]), rtol=0, atol=1e-9)
+    assert ds.assets == {"box": {"kind": "object"}}
+
+
+def test_camera_frames_video_and_calibration(converted, synth) -> None:
+    ds, sc, _ = converted
+    ep = ds.episode()
+    fr = ep.frames("cam0").to_pydict()
+    assert fr["t_ns"] == sc.image_t
+    assert fr["frame_index"] == list(range(len(sc.image_t)))
+    frames = list(ep.iter_video("cam0"))
+    assert len(frames) == len(sc.images)
+    for i, img in enumerate(frames):  # mp4v is lossy: the right frame, in the right order
+        err = np.abs(img.astype(float) - synth.frame_image(i).astype(float)).mean()
+        other = np.abs(img.astype(float) - synth.frame_image(i + 1).astype(float)).mean()
+        assert err < 6.0 and err < other
+    cam = ds.camera("cam0")
+    # ROS K puts the top-left pixel centre at (0, 0); robogs at (0.5, 0.5)
+    assert (cam.fx, cam.fy, cam.cx, cam.cy) == (sc.K[0], sc.K[4], sc.K[2] + 0.5, sc.K[5] + 0.5)
+    assert cam.distortion_model == "plumb_bob" and cam.distortion == tuple(sc.D)
+    np.testing.assert_allclose(cam.T_world_cam, sc.T_world_cam, atol=1e-12)
+
+
+def test_provenance_lists_everything(converted) -> None:
+    ds, sc, _ = converted
+    prov = ds.manifest["provenance"]
+    assert prov["converter"] == "mcap"
+    assert prov["dropped"] == [{"topic": "/rosout_like", "type": "std_msgs/msg/String", "messages": 1,
+                                "reasons": {"no role for message type std_msgs/msg/String": 1}}]
+    for topic, rec in prov["topics"].items():
+        assert rec["messages"] == rec["written"] + sum(rec.get("dropped", {}).values()), topic
+    assert ds.manifest["conventions"]["clock"] == "ros_time"
+
+
+def test_output_validates(converted) -> None:
+    assert _errors(converted[2]) == []
+
+
+def test_raw_images_and_role_override(tmp_path: Path, synth) -> None:
+    sc = synth.write_ros2_mcap(tmp_path / "raw.mcap", image_kind="raw", duration_s=0.2)
+    opts = ConvertOptions(roles={"/objects/box/pose": "ignore", "/ee/tool0/pose": "object_pose:gripper",
+                                 "/joint_states": "ignore"})
+    ds = convert_path(tmp_path / "raw.mcap", tmp_path / "out", options=opts)
+    ep = ds.episode()
+    assert "joint_states" not in ep.streams and "ee_poses" not in ep.streams
+    assert set(ep.table("object_poses").column("object").to_pylist()) == {"gripper"}
+    assert ep.frames("cam0").column("t_ns").to_pylist() == sc.image_t
+    frames = list(ep.iter_video("cam0"))
+    assert np.abs(frames[3].astype(float) - synth.frame_image(3).astype(float)).mean() < 6.0
+    prov = ds.manifest["provenance"]["topics"]
+    assert prov["/joint_states"]["dropped"] == {"mapped to ignore": len(sc.joint_t)}
+
+
+def test_role_override_of_wrong_type_is_refused(tmp_path: Path, synth) -> None:
+    synth.write_ros2_mcap(tmp_path / "a.mcap", duration_s=0.1)
+    with pytest.raises(InputError, match="cannot be joint_states"):
+        convert_path(tmp_path / "a.mcap", tmp_path / "out",
+                     options=ConvertOptions(roles={"/wrench/ft_sensor": "joint_states"}))
+    with pytest.raises(InputError, match="not in the source"):
+        convert_path(tmp_path / "a.mcap", tmp_path / "out", options=ConvertOptions(roles={"/nope": "ignore"}))
+    assert not (tmp_path / "out").exists()
+
+
+def test_log_time_when_header_stamps_are_implausible(tmp_path: Path, synth) -> None:
+    sc = synth.write_ros2_mcap(tmp_path / "a.mcap", duration_s=0.1, hostile={"zero_stamp_at": 0})
+    ds = convert_path(tmp_path / "a.mcap", tmp_path / "out")
+    st = ds.episode().stream("joint_states")
+    # the first JointState had stamp 0, so the whole topic falls back to log time
+    assert st["stamp_source"] == "log_time"
+    t = ds.episode().table("joint_states").column("t_ns").to_pylist()
+    assert t[1:] == [x + synth.LATENCY for x in sc.joint_t]
+    assert len(t) == len(sc.joint_t) + 1
+
+
+def test_clock_jump_is_dropped_and_recorded(tmp_path: Path, synth) -> None:
+    sc = synth.write_ros2_mcap(tmp_path / "a.mcap", duration_s=0.2, hostile={"clock_jump_at": 40})
+    ds = convert_path(tmp_path / "a.mcap", tmp_path / "out")
+    assert ds.episode().table("joint_states").column("t_ns").to_pylist() == sc.joint_t
+    issues = ds.manifest["provenance"]["issues"]
+    jump = [i for i in issues if i["topic"] == "/joint_states" and "clock jump backwards" in i["problem"]]
+    assert len(jump) == 1 and jump[0]["count"] == 1
+    t_bad = 1_700_000_000_000_000_000 + 10_000_000 + 40 * 2_000_000 - synth.LATENCY - 5_000_000_000
+    assert jump[0]["stamps_ns"] == [t_bad]
