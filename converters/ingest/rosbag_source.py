@@ -24,7 +24,7 @@ from ..registry import register_converter
 from .context import IngestContext
 from .messages import MessageIngest, TopicInfo
 
-__all__ = ["convert_ros1", "convert_ros2", "detect_ros1", "detect_ros2"]
+__all__ = ["convert_ros1", "convert_ros2", "detect_ros1", "detect_ros2", "ros2_storage_paths", "open_bag"]
 
 _MAX_META_BYTES = 8 << 20
 
@@ -72,12 +72,23 @@ def _read_metadata(folder: Path) -> dict[str, Any]:
     return info
 
 
-def _ros2_paths(folder: Path, ctx: IngestContext) -> list[Path]:
+def ros2_storage_paths(folder: Path) -> tuple[list[Path], dict[str, Any]]:
+    """What to open for a ROS 2 bag folder, and facts from its ``metadata.yaml``.
+
+    Returns:
+        ``(paths, facts)``: the storage files themselves when the bag is not compressed (so
+        that QoS differences between ``metadata.yaml`` and the storage do not hide messages),
+        else the folder. ``facts`` has ``storage``, ``ros_distro``, ``direct`` and, when direct,
+        ``metadata_counts`` (topic -> count as ``metadata.yaml`` says).
+
+    Raises:
+        InputError: unreadable metadata, no or missing storage files.
+    """
     info = _read_metadata(folder)
     mode = str(info.get("compression_mode") or "").strip().lower()
     files = [folder / Path(str(f)).name for f in info.get("relative_file_paths") or []]
-    ctx.provenance.extra["storage"] = str(info.get("storage_identifier", ""))
-    ctx.provenance.extra["ros_distro"] = str(info.get("ros_distro", "")) or None
+    facts: dict[str, Any] = {"storage": str(info.get("storage_identifier", "")),
+                             "ros_distro": str(info.get("ros_distro", "")) or None, "direct": False}
     if not files:
         raise InputError("metadata.yaml lists no storage files", path=folder / "metadata.yaml")
     missing = [f.name for f in files if not f.is_file()]
@@ -91,10 +102,9 @@ def _ros2_paths(folder: Path, ctx: IngestContext) -> list[Path]:
                 expected[str(t["topic_metadata"]["name"])] = int(t["message_count"])
             except (KeyError, TypeError, ValueError):
                 continue
-        ctx.provenance.extra["metadata_counts"] = expected
-        ctx.provenance.note("storage files read directly; metadata.yaml used for its listing only")
-        return files
-    return [folder]
+        facts.update(direct=True, metadata_counts=expected)
+        return files, facts
+    return [folder], facts
 
 
 def _open(paths: list[Path]):
@@ -180,9 +190,21 @@ def convert_ros1(src: Path, ctx: IngestContext) -> None:
     _convert([src], src, ctx)
 
 
+def open_bag(paths: list[Path]) -> Any:
+    """An (unopened) ``rosbags.highlevel.AnyReader`` over ``paths``, with a default type store
+    for storages that carry no message definitions."""
+    return _open(paths)
+
+
 def convert_ros2(src: Path, ctx: IngestContext) -> None:
     """Convert a ROS 2 bag folder (sqlite3 or mcap storage, split files merged by time)."""
-    _convert(_ros2_paths(src, ctx), src, ctx)
+    paths, facts = ros2_storage_paths(src)
+    prov = ctx.provenance
+    prov.extra.update({"storage": facts["storage"], "ros_distro": facts["ros_distro"]})
+    if facts["direct"]:
+        prov.extra["metadata_counts"] = facts["metadata_counts"]
+        prov.note("storage files read directly; metadata.yaml used for its listing only")
+    _convert(paths, src, ctx)
 
 
 register_converter("ros1", detect_ros1, convert_ros1, description="ROS 1 .bag file (rosbags)", priority=50)

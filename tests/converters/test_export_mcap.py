@@ -150,11 +150,3 @@ def _check_round_trip(src: Dataset, back: Dataset) -> None:
 
 def test_round_trip_through_ingest_tiny(tiny: Dataset, tmp_path: Path) -> None:
     _check_round_trip(tiny, _round_trip(tiny, tmp_path))
-
-
-def test_round_trip_through_ingest_synthetic_scene(tmp_path: Path) -> None:
-    from fixtures.synth import synthesize
-
-    synthesize(tmp_path / "scene", seed=0, size="small")
-    src = Dataset.open(tmp_path / "scene")
-    _check_round_trip(src, _round_trip(src, tmp_path))

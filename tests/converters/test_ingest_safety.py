@@ -94,7 +94,7 @@ def test_unknown_chunk_compression(small: Path, tmp_path: Path) -> None:
     assert b"zstd" in data
     bad = tmp_path / "weird.mcap"
     bad.write_bytes(data.replace(b"zstd", b"brot"))
-    with pytest.raises(InputError, match="corrupt|compression"):
+    with pytest.raises(InputError, match="unknown chunk compression 'brot'"):
         convert_path(bad, tmp_path / "out")
     assert _leftovers(tmp_path) == []
 

@@ -133,7 +133,6 @@ def diagnose_torques(
     rng = np.random.default_rng(seed)
     noise = rng.standard_normal((n * nj, null_draws))
     rows_flat = [(f[:, None] * nj + np.arange(nj)[None, :]).ravel() for f in folds]
-    all_rows = np.arange(n * nj)
     rows_out = []
     deltas: dict[str, np.ndarray] = {}
     for eff in effs:
@@ -147,10 +146,12 @@ def diagnose_torques(
         rf = r1.ravel()
         before, after, before_nm, after_nm, null_gain = [], [], [], [], np.zeros(null_draws)
         n_test = 0
+        h_all, g_all, gn_all = jac.T @ jac, jac.T @ rf, jac.T @ noise
         for test in rows_flat:
-            train = np.setdiff1d(all_rows, test, assume_unique=True)
-            jt, js = jac[train], jac[test]
-            step, *_ = np.linalg.lstsq(jt, -rf[train], rcond=None)
+            js = jac[test]
+            h_tr = h_all - js.T @ js  # normal equations of the training rows
+            h_inv = np.linalg.pinv(h_tr, rcond=1e-12, hermitian=True)
+            step = -h_inv @ (g_all - js.T @ rf[test])
             r_test = rf[test] + js @ step
             b = r0.ravel()[test]
             before.append(b)
@@ -158,8 +159,8 @@ def diagnose_torques(
             sig_rows = np.tile(sig, len(test) // nj)
             before_nm.append(b * sig_rows)
             after_nm.append(r_test * sig_rows)
-            coef, *_ = np.linalg.lstsq(jt, noise[train], rcond=None)
             e_test = noise[test]
+            coef = h_inv @ (gn_all - js.T @ e_test)
             null_gain += (e_test**2).sum(0) - ((e_test - js @ coef) ** 2).sum(0)
             n_test += len(test)
         null_gain /= max(n_test, 1)

@@ -1,0 +1,206 @@
+"""Speed and memory of the splat rasterizer (robogs_format.render).
+
+Figures (targets from the renderer's design):
+- forward render, 100k 3DGS Gaussians at 640x480, 2 threads: target <= 0.6 s;
+- forward + backward, 20k Gaussians at 320x240: target <= 0.5 s and <= 1 GB peak memory;
+- speed-up of the tiled backend over the dense oracle at 2k Gaussians, 128x96;
+- the same on CUDA when a GPU is present.
+
+Scenes are random but realistic: Gaussians spread through a 1 m cube whose centre is 1.2 m in
+front of the camera (f = 0.9 W, so the cube fills most of the frame), with a screen-space 3-sigma
+radius log-uniform in 1-20 px, mild anisotropy, random rotations, opacity sigmoid(N(1, 1.5)) and
+degree-3 SH.
+
+Memory: the peak resident-set growth of this process during the step (``ru_maxrss`` minus the
+RSS before), measured first, before any larger render has raised the high-water mark. It
+counts everything the step allocates (autograd's saved tensors included) and is what the OS
+must provide.
+
+Usage: python bench/render.py [--threads 2] [--repeats 5] [--no-append]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import resource
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from robogs_format.render import Camera, Gaussians, RenderConfig, available_backends, render  # noqa: E402
+from robogs_format.render.binning import bin_tiles  # noqa: E402
+from robogs_format.render.projection import project  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
+
+
+def make_scene(n: int, width: int, seed: int = 0, kind: str = "3dgs", device: str = "cpu") -> tuple[Gaussians, float]:
+    """N random Gaussians in a 1 m cube centred 1.2 m ahead; returns them and the focal length."""
+    f = 0.9 * width
+    gen = torch.Generator().manual_seed(seed)
+    xyz = torch.rand(n, 3, generator=gen) - 0.5
+    xyz[:, 2] += 1.2
+    r_px = torch.exp(torch.rand(n, generator=gen) * math.log(20.0))  # 3-sigma radius, px
+    sigma_m = r_px / 3.0 * xyz[:, 2] / f
+    ns = 3 if kind == "3dgs" else 2
+    aniso = torch.exp((torch.rand(n, ns, generator=gen) - 0.5) * 0.8)
+    sh = torch.randn(n, 16, 3, generator=gen) * 0.1
+    sh[:, 0] = torch.randn(n, 3, generator=gen) * 0.8
+    g = Gaussians(
+        means=xyz,
+        quats=torch.randn(n, 4, generator=gen),
+        log_scales=torch.log(sigma_m)[:, None] + torch.log(aniso),
+        opacity_logits=torch.randn(n, generator=gen) * 1.5 + 1.0,
+        sh=sh,
+    )
+    return Gaussians(**{k: (v.to(device) if v is not None else None) for k, v in vars(g).items()}), f
+
+
+def make_camera(width: int, height: int, f: float, device: str = "cpu") -> Camera:
+    return Camera(width=width, height=height, fx=f, fy=f, cx=width / 2, cy=height / 2, T_world_cam=torch.eye(4, device=device))
+
+
+def _sync(device: str) -> None:
+    if device == "cuda":
+        torch.cuda.synchronize()
+
+
+def timed(fn, repeats: int, device: str = "cpu") -> tuple[float, float, float]:
+    """(min wall s, median wall s, min process-CPU s) over ``repeats`` runs after one warm-up."""
+    fn()
+    _sync(device)
+    walls, cpus = [], []
+    for _ in range(repeats):
+        c0, t0 = time.process_time(), time.perf_counter()
+        fn()
+        _sync(device)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    walls.sort()
+    return walls[0], walls[len(walls) // 2], min(cpus)
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def pair_count(g: Gaussians, cam: Camera, cfg: RenderConfig, tile: int) -> int:
+    with torch.no_grad():
+        p = project(g, cam, cfg)
+        return int(bin_tiles(p.bbox, p.depth, p.visible, cam.width, cam.height, tile).gaussian_ids.numel())
+
+
+def bench_train_step(repeats: int, device: str = "cpu", tile: int | None = None) -> dict[str, float]:
+    g, f = make_scene(20_000, 320, seed=1, device=device)
+    cam = make_camera(320, 240, f, device)
+    params = [g.means, g.quats, g.log_scales, g.opacity_logits, g.sh]
+    for p in params:
+        p.requires_grad_(True)
+    cfg = RenderConfig(tile_size=tile)
+    target = torch.rand(240, 320, 3, generator=torch.Generator().manual_seed(0)).to(device)
+    times = {"fwd": [], "bwd": []}
+
+    def step() -> None:
+        _sync(device)
+        t0 = time.perf_counter()
+        out = render(g, cam, config=cfg)
+        loss = (out.rgb - target).abs().mean() + 0.1 * out.depth_expected.mean()
+        _sync(device)
+        t1 = time.perf_counter()
+        loss.backward()
+        _sync(device)
+        times["fwd"].append(t1 - t0)
+        times["bwd"].append(time.perf_counter() - t1)
+        for p in params:
+            p.grad = None
+
+    rss0 = _rss_mb()
+    if device == "cuda":
+        torch.cuda.reset_peak_memory_stats()
+        base = torch.cuda.memory_allocated()
+    wall, med, cpu = timed(step, repeats, device)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 - rss0
+    res = {"wall": wall, "median": med, "cpu": cpu, "fwd": min(times["fwd"]), "bwd": min(times["bwd"]), "peak_mb": peak}
+    if device == "cuda":
+        res["peak_mb"] = (torch.cuda.max_memory_allocated() - base) / 2**20
+    return res
+
+
+def bench_forward(repeats: int, tile: int | None, device: str = "cpu", n: int = 100_000, size=(640, 480)) -> dict[str, float]:
+    g, f = make_scene(n, size[0], seed=0, device=device)
+    cam = make_camera(size[0], size[1], f, device)
+    cfg = RenderConfig(tile_size=tile)
+    with torch.no_grad():
+        wall, med, cpu = timed(lambda: render(g, cam, config=cfg), repeats, device)
+        out = render(g, cam, config=cfg)
+    t = tile or (8 if device == "cpu" else 16)
+    return {"wall": wall, "median": med, "cpu": cpu, "pairs": pair_count(g, cam, cfg, t) * t * t, "coverage": float((out.alpha > 0.5).float().mean())}
+
+
+def bench_oracle(repeats: int, device: str = "cpu") -> dict[str, float]:
+    g, f = make_scene(2_000, 128, seed=2, device=device)
+    cam = make_camera(128, 96, f, device)
+    with torch.no_grad():
+        tiled = timed(lambda: render(g, cam), repeats, device)
+        dense = timed(lambda: render(g, cam, backend="dense"), 1, device)
+        diff = float((render(g, cam).rgb - render(g, cam, backend="dense").rgb).abs().max())
+    return {"tiled": tiled[0], "dense": dense[0], "ratio": dense[0] / tiled[0], "max_diff": diff}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--no-append", action="store_true", help="do not append to bench/RESULTS.md")
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, {platform.system()}"
+    head = [
+        f"machine: {machine}; torch {torch.__version__}; threads {torch.get_num_threads()}; load avg {os.getloadavg()[0]:.1f}",
+        f"backends: {available_backends()}",
+    ]
+    rows: list[tuple[str, str, str, str]] = []  # figure, measured, baseline / target, ratio
+
+    tr = bench_train_step(args.repeats)
+    rows.append(("fwd+bwd 20k @ 320x240 (tile 8)", f"{tr['wall']:.3f} s (fwd {tr['fwd']:.3f} + bwd {tr['bwd']:.3f}; median {tr['median']:.3f}; cpu {tr['cpu']:.3f})", "target 0.5 s", f"{tr['wall'] / 0.5:.2f}x target"))
+    rows.append(("peak RSS growth of that step", f"{tr['peak_mb']:.0f} MB", "target 1024 MB", f"{tr['peak_mb'] / 1024:.2f}x target"))
+    fw8 = bench_forward(args.repeats, 8)
+    fw16 = bench_forward(args.repeats, 16)
+    ns = fw8["wall"] / fw8["pairs"] * 1e9
+    rows.append(("forward 100k @ 640x480, tile 8 (default)", f"{fw8['wall']:.3f} s (median {fw8['median']:.3f}; cpu {fw8['cpu']:.3f}; {fw8['pairs'] / 1e6:.0f} M tile-pixel pairs binned, {ns:.1f} ns each; {fw8['coverage']:.0%} of pixels alpha > 0.5)", "target 0.6 s", f"{fw8['wall'] / 0.6:.2f}x target"))
+    rows.append(("forward 100k @ 640x480, tile 16", f"{fw16['wall']:.3f} s (median {fw16['median']:.3f})", f"tile 8: {fw8['wall']:.3f} s", f"tile 8 is {fw16['wall'] / fw8['wall']:.2f}x faster"))
+    orc = bench_oracle(args.repeats)
+    rows.append(("tiled vs dense oracle, 2k @ 128x96", f"tiled {orc['tiled'] * 1e3:.1f} ms", f"dense {orc['dense']:.2f} s", f"{orc['ratio']:.0f}x faster (max |d rgb| {orc['max_diff']:.1e})"))
+    if available_backends().get("numba") == "ok":
+        g, f = make_scene(100_000, 640, seed=0)
+        cam = make_camera(640, 480, f)
+        nb = timed(lambda: render(g, cam, backend="numba"), args.repeats)
+        rows.append(("forward 100k @ 640x480, numba", f"{nb[0]:.3f} s", f"torch {fw8['wall']:.3f} s; stretch 0.15 s", f"{fw8['wall'] / nb[0]:.2f}x faster than torch"))
+    if torch.cuda.is_available():
+        head.append(f"cuda: {torch.cuda.get_device_name()}")
+        fc = bench_forward(args.repeats, None, "cuda")
+        rows.append(("CUDA forward 100k @ 640x480 (tile 16)", f"{fc['wall'] * 1e3:.1f} ms", f"CPU {fw8['wall']:.3f} s", f"{fw8['wall'] / fc['wall']:.0f}x faster"))
+        tc = bench_train_step(args.repeats, "cuda")
+        rows.append(("CUDA fwd+bwd 20k @ 320x240", f"{tc['wall'] * 1e3:.1f} ms, peak {tc['peak_mb']:.0f} MB allocated", f"CPU {tr['wall']:.3f} s", f"{tr['wall'] / tc['wall']:.0f}x faster"))
+    else:
+        head.append("cuda: not available (no CUDA figures)")
+
+    lines = head + [""] + ["| figure | measured | baseline / target | ratio |", "|---|---|---|---|"] + [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
+    print("\n".join(lines))
+    if not args.no_append:
+        cmd = "python bench/render.py " + " ".join(sys.argv[1:])
+        text = f"\n## render — 2026-11-22\n\nCommand: `{cmd.strip()}`\n\n" + "\n".join(lines) + "\n"
+        with RESULTS.open("a") as fh:
+            fh.write(text)
+
+
+if __name__ == "__main__":
+    main()
