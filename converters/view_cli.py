@@ -24,11 +24,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare ``robogs view``'s arguments."""
     parser.add_argument("dataset", type=Path, metavar="DATASET", help="dataset folder")
     parser.add_argument("--out", type=Path, help="keep the recording here (.rrd)")
-    parser.add_argument("--spawn", action=argparse.BooleanOptionalAction, default=None,
-                        help="start the Rerun viewer on the recording (default: only without --out)")
+    parser.add_argument(
+        "--spawn",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="start the Rerun viewer on the recording (default: only without --out)",
+    )
     parser.add_argument("--episode", help="episode id (default: the first)")
-    parser.add_argument("--max-hz", type=float, default=60.0, dest="max_hz",
-                        help="downsampling rate of transforms and images (0 = all samples)")
+    parser.add_argument(
+        "--max-hz",
+        type=float,
+        default=60.0,
+        dest="max_hz",
+        help="downsampling rate of transforms and images (0 = all samples)",
+    )
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
 
 
@@ -43,15 +52,23 @@ def run(args: argparse.Namespace) -> int:
     out = args.out
     force = args.force
     if out is None:
-        out = Path(tempfile.mkdtemp(prefix="robogs-view-")) / f"{Path(args.dataset).resolve().name}.rrd"
+        out = (
+            Path(tempfile.mkdtemp(prefix="robogs-view-"))
+            / f"{Path(args.dataset).resolve().name}.rrd"
+        )
     spawn = args.spawn if args.spawn is not None else args.out is None
-    report = export("rerun", args.dataset, out, force=force, episode=args.episode, max_hz=args.max_hz)
+    report = export(
+        "rerun", args.dataset, out, force=force, episode=args.episode, max_hz=args.max_hz
+    )
     print_report(report)
     if spawn:
         try:
             subprocess.Popen(viewer_command(out), start_new_session=True)  # noqa: S603 - fixed command
         except OSError as exc:
-            raise InputError(f"could not start the Rerun viewer ({exc.strerror})", path=out,
-                             hint="open the file with 'rerun FILE.rrd' on a machine with a display") from None
+            raise InputError(
+                f"could not start the Rerun viewer ({exc.strerror})",
+                path=out,
+                hint="open the file with 'rerun FILE.rrd' on a machine with a display",
+            ) from None
         print(f"opened {out} in the Rerun viewer")
     return 0

@@ -254,7 +254,7 @@ class Binding:
         means64 = self.rest.means.double()
         moved = (R @ means64[..., None])[..., 0] + Mg[:, :3, 3]
         means = torch.where(bound, moved, means64).to(self.dtype)
-        qR = matrix_to_quat(R).to(self.dtype)
+        qR = matrix_to_quat(M[:, :3, :3]).to(self.dtype)[tid]  # one conversion per target
         quats = torch.where(bound, quat_multiply(qR, self.rest.quats), self.rest.quats)
         sh = self.rest.sh
         if sh.shape[1] > 1:

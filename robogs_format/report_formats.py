@@ -21,7 +21,14 @@ if TYPE_CHECKING:
     from .checks.registry import Check
     from .validate import Report
 
-__all__ = ["to_json", "to_junit", "to_markdown", "render_text", "render_check_list"]
+__all__ = [
+    "to_json",
+    "to_junit",
+    "to_markdown",
+    "render_text",
+    "render_check_list",
+    "catalogue_markdown",
+]
 
 _STYLE = {"error": "bold red", "warning": "yellow", "info": "cyan"}
 
@@ -44,23 +51,35 @@ def to_junit(report: Report, *, fail_on: str = "error") -> str:
     groups: dict[str, ET.Element] = {}
     totals: dict[str, list[int]] = {}
     cases = [(r.group, r.code, r.title, r.status, r.seconds) for r in report.runs]
-    cases += [("runner", code, "validator", "ran", 0.0) for code in sorted(by_code)
-              if code not in {r.code for r in report.runs}]
+    cases += [
+        ("runner", code, "validator", "ran", 0.0)
+        for code in sorted(by_code)
+        if code not in {r.code for r in report.runs}
+    ]
     for group, code, title, status, seconds in cases:
         suite = groups.get(group)
         if suite is None:
             suite = groups[group] = ET.SubElement(suites, "testsuite", name=f"robogs.{group}")
             totals[group] = [0, 0, 0]
-        case = ET.SubElement(suite, "testcase", classname=f"robogs.{group}", name=f"{code} {title}",
-                             time=f"{seconds:.3f}")
+        case = ET.SubElement(
+            suite,
+            "testcase",
+            classname=f"robogs.{group}",
+            name=f"{code} {title}",
+            time=f"{seconds:.3f}",
+        )
         totals[group][0] += 1
         found = by_code.get(code, [])
         failing = [f for f in found if _fails(f, fail_on)]
         if status == "skipped":
-            ET.SubElement(case, "skipped", message="not run (input reported elsewhere or manifest invalid)")
+            ET.SubElement(
+                case, "skipped", message="not run (input reported elsewhere or manifest invalid)"
+            )
             totals[group][2] += 1
         for f in failing:
-            el = ET.SubElement(case, "failure", message=f.message[:500], type=f"{f.code}:{f.severity}")
+            el = ET.SubElement(
+                case, "failure", message=f.message[:500], type=f"{f.code}:{f.severity}"
+            )
             el.text = _finding_text(f)
         if failing:
             totals[group][1] += 1
@@ -74,7 +93,9 @@ def to_junit(report: Report, *, fail_on: str = "error") -> str:
         suite.set("errors", "0")
         suite.set("skipped", str(skipped))
     ET.indent(suites)
-    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(suites, encoding="unicode") + "\n"
+    return (
+        '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(suites, encoding="unicode") + "\n"
+    )
 
 
 def _finding_text(f: Finding) -> str:
@@ -104,18 +125,39 @@ def to_markdown(report: Report) -> str:
         "|---|---:|---:|---:|---:|---:|",
     ]
     for group, g in report.groups().items():
-        out.append(f"| {group} | {g['checks']} | {g['skipped']} | {g['error']} | {g['warning']} | {g['info']} |")
+        out.append(
+            f"| {group} | {g['checks']} | {g['skipped']} | {g['error']} | {g['warning']} | {g['info']} |"
+        )
     out.append("")
     if report.findings:
-        out += ["| code | severity | location | measured (budget) | message | hint |",
-                "|---|---|---|---|---|---|"]
+        out += [
+            "| code | severity | location | measured (budget) | message | hint |",
+            "|---|---|---|---|---|---|",
+        ]
         for f in report.findings:
-            out.append("| " + " | ".join(_md_cell(x) for x in (
-                f.code, f.severity, str(f.location), f.value_text(), f.message, f.hint)) + " |")
+            out.append(
+                "| "
+                + " | ".join(
+                    _md_cell(x)
+                    for x in (
+                        f.code,
+                        f.severity,
+                        str(f.location),
+                        f.value_text(),
+                        f.message,
+                        f.hint,
+                    )
+                )
+                + " |"
+            )
     else:
         out.append("No findings.")
     if report.dropped:
-        out += ["", "Not listed (per-code cap): " + ", ".join(f"{k}: {v}" for k, v in sorted(report.dropped.items()))]
+        out += [
+            "",
+            "Not listed (per-code cap): "
+            + ", ".join(f"{k}: {v}" for k, v in sorted(report.dropped.items())),
+        ]
     return "\n".join(out) + "\n"
 
 
@@ -124,15 +166,28 @@ def render_text(report: Report, console: Console) -> None:
     from rich.table import Table
     from rich.text import Text
 
-    table = Table(title=f"robogs validate {report.dataset}" + (" (quick)" if report.quick else ""),
-                  title_justify="left")
-    for col, just in (("group", "left"), ("checks", "right"), ("skipped", "right"), ("errors", "right"),
-                      ("warnings", "right"), ("notes", "right")):
+    table = Table(
+        title=f"robogs validate {report.dataset}" + (" (quick)" if report.quick else ""),
+        title_justify="left",
+    )
+    for col, just in (
+        ("group", "left"),
+        ("checks", "right"),
+        ("skipped", "right"),
+        ("errors", "right"),
+        ("warnings", "right"),
+        ("notes", "right"),
+    ):
         table.add_column(col, justify=just)
     for group, g in report.groups().items():
-        table.add_row(group, str(g["checks"]), str(g["skipped"]),
-                      Text(str(g["error"]), style=_STYLE["error"] if g["error"] else ""),
-                      Text(str(g["warning"]), style=_STYLE["warning"] if g["warning"] else ""), str(g["info"]))
+        table.add_row(
+            group,
+            str(g["checks"]),
+            str(g["skipped"]),
+            Text(str(g["error"]), style=_STYLE["error"] if g["error"] else ""),
+            Text(str(g["warning"]), style=_STYLE["warning"] if g["warning"] else ""),
+            str(g["info"]),
+        )
     console.print(table)
     for f in report.findings:
         line = Text()
@@ -147,11 +202,22 @@ def render_text(report: Report, console: Console) -> None:
         if f.hint:
             console.print(Text(f"    hint: {f.hint}", style="green"))
     for code, n in sorted(report.dropped.items()):
-        console.print(Text(f"... and {n} more {code} findings (see --json for counts)", style="dim"))
+        console.print(
+            Text(f"... and {n} more {code} findings (see --json for counts)", style="dim")
+        )
     counts = report.counts()
-    style = _STYLE["error"] if counts["error"] else (_STYLE["warning"] if counts["warning"] else "bold green")
-    console.print(Text(f"{counts['error']} errors, {counts['warning']} warnings, {counts['info']} notes "
-                       f"in {report.seconds:.2f} s", style=style))
+    style = (
+        _STYLE["error"]
+        if counts["error"]
+        else (_STYLE["warning"] if counts["warning"] else "bold green")
+    )
+    console.print(
+        Text(
+            f"{counts['error']} errors, {counts['warning']} warnings, {counts['info']} notes "
+            f"in {report.seconds:.2f} s",
+            style=style,
+        )
+    )
 
 
 def render_check_list(checks: list[Check], console: Console) -> None:
@@ -162,5 +228,41 @@ def render_check_list(checks: list[Check], console: Console) -> None:
     for col in ("code", "group", "severity", "quick", "title", "budget"):
         table.add_column(col)
     for c in checks:
-        table.add_row(c.code, c.group, c.severity, "yes" if not c.needs_full else "", c.title, c.budget)
+        table.add_row(
+            c.code, c.group, c.severity, "yes" if not c.needs_full else "", c.title, c.budget
+        )
     console.print(table)
+
+
+def catalogue_markdown(checks: list[Check], runner_codes: dict[str, tuple[str, str]]) -> str:
+    """The catalogue table of ``spec/CHECKS.md``, built from the registry.
+
+    Columns: code, group, severity, quick (runs under ``--quick``), title, measured
+    quantity (unit), budget name, hint.
+    """
+    out = [
+        "| code | group | severity | quick | title | measures | budget | hint |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for c in checks:
+        measures = f"{c.quantity} ({c.unit})" if c.unit else c.quantity
+        out.append(
+            "| "
+            + " | ".join(
+                _md_cell(x)
+                for x in (
+                    c.code,
+                    c.group,
+                    c.severity,
+                    "yes" if not c.needs_full else "no",
+                    c.title,
+                    measures,
+                    f"`{c.budget}`" if c.budget else "",
+                    c.hint,
+                )
+            )
+            + " |"
+        )
+    for code, (severity, title) in sorted(runner_codes.items()):
+        out.append(f"| {code} | runner | {severity} | yes | {_md_cell(title)} |  |  |  |")
+    return "\n".join(out) + "\n"

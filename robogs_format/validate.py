@@ -109,11 +109,15 @@ class Report:
         out: dict[str, dict[str, int]] = {}
         by_code = {r.code: r.group for r in self.runs}
         for r in self.runs:
-            g = out.setdefault(r.group, {"checks": 0, "skipped": 0, "error": 0, "warning": 0, "info": 0})
+            g = out.setdefault(
+                r.group, {"checks": 0, "skipped": 0, "error": 0, "warning": 0, "info": 0}
+            )
             g["checks" if r.status != "skipped" else "skipped"] += 1
         for f in self.findings:
             grp = by_code.get(f.code, "runner")
-            g = out.setdefault(grp, {"checks": 0, "skipped": 0, "error": 0, "warning": 0, "info": 0})
+            g = out.setdefault(
+                grp, {"checks": 0, "skipped": 0, "error": 0, "warning": 0, "info": 0}
+            )
             g[f.severity] += 1
         order = {g: i for i, g in enumerate((*GROUPS, "runner"))}
         return dict(sorted(out.items(), key=lambda kv: order.get(kv[0], len(order))))
@@ -158,9 +162,14 @@ def select_checks(
     select = [s for s in (select or []) if s.strip()]
     ignore = [s for s in (ignore or []) if s.strip()]
     for s in (*select, *ignore):
-        if not any(_matches(c, s) for c in checks) and not any(k.startswith(s.strip().upper()) for k in RUNNER_CODES):
-            raise FormatError(f"no check matches {s!r}", where="--select/--ignore",
-                              hint="use codes (T003), prefixes (T) or groups (time); see --list-checks")
+        if not any(_matches(c, s) for c in checks) and not any(
+            k.startswith(s.strip().upper()) for k in RUNNER_CODES
+        ):
+            raise FormatError(
+                f"no check matches {s!r}",
+                where="--select/--ignore",
+                hint="use codes (T003), prefixes (T) or groups (time); see --list-checks",
+            )
     out = []
     for c in checks:
         if select and not any(_matches(c, s) for s in select):
@@ -173,12 +182,10 @@ def select_checks(
     return out
 
 
-def _code_kept(code: str, select: Sequence[str], ignore: Sequence[str]) -> bool:
-    if any(code.startswith(s.strip().upper()) for s in ignore):
-        return False
+def _code_kept(code: str, selected: set[str], ignore: Sequence[str]) -> bool:
     if code in RUNNER_CODES:
-        return True
-    return not select or any(code.startswith(s.strip().upper()) for s in select)
+        return not any(code.startswith(s.strip().upper()) for s in ignore)
+    return code in selected
 
 
 def validate(
@@ -230,13 +237,18 @@ def validate(
         if close is not None:
             close()
     if runner.skipped_invalid:
-        runner.add(Finding(
-            "X003", "info",
-            f"{len(runner.skipped_invalid)} checks not run because the manifest does not follow "
-            f"the schema: {', '.join(runner.skipped_invalid)}",
-            Location(file="manifest.json"),
-            hint="fix the schema findings first, then validate again"))
-    findings = [f for f in runner.findings if _code_kept(f.code, select_l, ignore_l)]
+        runner.add(
+            Finding(
+                "X003",
+                "info",
+                f"{len(runner.skipped_invalid)} checks not run because the manifest does not follow "
+                f"the schema: {', '.join(runner.skipped_invalid)}",
+                Location(file="manifest.json"),
+                hint="fix the schema findings first, then validate again",
+            )
+        )
+    selected = {c.code for c in checks}
+    findings = [f for f in runner.findings if _code_kept(f.code, selected, ignore_l)]
     findings.sort(key=lambda f: (severity_rank(f.severity), f.code))
     return Report(
         dataset=str(path),
@@ -294,14 +306,20 @@ class _Runner:
         except Exception as exc:  # a crashing check must not crash the validator
             tb = traceback.extract_tb(exc.__traceback__)
             at = f"{Path(tb[-1].filename).name}:{tb[-1].lineno}" if tb else "?"
-            self.add(Finding(
-                "X001", "error",
-                f"check {chk.code} ({chk.title}) crashed: {type(exc).__name__}: {str(exc)[:300]} (at {at})",
-                Location(),
-                hint="this is a bug in the check; report it with the dataset's manifest. "
-                     f"Run with --ignore {chk.code} to skip it"))
+            self.add(
+                Finding(
+                    "X001",
+                    "error",
+                    f"check {chk.code} ({chk.title}) crashed: {type(exc).__name__}: {str(exc)[:300]} (at {at})",
+                    Location(),
+                    hint="this is a bug in the check; report it with the dataset's manifest. "
+                    f"Run with --ignore {chk.code} to skip it",
+                )
+            )
             status, n = "crashed", n + 1
-        self.runs.append(CheckRun(chk.code, chk.group, chk.title, status, time.perf_counter() - t, n))
+        self.runs.append(
+            CheckRun(chk.code, chk.group, chk.title, status, time.perf_counter() - t, n)
+        )
 
     def _input_finding(self, chk: Check, exc: RobogsError) -> Finding | None:
         rel = self.ctx.rel(exc.path) if exc.path else None
@@ -312,14 +330,17 @@ class _Runner:
             return None
         self.seen.add(key)
         return Finding(
-            "X002", "error",
+            "X002",
+            "error",
             f"check {chk.code} ({chk.title}) could not read its input: {exc.message}",
             Location(file=rel, where=exc.where),
             hint=exc.hint or "fix the file so it can be read",
         )
 
 
-def _progress_callback(progress: bool | Callable[[str, int, int], None], total: int) -> Callable[[str, int, int], None]:
+def _progress_callback(
+    progress: bool | Callable[[str, int, int], None], total: int
+) -> Callable[[str, int, int], None]:
     if callable(progress):
         return progress
     if not progress:
@@ -327,8 +348,14 @@ def _progress_callback(progress: bool | Callable[[str, int, int], None], total: 
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    bar = Progress(TextColumn("{task.description:<48}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                   console=Console(stderr=True), transient=True)
+    bar = Progress(
+        TextColumn("{task.description:<48}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    )
     bar.start()
     task = bar.add_task("validating", total=total)
 

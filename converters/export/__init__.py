@@ -119,7 +119,9 @@ def register_exporter(
     """
     exp = fn if isinstance(fn, Exporter) else Exporter(name, fn, output, suffix, help)
     if name in _REGISTRY and not replace and _REGISTRY[name].fn is not exp.fn:
-        raise InputError(f"an exporter named {name!r} is already registered", hint="pass replace=True")
+        raise InputError(
+            f"an exporter named {name!r} is already registered", hint="pass replace=True"
+        )
     _REGISTRY[name] = exp
     return exp
 

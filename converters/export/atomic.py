@@ -45,9 +45,13 @@ def atomic_output(out: str | Path, *, folder: bool, force: bool = False) -> Iter
     out = Path(out).absolute()
     parent = out.parent
     if not parent.is_dir():
-        raise InputError("parent folder of the output does not exist", path=parent, hint="create it first")
+        raise InputError(
+            "parent folder of the output does not exist", path=parent, hint="create it first"
+        )
     if (out.exists() or out.is_symlink()) and not force:
-        raise DatasetExistsError("output already exists", path=out, hint="choose another path or pass --force")
+        raise DatasetExistsError(
+            "output already exists", path=out, hint="choose another path or pass --force"
+        )
     tag = uuid.uuid4().hex[:8]
     tmp = parent / f".{out.stem}.tmp-{tag}{out.suffix}"
     if folder:

@@ -138,10 +138,18 @@ def link_inertias(urdf: yourdfpy.URDF, physics: dict[str, Any] | None) -> dict[s
         inertial = link.inertial
         if inertial is None or inertial.mass is None:
             continue
-        frame = np.eye(4) if inertial.origin is None else np.asarray(inertial.origin, dtype=np.float64)
-        I_f = np.zeros((3, 3)) if inertial.inertia is None else np.asarray(inertial.inertia, dtype=np.float64)
+        frame = (
+            np.eye(4) if inertial.origin is None else np.asarray(inertial.origin, dtype=np.float64)
+        )
+        I_f = (
+            np.zeros((3, 3))
+            if inertial.inertia is None
+            else np.asarray(inertial.inertia, dtype=np.float64)
+        )
         R = frame[:3, :3]
-        out[link.name] = BodyInertia(float(inertial.mass), frame[:3, 3].copy(), R @ I_f @ R.T, frame, I_f)
+        out[link.name] = BodyInertia(
+            float(inertial.mass), frame[:3, 3].copy(), R @ I_f @ R.T, frame, I_f
+        )
     return out
 
 
@@ -168,7 +176,9 @@ def joint_dynamics(urdf: yourdfpy.URDF, physics: dict[str, Any] | None) -> dict[
     return out
 
 
-def scene_objects(ds: Dataset, physics: dict[str, Any] | None, robot_links: set[str]) -> list[SceneObject]:
+def scene_objects(
+    ds: Dataset, physics: dict[str, Any] | None, robot_links: set[str]
+) -> list[SceneObject]:
     """The ``physics.json`` objects that are not robot links, with their asset meshes."""
     out: list[SceneObject] = []
     for name, entry in sorted((physics or {}).get("objects", {}).items()):
@@ -189,7 +199,9 @@ def scene_objects(ds: Dataset, physics: dict[str, Any] | None, robot_links: set[
     return out
 
 
-def principal_axes(inertia: np.ndarray, *, where: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+def principal_axes(
+    inertia: np.ndarray, *, where: str | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Diagonalise a symmetric inertia tensor.
 
     Args:
@@ -203,7 +215,9 @@ def principal_axes(inertia: np.ndarray, *, where: str | None = None) -> tuple[np
         FormatError: the tensor is not symmetric or not finite.
     """
     inertia = np.asarray(inertia, dtype=np.float64)
-    if not np.all(np.isfinite(inertia)) or not np.allclose(inertia, inertia.T, atol=1e-12, rtol=1e-9):
+    if not np.all(np.isfinite(inertia)) or not np.allclose(
+        inertia, inertia.T, atol=1e-12, rtol=1e-9
+    ):
         raise FormatError("inertia tensor is not a finite symmetric matrix", where=where)
     d, R = np.linalg.eigh(0.5 * (inertia + inertia.T))
     if np.linalg.det(R) < 0:

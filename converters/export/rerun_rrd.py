@@ -46,5 +46,10 @@ def export_rerun(
     return ExportReport(out=out, files=[out.name], notes=notes)
 
 
-register_exporter("rerun", export_rerun, output="file", suffix=".rrd",
-                  help="Rerun recording: animated robot, cameras, labels, boxes, splats, plots, findings")
+register_exporter(
+    "rerun",
+    export_rerun,
+    output="file",
+    suffix=".rrd",
+    help="Rerun recording: animated robot, cameras, labels, boxes, splats, plots, findings",
+)

@@ -90,7 +90,9 @@ def _joint_states(ep: Episode) -> Iterator[Item]:
     joints = [c[len("position.") :] for c in cols if c.startswith("position.")]
     t = tab.column("t_ns").to_pylist()
     data = {
-        kind: _columns(tab, [f"{kind}.{j}" for j in joints]) if all(f"{kind}.{j}" in cols for j in joints) else None
+        kind: _columns(tab, [f"{kind}.{j}" for j in joints])
+        if all(f"{kind}.{j}" in cols for j in joints)
+        else None
         for kind in ("position", "velocity", "effort")
     }
     for i, ti in enumerate(t):
@@ -152,14 +154,21 @@ def _camera_sources(ds: Dataset, ep: Episode, image_format: str) -> list[Iterato
     return out
 
 
-def _images(ds: Dataset, ep: Episode, name: str, stamps: dict[int, int], image_format: str) -> Iterator[Item]:
-    ext, params = (".png", [cv2.IMWRITE_PNG_COMPRESSION, 3]) if image_format == "png" else (
-        ".jpg", [cv2.IMWRITE_JPEG_QUALITY, 95])
+def _images(
+    ds: Dataset, ep: Episode, name: str, stamps: dict[int, int], image_format: str
+) -> Iterator[Item]:
+    ext, params = (
+        (".png", [cv2.IMWRITE_PNG_COMPRESSION, 3])
+        if image_format == "png"
+        else (".jpg", [cv2.IMWRITE_JPEG_QUALITY, 95])
+    )
     cam = ds.camera(name)
     base, frame = f"/camera/{topic_part(name)}", topic_part(name) + CAMERA_FRAME_SUFFIX
     for i, rgb in enumerate(ep.iter_video(name)):
         if i not in stamps:
-            raise FormatError(f"video frame {i} has no row in frames.parquet", path=ep.video_path(name))
+            raise FormatError(
+                f"video frame {i} has no row in frames.parquet", path=ep.video_path(name)
+            )
         ok, buf = cv2.imencode(ext, cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), params)
         if not ok:
             raise FormatError(f"{image_format} encoding failed", where=f"{name} frame {i}")
@@ -170,8 +179,13 @@ def _images(ds: Dataset, ep: Episode, name: str, stamps: dict[int, int], image_f
 
 
 def _labels(ep: Episode, name: str, stamps: dict[int, int]) -> Iterator[Item]:
-    topic, frame = f"/camera/{topic_part(name)}/labels/compressed", topic_part(name) + CAMERA_FRAME_SUFFIX
-    labels = pq.read_table(ep.labels_path(name), columns=["frame_index", "png"]).sort_by("frame_index")
+    topic, frame = (
+        f"/camera/{topic_part(name)}/labels/compressed",
+        topic_part(name) + CAMERA_FRAME_SUFFIX,
+    )
+    labels = pq.read_table(ep.labels_path(name), columns=["frame_index", "png"]).sort_by(
+        "frame_index"
+    )
     for i, blob in zip(*_columns(labels, ["frame_index", "png"]), strict=True):
         if i in stamps:
             msg = {"header": _header(stamps[i], frame), "format": "png", "data": blob}
@@ -197,8 +211,13 @@ def _poses(ep: Episode, stream: str, key: str, prefix: str, priority: int) -> It
     tab = ep.table(stream).sort_by("t_ns")
     cols = _columns(tab, ["t_ns", key, "x", "y", "z", "qw", "qx", "qy", "qz"])
     for t, name, x, y, z, qw, qx, qy, qz in zip(*cols, strict=True):
-        msg = {"header": _header(t, WORLD_FRAME),
-               "pose": {"position": {"x": x, "y": y, "z": z}, "orientation": {"x": qx, "y": qy, "z": qz, "w": qw}}}
+        msg = {
+            "header": _header(t, WORLD_FRAME),
+            "pose": {
+                "position": {"x": x, "y": y, "z": z},
+                "orientation": {"x": qx, "y": qy, "z": qz, "w": qw},
+            },
+        }
         yield t, priority, f"/{prefix}/{topic_part(name)}/pose", "geometry_msgs/PoseStamped", msg
 
 
@@ -208,8 +227,10 @@ def _wrenches(ep: Episode) -> Iterator[Item]:
     tab = ep.table("wrenches").sort_by("t_ns")
     cols = _columns(tab, ["t_ns", "frame", "fx", "fy", "fz", "tx", "ty", "tz"])
     for t, frame, fx, fy, fz, tx, ty, tz in zip(*cols, strict=True):
-        msg = {"header": _header(t, frame),
-               "wrench": {"force": {"x": fx, "y": fy, "z": fz}, "torque": {"x": tx, "y": ty, "z": tz}}}
+        msg = {
+            "header": _header(t, frame),
+            "wrench": {"force": {"x": fx, "y": fy, "z": fz}, "torque": {"x": tx, "y": ty, "z": tz}},
+        }
         yield t, 7, f"/wrench/{topic_part(frame)}", "geometry_msgs/WrenchStamped", msg
 
 
@@ -219,11 +240,19 @@ def _static(ds: Dataset, ep: Episode) -> Iterator[Item]:
     for name in sorted(ep.camera_streams):
         cam = ds.camera(name)
         if cam.T_world_cam is not None and "extrinsics" not in ep.camera_streams[name]:
-            transforms.append(_transform(t0, WORLD_FRAME, topic_part(name) + CAMERA_FRAME_SUFFIX, cam.T_world_cam))
+            transforms.append(
+                _transform(t0, WORLD_FRAME, topic_part(name) + CAMERA_FRAME_SUFFIX, cam.T_world_cam)
+            )
     if transforms:
         yield t0, -2, "/tf_static", "tf2_msgs/TFMessage", {"transforms": transforms}
     if (ds.manifest.get("robot") or {}).get("urdf"):
-        yield t0, -1, "/robot_description", "std_msgs/String", {"data": ds.urdf_path.read_text(encoding="utf-8")}
+        yield (
+            t0,
+            -1,
+            "/robot_description",
+            "std_msgs/String",
+            {"data": ds.urdf_path.read_text(encoding="utf-8")},
+        )
 
 
 def export_mcap(
@@ -243,11 +272,17 @@ def export_mcap(
     if image_format not in ("png", "jpeg"):
         raise InputError(f"image_format must be 'png' or 'jpeg', not {image_format!r}")
     if not ds.episodes:
-        raise InputError("dataset has no episode", path=ds.manifest_path, hint="the mcap export writes one episode")
+        raise InputError(
+            "dataset has no episode",
+            path=ds.manifest_path,
+            hint="the mcap export writes one episode",
+        )
     ep = ds.episode(episode)
     if ep.start_ns < 0:
-        raise InputError(f"episode starts at {ep.start_ns} ns: MCAP log times must be >= 0",
-                         hint="shift the dataset clock to non-negative stamps")
+        raise InputError(
+            f"episode starts at {ep.start_ns} ns: MCAP log times must be >= 0",
+            hint="shift the dataset clock to non-negative stamps",
+        )
     sources = [
         _static(ds, ep),
         _joint_states(ep),
@@ -260,17 +295,36 @@ def export_mcap(
     with open(out, "wb") as fh:
         writer = Writer(fh)
         schemas = {name: writer.register_msgdef(name, text) for name, text in MSGDEFS.items()}
-        writer.add_metadata("robogs", {"dataset": ds.name, "spec_version": ds.spec_version, "episode": ep.id,
-                                       "clock": str(ds.manifest.get("conventions", {}).get("clock", ""))})
+        writer.add_metadata(
+            "robogs",
+            {
+                "dataset": ds.name,
+                "spec_version": ds.spec_version,
+                "episode": ep.id,
+                "clock": str(ds.manifest.get("conventions", {}).get("clock", "")),
+            },
+        )
         for t, _, topic, typ, msg in heapq.merge(*sources, key=lambda item: (item[0], item[1])):
             seq = counts.get(topic, 0)
-            writer.write_message(topic, schemas[typ], msg, log_time=int(t), publish_time=int(t), sequence=seq)
+            writer.write_message(
+                topic, schemas[typ], msg, log_time=int(t), publish_time=int(t), sequence=seq
+            )
             counts[topic] = seq + 1
         writer.finish()
-    notes = [f"{s} not exported (no standard ROS message)" for s in ("boxes2d", "boxes3d", "segments", "actions")
-             if ep.has(s)]
-    return ExportReport(out=out, files=[out.name], notes=notes, facts={"messages": counts, "episode": ep.id})
+    notes = [
+        f"{s} not exported (no standard ROS message)"
+        for s in ("boxes2d", "boxes3d", "segments", "actions")
+        if ep.has(s)
+    ]
+    return ExportReport(
+        out=out, files=[out.name], notes=notes, facts={"messages": counts, "episode": ep.id}
+    )
 
 
-register_exporter("mcap", export_mcap, output="file", suffix=".mcap",
-                  help="one episode as ROS 2 messages (joint states, images, camera info, TF, poses, wrenches)")
+register_exporter(
+    "mcap",
+    export_mcap,
+    output="file",
+    suffix=".mcap",
+    help="one episode as ROS 2 messages (joint states, images, camera info, TF, poses, wrenches)",
+)

@@ -37,7 +37,13 @@ from . import ExportReport, register_exporter
 __all__ = ["FLAT_LOG_SCALE", "export_ply", "ply_property_names"]
 
 FLAT_LOG_SCALE = math.log(1e-7)
-_BINDING = [("bind_id", "<i4"), ("bind_face", "<i4"), ("bind_u", "<f4"), ("bind_v", "<f4"), ("bind_offset", "<f4")]
+_BINDING = [
+    ("bind_id", "<i4"),
+    ("bind_face", "<i4"),
+    ("bind_u", "<f4"),
+    ("bind_v", "<f4"),
+    ("bind_offset", "<f4"),
+]
 
 
 def ply_property_names(sh_coeffs: int, *, with_binding: bool = False) -> list[str]:
@@ -57,7 +63,13 @@ def _owners(ds: Dataset) -> list[str]:
 
 def _posed(ds: Dataset, owner: str, t_ns: int | None, episode: str | None) -> dict[str, np.ndarray]:
     s = ds.splats(owner)
-    part = {"means": s.means, "quats": s.quats, "log_scales": s.log_scales, "opacity": s.opacity_logits, "sh": s.sh}
+    part = {
+        "means": s.means,
+        "quats": s.quats,
+        "log_scales": s.log_scales,
+        "opacity": s.opacity_logits,
+        "sh": s.sh,
+    }
     if t_ns is not None:
         import torch
 
@@ -90,8 +102,11 @@ def export_ply(
     """
     owners = _owners(ds)
     if not owners:
-        raise InputError("dataset has no splats (no robot.splats or assets.*.splats in the manifest)",
-                         path=ds.manifest_path, hint="the ply export needs reconstructed splats")
+        raise InputError(
+            "dataset has no splats (no robot.splats or assets.*.splats in the manifest)",
+            path=ds.manifest_path,
+            hint="the ply export needs reconstructed splats",
+        )
     parts, targets, counts = [], [], {}
     for owner in owners:
         entry = ds.splat_entry(owner)
@@ -108,7 +123,9 @@ def export_ply(
     def cat(key: str) -> np.ndarray:
         return np.concatenate([p[key] for p in parts])
 
-    sh = np.concatenate([np.pad(p["sh"], ((0, 0), (0, k - p["sh"].shape[1]), (0, 0))) for p in parts])
+    sh = np.concatenate(
+        [np.pad(p["sh"], ((0, 0), (0, k - p["sh"].shape[1]), (0, 0))) for p in parts]
+    )
     scales = np.concatenate(
         [p["log_scales"] if p["log_scales"].shape[1] == 3
          else np.concatenate([p["log_scales"], np.full((len(p["log_scales"]), 1), FLAT_LOG_SCALE)], 1)
@@ -136,9 +153,12 @@ def export_ply(
         uv = cat("bind_uv")
         arr["bind_u"], arr["bind_v"] = uv[:, 0], uv[:, 1]
         arr["bind_offset"] = cat("bind_offset")
-    header = ["ply", "format binary_little_endian 1.0",
-              f"comment robogs export of {ds.name}; rot_* is (w,x,y,z); "
-              + ("rest state" if t_ns is None else f"posed at t_ns {int(t_ns)}")]
+    header = [
+        "ply",
+        "format binary_little_endian 1.0",
+        f"comment robogs export of {ds.name}; rot_* is (w,x,y,z); "
+        + ("rest state" if t_ns is None else f"posed at t_ns {int(t_ns)}"),
+    ]
     if with_binding:
         header.append("comment robogs_targets " + json.dumps(targets, ensure_ascii=True))
     header += [f"element vertex {n}"]
@@ -147,9 +167,17 @@ def export_ply(
     with open(out, "wb") as fh:
         fh.write(("\n".join(header) + "\n").encode("ascii"))
         fh.write(arr.tobytes())
-    return ExportReport(out=out, files=[out.name],
-                        facts={"gaussians": n, "sh_degree": int(round(math.sqrt(k))) - 1, "owners": counts})
+    return ExportReport(
+        out=out,
+        files=[out.name],
+        facts={"gaussians": n, "sh_degree": int(round(math.sqrt(k))) - 1, "owners": counts},
+    )
 
 
-register_exporter("ply", export_ply, output="file", suffix=".ply",
-                  help="all splats posed at one time, merged into one standard 3DGS PLY")
+register_exporter(
+    "ply",
+    export_ply,
+    output="file",
+    suffix=".ply",
+    help="all splats posed at one time, merged into one standard 3DGS PLY",
+)

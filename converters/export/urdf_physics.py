@@ -72,11 +72,11 @@ def _inertial_element(inertia: BodyInertia) -> etree._Element:
     rpy = " ".join(_fmt(v) for v in _rpy(inertia.frame[:3, :3]))
     etree.SubElement(el, "origin", xyz=xyz, rpy=rpy)
     etree.SubElement(el, "mass", value=_fmt(inertia.mass))
-    I = inertia.inertia_in_frame
+    J = inertia.inertia_in_frame
     etree.SubElement(
         el, "inertia",
-        ixx=_fmt(I[0, 0]), ixy=_fmt(I[0, 1]), ixz=_fmt(I[0, 2]),
-        iyy=_fmt(I[1, 1]), iyz=_fmt(I[1, 2]), izz=_fmt(I[2, 2]),
+        ixx=_fmt(J[0, 0]), ixy=_fmt(J[0, 1]), ixz=_fmt(J[0, 2]),
+        iyy=_fmt(J[1, 1]), iyz=_fmt(J[1, 2]), izz=_fmt(J[2, 2]),
     )  # fmt: skip
     return el
 
@@ -106,7 +106,9 @@ class _MeshCopier:
 
 
 def _parse(path: Path) -> etree._Element:
-    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, remove_blank_text=True)
+    parser = etree.XMLParser(
+        resolve_entities=False, no_network=True, load_dtd=False, remove_blank_text=True
+    )
     try:
         return etree.parse(str(path), parser).getroot()
     except etree.XMLSyntaxError as exc:  # ds.urdf() parsed it already; this is a race or a bug
@@ -126,7 +128,9 @@ def _object_urdf(name: str, inertia: BodyInertia | None, mesh_rel: str | None) -
 
 
 def _write_xml(root: etree._Element, path: Path) -> None:
-    path.write_bytes(etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True))
+    path.write_bytes(
+        etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True)
+    )
 
 
 def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
@@ -144,8 +148,11 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
         InputError: the dataset has no robot.
     """
     if not (ds.manifest.get("robot") or {}).get("urdf"):
-        raise InputError("dataset has no robot (manifest 'robot.urdf' is missing)", path=ds.manifest_path,
-                         hint="the urdf export needs robot/robot.urdf")
+        raise InputError(
+            "dataset has no robot (manifest 'robot.urdf' is missing)",
+            path=ds.manifest_path,
+            hint="the urdf export needs robot/robot.urdf",
+        )
     urdf = ds.urdf(load_meshes=True)
     physics = ds.physics() if ds.manifest.get("physics") else None
     root = _parse(ds.urdf_path)
@@ -176,7 +183,9 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
         uri = mesh.get("filename", "")
         src = uri_to_path.get(uri)
         if src is None:
-            raise FormatError("mesh URI was not resolved by the loader", path=ds.urdf_path, where=uri)
+            raise FormatError(
+                "mesh URI was not resolved by the loader", path=ds.urdf_path, where=uri
+            )
         mesh.set("filename", meshes.add(src))
 
     dynamics = joint_dynamics(urdf, physics)
@@ -233,14 +242,24 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
             entry["urdf"] = rel
             files.append(rel)
         contact["objects"][obj.name] = entry
-    (out / f"{robot_name}.contact.json").write_text(json.dumps(contact, indent=2, ensure_ascii=False) + "\n")
+    (out / f"{robot_name}.contact.json").write_text(
+        json.dumps(contact, indent=2, ensure_ascii=False) + "\n"
+    )
     files += sorted(meshes.by_source.values())
     return ExportReport(
         out=out,
         files=files,
-        facts={"links": len(urdf.robot.links), "joints": len(urdf.robot.joints), "objects": len(objs)},
+        facts={
+            "links": len(urdf.robot.links),
+            "joints": len(urdf.robot.joints),
+            "objects": len(objs),
+        },
     )
 
 
-register_exporter("urdf", export_urdf, output="folder",
-                  help="URDF with inertials, joint dynamics, collision meshes + contact sidecar")
+register_exporter(
+    "urdf",
+    export_urdf,
+    output="folder",
+    help="URDF with inertials, joint dynamics, collision meshes + contact sidecar",
+)

@@ -93,14 +93,27 @@ def validate_usd(path: str | Path) -> list[UsdIssue]:
     names = [n for n in USD_VALIDATORS if reg.HasValidator(n)]
     stage = Usd.Stage.Open(str(path))
     errors = UsdValidation.ValidationContext(reg.GetOrLoadValidatorsByName(names)).Validate(stage)
-    kinds = {UsdValidation.ValidationErrorType.Error: "error", UsdValidation.ValidationErrorType.Warn: "warning"}
+    kinds = {
+        UsdValidation.ValidationErrorType.Error: "error",
+        UsdValidation.ValidationErrorType.Warn: "warning",
+    }
     out = []
     for e in errors:
         if e.HasNoError():
             continue
-        sites = tuple(str(s.GetPrim().GetPath()) if s.IsPrim() else str(s.GetPropertyPath()) for s in e.GetSites())
-        out.append(UsdIssue(e.GetValidator().GetMetadata().name if e.GetValidator() else "", e.GetName(),
-                            kinds.get(e.GetType(), "info"), e.GetMessage(), sites))
+        sites = tuple(
+            str(s.GetPrim().GetPath()) if s.IsPrim() else str(s.GetPropertyPath())
+            for s in e.GetSites()
+        )
+        out.append(
+            UsdIssue(
+                e.GetValidator().GetMetadata().name if e.GetValidator() else "",
+                e.GetName(),
+                kinds.get(e.GetType(), "info"),
+                e.GetMessage(),
+                sites,
+            )
+        )
     return out
 
 
@@ -156,7 +169,9 @@ class _Builder:
         if not mat.as_dict():
             return None
         if body not in self.materials:
-            folder = UsdGeom.Scope.Define(self.stage, self.root.AppendChild("PhysicsMaterials")).GetPath()
+            folder = UsdGeom.Scope.Define(
+                self.stage, self.root.AppendChild("PhysicsMaterials")
+            ).GetPath()
             path = folder.AppendChild(_name(body, self.material_names))
             material = UsdShade.Material.Define(self.stage, path)
             api = UsdPhysics.MaterialAPI.Apply(material.GetPrim())
@@ -169,8 +184,13 @@ class _Builder:
             self.materials[body] = material
         return self.materials[body]
 
-    def colliders(self, parent: Sdf.Path, meshes: list[Any], material: UsdShade.Material | None,
-                  approximation: str) -> None:
+    def colliders(
+        self,
+        parent: Sdf.Path,
+        meshes: list[Any],
+        material: UsdShade.Material | None,
+        approximation: str,
+    ) -> None:
         folder = UsdGeom.Scope.Define(self.stage, parent.AppendChild("collisions")).GetPath()
         for i, mesh in enumerate(meshes):
             m = _define_mesh(self.stage, folder.AppendChild(f"mesh_{i}"), mesh, guide=True)
@@ -222,13 +242,17 @@ def _set_joint_frames(joint: UsdPhysics.Joint, T0: np.ndarray, T1: np.ndarray) -
 
 def _custom(prim: Usd.Prim, name: str, value: float | None) -> None:
     if value is not None and math.isfinite(value):
-        prim.CreateAttribute(f"robogs:{name}", Sdf.ValueTypeNames.Double, custom=True).Set(float(value))
+        prim.CreateAttribute(f"robogs:{name}", Sdf.ValueTypeNames.Double, custom=True).Set(
+            float(value)
+        )
 
 
 def _object_rest_pose(ds: Dataset, name: str) -> np.ndarray:
     """T_world_object at rest: the splats' rest pose, else the first sample, else identity."""
     T = np.eye(4)
-    rest = (((ds.assets.get(name) or {}).get("splats") or {}).get("rest") or {}).get("object_poses", {})
+    rest = (((ds.assets.get(name) or {}).get("splats") or {}).get("rest") or {}).get(
+        "object_poses", {}
+    )
     pose = rest.get(name)
     if pose is None:
         for ep in ds.episodes:
@@ -236,7 +260,10 @@ def _object_rest_pose(ds: Dataset, name: str) -> np.ndarray:
                 tab = ep.table("object_poses")
                 idx = [i for i, n in enumerate(tab.column("object").to_pylist()) if n == name]
                 if idx:
-                    row = {c: tab.column(c)[idx[0]].as_py() for c in ("x", "y", "z", "qw", "qx", "qy", "qz")}
+                    row = {
+                        c: tab.column(c)[idx[0]].as_py()
+                        for c in ("x", "y", "z", "qw", "qx", "qy", "qz")
+                    }
                     pose = [row[c] for c in ("x", "y", "z", "qw", "qx", "qy", "qz")]
                     break
     if pose is not None:
@@ -257,10 +284,15 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
         The report; ``facts["validator_errors"]`` counts errors from :func:`validate_usd`.
     """
     if not (ds.manifest.get("robot") or {}).get("urdf"):
-        raise InputError("dataset has no robot (manifest 'robot.urdf' is missing)", path=ds.manifest_path,
-                         hint="the usd export needs robot/robot.urdf")
+        raise InputError(
+            "dataset has no robot (manifest 'robot.urdf' is missing)",
+            path=ds.manifest_path,
+            hint="the usd export needs robot/robot.urdf",
+        )
     if out.suffix.lower() not in (".usda", ".usdc", ".usd"):
-        raise InputError(f"USD output must end in .usda, .usdc or .usd, not {out.suffix!r}", path=out)
+        raise InputError(
+            f"USD output must end in .usda, .usdc or .usd, not {out.suffix!r}", path=out
+        )
     urdf = ds.urdf(load_meshes=True)
     physics = ds.physics() if ds.manifest.get("physics") else None
     chain = Chain.from_urdf(urdf, floating_as_fixed=True)
@@ -315,7 +347,9 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
             if link in inertias:
                 b.mass(prim, inertias[link], where=f"link {link}")
             else:
-                b.notes.append(f"link {link} has no inertial: its mass is left to the simulator (density)")
+                b.notes.append(
+                    f"link {link} has no inertial: its mass is left to the simulator (density)"
+                )
         prim_path[link] = path
         if visuals.get(link):
             b.visuals(path, visuals[link])
@@ -375,7 +409,9 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
             joint = UsdPhysics.FixedJoint.Define(stage, path)
             _set_joint_frames(joint, T0, np.eye(4))
         else:
-            b.notes.append(f"joint {j.name}: type {j.type!r} is not exported (no UsdPhysics equivalent)")
+            b.notes.append(
+                f"joint {j.name}: type {j.type!r} is not exported (no UsdPhysics equivalent)"
+            )
             continue
         joint.CreateBody0Rel().SetTargets([prim_path[body_of[j.parent]]])
         joint.CreateBody1Rel().SetTargets([prim_path[j.child]])
@@ -402,7 +438,11 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
             if obj.mesh_path is not None:
                 mesh = ds.mesh(obj.name)
                 b.visuals(path, [mesh])
-                approx = UsdPhysics.Tokens.none if obj.equation == "static" else UsdPhysics.Tokens.convexHull
+                approx = (
+                    UsdPhysics.Tokens.none
+                    if obj.equation == "static"
+                    else UsdPhysics.Tokens.convexHull
+                )
                 b.colliders(path, [mesh], b.material(obj.name, obj.material), approx)
             else:
                 b.notes.append(f"object {obj.name} has no mesh: exported without collider")
@@ -420,12 +460,19 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
             "bodies": sum(1 for link in chain.link_names if body_of[link] == link) + n_objects,
             "joints": n_joints + 1,
             "objects": n_objects,
-            "validators_run": [n for n in USD_VALIDATORS if UsdValidation.ValidationRegistry().HasValidator(n)],
+            "validators_run": [
+                n for n in USD_VALIDATORS if UsdValidation.ValidationRegistry().HasValidator(n)
+            ],
             "validator_errors": len(errors),
             "validator_issues": len(issues),
         },
     )
 
 
-register_exporter("usd", export_usd, output="file", suffix=".usda",
-                  help="OpenUSD stage with UsdPhysics bodies, masses, colliders, materials and joints")
+register_exporter(
+    "usd",
+    export_usd,
+    output="file",
+    suffix=".usda",
+    help="OpenUSD stage with UsdPhysics bodies, masses, colliders, materials and joints",
+)

@@ -439,10 +439,14 @@ class MessageIngest:
         self._match_labels(cam)
 
     def _labels(self, topic: str, role: Role, t: int, msg: Any) -> None:
-        name = role.name or camera_name_from_topic(topic)
-        for suffix in ("_labels", "_label", "_panoptic", "_segmentation"):
-            if name.endswith(suffix) and name[: -len(suffix)] in self._cameras:
-                name = name[: -len(suffix)]
+        if role.name:
+            name = role.name
+        else:  # /camera/<cam>/labels/compressed -> <cam>
+            parts = [p for p in topic.split("/") if p]
+            while parts and parts[-1] in ("compressed", "image_raw", "image", "labels", "label", "panoptic",
+                                          "segmentation"):
+                parts = parts[:-1]
+            name = camera_name_from_topic("/" + "/".join(parts) + "/image_raw")
         out = self._decode(topic, t, msg)
         if out is None:
             return

@@ -111,7 +111,7 @@ def _open(paths: list[Path]):
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
-    return AnyReader(paths, default_typestore=get_typestore(Stores.LATEST))
+    return AnyReader(paths, default_typestore=get_typestore(Stores.ROS2_HUMBLE))
 
 
 def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
@@ -186,6 +186,16 @@ def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
 
 def convert_ros1(src: Path, ctx: IngestContext) -> None:
     """Convert a ROS 1 bag (bz2/lz4 chunks handled by rosbags)."""
+    try:
+        with open(src, "rb") as fh:
+            head = fh.read(13)
+    except OSError as exc:
+        raise InputError(f"cannot open bag ({exc.strerror})", path=src) from None
+    if not head:
+        raise InputError("bag file is empty", path=src, hint="the recording did not start or was not copied")
+    if not head.startswith(b"#ROSBAG V2."):
+        raise InputError("not a ROS 1 bag (no '#ROSBAG V2.0' header)", path=src,
+                         hint="ROS 2 bags are folders with metadata.yaml; MCAP files use --from mcap")
     ctx.provenance.extra["storage"] = "rosbag1"
     _convert([src], src, ctx)
 

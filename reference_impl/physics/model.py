@@ -14,12 +14,15 @@ Dynamics (per step ``dt``, default 1 ms), for ``M`` parameter sets x ``T`` traje
   of the footprint from its centre). The box sticks exactly when the impulse needed to stop it
   lies inside the static cone ``mu_s N dt``; otherwise the dynamic impulse ``mu_d N dt`` is
   applied without reversing the motion (Stewart & Trinkle 1996 style velocity-level Coulomb).
-* **Pusher** - the end-effector link as a sphere of radius ``r`` moving kinematically along the
-  measured EE positions. It touches the box sides (planar contact while the sphere centre is
-  within the box height). A frictionless, perfectly inelastic, speculative impulse keeps the
-  gap non-negative: ``lambda = max(0, (-gap/dt - gap_rate) / k_eff)`` with the effective inverse
-  mass ``k_eff = 1/m + (r x n)^2 / I`` (Catto's sequential-impulse formulation, one pass after
-  friction).
+* **Pusher** - the end-effector link as a sphere, or a horizontal capsule along the EE y axis
+  (its two end spheres), moving kinematically along the measured EE poses. It touches the box
+  sides (planar contact while a sphere centre is within the box height). Frictionless,
+  perfectly inelastic, speculative impulses keep every gap non-negative:
+  ``gap/dt + rate + K lambda >= 0, lambda >= 0`` with complementarity, where ``K`` holds the
+  effective inverse masses ``n_i.n_j/m + (r_i x n_i)(r_j x n_j)/I`` (velocity-level contact
+  of Stewart & Trinkle 1996 / Catto's speculative contacts; the 2x2 LCP is solved exactly).
+  A point (sphere) pusher makes pushing unstable in yaw (tiny offsets grow), so scenarios use
+  a capsule: a flat push is stable.
 * **Grasp** - while the grasp flag is set, the object follows the EE with the relative transform
   it had when the flag rose; when it falls, the object is free with the EE velocity.
 
@@ -54,7 +57,9 @@ class BoxScene:
         restitution: Newton restitution box-table [-].
         damping_linear: viscous damping of the CoM velocity [1/s] (acceleration -c v).
         table_z: height of the table plane [m], world frame.
-        pusher_radius: radius of the end-effector sphere [m].
+        pusher_radius: radius of the end-effector sphere or capsule [m].
+        pusher_length: capsule length [m] along the EE y axis (0: a sphere). The capsule is
+            modelled by its two end spheres: it must be narrower than the box face it pushes.
         gravity: magnitude of gravity along -z [m/s^2].
         dt: integration step [s].
         bounce_min_speed: approach speeds below this give a plastic impact [m/s].
@@ -70,6 +75,7 @@ class BoxScene:
     damping_linear: float = 0.0
     table_z: float = 0.0
     pusher_radius: float = 0.01
+    pusher_length: float = 0.0
     gravity: float = 9.81
     dt: float = 1e-3
     bounce_min_speed: float = 0.05
@@ -204,6 +210,97 @@ def _base_body(scene: BoxScene, theta: torch.Tensor, space: ParamSpace) -> Body:
         restitution=base.get("restitution", const(scene.restitution)),
         damping=base.get("damping_linear", const(scene.damping_linear)),
     )
+
+
+def _pusher_points(
+    scene: BoxScene, c: torch.Tensor, cv: torch.Tensor, psi: torch.Tensor, rate: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """End-sphere centres [T, J, 3] and velocities of the capsule (J = 1 for a sphere)."""
+    if scene.pusher_length <= 0.0:
+        return c.unsqueeze(1), cv.unsqueeze(1)
+    half = 0.5 * scene.pusher_length
+    ax, ay = -torch.sin(psi) * half, torch.cos(psi) * half  # EE y axis
+    off = torch.stack([torch.stack([ax, ay, 0 * ax], -1), torch.stack([-ax, -ay, 0 * ax], -1)], 1)
+    voff = torch.stack([torch.stack([-rate * ay, rate * ax, 0 * ax], -1),
+                        torch.stack([rate * ay, -rate * ax, 0 * ax], -1)], 1)
+    return c.unsqueeze(1) + off, cv.unsqueeze(1) + voff
+
+
+def _pusher_impulse(
+    scene: BoxScene,
+    p: torch.Tensor,
+    yaw: torch.Tensor,
+    vx: torch.Tensor,
+    vy: torch.Tensor,
+    wf: torch.Tensor,
+    com_x: torch.Tensor,
+    com_y: torch.Tensor,
+    mass: torch.Tensor,
+    inertia: torch.Tensor,
+    c: torch.Tensor,
+    cv: torch.Tensor,
+    psi: torch.Tensor,
+    rate: torch.Tensor,
+    grasping: torch.Tensor,
+    dt: float,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Frictionless, inelastic, speculative contact of the pusher's end spheres with the box.
+
+    With two end spheres the 2x2 linear complementarity problem is solved exactly by
+    enumerating its four cases (Cottle, Pang & Stone 1992); one sphere is the scalar case.
+    """
+    hx, hy, hz = (0.5 * s for s in scene.size)
+    pts, pv = _pusher_points(scene, c, cv, psi, rate)  # [T, J, 3]
+    pts, pv = pts.unsqueeze(0), pv.unsqueeze(0)  # [1, T, J, 3]
+    yaw_, p_ = yaw.unsqueeze(-1), p.unsqueeze(-2)  # [M, T, 1]
+    offx, offy = yaw_rotate(com_x.unsqueeze(-1), com_y.unsqueeze(-1), yaw_)
+    ox_, oy_ = p_[..., 0] - offx, p_[..., 1] - offy
+    dx, dy, dz = pts[..., 0] - ox_, pts[..., 1] - oy_, pts[..., 2] - p_[..., 2]
+    lx, ly = yaw_rotate(dx, dy, -yaw_)
+    qx, qy = lx.clamp(-hx, hx), ly.clamp(-hy, hy)
+    ex, ey = lx - qx, ly - qy
+    dist_c = torch.sqrt(ex * ex + ey * ey)
+    outside = dist_c > 1e-9
+    pen_x, pen_y = hx - lx.abs(), hy - ly.abs()
+    use_x = pen_x < pen_y
+    zero = torch.zeros_like(lx)
+    safe = dist_c.clamp(min=1e-12)
+    nlx = torch.where(outside, ex / safe, torch.where(use_x, torch.sign(lx), zero))
+    nly = torch.where(outside, ey / safe, torch.where(use_x, zero, torch.sign(ly)))
+    gap = torch.where(outside, dist_c, -torch.minimum(pen_x, pen_y)) - scene.pusher_radius
+    nx, ny = yaw_rotate(nlx, nly, yaw_)
+    qwx, qwy = yaw_rotate(qx, qy, yaw_)
+    rcx, rcy = ox_ + qwx - p_[..., 0], oy_ + qwy - p_[..., 1]
+    w_ = wf.unsqueeze(-1)
+    vptx, vpty = vx.unsqueeze(-1) - w_ * rcy, vy.unsqueeze(-1) + w_ * rcx
+    rate_n = (pv[..., 0] - vptx) * nx + (pv[..., 1] - vpty) * ny
+    rxn = rcx * ny - rcy * nx  # [M, T, J]
+    m_, i_ = mass.unsqueeze(-1), inertia.unsqueeze(-1)
+    active = (dz.abs() <= hz) & ~grasping.view(1, -1, 1)
+    b = torch.where(active, -gap / dt - rate_n, torch.full_like(gap, -1.0))
+    if b.shape[-1] == 1:
+        lam = (b / (1.0 / m_ + rxn * rxn / i_)).clamp(min=0.0)
+    else:
+        n1x, n1y, n2x, n2y = nx[..., 0], ny[..., 0], nx[..., 1], ny[..., 1]
+        r1, r2 = rxn[..., 0], rxn[..., 1]
+        inv_m, inv_i = 1.0 / mass, 1.0 / inertia
+        k11 = inv_m + r1 * r1 * inv_i
+        k22 = inv_m + r2 * r2 * inv_i
+        k12 = (n1x * n2x + n1y * n2y) * inv_m + r1 * r2 * inv_i
+        b1, b2 = b[..., 0], b[..., 1]
+        det = (k11 * k22 - k12 * k12).clamp(min=1e-12)
+        l1b, l2b = (k22 * b1 - k12 * b2) / det, (k11 * b2 - k12 * b1) / det
+        l1s, l2s = b1 / k11, b2 / k22
+        only1 = (b1 > 0) & (b2 - k12 * l1s <= 0)
+        only2 = (b2 > 0) & (b1 - k12 * l2s <= 0)
+        none = (b1 <= 0) & (b2 <= 0)
+        l1 = torch.where(none, zero[..., 0], torch.where(only1, l1s, torch.where(only2, zero[..., 0], l1b)))
+        l2 = torch.where(none, zero[..., 0], torch.where(only1, zero[..., 0], torch.where(only2, l2s, l2b)))
+        lam = torch.stack([l1, l2], -1).clamp(min=0.0)
+    vx = vx - (lam * nx).sum(-1) / mass
+    vy = vy - (lam * ny).sum(-1) / mass
+    wf = wf - (lam * rxn).sum(-1) / inertia
+    return vx, vy, wf
 
 
 def simulate(
@@ -357,34 +454,10 @@ def simulate(
 
         # ---- pusher: frictionless inelastic speculative contact on the box sides ------------
         if pusher_low[k]:
-            cpos = pusher[:, k].unsqueeze(0)
-            cvel = pvel[:, k].unsqueeze(0)
-            offx, offy = yaw_rotate(com_x, com_y, yaw)
-            ox_, oy_ = p[..., 0] - offx, p[..., 1] - offy
-            dx, dy, dz = cpos[..., 0] - ox_, cpos[..., 1] - oy_, cpos[..., 2] - p[..., 2]
-            lx, ly = yaw_rotate(dx, dy, -yaw)
-            qx, qy = lx.clamp(-hx, hx), ly.clamp(-hy, hy)
-            ex, ey = lx - qx, ly - qy
-            dist_c = torch.sqrt(ex * ex + ey * ey)
-            outside = dist_c > 1e-9
-            pen_x, pen_y = hx - lx.abs(), hy - ly.abs()
-            use_x = pen_x < pen_y
-            one = torch.ones_like(lx)
-            nlx = torch.where(outside, ex / dist_c.clamp(min=1e-12), torch.where(use_x, torch.sign(lx), 0 * one))
-            nly = torch.where(outside, ey / dist_c.clamp(min=1e-12), torch.where(use_x, 0 * one, torch.sign(ly)))
-            gap_p = torch.where(outside, dist_c, -torch.minimum(pen_x, pen_y)) - scene.pusher_radius
-            nx, ny = yaw_rotate(nlx, nly, yaw)
-            qwx, qwy = yaw_rotate(qx, qy, yaw)
-            rcx, rcy = ox_ + qwx - p[..., 0], oy_ + qwy - p[..., 1]
-            vptx, vpty = vx - wf * rcy, vy + wf * rcx
-            rate = (cvel[..., 0] - vptx) * nx + (cvel[..., 1] - vpty) * ny
-            rxn = rcx * ny - rcy * nx
-            k_eff = 1.0 / mass + rxn * rxn / inertia
-            band = (dz.abs() <= hz) & ~grasp[:, k].unsqueeze(0)
-            lam = torch.where(band, ((-gap_p / dt - rate) / k_eff).clamp(min=0.0), torch.zeros_like(rate))
-            vx = vx - lam * nx / mass
-            vy = vy - lam * ny / mass
-            wf = wf - lam * rxn / inertia
+            vx, vy, wf = _pusher_impulse(
+                scene, p, yaw, vx, vy, wf, com_x, com_y, mass, inertia,
+                pusher[:, k], pvel[:, k], ee_yaw[:, k], ee_rate[:, k], grasp[:, k], dt,
+            )
 
         v_new = torch.stack([vx, vy, vz], dim=-1)
         p = p + dt * v_new

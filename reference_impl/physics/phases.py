@@ -71,16 +71,21 @@ def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
 
 
-def _box_gap(tr: Trajectory, size: tuple[float, float, float], radius: float) -> np.ndarray:
+def _box_gap(tr: Trajectory, size: tuple[float, float, float], radius: float, length: float) -> np.ndarray:
     ex = np.stack([np.interp(tr.t_ns, tr.ee_t_ns, tr.ee_pos[:, i]) for i in range(3)], axis=-1)
+    psi = np.interp(tr.t_ns, tr.ee_t_ns, np.unwrap(yaw_of(tr.ee_quat)))
     yaw = yaw_of(tr.object_quat)
-    d = ex - tr.object_pos
     c, s = np.cos(yaw), np.sin(yaw)
-    lx, ly = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
     hx, hy, hz = (0.5 * v for v in size)
-    qx, qy = np.clip(lx, -hx, hx), np.clip(ly, -hy, hy)
-    gap = np.hypot(lx - qx, ly - qy) - radius
-    return np.where(np.abs(d[:, 2]) <= hz + radius, gap, np.inf)
+    gaps = []
+    for u in np.linspace(-0.5, 0.5, 5) if length > 0 else (0.0,):
+        pt = ex + u * length * np.stack([-np.sin(psi), np.cos(psi), 0 * psi], axis=-1)
+        d = pt - tr.object_pos
+        lx, ly = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+        qx, qy = np.clip(lx, -hx, hx), np.clip(ly, -hy, hy)
+        gap = np.hypot(lx - qx, ly - qy) - radius
+        gaps.append(np.where(np.abs(d[:, 2]) <= hz + radius, gap, np.inf))
+    return np.min(gaps, axis=0)
 
 
 def segment_phases(
@@ -90,6 +95,7 @@ def segment_phases(
     table_z: float,
     pusher_radius: float,
     sigma_pos: float,
+    pusher_length: float = 0.0,
     contact_margin: float = 0.004,
 ) -> PhaseLabels:
     """Label every object-pose sample of ``tr`` with a phase.
@@ -108,7 +114,7 @@ def segment_phases(
     height = tr.object_pos[:, 2] - (table_z + 0.5 * size[2])
     z_thr = max(0.003, 4.0 * sigma_pos)
     grasp = np.interp(tr.t_ns, tr.ee_t_ns, tr.grasp.astype(float)) > 0.5
-    gap = _box_gap(tr, size, pusher_radius)
+    gap = _box_gap(tr, size, pusher_radius, pusher_length)
     label = np.zeros(len(t), dtype=np.int64)  # rest
     moving = (np.hypot(vel[:, 0], vel[:, 1]) > v_thr) | (np.abs(vel[:, 2]) > v_thr)
     label[moving] = PHASES.index("sliding")

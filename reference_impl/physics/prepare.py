@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.signal import savgol_filter
 
 from reference_impl.physics.model import BoxScene, Drive
 from reference_impl.physics.noise import NoiseModel, estimate_noise
@@ -67,10 +68,30 @@ def _initial_pose(pos: np.ndarray, yaw: np.ndarray, lab: PhaseLabels) -> tuple[n
     return pos[0].copy(), float(yaw[0])
 
 
+def _smooth(t: np.ndarray, x: np.ndarray, window: float) -> np.ndarray:
+    """Savitzky-Golay smoothing (quadratic, ``window`` seconds) of EE samples [E, D]."""
+    if len(t) < 7 or window <= 0:
+        return x
+    period = float(np.median(np.diff(t)))
+    n = int(round(window / period)) | 1
+    n = max(5, min(n, (len(t) - 1) | 1 if len(t) % 2 == 0 else len(t)))
+    if n > len(t):
+        return x
+    return savgol_filter(x, n, 2, axis=0, mode="interp")
+
+
 def build_drive(
-    rec: Recording, scene: BoxScene, labels: list[PhaseLabels], dt: float, z_snap: float = 0.003
+    rec: Recording,
+    scene: BoxScene,
+    labels: list[PhaseLabels],
+    dt: float,
+    z_snap: float = 0.003,
+    ee_window: float = 0.016,
 ) -> tuple[Drive, np.ndarray]:
     """Resample the EE onto a grid of step ``dt`` from each trajectory's first stamp.
+
+    The EE poses are smoothed first (Savitzky & Golay 1964, quadratic over ``ee_window`` s) so
+    that encoder noise does not turn into spurious release velocities.
 
     The initial object pose is the median of the first static samples; a start height within
     ``z_snap`` of the resting height is snapped onto the table.
@@ -94,9 +115,11 @@ def build_drive(
     iyaw = np.zeros(n_t)
     for i, (tr, lab) in enumerate(zip(trs, labels, strict=True)):
         te = (tr.ee_t_ns - t0[i]) * 1e-9
+        ee_pos = _smooth(te, tr.ee_pos, ee_window)
+        ee_yaw = _smooth(te, np.unwrap(yaw_of(tr.ee_quat))[:, None], ee_window)[:, 0]
         for a in range(3):
-            pusher[i, :, a] = np.interp(grid, te, tr.ee_pos[:, a])
-        eyaw[i] = np.interp(grid, te, np.unwrap(yaw_of(tr.ee_quat)))
+            pusher[i, :, a] = np.interp(grid, te, ee_pos[:, a])
+        eyaw[i] = np.interp(grid, te, ee_yaw)
         j = np.clip(np.searchsorted(te, grid, side="right") - 1, 0, len(te) - 1)
         grasp[i] = tr.grasp[j]
         n = len(tr.t_ns)
@@ -153,7 +176,12 @@ def prepare(recording: object, *, dt: float = 1e-3, noise: NoiseModel | None = N
     """Prepare a recording (or recording-like object) for rollouts and residuals."""
     rec = as_recording(recording)
     scene = scene_from_physics(rec.physics, rec.object_name, dt=dt)
-    seg = dict(size=scene.size, table_z=scene.table_z, pusher_radius=scene.pusher_radius)
+    seg = dict(
+        size=scene.size,
+        table_z=scene.table_z,
+        pusher_radius=scene.pusher_radius,
+        pusher_length=scene.pusher_length,
+    )
     # first pass: rough noise from high frequencies, to set phase thresholds
     rough = estimate_noise(rec, None)
     labels = [segment_phases(tr, sigma_pos=rough.sigma_pos, **seg) for tr in rec.trajectories]

@@ -26,7 +26,7 @@ def scene_from_physics(physics: dict[str, Any], object_name: str, *, dt: float =
 
     Reads ``objects[object_name]`` (``size_m``, ``mass_kg``, ``inertia_kgm2``, ``com_m``,
     friction, restitution, damping), ``objects.table.plane_z_m`` (default 0) and
-    ``objects.pusher.radius_m`` (default 0.01 m), and ``gravity_mps2`` (default -9.81 z).
+    ``objects.pusher.radius_m`` (default 0.01 m) and ``length_m`` (capsule, default 0: sphere), and ``gravity_mps2`` (default -9.81 z).
     """
     objects = physics.get("objects", {})
     if object_name not in objects:
@@ -50,6 +50,7 @@ def scene_from_physics(physics: dict[str, Any], object_name: str, *, dt: float =
         damping_linear=float(ob.get("damping_linear", 0.0)),
         table_z=float(objects.get("table", {}).get("plane_z_m", 0.0)),
         pusher_radius=float(objects.get("pusher", {}).get("radius_m", 0.01)),
+        pusher_length=float(objects.get("pusher", {}).get("length_m", 0.0)),
         gravity=float(-grav[2]),
         dt=dt,
     )

@@ -46,7 +46,14 @@ __all__ = [
 ]
 
 #: stream kinds sampled at a (nominal) rate; camera means its frame table
-PERIODIC_KINDS: tuple[str, ...] = ("joint_states", "actions", "ee_poses", "object_poses", "wrenches", "camera")
+PERIODIC_KINDS: tuple[str, ...] = (
+    "joint_states",
+    "actions",
+    "ee_poses",
+    "object_poses",
+    "wrenches",
+    "camera",
+)
 
 #: column naming the entity of each row, for tables that interleave several series
 ENTITY_COLUMNS: dict[str, str] = {
@@ -148,14 +155,24 @@ class CheckContext:
             for name, value in declared.items():
                 if name not in values:
                     self.budget_problems.append(f"unknown budget {name!r}")
-                elif isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value) and value >= 0:
+                elif (
+                    isinstance(value, int | float)
+                    and not isinstance(value, bool)
+                    and math.isfinite(value)
+                    and value >= 0
+                ):
                     values[name] = float(value)
                 else:
-                    self.budget_problems.append(f"budget {name!r} must be a non-negative number, got {value!r}")
+                    self.budget_problems.append(
+                        f"budget {name!r} must be a non-negative number, got {value!r}"
+                    )
         for name, value in overrides.items():
             if name not in values:
-                raise FormatError(f"unknown budget {name!r}", where="--budget",
-                                  hint=f"known budgets: {', '.join(sorted(values))}")
+                raise FormatError(
+                    f"unknown budget {name!r}",
+                    where="--budget",
+                    hint=f"known budgets: {', '.join(sorted(values))}",
+                )
             values[name] = float(value)
         return values
 
@@ -175,12 +192,18 @@ class CheckContext:
     def episodes(self) -> list[Episode]:
         """Episodes of the manifest (only well-formed entries)."""
         out = []
-        for e in self.manifest.get("episodes", []) if isinstance(self.manifest.get("episodes"), list) else []:
+        for e in (
+            self.manifest.get("episodes", [])
+            if isinstance(self.manifest.get("episodes"), list)
+            else []
+        ):
             if isinstance(e, dict) and {"id", "start_ns", "end_ns", "streams"} <= set(e):
                 out.append(Episode(self.dataset, e))
         return out
 
-    def streams(self, kinds: tuple[str, ...] | None = None) -> Iterator[tuple[Episode, str, dict[str, Any]]]:
+    def streams(
+        self, kinds: tuple[str, ...] | None = None
+    ) -> Iterator[tuple[Episode, str, dict[str, Any]]]:
         """``(episode, stream name, stream entry)`` for every stream (of the given kinds)."""
         for ep in self.episodes:
             for name, st in ep.streams.items():
@@ -324,11 +347,19 @@ class CheckContext:
             if full is not None and columns is not None:
                 self._cache[key] = full.select(list(columns))
             else:
-                self._cache[key] = read_parquet(self.existing(rel), columns=list(columns) if columns else None)
+                self._cache[key] = read_parquet(
+                    self.existing(rel), columns=list(columns) if columns else None
+                )
         return self._cache[key]
 
-    def stream_table(self, ep: Episode, stream: str, *, field: str = "path",
-                     columns: tuple[str, ...] | None = None) -> pa.Table:
+    def stream_table(
+        self,
+        ep: Episode,
+        stream: str,
+        *,
+        field: str = "path",
+        columns: tuple[str, ...] | None = None,
+    ) -> pa.Table:
         """The table a stream names in ``field`` (``path``, ``frames``, ``labels``...)."""
         st = ep.streams.get(stream, {})
         rel = st.get(field)
@@ -355,7 +386,9 @@ class CheckContext:
         if key not in self._cache:
             try:
                 doc = read_json(self.existing(rel), what=f"{schema} file")
-                self._cache[key] = doc if isinstance(doc, dict) and not schema_problems(schema, doc) else None
+                self._cache[key] = (
+                    doc if isinstance(doc, dict) and not schema_problems(schema, doc) else None
+                )
             except FormatError:
                 self._cache[key] = None
         doc = self._cache[key]
@@ -416,7 +449,9 @@ class CheckContext:
         """Forward kinematics of the robot (cached)."""
         from ..kinematics import Chain
 
-        return self._cached(("chain",), lambda: Chain.from_urdf(self.urdf(), floating_as_fixed=True))
+        return self._cached(
+            ("chain",), lambda: Chain.from_urdf(self.urdf(), floating_as_fixed=True)
+        )
 
     def has_robot(self) -> bool:
         robot = self.manifest.get("robot")
@@ -426,7 +461,9 @@ class CheckContext:
         assets = self.manifest.get("assets")
         if not isinstance(assets, dict):
             return []
-        return sorted(n for n, a in assets.items() if isinstance(a, dict) and a.get("kind") in kinds)
+        return sorted(
+            n for n, a in assets.items() if isinstance(a, dict) and a.get("kind") in kinds
+        )
 
     def asset_kind(self, name: str) -> str | None:
         a = (self.manifest.get("assets") or {}).get(name)
@@ -475,7 +512,9 @@ class CheckContext:
         if size:
             ratio = extent / max(float(max(size)), 1e-12)
             if 100.0 <= ratio <= 10000.0:
-                return f"mesh extent {extent:.4g} m is {ratio:.0f}x the physics size {max(size):.4g} m"
+                return (
+                    f"mesh extent {extent:.4g} m is {ratio:.0f}x the physics size {max(size):.4g} m"
+                )
         return None
 
     # -- label images -------------------------------------------------------------------
@@ -489,4 +528,6 @@ class CheckContext:
         path = self.existing(rel)
         self.footer(rel)
         self.progress(f"label boxes {ep.id}/{stream}")
-        return self._cached(("labels", rel), lambda: scan_label_boxes(path, threads=self.label_threads))
+        return self._cached(
+            ("labels", rel), lambda: scan_label_boxes(path, threads=self.label_threads)
+        )

@@ -106,8 +106,11 @@ def _load_mesh_file(path: Path, scale: Any) -> np.ndarray:
     try:
         mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types on bad files
-        raise FormatError(f"unreadable mesh ({type(exc).__name__}: {str(exc)[:200]})", path=path,
-                          hint="re-export the mesh as STL, OBJ, PLY, GLB or DAE") from None
+        raise FormatError(
+            f"unreadable mesh ({type(exc).__name__}: {str(exc)[:200]})",
+            path=path,
+            hint="re-export the mesh as STL, OBJ, PLY, GLB or DAE",
+        ) from None
     v = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), np.float64)
     if scale is not None:
         v = v * np.broadcast_to(np.asarray(scale, np.float64), (3,))
@@ -128,16 +131,26 @@ def _primitive_vertices(geom: Any) -> np.ndarray | None:
     if geom.box is not None:
         return np.asarray(trimesh.creation.box(extents=geom.box.size).vertices)
     if geom.cylinder is not None:
-        return np.asarray(trimesh.creation.cylinder(radius=geom.cylinder.radius, height=geom.cylinder.length,
-                                                    sections=16).vertices)
+        return np.asarray(
+            trimesh.creation.cylinder(
+                radius=geom.cylinder.radius, height=geom.cylinder.length, sections=16
+            ).vertices
+        )
     if geom.sphere is not None:
-        return np.asarray(trimesh.creation.icosphere(subdivisions=1, radius=geom.sphere.radius).vertices)
+        return np.asarray(
+            trimesh.creation.icosphere(subdivisions=1, radius=geom.sphere.radius).vertices
+        )
     return None
 
 
-def link_geometry(ctx: CheckContext) -> dict[str, _LinkGeometry]:
-    """Per link: collision geometry (visual if none) as link-frame vertices (cached)."""
-    key = ("link-geometry",)
+def link_geometry(ctx: CheckContext, *, prefer: str = "collision") -> dict[str, _LinkGeometry]:
+    """Per link: its geometry as link-frame vertices (cached).
+
+    Args:
+        prefer: ``"collision"`` (for mass properties) or ``"visual"`` (for images);
+            the other kind is used when a link has none of the preferred one.
+    """
+    key = ("link-geometry", prefer)
     if key in ctx._cache:
         return ctx._cache[key]
     from ..urdf import MESH_SUFFIXES, resolve_mesh_uri
@@ -147,7 +160,7 @@ def link_geometry(ctx: CheckContext) -> dict[str, _LinkGeometry]:
     uri_cache: dict[str, Path] = {}
     out: dict[str, _LinkGeometry] = {}
     for link in urdf.robot.links:
-        for kind in ("collision", "visual"):
+        for kind in (prefer, "visual" if prefer == "collision" else "collision"):
             items = link.collisions if kind == "collision" else link.visuals
             parts: list[np.ndarray] = []
             sources: list[str] = []
@@ -159,12 +172,20 @@ def link_geometry(ctx: CheckContext) -> dict[str, _LinkGeometry]:
                 if geom.mesh is not None:
                     where = f"link '{link.name}' {kind} mesh '{geom.mesh.filename}'"
                     try:
-                        path = resolve_mesh_uri(geom.mesh.filename, urdf_path, ctx.root, _cache=uri_cache)
+                        path = resolve_mesh_uri(
+                            geom.mesh.filename, urdf_path, ctx.root, _cache=uri_cache
+                        )
                     except RobogsError as exc:
-                        raise type(exc)(exc.message, path=urdf_path, where=where, hint=exc.hint) from None
+                        raise type(exc)(
+                            exc.message, path=urdf_path, where=where, hint=exc.hint
+                        ) from None
                     if not path.is_file() or path.suffix.lower() not in MESH_SUFFIXES:
-                        raise FormatError("mesh file not found or of an unsupported type", path=urdf_path,
-                                          where=where, hint=f"use an existing {sorted(MESH_SUFFIXES)} file")
+                        raise FormatError(
+                            "mesh file not found or of an unsupported type",
+                            path=urdf_path,
+                            where=where,
+                            hint=f"use an existing {sorted(MESH_SUFFIXES)} file",
+                        )
                     v = _mesh_vertices(ctx, path, geom.mesh.scale)
                     sources.append(ctx.rel(path) or str(path))
                     if v.size:
@@ -181,7 +202,9 @@ def link_geometry(ctx: CheckContext) -> dict[str, _LinkGeometry]:
                 T = np.asarray(item.origin if item.origin is not None else np.eye(4), np.float64)
                 parts.append(v @ T[:3, :3].T + T[:3, 3])
             if parts:
-                out[link.name] = _LinkGeometry(link.name, np.concatenate(parts), tuple(sources), problem)
+                out[link.name] = _LinkGeometry(
+                    link.name, np.concatenate(parts), tuple(sources), problem
+                )
                 break
     ctx._cache[key] = out
     return out
@@ -199,9 +222,14 @@ def _moving_links(ctx: CheckContext) -> set[str]:
     return {j.child for j in ctx.urdf().robot.joints if j.type not in ("fixed",)}
 
 
-@check("G001", group="geometry", severity="error", title="the robot URDF and its meshes load",
-       quantity="load errors",
-       hint="fix the URDF element or mesh named in the message; mesh paths stay inside the dataset")
+@check(
+    "G001",
+    group="geometry",
+    severity="error",
+    title="the robot URDF and its meshes load",
+    quantity="load errors",
+    hint="fix the URDF element or mesh named in the message; mesh paths stay inside the dataset",
+)
 def _urdf_loads(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     _robot_or_skip(ctx)
     rel = ctx.manifest["robot"]["urdf"]
@@ -210,13 +238,23 @@ def _urdf_loads(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         ctx.chain()
         link_geometry(ctx)
     except RobogsError as exc:
-        yield chk.finding(exc.message, file=ctx.rel(exc.path) if exc.path else rel, where=exc.where,
-                          hint=exc.hint or chk.hint)
+        yield chk.finding(
+            exc.message,
+            file=ctx.rel(exc.path) if exc.path else rel,
+            where=exc.where,
+            hint=exc.hint or chk.hint,
+        )
 
 
-@check("G002", group="geometry", severity="error", title="URDF link masses are positive",
-       quantity="link mass", unit="kg",
-       hint="give every moving link an <inertial> with mass > 0 kg (not grams)")
+@check(
+    "G002",
+    group="geometry",
+    severity="error",
+    title="URDF link masses are positive",
+    quantity="link mass",
+    unit="kg",
+    hint="give every moving link an <inertial> with mass > 0 kg (not grams)",
+)
 def _link_mass(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     _robot_or_skip(ctx)
     urdf_rel = ctx.manifest["robot"]["urdf"]
@@ -226,18 +264,30 @@ def _link_mass(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         where = f"link '{link.name}'"
         if inertial is None or inertial.mass is None:
             if link.name in moving:
-                yield chk.finding("moving link has no <inertial>; dynamics cannot be simulated",
-                                  severity="warning", file=urdf_rel, where=where, link=link.name)
+                yield chk.finding(
+                    "moving link has no <inertial>; dynamics cannot be simulated",
+                    severity="warning",
+                    file=urdf_rel,
+                    where=where,
+                    link=link.name,
+                )
             continue
         m = float(inertial.mass)
         if not np.isfinite(m) or m <= 0:
-            yield chk.finding(f"mass is {m:g} kg", value=m, budget=0, file=urdf_rel, where=where, link=link.name)
+            yield chk.finding(
+                f"mass is {m:g} kg", value=m, budget=0, file=urdf_rel, where=where, link=link.name
+            )
 
 
-@check("G003", group="geometry", severity="error",
-       title="URDF link inertias are positive definite and satisfy the triangle inequality",
-       quantity="inertia tensor", budget="geometry.inertia_rel",
-       hint="take the inertia from the mesh and density (or a CAD tool); ixx, iyy, izz are > 0 kg m^2")
+@check(
+    "G003",
+    group="geometry",
+    severity="error",
+    title="URDF link inertias are positive definite and satisfy the triangle inequality",
+    quantity="inertia tensor",
+    budget="geometry.inertia_rel",
+    hint="take the inertia from the mesh and density (or a CAD tool); ixx, iyy, izz are > 0 kg m^2",
+)
 def _link_inertia(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     _robot_or_skip(ctx)
     urdf_rel = ctx.manifest["robot"]["urdf"]
@@ -248,12 +298,21 @@ def _link_inertia(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             continue
         problem = inertia_problem(np.asarray(inertial.inertia), rel)
         if problem:
-            yield chk.finding(problem, file=urdf_rel, where=f"link '{link.name}' <inertia>", link=link.name)
+            yield chk.finding(
+                problem, file=urdf_rel, where=f"link '{link.name}' <inertia>", link=link.name
+            )
 
 
-@check("G004", group="geometry", severity="error", title="URDF link CoM lies inside the link's geometry",
-       quantity="CoM distance outside the convex hull", unit="mm", budget="geometry.com_outside_mm",
-       hint="the <inertial><origin> is in the link frame, in metres; check its sign and units")
+@check(
+    "G004",
+    group="geometry",
+    severity="error",
+    title="URDF link CoM lies inside the link's geometry",
+    quantity="CoM distance outside the convex hull",
+    unit="mm",
+    budget="geometry.com_outside_mm",
+    hint="the <inertial><origin> is in the link frame, in metres; check its sign and units",
+)
 def _link_com(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     _robot_or_skip(ctx)
     urdf_rel = ctx.manifest["robot"]["urdf"]
@@ -270,27 +329,50 @@ def _link_com(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         except Exception:  # flat geometry has no volume hull
             continue
         if d_mm > budget:
-            yield chk.finding(f"CoM {_fmt3(com)} m is {d_mm:.4g} mm outside the link's geometry",
-                              value=d_mm, budget=budget, file=urdf_rel, where=f"link '{link.name}' <inertial>",
-                              link=link.name)
+            yield chk.finding(
+                f"CoM {_fmt3(com)} m is {d_mm:.4g} mm outside the link's geometry",
+                value=d_mm,
+                budget=budget,
+                file=urdf_rel,
+                where=f"link '{link.name}' <inertial>",
+                link=link.name,
+            )
 
 
-@check("G005", group="geometry", severity="error", title="URDF meshes are in metres",
-       quantity="mesh extent", unit="m",
-       hint="the mesh was exported in millimetres: rescale it by 0.001 or set <mesh scale=\"0.001 0.001 0.001\">")
+@check(
+    "G005",
+    group="geometry",
+    severity="error",
+    title="URDF meshes are in metres",
+    quantity="mesh extent",
+    unit="m",
+    hint='the mesh was exported in millimetres: rescale it by 0.001 or set <mesh scale="0.001 0.001 0.001">',
+)
 def _link_units(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     _robot_or_skip(ctx)
     urdf_rel = ctx.manifest["robot"]["urdf"]
     for name, g in sorted(link_geometry(ctx).items()):
         if g.mm_problem:
             ext = float(np.max(np.ptp(g.vertices, axis=0)))
-            yield chk.finding(f"{g.mm_problem}: looks like millimetres", value=ext, budget=MM_SUSPECT_EXTENT_M,
-                              file=urdf_rel, where=f"link '{name}'", link=name)
+            yield chk.finding(
+                f"{g.mm_problem}: looks like millimetres",
+                value=ext,
+                budget=MM_SUSPECT_EXTENT_M,
+                file=urdf_rel,
+                where=f"link '{name}'",
+                link=name,
+            )
 
 
-@check("G006", group="geometry", severity="error", title="asset meshes load and are in metres",
-       quantity="mesh extent", unit="m",
-       hint="the mesh was exported in millimetres: rescale its vertices by 0.001")
+@check(
+    "G006",
+    group="geometry",
+    severity="error",
+    title="asset meshes load and are in metres",
+    quantity="mesh extent",
+    unit="m",
+    hint="the mesh was exported in millimetres: rescale its vertices by 0.001",
+)
 def _asset_units(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for name in ctx.asset_names():
         try:
@@ -298,13 +380,23 @@ def _asset_units(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         except InputReported:
             continue
         except RobogsError as exc:
-            yield chk.finding(exc.message, file=ctx.rel(exc.path), where=exc.where, object=name,
-                              hint=exc.hint or "re-export the mesh as PLY, OBJ, STL or GLB")
+            yield chk.finding(
+                exc.message,
+                file=ctx.rel(exc.path),
+                where=exc.where,
+                object=name,
+                hint=exc.hint or "re-export the mesh as PLY, OBJ, STL or GLB",
+            )
             continue
         if problem:
             ext = float(np.max(np.ptp(ctx.asset_hull_vertices(name), axis=0)))
-            yield chk.finding(f"{problem}: looks like millimetres", value=ext, budget=MM_SUSPECT_EXTENT_M,
-                              file=ctx.manifest["assets"][name]["mesh"], object=name)
+            yield chk.finding(
+                f"{problem}: looks like millimetres",
+                value=ext,
+                budget=MM_SUSPECT_EXTENT_M,
+                file=ctx.manifest["assets"][name]["mesh"],
+                object=name,
+            )
 
 
 # --------------------------------------------------------------------------- joints and kinematics
@@ -316,7 +408,9 @@ def _ordered_stamps(t: np.ndarray) -> np.ndarray:
     return t
 
 
-def joint_positions(ctx: CheckContext, ep: Any, stream: str, joints: list[str]) -> tuple[np.ndarray, np.ndarray]:
+def joint_positions(
+    ctx: CheckContext, ep: Any, stream: str, joints: list[str]
+) -> tuple[np.ndarray, np.ndarray]:
     """([N] int64 t_ns, [N, J] positions) of the named joints from a joint_states stream."""
     rel = ep.streams[stream]["path"]
     names = ctx.footer(rel).schema.to_arrow_schema().names
@@ -325,13 +419,24 @@ def joint_positions(ctx: CheckContext, ep: Any, stream: str, joints: list[str]) 
         raise InputReported("joint columns")  # reported by S003/S007
     tab = ctx.table(rel, columns=("t_ns", *cols))
     t = np.array(tab.column("t_ns").to_numpy(zero_copy_only=False), dtype=np.int64)
-    q = np.stack([tab.column(c).to_numpy(zero_copy_only=False) for c in cols], axis=1) if cols else np.zeros((t.size, 0))
+    q = (
+        np.stack([tab.column(c).to_numpy(zero_copy_only=False) for c in cols], axis=1)
+        if cols
+        else np.zeros((t.size, 0))
+    )
     return t, q.astype(np.float64, copy=False)
 
 
-@check("G007", group="geometry", severity="error", title="recorded joints stay within their URDF limits",
-       quantity="excess beyond the limit", unit="rad", budget="geometry.joint_limit_rad",
-       hint="check the joint offset/sign convention and the URDF <limit>; prismatic joints are in metres")
+@check(
+    "G007",
+    group="geometry",
+    severity="error",
+    title="recorded joints stay within their URDF limits",
+    quantity="excess beyond the limit",
+    unit="rad",
+    budget="geometry.joint_limit_rad",
+    hint="check the joint offset/sign convention and the URDF <limit>; prismatic joints are in metres",
+)
 def _joint_limits(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     _robot_or_skip(ctx)
     budget = ctx.budget("geometry.joint_limit_rad")
@@ -356,11 +461,24 @@ def _joint_limits(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             i = int(np.argmax(col))
             if col[i] > budget:
                 n = int(np.sum(col > budget))
-                unit = "m" if chain.joint_types[chain.tree_joint_names.index(j)] == "prismatic" else "rad"
+                unit = (
+                    "m"
+                    if chain.joint_types[chain.tree_joint_names.index(j)] == "prismatic"
+                    else "rad"
+                )
                 yield chk.finding(
                     f"joint {j!r} reaches {q[i, k]:.6g} {unit}, outside [{lo[k]:.6g}, {hi[k]:.6g}] "
-                    f"({urdf_rel}) in {n} samples", value=float(col[i]), budget=budget, unit=unit,
-                    file=rel, episode=ep.id, stream=name, link=j, t_ns=int(t[i]), where=f"row {i}")
+                    f"({urdf_rel}) in {n} samples",
+                    value=float(col[i]),
+                    budget=budget,
+                    unit=unit,
+                    file=rel,
+                    episode=ep.id,
+                    stream=name,
+                    link=j,
+                    t_ns=int(t[i]),
+                    where=f"row {i}",
+                )
 
 
 def _world_from_root(ctx: CheckContext, T_root: torch.Tensor, chain: Any) -> torch.Tensor:
@@ -373,9 +491,16 @@ def _world_from_root(ctx: CheckContext, T_root: torch.Tensor, chain: Any) -> tor
     return torch.linalg.inv(T_root_base)[..., None, :, :] @ T_root
 
 
-@check("G008", group="geometry", severity="error", title="recorded end-effector poses match forward kinematics",
-       quantity="position error |FK(q(t)) - recorded|", unit="mm", budget="geometry.fk_ee_mm",
-       hint="check the URDF (link lengths, joint offsets), the joint sign convention and the ee_poses link frame")
+@check(
+    "G008",
+    group="geometry",
+    severity="error",
+    title="recorded end-effector poses match forward kinematics",
+    quantity="position error |FK(q(t)) - recorded|",
+    unit="mm",
+    budget="geometry.fk_ee_mm",
+    hint="check the URDF (link lengths, joint offsets), the joint sign convention and the ee_poses link frame",
+)
 def _fk_ee(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     from ..interp import interp_linear
 
@@ -396,7 +521,9 @@ def _fk_ee(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         links = tab.column("link").to_numpy(zero_copy_only=False).astype(str)
         t_all = tab.column("t_ns").to_numpy(zero_copy_only=False).astype(np.int64)
         xyz_all = np.stack([tab.column(c).to_numpy(zero_copy_only=False) for c in "xyz"], axis=1)
-        quat_all = np.stack([tab.column(c).to_numpy(zero_copy_only=False) for c in ("qw", "qx", "qy", "qz")], axis=1)
+        quat_all = np.stack(
+            [tab.column(c).to_numpy(zero_copy_only=False) for c in ("qw", "qx", "qy", "qz")], axis=1
+        )
         for link in sorted(set(links.tolist())):
             if link not in chain.link_names:
                 continue  # reported by S007
@@ -426,28 +553,57 @@ def _fk_ee(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                     f"link {link!r}: FK differs from the recorded pose by up to {err_mm[i]:.4g} mm "
                     f"(median {np.median(err_mm):.3g} mm, {n} of {t.size} samples over budget; "
                     f"orientation up to {ang_deg.max():.3g} deg)",
-                    value=float(err_mm[i]), budget=budget, file=rel, episode=ep.id, stream=name, link=link,
-                    t_ns=int(t[i]), where=f"row {int(rows[i])}")
+                    value=float(err_mm[i]),
+                    budget=budget,
+                    file=rel,
+                    episode=ep.id,
+                    stream=name,
+                    link=link,
+                    t_ns=int(t[i]),
+                    where=f"row {int(rows[i])}",
+                )
 
 
 # --------------------------------------------------------------------------- boxes and objects
 
 
-@check("G009", group="geometry", severity="error", title="2D boxes match the labelled pixels",
-       quantity="largest box edge offset from the label's pixel bounds", unit="px", budget="geometry.box2d_px",
-       hint="2D boxes are pixel edges with x_max/y_max exclusive; re-derive them from the label images")
+@check(
+    "G009",
+    group="geometry",
+    severity="error",
+    title="2D boxes match the labelled pixels",
+    quantity="largest box edge offset from the label's pixel bounds",
+    unit="px",
+    budget="geometry.box2d_px",
+    hint="2D boxes are pixel edges with x_max/y_max exclusive; re-derive them from the label images",
+)
 def _boxes2d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("geometry.box2d_px")
     for ep, name, st in ctx.streams(("boxes2d",)):
         rel = st.get("path")
         try:
-            boxes = ctx.table(rel, columns=("t_ns", "camera", "frame_index", "label_id",
-                                            "x_min", "y_min", "x_max", "y_max"))
+            boxes = ctx.table(
+                rel,
+                columns=(
+                    "t_ns",
+                    "camera",
+                    "frame_index",
+                    "label_id",
+                    "x_min",
+                    "y_min",
+                    "x_max",
+                    "y_max",
+                ),
+            )
         except InputReported:
             continue
         cam_col = boxes.column("camera").to_numpy(zero_copy_only=False).astype(str)
         for sname, cst in ep.streams.items():
-            if not isinstance(cst, dict) or cst.get("kind") != "camera" or not isinstance(cst.get("labels"), str):
+            if (
+                not isinstance(cst, dict)
+                or cst.get("kind") != "camera"
+                or not isinstance(cst.get("labels"), str)
+            ):
                 continue
             rows = np.flatnonzero(cam_col == cst.get("camera"))
             if rows.size == 0:
@@ -459,8 +615,17 @@ def _boxes2d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             yield from _compare_boxes(chk, ctx, boxes, rows, lb, budget, rel, ep.id, name)
 
 
-def _compare_boxes(chk: Check, ctx: CheckContext, boxes: Any, rows: np.ndarray, lb: Any, budget: float,
-                   rel: str, ep_id: str, stream: str) -> Iterator[Finding]:
+def _compare_boxes(
+    chk: Check,
+    ctx: CheckContext,
+    boxes: Any,
+    rows: np.ndarray,
+    lb: Any,
+    budget: float,
+    rel: str,
+    ep_id: str,
+    stream: str,
+) -> Iterator[Finding]:
     def col(c: str) -> np.ndarray:
         return boxes.column(c).to_numpy(zero_copy_only=False)[rows]
 
@@ -470,22 +635,34 @@ def _compare_boxes(chk: Check, ctx: CheckContext, boxes: Any, rows: np.ndarray, 
     order = np.argsort(key_l)
     key_b = fi * 65536 + lid
     pos = np.clip(np.searchsorted(key_l[order], key_b), 0, max(key_l.size - 1, 0))
-    found = (key_l.size > 0) & (key_l[order][pos] == key_b) if key_l.size else np.zeros(fi.size, bool)
+    found = (
+        (key_l.size > 0) & (key_l[order][pos] == key_b) if key_l.size else np.zeros(fi.size, bool)
+    )
     found = np.asarray(found, bool) & labelled
     absent = labelled & ~found
     loc = {"file": rel, "episode": ep_id, "stream": stream}
     if absent.any():
         k = int(np.flatnonzero(absent)[0])
-        yield chk.finding(f"{int(absent.sum())} boxes name labels absent from their label image "
-                          f"(first: label {int(lid[k])})", frame=int(fi[k]), t_ns=int(col("t_ns")[k]),
-                          where=f"row {int(rows[k])}", **loc)
+        yield chk.finding(
+            f"{int(absent.sum())} boxes name labels absent from their label image "
+            f"(first: label {int(lid[k])})",
+            frame=int(fi[k]),
+            t_ns=int(col("t_ns")[k]),
+            where=f"row {int(rows[k])}",
+            **loc,
+        )
     if not found.any():
         return
     j = order[pos[found]]
-    diff = np.stack([
-        col("x_min")[found] - lb.x_min[j], col("y_min")[found] - lb.y_min[j],
-        col("x_max")[found] - lb.x_max[j], col("y_max")[found] - lb.y_max[j],
-    ], axis=1)
+    diff = np.stack(
+        [
+            col("x_min")[found] - lb.x_min[j],
+            col("y_min")[found] - lb.y_min[j],
+            col("x_max")[found] - lb.x_max[j],
+            col("y_max")[found] - lb.y_max[j],
+        ],
+        axis=1,
+    )
     err = np.abs(diff).max(axis=1)
     k = int(np.argmax(err))
     if err[k] > budget:
@@ -493,16 +670,25 @@ def _compare_boxes(chk: Check, ctx: CheckContext, boxes: Any, rows: np.ndarray, 
         yield chk.finding(
             f"{int(np.sum(err > budget))} boxes differ from their label's pixel bounds by more than the budget; "
             f"worst: label {int(lid[idx])} edges off by {_fmt3(diff[k])[1:-1]} px (x_min, y_min, x_max, y_max)",
-            value=float(err[k]), budget=budget, frame=int(fi[idx]), t_ns=int(col("t_ns")[idx]),
-            where=f"row {int(rows[idx])}", **loc)
+            value=float(err[k]),
+            budget=budget,
+            frame=int(fi[idx]),
+            t_ns=int(col("t_ns")[idx]),
+            where=f"row {int(rows[idx])}",
+            **loc,
+        )
 
 
-def object_poses(ctx: CheckContext, ep: Any, obj: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def object_poses(
+    ctx: CheckContext, ep: Any, obj: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """([N] t_ns, [N, 3] position m, [N, 4] wxyz) of one object in an episode, or None."""
     stream = ctx.find_stream(ep, "object_poses")
     if stream is None:
         return None
-    tab = ctx.stream_table(ep, stream, columns=("t_ns", "object", "x", "y", "z", "qw", "qx", "qy", "qz"))
+    tab = ctx.stream_table(
+        ep, stream, columns=("t_ns", "object", "x", "y", "z", "qw", "qx", "qy", "qz")
+    )
     key = ("object-rows", ep.id, stream)
     if key not in ctx._cache:
         names = tab.column("object").to_numpy(zero_copy_only=False).astype(str)
@@ -529,9 +715,16 @@ def _usable_mesh(ctx: CheckContext, name: str) -> np.ndarray | None:
         return None
 
 
-@check("G010", group="geometry", severity="error", title="3D boxes contain their object's mesh",
-       quantity="mesh protrusion beyond the box", unit="mm", budget="geometry.box3d_mm",
-       hint="boxes3d hold the centre pose and full edge lengths in metres; re-derive them from the mesh and pose")
+@check(
+    "G010",
+    group="geometry",
+    severity="error",
+    title="3D boxes contain their object's mesh",
+    quantity="mesh protrusion beyond the box",
+    unit="mm",
+    budget="geometry.box3d_mm",
+    hint="boxes3d hold the centre pose and full edge lengths in metres; re-derive them from the mesh and pose",
+)
 def _boxes3d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     from ..interp import interp_pose
 
@@ -564,7 +757,9 @@ def _boxes3d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             R_o = quat_to_matrix_np(qo[ok])
             world = np.einsum("nij,vj->nvi", R_o, verts) + p[ok][:, None, :]  # [N, V, 3]
             c = np.stack([col("x"), col("y"), col("z")], axis=1)[ok]
-            R_b = quat_to_matrix_np(np.stack([col("qw"), col("qx"), col("qy"), col("qz")], axis=1)[ok])
+            R_b = quat_to_matrix_np(
+                np.stack([col("qw"), col("qx"), col("qy"), col("qz")], axis=1)[ok]
+            )
             local = np.einsum("nji,nvj->nvi", R_b, world - c[:, None, :])
             half = 0.5 * np.stack([col("size_x"), col("size_y"), col("size_z")], axis=1)[ok]
             out_mm = (np.abs(local) - half[:, None, :]).max(axis=(1, 2)) * _MM
@@ -574,22 +769,37 @@ def _boxes3d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 yield chk.finding(
                     f"object {obj!r} sticks out of its 3D box by up to {out_mm[k]:.4g} mm "
                     f"({int(np.sum(out_mm > budget))} of {out_mm.size} boxes)",
-                    value=float(out_mm[k]), budget=budget, file=rel, episode=ep.id, stream=name, object=obj,
-                    t_ns=int(t[idx]), where=f"row {int(rows[idx])}")
+                    value=float(out_mm[k]),
+                    budget=budget,
+                    file=rel,
+                    episode=ep.id,
+                    stream=name,
+                    object=obj,
+                    t_ns=int(t[idx]),
+                    where=f"row {int(rows[idx])}",
+                )
 
 
 def _rest_pose(ctx: CheckContext, name: str) -> np.ndarray | None:
     """[7] (x, y, z, qw, qx, qy, qz) of a static object from a splat entry's rest state, if declared."""
     entries = [(ctx.manifest.get("robot") or {}).get("splats")]
-    entries += [a.get("splats") for a in (ctx.manifest.get("assets") or {}).values() if isinstance(a, dict)]
+    entries += [
+        a.get("splats") for a in (ctx.manifest.get("assets") or {}).values() if isinstance(a, dict)
+    ]
     for e in entries:
-        pose = ((e or {}).get("rest") or {}).get("object_poses", {}).get(name) if isinstance(e, dict) else None
+        pose = (
+            ((e or {}).get("rest") or {}).get("object_poses", {}).get(name)
+            if isinstance(e, dict)
+            else None
+        )
         if isinstance(pose, list) and len(pose) == 7:
             return np.asarray(pose, np.float64)
     return None
 
 
-def _table_top(ctx: CheckContext, ep: Any, table: str) -> tuple[float, np.ndarray, np.ndarray] | None:
+def _table_top(
+    ctx: CheckContext, ep: Any, table: str
+) -> tuple[float, np.ndarray, np.ndarray] | None:
     """(top z in m, xy min, xy max) of a table asset in the world.
 
     The table is static: its pose is the first ``object_poses`` sample, else the
@@ -608,10 +818,16 @@ def _table_top(ctx: CheckContext, ep: Any, table: str) -> tuple[float, np.ndarra
     return float(verts[:, 2].max()), verts[:, :2].min(axis=0), verts[:, :2].max(axis=0)
 
 
-@check("G011", group="geometry", severity="error", title="objects do not sink into the table",
-       quantity="depth of the object's lowest point below the table top", unit="mm",
-       budget="geometry.penetration_mm",
-       hint="the object pose or mesh origin is off (or the table pose); objects rest on the top, not in it")
+@check(
+    "G011",
+    group="geometry",
+    severity="error",
+    title="objects do not sink into the table",
+    quantity="depth of the object's lowest point below the table top",
+    unit="mm",
+    budget="geometry.penetration_mm",
+    hint="the object pose or mesh origin is off (or the table pose); objects rest on the top, not in it",
+)
 def _penetration(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("geometry.penetration_mm")
     tables = ctx.asset_names(("table",))
@@ -646,5 +862,11 @@ def _penetration(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                     yield chk.finding(
                         f"object {obj!r} is {depth_mm[k]:.4g} mm below the top of {table!r} "
                         f"(z_top {z_top:.4g} m) in {int(np.sum(depth_mm > budget))} of {t.size} poses",
-                        value=float(depth_mm[k]), budget=budget, file=rel, episode=ep.id, stream=stream,
-                        object=obj, t_ns=int(t[k]))
+                        value=float(depth_mm[k]),
+                        budget=budget,
+                        file=rel,
+                        episode=ep.id,
+                        stream=stream,
+                        object=obj,
+                        t_ns=int(t[k]),
+                    )

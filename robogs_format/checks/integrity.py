@@ -43,8 +43,16 @@ def _listed(ctx: CheckContext) -> Iterator[tuple[str, dict, Path]]:
             continue
 
 
-@check("I001", group="integrity", severity="error", title="listed files exist",
-       needs_full=False, needs_valid_manifest=False, quantity="missing files", hint=_REWRITE)
+@check(
+    "I001",
+    group="integrity",
+    severity="error",
+    title="listed files exist",
+    needs_full=False,
+    needs_valid_manifest=False,
+    quantity="missing files",
+    hint=_REWRITE,
+)
 def _missing(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for rel, _entry, path in _listed(ctx):
         if not path.is_file():
@@ -52,9 +60,16 @@ def _missing(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             yield chk.finding(f"file listed in the manifest {what}", file=rel)
 
 
-@check("I002", group="integrity", severity="error", title="no files besides those listed",
-       needs_full=False, needs_valid_manifest=False, quantity="unlisted files",
-       hint="remove the file, or add it through the writer so the manifest lists it")
+@check(
+    "I002",
+    group="integrity",
+    severity="error",
+    title="no files besides those listed",
+    needs_full=False,
+    needs_valid_manifest=False,
+    quantity="unlisted files",
+    hint="remove the file, or add it through the writer so the manifest lists it",
+)
 def _extra(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     listed = set(ctx.files)
     root = ctx.root
@@ -73,31 +88,54 @@ def _extra(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             yield chk.finding("file is in the dataset folder but not in the manifest", file=rel)
 
 
-@check("I003", group="integrity", severity="error", title="file sizes match the manifest",
-       needs_full=False, quantity="size difference", unit="bytes", hint=_REWRITE)
+@check(
+    "I003",
+    group="integrity",
+    severity="error",
+    title="file sizes match the manifest",
+    needs_full=False,
+    quantity="size difference",
+    unit="bytes",
+    hint=_REWRITE,
+)
 def _size(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for rel, entry, path in _listed(ctx):
         if path.is_file() and isinstance(entry.get("size"), int):
             size = path.stat().st_size
             if size != entry["size"]:
-                yield chk.finding(f"file is {size} bytes, the manifest says {entry['size']}",
-                                  file=rel, value=size - entry["size"], budget=0)
+                yield chk.finding(
+                    f"file is {size} bytes, the manifest says {entry['size']}",
+                    file=rel,
+                    value=size - entry["size"],
+                    budget=0,
+                )
 
 
-@check("I004", group="integrity", severity="error", title="file contents match their sha256",
-       quantity="hash mismatch",
-       hint="the file was edited after the manifest was written; " + _REWRITE)
+@check(
+    "I004",
+    group="integrity",
+    severity="error",
+    title="file contents match their sha256",
+    quantity="hash mismatch",
+    hint="the file was edited after the manifest was written; " + _REWRITE,
+)
 def _sha(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
-    todo = [(rel, entry, path) for rel, entry, path in _listed(ctx)
-            if path.is_file() and isinstance(entry.get("sha256"), str)
-            and entry.get("size") == path.stat().st_size]
+    todo = [
+        (rel, entry, path)
+        for rel, entry, path in _listed(ctx)
+        if path.is_file()
+        and isinstance(entry.get("sha256"), str)
+        and entry.get("size") == path.stat().st_size
+    ]
     ctx.progress(f"hashing {len(todo)} files")
     with ThreadPoolExecutor(max_workers=max(1, ctx.label_threads)) as pool:
         digests = pool.map(lambda item: sha256_file(item[2]), todo)
         for (rel, entry, _path), digest in zip(todo, digests, strict=True):
             if digest != entry["sha256"]:
-                yield chk.finding(f"sha256 is {digest[:12]}..., the manifest says {entry['sha256'][:12]}...",
-                                  file=rel)
+                yield chk.finding(
+                    f"sha256 is {digest[:12]}..., the manifest says {entry['sha256'][:12]}...",
+                    file=rel,
+                )
 
 
 def _parquet_rels(ctx: CheckContext) -> list[str]:
@@ -109,8 +147,16 @@ def _parquet_rels(ctx: CheckContext) -> list[str]:
     return sorted(rels)
 
 
-@check("I005", group="integrity", severity="error", title="table row counts match the manifest",
-       needs_full=False, quantity="row difference", unit="rows", hint=_REWRITE)
+@check(
+    "I005",
+    group="integrity",
+    severity="error",
+    title="table row counts match the manifest",
+    needs_full=False,
+    quantity="row difference",
+    unit="rows",
+    hint=_REWRITE,
+)
 def _rows(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for rel, entry, _path in _listed(ctx):
         if not rel.endswith(".parquet") or not isinstance(entry.get("rows"), int):
@@ -120,13 +166,23 @@ def _rows(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         except InputReported:
             continue
         if rows != entry["rows"]:
-            yield chk.finding(f"table has {rows} rows, the manifest says {entry['rows']}",
-                              file=rel, value=rows - entry["rows"], budget=0)
+            yield chk.finding(
+                f"table has {rows} rows, the manifest says {entry['rows']}",
+                file=rel,
+                value=rows - entry["rows"],
+                budget=0,
+            )
 
 
-@check("I006", group="integrity", severity="error", title="parquet tables are readable",
-       needs_full=False, quantity="unreadable tables",
-       hint="the file is truncated or not parquet; re-export it")
+@check(
+    "I006",
+    group="integrity",
+    severity="error",
+    title="parquet tables are readable",
+    needs_full=False,
+    quantity="unreadable tables",
+    hint="the file is truncated or not parquet; re-export it",
+)
 def _readable(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for rel in _parquet_rels(ctx):
         try:
@@ -146,12 +202,21 @@ def _readable(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             for _batch in pq.ParquetFile(path).iter_batches(batch_size=1 << 16):
                 pass
         except (pa.ArrowException, OSError, ValueError) as exc:
-            yield chk.finding(f"table body is unreadable ({str(exc).splitlines()[0][:200]})", file=rel)
+            yield chk.finding(
+                f"table body is unreadable ({str(exc).splitlines()[0][:200]})", file=rel
+            )
 
 
-@check("I007", group="integrity", severity="error", title="paths stay inside the dataset root",
-       needs_full=False, needs_valid_manifest=False, quantity="escaping paths",
-       hint="paths are relative to the dataset root, with '/' separators, no '..', no URI, no symlink out")
+@check(
+    "I007",
+    group="integrity",
+    severity="error",
+    title="paths stay inside the dataset root",
+    needs_full=False,
+    needs_valid_manifest=False,
+    quantity="escaping paths",
+    hint="paths are relative to the dataset root, with '/' separators, no '..', no URI, no symlink out",
+)
 def _escapes(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     seen: set[str] = set()
     for ref in ctx.path_refs():
@@ -159,8 +224,12 @@ def _escapes(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         if exc is None or (ref.rel, ref.where) in seen:
             continue
         seen.add((ref.rel, ref.where))
-        yield chk.finding(f"{exc.message}; it was not opened", file=MANIFEST_NAME, where=ref.where,
-                          hint=exc.hint or chk.hint)
+        yield chk.finding(
+            f"{exc.message}; it was not opened",
+            file=MANIFEST_NAME,
+            where=ref.where,
+            hint=exc.hint or chk.hint,
+        )
     root = ctx.root.resolve()
     for dirpath, dirnames, filenames in os.walk(ctx.root, followlinks=False):
         here = Path(dirpath)
@@ -169,9 +238,11 @@ def _escapes(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             if not p.is_symlink():
                 continue
             if not _inside(p, root):
-                yield chk.finding("symbolic link leads outside the dataset root; it was not opened",
-                                  file=p.relative_to(ctx.root).as_posix(),
-                                  hint="replace the link with the file itself")
+                yield chk.finding(
+                    "symbolic link leads outside the dataset root; it was not opened",
+                    file=p.relative_to(ctx.root).as_posix(),
+                    hint="replace the link with the file itself",
+                )
     if not ctx.quick:
         yield from _urdf_mesh_escapes(chk, ctx)
 
@@ -193,21 +264,37 @@ def _urdf_mesh_escapes(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         try:
             resolve_mesh_uri(ref.uri, path, ctx.root, _cache=cache)
         except PathEscapeError as exc:
-            yield chk.finding(f"{exc.message}; it was not opened", file=rel,
-                              where=f"link '{ref.link}' {ref.kind} mesh '{ref.uri}'", link=ref.link,
-                              hint=exc.hint or chk.hint)
+            yield chk.finding(
+                f"{exc.message}; it was not opened",
+                file=rel,
+                where=f"link '{ref.link}' {ref.kind} mesh '{ref.uri}'",
+                link=ref.link,
+                hint=exc.hint or chk.hint,
+            )
         except FormatError:
             continue  # unknown package etc.: reported when the URDF is loaded
 
 
-@check("I008", group="integrity", severity="error", title="files named by the manifest are listed in files",
-       needs_full=False, needs_valid_manifest=False, quantity="unlisted references",
-       hint="add the file through the writer so it is hashed and listed")
+@check(
+    "I008",
+    group="integrity",
+    severity="error",
+    title="files named by the manifest are listed in files",
+    needs_full=False,
+    needs_valid_manifest=False,
+    quantity="unlisted references",
+    hint="add the file through the writer so it is hashed and listed",
+)
 def _unlisted(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     listed = set(ctx.files)
     seen: set[str] = set()
     for ref in ctx.path_refs():
-        if ref.role == "file" or ref.rel in listed or ref.rel in ctx.unsafe_paths or ref.rel in seen:
+        if (
+            ref.role == "file"
+            or ref.rel in listed
+            or ref.rel in ctx.unsafe_paths
+            or ref.rel in seen
+        ):
             continue
         seen.add(ref.rel)
         try:
@@ -215,4 +302,6 @@ def _unlisted(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         except PathEscapeError:
             continue
         state = "exists but is not listed" if exists else "is neither listed nor present"
-        yield chk.finding(f"{ref.rel!r} {state} in the manifest's files", file=MANIFEST_NAME, where=ref.where)
+        yield chk.finding(
+            f"{ref.rel!r} {state} in the manifest's files", file=MANIFEST_NAME, where=ref.where
+        )

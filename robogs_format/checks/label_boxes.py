@@ -97,7 +97,9 @@ def boxes_of_label_image(img: np.ndarray) -> tuple[np.ndarray, ...]:
     )
 
 
-def _decode_boxes(item: tuple[int, bytes, Path]) -> tuple[int, tuple[int, int], tuple[np.ndarray, ...]]:
+def _decode_boxes(
+    item: tuple[int, bytes, Path],
+) -> tuple[int, tuple[int, int], tuple[np.ndarray, ...]]:
     idx, blob, path = item
     img = decode_label_png(blob, path=path, where=f"frame_index {idx}")
     return idx, img.shape, boxes_of_label_image(img)
@@ -142,7 +144,9 @@ def scan_label_boxes(
             idx = batch.column(0).to_numpy(zero_copy_only=False).astype(np.int64)
             blobs = batch.column(1).to_pylist()
             frames.append(idx)
-            for i, shape, boxes in pool.map(_decode_boxes, [(int(i), b, path) for i, b in zip(idx, blobs, strict=True)]):
+            for i, shape, boxes in pool.map(
+                _decode_boxes, [(int(i), b, path) for i, b in zip(idx, blobs, strict=True)]
+            ):
                 if first_shape is None:
                     first_shape = shape
                 shapes.add(shape)

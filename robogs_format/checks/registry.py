@@ -55,7 +55,15 @@ ENTRY_POINT_GROUP = "robogs.checks"
 
 #: modules of this package that define built-in checks (a missing one is skipped,
 #: so a new group such as ``binding`` is added by creating its module)
-BUILTIN_MODULES: tuple[str, ...] = ("schema", "integrity", "timing", "geometry", "physics", "binding")
+BUILTIN_MODULES: tuple[str, ...] = (
+    "schema",
+    "integrity",
+    "timing",
+    "sync",
+    "geometry",
+    "physics",
+    "binding",
+)
 
 _CODE = re.compile(r"^[A-Z][0-9]{3}$")
 
@@ -231,7 +239,9 @@ def _load_all() -> None:
         try:
             _register_loaded(ep.load(), ep.name)
         except Exception as exc:  # a broken plug-in is reported, never fatal
-            _PLUGIN_ERRORS.append(f"check plug-in {ep.name!r} ({ep.value}) failed to load: {type(exc).__name__}: {exc}")
+            _PLUGIN_ERRORS.append(
+                f"check plug-in {ep.name!r} ({ep.value}) failed to load: {type(exc).__name__}: {exc}"
+            )
 
 
 def _order(chk: Check) -> tuple[int, str]:

@@ -33,17 +33,28 @@ def _newer_minor(ctx: CheckContext) -> bool:
     return theirs is not None and theirs[0] == ours[0] and theirs[1] > ours[1]
 
 
-@check("S001", group="schema", severity="error", title="manifest follows the JSON Schema",
-       needs_full=False, needs_valid_manifest=False, quantity="schema violations",
-       hint="fix the field named by the JSON pointer; the writer never produces this")
+@check(
+    "S001",
+    group="schema",
+    severity="error",
+    title="manifest follows the JSON Schema",
+    needs_full=False,
+    needs_valid_manifest=False,
+    quantity="schema violations",
+    hint="fix the field named by the JSON pointer; the writer never produces this",
+)
 def _manifest_schema(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     lenient = _newer_minor(ctx)
     for p in ctx.manifest_problems:
         unknown_field = "Additional properties are not allowed" in p.message
         if lenient and unknown_field:
-            yield chk.finding(f"{p.message} (field of a newer minor spec version)", severity="warning",
-                              file=MANIFEST_NAME, where=p.pointer,
-                              hint=f"this robogs reads spec {SPEC_VERSION}; upgrade robogs to use the field")
+            yield chk.finding(
+                f"{p.message} (field of a newer minor spec version)",
+                severity="warning",
+                file=MANIFEST_NAME,
+                where=p.pointer,
+                hint=f"this robogs reads spec {SPEC_VERSION}; upgrade robogs to use the field",
+            )
         else:
             yield chk.finding(p.message, file=MANIFEST_NAME, where=p.pointer)
 
@@ -53,7 +64,11 @@ def _sidecars(ctx: CheckContext) -> list[tuple[str, str, str]]:
     out: list[tuple[str, str, str]] = []
     cams = ctx.manifest.get("cameras")
     if isinstance(cams, dict):
-        out += [(rel, "camera", f"/cameras/{name}") for name, rel in sorted(cams.items()) if isinstance(rel, str)]
+        out += [
+            (rel, "camera", f"/cameras/{name}")
+            for name, rel in sorted(cams.items())
+            if isinstance(rel, str)
+        ]
     phys = ctx.manifest.get("physics")
     if isinstance(phys, str):
         out.append((phys, "physics", "/physics"))
@@ -66,9 +81,15 @@ def _sidecars(ctx: CheckContext) -> list[tuple[str, str, str]]:
     return out
 
 
-@check("S002", group="schema", severity="error", title="JSON sidecars follow their schemas",
-       needs_valid_manifest=False, quantity="schema violations",
-       hint="fix the field named by the JSON pointer (cameras/*.json, physics.json, robot/mdh.json)")
+@check(
+    "S002",
+    group="schema",
+    severity="error",
+    title="JSON sidecars follow their schemas",
+    needs_valid_manifest=False,
+    quantity="schema violations",
+    hint="fix the field named by the JSON pointer (cameras/*.json, physics.json, robot/mdh.json)",
+)
 def _sidecar_schema(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for rel, schema, _ptr in _sidecars(ctx):
         try:
@@ -87,9 +108,15 @@ def _sidecar_schema(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             yield chk.finding(p.message, file=rel, where=p.pointer)
 
 
-@check("S003", group="schema", severity="error", title="table columns and types match the table kind",
-       needs_full=False, quantity="column problems",
-       hint="re-export the table with the columns and types of spec/FORMAT.md")
+@check(
+    "S003",
+    group="schema",
+    severity="error",
+    title="table columns and types match the table kind",
+    needs_full=False,
+    quantity="column problems",
+    hint="re-export the table with the columns and types of spec/FORMAT.md",
+)
 def _table_schema(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     done: set[str] = set()
     for ep, name, st in ctx.streams():
@@ -107,29 +134,54 @@ def _table_schema(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 yield chk.finding(f"{kind} table: {problem}", file=rel, episode=ep.id, stream=name)
 
 
-@check("S004", group="schema", severity="warning", title="spec version is not a newer minor version",
-       needs_full=False, needs_valid_manifest=False, quantity="spec version",
-       hint="upgrade robogs to read every field of this dataset")
+@check(
+    "S004",
+    group="schema",
+    severity="warning",
+    title="spec version is not a newer minor version",
+    needs_full=False,
+    needs_valid_manifest=False,
+    quantity="spec version",
+    hint="upgrade robogs to read every field of this dataset",
+)
 def _newer_minor_version(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     if _newer_minor(ctx):
         yield chk.finding(
             f"dataset uses spec {ctx.manifest.get('spec_version')}, newer than the spec {SPEC_VERSION} "
             "this robogs reads; fields it does not know are reported but ignored",
-            file=MANIFEST_NAME, where="/spec_version")
+            file=MANIFEST_NAME,
+            where="/spec_version",
+        )
 
 
-@check("S005", group="schema", severity="error", title="spec major version is readable",
-       needs_full=False, needs_valid_manifest=False, quantity="spec version",
-       hint="upgrade robogs (pip install -U robogs) to read this dataset")
+@check(
+    "S005",
+    group="schema",
+    severity="error",
+    title="spec major version is readable",
+    needs_full=False,
+    needs_valid_manifest=False,
+    quantity="spec version",
+    hint="upgrade robogs (pip install -U robogs) to read this dataset",
+)
 def _major_version(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     err = ctx.version_error
     if err is not None and _theirs(ctx) is not None:
-        yield chk.finding(err.message, file=MANIFEST_NAME, where="/spec_version", hint=err.hint or chk.hint)
+        yield chk.finding(
+            err.message, file=MANIFEST_NAME, where="/spec_version", hint=err.hint or chk.hint
+        )
 
 
-@check("S006", group="schema", severity="error", title="budget overrides in the manifest are known",
-       needs_full=False, needs_valid_manifest=False, quantity="unknown budgets",
-       hint="use the budget names listed in spec/FORMAT.md (robogs-validate --list-checks shows them)")
+@check(
+    "S006",
+    group="schema",
+    severity="error",
+    title="budget overrides in the manifest are known",
+    needs_full=False,
+    needs_valid_manifest=False,
+    quantity="unknown budgets",
+    hint="use the budget names listed in spec/FORMAT.md (robogs-validate --list-checks shows them)",
+)
 def _budget_names(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for problem in ctx.budget_problems:
         yield chk.finding(problem, file=MANIFEST_NAME, where="/budgets")
@@ -140,10 +192,14 @@ def _strings(table: pa.Table, column: str) -> set[str]:
     return {str(v) for v in col.unique().to_pylist() if v is not None}
 
 
-@check("S007", group="schema", severity="error",
-       title="tables name known joints, links, objects, cameras and labels",
-       quantity="unknown names",
-       hint="rename the entries to the URDF joint/link, asset, camera or segment names")
+@check(
+    "S007",
+    group="schema",
+    severity="error",
+    title="tables name known joints, links, objects, cameras and labels",
+    quantity="unknown names",
+    hint="rename the entries to the URDF joint/link, asset, camera or segment names",
+)
 def _names(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     joints: set[str] | None = None
     links: set[str] | None = None
@@ -169,8 +225,12 @@ def _names(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         if kind == "camera":
             cam = st.get("camera")
             if not isinstance(cam, str) or cam not in cameras:
-                yield chk.finding(f"camera stream names camera {cam!r}, which the manifest does not declare",
-                                  file=MANIFEST_NAME, where=f"/episodes/{ep.id}/streams/{name}/camera", **loc)
+                yield chk.finding(
+                    f"camera stream names camera {cam!r}, which the manifest does not declare",
+                    file=MANIFEST_NAME,
+                    where=f"/episodes/{ep.id}/streams/{name}/camera",
+                    **loc,
+                )
             continue
         if not isinstance(rel, str):
             continue
@@ -186,42 +246,69 @@ def _names(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 checks.append(("joint", unknown(set(family_columns(names, fam)), joints)))
             missing = [j for j in actuated if j not in cols]
             if joints is not None and missing:
-                yield chk.finding(f"joint_states has no position column for actuated joints {missing}",
-                                  severity="warning", file=rel, **loc,
-                                  hint="record every actuated joint; forward-kinematics checks need them")
+                yield chk.finding(
+                    f"joint_states has no position column for actuated joints {missing}",
+                    severity="warning",
+                    file=rel,
+                    **loc,
+                    hint="record every actuated joint; forward-kinematics checks need them",
+                )
         elif kind == "actions":
             checks.append(("joint", unknown(set(family_columns(names, "command.")), joints)))
         elif kind == "ee_poses" and "link" in names:
-            checks.append(("link", unknown(_strings(ctx.table(rel, columns=("link",)), "link"), links)))
+            checks.append(
+                ("link", unknown(_strings(ctx.table(rel, columns=("link",)), "link"), links))
+            )
         elif kind in ("object_poses", "boxes3d") and "object" in names:
-            checks.append(("object", unknown(_strings(ctx.table(rel, columns=("object",)), "object"), assets)))
+            checks.append(
+                ("object", unknown(_strings(ctx.table(rel, columns=("object",)), "object"), assets))
+            )
         elif kind == "boxes2d" and "camera" in names:
-            checks.append(("camera", unknown(_strings(ctx.table(rel, columns=("camera",)), "camera"), cameras)))
+            checks.append(
+                (
+                    "camera",
+                    unknown(_strings(ctx.table(rel, columns=("camera",)), "camera"), cameras),
+                )
+            )
             yield from _box_labels(chk, ctx, ep, rel, loc)
         elif kind == "segments" and {"kind", "target"} <= set(names):
             seg = ctx.table(rel, columns=("kind", "target"))
             kinds = np.asarray(seg.column("kind").to_pylist(), dtype=object)
             targets = np.asarray(seg.column("target").to_pylist(), dtype=object)
-            checks.append(("link", unknown({str(t) for t in targets[kinds == "robot_link"]}, links)))
+            checks.append(
+                ("link", unknown({str(t) for t in targets[kinds == "robot_link"]}, links))
+            )
             checks.append(("object", unknown({str(t) for t in targets[kinds == "object"]}, assets)))
             bad_kinds = sorted({str(k) for k in kinds} - {"robot_link", "object", "background"})
             if bad_kinds:
-                yield chk.finding(f"segments use unknown kinds {bad_kinds}", file=rel, **loc,
-                                  hint="kind is one of robot_link, object, background")
+                yield chk.finding(
+                    f"segments use unknown kinds {bad_kinds}",
+                    file=rel,
+                    **loc,
+                    hint="kind is one of robot_link, object, background",
+                )
         for what, bad in checks:
             if bad:
                 yield chk.finding(f"{kind} names unknown {what}s {bad[:10]}", file=rel, **loc)
 
 
-def _box_labels(chk: Check, ctx: CheckContext, ep: Any, rel: str, loc: dict[str, Any]) -> Iterator[Finding]:
+def _box_labels(
+    chk: Check, ctx: CheckContext, ep: Any, rel: str, loc: dict[str, Any]
+) -> Iterator[Finding]:
     seg_name = ctx.find_stream(ep, "segments")
     if seg_name is None or "label_id" not in ctx.footer(rel).schema.to_arrow_schema().names:
         return
     try:
-        known = set(ctx.stream_table(ep, seg_name, columns=("label_id",)).column("label_id").to_pylist())
+        known = set(
+            ctx.stream_table(ep, seg_name, columns=("label_id",)).column("label_id").to_pylist()
+        )
     except InputReported:
         return
     used = set(ctx.table(rel, columns=("label_id",)).column("label_id").unique().to_pylist())
     bad = sorted(int(v) for v in used - known if v is not None)
     if bad:
-        yield chk.finding(f"boxes2d use label ids {bad[:10]} that the segments table does not define", file=rel, **loc)
+        yield chk.finding(
+            f"boxes2d use label ids {bad[:10]} that the segments table does not define",
+            file=rel,
+            **loc,
+        )

@@ -34,22 +34,55 @@ def _budget(text: str) -> tuple[str, float]:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``validate`` options to ``parser``."""
-    parser.add_argument("dataset", nargs="?", type=Path, help="dataset folder (holding manifest.json)")
+    parser.add_argument(
+        "dataset", nargs="?", type=Path, help="dataset folder (holding manifest.json)"
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object to stdout")
     parser.add_argument("--junit", type=Path, metavar="FILE", help="also write JUnit XML to FILE")
-    parser.add_argument("--markdown", type=Path, metavar="FILE", help="also write a Markdown report to FILE")
-    parser.add_argument("--select", type=_csv, action="extend", default=[], metavar="CODES",
-                        help="run only these checks: codes, prefixes or groups, comma-separated (e.g. T,G007,schema)")
-    parser.add_argument("--ignore", type=_csv, action="extend", default=[], metavar="CODES",
-                        help="leave out these checks (same syntax as --select)")
-    parser.add_argument("--fail-on", choices=("error", "warning", "info", "never"), default="error",
-                        help="exit 1 when a finding is at or above this severity (default: error)")
-    parser.add_argument("--quick", action="store_true",
-                        help="read only the manifest and parquet footers (no hashing, no table bodies)")
-    parser.add_argument("--budget", type=_budget, action="append", default=[], metavar="NAME=VALUE",
-                        help="override a budget, e.g. --budget geometry.fk_ee_mm=1.0 (repeatable)")
+    parser.add_argument(
+        "--markdown", type=Path, metavar="FILE", help="also write a Markdown report to FILE"
+    )
+    parser.add_argument(
+        "--select",
+        type=_csv,
+        action="extend",
+        default=[],
+        metavar="CODES",
+        help="run only these checks: codes, prefixes or groups, comma-separated (e.g. T,G007,schema)",
+    )
+    parser.add_argument(
+        "--ignore",
+        type=_csv,
+        action="extend",
+        default=[],
+        metavar="CODES",
+        help="leave out these checks (same syntax as --select)",
+    )
+    parser.add_argument(
+        "--fail-on",
+        choices=("error", "warning", "info", "never"),
+        default="error",
+        help="exit 1 when a finding is at or above this severity (default: error)",
+    )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="read only the manifest and parquet footers (no hashing, no table bodies)",
+    )
+    parser.add_argument(
+        "--budget",
+        type=_budget,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override a budget, e.g. --budget geometry.fk_ee_mm=1.0 (repeatable)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
-    parser.add_argument("--list-checks", action="store_true", help="list the registered checks and exit")
+    parser.add_argument(
+        "--list-checks",
+        action="store_true",
+        help="list the registered checks and exit (with --markdown FILE: write the catalogue table)",
+    )
 
 
 def _err(msg: str) -> int:
@@ -62,7 +95,14 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from ..checks import available_checks
-    from ..report_formats import render_check_list, render_text, to_json, to_junit, to_markdown
+    from ..report_formats import (
+        catalogue_markdown,
+        render_check_list,
+        render_text,
+        to_json,
+        to_junit,
+        to_markdown,
+    )
     from ..validate import validate
 
     if args.list_checks:
@@ -70,18 +110,44 @@ def run(args: argparse.Namespace) -> int:
         if args.json:
             import json
 
-            print(json.dumps([{"code": c.code, "group": c.group, "severity": c.severity, "title": c.title,
-                               "quick": not c.needs_full, "budget": c.budget, "unit": c.unit,
-                               "quantity": c.quantity, "hint": c.hint} for c in checks], indent=2))
+            print(
+                json.dumps(
+                    [
+                        {
+                            "code": c.code,
+                            "group": c.group,
+                            "severity": c.severity,
+                            "title": c.title,
+                            "quick": not c.needs_full,
+                            "budget": c.budget,
+                            "unit": c.unit,
+                            "quantity": c.quantity,
+                            "hint": c.hint,
+                        }
+                        for c in checks
+                    ],
+                    indent=2,
+                )
+            )
         else:
             render_check_list(checks, Console())
+        if args.markdown is not None:
+            from ..validate import RUNNER_CODES
+
+            args.markdown.write_text(catalogue_markdown(checks, RUNNER_CODES), encoding="utf-8")
         return 0
     if args.dataset is None:
         return _err("the DATASET folder is required (or --list-checks)")
     progress = not args.no_progress and not args.json and sys.stderr.isatty()
     try:
-        report = validate(args.dataset, select=args.select, ignore=args.ignore, quick=args.quick,
-                          budgets=dict(args.budget), progress=progress)
+        report = validate(
+            args.dataset,
+            select=args.select,
+            ignore=args.ignore,
+            quick=args.quick,
+            budgets=dict(args.budget),
+            progress=progress,
+        )
     except RobogsError as exc:
         return _err(exc.one_line())
     if args.json:

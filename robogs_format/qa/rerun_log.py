@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import rerun as rr
 import rerun.blueprint as rrb
 
@@ -130,7 +131,9 @@ def downsample_indices(t_ns: np.ndarray, max_hz: float) -> np.ndarray:
 # ----------------------------------------------------------------------------- geometry
 
 
-def robot_link_meshes(urdf: yourdfpy.URDF, *, collision: bool = False) -> dict[str, list[trimesh.Trimesh]]:
+def robot_link_meshes(
+    urdf: yourdfpy.URDF, *, collision: bool = False
+) -> dict[str, list[trimesh.Trimesh]]:
     """The visual (or collision) geometry of every link, in the link frame.
 
     Args:
@@ -153,7 +156,9 @@ def robot_link_meshes(urdf: yourdfpy.URDF, *, collision: bool = False) -> dict[s
         geom = scene.geometry[geom_name]
         if not hasattr(geom, "faces") or len(geom.faces) == 0:
             continue
-        mesh = trimesh.Trimesh(np.asarray(geom.vertices, dtype=np.float64), np.asarray(geom.faces), process=False)
+        mesh = trimesh.Trimesh(
+            np.asarray(geom.vertices, dtype=np.float64), np.asarray(geom.faces), process=False
+        )
         mesh.apply_transform(np.asarray(T, dtype=np.float64))
         out.setdefault(str(link), []).append(mesh)
     return out
@@ -165,7 +170,9 @@ def rest_joint_positions(ds: Dataset, chain: Chain) -> np.ndarray:
     The splats' declared rest (``robot.splats.rest.joint_positions``) where given, else 0;
     each value clipped into the joint's limits.
     """
-    rest = (((ds.manifest.get("robot") or {}).get("splats") or {}).get("rest") or {}).get("joint_positions", {})
+    rest = (((ds.manifest.get("robot") or {}).get("splats") or {}).get("rest") or {}).get(
+        "joint_positions", {}
+    )
     q = np.array([float(rest.get(n, 0.0)) for n in chain.joint_names], dtype=np.float64)
     return np.clip(q, chain.joint_lower, chain.joint_upper)
 
@@ -238,7 +245,11 @@ class RerunContext:
 
     def table(self, stream: str) -> pa.Table | None:
         """An episode table, or None when the episode lacks the stream."""
-        if self.episode is None or not self.episode.has(stream) or "path" not in self.episode.stream(stream):
+        if (
+            self.episode is None
+            or not self.episode.has(stream)
+            or "path" not in self.episode.stream(stream)
+        ):
             return None
         return self.episode.table(stream)
 
@@ -269,7 +280,9 @@ def _forward(ctx: RerunContext, q: np.ndarray) -> np.ndarray:
     return ctx.chain.forward(torch.from_numpy(np.ascontiguousarray(q, dtype=np.float64))).numpy()
 
 
-def _log_mesh(rec: rr.RecordingStream, path: str, meshes: list[trimesh.Trimesh], color: tuple[int, ...]) -> None:
+def _log_mesh(
+    rec: rr.RecordingStream, path: str, meshes: list[trimesh.Trimesh], color: tuple[int, ...]
+) -> None:
     import trimesh
 
     mesh = meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(meshes)
@@ -286,7 +299,11 @@ def _log_mesh(rec: rr.RecordingStream, path: str, meshes: list[trimesh.Trimesh],
 
 
 def _send_poses(ctx: RerunContext, path: str, t_ns: np.ndarray, T: np.ndarray) -> None:
-    ctx.send(path, t_ns, rr.Transform3D.columns(translation=T[:, :3, 3], quaternion=_quat_xyzw(T[:, :3, :3])))
+    ctx.send(
+        path,
+        t_ns,
+        rr.Transform3D.columns(translation=T[:, :3, 3], quaternion=_quat_xyzw(T[:, :3, :3])),
+    )
 
 
 def _pose_rows(table: pa.Table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -315,8 +332,11 @@ def _layer_robot(ctx: RerunContext) -> None:
     if js is None or js.num_rows == 0:
         T = _forward(ctx, ctx.q_rest[None])[0]
         for k, link in enumerate(ctx.chain.link_names):
-            ctx.rec.log(ctx.link_path(link), rr.Transform3D(translation=T[k, :3, 3], mat3x3=T[k, :3, :3]),
-                        static=True)
+            ctx.rec.log(
+                ctx.link_path(link),
+                rr.Transform3D(translation=T[k, :3, 3], mat3x3=T[k, :3, :3]),
+                static=True,
+            )
         ctx.notes.append("no joint_states: robot shown at its rest configuration")
         return
     t = js.column("t_ns").to_numpy().astype(np.int64)
@@ -324,10 +344,6 @@ def _layer_robot(ctx: RerunContext) -> None:
     T = _forward(ctx, _joint_matrix(ctx, js, rows))  # [K, L, 4, 4]
     for k, link in enumerate(ctx.chain.link_names):
         _send_poses(ctx, ctx.link_path(link), t[rows], T[:, k])
-
-
-def _object_names(ctx: RerunContext) -> list[str]:
-    return sorted(set(ctx.ds.assets) | set(_groups_or_empty(ctx.table("object_poses"))))
 
 
 def _groups_or_empty(table: pa.Table | None) -> dict[str, np.ndarray]:
@@ -345,12 +361,17 @@ def _layer_objects(ctx: RerunContext) -> None:
         color = (200, 140, 80, 255) if entry.get("kind") == "object" else (120, 120, 110, 255)
         _log_mesh(ctx.rec, ctx.object_path(name) + "/mesh", [ctx.ds.mesh(name)], color)
         if name not in groups:
-            ctx.rec.log(ctx.object_path(name), rr.Transform3D(translation=(0.0, 0.0, 0.0)), static=True)
+            ctx.rec.log(
+                ctx.object_path(name), rr.Transform3D(translation=(0.0, 0.0, 0.0)), static=True
+            )
     for name, idx in groups.items():
         t, p, q = _pose_rows(poses.take(pa.array(idx)))
         keep = downsample_indices(t, ctx.max_hz)
-        ctx.send(ctx.object_path(name), t[keep],
-                 rr.Transform3D.columns(translation=p[keep], quaternion=q[keep][:, [1, 2, 3, 0]]))
+        ctx.send(
+            ctx.object_path(name),
+            t[keep],
+            rr.Transform3D.columns(translation=p[keep], quaternion=q[keep][:, [1, 2, 3, 0]]),
+        )
 
 
 def _splat_points(splats: Any, sel: np.ndarray, T_inv: np.ndarray) -> rr.Points3D:
@@ -378,7 +399,9 @@ def _layer_splats(ctx: RerunContext) -> None:
             if sel.size == 0 or link not in ctx.chain.link_names:
                 continue
             T_inv = np.linalg.inv(T_rest[ctx.chain.link_index(link)])
-            ctx.rec.log(ctx.link_path(link) + "/splats", _splat_points(splats, sel, T_inv), static=True)
+            ctx.rec.log(
+                ctx.link_path(link) + "/splats", _splat_points(splats, sel, T_inv), static=True
+            )
     for name, asset in sorted(ctx.ds.assets.items()):
         if "splats" not in asset:
             continue
@@ -391,8 +414,11 @@ def _layer_splats(ctx: RerunContext) -> None:
                 continue
             pose = np.asarray(rest.get(target, (0, 0, 0, 1, 0, 0, 0)), dtype=np.float64)
             T = np.asarray(make_T(quat_to_matrix(pose[3:7]), pose[:3]))
-            ctx.rec.log(ctx.object_path(target) + "/splats", _splat_points(splats, sel, np.linalg.inv(T)),
-                        static=True)
+            ctx.rec.log(
+                ctx.object_path(target) + "/splats",
+                _splat_points(splats, sel, np.linalg.inv(T)),
+                static=True,
+            )
 
 
 def _annotation_context(segments: pa.Table) -> rr.AnnotationContext:
@@ -402,7 +428,9 @@ def _annotation_context(segments: pa.Table) -> rr.AnnotationContext:
     targets = segments.column("target").to_pylist()
     colors = label_colors(ids)
     infos = [
-        rr.AnnotationInfo(id=int(i), label=f"{c}:{n}" + (f" ({t})" if t else ""), color=tuple(int(v) for v in col))
+        rr.AnnotationInfo(
+            id=int(i), label=f"{c}:{n}" + (f" ({t})" if t else ""), color=tuple(int(v) for v in col)
+        )
         for i, c, n, t, col in zip(ids, cats, inst, targets, colors, strict=True)
     ]
     return rr.AnnotationContext([rr.ClassDescription(info=a) for a in infos])
@@ -423,11 +451,17 @@ def _layer_cameras(ctx: RerunContext) -> None:
             ctx.rec.log(base, rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]), static=True)
         ctx.rec.log(
             base + "/image",
-            rr.Pinhole(image_from_camera=cam.K, resolution=[cam.width, cam.height], camera_xyz=rr.ViewCoordinates.RDF),
+            rr.Pinhole(
+                image_from_camera=cam.K,
+                resolution=[cam.width, cam.height],
+                camera_xyz=rr.ViewCoordinates.RDF,
+            ),
             static=True,
         )
         if cam.distortion_model != "none" and any(cam.distortion):
-            ctx.notes.append(f"camera {cam_name}: distortion ({cam.distortion_model}) is not shown by the pinhole")
+            ctx.notes.append(
+                f"camera {cam_name}: distortion ({cam.distortion_model}) is not shown by the pinhole"
+            )
         ep = ctx.episode
         if ep is None or cam_name not in ep.camera_streams:
             continue
@@ -435,25 +469,40 @@ def _layer_cameras(ctx: RerunContext) -> None:
         if "frames" not in stream:
             continue
         frames = ep.frames(cam_name)
-        stamp = dict(zip(frames.column("frame_index").to_pylist(), frames.column("t_ns").to_pylist(), strict=True))
+        stamp = dict(
+            zip(
+                frames.column("frame_index").to_pylist(),
+                frames.column("t_ns").to_pylist(),
+                strict=True,
+            )
+        )
         order = np.array(sorted(stamp), dtype=np.int64)
-        keep = set(order[downsample_indices(np.array([stamp[i] for i in order]), ctx.max_hz)].tolist())
+        keep = set(
+            order[downsample_indices(np.array([stamp[i] for i in order]), ctx.max_hz)].tolist()
+        )
         if "video" in stream:
             for i, rgb in enumerate(ep.iter_video(cam_name)):
                 if i not in keep:
                     continue
-                ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 90])
+                ok, buf = cv2.imencode(
+                    ".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 90]
+                )
                 if not ok:
                     raise FormatError("JPEG encoding failed", where=f"{cam_name} frame {i}")
                 ctx.time.set(ctx.rec, stamp[i])
-                ctx.rec.log(base + "/image/rgb", rr.EncodedImage(contents=buf.tobytes(), media_type="image/jpeg"))
+                ctx.rec.log(
+                    base + "/image/rgb",
+                    rr.EncodedImage(contents=buf.tobytes(), media_type="image/jpeg"),
+                )
         if "labels" in stream:
             for i, lab in ep.iter_labels(cam_name):
                 if i in keep and i in stamp:
                     ctx.time.set(ctx.rec, stamp[i])
-                    ctx.rec.log(base + "/image/segmentation", rr.SegmentationImage(lab, opacity=0.5))
+                    ctx.rec.log(
+                        base + "/image/segmentation", rr.SegmentationImage(lab, opacity=0.5)
+                    )
         if boxes is not None and boxes.num_rows:
-            mine = boxes.filter(pa.compute.equal(boxes.column("camera"), cam_name))
+            mine = boxes.filter(pc.equal(boxes.column("camera"), cam_name))
             if mine.num_rows:
                 _send_boxes2d(ctx, base + "/image/boxes", mine)
     ctx.rec.reset_time()
@@ -466,7 +515,9 @@ def _send_boxes2d(ctx: RerunContext, path: str, boxes: pa.Table) -> None:
     hi = np.stack([boxes.column("x_max").to_numpy(), boxes.column("y_max").to_numpy()], -1)
     stamps, counts = np.unique(t, return_counts=True)
     cols = rr.Boxes2D.columns(
-        centers=0.5 * (lo + hi), half_sizes=0.5 * (hi - lo), class_ids=boxes.column("label_id").to_numpy()
+        centers=0.5 * (lo + hi),
+        half_sizes=0.5 * (hi - lo),
+        class_ids=boxes.column("label_id").to_numpy(),
     ).partition(counts)
     ctx.send(path, stamps, cols)
 
@@ -480,7 +531,10 @@ def _layer_boxes3d(ctx: RerunContext) -> None:
     size = np.stack([boxes.column(c).to_numpy() for c in ("size_x", "size_y", "size_z")], -1)
     stamps, counts = np.unique(t, return_counts=True)
     cols = rr.Boxes3D.columns(
-        centers=p, half_sizes=0.5 * size, quaternions=q[:, [1, 2, 3, 0]], labels=boxes.column("object").to_pylist()
+        centers=p,
+        half_sizes=0.5 * size,
+        quaternions=q[:, [1, 2, 3, 0]],
+        labels=boxes.column("object").to_pylist(),
     ).partition(counts)
     ctx.send("world/boxes3d", stamps, cols)
 
@@ -489,15 +543,23 @@ def _layer_ee_poses(ctx: RerunContext) -> None:
     table = ctx.table("ee_poses")
     if table is None or table.num_rows == 0:
         return
-    for link, idx in _groups(np.asarray(table.column("link").to_pylist(), dtype=object).astype(str)).items():
+    for link, idx in _groups(
+        np.asarray(table.column("link").to_pylist(), dtype=object).astype(str)
+    ).items():
         t, p, q = _pose_rows(table.take(pa.array(idx)))
         keep = downsample_indices(t, ctx.max_hz)
         path = "world/ee/" + entity(link)
         ctx.rec.log(path, rr.TransformAxes3D(0.05), static=True)
-        ctx.send(path, t[keep], rr.Transform3D.columns(translation=p[keep], quaternion=q[keep][:, [1, 2, 3, 0]]))
+        ctx.send(
+            path,
+            t[keep],
+            rr.Transform3D.columns(translation=p[keep], quaternion=q[keep][:, [1, 2, 3, 0]]),
+        )
 
 
-def log_scalar_series(ctx: RerunContext, path: str, t_ns: np.ndarray, values: np.ndarray, *, name: str = "") -> None:
+def log_scalar_series(
+    ctx: RerunContext, path: str, t_ns: np.ndarray, values: np.ndarray, *, name: str = ""
+) -> None:
     """Plot one scalar series (e.g. a residual) on the ``time`` timeline.
 
     Args:
@@ -509,7 +571,11 @@ def log_scalar_series(ctx: RerunContext, path: str, t_ns: np.ndarray, values: np
     """
     if name:
         ctx.rec.log(path, rr.SeriesLines(names=name), static=True)
-    ctx.send(path, np.asarray(t_ns, dtype=np.int64), rr.Scalars.columns(scalars=np.asarray(values, np.float64)))
+    ctx.send(
+        path,
+        np.asarray(t_ns, dtype=np.int64),
+        rr.Scalars.columns(scalars=np.asarray(values, np.float64)),
+    )
 
 
 def _layer_plots(ctx: RerunContext) -> None:
@@ -519,19 +585,33 @@ def _layer_plots(ctx: RerunContext) -> None:
         for col in js.column_names:
             kind, _, joint = col.partition(".")
             if kind in ("position", "velocity", "effort") and joint:
-                log_scalar_series(ctx, f"plots/joints/{kind}/" + entity(joint), t, js.column(col).to_numpy(),
-                                  name=joint)
+                log_scalar_series(
+                    ctx,
+                    f"plots/joints/{kind}/" + entity(joint),
+                    t,
+                    js.column(col).to_numpy(),
+                    name=joint,
+                )
     wr = ctx.table("wrenches")
     if wr is not None and wr.num_rows:
-        for frame, idx in _groups(np.asarray(wr.column("frame").to_pylist(), dtype=object).astype(str)).items():
+        for frame, idx in _groups(
+            np.asarray(wr.column("frame").to_pylist(), dtype=object).astype(str)
+        ).items():
             sub = wr.take(pa.array(idx))
             t = sub.column("t_ns").to_numpy().astype(np.int64)
             for c in ("fx", "fy", "fz", "tx", "ty", "tz"):
-                log_scalar_series(ctx, f"plots/wrench/{entity(frame)}/{c}", t, sub.column(c).to_numpy(), name=c)
+                log_scalar_series(
+                    ctx, f"plots/wrench/{entity(frame)}/{c}", t, sub.column(c).to_numpy(), name=c
+                )
 
 
-_LEVELS = {"error": rr.TextLogLevel.ERROR, "warning": rr.TextLogLevel.WARN, "warn": rr.TextLogLevel.WARN,
-           "info": rr.TextLogLevel.INFO, "debug": rr.TextLogLevel.DEBUG}
+_LEVELS = {
+    "error": rr.TextLogLevel.ERROR,
+    "warning": rr.TextLogLevel.WARN,
+    "warn": rr.TextLogLevel.WARN,
+    "info": rr.TextLogLevel.INFO,
+    "debug": rr.TextLogLevel.DEBUG,
+}
 
 
 def _finding_record(f: Any) -> tuple[str, str, int | None]:
@@ -613,7 +693,8 @@ def available_layers() -> list[str]:
 def default_blueprint(ds: Dataset) -> rrb.Blueprint:
     """3D scene on the left; camera views, joint plots and the findings log on the right."""
     right: list[Any] = [
-        rrb.Spatial2DView(origin="world/cameras/" + entity(c) + "/image", name=c) for c in ds.camera_names
+        rrb.Spatial2DView(origin="world/cameras/" + entity(c) + "/image", name=c)
+        for c in ds.camera_names
     ]
     right.append(
         rrb.Tabs(
@@ -625,7 +706,11 @@ def default_blueprint(ds: Dataset) -> rrb.Blueprint:
     )
     right.append(rrb.TextLogView(origin="logs", name="findings"))
     return rrb.Blueprint(
-        rrb.Horizontal(rrb.Spatial3DView(origin="world", name="scene"), rrb.Vertical(*right), column_shares=[3, 2]),
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="world", name="scene"),
+            rrb.Vertical(*right),
+            column_shares=[3, 2],
+        ),
         collapse_panels=False,
     )
 
@@ -657,7 +742,9 @@ def log_dataset(
     names = list(DEFAULT_LAYERS if layers is None else layers)
     unknown = [n for n in names if n not in _LAYERS]
     if unknown:
-        raise RobogsError(f"unknown Rerun layer(s) {', '.join(unknown)}", hint=f"choose from {', '.join(_LAYERS)}")
+        raise RobogsError(
+            f"unknown Rerun layer(s) {', '.join(unknown)}", hint=f"choose from {', '.join(_LAYERS)}"
+        )
     for name in names:
         _LAYERS[name](ctx)
     return ctx
@@ -687,7 +774,9 @@ def write_rrd(
     """
     if not math.isfinite(max_hz):
         raise RobogsError(f"max_hz must be finite, got {max_hz}")
-    rec = rr.RecordingStream(application_id, recording_id=f"robogs-{ds.name}", send_properties=False)
+    rec = rr.RecordingStream(
+        application_id, recording_id=f"robogs-{ds.name}", send_properties=False
+    )
     rec.set_log_time_enabled(False)  # only the dataset clock, so recordings are reproducible
     rec.set_log_tick_enabled(False)
     rec.save(str(path), default_blueprint=default_blueprint(ds))

@@ -64,8 +64,9 @@ CASES: list[tuple[str, dict, str, dict]] = [
 
 
 @pytest.mark.parametrize(("name", "kwargs", "code", "budgets"), CASES, ids=[c[0] for c in CASES])
-def test_mutation_trips_exactly_its_code(clean_copy: Path, name: str, kwargs: dict, code: str,
-                                         budgets: dict) -> None:
+def test_mutation_trips_exactly_its_code(
+    clean_copy: Path, name: str, kwargs: dict, code: str, budgets: dict
+) -> None:
     mut.MUTATIONS[name](clean_copy, **kwargs)
     report = validate(clean_copy, budgets=budgets)
     assert _errors(report) == {code}, [f.to_dict() for f in report.findings]
@@ -93,12 +94,30 @@ def test_rigid_object_without_inertia_is_a_warning(clean_copy: Path) -> None:
     assert "P003" in report.codes(min_severity="warning")
 
 
-def test_camera_shift_is_detected(clean_copy: Path) -> None:
+def test_camera_shift_is_detected_from_robot_motion(clean_copy: Path) -> None:
+    """20 ms late camera stamps: T012 fits the lag of the robot-link label boxes behind the joints."""
     mut.shift_camera_stamps(clean_copy, ms=20.0)
     report = validate(clean_copy)
+    assert _errors(report) == {"T012"}, [f.to_dict() for f in report.findings]
+    (f,) = [f for f in report.findings if f.code == "T012"]
+    assert f.value == pytest.approx(20.0, abs=5.0)
+
+
+def test_camera_shift_beyond_episode_end_is_detected_from_stamps(tiny_copy: Path) -> None:
+    """Without robot labels only the stamps can tell: the last frame now lies after the episode end."""
+    mut.shift_camera_stamps(tiny_copy, ms=20.0)
+    report = validate(tiny_copy)
     assert _errors(report) == {"T008"}, [f.to_dict() for f in report.findings]
-    (f,) = [f for f in report.findings if f.code == "T008"]
-    assert f.value == pytest.approx(20.0, abs=0.5)
+    found = {f.location.stream: f.value for f in report.findings if f.code == "T008"}
+    assert found == {
+        "camera/cam0": pytest.approx(20.0, abs=0.01),
+        "boxes2d": pytest.approx(20.0, abs=0.01),
+    }
+
+
+def test_tiny_scene_is_clean(tiny_root: Path) -> None:
+    report = validate(tiny_root)
+    assert report.findings == [], [f.to_dict() for f in report.findings]
 
 
 def test_mutation_without_target_fails_loudly(tmp_path: Path, clean_root: Path) -> None:

@@ -61,6 +61,7 @@ class Scene:
     joint_eff: list[list[float]] = field(default_factory=list)
     image_t: list[int] = field(default_factory=list)
     images: list[np.ndarray] = field(default_factory=list)
+    labels: list[np.ndarray] = field(default_factory=list)
     poses: dict[str, list[tuple[int, list[float]]]] = field(default_factory=dict)
     ee: dict[str, list[tuple[int, list[float]]]] = field(default_factory=dict)
     wrench: list[tuple[int, list[float]]] = field(default_factory=list)
@@ -99,6 +100,9 @@ def write_ros2_mcap(
     hostile: dict[str, Any] | None = None,
     seed: int = 0,
     chunk_size: int = 64 * 1024,
+    joints: list[str] | None = None,
+    robot_description: str | None = None,
+    labels: bool = False,
 ) -> Scene:
     """Write a small ROS 2 MCAP: JointState, camera images + CameraInfo, /tf_static, poses, wrench.
 
@@ -110,7 +114,7 @@ def write_ros2_mcap(
 
     hostile = hostile or {}
     rng = np.random.default_rng(seed)
-    joints = ["shoulder_pan", "elbow", "wrist_1"]
+    joints = list(joints or ["shoulder_pan", "elbow", "wrist_1"])
     sc = Scene(joints=joints)
     w, h = sc.size
     sc.K = [52.0, 0.0, 31.5, 0.0, 53.0, 23.5, 0.0, 0.0, 1.0]
@@ -130,7 +134,7 @@ def write_ros2_mcap(
             stamp -= 5_000_000_000
         if hostile.get("zero_stamp_at") == i:
             stamp = 0
-        pos = [float(v) for v in rng.normal(size=3)]
+        pos = [float(v) for v in 0.5 * rng.normal(size=3)]
         vel = [float(v) for v in rng.normal(size=3)]
         eff = [float(v) for v in rng.normal(size=3)]
         # the publisher sends names in a different order every other message
@@ -168,6 +172,14 @@ def write_ros2_mcap(
             events.append((log, 2, "/camera/cam0/image_raw", msg))
         sc.image_t.append(stamp)
         sc.images.append(img)
+        if labels:
+            lab = np.zeros((h, w), np.uint16)
+            lab[img[..., 2] == 200] = 1000 + i  # the block carries a 16-bit id
+            ok, buf = cv2.imencode(".png", lab)
+            assert ok
+            events.append((log + 1, 2, "/camera/cam0/labels/compressed",
+                           {"header": hdr, "format": "png", "data": buf.tobytes()}))
+            sc.labels.append(lab)
         info = {"header": hdr, "height": h, "width": w, "distortion_model": distortion_model, "d": list(distortion),
                 "k": sc.K, "r": [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
                 "p": [sc.K[0], 0.0, sc.K[2], 0.0, 0.0, sc.K[4], sc.K[5], 0.0, 0.0, 0.0, 1.0, 0.0],
@@ -204,17 +216,21 @@ def write_ros2_mcap(
         events.append((log, 5, "/wrench/ft_sensor", msg))
         sc.wrench.append((stamp, v))
     events.append((T0 + 1, 6, "/rosout_like", {"data": "hello"}))
+    if robot_description is not None:
+        events.append((T0 + 2, 6, "/robot_description", {"data": robot_description}))
 
     types = {
         "/joint_states": "sensor_msgs/msg/JointState",
         "/camera/cam0/image_raw/compressed": "sensor_msgs/msg/CompressedImage",
         "/camera/cam0/image_raw": "sensor_msgs/msg/Image",
+        "/camera/cam0/labels/compressed": "sensor_msgs/msg/CompressedImage",
         "/camera/cam0/camera_info": "sensor_msgs/msg/CameraInfo",
         "/tf_static": "tf2_msgs/msg/TFMessage",
         "/objects/box/pose": "geometry_msgs/msg/PoseStamped",
         "/ee/tool0/pose": "geometry_msgs/msg/PoseStamped",
         "/wrench/ft_sensor": "geometry_msgs/msg/WrenchStamped",
         "/rosout_like": "std_msgs/msg/String",
+        "/robot_description": "std_msgs/msg/String",
     }
     events.sort(key=lambda e: (e[0], e[1]))
     with open(path, "wb") as fh:

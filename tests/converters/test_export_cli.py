@@ -28,7 +28,9 @@ def _leftovers(folder: Path) -> list[str]:
     return sorted(p.name for p in folder.iterdir() if ".tmp-" in p.name or ".old-" in p.name)
 
 
-def test_cli_writes_then_refuses_then_forces(tiny: Dataset, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_cli_writes_then_refuses_then_forces(
+    tiny: Dataset, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     out = tmp_path / "robot"
     assert main(["export", "urdf", str(tiny.root), str(out)]) == 0
     first = (out / "tiny_arm.urdf").read_bytes()
@@ -47,19 +49,35 @@ def test_every_format_through_the_cli(tiny: Dataset, tmp_path: Path) -> None:
     for fmt, name in (("usd", "s.usdc"), ("mcap", "s.mcap"), ("ply", "s.ply"), ("rerun", "s.rrd")):
         assert main(["export", fmt, str(tiny.root), str(tmp_path / name)]) == 0, fmt
         assert (tmp_path / name).stat().st_size > 0
-    assert main(["view", str(tiny.root), "--out", str(tmp_path / "v.rrd"), "--no-spawn", "--max-hz", "10"]) == 0
+    assert (
+        main(
+            [
+                "view",
+                str(tiny.root),
+                "--out",
+                str(tmp_path / "v.rrd"),
+                "--no-spawn",
+                "--max-hz",
+                "10",
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "v.rrd").stat().st_size > 0
     assert _leftovers(tmp_path) == []
 
 
-def test_option_that_does_not_apply_is_a_usage_error(tiny: Dataset, tmp_path: Path,
-                                                     capsys: pytest.CaptureFixture) -> None:
+def test_option_that_does_not_apply_is_a_usage_error(
+    tiny: Dataset, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     assert main(["export", "urdf", str(tiny.root), str(tmp_path / "o"), "--t-ns", "5"]) == 2
     assert "--t-ns does not apply to the urdf export" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 
-def test_no_robot_is_one_clear_line(tiny: Dataset, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_no_robot_is_one_clear_line(
+    tiny: Dataset, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     shutil.copytree(tiny.root, tmp_path / "copy")
     with Dataset.open(tmp_path / "copy").edit() as w:
         w.manifest.pop("robot")
@@ -90,7 +108,9 @@ def test_failing_exporter_leaves_nothing_behind(tiny: Dataset, tmp_path: Path) -
 
 def test_entry_point_exporters_are_listed(monkeypatch: pytest.MonkeyPatch) -> None:
     ep = EntryPoint("test_plugin_ply", "converters.export.splat_ply:export_ply", "robogs.exporters")
-    monkeypatch.setattr(export_pkg, "entry_points", lambda group: [ep] if group == "robogs.exporters" else [])
+    monkeypatch.setattr(
+        export_pkg, "entry_points", lambda group: [ep] if group == "robogs.exporters" else []
+    )
     monkeypatch.setattr(export_pkg, "_loaded_entry_points", False)
     names = available_exporters()
     assert {"urdf", "usd", "mcap", "ply", "rerun", "test_plugin_ply"} <= set(names)

@@ -87,17 +87,34 @@ PHYSICS = {
             "equation": "rigid",
             "mass_kg": 0.5,
             "com_m": [0.001, -0.002, 0.003],
-            "inertia_kgm2": [[2.0e-4, 1.0e-5, 0.0], [1.0e-5, 3.0e-4, -2.0e-5], [0.0, -2.0e-5, 2.5e-4]],
+            "inertia_kgm2": [
+                [2.0e-4, 1.0e-5, 0.0],
+                [1.0e-5, 3.0e-4, -2.0e-5],
+                [0.0, -2.0e-5, 2.5e-4],
+            ],
             "friction_static": 0.6,
             "friction_dynamic": 0.45,
             "restitution": 0.15,
             "damping_linear": 0.0,
             "damping_angular": 0.0,
         },
-        "table": {"equation": "static", "friction_static": 0.8, "friction_dynamic": 0.7, "restitution": 0.05},
-        "link1": {"equation": "articulated", "friction_static": 0.9, "friction_dynamic": 0.85, "restitution": 0.0},
+        "table": {
+            "equation": "static",
+            "friction_static": 0.8,
+            "friction_dynamic": 0.7,
+            "restitution": 0.05,
+        },
+        "link1": {
+            "equation": "articulated",
+            "friction_static": 0.9,
+            "friction_dynamic": 0.85,
+            "restitution": 0.0,
+        },
     },
-    "joints": {"j1": {"damping": 0.12, "friction": 0.05, "armature": 0.01}, "j2": {"damping": 2.5, "friction": 0.4}},
+    "joints": {
+        "j1": {"damping": 0.12, "friction": 0.05, "armature": 0.01},
+        "j2": {"damping": 2.5, "friction": 0.4},
+    },
     "effects": [],
     "sensors": {"cam0": {"time_offset_ns": 0}},
 }
@@ -110,7 +127,9 @@ CAM_W, CAM_H = 32, 24
 
 def _stamps(n: int, period_ns: int, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
-    return (T0_NS + np.cumsum(period_ns + rng.integers(-period_ns // 10, period_ns // 10, n))).astype(np.int64)
+    return (
+        T0_NS + np.cumsum(period_ns + rng.integers(-period_ns // 10, period_ns // 10, n))
+    ).astype(np.int64)
 
 
 def _quat_z(angle: np.ndarray) -> np.ndarray:
@@ -126,7 +145,11 @@ def _pose_table(key: str, names: list[str], t: np.ndarray, seed: int) -> pa.Tabl
             q = _quat_z(np.array(0.1 * i + k)) + rng.normal(0, 0.05, 4)
             q /= np.linalg.norm(q)
             p = np.array([0.3 + 0.01 * i, 0.1 * k, 0.05]) + rng.normal(0, 1e-3, 3)
-            for c, v in zip(("t_ns", key, "x", "y", "z", "qw", "qx", "qy", "qz"), (t[i], name, *p, *q), strict=True):
+            for c, v in zip(
+                ("t_ns", key, "x", "y", "z", "qw", "qx", "qy", "qz"),
+                (t[i], name, *p, *q),
+                strict=True,
+            ):
                 cols[c].append(v)
     return pa.table(
         {
@@ -176,7 +199,9 @@ def build_tiny_dataset(root: Path) -> Dataset:
     w.set_physics(PHYSICS)
 
     links = ["base_link", "link1", "link2", "tool"]
-    w.write_splats("robot/splats.ply", _splats(300, len(links), "3dgs", 4, 1, np.array([0.0, 0.0, 0.2])))
+    w.write_splats(
+        "robot/splats.ply", _splats(300, len(links), "3dgs", 4, 1, np.array([0.0, 0.0, 0.2]))
+    )
     w.manifest["robot"]["splats"] = {
         "path": "robot/splats.ply",
         "kind": "3dgs",
@@ -184,7 +209,9 @@ def build_tiny_dataset(root: Path) -> Dataset:
         "targets": links,
         "rest": {"t_ns": int(T0_NS), "joint_positions": {"j1": 0.0, "j2": 0.0}},
     }
-    w.write_splats("assets/box/splats.ply", _splats(80, 1, "2dgs", 1, 2, np.array([0.3, 0.0, 0.05])))
+    w.write_splats(
+        "assets/box/splats.ply", _splats(80, 1, "2dgs", 1, 2, np.array([0.3, 0.0, 0.05]))
+    )
     w.set_asset(
         "box",
         kind="object",
@@ -194,7 +221,10 @@ def build_tiny_dataset(root: Path) -> Dataset:
             "kind": "2dgs",
             "sh_degree": 0,
             "targets": ["box"],
-            "rest": {"t_ns": int(T0_NS), "object_poses": {"box": [0.3, 0.0, 0.05, 1.0, 0.0, 0.0, 0.0]}},
+            "rest": {
+                "t_ns": int(T0_NS),
+                "object_poses": {"box": [0.3, 0.0, 0.05, 1.0, 0.0, 0.0, 0.0]},
+            },
         },
     )
     w.set_asset("table", kind="table", mesh="assets/table/mesh.ply")
@@ -205,8 +235,16 @@ def build_tiny_dataset(root: Path) -> Dataset:
     T_world_cam[:3, 3] = (-0.8, 0.05, 0.3)
     w.set_camera(
         CameraModel(
-            "cam0", CAM_W, CAM_H, 30.0, 31.0, 16.2, 11.8, distortion_model="plumb_bob",
-            distortion=(0.01, -0.02, 0.001, 0.0005, 0.003), T_world_cam=T_world_cam,
+            "cam0",
+            CAM_W,
+            CAM_H,
+            30.0,
+            31.0,
+            16.2,
+            11.8,
+            distortion_model="plumb_bob",
+            distortion=(0.01, -0.02, 0.001, 0.0005, 0.003),
+            T_world_cam=T_world_cam,
         )
     )
 
@@ -227,12 +265,19 @@ def build_tiny_dataset(root: Path) -> Dataset:
     )
     w.write_table(f"{ep}/joint_states.parquet", js, kind="joint_states")
     t_pose = _stamps(N_POSE, 50_000_000, 5)
-    w.write_table(f"{ep}/object_poses.parquet", _pose_table("object", ["box"], t_pose, 6), kind="object_poses")
-    w.write_table(f"{ep}/ee_poses.parquet", _pose_table("link", ["tool"], t_pose, 7), kind="ee_poses")
+    w.write_table(
+        f"{ep}/object_poses.parquet", _pose_table("object", ["box"], t_pose, 6), kind="object_poses"
+    )
+    w.write_table(
+        f"{ep}/ee_poses.parquet", _pose_table("link", ["tool"], t_pose, 7), kind="ee_poses"
+    )
     wr = {
         "t_ns": pa.array(t_pose, pa.int64()),
         "frame": pa.array(["tool"] * N_POSE, pa.string()),
-        **{c: pa.array(rng.normal(0, 2, N_POSE), pa.float64()) for c in ("fx", "fy", "fz", "tx", "ty", "tz")},
+        **{
+            c: pa.array(rng.normal(0, 2, N_POSE), pa.float64())
+            for c in ("fx", "fy", "fz", "tx", "ty", "tz")
+        },
     }
     w.write_table(f"{ep}/wrenches.parquet", pa.table(wr), kind="wrenches")
     b3 = _pose_table("object", ["box"], t_pose, 8)
@@ -251,7 +296,12 @@ def build_tiny_dataset(root: Path) -> Dataset:
     w.write_table(f"{ep}/segments.parquet", seg, kind="segments")
 
     t_frames = _stamps(N_FRAMES, 33_333_333, 9)
-    frames = pa.table({"t_ns": pa.array(t_frames, pa.int64()), "frame_index": pa.array(range(N_FRAMES), pa.int64())})
+    frames = pa.table(
+        {
+            "t_ns": pa.array(t_frames, pa.int64()),
+            "frame_index": pa.array(range(N_FRAMES), pa.int64()),
+        }
+    )
     w.write_table(f"{ep}/cameras/cam0/frames.parquet", frames, kind="camera_frames")
     with VideoWriter(w.path(f"{ep}/cameras/cam0/rgb.mp4"), CAM_W, CAM_H, 30.0) as vw:
         for i in range(N_FRAMES):
@@ -259,7 +309,22 @@ def build_tiny_dataset(root: Path) -> Dataset:
             img[:, :, 0] = 40 * i
             img[4:12, 6 + i : 14 + i, 1] = 200
             vw.write(img)
-    pngs, b2 = [], {c: [] for c in ("t_ns", "camera", "frame_index", "label_id", "x_min", "y_min", "x_max", "y_max")}
+    pngs, b2 = (
+        [],
+        {
+            c: []
+            for c in (
+                "t_ns",
+                "camera",
+                "frame_index",
+                "label_id",
+                "x_min",
+                "y_min",
+                "x_max",
+                "y_max",
+            )
+        },
+    )
     for i in range(N_FRAMES):
         lab = np.zeros((CAM_H, CAM_W), np.uint16)
         lab[4:12, 6 + i : 14 + i] = 3
@@ -267,7 +332,9 @@ def build_tiny_dataset(root: Path) -> Dataset:
         pngs.append(encode_label_png(lab))
         for c, v in zip(b2, (t_frames[i], "cam0", i, 3, 6.0 + i, 4.0, 14.0 + i, 12.0), strict=True):
             b2[c].append(v)
-    labels = pa.table({"frame_index": pa.array(range(N_FRAMES), pa.int64()), "png": pa.array(pngs, pa.binary())})
+    labels = pa.table(
+        {"frame_index": pa.array(range(N_FRAMES), pa.int64()), "png": pa.array(pngs, pa.binary())}
+    )
     w.write_table(f"{ep}/cameras/cam0/labels.parquet", labels, kind="camera_labels")
     boxes2d = pa.table(
         {
@@ -292,15 +359,66 @@ def build_tiny_dataset(root: Path) -> Dataset:
         "boxes2d": s("boxes2d", f"{ep}/boxes2d.parquet"),
         "segments": s("segments", f"{ep}/segments.parquet"),
         "camera/cam0": {
-            "kind": "camera", "camera": "cam0", "frames": f"{ep}/cameras/cam0/frames.parquet",
-            "video": f"{ep}/cameras/cam0/rgb.mp4", "labels": f"{ep}/cameras/cam0/labels.parquet",
-            "stamp_source": "synthetic", "offset_ns": 0,
+            "kind": "camera",
+            "camera": "cam0",
+            "frames": f"{ep}/cameras/cam0/frames.parquet",
+            "video": f"{ep}/cameras/cam0/rgb.mp4",
+            "labels": f"{ep}/cameras/cam0/labels.parquet",
+            "stamp_source": "synthetic",
+            "offset_ns": 0,
         },
     }
     start = int(min(t_js[0], t_pose[0], t_frames[0]))
     end = int(max(t_js[-1], t_pose[-1], t_frames[-1]))
     w.add_episode("ep000", start_ns=start, end_ns=end, streams=streams)
     return w.commit()
+
+
+def same_table(a: pa.Table, b: pa.Table, what: str) -> None:
+    """Same rows, identical stamps, float columns within 1e-9, other columns identical."""
+    assert a.num_rows == b.num_rows, what
+    assert a.column("t_ns").to_pylist() == b.column("t_ns").to_pylist(), f"{what}: stamps differ"
+    for name in a.column_names:
+        if name == "t_ns":
+            continue
+        col_a, col_b = a.column(name), b.column(name)
+        if pa.types.is_floating(col_a.type):
+            np.testing.assert_allclose(
+                col_b.to_numpy(), col_a.to_numpy(), rtol=0, atol=1e-9, err_msg=f"{what}.{name}"
+            )
+        else:
+            assert col_a.to_pylist() == col_b.to_pylist(), f"{what}.{name}"
+
+
+def mcap_round_trip(src: Dataset, tmp: Path) -> Dataset:
+    """Export ``src`` to MCAP and read it back with robogs' MCAP ingest."""
+    from converters.export import export
+    from converters.ingest.convert import convert_path
+
+    export("mcap", src, tmp / "x.mcap")
+    return convert_path(tmp / "x.mcap", tmp / "back")
+
+
+def check_round_trip(src: Dataset, back: Dataset) -> None:
+    """Tables equal (stamps exactly, values within 1e-9), cameras and labels equal."""
+    a, b = src.episode(), back.episode()
+    for stream in ("joint_states", "object_poses", "ee_poses", "wrenches"):
+        if a.has(stream):
+            same_table(
+                a.table(stream), b.table(stream).select(a.table(stream).column_names), stream
+            )
+    for cam in src.camera_names:
+        ca, cb = src.camera(cam), back.camera(cam)
+        np.testing.assert_allclose(cb.K, ca.K, atol=1e-9)
+        np.testing.assert_allclose(cb.T_world_cam, ca.T_world_cam, atol=1e-9)
+        assert (cb.width, cb.height) == (ca.width, ca.height)
+        da = np.zeros(5) if ca.distortion_model == "none" else np.asarray(ca.distortion)
+        np.testing.assert_allclose(
+            np.asarray(cb.distortion) if cb.distortion else np.zeros(5), da, atol=1e-12
+        )
+        assert a.frames(cam).column("t_ns").to_pylist() == b.frames(cam).column("t_ns").to_pylist()
+        for (ia, la), (ib, lb) in zip(a.iter_labels(cam), b.iter_labels(cam), strict=True):
+            assert ia == ib and np.array_equal(la, lb)
 
 
 def test_tiny_dataset_reads_back(tmp_path: Path) -> None:

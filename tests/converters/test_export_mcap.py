@@ -6,7 +6,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import pyarrow as pa
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -16,9 +15,9 @@ from converters.export.ros2_mcap import stamp
 from robogs_format import Dataset
 
 try:
-    from .test_export_data import build_tiny_dataset
+    from .test_export_data import build_tiny_dataset, check_round_trip, mcap_round_trip
 except ImportError:
-    from test_export_data import build_tiny_dataset
+    from test_export_data import build_tiny_dataset, check_round_trip, mcap_round_trip
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +30,9 @@ def _read(path: Path) -> dict[str, list[tuple[int, int, object]]]:
     with open(path, "rb") as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
         for _, channel, message, decoded in reader.iter_decoded_messages(log_time_order=False):
-            out.setdefault(channel.topic, []).append((message.log_time, message.publish_time, decoded))
+            out.setdefault(channel.topic, []).append(
+                (message.log_time, message.publish_time, decoded)
+            )
     return out
 
 
@@ -70,11 +71,16 @@ def test_messages_equal_the_dataset(tiny: Dataset, tmp_path: Path) -> None:
     assert [_ns(m) for _, _, m in images] == t_frames
     for (_, _, m), rgb in zip(images, ep.iter_video("cam0"), strict=True):
         assert m.format == "png" and m.header.frame_id == "cam0_optical_frame"
-        png = cv2.cvtColor(cv2.imdecode(np.frombuffer(bytes(m.data), np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+        png = cv2.cvtColor(
+            cv2.imdecode(np.frombuffer(bytes(m.data), np.uint8), cv2.IMREAD_COLOR),
+            cv2.COLOR_BGR2RGB,
+        )
         assert np.array_equal(png, rgb)  # lossless w.r.t. the decoded video frame
     labels = msgs["/camera/cam0/labels/compressed"]
     for (_, _, m), (_, lab) in zip(labels, ep.iter_labels("cam0"), strict=True):
-        assert np.array_equal(cv2.imdecode(np.frombuffer(bytes(m.data), np.uint8), cv2.IMREAD_UNCHANGED), lab)
+        assert np.array_equal(
+            cv2.imdecode(np.frombuffer(bytes(m.data), np.uint8), cv2.IMREAD_UNCHANGED), lab
+        )
 
     cam = tiny.camera("cam0")
     info = msgs["/camera/cam0/camera_info"][0][2]
@@ -83,70 +89,71 @@ def test_messages_equal_the_dataset(tiny: Dataset, tmp_path: Path) -> None:
     np.testing.assert_array_equal(K, cam.K - np.array([[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]]))
     assert list(info.d) == list(cam.distortion)
 
-    (lt, _, tf), = msgs["/tf_static"]
+    ((lt, _, tf),) = msgs["/tf_static"]
     (tr,) = tf.transforms
-    assert (tr.header.frame_id, tr.child_frame_id, lt) == ("world", "cam0_optical_frame", ep.start_ns)
+    assert (tr.header.frame_id, tr.child_frame_id, lt) == (
+        "world",
+        "cam0_optical_frame",
+        ep.start_ns,
+    )
     q = tr.transform.rotation
     x, y, z, w = q.x, q.y, q.z, q.w
-    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    R = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
     np.testing.assert_allclose(R, cam.T_world_cam[:3, :3], atol=1e-12)
     v = tr.transform.translation
     np.testing.assert_array_equal([v.x, v.y, v.z], cam.T_world_cam[:3, 3])
 
-    for topic, stream, key in (("/objects/box/pose", "object_poses", "box"), ("/ee/tool/pose", "ee_poses", "tool")):
+    for topic, stream, key in (
+        ("/objects/box/pose", "object_poses", "box"),
+        ("/ee/tool/pose", "ee_poses", "tool"),
+    ):
         tab = ep.table(stream)
         got = msgs[topic]
         assert [_ns(m) for _, _, m in got] == tab.column("t_ns").to_pylist()
-        arr = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.w,
-                         m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z] for _, _, m in got])
-        ref = np.stack([tab.column(c).to_numpy() for c in ("x", "y", "z", "qw", "qx", "qy", "qz")], -1)
+        arr = np.array(
+            [
+                [
+                    m.pose.position.x,
+                    m.pose.position.y,
+                    m.pose.position.z,
+                    m.pose.orientation.w,
+                    m.pose.orientation.x,
+                    m.pose.orientation.y,
+                    m.pose.orientation.z,
+                ]
+                for _, _, m in got
+            ]
+        )
+        ref = np.stack(
+            [tab.column(c).to_numpy() for c in ("x", "y", "z", "qw", "qx", "qy", "qz")], -1
+        )
         assert np.array_equal(arr, ref), key
     wr = ep.table("wrenches")
     got = msgs["/wrench/tool"]
-    arr = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z, m.wrench.torque.x, m.wrench.torque.y,
-                     m.wrench.torque.z] for _, _, m in got])
-    assert np.array_equal(arr, np.stack([wr.column(c).to_numpy() for c in ("fx", "fy", "fz", "tx", "ty", "tz")], -1))
+    arr = np.array(
+        [
+            [
+                m.wrench.force.x,
+                m.wrench.force.y,
+                m.wrench.force.z,
+                m.wrench.torque.x,
+                m.wrench.torque.y,
+                m.wrench.torque.z,
+            ]
+            for _, _, m in got
+        ]
+    )
+    assert np.array_equal(
+        arr, np.stack([wr.column(c).to_numpy() for c in ("fx", "fy", "fz", "tx", "ty", "tz")], -1)
+    )
     assert msgs["/robot_description"][0][2].data == tiny.urdf_path.read_text()
 
 
-def _same_table(a: pa.Table, b: pa.Table, what: str) -> None:
-    assert a.num_rows == b.num_rows, what
-    assert a.column("t_ns").to_pylist() == b.column("t_ns").to_pylist(), f"{what}: stamps differ"
-    for name in a.column_names:
-        if name == "t_ns":
-            continue
-        col_a, col_b = a.column(name), b.column(name)
-        if pa.types.is_floating(col_a.type):
-            np.testing.assert_allclose(col_b.to_numpy(), col_a.to_numpy(), rtol=0, atol=1e-9, err_msg=f"{what}.{name}")
-        else:
-            assert col_a.to_pylist() == col_b.to_pylist(), f"{what}.{name}"
-
-
-def _round_trip(src: Dataset, tmp: Path) -> Dataset:
-    from converters.ingest.convert import convert_path
-
-    export("mcap", src, tmp / "x.mcap")
-    return convert_path(tmp / "x.mcap", tmp / "back")
-
-
-def _check_round_trip(src: Dataset, back: Dataset) -> None:
-    a, b = src.episode(), back.episode()
-    for stream in ("joint_states", "object_poses", "ee_poses", "wrenches"):
-        if a.has(stream):
-            _same_table(a.table(stream), b.table(stream).select(a.table(stream).column_names), stream)
-    for cam in src.camera_names:
-        ca, cb = src.camera(cam), back.camera(cam)
-        np.testing.assert_allclose(cb.K, ca.K, atol=1e-9)
-        np.testing.assert_allclose(cb.T_world_cam, ca.T_world_cam, atol=1e-9)
-        assert (cb.width, cb.height) == (ca.width, ca.height)
-        da = np.zeros(5) if ca.distortion_model == "none" else np.asarray(ca.distortion)
-        np.testing.assert_allclose(np.asarray(cb.distortion) if cb.distortion else np.zeros(5), da, atol=1e-12)
-        assert a.frames(cam).column("t_ns").to_pylist() == b.frames(cam).column("t_ns").to_pylist()
-        for (ia, la), (ib, lb) in zip(a.iter_labels(cam), b.iter_labels(cam), strict=True):
-            assert ia == ib and np.array_equal(la, lb)
-
-
 def test_round_trip_through_ingest_tiny(tiny: Dataset, tmp_path: Path) -> None:
-    _check_round_trip(tiny, _round_trip(tiny, tmp_path))
+    check_round_trip(tiny, mcap_round_trip(tiny, tmp_path))

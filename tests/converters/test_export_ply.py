@@ -83,7 +83,10 @@ def test_posed_export_matches_an_independent_pose(tiny: Dataset, tmp_path: Path)
     _, v = _vertex(tmp_path / "p.ply")
     js = ep.table("joint_states")
     tj = js.column("t_ns").to_numpy()
-    q_t = {j: float(np.interp(t - tj[0], tj - tj[0], js.column(f"position.{j}").to_numpy())) for j in ("j1", "j2")}
+    q_t = {
+        j: float(np.interp(t - tj[0], tj - tj[0], js.column(f"position.{j}").to_numpy()))
+        for j in ("j1", "j2")
+    }
     q_0 = {"j1": 0.0, "j2": 0.0}
     robot = tiny.splats("robot")
     targets = tiny.splat_entry("robot")["targets"]
@@ -95,9 +98,13 @@ def test_posed_export_matches_an_independent_pose(tiny: Dataset, tmp_path: Path)
         np.testing.assert_allclose(got[sel], want, atol=2e-6, err_msg=link)
     row = {c: poses.column(c)[5].as_py() for c in ("x", "y", "z", "qw", "qx", "qy", "qz")}
     w, x, y, z = row["qw"], row["qx"], row["qy"], row["qz"]
-    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]) / (w * w + x * x + y * y + z * z)
+    R = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    ) / (w * w + x * x + y * y + z * z)
     box = tiny.splats("box")
     rest = np.array([0.3, 0.0, 0.05])  # rest pose of the box: identity rotation
     want = (box.means.astype(np.float64) - rest) @ R.T + np.array([row["x"], row["y"], row["z"]])
@@ -108,12 +115,20 @@ def test_with_binding_appends_columns_and_targets(tiny: Dataset, tmp_path: Path)
     export("ply", tiny, tmp_path / "b.ply", with_binding=True)
     ply, v = _vertex(tmp_path / "b.ply")
     names = [p.name for p in ply["vertex"].properties]
-    assert names == REFERENCE_3DGS_DEG1 + ["bind_id", "bind_face", "bind_u", "bind_v", "bind_offset"]
-    targets = json.loads(next(c for c in ply.comments if c.startswith("robogs_targets "))[len("robogs_targets "):])
+    assert names == REFERENCE_3DGS_DEG1 + [
+        "bind_id",
+        "bind_face",
+        "bind_u",
+        "bind_v",
+        "bind_offset",
+    ]
+    targets = json.loads(
+        next(c for c in ply.comments if c.startswith("robogs_targets "))[len("robogs_targets ") :]
+    )
     assert targets == ["base_link", "link1", "link2", "tool", "box"]
     np.testing.assert_array_equal(v["bind_id"][:300], tiny.splats("robot").bind_id)
     assert np.all(v["bind_id"][300:] == 4)
-    assert not any(n.startswith(("scale_", "rot")) for n in names[len(REFERENCE_3DGS_DEG1):])
+    assert not any(n.startswith(("scale_", "rot")) for n in names[len(REFERENCE_3DGS_DEG1) :])
 
 
 def test_no_splats_is_a_clear_error(tiny: Dataset, tmp_path: Path) -> None:

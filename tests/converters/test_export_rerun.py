@@ -27,7 +27,9 @@ def tiny(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
 
 
 @pytest.fixture(scope="module")
-def chunks(tiny: Dataset, tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[pa.RecordBatch]]:
+def chunks(
+    tiny: Dataset, tmp_path_factory: pytest.TempPathFactory
+) -> dict[str, list[pa.RecordBatch]]:
     out = tmp_path_factory.mktemp("rrd_out") / "t.rrd"
     export("rerun", tiny, out)
     reader = RrdReader(out)
@@ -75,7 +77,9 @@ def test_robot_animated_by_joint_states(tiny: Dataset, chunks: dict) -> None:
         assert np.array_equal(_t(tab), t[kept])  # stamps kept exactly, ns
         trans = np.array([row[0] for row in tab.column("Transform3D:translation").to_pylist()])
         for k, i in enumerate(kept[::7]):
-            urdf.update_cfg({j: float(js.column(f"position.{j}")[int(i)].as_py()) for j in ("j1", "j2")})
+            urdf.update_cfg(
+                {j: float(js.column(f"position.{j}")[int(i)].as_py()) for j in ("j1", "j2")}
+            )
             want = np.asarray(urdf.get_transform(link, "base_link"))[:3, 3]
             np.testing.assert_allclose(trans[7 * k], want, atol=1e-6)
         assert f"/world/robot/{link}/splats" in chunks
@@ -89,8 +93,11 @@ def test_streams_rows_and_stamps(tiny: Dataset, chunks: dict) -> None:
         tab = _rows(chunks, f"/plots/joints/{kind}/j2", "Scalars:scalars")
         assert np.array_equal(_t(tab), t_js) and tab.num_rows == N_JS
     t_frames = ep.frames("cam0").column("t_ns").to_numpy()
-    for entity, comp in (("rgb", "EncodedImage:blob"), ("segmentation", "SegmentationImage:buffer"),
-                         ("boxes", "Boxes2D:centers")):
+    for entity, comp in (
+        ("rgb", "EncodedImage:blob"),
+        ("segmentation", "SegmentationImage:buffer"),
+        ("boxes", "Boxes2D:centers"),
+    ):
         tab = _rows(chunks, f"/world/cameras/cam0/image/{entity}", comp)
         assert tab.num_rows == N_FRAMES and np.array_equal(_t(tab), t_frames)
     boxes = _rows(chunks, "/world/cameras/cam0/image/boxes", "Boxes2D:centers")

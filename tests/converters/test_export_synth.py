@@ -16,9 +16,9 @@ from converters.export.usd_physics import validate_usd
 from robogs_format import Dataset
 
 try:
-    from .test_export_mcap import _check_round_trip, _round_trip
+    from .test_export_data import check_round_trip, mcap_round_trip
 except ImportError:
-    from test_export_mcap import _check_round_trip, _round_trip
+    from test_export_data import check_round_trip, mcap_round_trip
 
 
 @pytest.fixture(scope="module")
@@ -31,20 +31,22 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
 
 
 def test_mcap_round_trip_through_ingest(scene: Dataset, tmp_path: Path) -> None:
-    _check_round_trip(scene, _round_trip(scene, tmp_path))
+    check_round_trip(scene, mcap_round_trip(scene, tmp_path))
 
 
 def test_urdf_and_usd(scene: Dataset, tmp_path: Path) -> None:
     export("urdf", scene, tmp_path / "urdf")
-    name = yourdfpy.URDF.load(str(next((tmp_path / "urdf").glob("*.urdf"))), mesh_dir=str(tmp_path / "urdf"))
+    got = yourdfpy.URDF.load(
+        str(next((tmp_path / "urdf").glob("*.urdf"))), mesh_dir=str(tmp_path / "urdf")
+    )
     ref = scene.urdf(load_meshes=False)
     phys = scene.physics()
     for j, dyn in phys["joints"].items():
-        assert float(name.joint_map[j].dynamics.damping) == dyn["damping"]
-        assert float(name.joint_map[j].dynamics.friction) == dyn["friction"]
+        assert float(got.joint_map[j].dynamics.damping) == dyn["damping"]
+        assert float(got.joint_map[j].dynamics.friction) == dyn["friction"]
     for link in ref.robot.links:
         if link.inertial is not None:
-            assert name.link_map[link.name].inertial.mass == link.inertial.mass
+            assert got.link_map[link.name].inertial.mass == link.inertial.mass
     report = export("usd", scene, tmp_path / "s.usdc")
     assert report.facts["validator_errors"] == 0
     assert [i for i in validate_usd(tmp_path / "s.usdc") if i.kind == "error"] == []

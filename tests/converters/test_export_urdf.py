@@ -34,8 +34,12 @@ def test_urdf_export_matches_dataset(tiny: Dataset, tmp_path: Path) -> None:
     report = export("urdf", tiny, tmp_path / "out")
     out = tmp_path / "out"
     assert report.out == out and (out / "tiny_arm.urdf").is_file()
-    got = yourdfpy.URDF.load(str(out / "tiny_arm.urdf"), mesh_dir=str(out), build_collision_scene_graph=True,
-                             load_collision_meshes=True)
+    got = yourdfpy.URDF.load(
+        str(out / "tiny_arm.urdf"),
+        mesh_dir=str(out),
+        build_collision_scene_graph=True,
+        load_collision_meshes=True,
+    )
     ref = tiny.urdf()
     for link in ref.robot.links:
         g = got.link_map[link.name]
@@ -55,7 +59,11 @@ def test_urdf_export_matches_dataset(tiny: Dataset, tmp_path: Path) -> None:
         if j.type == "fixed":
             continue
         assert (g.limit.lower, g.limit.upper, g.limit.effort, g.limit.velocity) == (
-            j.limit.lower, j.limit.upper, j.limit.effort, j.limit.velocity)
+            j.limit.lower,
+            j.limit.upper,
+            j.limit.effort,
+            j.limit.velocity,
+        )
         # yourdfpy keeps <dynamics> attributes as strings
         assert float(g.dynamics.damping) == PHYSICS["joints"][j.name]["damping"]
         assert float(g.dynamics.friction) == PHYSICS["joints"][j.name]["friction"]
@@ -63,18 +71,32 @@ def test_urdf_export_matches_dataset(tiny: Dataset, tmp_path: Path) -> None:
     assert len(got.link_map["link1"].collisions) == 1
     assert len(got.collision_scene.geometry) == 3
     assert got.link_map["link1"].collisions[0].geometry.mesh.filename == "meshes/link1.ply"
-    assert (out / "meshes" / "link1.ply").read_bytes() == (tiny.root / "robot/meshes/link1.ply").read_bytes()
+    assert (out / "meshes" / "link1.ply").read_bytes() == (
+        tiny.root / "robot/meshes/link1.ply"
+    ).read_bytes()
 
     contact = json.loads((out / "tiny_arm.contact.json").read_text())
-    assert contact["links"]["link1"] == {"friction_static": 0.9, "friction_dynamic": 0.85, "restitution": 0.0}
+    assert contact["links"]["link1"] == {
+        "friction_static": 0.9,
+        "friction_dynamic": 0.85,
+        "restitution": 0.0,
+    }
     assert contact["joints"]["j1"] == {"armature": 0.01}
     box = contact["objects"]["box"]
-    assert (box["friction_static"], box["friction_dynamic"], box["restitution"]) == (0.6, 0.45, 0.15)
+    assert (box["friction_static"], box["friction_dynamic"], box["restitution"]) == (
+        0.6,
+        0.45,
+        0.15,
+    )
     obj = yourdfpy.URDF.load(str(out / box["urdf"]), mesh_dir=str(out / "objects/box"))
     ob = obj.link_map["box"]
     assert ob.inertial.mass == PHYSICS["objects"]["box"]["mass_kg"]
-    np.testing.assert_allclose(np.asarray(ob.inertial.origin)[:3, 3], PHYSICS["objects"]["box"]["com_m"])
-    np.testing.assert_allclose(ob.inertial.inertia, PHYSICS["objects"]["box"]["inertia_kgm2"], rtol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(ob.inertial.origin)[:3, 3], PHYSICS["objects"]["box"]["com_m"]
+    )
+    np.testing.assert_allclose(
+        ob.inertial.inertia, PHYSICS["objects"]["box"]["inertia_kgm2"], rtol=1e-12
+    )
     assert len(obj.scene.geometry) == 1
 
 
@@ -83,14 +105,18 @@ def test_physics_json_overrides_urdf_inertial(tiny: Dataset, tmp_path: Path) -> 
     src = Dataset.open(tmp_path / "copy")
     with src.edit() as w:
         phys = src.physics()
-        phys["objects"]["link2"] = {"equation": "articulated", "mass_kg": 0.75, "com_m": [0.04, 0.001, 0.0],
-                                    "inertia_kgm2": [[3e-4, 1e-5, 0], [1e-5, 5e-4, 0], [0, 0, 6e-4]]}
+        phys["objects"]["link2"] = {
+            "equation": "articulated",
+            "mass_kg": 0.75,
+            "com_m": [0.04, 0.001, 0.0],
+            "inertia_kgm2": [[3e-4, 1e-5, 0], [1e-5, 5e-4, 0], [0, 0, 6e-4]],
+        }
         w.set_physics(phys)
         ds = w.commit()
     export("urdf", ds, tmp_path / "o", objects=False)
     got = yourdfpy.URDF.load(str(tmp_path / "o/tiny_arm.urdf"), load_meshes=False)
-    m, c, I = _inertia_in_link(got.link_map["link2"])
+    m, c, inertia = _inertia_in_link(got.link_map["link2"])
     assert m == 0.75
     np.testing.assert_allclose(c, [0.04, 0.001, 0.0])
-    np.testing.assert_allclose(I, phys["objects"]["link2"]["inertia_kgm2"], rtol=1e-12)
+    np.testing.assert_allclose(inertia, phys["objects"]["link2"]["inertia_kgm2"], rtol=1e-12)
     assert not (tmp_path / "o/objects").exists()

@@ -137,3 +137,15 @@ def test_clock_jump_is_dropped_and_recorded(tmp_path: Path, synth) -> None:
     assert len(jump) == 1 and jump[0]["count"] == 1
     t_bad = 1_700_000_000_000_000_000 + 10_000_000 + 40 * 2_000_000 - synth.LATENCY - 5_000_000_000
     assert jump[0]["stamps_ns"] == [t_bad]
+
+
+def test_label_images_pair_with_colour_frames(tmp_path: Path, synth) -> None:
+    sc = synth.write_ros2_mcap(tmp_path / "a.mcap", duration_s=0.2, labels=True)
+    ds = convert_path(tmp_path / "a.mcap", tmp_path / "out")
+    ep = ds.episode()
+    assert ep.stream("camera/cam0")["labels"] == "episodes/ep000/cameras/cam0/labels.parquet"
+    got = list(ep.iter_labels("cam0"))
+    assert [i for i, _ in got] == list(range(len(sc.labels)))
+    for (_, lab), truth in zip(got, sc.labels, strict=True):
+        assert lab.dtype == np.uint16 and np.array_equal(lab, truth)  # lossless, exact ids
+    assert _errors(tmp_path / "out") == []

@@ -113,7 +113,7 @@ def test_truncated_ros1_bag(tmp_path: Path, synth) -> None:
     synth.write_ros1_bag(tmp_path / "a.bag", duration_s=0.2)
     data = (tmp_path / "a.bag").read_bytes()
     (tmp_path / "cut.bag").write_bytes(data[: len(data) * 2 // 3])
-    with pytest.raises(InputError, match="cannot open bag|corrupt"):
+    with pytest.raises(InputError, match="cannot open bag .*index looks damaged"):
         convert_path(tmp_path / "cut.bag", tmp_path / "out")
     assert _leftovers(tmp_path) == []
 

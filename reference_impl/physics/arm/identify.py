@@ -201,7 +201,7 @@ def fit_effects(
                 break
             lam *= 10
         r0 = _whitened(torch.as_tensor(theta[None], dtype=dt, device=dev), space, pb, fixed, row_idx)[0].cpu().numpy()
-        if not improved or rel < 1e-12 or step_small:
+        if not improved or rel < 1e-9 or step_small:
             converged = True
             break
     if len(theta):

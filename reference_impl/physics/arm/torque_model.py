@@ -9,8 +9,12 @@
 * ``delta`` the effort time offset, applied by linear interpolation of the model series inside
   each trajectory (end values held).
 
-Velocities are the measured ones when the log has them; accelerations (and missing velocities)
-come from :func:`~reference_impl.physics.arm.differentiate.savgol_derivative`. The noise floor
+Velocities are the measured ones when the log has them, smoothed by the same Savitzky-Golay
+filter (order 0; it keeps the encoder-rate noise out of the Coulomb term near reversals).
+Accelerations always come from the second derivative of the *positions* (encoder positions are
+far less noisy than logged velocities, whose derivative would put noise on every inertial
+torque), and missing velocities from the first derivative; both by
+:func:`~reference_impl.physics.arm.differentiate.savgol_derivative`. The noise floor
 of each joint's effort is estimated from the data (1.4826 MAD of second differences / sqrt 6),
 never assumed.
 """
@@ -90,8 +94,10 @@ def _rates(t_ns: np.ndarray, q: np.ndarray, qd: np.ndarray | None) -> tuple[np.n
         derived += [f"velocity: {describe_differentiator(1)} of position",
                     f"acceleration: {describe_differentiator(2)} of position"]
     else:
-        qdd = savgol_derivative(t_ns, qd, order=1)
-        derived.append(f"acceleration: {describe_differentiator(1)} of velocity")
+        qdd = savgol_derivative(t_ns, q, order=2)
+        qd = savgol_derivative(t_ns, qd, order=0)
+        derived += [f"velocity: measured, smoothed by {describe_differentiator(0)}",
+                    f"acceleration: {describe_differentiator(2)} of position"]
     return qd, qdd, derived
 
 

@@ -1,0 +1,273 @@
+"""Camera-to-robot time alignment (T012), estimated from label boxes without rendering.
+
+The bounding box of a robot link's labelled pixels in a frame must match the
+bounding box of the link's projected geometry at the frame's stamp: forward
+kinematics of the joints interpolated at ``t_ns + delta``, then the pinhole
+camera. The extremes of a projected mesh are extremes of its projected convex
+hull vertices, so only hull vertices are projected. The offset ``delta`` is fitted
+by Gauss-Newton on the box edges that move (central differences in time), with a
+constant bias per edge side (pixel conventions) and robust re-weighting that
+drops occluded or clipped edges. It is the lag-estimation idea of
+hand-eye/temporal calibration (e.g. Kalibr's camera-IMU time offset, Furgale et
+al. 2013), reduced to box edges.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..errors import RobogsError
+from ..findings import Finding
+from .context import CheckContext, InputReported
+from .geometry import _world_from_root, joint_positions, link_geometry
+from .registry import Check, check
+
+__all__ = ["LagEstimate", "estimate_camera_lag"]
+
+_MAX_FRAMES = 300
+_STEP_NS = 5_000_000
+_MIN_SPEED_PX_PER_S = 20.0
+_MAX_LAG_NS = 250_000_000
+
+
+@dataclass(frozen=True)
+class LagEstimate:
+    """Fitted lag of a camera's images behind (or ahead of) its frame stamps.
+
+    Attributes:
+        offset_ms: how late the frame stamps are (stamp - true capture time), ms.
+        stderr_ms: standard error of ``offset_ms``.
+        edges: box edges used in the final fit.
+        frames: frames used.
+        residual_px: robust residual scale after the fit, px.
+    """
+
+    offset_ms: float
+    stderr_ms: float
+    edges: int
+    frames: int
+    residual_px: float
+
+
+class _Model:
+    """Projected link boxes at frame stamps shifted by a lag."""
+
+    def __init__(self, ctx: CheckContext, ep, cam_stream: dict, links: dict[int, str]) -> None:
+        import trimesh
+
+        self.cam = ctx.camera(cam_stream["camera"])
+        if self.cam.T_world_cam is None or self.cam.extrinsics != "static":
+            raise InputReported("camera extrinsics")
+        self.T_cam_world = np.linalg.inv(self.cam.T_world_cam)
+        self.chain = ctx.chain()
+        self.ctx = ctx
+        js = ctx.find_stream(ep, "joint_states")
+        if js is None:
+            raise InputReported("joint_states")
+        self.t_js, self.q = joint_positions(ctx, ep, js, list(self.chain.joint_names))
+        if self.t_js.size < 2 or not np.all(np.diff(self.t_js) > 0):
+            raise InputReported("joint stamps")
+        geo = link_geometry(ctx, prefer="visual")
+        self.hulls: dict[str, np.ndarray] = {}
+        for name in set(links.values()):
+            g = geo.get(name)
+            if (
+                g is None
+                or g.mm_problem
+                or len(g.vertices) < 4
+                or name not in self.chain.link_names
+            ):
+                continue
+            try:
+                self.hulls[name] = np.asarray(trimesh.convex.convex_hull(g.vertices).vertices)
+            except Exception:  # flat geometry
+                self.hulls[name] = g.vertices
+
+    def boxes(
+        self, t_ns: np.ndarray, link_of_obs: np.ndarray, frame_of_obs: np.ndarray, delta_ns: float
+    ) -> np.ndarray:
+        """[n_obs, 4] projected (x_min, y_min, x_max, y_max) px; NaN where undefined."""
+        from ..interp import interp_linear
+
+        tq = np.rint(t_ns + delta_ns).astype(np.int64)
+        inside = (tq >= self.t_js[0]) & (tq <= self.t_js[-1])
+        q = interp_linear(np.clip(tq, self.t_js[0], self.t_js[-1]), self.t_js, self.q)
+        T = _world_from_root(
+            self.ctx, self.chain.forward(torch.as_tensor(q, dtype=torch.float64)), self.chain
+        ).numpy()
+        out = np.full((link_of_obs.size, 4), np.nan)
+        cam = self.cam
+        for name, hull in self.hulls.items():
+            sel = link_of_obs == name
+            if not sel.any():
+                continue
+            k = self.chain.link_index(name)
+            T_cl = np.einsum("ij,fjk->fik", self.T_cam_world, T[:, k])  # [F, 4, 4]
+            p = np.einsum("fij,vj->fvi", T_cl[:, :3, :3], hull) + T_cl[:, None, :3, 3]
+            z = p[..., 2]
+            uv = _project(cam, p)
+            box = np.stack(
+                [uv[..., 0].min(1), uv[..., 1].min(1), uv[..., 0].max(1), uv[..., 1].max(1)], 1
+            )
+            box[(z.min(1) <= 1e-3) | ~inside] = np.nan
+            out[sel] = box[frame_of_obs[sel]]
+        return out
+
+
+def _project(cam, p: np.ndarray) -> np.ndarray:
+    """Camera-frame points [..., 3] -> pixels [..., 2] (OpenCV model, pixel centres at +0.5)."""
+    z = np.where(p[..., 2] > 1e-6, p[..., 2], 1e-6)
+    x, y = p[..., 0] / z, p[..., 1] / z
+    d = np.asarray(cam.distortion, np.float64)
+    if cam.distortion_model in ("plumb_bob", "rational_polynomial") and d.size and np.any(d):
+        k = np.zeros(8)
+        k[: min(d.size, 8)] = d[:8]
+        r2 = x * x + y * y
+        radial = (1 + k[0] * r2 + k[1] * r2**2 + k[4] * r2**3) / (
+            1 + k[5] * r2 + k[6] * r2**2 + k[7] * r2**3
+        )
+        x, y = (
+            x * radial + 2 * k[2] * x * y + k[3] * (r2 + 2 * x * x),
+            y * radial + k[2] * (r2 + 2 * y * y) + 2 * k[3] * x * y,
+        )
+    elif cam.distortion_model == "equidistant" and d.size and np.any(d):
+        r = np.sqrt(x * x + y * y)
+        th = np.arctan(r)
+        th_d = th * (1 + d[0] * th**2 + d[1] * th**4 + d[2] * th**6 + d[3] * th**8)
+        scale = np.where(r > 1e-12, th_d / np.maximum(r, 1e-12), 1.0)
+        x, y = x * scale, y * scale
+    return np.stack([cam.fx * x + cam.cx, cam.fy * y + cam.cy], -1)
+
+
+def estimate_camera_lag(ctx: CheckContext, ep, stream: str) -> LagEstimate | None:
+    """Fit the lag of a camera stream's frame stamps against the robot's joint stamps.
+
+    Returns None when the stream lacks what the fit needs (labels of robot links,
+    a static camera, joint states, link geometry) or the links barely move.
+    """
+    st = ep.streams[stream]
+    seg_stream = ctx.find_stream(ep, "segments")
+    if (
+        seg_stream is None
+        or not isinstance(st.get("labels"), str)
+        or not isinstance(st.get("frames"), str)
+    ):
+        return None
+    seg = ctx.stream_table(ep, seg_stream, columns=("label_id", "kind", "target"))
+    links = {
+        int(r["label_id"]): str(r["target"]) for r in seg.to_pylist() if r["kind"] == "robot_link"
+    }
+    if not links:
+        return None
+    model = _Model(ctx, ep, st, links)
+    frames = ctx.stream_table(ep, stream, field="frames", columns=("t_ns", "frame_index"))
+    f_idx = frames.column("frame_index").to_numpy(zero_copy_only=False)
+    f_t = frames.column("t_ns").to_numpy(zero_copy_only=False).astype(np.int64)
+    if f_t.size < 3 or not np.all(np.diff(f_t) > 0) or not np.all(np.diff(f_idx) > 0):
+        return None
+    lb = ctx.label_boxes(ep, stream)
+    keep_f = f_idx[np.linspace(0, f_idx.size - 1, min(_MAX_FRAMES, f_idx.size)).round().astype(int)]
+    sel = np.isin(lb.label_id, list(links)) & np.isin(lb.frame_index, keep_f)
+    names = np.array([links.get(int(i), "") for i in lb.label_id[sel]], dtype=object)
+    usable = np.isin(names, list(model.hulls))
+    obs = np.stack([lb.x_min, lb.y_min, lb.x_max, lb.y_max], 1)[sel][usable].astype(np.float64)
+    names, obs_f = names[usable], lb.frame_index[sel][usable]
+    if obs.shape[0] == 0:
+        return None
+    used_frames, frame_of_obs = np.unique(obs_f, return_inverse=True)
+    t_frames = f_t[np.searchsorted(f_idx, used_frames)]
+    clipped = np.stack(
+        [obs[:, 0] <= 0, obs[:, 1] <= 0, obs[:, 2] >= lb.width, obs[:, 3] >= lb.height], 1
+    )
+    return _fit(model, t_frames, names, frame_of_obs, obs, clipped, used_frames.size)
+
+
+def _fit(
+    model: _Model,
+    t_frames: np.ndarray,
+    names: np.ndarray,
+    frame_of_obs: np.ndarray,
+    obs: np.ndarray,
+    clipped: np.ndarray,
+    n_frames: int,
+) -> LagEstimate | None:
+    delta = 0.0
+    side = np.broadcast_to(np.arange(4), obs.shape)
+    inlier = ~clipped
+    for _ in range(8):
+        b0 = model.boxes(t_frames, names, frame_of_obs, delta)
+        jac = (
+            model.boxes(t_frames, names, frame_of_obs, delta + _STEP_NS)
+            - model.boxes(t_frames, names, frame_of_obs, delta - _STEP_NS)
+        ) / (2 * _STEP_NS)  # px/ns
+        r = obs - b0
+        ok = np.isfinite(r) & np.isfinite(jac) & inlier & (np.abs(jac) * 1e9 > _MIN_SPEED_PX_PER_S)
+        if ok.sum() < 12:
+            return None
+        # unknowns: lag step (ns) and one bias per box side (px)
+        A = np.zeros((int(ok.sum()), 5))
+        A[:, 0] = jac[ok] * 1e6  # per ms
+        A[np.arange(A.shape[0]), 1 + side[ok]] = 1.0
+        sol, *_ = np.linalg.lstsq(A, r[ok], rcond=None)
+        res = r[ok] - A @ sol
+        scale = max(1.4826 * float(np.median(np.abs(res))), 0.3)
+        step_ns = float(sol[0]) * 1e6
+        delta += step_ns
+        full = np.full(obs.shape, np.inf)
+        full[ok] = np.abs(res)
+        inlier = ~clipped & (full < 3.0 * scale)
+        if abs(delta) > _MAX_LAG_NS:
+            return None
+        if abs(step_ns) < 5e4:
+            break
+    cov = np.linalg.pinv(A.T @ A) * scale**2
+    return LagEstimate(
+        offset_ms=-delta * 1e-6,
+        stderr_ms=float(np.sqrt(cov[0, 0])),
+        edges=int(ok.sum()),
+        frames=int(n_frames),
+        residual_px=scale,
+    )
+
+
+@check(
+    "T012",
+    group="time",
+    severity="error",
+    title="camera stamps agree with the robot's motion",
+    quantity="fitted lag of frame stamps behind the joint stamps",
+    unit="ms",
+    budget="time.sync_ms",
+    hint="the camera clock or offset_ns is off by this much; re-stamp the frames (the binding re-render "
+    "check confirms it per frame)",
+)
+def _camera_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    budget = ctx.budget("time.sync_ms")
+    if not ctx.has_robot():
+        return
+    for ep, name, st in ctx.streams(("camera",)):
+        try:
+            est = estimate_camera_lag(ctx, ep, name)
+        except InputReported:
+            continue
+        except RobogsError:
+            continue  # unreadable URDF, labels or camera: reported by their own checks
+        if est is None:
+            continue
+        significant = abs(est.offset_ms) > 3.0 * est.stderr_ms
+        if abs(est.offset_ms) > budget and significant:
+            when = "late" if est.offset_ms > 0 else "early"
+            yield chk.finding(
+                f"camera {st.get('camera')!r}: frame stamps are {abs(est.offset_ms):.3g} ± {est.stderr_ms:.2g} ms "
+                f"{when} relative to the robot's joint stamps (fit of {est.edges} link box edges in "
+                f"{est.frames} frames, residual {est.residual_px:.2g} px)",
+                value=est.offset_ms,
+                budget=budget,
+                file=st.get("frames"),
+                episode=ep.id,
+                stream=name,
+            )
