@@ -41,7 +41,9 @@ from robogs_format.render.projection import project  # noqa: E402
 RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
 
 
-def make_scene(n: int, width: int, seed: int = 0, kind: str = "3dgs", device: str = "cpu") -> tuple[Gaussians, float]:
+def make_scene(
+    n: int, width: int, seed: int = 0, kind: str = "3dgs", device: str = "cpu"
+) -> tuple[Gaussians, float]:
     """N random Gaussians in a 1 m cube centred 1.2 m ahead; returns them and the focal length."""
     f = 0.9 * width
     gen = torch.Generator().manual_seed(seed)
@@ -60,11 +62,21 @@ def make_scene(n: int, width: int, seed: int = 0, kind: str = "3dgs", device: st
         opacity_logits=torch.randn(n, generator=gen) * 1.5 + 1.0,
         sh=sh,
     )
-    return Gaussians(**{k: (v.to(device) if v is not None else None) for k, v in vars(g).items()}), f
+    return Gaussians(
+        **{k: (v.to(device) if v is not None else None) for k, v in vars(g).items()}
+    ), f
 
 
 def make_camera(width: int, height: int, f: float, device: str = "cpu") -> Camera:
-    return Camera(width=width, height=height, fx=f, fy=f, cx=width / 2, cy=height / 2, T_world_cam=torch.eye(4, device=device))
+    return Camera(
+        width=width,
+        height=height,
+        fx=f,
+        fy=f,
+        cx=width / 2,
+        cy=height / 2,
+        T_world_cam=torch.eye(4, device=device),
+    )
 
 
 def _sync(device: str) -> None:
@@ -95,10 +107,14 @@ def _rss_mb() -> float:
 def pair_count(g: Gaussians, cam: Camera, cfg: RenderConfig, tile: int) -> int:
     with torch.no_grad():
         p = project(g, cam, cfg)
-        return int(bin_tiles(p.bbox, p.depth, p.visible, cam.width, cam.height, tile).gaussian_ids.numel())
+        return int(
+            bin_tiles(p.bbox, p.depth, p.visible, cam.width, cam.height, tile).gaussian_ids.numel()
+        )
 
 
-def bench_train_step(repeats: int, device: str = "cpu", tile: int | None = None) -> dict[str, float]:
+def bench_train_step(
+    repeats: int, device: str = "cpu", tile: int | None = None
+) -> dict[str, float]:
     g, f = make_scene(20_000, 320, seed=1, device=device)
     cam = make_camera(320, 240, f, device)
     params = [g.means, g.quats, g.log_scales, g.opacity_logits, g.sh]
@@ -128,13 +144,22 @@ def bench_train_step(repeats: int, device: str = "cpu", tile: int | None = None)
         base = torch.cuda.memory_allocated()
     wall, med, cpu = timed(step, repeats, device)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 - rss0
-    res = {"wall": wall, "median": med, "cpu": cpu, "fwd": min(times["fwd"]), "bwd": min(times["bwd"]), "peak_mb": peak}
+    res = {
+        "wall": wall,
+        "median": med,
+        "cpu": cpu,
+        "fwd": min(times["fwd"]),
+        "bwd": min(times["bwd"]),
+        "peak_mb": peak,
+    }
     if device == "cuda":
         res["peak_mb"] = (torch.cuda.max_memory_allocated() - base) / 2**20
     return res
 
 
-def bench_forward(repeats: int, tile: int | None, device: str = "cpu", n: int = 100_000, size=(640, 480)) -> dict[str, float]:
+def bench_forward(
+    repeats: int, tile: int | None, device: str = "cpu", n: int = 100_000, size=(640, 480)
+) -> dict[str, float]:
     g, f = make_scene(n, size[0], seed=0, device=device)
     cam = make_camera(size[0], size[1], f, device)
     cfg = RenderConfig(tile_size=tile)
@@ -142,7 +167,13 @@ def bench_forward(repeats: int, tile: int | None, device: str = "cpu", n: int = 
         wall, med, cpu = timed(lambda: render(g, cam, config=cfg), repeats, device)
         out = render(g, cam, config=cfg)
     t = tile or (8 if device == "cpu" else 16)
-    return {"wall": wall, "median": med, "cpu": cpu, "pairs": pair_count(g, cam, cfg, t) * t * t, "coverage": float((out.alpha > 0.5).float().mean())}
+    return {
+        "wall": wall,
+        "median": med,
+        "cpu": cpu,
+        "pairs": pair_count(g, cam, cfg, t) * t * t,
+        "coverage": float((out.alpha > 0.5).float().mean()),
+    }
 
 
 def bench_oracle(repeats: int, device: str = "cpu") -> dict[str, float]:
@@ -162,7 +193,9 @@ def main() -> None:
     ap.add_argument("--no-append", action="store_true", help="do not append to bench/RESULTS.md")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, {platform.system()}"
+    machine = (
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, {platform.system()}"
+    )
     head = [
         f"machine: {machine}; torch {torch.__version__}; threads {torch.get_num_threads()}; load avg {os.getloadavg()[0]:.1f}",
         f"backends: {available_backends()}",
@@ -170,30 +203,91 @@ def main() -> None:
     rows: list[tuple[str, str, str, str]] = []  # figure, measured, baseline / target, ratio
 
     tr = bench_train_step(args.repeats)
-    rows.append(("fwd+bwd 20k @ 320x240 (tile 8)", f"{tr['wall']:.3f} s (fwd {tr['fwd']:.3f} + bwd {tr['bwd']:.3f}; median {tr['median']:.3f}; cpu {tr['cpu']:.3f})", "target 0.5 s", f"{tr['wall'] / 0.5:.2f}x target"))
-    rows.append(("peak RSS growth of that step", f"{tr['peak_mb']:.0f} MB", "target 1024 MB", f"{tr['peak_mb'] / 1024:.2f}x target"))
+    rows.append(
+        (
+            "fwd+bwd 20k @ 320x240 (tile 8)",
+            f"{tr['wall']:.3f} s (fwd {tr['fwd']:.3f} + bwd {tr['bwd']:.3f}; median {tr['median']:.3f}; cpu {tr['cpu']:.3f})",
+            "target 0.5 s",
+            f"{tr['wall'] / 0.5:.2f}x target",
+        )
+    )
+    rows.append(
+        (
+            "peak RSS growth of that step",
+            f"{tr['peak_mb']:.0f} MB",
+            "target 1024 MB",
+            f"{tr['peak_mb'] / 1024:.2f}x target",
+        )
+    )
     fw8 = bench_forward(args.repeats, 8)
     fw16 = bench_forward(args.repeats, 16)
     ns = fw8["wall"] / fw8["pairs"] * 1e9
-    rows.append(("forward 100k @ 640x480, tile 8 (default)", f"{fw8['wall']:.3f} s (median {fw8['median']:.3f}; cpu {fw8['cpu']:.3f}; {fw8['pairs'] / 1e6:.0f} M tile-pixel pairs binned, {ns:.1f} ns each; {fw8['coverage']:.0%} of pixels alpha > 0.5)", "target 0.6 s", f"{fw8['wall'] / 0.6:.2f}x target"))
-    rows.append(("forward 100k @ 640x480, tile 16", f"{fw16['wall']:.3f} s (median {fw16['median']:.3f})", f"tile 8: {fw8['wall']:.3f} s", f"tile 8 is {fw16['wall'] / fw8['wall']:.2f}x faster"))
+    rows.append(
+        (
+            "forward 100k @ 640x480, tile 8 (default)",
+            f"{fw8['wall']:.3f} s (median {fw8['median']:.3f}; cpu {fw8['cpu']:.3f}; {fw8['pairs'] / 1e6:.0f} M tile-pixel pairs binned, {ns:.1f} ns each; {fw8['coverage']:.0%} of pixels alpha > 0.5)",
+            "target 0.6 s",
+            f"{fw8['wall'] / 0.6:.2f}x target",
+        )
+    )
+    rows.append(
+        (
+            "forward 100k @ 640x480, tile 16",
+            f"{fw16['wall']:.3f} s (median {fw16['median']:.3f})",
+            f"tile 8: {fw8['wall']:.3f} s",
+            f"tile 8 is {fw16['wall'] / fw8['wall']:.2f}x faster",
+        )
+    )
     orc = bench_oracle(args.repeats)
-    rows.append(("tiled vs dense oracle, 2k @ 128x96", f"tiled {orc['tiled'] * 1e3:.1f} ms", f"dense {orc['dense']:.2f} s", f"{orc['ratio']:.0f}x faster (max |d rgb| {orc['max_diff']:.1e})"))
+    rows.append(
+        (
+            "tiled vs dense oracle, 2k @ 128x96",
+            f"tiled {orc['tiled'] * 1e3:.1f} ms",
+            f"dense {orc['dense']:.2f} s",
+            f"{orc['ratio']:.0f}x faster (max |d rgb| {orc['max_diff']:.1e})",
+        )
+    )
     if available_backends().get("numba") == "ok":
         g, f = make_scene(100_000, 640, seed=0)
         cam = make_camera(640, 480, f)
         nb = timed(lambda: render(g, cam, backend="numba"), args.repeats)
-        rows.append(("forward 100k @ 640x480, numba", f"{nb[0]:.3f} s", f"torch {fw8['wall']:.3f} s; stretch 0.15 s", f"{fw8['wall'] / nb[0]:.2f}x faster than torch"))
+        rows.append(
+            (
+                "forward 100k @ 640x480, numba",
+                f"{nb[0]:.3f} s",
+                f"torch {fw8['wall']:.3f} s; stretch 0.15 s",
+                f"{fw8['wall'] / nb[0]:.2f}x faster than torch",
+            )
+        )
     if torch.cuda.is_available():
         head.append(f"cuda: {torch.cuda.get_device_name()}")
         fc = bench_forward(args.repeats, None, "cuda")
-        rows.append(("CUDA forward 100k @ 640x480 (tile 16)", f"{fc['wall'] * 1e3:.1f} ms", f"CPU {fw8['wall']:.3f} s", f"{fw8['wall'] / fc['wall']:.0f}x faster"))
+        rows.append(
+            (
+                "CUDA forward 100k @ 640x480 (tile 16)",
+                f"{fc['wall'] * 1e3:.1f} ms",
+                f"CPU {fw8['wall']:.3f} s",
+                f"{fw8['wall'] / fc['wall']:.0f}x faster",
+            )
+        )
         tc = bench_train_step(args.repeats, "cuda")
-        rows.append(("CUDA fwd+bwd 20k @ 320x240", f"{tc['wall'] * 1e3:.1f} ms, peak {tc['peak_mb']:.0f} MB allocated", f"CPU {tr['wall']:.3f} s", f"{tr['wall'] / tc['wall']:.0f}x faster"))
+        rows.append(
+            (
+                "CUDA fwd+bwd 20k @ 320x240",
+                f"{tc['wall'] * 1e3:.1f} ms, peak {tc['peak_mb']:.0f} MB allocated",
+                f"CPU {tr['wall']:.3f} s",
+                f"{tr['wall'] / tc['wall']:.0f}x faster",
+            )
+        )
     else:
         head.append("cuda: not available (no CUDA figures)")
 
-    lines = head + [""] + ["| figure | measured | baseline / target | ratio |", "|---|---|---|---|"] + [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
+    lines = (
+        head
+        + [""]
+        + ["| figure | measured | baseline / target | ratio |", "|---|---|---|---|"]
+        + [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
+    )
     print("\n".join(lines))
     if not args.no_append:
         cmd = "python bench/render.py " + " ".join(sys.argv[1:])

@@ -5,6 +5,18 @@ Ingest converters are kept in a registry keyed by source format; see
 ``robogs.converters``) and :func:`converters.ingest.convert_path`.
 """
 
-from .registry import Converter, available_converters, detect_format, get_converter, register_converter
+from .registry import (
+    Converter,
+    available_converters,
+    detect_format,
+    get_converter,
+    register_converter,
+)
 
-__all__ = ["Converter", "available_converters", "detect_format", "get_converter", "register_converter"]
+__all__ = [
+    "Converter",
+    "available_converters",
+    "detect_format",
+    "get_converter",
+    "register_converter",
+]

@@ -22,36 +22,73 @@ _UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the options of ``robogs convert``."""
-    parser.add_argument("src", nargs="?", type=Path, help="bag, MCAP, ROS 2 bag folder, video, image folder, "
-                        "nerfstudio transforms.json or COLMAP model")
+    parser.add_argument(
+        "src",
+        nargs="?",
+        type=Path,
+        help="bag, MCAP, ROS 2 bag folder, video, image folder, "
+        "nerfstudio transforms.json or COLMAP model",
+    )
     parser.add_argument("out", nargs="?", type=Path, help="dataset folder to create")
-    parser.add_argument("--from", dest="fmt", metavar="FORMAT", help="source format (default: detected)")
-    parser.add_argument("--list-formats", action="store_true", help="list the source formats and exit")
+    parser.add_argument(
+        "--from", dest="fmt", metavar="FORMAT", help="source format (default: detected)"
+    )
+    parser.add_argument(
+        "--list-formats", action="store_true", help="list the source formats and exit"
+    )
     parser.add_argument("--force", action="store_true", help="replace an existing dataset at OUT")
     g = parser.add_argument_group("bags and MCAP")
     g.add_argument("--map", type=Path, metavar="YAML", help="topic -> role mapping (YAML)")
-    g.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",
-                   help="give TOPIC a role, e.g. object_pose:box=/mocap/box/pose or ignore=/rosout")
+    g.add_argument(
+        "--topic",
+        action="append",
+        default=[],
+        metavar="ROLE=TOPIC",
+        help="give TOPIC a role, e.g. object_pose:box=/mocap/box/pose or ignore=/rosout",
+    )
     g.add_argument("--world-frame", metavar="FRAME", help="TF frame that is the dataset world")
     g = parser.add_argument_group("robot")
     g.add_argument("--urdf", type=Path, help="robot URDF (copied with its meshes into robot/)")
-    g.add_argument("--package", action="append", default=[], metavar="NAME=FOLDER",
-                   help="folder of a package:// name used by the URDF's meshes")
+    g.add_argument(
+        "--package",
+        action="append",
+        default=[],
+        metavar="NAME=FOLDER",
+        help="folder of a package:// name used by the URDF's meshes",
+    )
     g = parser.add_argument_group("videos and image folders")
-    g.add_argument("--camera", type=Path, metavar="FILE", help="calibration (ROS/OpenCV YAML, ROS INI)")
-    g.add_argument("--camera-name", metavar="NAME", help="camera name (default: from the calibration or file)")
-    g.add_argument("--stamps", type=Path, metavar="CSV", help="frame stamps: CSV with frame_index,t_ns")
-    g.add_argument("--assume-fps", type=float, metavar="FPS",
-                   help="derive frame stamps as i/FPS (recorded as stamp_source 'derived')")
-    g.add_argument("--offset-ns", type=int, default=0, help="added to container/sidecar stamps (ns)")
-    g.add_argument("--joints", type=Path, metavar="CSV", help="joint log: t_ns, position.<joint> ...")
+    g.add_argument(
+        "--camera", type=Path, metavar="FILE", help="calibration (ROS/OpenCV YAML, ROS INI)"
+    )
+    g.add_argument(
+        "--camera-name", metavar="NAME", help="camera name (default: from the calibration or file)"
+    )
+    g.add_argument(
+        "--stamps", type=Path, metavar="CSV", help="frame stamps: CSV with frame_index,t_ns"
+    )
+    g.add_argument(
+        "--assume-fps",
+        type=float,
+        metavar="FPS",
+        help="derive frame stamps as i/FPS (recorded as stamp_source 'derived')",
+    )
+    g.add_argument(
+        "--offset-ns", type=int, default=0, help="added to container/sidecar stamps (ns)"
+    )
+    g.add_argument(
+        "--joints", type=Path, metavar="CSV", help="joint log: t_ns, position.<joint> ..."
+    )
     g.add_argument("--no-video", action="store_true", help="write frames tables only (no rgb.mp4)")
     g = parser.add_argument_group("static captures (nerfstudio, COLMAP)")
-    g.add_argument("--images", type=Path, metavar="DIR", help="image folder (default: next to the model)")
+    g.add_argument(
+        "--images", type=Path, metavar="DIR", help="image folder (default: next to the model)"
+    )
     g.add_argument("--world-up", choices=_UP_AXES, help="source world's up axis, rotated to +z")
     parser.add_argument("--episode", default="ep000", help="episode id (default ep000)")
     p = parser.add_mutually_exclusive_group()
-    p.add_argument("--progress", dest="progress", action="store_true", default=None, help="show progress")
+    p.add_argument(
+        "--progress", dest="progress", action="store_true", default=None, help="show progress"
+    )
     p.add_argument("--no-progress", dest="progress", action="store_false", help="hide progress")
     parser.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
 
@@ -72,8 +109,10 @@ def _summary(ds, out: Path) -> dict:
     return {
         "dataset": str(out),
         "converter": prov.get("converter"),
-        "episodes": [{"id": e.id, "start_ns": e.start_ns, "end_ns": e.end_ns, "streams": sorted(e.streams)}
-                     for e in eps],
+        "episodes": [
+            {"id": e.id, "start_ns": e.start_ns, "end_ns": e.end_ns, "streams": sorted(e.streams)}
+            for e in eps
+        ],
         "cameras": ds.camera_names,
         "robot": bool(ds.manifest.get("robot")),
         "dropped": prov.get("dropped", []),
@@ -119,7 +158,9 @@ def run(args: argparse.Namespace) -> int:
         world_up=args.world_up,
         video=not args.no_video,
         progress=progress,
-        command="robogs convert " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else None,
+        command="robogs convert " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+        if sys.argv[1:2] == ["convert"]
+        else None,
     )
     ds = convert_path(args.src, args.out, fmt=args.fmt, options=opts, force=args.force)
     summary = _summary(ds, args.out)
@@ -128,8 +169,10 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"wrote {args.out} ({summary['converter']})")
     for e in summary["episodes"]:
-        print(f"  episode {e['id']}: {', '.join(e['streams'])} "
-              f"({(e['end_ns'] - e['start_ns']) / 1e9:.3f} s)")
+        print(
+            f"  episode {e['id']}: {', '.join(e['streams'])} "
+            f"({(e['end_ns'] - e['start_ns']) / 1e9:.3f} s)"
+        )
     if summary["cameras"]:
         print(f"  cameras: {', '.join(summary['cameras'])}")
     print(f"  robot: {'yes' if summary['robot'] else 'no'}")
@@ -137,9 +180,13 @@ def run(args: argparse.Namespace) -> int:
         reasons = "; ".join(f"{k} x{v}" for k, v in d["reasons"].items())
         print(f"  not converted: {d['topic']} ({d['type']}) x{d['messages']}: {reasons}")
     for u in summary["undecodable"]:
-        print(f"  undecodable: {u['topic']} ({u['schema']}, {u['message_encoding']}) x{u['messages']}")
+        print(
+            f"  undecodable: {u['topic']} ({u['schema']}, {u['message_encoding']}) x{u['messages']}"
+        )
     for i in summary["issues"]:
-        print(f"  issue: {i['topic']}: {i['problem']} x{i['count']} (first stamps {i['stamps_ns'][:3]})")
+        print(
+            f"  issue: {i['topic']}: {i['problem']} x{i['count']} (first stamps {i['stamps_ns'][:3]})"
+        )
     for n in summary["notes"]:
         print(f"  note: {n}")
     return 0

@@ -41,7 +41,7 @@ from .cameras import CameraModel
 from .errors import FormatError, InputError
 from .frames import quat_to_matrix
 from .images import decode_label_png, iter_video_frames
-from .render import Camera, RenderConfig, RenderOutput, render
+from .render import Camera, Gaussians, RenderConfig, RenderOutput, render
 
 __all__ = [
     "RerenderOptions",
@@ -51,6 +51,8 @@ __all__ = [
     "SceneRerenderer",
     "FrameMetrics",
     "compare_frame",
+    "label_edges",
+    "pose_stream",
     "boundary_distance",
     "recorded_soft_labels",
     "AlignmentFit",
@@ -60,6 +62,7 @@ __all__ = [
     "read_video_frames",
     "foreground_psnr",
     "MAX_LOG_SCALE",
+    "BLUR_SCHEDULE_PX",
 ]
 
 #: Gaussians with a standard deviation above e^MAX_LOG_SCALE m (10 m) are absurd and not rendered
@@ -77,15 +80,15 @@ class RerenderOptions:
         backend: render backend name (see ``robogs_format.render.available_backends``).
         fit_frames: frames (those with the fastest image motion) used by the offset and
             camera-displacement fit.
-        offset_range_ms: the time-offset search covers ±this, ms.
+        max_offset_ms: the time-offset estimate is kept within ±this, ms.
         device: torch device of the Gaussians ("cpu", "cuda", ...).
     """
 
     stride: int = 1
     scale: float = 1.0
     backend: str = "torch"
-    fit_frames: int = 6
-    offset_range_ms: float = 150.0
+    fit_frames: int = 4
+    max_offset_ms: float = 200.0
     device: str = "cpu"
 
     def __post_init__(self) -> None:
@@ -249,49 +252,77 @@ class SceneRerenderer:
         """The render camera at ``t_ns``, optionally moved by ``shift_m`` [3] m in its own frame."""
         return _render_camera(self.model, _shifted(self.T_world_cam(t_ns), shift_m), self.scale)
 
-    def render(self, t_ns: int, *, offset_ns: float = 0.0, shift_m: np.ndarray | None = None) -> RenderOutput:
-        """Render the Gaussians posed at ``t_ns + offset_ns`` into the (shifted) camera."""
-        g = self.binding.pose(int(t_ns), time_offset_ns=int(round(offset_ns)))
-        v = self.valid
-        from .render import Gaussians
+    def render(self, t_ns: int, *, offset_ns: float = 0.0, shift_m: np.ndarray | None = None,
+               velocity: bool = False) -> RenderOutput:
+        """Render the Gaussians posed at ``t_ns + offset_ns`` into the (shifted) camera.
 
-        g = Gaussians(g.means[v], g.quats[v], g.log_scales[v], g.opacity_logits[v], g.sh[v], extra=self.extra)
+        With ``velocity`` two more extra channels carry each Gaussian's image velocity (px/ms,
+        render grid, pinhole projection), blended like the labels (divide by alpha to read them).
+        """
+        t = int(t_ns) + int(round(offset_ns))
+        g = self.binding.pose(t)
+        v = self.valid
+        extra = self.extra
+        if velocity:
+            vel = self._velocity(t, self.T_world_cam(t_ns), shift_m)
+            extra = torch.cat([extra, vel.to(dtype=extra.dtype, device=extra.device)], 1)
+        g = Gaussians(g.means[v], g.quats[v], g.log_scales[v], g.opacity_logits[v], g.sh[v], extra=extra)
         return render(g, self.camera(t_ns, shift_m), config=self.config, backend=self.backend)
 
     def probabilities(self, out: RenderOutput) -> np.ndarray:
         """[H, W, C+1] float32 soft labels: channel 0 = 1 - sum of the label channels."""
-        e = out.extra.detach().to("cpu", torch.float32).numpy()
+        e = out.extra[..., : self.channels.count].detach().to("cpu", torch.float32).numpy()
         none = np.clip(1.0 - e.sum(-1, keepdims=True), 0.0, 1.0)
         return np.concatenate([none, e], -1)
 
-    def image_motion_px(self, t_ns: Sequence[int], *, dt_ns: int = 10_000_000, sample: int = 2048) -> np.ndarray:
-        """[F] mean image speed (px per ``2 dt_ns``, render grid) of a fixed subsample of Gaussians.
+    def _project(self, x_world: torch.Tensor, T_world_cam: np.ndarray) -> torch.Tensor:
+        """[M, 2] pinhole pixel coordinates (render grid) of world points [M, 3] (float64)."""
+        T = torch.as_tensor(T_world_cam, dtype=torch.float64, device=x_world.device)
+        xc = (x_world - T[:3, 3]) @ T[:3, :3]
+        z = torch.where(xc[:, 2] > 1e-3, xc[:, 2], torch.full_like(xc[:, 2], float("nan")))
+        return torch.stack([self.fx * xc[:, 0] / z + self.cx, self.fy * xc[:, 1] / z + self.cy], -1)
 
-        Used to pick the frames that constrain the time offset.
+    def _moved(self, t_ns: int, idx: torch.Tensor | None = None) -> torch.Tensor:
+        """World centres [M, 3] (float64) of the valid Gaussians (or ``idx`` of them) at ``t_ns``."""
+        b = self.binding
+        sel = torch.nonzero(self.valid)[:, 0] if idx is None else idx
+        tid = b.target_index[sel]
+        M = b.target_motion(int(t_ns)).to(tid.device)[tid.clamp(min=0)]
+        x0 = b.rest.means[sel].double()
+        moved = (M[:, :3, :3] @ x0[..., None])[..., 0] + M[:, :3, 3]
+        return torch.where((tid >= 0)[:, None], moved, x0)
+
+    def _velocity(self, t_ns: int, T_world_cam: np.ndarray, shift_m: np.ndarray | None,
+                  dt_ns: int = 2_000_000) -> torch.Tensor:
+        """[N_valid, 2] image velocity of every rendered Gaussian, px/ms (0 where not projectable)."""
+        T = _shifted(T_world_cam, shift_m)
+        uv0 = self._project(self._moved(t_ns - dt_ns), T)
+        uv1 = self._project(self._moved(t_ns + dt_ns), T)
+        vel = (uv1 - uv0) / (2 * dt_ns * 1e-6)
+        return torch.nan_to_num(vel, nan=0.0, posinf=0.0, neginf=0.0)
+
+    def image_motion_px(self, t_ns: Sequence[int], *, dt_ns: int = 10_000_000, sample: int = 2048) -> np.ndarray:
+        """[F] mean image displacement over ``2 dt_ns`` (px, render grid) of moving Gaussians.
+
+        A fixed subsample of the Gaussians bound to links and objects is projected at
+        ``t - dt_ns`` and ``t + dt_ns``; used to pick the frames that constrain the time offset.
         """
         b = self.binding
-        idx = torch.nonzero(self.valid & (b.target_index >= 0))[:, 0]
+        kinds = torch.as_tensor([tg.kind != "static" for tg in b.targets] + [False], device=b.target_index.device)
+        moving = self.valid & kinds[torch.where(b.target_index >= 0, b.target_index, len(b.targets))]
+        idx = torch.nonzero(moving)[:, 0]
         if idx.numel() == 0:
             return np.zeros(len(t_ns))
         gen = torch.Generator().manual_seed(0)
         idx = idx[torch.randperm(idx.numel(), generator=gen)[:sample].to(idx.device)]
-        x0 = b.rest.means[idx].double().cpu()
-        tid = b.target_index[idx].cpu()
         out = np.zeros(len(t_ns))
         for i, t in enumerate(t_ns):
             T = self.T_world_cam(int(t))
-            R_cw, t_cw = T[:3, :3].T, -T[:3, :3].T @ T[:3, 3]
-            uv = []
-            for tt in (int(t) - dt_ns, int(t) + dt_ns):
-                M = b.target_motion(tt)[tid]
-                xw = (M[:, :3, :3] @ x0[..., None])[..., 0] + M[:, :3, 3]
-                xc = xw.numpy() @ R_cw.T + t_cw
-                z = np.where(xc[:, 2] > 1e-3, xc[:, 2], np.nan)
-                uv.append(np.stack([self.fx * xc[:, 0] / z, self.fy * xc[:, 1] / z], -1))
-            d = np.linalg.norm(uv[1] - uv[0], axis=1)
-            out[i] = float(np.nanmean(d)) if np.isfinite(d).any() else 0.0
+            d = self._project(self._moved(int(t) + dt_ns, idx), T) - self._project(self._moved(int(t) - dt_ns, idx), T)
+            d = d.norm(dim=1)
+            d = d[torch.isfinite(d)]
+            out[i] = float(d.mean()) if d.numel() else 0.0
         return out
-
 
 # --------------------------------------------------------------------------------- comparison
 
@@ -301,10 +332,10 @@ class FrameMetrics:
     """Per-label measurements of one frame, arrays of length C (channel c+1).
 
     Attributes:
-        inter: intersection of recorded and re-rendered masks, px.
-        union: union, px.
-        recorded: recorded mask size, px.
-        rendered: re-rendered mask size, px.
+        inter: intersection of recorded and re-rendered masks outside the void band, px.
+        union: union outside the void band, px.
+        recorded: recorded mask size outside the void band, px.
+        rendered: re-rendered mask size outside the void band, px.
         boundary_sum: sum of boundary-to-boundary distances (both directions), px.
         boundary_count: number of boundary pixels summed (both directions).
         depth_m: median rendered depth of the re-rendered mask, m (NaN if empty).
@@ -362,8 +393,25 @@ def _upsample(p: np.ndarray, width: int, height: int) -> np.ndarray:
     return cv2.resize(p, (width, height), interpolation=cv2.INTER_LINEAR).reshape(height, width, p.shape[-1])
 
 
+def label_edges(labels: np.ndarray) -> np.ndarray:
+    """[H, W] bool: pixels with a 4-neighbour of another label (both sides of every label edge)."""
+    edge = np.zeros(labels.shape, bool)
+    dv = labels[1:] != labels[:-1]
+    dh = labels[:, 1:] != labels[:, :-1]
+    edge[1:] |= dv
+    edge[:-1] |= dv
+    edge[:, 1:] |= dh
+    edge[:, :-1] |= dh
+    return edge
+
+
 def compare_frame(prob: np.ndarray, depth: np.ndarray, recorded_channels: np.ndarray, num_channels: int) -> FrameMetrics:
     """Compare a re-render with a recorded label image.
+
+    Intersection and union leave out a void band of one pixel on both sides of every recorded
+    label edge (as PASCAL VOC's void band, Everingham et al. 2010): sub-pixel boundary placement
+    is measured by the boundary distance, so IoU measures gross errors (wrong, missing or extra
+    labels) and stays meaningful for thin links.
 
     Args:
         prob: [h, w, C+1] soft labels on the render grid.
@@ -379,16 +427,19 @@ def compare_frame(prob: np.ndarray, depth: np.ndarray, recorded_channels: np.nda
     low = prob.argmax(-1)
     rendered = _upsample(prob, W, H).argmax(-1)
     rec = recorded_channels
-    conf = np.bincount((rec * (C + 1) + rendered).ravel(), minlength=(C + 1) ** 2).reshape(C + 1, C + 1)
+    keep = ~label_edges(rec)
+    pair = (rec * (C + 1) + rendered)[keep]
+    conf = np.bincount(pair, minlength=(C + 1) ** 2).reshape(C + 1, C + 1)
     inter = np.diag(conf)[1:].astype(np.int64)
     n_rec = conf.sum(1)[1:].astype(np.int64)
     n_ren = conf.sum(0)[1:].astype(np.int64)
     bsum = np.zeros(C)
     bcnt = np.zeros(C, np.int64)
     dep = np.full(C, np.nan)
-    for c in range(1, C + 1):
-        if n_rec[c - 1] == 0 and n_ren[c - 1] == 0:
-            continue
+    present = np.zeros(C + 1, bool)
+    present[np.unique(rec)] = True
+    present[np.unique(rendered)] = True
+    for c in np.flatnonzero(present[1:]) + 1:
         bsum[c - 1], bcnt[c - 1] = boundary_distance(rec == c, rendered == c)
         z = depth[(low == c) & (depth > 0)]
         if z.size:
@@ -438,6 +489,7 @@ class AlignmentFit:
         frames: frame stamps used, ns.
         motion_px: image speed of each fit frame (px per 20 ms, render grid).
         offset_observable: False when the fit frames show too little motion.
+        dilation_px: the common growth of the re-rendered labels over the recorded ones, px.
     """
 
     offset_ms: float
@@ -447,6 +499,7 @@ class AlignmentFit:
     frames: list[int]
     motion_px: list[float]
     offset_observable: bool
+    dilation_px: float = 0.0
 
     @property
     def shift_2d_mm(self) -> float:
@@ -475,109 +528,126 @@ def _depth_filled(depth: np.ndarray) -> np.ndarray:
     return np.where(depth > 0, depth, grown)
 
 
+#: Gauss–Newton blur schedule (px on the render grid): coarse to fine widens the basin of
+#: convergence to offsets that move edges by several pixels (Bouguet 2001, pyramidal Lucas–Kanade)
+BLUR_SCHEDULE_PX: tuple[float, ...] = (4.0, 2.0, 1.0, 0.0, 0.0)
+
+
+def _blur(x: np.ndarray, sigma: float) -> np.ndarray:
+    if sigma <= 0:
+        return x
+    return cv2.GaussianBlur(x, (0, 0), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REFLECT)
+
+
+def _growth_into_background(gu: np.ndarray, gv: np.ndarray) -> np.ndarray:
+    """[h, w, C+1] change of the soft labels when every label grows by 1 px into the background.
+
+    Label c gains ``relu(-grad p_0 . n_c)`` (the part of its edge that faces channel 0,
+    "nothing", with ``n_c`` its unit gradient) and channel 0 loses the sum. Edges between two
+    labels are left alone: which one grows there depends on the occlusion order.
+    """
+    g0u, g0v = gu[..., :1], gv[..., :1]
+    norm = np.hypot(gu[..., 1:], gv[..., 1:])
+    face = -(g0u * gu[..., 1:] + g0v * gv[..., 1:]) / np.maximum(norm, 1e-12)
+    gain = np.where(norm > 1e-9, np.maximum(face, 0.0), 0.0)
+    return np.concatenate([-gain.sum(-1, keepdims=True), gain], -1)
+
+
 def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[np.ndarray], *,
-                  offset_range_ms: float = 150.0, fit_offset: bool = True, iterations: int = 5,
-                  motion_px: Sequence[float] | None = None) -> AlignmentFit:
+                  fit_offset: bool = True, fit_depth: bool = False, schedule: Sequence[float] = BLUR_SCHEDULE_PX,
+                  max_offset_ms: float = 200.0, motion_px: Sequence[float] | None = None) -> AlignmentFit:
     """Estimate the camera time offset and a camera translation from label disagreement.
 
     Minimises ``sum over frames, pixels, channels of (p(t + offset; shift) - y)^2`` where ``p``
-    are the rendered soft labels and ``y`` the recorded ones (:func:`recorded_soft_labels`).
-    The offset is first located on a grid of ``offset_range_ms / 6`` steps (renders, with a
-    parabola through the best three), then offset and shift are refined jointly by Gauss–Newton:
-    the offset column by central differences of renders (±3 ms), the shift columns by the
-    optical flow a camera translation causes (``du = -fx dX / Z + (u - cx) dZ / Z``, likewise for
-    ``v``), chained with the image gradient of ``p``.
+    are the rendered soft labels and ``y`` the recorded ones (:func:`recorded_soft_labels`), by
+    Gauss–Newton with one render per frame and iteration, coarse to fine (both images blurred
+    by ``schedule[i]`` px at iteration i). The Jacobian chains the image gradient of ``p`` with
+    the optical flow of each parameter: for the offset, the rendered image velocity of the
+    Gaussians; for a camera translation (dX, dY, dZ) in its own frame, the rigid-motion flow
+    ``du = -fx dX / Z + (u - cx) dZ / Z`` (likewise ``v``) at the rendered depth Z
+    (Longuet-Higgins & Prazdny 1980). A nuisance parameter grows every label into the background
+    by the same amount (:func:`_growth_into_background`): it absorbs the silhouette growth of
+    splats over their mesh, which one-sided edges (a table cut by the image border) would
+    otherwise read as a camera translation.
 
     Args:
         rr: the re-renderer.
         stamps: frame stamps, ns.
         targets: per frame, [h, w, C+1] recorded soft labels on the render grid.
-        offset_range_ms: search interval of the offset, ±ms.
-        fit_offset: False to keep the offset at 0 (static scenes).
-        iterations: Gauss–Newton iterations.
-        motion_px: image speed of each frame (reported only).
+        fit_offset: False to keep the offset at 0.
+        fit_depth: also fit the translation along the optical axis (weakly observable; it
+            trades off against the label growth).
+        schedule: blur (px) of each iteration; its length is the number of iterations.
+        max_offset_ms: offsets are kept within ±this.
+        motion_px: image speed of each frame (reported; all zero makes the offset unobservable).
 
     Returns:
         The fit.
     """
     stamps = [int(t) for t in stamps]
-    ys = list(targets)
-
-    def probs(off_ms: float, shift_mm: np.ndarray) -> list[tuple[np.ndarray, RenderOutput]]:
-        out = []
-        for t in stamps:
-            o = rr.render(t, offset_ns=off_ms * 1e6, shift_m=shift_mm * 1e-3)
-            out.append((rr.probabilities(o), o))
-        return out
-
-    def cost(ps: list[tuple[np.ndarray, RenderOutput]]) -> float:
-        return float(sum(np.square(p - y).sum() for (p, _), y in zip(ps, ys, strict=True)))
-
-    shift = np.zeros(3)
-    base = probs(0.0, shift)
-    cost0 = cost(base)
-    offset = 0.0
-    observable = fit_offset
-    if fit_offset:
-        step = offset_range_ms / 6.0
-        grid = np.arange(-6, 7) * step
-        costs = np.array([cost0 if g == 0 else cost(probs(float(g), shift)) for g in grid])
-        i = int(np.argmin(costs))
-        offset = float(grid[i])
-        if 0 < i < len(grid) - 1:
-            offset += step * _parabola_vertex(costs[i - 1], costs[i], costs[i + 1])
-        if np.ptp(costs) <= 1e-6 * max(costs.max(), 1.0):
-            observable, offset = False, 0.0
-    h_ms = 3.0
+    ys = [np.asarray(y, np.float32) for y in targets]
+    motion = np.asarray(motion_px if motion_px is not None else np.ones(len(stamps)), np.float64)
+    observable = bool(fit_offset and motion.max(initial=0.0) > 1e-6)
     H, W = rr.height, rr.width
     u = (np.arange(W) + 0.5 - rr.cx)[None, :, None]
     v = (np.arange(H) + 0.5 - rr.cy)[:, None, None]
-    for _ in range(iterations):
-        cur = probs(offset, shift)
-        A = np.zeros((4, 4))
-        b = np.zeros(4)
-        plus = probs(offset + h_ms, shift) if observable else None
-        minus = probs(offset - h_ms, shift) if observable else None
-        for f, ((p, o), y) in enumerate(zip(cur, ys, strict=True)):
-            r = (p - y).astype(np.float64)
-            gv, gu = np.gradient(p.astype(np.float64), axis=(0, 1))
+    theta = np.zeros(5)  # offset ms, shift x y z mm, dilation px
+    cost0 = float("nan")
+    history: list[tuple[float, np.ndarray]] = []
+    for it, sigma in enumerate([*schedule, 0.0]):
+        last = it == len(schedule)
+        A = np.zeros((5, 5))
+        b = np.zeros(5)
+        sharp = 0.0
+        for f, t in enumerate(stamps):
+            o = rr.render(t, offset_ns=theta[0] * 1e6, shift_m=theta[1:4] * 1e-3, velocity=observable and not last)
+            p0 = rr.probabilities(o)
+            sharp += float(np.square(p0 - ys[f]).sum())
+            if last:
+                continue
+            p = _blur(p0, sigma).astype(np.float64)
+            r = p - _blur(ys[f], sigma)
+            gv, gu = np.gradient(p, axis=(0, 1))
             z = _depth_filled(o.depth_expected.detach().cpu().numpy().astype(np.float64))
-            inv_z = np.where(z > 0, 1.0 / np.maximum(z, 1e-6), 0.0)[..., None]
-            cols = [
-                np.zeros_like(r) if plus is None else (plus[f][0] - minus[f][0]) / (2 * h_ms),
-                rr.fx * inv_z * gu * 1e-3,
-                rr.fy * inv_z * gv * 1e-3,
-                -(u * gu + v * gv) * inv_z * 1e-3,
-            ]
+            inv_z = np.where(z > 0, 1.0 / np.maximum(z, 1e-6), 0.0)
+            inv_z = _blur(inv_z.astype(np.float32), sigma).astype(np.float64)[..., None]
+            if observable:
+                alpha = o.alpha.detach().cpu().numpy().astype(np.float64)
+                vel = o.extra[..., rr.channels.count:].detach().cpu().numpy().astype(np.float64)
+                vel = np.where(alpha[..., None] > 1e-3, vel / np.maximum(alpha, 1e-3)[..., None], 0.0)
+                vel = _blur(vel.astype(np.float32), sigma).astype(np.float64)
+                j_off = -(gu * vel[..., :1] + gv * vel[..., 1:2])
+            else:
+                j_off = np.zeros_like(r)
+            grow = _growth_into_background(gu, gv)
+            cols = [j_off, rr.fx * inv_z * gu * 1e-3, rr.fy * inv_z * gv * 1e-3,
+                    -(u * gu + v * gv) * inv_z * 1e-3 if fit_depth else np.zeros_like(r), grow]
             J = np.stack([c.ravel() for c in cols], 1)
             A += J.T @ J
             b += J.T @ r.ravel()
-        if not observable:
-            A[0, :] = A[:, 0] = 0.0
-            A[0, 0] = 1.0
-            b[0] = 0.0
-        damp = np.diag(np.diag(A)) * 1e-3 + np.eye(4) * 1e-9 * max(np.trace(A), 1.0)
+        if it == 0:
+            cost0 = sharp
+        history.append((sharp, theta.copy()))
+        if last:
+            break
+        for k in ([0] if not observable else []) + ([3] if not fit_depth else []):
+            A[k, :] = A[:, k] = 0.0
+            A[k, k] = 1.0
+            b[k] = 0.0
+        damp = np.diag(np.diag(A)) * 1e-3 + np.eye(5) * 1e-12 * max(np.trace(A), 1.0)
         try:
-            step_x = -np.linalg.solve(A + damp, b)
+            dx = -np.linalg.solve(A + damp, b)
         except np.linalg.LinAlgError:
             break
-        step_x[0] = float(np.clip(step_x[0], -10.0, 10.0))
-        step_x[1:] = np.clip(step_x[1:], -5.0, 5.0)
-        offset += float(step_x[0])
-        shift = shift + step_x[1:]
-        if abs(step_x[0]) < 0.02 and np.abs(step_x[1:]).max() < 0.02:
-            break
-    final = cost(probs(offset, shift))
-    return AlignmentFit(offset if observable else float("nan"), shift, cost0, final, stamps,
-                        [float(m) for m in (motion_px or [])], observable)
-
-
-def _parabola_vertex(c_minus: float, c0: float, c_plus: float) -> float:
-    """Vertex of the parabola through (-1, c_minus), (0, c0), (1, c_plus), clamped to [-1, 1]."""
-    den = c_minus - 2.0 * c0 + c_plus
-    if den <= 0:
-        return 0.0
-    return float(np.clip(0.5 * (c_minus - c_plus) / den, -1.0, 1.0))
+        dx[0] = float(np.clip(dx[0], -50.0, 50.0))
+        dx[1:4] = np.clip(dx[1:4], -10.0, 10.0)
+        theta = theta + dx
+        theta[0] = float(np.clip(theta[0], -max_offset_ms, max_offset_ms))
+    # the last iterations are unblurred: keep the best of them
+    fine = [h for h, s in zip(history, [*schedule, 0.0], strict=False) if s == 0.0] or history
+    final, theta = min(fine, key=lambda h: h[0])
+    return AlignmentFit(float(theta[0]) if observable else float("nan"), theta[1:4].copy(), cost0, final,
+                        stamps, [float(m) for m in motion], observable, float(theta[4]))
 
 
 # ---------------------------------------------------------------------------------- reading

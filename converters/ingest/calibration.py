@@ -21,7 +21,6 @@ or topic and stamp — it is never padded or truncated.
 
 from __future__ import annotations
 
-import configparser
 import math
 import re
 from collections.abc import Sequence
@@ -70,22 +69,34 @@ def check_distortion(
     if model.strip() == "":
         m = {0: "none", 5: "plumb_bob", 8: "rational_polynomial"}.get(len(d), "")
         if not m:
-            raise InputError(f"{len(d)} distortion coefficients and no distortion model", path=path,
-                             where=where, hint="name the model (plumb_bob 5, rational_polynomial 8, equidistant 4)")
+            raise InputError(
+                f"{len(d)} distortion coefficients and no distortion model",
+                path=path,
+                where=where,
+                hint="name the model (plumb_bob 5, rational_polynomial 8, equidistant 4)",
+            )
     if m == "none" and len(d) == 0:
         return "none", ()
     if m == "none" and not any(d):
         return "none", ()
     if m not in DISTORTION_COEFFS:
-        raise InputError(f"unsupported distortion model {model!r}", path=path, where=where,
-                         hint="supported: plumb_bob, rational_polynomial, equidistant")
+        raise InputError(
+            f"unsupported distortion model {model!r}",
+            path=path,
+            where=where,
+            hint="supported: plumb_bob, rational_polynomial, equidistant",
+        )
     want = DISTORTION_COEFFS[m]
     if len(d) not in want:
         hint = "re-run the calibration or fix the file"
         if m == "plumb_bob" and len(d) == 4:
             hint = "a 4-coefficient fisheye calibration is 'equidistant'; plumb_bob needs k1 k2 p1 p2 k3"
-        raise InputError(f"distortion model {m} needs {want[0]} coefficients, got {len(d)}", path=path,
-                         where=where, hint=hint)
+        raise InputError(
+            f"distortion model {m} needs {want[0]} coefficients, got {len(d)}",
+            path=path,
+            where=where,
+            hint=hint,
+        )
     if not all(math.isfinite(v) for v in d):
         raise InputError("non-finite distortion coefficient", path=path, where=where)
     return m, d
@@ -110,20 +121,43 @@ def camera_from_matrices(
     """
     k = np.asarray(list(K), dtype=np.float64).reshape(-1)
     if k.size != 9 or not np.all(np.isfinite(k)):
-        raise InputError(f"camera matrix must have 9 finite values, has {k.size}", path=path, where=where)
+        raise InputError(
+            f"camera matrix must have 9 finite values, has {k.size}", path=path, where=where
+        )
     fx, skew, cx, _, fy, cy = k[0], k[1], k[2], k[3], k[4], k[5]
     if fx <= 0 or fy <= 0:
-        raise InputError("camera is not calibrated (fx or fy is 0)", path=path, where=where,
-                         hint="calibrate the camera, or pass a calibration file")
-    if abs(skew) > 1e-9 * fx or abs(k[3]) > 1e-12 or k[6] != 0 or k[7] != 0 or abs(k[8] - 1.0) > 1e-12:
-        raise InputError("camera matrix is not [[fx,0,cx],[0,fy,cy],[0,0,1]] (skew is not supported)",
-                         path=path, where=where)
+        raise InputError(
+            "camera is not calibrated (fx or fy is 0)",
+            path=path,
+            where=where,
+            hint="calibrate the camera, or pass a calibration file",
+        )
+    if (
+        abs(skew) > 1e-9 * fx
+        or abs(k[3]) > 1e-12
+        or k[6] != 0
+        or k[7] != 0
+        or abs(k[8] - 1.0) > 1e-12
+    ):
+        raise InputError(
+            "camera matrix is not [[fx,0,cx],[0,fy,cy],[0,0,1]] (skew is not supported)",
+            path=path,
+            where=where,
+        )
     if not (0 < int(width) <= 65536 and 0 < int(height) <= 65536):
         raise InputError(f"invalid image size {width}x{height}", path=path, where=where)
     m, d = check_distortion(model, D, path=path, where=where)
-    return CameraModel(name=name, width=int(width), height=int(height), fx=float(fx), fy=float(fy),
-                       cx=float(cx) + pixel_shift, cy=float(cy) + pixel_shift, distortion_model=m,
-                       distortion=d)
+    return CameraModel(
+        name=name,
+        width=int(width),
+        height=int(height),
+        fx=float(fx),
+        fy=float(fy),
+        cx=float(cx) + pixel_shift,
+        cy=float(cy) + pixel_shift,
+        distortion_model=m,
+        distortion=d,
+    )
 
 
 def _field(msg: Any, *names: str) -> Any:
@@ -133,7 +167,9 @@ def _field(msg: Any, *names: str) -> Any:
     raise AttributeError(names[0])
 
 
-def camera_from_info_msg(msg: Any, *, name: str, topic: str, t_ns: int, rectified: bool = False) -> CameraModel:
+def camera_from_info_msg(
+    msg: Any, *, name: str, topic: str, t_ns: int, rectified: bool = False
+) -> CameraModel:
     """A camera from a ``sensor_msgs/CameraInfo`` message (ROS 1 or ROS 2 field names).
 
     Region of interest and binning are applied (ROI first, then binning, as in
@@ -154,14 +190,20 @@ def camera_from_info_msg(msg: Any, *, name: str, topic: str, t_ns: int, rectifie
             K = np.array([P[0], P[1], P[2], P[4], P[5], P[6], P[8], P[9], P[10]])
             D, model = [], "none"
     roi = getattr(msg, "roi", None)
-    if roi is not None and int(roi.width) > 0 and int(roi.height) > 0 and (
-        int(roi.width) != width or int(roi.height) != height
+    if (
+        roi is not None
+        and int(roi.width) > 0
+        and int(roi.height) > 0
+        and (int(roi.width) != width or int(roi.height) != height)
     ):
         K = K.copy()
         K[2] -= int(roi.x_offset)
         K[5] -= int(roi.y_offset)
         width, height = int(roi.width), int(roi.height)
-    bx, by = max(int(getattr(msg, "binning_x", 0) or 1), 1), max(int(getattr(msg, "binning_y", 0) or 1), 1)
+    bx, by = (
+        max(int(getattr(msg, "binning_x", 0) or 1), 1),
+        max(int(getattr(msg, "binning_y", 0) or 1), 1),
+    )
     if bx > 1 or by > 1:
         K = K.copy()
         K[0] /= bx
@@ -201,8 +243,11 @@ def _matrix(doc: dict[str, Any], key: str, path: Path) -> list[float]:
         raise InputError(f"{key!r} holds non-numbers", path=path, where=key) from None
     if isinstance(node, dict) and "rows" in node and "cols" in node:
         if int(node["rows"]) * int(node["cols"]) != len(vals):
-            raise InputError(f"{key!r} declares {node['rows']}x{node['cols']} but holds {len(vals)} values",
-                             path=path, where=key)
+            raise InputError(
+                f"{key!r} declares {node['rows']}x{node['cols']} but holds {len(vals)} values",
+                path=path,
+                where=key,
+            )
     return vals
 
 
@@ -224,7 +269,9 @@ def _read_yaml(path: Path, text: str, name: str | None) -> CameraModel:
     try:
         doc = yaml.load(text, Loader=_OpenCVLoader)  # noqa: S506 - SafeLoader subclass
     except yaml.YAMLError as exc:
-        raise InputError(f"calibration is not valid YAML ({str(exc).splitlines()[0]})", path=path) from None
+        raise InputError(
+            f"calibration is not valid YAML ({str(exc).splitlines()[0]})", path=path
+        ) from None
     if not isinstance(doc, dict):
         raise InputError("calibration YAML must be a mapping", path=path)
     try:
@@ -233,7 +280,9 @@ def _read_yaml(path: Path, text: str, name: str | None) -> CameraModel:
         raise InputError("calibration has no image_width/image_height", path=path) from None
     K = _matrix(doc, "camera_matrix", path)
     D = _matrix(doc, "distortion_coefficients", path) if "distortion_coefficients" in doc else []
-    model = str(doc.get("distortion_model", "")) if not opencv else str(doc.get("distortion_model", ""))
+    model = (
+        str(doc.get("distortion_model", "")) if not opencv else str(doc.get("distortion_model", ""))
+    )
     cam = name or str(doc.get("camera_name") or path.stem)
     from .roles import safe_name
 
@@ -280,11 +329,14 @@ def _read_ini(path: Path, text: str, name: str | None) -> CameraModel:
         width, height = int(img["width"][0]), int(img["height"][0])
         K = cam["camera matrix"]
     except (KeyError, IndexError):
-        raise InputError("INI calibration lacks width, height or camera matrix", path=path) from None
+        raise InputError(
+            "INI calibration lacks width, height or camera matrix", path=path
+        ) from None
     from .roles import safe_name
 
-    return camera_from_matrices(safe_name(name or cam_section), width, height, K, cam.get("distortion", []), "",
-                                path=path)
+    return camera_from_matrices(
+        safe_name(name or cam_section), width, height, K, cam.get("distortion", []), "", path=path
+    )
 
 
 def read_calibration(path: str | Path, *, name: str | None = None) -> CameraModel:

@@ -26,7 +26,14 @@ from .tf_tree import matrix_to_quat_np
 
 __all__ = ["View", "write_static_capture", "world_up_rotation", "UP_AXES"]
 
-UP_AXES = {"+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0), "-y": (0, -1, 0), "+z": (0, 0, 1), "-z": (0, 0, -1)}
+UP_AXES = {
+    "+x": (1, 0, 0),
+    "-x": (-1, 0, 0),
+    "+y": (0, 1, 0),
+    "-y": (0, -1, 0),
+    "+z": (0, 0, 1),
+    "-z": (0, 0, -1),
+}
 
 
 @dataclass
@@ -53,7 +60,9 @@ def world_up_rotation(up: str) -> np.ndarray:
     :data:`robogs_format.frames.T_ZUP_YUP`.
     """
     if up not in UP_AXES:
-        raise InputError(f"unknown up axis {up!r}", where="--world-up", hint=f"one of {', '.join(UP_AXES)}")
+        raise InputError(
+            f"unknown up axis {up!r}", where="--world-up", hint=f"one of {', '.join(UP_AXES)}"
+        )
     u = np.asarray(UP_AXES[up], dtype=np.float64)
     z = np.array([0.0, 0.0, 1.0])
     R = np.eye(3)
@@ -77,8 +86,12 @@ def _intrinsics_key(c: CameraModel) -> tuple:
 
 def _read_rgb(path: Path, view: str) -> np.ndarray:
     if not path.is_file():
-        raise InputError("image file not found", path=path, where=f"view {view}",
-                         hint="pass --images with the folder that holds the capture's images")
+        raise InputError(
+            "image file not found",
+            path=path,
+            where=f"view {view}",
+            hint="pass --images with the folder that holds the capture's images",
+        )
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
         raise InputError("image file cannot be decoded", path=path, where=f"view {view}")
@@ -101,8 +114,11 @@ def write_static_capture(ctx: IngestContext, views: list[View], *, source: str) 
         name = v.camera.name
         k = _intrinsics_key(v.camera)
         if name in keys and keys[name] != k:
-            raise InputError(f"views named camera {name!r} have different intrinsics", path=source,
-                             where=f"view {v.name}")
+            raise InputError(
+                f"views named camera {name!r} have different intrinsics",
+                path=source,
+                where=f"view {v.name}",
+            )
         keys[name] = k
         groups.setdefault(name, []).append((i, v))
     ep = ctx.episode_dir()
@@ -114,8 +130,14 @@ def write_static_capture(ctx: IngestContext, views: list[View], *, source: str) 
         cam = items[0][1].camera
         w.set_camera(replace(cam, T_world_cam=None, extrinsics="time_varying"))
         base = f"{ep}/cameras/{cam_name}"
-        sink = CameraSink(w.path(f"{base}/frames.parquet"), w.path(f"{base}/rgb.mp4"), topic=source,
-                          provenance=ctx.provenance, video=ctx.options.video, fps_hint=1.0)
+        sink = CameraSink(
+            w.path(f"{base}/frames.parquet"),
+            w.path(f"{base}/rgb.mp4"),
+            topic=source,
+            provenance=ctx.provenance,
+            video=ctx.options.video,
+            fps_hint=1.0,
+        )
         rows: list[list[float]] = []
         stamps: list[int] = []
         for i, v in items:
@@ -123,8 +145,12 @@ def write_static_capture(ctx: IngestContext, views: list[View], *, source: str) 
             if ctx.options.video:
                 rgb = _read_rgb(v.image_path, v.name)
                 if (rgb.shape[1], rgb.shape[0]) != (cam.width, cam.height):
-                    raise InputError(f"image is {rgb.shape[1]}x{rgb.shape[0]} but its camera says "
-                                     f"{cam.width}x{cam.height}", path=v.image_path, where=f"view {v.name}")
+                    raise InputError(
+                        f"image is {rgb.shape[1]}x{rgb.shape[0]} but its camera says "
+                        f"{cam.width}x{cam.height}",
+                        path=v.image_path,
+                        where=f"view {v.name}",
+                    )
             sink.add(i, rgb)
             T = np.asarray(v.T_world_cam, dtype=np.float64)
             rows.append([*T[:3, 3].tolist(), *matrix_to_quat_np(T[:3, :3]).tolist()])
@@ -138,9 +164,16 @@ def write_static_capture(ctx: IngestContext, views: list[View], *, source: str) 
         cols = [pa.array(stamps, pa.int64())] + [pa.array(vals[:, j]) for j in range(7)]
         table = pa.Table.from_arrays(cols, names=["t_ns", "x", "y", "z", "qw", "qx", "qy", "qz"])
         w.write_table(f"{base}/extrinsics.parquet", table, kind="camera_extrinsics")
-        entry = {"kind": "camera", "camera": cam_name, "frames": f"{base}/frames.parquet",
-                 "extrinsics": f"{base}/extrinsics.parquet", "stamp_source": "none", "offset_ns": 0,
-                 "nominal_rate_hz": None, "source": source}
+        entry = {
+            "kind": "camera",
+            "camera": cam_name,
+            "frames": f"{base}/frames.parquet",
+            "extrinsics": f"{base}/extrinsics.parquet",
+            "stamp_source": "none",
+            "offset_ns": 0,
+            "nominal_rate_hz": None,
+            "source": source,
+        }
         if ctx.options.video:
             entry["video"] = f"{base}/rgb.mp4"
         ctx.add_stream(f"camera/{cam_name}", entry, start_ns=st.start_ns, end_ns=st.end_ns)

@@ -48,7 +48,8 @@ _MAX_COUNT = 10_000_000
 
 def _has_model(p: Path) -> bool:
     return any((p / f"cameras{e}").is_file() for e in (".bin", ".txt")) and any(
-        (p / f"images{e}").is_file() for e in (".bin", ".txt"))
+        (p / f"images{e}").is_file() for e in (".bin", ".txt")
+    )
 
 
 def model_folder(path: Path) -> Path | None:
@@ -64,7 +65,9 @@ def detect_colmap(path: Path) -> bool:
     return path.is_dir() and model_folder(path) is not None
 
 
-def _camera_from_params(cid: int, model: str, w: int, h: int, params: list[float], path: Path) -> CameraModel:
+def _camera_from_params(
+    cid: int, model: str, w: int, h: int, params: list[float], path: Path
+) -> CameraModel:
     where = f"camera {cid}"
     p = [float(v) for v in params]
     n = _BY_NAME.get(model, (None, None))[1]
@@ -93,15 +96,28 @@ def _camera_from_params(cid: int, model: str, w: int, h: int, params: list[float
         fx, fy, cx, cy = p[:4]
         dm, d = "equidistant", p[4:8]
     else:
-        raise InputError(f"COLMAP camera model {model} has no robogs equivalent", path=path, where=where,
-                         hint="undistort the images with COLMAP (image_undistorter) and convert that model")
+        raise InputError(
+            f"COLMAP camera model {model} has no robogs equivalent",
+            path=path,
+            where=where,
+            hint="undistort the images with COLMAP (image_undistorter) and convert that model",
+        )
     if not any(d):
         dm, d = "none", []
     dm, dd = check_distortion(dm, d, path=path, where=where)
     if fx <= 0 or fy <= 0 or w <= 0 or h <= 0:
         raise InputError("non-positive focal length or image size", path=path, where=where)
-    return CameraModel(name=f"cam{cid}", width=int(w), height=int(h), fx=fx, fy=fy, cx=cx, cy=cy,
-                       distortion_model=dm, distortion=dd)
+    return CameraModel(
+        name=f"cam{cid}",
+        width=int(w),
+        height=int(h),
+        fx=fx,
+        fy=fy,
+        cx=cx,
+        cy=cy,
+        distortion_model=dm,
+        distortion=dd,
+    )
 
 
 def _lines(path: Path) -> list[str]:
@@ -159,13 +175,17 @@ class _Bin:
         n = struct.calcsize(fmt)
         data = self.fh.read(n)
         if len(data) != n:
-            raise InputError("COLMAP binary file is truncated", path=self.path, where=f"byte {self.fh.tell()}")
+            raise InputError(
+                "COLMAP binary file is truncated", path=self.path, where=f"byte {self.fh.tell()}"
+            )
         return struct.unpack(fmt, data)
 
     def count(self) -> int:
         (n,) = self.read("<Q")
         if n > _MAX_COUNT:
-            raise InputError(f"implausible count {n}", path=self.path, where=f"byte {self.fh.tell() - 8}")
+            raise InputError(
+                f"implausible count {n}", path=self.path, where=f"byte {self.fh.tell() - 8}"
+            )
         return n
 
     def cstring(self) -> str:
@@ -202,7 +222,9 @@ def _cameras_bin(path: Path) -> dict[int, CameraModel]:
         for _ in range(b.count()):
             cid, mid, w, h = b.read("<iiQQ")
             if mid not in COLMAP_MODELS:
-                raise InputError(f"unknown COLMAP camera model id {mid}", path=path, where=f"camera {cid}")
+                raise InputError(
+                    f"unknown COLMAP camera model id {mid}", path=path, where=f"camera {cid}"
+                )
             name, n = COLMAP_MODELS[mid]
             out[cid] = _camera_from_params(cid, name, int(w), int(h), list(b.read(f"<{n}d")), path)
         return out
@@ -227,7 +249,9 @@ def _points_count(folder: Path) -> int | None:
             data = fh.read(8)
         return struct.unpack("<Q", data)[0] if len(data) == 8 else None
     if (folder / "points3D.txt").is_file():
-        return sum(1 for ln in _lines(folder / "points3D.txt") if ln.strip() and not ln.startswith("#"))
+        return sum(
+            1 for ln in _lines(folder / "points3D.txt") if ln.strip() and not ln.startswith("#")
+        )
     return None
 
 
@@ -237,14 +261,19 @@ def read_colmap_model(folder: Path, images: Path) -> list[View]:
     Raises:
         InputError: malformed or truncated files, unknown cameras or models.
     """
-    cams = _cameras_bin(folder / "cameras.bin") if (folder / "cameras.bin").is_file() else \
-        _cameras_txt(folder / "cameras.txt")
+    cams = (
+        _cameras_bin(folder / "cameras.bin")
+        if (folder / "cameras.bin").is_file()
+        else _cameras_txt(folder / "cameras.txt")
+    )
     ipath = folder / "images.bin" if (folder / "images.bin").is_file() else folder / "images.txt"
     imgs = _images_bin(ipath) if ipath.suffix == ".bin" else _images_txt(ipath)
     views = []
     for name, cid, q, t in imgs:
         if cid not in cams:
-            raise InputError(f"image {name!r} uses camera {cid}, which is not in the cameras file", path=ipath)
+            raise InputError(
+                f"image {name!r} uses camera {cid}, which is not in the cameras file", path=ipath
+            )
         if not np.all(np.isfinite(q)) or not np.all(np.isfinite(t)) or np.linalg.norm(q) < 1e-12:
             raise InputError(f"image {name!r} has a non-finite or zero pose", path=ipath)
         R = quat_to_matrix_np(q)  # world -> camera
@@ -263,12 +292,17 @@ def convert_colmap(src: Path, ctx: IngestContext) -> None:
     if ctx.options.images is not None:
         images = ctx.options.images
     else:
-        project = src if folder != src else (folder.parent.parent if folder.parent.name == "sparse" else
-                                              folder.parent)
+        project = (
+            src
+            if folder != src
+            else (folder.parent.parent if folder.parent.name == "sparse" else folder.parent)
+        )
         images = project / "images"
     views = read_colmap_model(folder, images)
     prov = ctx.provenance
-    prov.extra.update({"capture": "colmap", "model": "binary" if (folder / "images.bin").is_file() else "text"})
+    prov.extra.update(
+        {"capture": "colmap", "model": "binary" if (folder / "images.bin").is_file() else "text"}
+    )
     pts = _points_count(folder)
     if pts is not None:
         prov.note(f"points3D ({pts} points) not converted: the format has no sparse point cloud")
@@ -280,8 +314,10 @@ def convert_colmap(src: Path, ctx: IngestContext) -> None:
             v.T_world_cam = T @ v.T_world_cam
         prov.note(f"world rotated so that the capture's {ctx.options.world_up} axis is +z")
     else:
-        prov.note("world frame kept as in the COLMAP model (arbitrary origin, orientation and scale); "
-                  "pass --world-up to re-orient")
+        prov.note(
+            "world frame kept as in the COLMAP model (arbitrary origin, orientation and scale); "
+            "pass --world-up to re-orient"
+        )
     write_static_capture(ctx, views, source=_images_name(folder))
 
 
@@ -289,5 +325,10 @@ def _images_name(folder: Path) -> str:
     return "images.bin" if (folder / "images.bin").is_file() else "images.txt"
 
 
-register_converter("colmap", detect_colmap, convert_colmap, description="COLMAP sparse model (text or binary)",
-                   priority=80)
+register_converter(
+    "colmap",
+    detect_colmap,
+    convert_colmap,
+    description="COLMAP sparse model (text or binary)",
+    priority=80,
+)

@@ -89,8 +89,14 @@ class IngestContext:
     robot_description: str | None = None
     robot_root_link: str | None = None
 
-    def add_stream(self, name: str, entry: dict[str, Any], *, start_ns: int | None = None,
-                   end_ns: int | None = None) -> None:
+    def add_stream(
+        self,
+        name: str,
+        entry: dict[str, Any],
+        *,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+    ) -> None:
         """Declare one stream of the episode and widen the episode's time span."""
         self.streams[name] = entry
         for t in (start_ns, end_ns):

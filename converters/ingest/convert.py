@@ -25,18 +25,27 @@ __all__ = ["convert_path"]
 def _check_target(src: Path, out: Path, force: bool) -> None:
     out_r, src_r = out.resolve(), src.resolve()
     if out_r == src_r or out_r in src_r.parents:
-        raise InputError("the output folder would contain or replace the source", path=out,
-                         hint="choose an output outside the source")
+        raise InputError(
+            "the output folder would contain or replace the source",
+            path=out,
+            hint="choose an output outside the source",
+        )
     if not out.exists() and not out.is_symlink():
         return
     if not force:
-        raise DatasetExistsError("output already exists", path=out,
-                                 hint="choose another path or pass --force to replace it")
+        raise DatasetExistsError(
+            "output already exists",
+            path=out,
+            hint="choose another path or pass --force to replace it",
+        )
     if out.is_symlink() or not out.is_dir():
         raise InputError("output exists and is not a folder; refusing to replace it", path=out)
     if any(out.iterdir()) and not (out / MANIFEST_NAME).is_file():
-        raise InputError("output folder exists and is not a robogs dataset; refusing to replace it", path=out,
-                         hint="remove it yourself or choose another path")
+        raise InputError(
+            "output folder exists and is not a robogs dataset; refusing to replace it",
+            path=out,
+            hint="remove it yourself or choose another path",
+        )
 
 
 def convert_path(
@@ -84,12 +93,20 @@ def convert_path(
             prov.note("no robot: pass --urdf to add one (the source has no robot_description)")
         if ctx.streams:
             assert ctx.start_ns is not None and ctx.end_ns is not None
-            writer.add_episode(opts.episode, start_ns=ctx.start_ns, end_ns=ctx.end_ns, streams=ctx.streams,
-                               segment=src.name)
+            writer.add_episode(
+                opts.episode,
+                start_ns=ctx.start_ns,
+                end_ns=ctx.end_ns,
+                streams=ctx.streams,
+                segment=src.name,
+            )
         elif not writer.manifest.get("cameras"):
-            raise InputError("nothing was converted (every message was dropped)", path=src,
-                             where="; ".join(f"{i['topic']}: {i['problem']}" for i in prov.issues[:3]) or None,
-                             hint="see the roles with --topic/--map")
+            raise InputError(
+                "nothing was converted (every message was dropped)",
+                path=src,
+                where="; ".join(f"{i['topic']}: {i['problem']}" for i in prov.issues[:3]) or None,
+                hint="see the roles with --topic/--map",
+            )
         if ctx.clock:
             writer.manifest["conventions"]["clock"] = ctx.clock
         writer.manifest["provenance"] = prov.to_dict()

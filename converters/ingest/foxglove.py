@@ -36,12 +36,16 @@ def _get(obj: Any, *names: str, default: Any = None) -> Any:
 def _stamp(ts: Any) -> SimpleNamespace:
     if ts is None:
         return SimpleNamespace(sec=0, nanosec=0)
-    return SimpleNamespace(sec=int(_get(ts, "sec", "seconds", default=0)),
-                           nanosec=int(_get(ts, "nsec", "nanos", "nanosec", default=0)))
+    return SimpleNamespace(
+        sec=int(_get(ts, "sec", "seconds", default=0)),
+        nanosec=int(_get(ts, "nsec", "nanos", "nanosec", default=0)),
+    )
 
 
 def _header(m: Any) -> SimpleNamespace:
-    return SimpleNamespace(stamp=_stamp(_get(m, "timestamp")), frame_id=str(_get(m, "frame_id", default="")))
+    return SimpleNamespace(
+        stamp=_stamp(_get(m, "timestamp")), frame_id=str(_get(m, "frame_id", default=""))
+    )
 
 
 def _bytes(data: Any) -> bytes:
@@ -51,30 +55,54 @@ def _bytes(data: Any) -> bytes:
 
 
 def _xyz(v: Any) -> SimpleNamespace:
-    return SimpleNamespace(x=float(_get(v, "x", default=0.0)), y=float(_get(v, "y", default=0.0)),
-                           z=float(_get(v, "z", default=0.0)))
+    return SimpleNamespace(
+        x=float(_get(v, "x", default=0.0)),
+        y=float(_get(v, "y", default=0.0)),
+        z=float(_get(v, "z", default=0.0)),
+    )
 
 
 def _quat(q: Any) -> SimpleNamespace:
-    return SimpleNamespace(x=float(_get(q, "x", default=0.0)), y=float(_get(q, "y", default=0.0)),
-                           z=float(_get(q, "z", default=0.0)), w=float(_get(q, "w", default=1.0)))
+    return SimpleNamespace(
+        x=float(_get(q, "x", default=0.0)),
+        y=float(_get(q, "y", default=0.0)),
+        z=float(_get(q, "z", default=0.0)),
+        w=float(_get(q, "w", default=1.0)),
+    )
 
 
 def _compressed_image(m: Any) -> SimpleNamespace:
-    return SimpleNamespace(header=_header(m), format=str(_get(m, "format", default="")), data=_bytes(m.data))
+    return SimpleNamespace(
+        header=_header(m), format=str(_get(m, "format", default="")), data=_bytes(m.data)
+    )
 
 
 def _raw_image(m: Any) -> SimpleNamespace:
-    return SimpleNamespace(header=_header(m), width=int(m.width), height=int(m.height), encoding=str(m.encoding),
-                           step=int(m.step), is_bigendian=0, data=_bytes(m.data))
+    return SimpleNamespace(
+        header=_header(m),
+        width=int(m.width),
+        height=int(m.height),
+        encoding=str(m.encoding),
+        step=int(m.step),
+        is_bigendian=0,
+        data=_bytes(m.data),
+    )
 
 
 def _calibration(m: Any) -> SimpleNamespace:
-    return SimpleNamespace(header=_header(m), width=int(m.width), height=int(m.height),
-                           distortion_model=str(_get(m, "distortion_model", default="")),
-                           d=list(_get(m, "D", "d", default=[])), k=list(_get(m, "K", "k", default=[])),
-                           r=list(_get(m, "R", "r", default=[])), p=list(_get(m, "P", "p", default=[])),
-                           binning_x=0, binning_y=0, roi=None)
+    return SimpleNamespace(
+        header=_header(m),
+        width=int(m.width),
+        height=int(m.height),
+        distortion_model=str(_get(m, "distortion_model", default="")),
+        d=list(_get(m, "D", "d", default=[])),
+        k=list(_get(m, "K", "k", default=[])),
+        r=list(_get(m, "R", "r", default=[])),
+        p=list(_get(m, "P", "p", default=[])),
+        binning_x=0,
+        binning_y=0,
+        roi=None,
+    )
 
 
 def _transform(m: Any) -> SimpleNamespace:
@@ -94,8 +122,10 @@ def _frame_transforms(m: Any) -> SimpleNamespace:
 
 
 def _pose_in_frame(m: Any) -> SimpleNamespace:
-    return SimpleNamespace(header=_header(m),
-                           pose=SimpleNamespace(position=_xyz(m.pose.position), orientation=_quat(m.pose.orientation)))
+    return SimpleNamespace(
+        header=_header(m),
+        pose=SimpleNamespace(position=_xyz(m.pose.position), orientation=_quat(m.pose.orientation)),
+    )
 
 
 #: Foxglove schema name -> (ROS type it stands for, adapter)
@@ -111,12 +141,16 @@ FOXGLOVE_TYPES: dict[str, tuple[str, Callable[[Any], Any]]] = {
 
 def ros_type_of(schema_name: str) -> str | None:
     """The ROS type a Foxglove schema stands for (``foxglove_msgs/msg/X`` or ``foxglove.X``)."""
-    key = schema_name.replace("foxglove_msgs/msg/", "foxglove.").replace("foxglove_msgs/", "foxglove.")
+    key = schema_name.replace("foxglove_msgs/msg/", "foxglove.").replace(
+        "foxglove_msgs/", "foxglove."
+    )
     entry = FOXGLOVE_TYPES.get(key)
     return entry[0] if entry else None
 
 
 def adapt(schema_name: str, msg: Any) -> Any:
     """Convert a decoded Foxglove message to its ROS shape."""
-    key = schema_name.replace("foxglove_msgs/msg/", "foxglove.").replace("foxglove_msgs/", "foxglove.")
+    key = schema_name.replace("foxglove_msgs/msg/", "foxglove.").replace(
+        "foxglove_msgs/", "foxglove."
+    )
     return FOXGLOVE_TYPES[key][1](msg)

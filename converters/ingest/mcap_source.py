@@ -2,7 +2,8 @@
 
 Decoders, chosen per channel from its message encoding and schema encoding:
 
-* ``cdr`` + ``ros2msg``: ``mcap_ros2.decoder.DecoderFactory``;
+* ``cdr`` + ``ros2msg``: ``mcap_ros2.decoder.DecoderFactory`` (JointState, Image and
+  CompressedImage with the standard layout go through :mod:`converters.ingest.cdr_fast`);
 * ``cdr`` + ``ros2idl`` and ``ros1`` + ``ros1msg``: rosbags' type system, built from the schema
   text stored in the file;
 * ``json``: the standard library; Foxglove schemas are mapped to ROS shapes
@@ -26,7 +27,7 @@ from typing import Any
 from robogs_format.errors import InputError, RobogsError
 
 from ..registry import register_converter
-from . import foxglove
+from . import cdr_fast, foxglove
 from .context import IngestContext
 from .messages import MessageIngest, TopicInfo
 
@@ -48,8 +49,16 @@ def detect_mcap(path: Path) -> bool:
 def _mcap_errors() -> tuple[type[BaseException], ...]:
     from mcap.exceptions import McapError
 
-    errs: list[type[BaseException]] = [McapError, struct.error, EOFError, ValueError, OSError, KeyError,
-                                       IndexError, RuntimeError]
+    errs: list[type[BaseException]] = [
+        McapError,
+        struct.error,
+        EOFError,
+        ValueError,
+        OSError,
+        KeyError,
+        IndexError,
+        RuntimeError,
+    ]
     try:
         from zstandard import ZstdError
 
@@ -85,12 +94,25 @@ def _rosbags_name(name: str) -> str:
     return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
 
 
-def channel_decoder(message_encoding: str, schema: Any, ros2_factory: Any) -> Callable[[bytes], Any] | None:
+def channel_decoder(
+    message_encoding: str, schema: Any, ros2_factory: Any
+) -> Callable[[bytes], Any] | None:
     """A ``bytes -> message`` function for one channel, or ``None`` when none is available."""
     enc = message_encoding.lower()
     senc = (schema.encoding if schema is not None else "").lower()
     if enc == "cdr" and senc == "ros2msg":
-        return ros2_factory.decoder_for(message_encoding, schema)
+        generic = ros2_factory.decoder_for(message_encoding, schema)
+        fast = cdr_fast.fast_decoder(schema.name, schema.data.decode("utf-8", errors="replace"))
+        if fast is None or generic is None:
+            return generic
+
+        def decode(data: bytes) -> Any:
+            try:
+                return fast(data)
+            except ValueError:  # big-endian or malformed: the generic decoder decides
+                return generic(data)
+
+        return decode
     if (enc == "cdr" and senc == "ros2idl") or (enc == "ros1" and senc == "ros1msg"):
         return _rosbags_decoder(schema, enc)
     if enc == "json":
@@ -128,16 +150,25 @@ def convert_mcap(src: Path, ctx: IngestContext) -> None:
             header = reader.get_header()
             summary = reader.get_summary()
         except errors as exc:
-            raise InputError(f"not a readable MCAP file ({type(exc).__name__}: {exc})", path=src,
-                             hint="the file is empty, truncated or not MCAP; `mcap recover` rebuilds "
-                                  "a truncated recording") from None
+            raise InputError(
+                f"not a readable MCAP file ({type(exc).__name__}: {exc})",
+                path=src,
+                hint="the file is empty, truncated or not MCAP; `mcap recover` rebuilds "
+                "a truncated recording",
+            ) from None
         if summary is None:
-            raise InputError("MCAP file has no summary section (truncated while recording?)", path=src,
-                             hint="run `mcap recover` on it, then convert the recovered file")
+            raise InputError(
+                "MCAP file has no summary section (truncated while recording?)",
+                path=src,
+                hint="run `mcap recover` on it, then convert the recovered file",
+            )
         unknown = sorted({ci.compression for ci in summary.chunk_indexes} - {"", "zstd", "lz4"})
         if unknown:
-            raise InputError(f"unknown chunk compression {', '.join(map(repr, unknown))}", path=src,
-                             hint="MCAP chunks are uncompressed, zstd or lz4; re-write the file with one of them")
+            raise InputError(
+                f"unknown chunk compression {', '.join(map(repr, unknown))}",
+                path=src,
+                hint="MCAP chunks are uncompressed, zstd or lz4; re-write the file with one of them",
+            )
         prov.extra["mcap_profile"] = header.profile
         prov.extra["mcap_library"] = header.library
         stats = summary.statistics
@@ -157,8 +188,10 @@ def convert_mcap(src: Path, ctx: IngestContext) -> None:
                 decoders[cid] = channel_decoder(ch.message_encoding, schema, ros2)
             except Exception as exc:  # noqa: BLE001 - a schema we cannot parse is reported, not fatal
                 decoders[cid] = None
-                prov.note(f"{ch.topic}: schema {getattr(schema, 'name', '?')} could not be parsed "
-                          f"({type(exc).__name__}: {str(exc)[:120]})")
+                prov.note(
+                    f"{ch.topic}: schema {getattr(schema, 'name', '?')} could not be parsed "
+                    f"({type(exc).__name__}: {str(exc)[:120]})"
+                )
             by_topic.setdefault(ch.topic, []).append(cid)
         topics: list[TopicInfo] = []
         for topic, cids in sorted(by_topic.items()):
@@ -168,11 +201,21 @@ def convert_mcap(src: Path, ctx: IngestContext) -> None:
             if bad or len(types) != 1:
                 ch = summary.channels[cids[0]]
                 sch = schema_of[cids[0]]
-                reason = "several message types on one topic" if len(types) != 1 else "no decoder for this encoding"
-                prov.undecodable.append({"topic": topic, "schema": getattr(sch, "name", None),
-                                         "schema_encoding": getattr(sch, "encoding", None),
-                                         "message_encoding": ch.message_encoding, "messages": n,
-                                         "reason": reason})
+                reason = (
+                    "several message types on one topic"
+                    if len(types) != 1
+                    else "no decoder for this encoding"
+                )
+                prov.undecodable.append(
+                    {
+                        "topic": topic,
+                        "schema": getattr(sch, "name", None),
+                        "schema_encoding": getattr(sch, "encoding", None),
+                        "message_encoding": ch.message_encoding,
+                        "messages": n,
+                        "reason": reason,
+                    }
+                )
                 rec = prov.topic(topic, ", ".join(sorted(types)), "ignore")
                 rec.messages = n
                 if n:
@@ -181,7 +224,9 @@ def convert_mcap(src: Path, ctx: IngestContext) -> None:
             topics.append(TopicInfo(topic, types.pop(), n))
         start = stats.message_start_time if stats is not None else None
         end = stats.message_end_time if stats is not None else None
-        time_range = (start, end) if start is not None and end is not None and start <= end else None
+        time_range = (
+            (start, end) if start is not None and end is not None and start <= end else None
+        )
         ingest = MessageIngest(ctx, time_range=time_range)
         static, main = ingest.plan(topics)
         where = "before the first message"
@@ -192,7 +237,9 @@ def convert_mcap(src: Path, ctx: IngestContext) -> None:
                     continue
                 total = sum(ingest.counts[t] for t in group)
                 ctx.progress.start(f"reading {label} ({size_mb:.0f} MB)", total)
-                for schema, channel, message in reader.iter_messages(topics=group, log_time_order=True):
+                for schema, channel, message in reader.iter_messages(
+                    topics=group, log_time_order=True
+                ):
                     where = f"after topic {channel.topic} log time {message.log_time}"
                     dec = decoders[channel.id]
                     assert dec is not None
@@ -201,7 +248,9 @@ def convert_mcap(src: Path, ctx: IngestContext) -> None:
                         if schema is not None and foxglove.ros_type_of(schema.name):
                             msg = foxglove.adapt(schema.name, msg)
                     except Exception as exc:  # noqa: BLE001 - any decoder failure is one bad message
-                        ingest.note_undecodable(channel.topic, message.log_time, f"{type(exc).__name__}: {exc}")
+                        ingest.note_undecodable(
+                            channel.topic, message.log_time, f"{type(exc).__name__}: {exc}"
+                        )
                         ctx.progress.advance()
                         continue
                     ingest.handle(channel.topic, message.log_time, msg)
@@ -214,12 +263,21 @@ def convert_mcap(src: Path, ctx: IngestContext) -> None:
     except RobogsError:
         raise
     except errors as exc:
-        raise InputError(f"MCAP is corrupt ({type(exc).__name__}: {str(exc)[:200]})", path=src,
-                         where=where, hint="the file is damaged; `mcap recover` may salvage it") from None
+        raise InputError(
+            f"MCAP is corrupt ({type(exc).__name__}: {str(exc)[:200]})",
+            path=src,
+            where=where,
+            hint="the file is damaged; `mcap recover` may salvage it",
+        ) from None
     finally:
         ctx.progress.stop()
         fh.close()
 
 
-register_converter("mcap", detect_mcap, convert_mcap, description="MCAP file (ROS 2, ROS 1, JSON/Foxglove)",
-                   priority=60)
+register_converter(
+    "mcap",
+    detect_mcap,
+    convert_mcap,
+    description="MCAP file (ROS 2, ROS 1, JSON/Foxglove)",
+    priority=60,
+)

@@ -37,7 +37,15 @@ __all__ = ["TopicInfo", "MessageIngest", "PRODUCTIVE_ROLES", "STATIC_ROLES"]
 
 #: roles that put data into the dataset
 PRODUCTIVE_ROLES = frozenset(
-    {"joint_states", "camera_image", "camera_info", "camera_labels", "object_pose", "ee_pose", "wrench"}
+    {
+        "joint_states",
+        "camera_image",
+        "camera_info",
+        "camera_labels",
+        "object_pose",
+        "ee_pose",
+        "wrench",
+    }
 )
 #: roles read before everything else
 STATIC_ROLES = frozenset({"tf_static", "robot_description"})
@@ -47,10 +55,16 @@ _ROLE_TYPES: dict[str, set[str]] = {
     "camera_image": {"sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"},
     "camera_labels": {"sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"},
     "camera_info": {"sensor_msgs/msg/CameraInfo"},
-    "object_pose": {"geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
-                    "geometry_msgs/msg/TransformStamped"},
-    "ee_pose": {"geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
-                "geometry_msgs/msg/TransformStamped"},
+    "object_pose": {
+        "geometry_msgs/msg/PoseStamped",
+        "geometry_msgs/msg/PoseWithCovarianceStamped",
+        "geometry_msgs/msg/TransformStamped",
+    },
+    "ee_pose": {
+        "geometry_msgs/msg/PoseStamped",
+        "geometry_msgs/msg/PoseWithCovarianceStamped",
+        "geometry_msgs/msg/TransformStamped",
+    },
     "wrench": {"geometry_msgs/msg/WrenchStamped"},
     "tf_static": {"tf2_msgs/msg/TFMessage", "tf/msg/tfMessage"},
     "tf": {"tf2_msgs/msg/TFMessage", "tf/msg/tfMessage"},
@@ -150,13 +164,18 @@ class MessageIngest:
             InputError: a role that does not fit the topic's type, a role naming an absent
                 topic, or no topic that puts data into the dataset.
         """
-        overrides = {t: parse_role(r, where=f"role of {t}") if isinstance(r, str) else r
-                     for t, r in self.opts.roles.items()}
+        overrides = {
+            t: parse_role(r, where=f"role of {t}") if isinstance(r, str) else r
+            for t, r in self.opts.roles.items()
+        }
         known = {t.topic for t in topics}
         missing = sorted(set(overrides) - known)
         if missing:
-            raise InputError(f"role given for topics not in the source: {', '.join(missing)}",
-                             where="--topic/--map", hint=f"topics: {', '.join(sorted(known)) or 'none'}")
+            raise InputError(
+                f"role given for topics not in the source: {', '.join(missing)}",
+                where="--topic/--map",
+                hint=f"topics: {', '.join(sorted(known)) or 'none'}",
+            )
         reasons: dict[str, str] = {}
         for info in topics:
             t = normalize_type(info.msgtype)
@@ -165,14 +184,19 @@ class MessageIngest:
             if info.topic in overrides:
                 role = overrides[info.topic]
                 if role.kind != "ignore" and t not in _ROLE_TYPES.get(role.kind, set()):
-                    raise InputError(f"topic {info.topic} has type {t}, which cannot be {role}",
-                                     where="--topic/--map",
-                                     hint=f"{role.kind} takes {', '.join(sorted(_ROLE_TYPES[role.kind]))}")
+                    raise InputError(
+                        f"topic {info.topic} has type {t}, which cannot be {role}",
+                        where="--topic/--map",
+                        hint=f"{role.kind} takes {', '.join(sorted(_ROLE_TYPES[role.kind]))}",
+                    )
                 reason = "mapped to ignore" if role.kind == "ignore" else None
             else:
                 role, reason = default_role(info.topic, t)
             if role.kind == "tf":
-                role, reason = Role("ignore"), "dynamic tf is not converted (record poses as PoseStamped)"
+                role, reason = (
+                    Role("ignore"),
+                    "dynamic tf is not converted (record poses as PoseStamped)",
+                )
             self.roles[info.topic] = role
             if reason:
                 reasons[info.topic] = reason
@@ -183,9 +207,14 @@ class MessageIngest:
             rec.messages = info.count
             if role.kind == "ignore" and info.count:
                 self.prov.drop(info.topic, reasons.get(info.topic, "ignored"), info.count)
-        productive = [t for t, r in self.roles.items() if r.kind in PRODUCTIVE_ROLES and self.counts[t] > 0]
+        productive = [
+            t for t, r in self.roles.items() if r.kind in PRODUCTIVE_ROLES and self.counts[t] > 0
+        ]
         if not productive:
-            listing = "; ".join(f"{t.topic} {normalize_type(t.msgtype)} x{t.count}" for t in topics) or "none"
+            listing = (
+                "; ".join(f"{t.topic} {normalize_type(t.msgtype)} x{t.count}" for t in topics)
+                or "none"
+            )
             raise InputError(
                 "nothing to convert: no joint states, images, camera info, poses or wrenches",
                 where=f"topics: {listing}",
@@ -201,10 +230,20 @@ class MessageIngest:
             return
         forced = [t for t in cands if t in overrides]
         if len(forced) > 1:
-            raise InputError(f"several topics mapped to joint_states: {', '.join(forced)}",
-                             where="--topic/--map", hint="map one; ignore the others")
-        chosen = forced[0] if forced else (
-            "/joint_states" if "/joint_states" in cands else max(cands, key=lambda t: (self.counts[t], t)))
+            raise InputError(
+                f"several topics mapped to joint_states: {', '.join(forced)}",
+                where="--topic/--map",
+                hint="map one; ignore the others",
+            )
+        chosen = (
+            forced[0]
+            if forced
+            else (
+                "/joint_states"
+                if "/joint_states" in cands
+                else max(cands, key=lambda t: (self.counts[t], t))
+            )
+        )
         for t in cands:
             if t != chosen:
                 self.roles[t] = Role("ignore")
@@ -227,21 +266,28 @@ class MessageIngest:
             t_hdr = _stamp_ns(header.stamp) if header is not None else 0
             src = "sensor_header" if header is not None and self._plausible(t_hdr) else "log_time"
             if header is not None and src == "log_time":
-                self.prov.note(f"{topic}: header.stamp {t_hdr} is zero or outside the recording's time range; "
-                               "log time used for this topic")
+                self.prov.note(
+                    f"{topic}: header.stamp {t_hdr} is zero or outside the recording's time range; "
+                    "log time used for this topic"
+                )
             self._stamp_src[topic] = src
             self.prov.topic(topic).stamp_source = src
         if src == "log_time":
             return int(log_time)
         t = _stamp_ns(header.stamp)
         if not self._plausible(t):
-            self.prov.issue(topic, "header stamp zero or outside the recording's time range (sample dropped)", t)
+            self.prov.issue(
+                topic, "header stamp zero or outside the recording's time range (sample dropped)", t
+            )
             return None
         return t
 
     def _sink_kwargs(self) -> dict[str, Any]:
-        return {"provenance": self.prov, "jump_back_ns": self.opts.jump_back_ns,
-                "jump_forward_ns": self.opts.jump_forward_ns}
+        return {
+            "provenance": self.prov,
+            "jump_back_ns": self.opts.jump_back_ns,
+            "jump_forward_ns": self.opts.jump_forward_ns,
+        }
 
     # ------------------------------------------------------------------ dispatch
     def handle(self, topic: str, log_time: int, msg: Any) -> None:
@@ -294,16 +340,26 @@ class MessageIngest:
         lay = self._joint_layout
         if lay is None:
             if not names or len(set(names)) != len(names) or pos.size != len(names):
-                self.prov.issue(topic, "JointState without unique names matching its positions (dropped)", t)
+                self.prov.issue(
+                    topic, "JointState without unique names matching its positions (dropped)", t
+                )
                 return
             vel, eff = _floats(msg.velocity), _floats(msg.effort)
-            lay = self._joint_layout = _JointLayout(names, {n: i for i, n in enumerate(names)},
-                                                    vel.size == len(names), eff.size == len(names))
+            lay = self._joint_layout = _JointLayout(
+                names,
+                {n: i for i, n in enumerate(names)},
+                vel.size == len(names),
+                eff.size == len(names),
+            )
             cols = [f"position.{n}" for n in names]
             cols += [f"velocity.{n}" for n in names] if lay.has_vel else []
             cols += [f"effort.{n}" for n in names] if lay.has_eff else []
-            self._joint_sink = TableSink(self.ctx.writer.path(f"{self.ctx.episode_dir()}/joint_states.parquet"),
-                                         "joint_states", cols, **self._sink_kwargs())
+            self._joint_sink = TableSink(
+                self.ctx.writer.path(f"{self.ctx.episode_dir()}/joint_states.parquet"),
+                "joint_states",
+                cols,
+                **self._sink_kwargs(),
+            )
         n = len(lay.names)
         if names == lay.names and pos.size == n:
             parts = [pos]
@@ -317,8 +373,12 @@ class MessageIngest:
                 return
             unknown = [x for x in names if x not in lay.index]
             if unknown:
-                self.prov.issue(topic, f"joints {unknown[:5]} not in the first message (their values dropped)",
-                                t, drop=False)
+                self.prov.issue(
+                    topic,
+                    f"joints {unknown[:5]} not in the first message (their values dropped)",
+                    t,
+                    drop=False,
+                )
             parts = [self._by_name(names, pos, lay, topic, t, "position")]
             if lay.has_vel:
                 parts.append(self._by_name(names, _floats(msg.velocity), lay, topic, t, "velocity"))
@@ -336,8 +396,9 @@ class MessageIngest:
         self.prov.issue(topic, f"JointState without {what} (NaN written)", t, drop=False)
         return np.full(n, np.nan)
 
-    def _by_name(self, names: list[str], values: np.ndarray, lay: _JointLayout, topic: str, t: int,
-                 what: str) -> np.ndarray:
+    def _by_name(
+        self, names: list[str], values: np.ndarray, lay: _JointLayout, topic: str, t: int, what: str
+    ) -> np.ndarray:
         out = np.full(len(lay.names), np.nan)
         if values.size != len(names):
             self.prov.issue(topic, f"JointState without {what} (NaN written)", t, drop=False)
@@ -347,7 +408,9 @@ class MessageIngest:
             if j is not None:
                 out[j] = values[i]
         if np.isnan(out).any():
-            self.prov.issue(topic, f"JointState missing some joints' {what} (NaN written)", t, drop=False)
+            self.prov.issue(
+                topic, f"JointState missing some joints' {what} (NaN written)", t, drop=False
+            )
         return out
 
     # ------------------------------------------------------------------ cameras
@@ -367,18 +430,29 @@ class MessageIngest:
         header = getattr(msg, "header", None)
         t = _stamp_ns(header.stamp) if header is not None else int(log_time)
         K = _floats(getattr(msg, "k", getattr(msg, "K", ())))
-        key = (int(msg.width), int(msg.height), tuple(K.tolist()),
-               tuple(_floats(getattr(msg, "d", getattr(msg, "D", ()))).tolist()), str(msg.distortion_model))
+        key = (
+            int(msg.width),
+            int(msg.height),
+            tuple(K.tolist()),
+            tuple(_floats(getattr(msg, "d", getattr(msg, "D", ()))).tolist()),
+            str(msg.distortion_model),
+        )
         if cam.info_key is None:
             cam.info_key = key
             if K.size != 9 or K[0] == 0.0:
-                self.prov.issue(topic, "camera is not calibrated (K[0] == 0); no intrinsics written", t)
+                self.prov.issue(
+                    topic, "camera is not calibrated (K[0] == 0); no intrinsics written", t
+                )
                 return
             cam.model = camera_from_info_msg(msg, name=name, topic=topic, t_ns=t)
             cam.frame_id = str(header.frame_id).lstrip("/") if header is not None else ""
-            self.prov.topic(topic).stamp_source = "sensor_header" if header is not None else "log_time"
+            self.prov.topic(topic).stamp_source = (
+                "sensor_header" if header is not None else "log_time"
+            )
         elif key != cam.info_key:
-            self.prov.issue(topic, "calibration differs from the first camera_info (first one kept)", t)
+            self.prov.issue(
+                topic, "calibration differs from the first camera_info (first one kept)", t
+            )
             return
         if cam.model is None:
             self.prov.drop(topic, "camera is not calibrated (K[0] == 0)")
@@ -388,7 +462,9 @@ class MessageIngest:
     def _fps_hint(self, topic: str) -> float:
         n = self.counts.get(topic, 0)
         if self.time_range and n > 1 and self.time_range[1] > self.time_range[0]:
-            return max(1.0, min(1000.0, (n - 1) / ((self.time_range[1] - self.time_range[0]) / 1e9)))
+            return max(
+                1.0, min(1000.0, (n - 1) / ((self.time_range[1] - self.time_range[0]) / 1e9))
+            )
         return 30.0
 
     def _decode(self, topic: str, t: int, msg: Any) -> tuple[str, np.ndarray] | None:
@@ -396,7 +472,9 @@ class MessageIngest:
             out = decode_compressed_image(msg, topic=topic, t_ns=t)
             if out is None:
                 fmt = str(getattr(msg, "format", ""))[:40]
-                self.prov.issue(topic, f"compressed image not decodable as a still image (format {fmt!r})", t)
+                self.prov.issue(
+                    topic, f"compressed image not decodable as a still image (format {fmt!r})", t
+                )
             return out
         return decode_raw_image(msg, topic=topic, t_ns=t)
 
@@ -411,9 +489,14 @@ class MessageIngest:
             w = self.ctx.writer
             cam.image_topic = topic
             cam.stamp_source = self._stamp_src.get(topic)
-            cam.sink = CameraSink(w.path(f"{ep}/cameras/{name}/frames.parquet"),
-                                  w.path(f"{ep}/cameras/{name}/rgb.mp4"), topic=topic, provenance=self.prov,
-                                  video=self.opts.video, fps_hint=self._fps_hint(topic))
+            cam.sink = CameraSink(
+                w.path(f"{ep}/cameras/{name}/frames.parquet"),
+                w.path(f"{ep}/cameras/{name}/rgb.mp4"),
+                topic=topic,
+                provenance=self.prov,
+                video=self.opts.video,
+                fps_hint=self._fps_hint(topic),
+            )
             header = getattr(msg, "header", None)
             if header is not None and not cam.frame_id:
                 cam.frame_id = str(header.frame_id).lstrip("/")
@@ -427,8 +510,12 @@ class MessageIngest:
                 return
             kind, rgb = out
             if kind != "rgb":
-                self.prov.issue(topic, "16-bit single-channel image on a colour camera topic (map it as "
-                                "camera_labels)", t)
+                self.prov.issue(
+                    topic,
+                    "16-bit single-channel image on a colour camera topic (map it as "
+                    "camera_labels)",
+                    t,
+                )
                 return
         elif self.types.get(topic) == "sensor_msgs/msg/Image":
             decode_raw_image(msg, topic=topic, t_ns=t)  # size checks even without video
@@ -443,8 +530,15 @@ class MessageIngest:
             name = role.name
         else:  # /camera/<cam>/labels/compressed -> <cam>
             parts = [p for p in topic.split("/") if p]
-            while parts and parts[-1] in ("compressed", "image_raw", "image", "labels", "label", "panoptic",
-                                          "segmentation"):
+            while parts and parts[-1] in (
+                "compressed",
+                "image_raw",
+                "image",
+                "labels",
+                "label",
+                "panoptic",
+                "segmentation",
+            ):
                 parts = parts[:-1]
             name = camera_name_from_topic("/" + "/".join(parts) + "/image_raw")
         out = self._decode(topic, t, msg)
@@ -464,7 +558,9 @@ class MessageIngest:
         self._match_labels(cam)
         if len(pend) > _MAX_PENDING_LABELS:
             t_old, _ = pend.pop(0)
-            self.prov.issue(topic, "label image without a colour frame of the same stamp (dropped)", t_old)
+            self.prov.issue(
+                topic, "label image without a colour frame of the same stamp (dropped)", t_old
+            )
 
     def _match_labels(self, cam: _Camera) -> None:
         pend = self._pending_labels.get(cam.name)
@@ -483,11 +579,20 @@ class MessageIngest:
         schema = pa.schema([pa.field("frame_index", pa.int64()), pa.field("png", pa.binary())])
         entry = self._labels_writers.get(cam.name)
         if entry is None:
-            path = self.ctx.writer.path(f"{self.ctx.episode_dir()}/cameras/{cam.name}/labels.parquet")
+            path = self.ctx.writer.path(
+                f"{self.ctx.episode_dir()}/cameras/{cam.name}/labels.parquet"
+            )
             entry = (pq.ParquetWriter(path, schema, compression="none"), 0)
         writer, n = entry
-        writer.write_table(pa.Table.from_arrays(
-            [pa.array([frame_index], pa.int64()), pa.array([encode_label_png(img)], pa.binary())], schema=schema))
+        writer.write_table(
+            pa.Table.from_arrays(
+                [
+                    pa.array([frame_index], pa.int64()),
+                    pa.array([encode_label_png(img)], pa.binary()),
+                ],
+                schema=schema,
+            )
+        )
         self._labels_writers[cam.name] = (writer, n + 1)
         assert cam.labels_topic is not None
         self.prov.topic(cam.labels_topic).written += 1
@@ -500,7 +605,9 @@ class MessageIngest:
             cands = [self.opts.world_frame] if self.opts.world_frame else []
             cands += [self.ctx.robot_root_link] if self.ctx.robot_root_link else []
             cands += list(_WORLD_CANDIDATES)
-            self._world = next((c for c in cands if c in frames), cands[0] if self.opts.world_frame else "world")
+            self._world = next(
+                (c for c in cands if c in frames), cands[0] if self.opts.world_frame else "world"
+            )
         return self._world
 
     def _frame_to_world(self, topic: str, frame: str) -> np.ndarray | None:
@@ -511,10 +618,14 @@ class MessageIngest:
         if frame and frame != world:
             T = self.tf.lookup(world, frame)
             if T is None:
-                self.prov.note(f"{topic}: frame {frame!r} is not connected to {world!r} in /tf_static; "
-                               "poses kept as given")
+                self.prov.note(
+                    f"{topic}: frame {frame!r} is not connected to {world!r} in /tf_static; "
+                    "poses kept as given"
+                )
             else:
-                self.prov.note(f"{topic}: poses given in {frame!r}, composed with the static chain to {world!r}")
+                self.prov.note(
+                    f"{topic}: poses given in {frame!r}, composed with the static chain to {world!r}"
+                )
         self._pose_frames[topic] = T
         return T
 
@@ -527,7 +638,9 @@ class MessageIngest:
         vals = [float(p.x), float(p.y), float(p.z), float(q.w), float(q.x), float(q.y), float(q.z)]
         qn = math.sqrt(sum(v * v for v in vals[3:]))
         if not all(math.isfinite(v) for v in vals) or qn < 1e-9:
-            self.prov.issue(topic, "pose with a zero or non-finite quaternion or position (dropped)", t)
+            self.prov.issue(
+                topic, "pose with a zero or non-finite quaternion or position (dropped)", t
+            )
             return
         T = self._frame_to_world(topic, str(msg.header.frame_id).lstrip("/"))
         if T is not None:
@@ -538,8 +651,12 @@ class MessageIngest:
         sink = self._pose_sinks.get(kind)
         if sink is None:
             sink = self._pose_sinks[kind] = TableSink(
-                self.ctx.writer.path(f"{self.ctx.episode_dir()}/{kind}.parquet"), kind, _POSE_COLS,
-                label_column="link" if kind == "ee_poses" else "object", **self._sink_kwargs())
+                self.ctx.writer.path(f"{self.ctx.episode_dir()}/{kind}.parquet"),
+                kind,
+                _POSE_COLS,
+                label_column="link" if kind == "ee_poses" else "object",
+                **self._sink_kwargs(),
+            )
         label = role.name or safe_name(topic)
         if sink.add(topic, t, vals, label):
             self.prov.topic(topic).written += 1
@@ -551,8 +668,13 @@ class MessageIngest:
             self.prov.issue(topic, "non-finite wrench (dropped)", t)
             return
         if self._wrench_sink is None:
-            self._wrench_sink = TableSink(self.ctx.writer.path(f"{self.ctx.episode_dir()}/wrenches.parquet"),
-                                          "wrenches", _WRENCH_COLS, label_column="frame", **self._sink_kwargs())
+            self._wrench_sink = TableSink(
+                self.ctx.writer.path(f"{self.ctx.episode_dir()}/wrenches.parquet"),
+                "wrenches",
+                _WRENCH_COLS,
+                label_column="frame",
+                **self._sink_kwargs(),
+            )
         frame = role.name or str(msg.header.frame_id).lstrip("/") or safe_name(topic)
         if self._wrench_sink.add(topic, t, vals, frame):
             self.prov.topic(topic).written += 1
@@ -561,8 +683,10 @@ class MessageIngest:
     def _stream_stamp_source(self, topics: list[str]) -> str:
         srcs = sorted({self._stamp_src.get(t, "log_time") for t in topics})
         if len(srcs) > 1:
-            self.prov.note(f"topics {', '.join(topics)} share one table but use different stamp sources "
-                           "(see topics/*/stamp_source); the stream records the first")
+            self.prov.note(
+                f"topics {', '.join(topics)} share one table but use different stamp sources "
+                "(see topics/*/stamp_source); the stream records the first"
+            )
         return self._stamp_src.get(topics[0], "log_time")
 
     def finish(self) -> None:
@@ -572,20 +696,36 @@ class MessageIngest:
             st = self._joint_sink.close()
             if st.rows:
                 assert self._joint_topic is not None
-                ctx.add_stream("joint_states", {
-                    "kind": "joint_states", "path": f"{ep}/joint_states.parquet",
-                    "stamp_source": self._stream_stamp_source([self._joint_topic]), "offset_ns": 0,
-                    "nominal_rate_hz": st.rate_hz, "source": self._joint_topic,
-                }, start_ns=st.start_ns, end_ns=st.end_ns)
+                ctx.add_stream(
+                    "joint_states",
+                    {
+                        "kind": "joint_states",
+                        "path": f"{ep}/joint_states.parquet",
+                        "stamp_source": self._stream_stamp_source([self._joint_topic]),
+                        "offset_ns": 0,
+                        "nominal_rate_hz": st.rate_hz,
+                        "source": self._joint_topic,
+                    },
+                    start_ns=st.start_ns,
+                    end_ns=st.end_ns,
+                )
         for kind, sink in sorted(self._pose_sinks.items()):
             st = sink.close()
             if st.rows:
                 topics = sorted(sink.written)
-                ctx.add_stream(kind, {
-                    "kind": kind, "path": f"{ep}/{kind}.parquet",
-                    "stamp_source": self._stream_stamp_source(topics), "offset_ns": 0,
-                    "nominal_rate_hz": st.rate_hz, "source": ", ".join(topics),
-                }, start_ns=st.start_ns, end_ns=st.end_ns)
+                ctx.add_stream(
+                    kind,
+                    {
+                        "kind": kind,
+                        "path": f"{ep}/{kind}.parquet",
+                        "stamp_source": self._stream_stamp_source(topics),
+                        "offset_ns": 0,
+                        "nominal_rate_hz": st.rate_hz,
+                        "source": ", ".join(topics),
+                    },
+                    start_ns=st.start_ns,
+                    end_ns=st.end_ns,
+                )
                 if kind == "object_poses":
                     for label in sink._labels:
                         if label:
@@ -594,11 +734,19 @@ class MessageIngest:
             st = self._wrench_sink.close()
             if st.rows:
                 topics = sorted(self._wrench_sink.written)
-                ctx.add_stream("wrenches", {
-                    "kind": "wrenches", "path": f"{ep}/wrenches.parquet",
-                    "stamp_source": self._stream_stamp_source(topics), "offset_ns": 0,
-                    "nominal_rate_hz": st.rate_hz, "source": ", ".join(topics),
-                }, start_ns=st.start_ns, end_ns=st.end_ns)
+                ctx.add_stream(
+                    "wrenches",
+                    {
+                        "kind": "wrenches",
+                        "path": f"{ep}/wrenches.parquet",
+                        "stamp_source": self._stream_stamp_source(topics),
+                        "offset_ns": 0,
+                        "nominal_rate_hz": st.rate_hz,
+                        "source": ", ".join(topics),
+                    },
+                    start_ns=st.start_ns,
+                    end_ns=st.end_ns,
+                )
         for writer, _ in self._labels_writers.values():
             writer.close()
         self._finish_cameras()
@@ -608,14 +756,21 @@ class MessageIngest:
                 continue
             got = self.read.get(topic, 0)
             if got < n_index:
-                self.prov.drop(topic, "listed in the index but not delivered by the reader", n_index - got)
-                self.prov.note(f"{topic}: {n_index - got} of {n_index} indexed messages were not delivered")
+                self.prov.drop(
+                    topic, "listed in the index but not delivered by the reader", n_index - got
+                )
+                self.prov.note(
+                    f"{topic}: {n_index - got} of {n_index} indexed messages were not delivered"
+                )
             elif got > n_index:
                 self.prov.topic(topic).messages = got
         for name, pend in self._pending_labels.items():
             for t, _ in pend:
-                self.prov.issue(self._cameras[name].labels_topic or name,
-                                "label image without a colour frame of the same stamp (dropped)", t)
+                self.prov.issue(
+                    self._cameras[name].labels_topic or name,
+                    "label image without a colour frame of the same stamp (dropped)",
+                    t,
+                )
 
     def _finish_cameras(self) -> None:
         ctx, ep = self.ctx, self.ctx.episode_dir()
@@ -627,30 +782,44 @@ class MessageIngest:
                 T = self.tf.lookup(world, cam.frame_id) if cam.frame_id else None
                 if T is None:
                     T = np.eye(4)
-                    self.prov.note(f"camera {name}: no /tf_static chain from {world!r} to "
-                                   f"{cam.frame_id or '(no frame_id)'!r}; T_world_cam set to identity")
+                    self.prov.note(
+                        f"camera {name}: no /tf_static chain from {world!r} to "
+                        f"{cam.frame_id or '(no frame_id)'!r}; T_world_cam set to identity"
+                    )
                 if stats is not None and cam.sink is not None and cam.sink.size is not None:
                     if cam.sink.size != (model.width, model.height):
-                        self.prov.issue(cam.image_topic or name,
-                                        f"image size {cam.sink.size} differs from camera_info "
-                                        f"{(model.width, model.height)}", None, drop=False)
+                        self.prov.issue(
+                            cam.image_topic or name,
+                            f"image size {cam.sink.size} differs from camera_info "
+                            f"{(model.width, model.height)}",
+                            None,
+                            drop=False,
+                        )
                 from dataclasses import replace
 
                 ctx.writer.set_camera(replace(model, T_world_cam=T))
             elif cam.image_topic is not None:
-                self.prov.note(f"camera {name}: images without a usable camera_info; no intrinsics written "
-                               "(pass the calibration with --map or record camera_info)")
+                self.prov.note(
+                    f"camera {name}: images without a usable camera_info; no intrinsics written "
+                    "(pass the calibration with --map or record camera_info)"
+                )
             if stats is not None and stats.rows:
                 entry: dict[str, Any] = {
-                    "kind": "camera", "camera": name, "frames": f"{ep}/cameras/{name}/frames.parquet",
-                    "stamp_source": cam.stamp_source or "log_time", "offset_ns": 0,
-                    "nominal_rate_hz": stats.rate_hz, "source": cam.image_topic or "",
+                    "kind": "camera",
+                    "camera": name,
+                    "frames": f"{ep}/cameras/{name}/frames.parquet",
+                    "stamp_source": cam.stamp_source or "log_time",
+                    "offset_ns": 0,
+                    "nominal_rate_hz": stats.rate_hz,
+                    "source": cam.image_topic or "",
                 }
                 if self.opts.video:
                     entry["video"] = f"{ep}/cameras/{name}/rgb.mp4"
                 if name in self._labels_writers:
                     entry["labels"] = f"{ep}/cameras/{name}/labels.parquet"
-                ctx.add_stream(f"camera/{name}", entry, start_ns=stats.start_ns, end_ns=stats.end_ns)
+                ctx.add_stream(
+                    f"camera/{name}", entry, start_ns=stats.start_ns, end_ns=stats.end_ns
+                )
 
     def abort(self) -> None:
         """Close open files after a failure (the writer discards them)."""

@@ -34,8 +34,22 @@ __all__ = ["convert_nerfstudio", "detect_nerfstudio", "read_transforms", "T_GL_T
 #: right-multiply an OpenGL-axes camera pose to get the OpenCV-axes pose
 T_GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
 _MAX_BYTES = 256 << 20
-_INTR = ("fl_x", "fl_y", "cx", "cy", "w", "h", "k1", "k2", "k3", "k4", "p1", "p2", "camera_angle_x",
-         "camera_angle_y")
+_INTR = (
+    "fl_x",
+    "fl_y",
+    "cx",
+    "cy",
+    "w",
+    "h",
+    "k1",
+    "k2",
+    "k3",
+    "k4",
+    "p1",
+    "p2",
+    "camera_angle_x",
+    "camera_angle_y",
+)
 
 
 def _transforms_file(path: Path) -> Path | None:
@@ -62,7 +76,9 @@ def _camera(d: dict[str, Any], model: str, path: Path, where: str, name: str) ->
     try:
         w, h = int(d["w"]), int(d["h"])
     except (KeyError, TypeError, ValueError):
-        raise InputError("intrinsics need 'w' and 'h' (image size in px)", path=path, where=where) from None
+        raise InputError(
+            "intrinsics need 'w' and 'h' (image size in px)", path=path, where=where
+        ) from None
     if "fl_x" in d:
         fx = _num(d, "fl_x", path, where)
     elif "camera_angle_x" in d:
@@ -80,19 +96,34 @@ def _camera(d: dict[str, Any], model: str, path: Path, where: str, name: str) ->
     k = {n: float(d.get(n, 0.0) or 0.0) for n in ("k1", "k2", "k3", "k4", "p1", "p2")}
     m = model.upper()
     if m == "OPENCV_FISHEYE":
-        dm, dist = check_distortion("equidistant", [k["k1"], k["k2"], k["k3"], k["k4"]], path=path, where=where)
+        dm, dist = check_distortion(
+            "equidistant", [k["k1"], k["k2"], k["k3"], k["k4"]], path=path, where=where
+        )
     elif m in ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE", ""):
         coeffs = [k["k1"], k["k2"], k["p1"], k["p2"], k["k3"]]
         if k["k4"]:
             raise InputError("k4 is set for a non-fisheye camera", path=path, where=where)
         dm, dist = ("plumb_bob", tuple(coeffs)) if any(coeffs) else ("none", ())
     else:
-        raise InputError(f"unsupported camera_model {model!r}", path=path, where=where,
-                         hint="supported: OPENCV, OPENCV_FISHEYE, PINHOLE")
+        raise InputError(
+            f"unsupported camera_model {model!r}",
+            path=path,
+            where=where,
+            hint="supported: OPENCV, OPENCV_FISHEYE, PINHOLE",
+        )
     if fx <= 0 or fy <= 0 or w <= 0 or h <= 0:
         raise InputError("focal lengths and image size must be positive", path=path, where=where)
-    return CameraModel(name=name, width=w, height=h, fx=fx, fy=fy, cx=cx, cy=cy, distortion_model=dm,
-                       distortion=dist)
+    return CameraModel(
+        name=name,
+        width=w,
+        height=h,
+        fx=fx,
+        fy=fy,
+        cx=cx,
+        cy=cy,
+        distortion_model=dm,
+        distortion=dist,
+    )
 
 
 def _image_path(rel: str, base: Path, images: Path | None, path: Path, where: str) -> Path:
@@ -136,23 +167,41 @@ def read_transforms(path: Path, *, images: Path | None = None) -> tuple[list[Vie
         intr = {k: doc[k] for k in _INTR if k in doc}
         intr.update({k: fr[k] for k in _INTR if k in fr})
         cam = _camera(intr, model, path, where, "cam0")
-        key = (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, cam.distortion_model, cam.distortion)
+        key = (
+            cam.width,
+            cam.height,
+            cam.fx,
+            cam.fy,
+            cam.cx,
+            cam.cy,
+            cam.distortion_model,
+            cam.distortion,
+        )
         name = cams.setdefault(key, f"cam{len(cams)}")
         cam = replace(cam, name=name)
         try:
             M = np.asarray(fr["transform_matrix"], dtype=np.float64)
         except (KeyError, TypeError, ValueError):
-            raise InputError("frame has no numeric transform_matrix", path=path, where=where) from None
+            raise InputError(
+                "frame has no numeric transform_matrix", path=path, where=where
+            ) from None
         if M.shape == (3, 4):
             M = np.vstack([M, [0.0, 0.0, 0.0, 1.0]])
         if M.shape != (4, 4) or not np.all(np.isfinite(M)):
-            raise InputError(f"transform_matrix must be 4x4 (or 3x4), is {M.shape}", path=path, where=where)
+            raise InputError(
+                f"transform_matrix must be 4x4 (or 3x4), is {M.shape}", path=path, where=where
+            )
         R = M[:3, :3]
         if abs(np.linalg.det(R) - 1.0) > 1e-3 or np.abs(R.T @ R - np.eye(3)).max() > 1e-3:
-            raise InputError("transform_matrix rotation is not orthonormal (scaled poses are not supported)",
-                             path=path, where=where)
+            raise InputError(
+                "transform_matrix rotation is not orthonormal (scaled poses are not supported)",
+                path=path,
+                where=where,
+            )
         rel = fr.get("file_path")
-        views.append(View(str(rel), _image_path(rel, base, images, path, where), cam, M @ T_GL_TO_CV))
+        views.append(
+            View(str(rel), _image_path(rel, base, images, path, where), cam, M @ T_GL_TO_CV)
+        )
     extra: dict[str, Any] = {}
     if "applied_transform" in doc:
         extra["applied_transform"] = doc["applied_transform"]
@@ -173,11 +222,18 @@ def convert_nerfstudio(src: Path, ctx: IngestContext) -> None:
             v.T_world_cam = T @ v.T_world_cam
         prov.note(f"world rotated so that the capture's {ctx.options.world_up} axis is +z")
     else:
-        prov.note("world frame kept as in transforms.json (nerfstudio worlds are arbitrary: origin and scale "
-                  "come from the capture pipeline, not the robot base); pass --world-up to re-orient")
+        prov.note(
+            "world frame kept as in transforms.json (nerfstudio worlds are arbitrary: origin and scale "
+            "come from the capture pipeline, not the robot base); pass --world-up to re-orient"
+        )
     prov.note("camera poses converted from OpenGL (x right, y up, z back) to OpenCV axes")
     write_static_capture(ctx, views, source=path.name)
 
 
-register_converter("nerfstudio", detect_nerfstudio, convert_nerfstudio,
-                   description="nerfstudio transforms.json capture", priority=90)
+register_converter(
+    "nerfstudio",
+    detect_nerfstudio,
+    convert_nerfstudio,
+    description="nerfstudio transforms.json capture",
+    priority=90,
+)

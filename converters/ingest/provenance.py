@@ -37,8 +37,12 @@ class TopicRecord:
     dropped: dict[str, int] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"type": self.type, "role": self.role, "messages": self.messages,
-                               "written": self.written}
+        out: dict[str, Any] = {
+            "type": self.type,
+            "role": self.role,
+            "messages": self.messages,
+            "written": self.written,
+        }
         if self.stamp_source is not None:
             out["stamp_source"] = self.stamp_source
         if self.dropped:
@@ -74,7 +78,9 @@ class Provenance:
         rec = self.topic(topic)
         rec.dropped[reason] = rec.dropped.get(reason, 0) + n
 
-    def issue(self, topic: str, problem: str, t_ns: int | None = None, *, drop: bool = True) -> None:
+    def issue(
+        self, topic: str, problem: str, t_ns: int | None = None, *, drop: bool = True
+    ) -> None:
         """Record a problem with one sample of ``topic`` at stamp ``t_ns`` (ns).
 
         Args:
@@ -86,7 +92,12 @@ class Provenance:
         key = (topic, problem)
         entry = self._issues.get(key)
         if entry is None:
-            entry = self._issues[key] = {"topic": topic, "problem": problem, "count": 0, "stamps_ns": []}
+            entry = self._issues[key] = {
+                "topic": topic,
+                "problem": problem,
+                "count": 0,
+                "stamps_ns": [],
+            }
         entry["count"] += 1
         if t_ns is not None and len(entry["stamps_ns"]) < _MAX_EXAMPLES:
             entry["stamps_ns"].append(int(t_ns))
@@ -108,7 +119,12 @@ class Provenance:
         out.update(self.extra)
         out["topics"] = {k: v.to_dict() for k, v in sorted(self.topics.items())}
         dropped = [
-            {"topic": k, "type": v.type, "messages": v.messages - v.written, "reasons": dict(v.dropped)}
+            {
+                "topic": k,
+                "type": v.type,
+                "messages": v.messages - v.written,
+                "reasons": dict(v.dropped),
+            }
             for k, v in sorted(self.topics.items())
             if v.messages > v.written
         ]

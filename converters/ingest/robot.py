@@ -34,11 +34,15 @@ def urdf_root_link(urdf_path: Path) -> str:
 
 
 def _safe_parse(path: Path) -> etree._ElementTree:
-    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False)
+    parser = etree.XMLParser(
+        resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False
+    )
     return etree.parse(str(path), parser)
 
 
-def attach_robot(ctx: IngestContext, urdf_path: Path, *, package_roots: dict[str, Path] | None = None) -> None:
+def attach_robot(
+    ctx: IngestContext, urdf_path: Path, *, package_roots: dict[str, Path] | None = None
+) -> None:
     """Copy ``urdf_path`` and every mesh it uses into the dataset; declare the robot.
 
     Raises:
@@ -56,14 +60,23 @@ def attach_robot(ctx: IngestContext, urdf_path: Path, *, package_roots: dict[str
         try:
             p = resolve_mesh_uri(ref.uri, urdf_path, None, roots or None)
         except RobogsError as exc:
-            raise type(exc)(exc.message, path=urdf_path, where=f"link {ref.link} mesh {ref.uri}",
-                            hint=exc.hint or "pass --package NAME=FOLDER for package:// URIs") from None
+            raise type(exc)(
+                exc.message,
+                path=urdf_path,
+                where=f"link {ref.link} mesh {ref.uri}",
+                hint=exc.hint or "pass --package NAME=FOLDER for package:// URIs",
+            ) from None
         if not p.is_file():
-            raise InputError(f"mesh file not found (resolved to {p})", path=urdf_path,
-                             where=f"link {ref.link} mesh {ref.uri}",
-                             hint="pass --package NAME=FOLDER for package:// URIs")
+            raise InputError(
+                f"mesh file not found (resolved to {p})",
+                path=urdf_path,
+                where=f"link {ref.link} mesh {ref.uri}",
+                hint="pass --package NAME=FOLDER for package:// URIs",
+            )
         resolved[ref.uri] = p
-    common = Path(os.path.commonpath([str(p.parent) for p in resolved.values()])) if resolved else None
+    common = (
+        Path(os.path.commonpath([str(p.parent) for p in resolved.values()])) if resolved else None
+    )
     new_rel: dict[str, str] = {}
     for uri, p in sorted(resolved.items()):
         assert common is not None
@@ -78,11 +91,16 @@ def attach_robot(ctx: IngestContext, urdf_path: Path, *, package_roots: dict[str
     ctx.writer.write_bytes(URDF_REL, etree.tostring(tree, xml_declaration=True, encoding="utf-8"))
     root = urdf_root_link(urdf_path)
     ctx.writer.set_robot(URDF_REL, base_link=root)
-    ctx.provenance.extra["robot"] = {"urdf": urdf_path.name, "meshes": len(resolved), "root_link": root}
+    ctx.provenance.extra["robot"] = {
+        "urdf": urdf_path.name,
+        "meshes": len(resolved),
+        "root_link": root,
+    }
 
 
-def attach_robot_description(ctx: IngestContext, text: str, *,
-                             package_roots: dict[str, Path] | None = None) -> bool:
+def attach_robot_description(
+    ctx: IngestContext, text: str, *, package_roots: dict[str, Path] | None = None
+) -> bool:
     """Use a ``/robot_description`` URDF string; returns False (with a note) when unusable."""
     with tempfile.TemporaryDirectory(prefix="robogs-urdf-") as tmp:
         path = Path(tmp) / "robot_description.urdf"
@@ -91,9 +109,11 @@ def attach_robot_description(ctx: IngestContext, text: str, *,
             attach_robot(ctx, path, package_roots=package_roots)
         except RobogsError as exc:
             ctx.writer.remove("robot")
-            ctx.provenance.note(f"robot_description from the source not used: {exc.message}"
-                                + (f" ({exc.where})" if exc.where else "")
-                                + "; pass --urdf (and --package NAME=FOLDER) to add the robot")
+            ctx.provenance.note(
+                f"robot_description from the source not used: {exc.message}"
+                + (f" ({exc.where})" if exc.where else "")
+                + "; pass --urdf (and --package NAME=FOLDER) to add the robot"
+            )
             return False
     ctx.provenance.extra["robot"]["urdf"] = "robot_description topic"
     return True

@@ -49,7 +49,14 @@ ROLE_KINDS = (
 _NAMED = {"object_pose", "ee_pose", "wrench", "camera_image", "camera_info", "camera_labels"}
 _MAX_MAP_BYTES = 1 << 20
 
-_IMAGE_SUFFIXES = ("image_raw", "image_rect_color", "image_rect", "image_color", "image_mono", "image")
+_IMAGE_SUFFIXES = (
+    "image_raw",
+    "image_rect_color",
+    "image_rect",
+    "image_color",
+    "image_mono",
+    "image",
+)
 _POSE_TYPES = {
     "geometry_msgs/msg/PoseStamped",
     "geometry_msgs/msg/PoseWithCovarianceStamped",
@@ -91,7 +98,9 @@ def parse_role(text: str, *, where: str | None = None) -> Role:
     """
     kind, sep, name = str(text).strip().partition(":")
     if kind not in ROLE_KINDS:
-        raise InputError(f"unknown role {text!r}", where=where, hint=f"roles: {', '.join(ROLE_KINDS)}")
+        raise InputError(
+            f"unknown role {text!r}", where=where, hint=f"roles: {', '.join(ROLE_KINDS)}"
+        )
     if sep and kind not in _NAMED:
         raise InputError(f"role {kind!r} takes no name", where=where)
     if sep and not name:
@@ -113,12 +122,17 @@ def load_role_map(path: str | Path) -> dict[str, Role]:
     except OSError as exc:
         raise InputError(f"cannot read role map ({exc.strerror})", path=p) from None
     except yaml.YAMLError as exc:
-        raise InputError(f"role map is not valid YAML ({str(exc).splitlines()[0]})", path=p) from None
+        raise InputError(
+            f"role map is not valid YAML ({str(exc).splitlines()[0]})", path=p
+        ) from None
     if isinstance(doc, dict) and isinstance(doc.get("topics"), dict):
         doc = doc["topics"]
     if not isinstance(doc, dict):
-        raise InputError("role map must be a mapping 'topic: role'", path=p,
-                         hint="e.g. '/mocap/box/pose: object_pose:box'")
+        raise InputError(
+            "role map must be a mapping 'topic: role'",
+            path=p,
+            hint="e.g. '/mocap/box/pose: object_pose:box'",
+        )
     out: dict[str, Role] = {}
     for topic, role in doc.items():
         out[str(topic)] = parse_role(str(role), where=f"{p}: {topic}")
@@ -135,8 +149,11 @@ def parse_topic_flags(flags: list[str]) -> dict[str, Role]:
     for flag in flags:
         role, sep, topic = flag.partition("=")
         if not sep or not topic:
-            raise InputError(f"--topic expects ROLE=TOPIC, got {flag!r}", where="--topic",
-                             hint="e.g. --topic object_pose:box=/mocap/box/pose")
+            raise InputError(
+                f"--topic expects ROLE=TOPIC, got {flag!r}",
+                where="--topic",
+                hint="e.g. --topic object_pose:box=/mocap/box/pose",
+            )
         out[topic] = parse_role(role, where="--topic")
     return out
 
@@ -163,7 +180,13 @@ def _pose_name(topic: str, prefix: str) -> str | None:
 
 def _object_name(topic: str) -> str:
     parts = [p for p in topic.split("/") if p]
-    while len(parts) > 1 and parts[-1] in ("pose", "pose_stamped", "transform", "transform_stamped", "odom"):
+    while len(parts) > 1 and parts[-1] in (
+        "pose",
+        "pose_stamped",
+        "transform",
+        "transform_stamped",
+        "odom",
+    ):
         parts = parts[:-1]
     return safe_name(parts[-1]) if parts else "object"
 

@@ -15,7 +15,13 @@ import numpy as np
 
 from robogs_format.errors import InputError
 
-__all__ = ["as_bytes", "decode_raw_image", "decode_compressed_image", "COLOUR_ENCODINGS", "MONO16_ENCODINGS"]
+__all__ = [
+    "as_bytes",
+    "decode_raw_image",
+    "decode_compressed_image",
+    "COLOUR_ENCODINGS",
+    "MONO16_ENCODINGS",
+]
 
 #: encoding -> (channels, OpenCV conversion to RGB or None)
 COLOUR_ENCODINGS: dict[str, tuple[int, int | None]] = {
@@ -35,7 +41,9 @@ _MAX_PIXELS = 100_000_000
 def as_bytes(data: Any) -> np.ndarray:
     """A message's ``uint8[]`` field (bytes, bytearray, list or numpy array) as a uint8 array."""
     if isinstance(data, np.ndarray):
-        return data.view(np.uint8).reshape(-1) if data.dtype.itemsize == 1 else data.astype(np.uint8)
+        return (
+            data.view(np.uint8).reshape(-1) if data.dtype.itemsize == 1 else data.astype(np.uint8)
+        )
     if isinstance(data, (bytes, bytearray, memoryview)):
         return np.frombuffer(data, dtype=np.uint8)
     return np.asarray(data, dtype=np.uint8)
@@ -62,8 +70,11 @@ def decode_raw_image(msg: Any, *, topic: str, t_ns: int) -> tuple[str, np.ndarra
     elif enc in MONO16_ENCODINGS:
         ch, conv, bpp = 1, None, 2
     else:
-        raise InputError(f"unsupported image encoding {msg.encoding!r}", where=where,
-                         hint="supported: rgb8, bgr8, rgba8, bgra8, mono8, mono16")
+        raise InputError(
+            f"unsupported image encoding {msg.encoding!r}",
+            where=where,
+            hint="supported: rgb8, bgr8, rgba8, bgra8, mono8, mono16",
+        )
     if step < w * bpp or data.size != step * h:
         raise InputError(
             f"image data has {data.size} bytes but {w}x{h} {enc} with step {step} needs {step * h}"
@@ -73,7 +84,9 @@ def decode_raw_image(msg: Any, *, topic: str, t_ns: int) -> tuple[str, np.ndarra
         )
     rows = data.reshape(h, step)[:, : w * bpp]
     if enc in MONO16_ENCODINGS:
-        img16 = rows.copy().view(">u2" if int(getattr(msg, "is_bigendian", 0)) else "<u2").reshape(h, w)
+        img16 = (
+            rows.copy().view(">u2" if int(getattr(msg, "is_bigendian", 0)) else "<u2").reshape(h, w)
+        )
         return "mono16", img16.astype(np.uint16)
     img = rows.reshape(h, w, ch) if ch > 1 else rows.reshape(h, w)
     if conv is not None:

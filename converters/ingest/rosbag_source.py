@@ -24,7 +24,14 @@ from ..registry import register_converter
 from .context import IngestContext
 from .messages import MessageIngest, TopicInfo
 
-__all__ = ["convert_ros1", "convert_ros2", "detect_ros1", "detect_ros2", "ros2_storage_paths", "open_bag"]
+__all__ = [
+    "convert_ros1",
+    "convert_ros2",
+    "detect_ros1",
+    "detect_ros2",
+    "ros2_storage_paths",
+    "open_bag",
+]
 
 _MAX_META_BYTES = 8 << 20
 
@@ -44,8 +51,20 @@ def _reader_errors() -> tuple[type[BaseException], ...]:
     from rosbags.rosbag1 import ReaderError as R1
     from rosbags.rosbag2 import ReaderError as R2
 
-    errs: list[type[BaseException]] = [AnyReaderError, R1, R2, OSError, ValueError, struct.error, EOFError,
-                                       KeyError, IndexError, sqlite3.Error, RuntimeError, AssertionError]
+    errs: list[type[BaseException]] = [
+        AnyReaderError,
+        R1,
+        R2,
+        OSError,
+        ValueError,
+        struct.error,
+        EOFError,
+        KeyError,
+        IndexError,
+        sqlite3.Error,
+        RuntimeError,
+        AssertionError,
+    ]
     try:
         from rosbags.typesys import TypesysError
 
@@ -64,11 +83,16 @@ def _read_metadata(folder: Path) -> dict[str, Any]:
     except OSError as exc:
         raise InputError(f"cannot read metadata.yaml ({exc.strerror})", path=meta) from None
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise InputError(f"metadata.yaml is not valid YAML ({str(exc).splitlines()[0]})", path=meta) from None
+        raise InputError(
+            f"metadata.yaml is not valid YAML ({str(exc).splitlines()[0]})", path=meta
+        ) from None
     info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
     if not isinstance(info, dict):
-        raise InputError("metadata.yaml has no rosbag2_bagfile_information", path=meta,
-                         hint="is this a ROS 2 bag folder?")
+        raise InputError(
+            "metadata.yaml has no rosbag2_bagfile_information",
+            path=meta,
+            hint="is this a ROS 2 bag folder?",
+        )
     return info
 
 
@@ -87,14 +111,20 @@ def ros2_storage_paths(folder: Path) -> tuple[list[Path], dict[str, Any]]:
     info = _read_metadata(folder)
     mode = str(info.get("compression_mode") or "").strip().lower()
     files = [folder / Path(str(f)).name for f in info.get("relative_file_paths") or []]
-    facts: dict[str, Any] = {"storage": str(info.get("storage_identifier", "")),
-                             "ros_distro": str(info.get("ros_distro", "")) or None, "direct": False}
+    facts: dict[str, Any] = {
+        "storage": str(info.get("storage_identifier", "")),
+        "ros_distro": str(info.get("ros_distro", "")) or None,
+        "direct": False,
+    }
     if not files:
         raise InputError("metadata.yaml lists no storage files", path=folder / "metadata.yaml")
     missing = [f.name for f in files if not f.is_file()]
     if missing:
-        raise InputError(f"storage files missing: {', '.join(missing)}", path=folder,
-                         hint="copy the whole bag folder")
+        raise InputError(
+            f"storage files missing: {', '.join(missing)}",
+            path=folder,
+            hint="copy the whole bag folder",
+        )
     if mode in ("", "none") and all(f.suffix in (".db3", ".mcap") for f in files):
         expected = {}
         for t in info.get("topics_with_message_count") or []:
@@ -124,8 +154,11 @@ def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
     except RobogsError:
         raise
     except errors as exc:
-        raise InputError(f"cannot open bag ({type(exc).__name__}: {exc})", path=src,
-                         hint="the file is truncated, empty, not a bag, or uses an unknown compression") from None
+        raise InputError(
+            f"cannot open bag ({type(exc).__name__}: {exc})",
+            path=src,
+            hint="the file is truncated, empty, not a bag, or uses an unknown compression",
+        ) from None
     try:
         count = reader.message_count
         start, end = reader.start_time, reader.end_time
@@ -142,8 +175,10 @@ def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
         if expected:
             for t in topics:
                 if t.topic in expected and expected[t.topic] != t.count:
-                    ctx.provenance.note(f"{t.topic}: metadata.yaml says {expected[t.topic]} messages, "
-                                        f"the storage holds {t.count}")
+                    ctx.provenance.note(
+                        f"{t.topic}: metadata.yaml says {expected[t.topic]} messages, "
+                        f"the storage holds {t.count}"
+                    )
         ingest = MessageIngest(ctx, time_range=time_range)
         static, main = ingest.plan(topics)
         where = "before the first message"
@@ -161,7 +196,9 @@ def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
                     except RobogsError:
                         raise
                     except errors + (TypeError, UnicodeDecodeError) as exc:
-                        ingest.note_undecodable(conn.topic, log_time, f"{type(exc).__name__}: {exc}")
+                        ingest.note_undecodable(
+                            conn.topic, log_time, f"{type(exc).__name__}: {exc}"
+                        )
                         ctx.progress.advance()
                         continue
                     ingest.handle(conn.topic, log_time, msg)
@@ -174,8 +211,12 @@ def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
     except RobogsError:
         raise
     except errors as exc:
-        raise InputError(f"bag is corrupt ({type(exc).__name__}: {exc})", path=src, where=where,
-                         hint="the file may be truncated; re-record or reindex it") from None
+        raise InputError(
+            f"bag is corrupt ({type(exc).__name__}: {exc})",
+            path=src,
+            where=where,
+            hint="the file may be truncated; re-record or reindex it",
+        ) from None
     finally:
         ctx.progress.stop()
         try:
@@ -192,10 +233,15 @@ def convert_ros1(src: Path, ctx: IngestContext) -> None:
     except OSError as exc:
         raise InputError(f"cannot open bag ({exc.strerror})", path=src) from None
     if not head:
-        raise InputError("bag file is empty", path=src, hint="the recording did not start or was not copied")
+        raise InputError(
+            "bag file is empty", path=src, hint="the recording did not start or was not copied"
+        )
     if not head.startswith(b"#ROSBAG V2."):
-        raise InputError("not a ROS 1 bag (no '#ROSBAG V2.0' header)", path=src,
-                         hint="ROS 2 bags are folders with metadata.yaml; MCAP files use --from mcap")
+        raise InputError(
+            "not a ROS 1 bag (no '#ROSBAG V2.0' header)",
+            path=src,
+            hint="ROS 2 bags are folders with metadata.yaml; MCAP files use --from mcap",
+        )
     ctx.provenance.extra["storage"] = "rosbag1"
     _convert([src], src, ctx)
 
@@ -217,6 +263,13 @@ def convert_ros2(src: Path, ctx: IngestContext) -> None:
     _convert(paths, src, ctx)
 
 
-register_converter("ros1", detect_ros1, convert_ros1, description="ROS 1 .bag file (rosbags)", priority=50)
-register_converter("ros2", detect_ros2, convert_ros2,
-                   description="ROS 2 bag folder with metadata.yaml (sqlite3 or mcap storage)", priority=100)
+register_converter(
+    "ros1", detect_ros1, convert_ros1, description="ROS 1 .bag file (rosbags)", priority=50
+)
+register_converter(
+    "ros2",
+    detect_ros2,
+    convert_ros2,
+    description="ROS 2 bag folder with metadata.yaml (sqlite3 or mcap storage)",
+    priority=100,
+)

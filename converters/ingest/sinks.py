@@ -94,7 +94,9 @@ class TableSink:
         self.schema = pa.schema(fields)
         problems = check_table_schema(kind, self.schema)
         if problems:
-            raise FormatError(f"internal: {kind} columns do not match the spec: {'; '.join(problems)}")
+            raise FormatError(
+                f"internal: {kind} columns do not match the spec: {'; '.join(problems)}"
+            )
         self.path = path
         self.kind = kind
         self.float_columns = list(float_columns)
@@ -119,7 +121,9 @@ class TableSink:
         self.end_ns: int | None = None
         self.written: dict[str, int] = {}
 
-    def add(self, source: str, t_ns: int, values: tuple[float, ...] | list[float], label: str = "") -> bool:
+    def add(
+        self, source: str, t_ns: int, values: tuple[float, ...] | list[float], label: str = ""
+    ) -> bool:
         """Queue one row; returns False when it was dropped (and recorded)."""
         last = self._last.get(source)
         if last is not None:
@@ -127,12 +131,20 @@ class TableSink:
                 self.prov.issue(source, "duplicate stamp (sample dropped)", t_ns)
                 return False
             if t_ns < last - self.jump_back_ns:
-                self.prov.issue(source, "clock jump backwards by more than "
-                                f"{self.jump_back_ns / 1e9:g} s (sample dropped)", t_ns)
+                self.prov.issue(
+                    source,
+                    "clock jump backwards by more than "
+                    f"{self.jump_back_ns / 1e9:g} s (sample dropped)",
+                    t_ns,
+                )
                 return False
             if t_ns > last + self.jump_forward_ns:
-                self.prov.issue(source, f"clock jump forward by more than {self.jump_forward_ns / 3.6e12:g} h",
-                                t_ns, drop=False)
+                self.prov.issue(
+                    source,
+                    f"clock jump forward by more than {self.jump_forward_ns / 3.6e12:g} h",
+                    t_ns,
+                    drop=False,
+                )
         if self._emitted_max is not None and t_ns < self._emitted_max:
             self.prov.issue(source, "stamp older than rows already written (sample dropped)", t_ns)
             return False
@@ -224,8 +236,17 @@ class CameraSink:
         fps_hint: container frame rate for the mp4 header (stamps live in the table).
     """
 
-    def __init__(self, frames_path: Path, video_path: Path, *, topic: str, provenance: Provenance,
-                 video: bool = True, fps_hint: float = 30.0, chunk_rows: int = 1 << 14) -> None:
+    def __init__(
+        self,
+        frames_path: Path,
+        video_path: Path,
+        *,
+        topic: str,
+        provenance: Provenance,
+        video: bool = True,
+        fps_hint: float = 30.0,
+        chunk_rows: int = 1 << 14,
+    ) -> None:
         self.frames_path = frames_path
         self.video_path = video_path
         self.topic = topic
@@ -233,7 +254,9 @@ class CameraSink:
         self.video = video
         self.fps_hint = fps_hint if fps_hint and fps_hint > 0 else 30.0
         self.chunk_rows = chunk_rows
-        self.schema = pa.schema([pa.field("t_ns", pa.int64(), nullable=False), pa.field("frame_index", pa.int64())])
+        self.schema = pa.schema(
+            [pa.field("t_ns", pa.int64(), nullable=False), pa.field("frame_index", pa.int64())]
+        )
         self._vw: VideoWriter | None = None
         self._pw: pq.ParquetWriter | None = None
         self._t: list[int] = []
@@ -246,7 +269,9 @@ class CameraSink:
     def accepts(self, t_ns: int) -> bool:
         """Whether a frame at ``t_ns`` can be appended (records a drop when not)."""
         if self.end_ns is not None and t_ns <= self.end_ns:
-            self.prov.issue(self.topic, "frame stamp not after the previous frame (frame dropped)", t_ns)
+            self.prov.issue(
+                self.topic, "frame stamp not after the previous frame (frame dropped)", t_ns
+            )
             return False
         return True
 
@@ -260,9 +285,11 @@ class CameraSink:
                 self.size = (w, h)
                 self._vw = VideoWriter(self.video_path, w, h, self.fps_hint)
             elif self.size != (w, h):
-                raise InputError(f"image size changed from {self.size[0]}x{self.size[1]} to {w}x{h}",
-                                 where=f"topic {self.topic} stamp {t_ns}",
-                                 hint="a camera stream must keep one resolution")
+                raise InputError(
+                    f"image size changed from {self.size[0]}x{self.size[1]} to {w}x{h}",
+                    where=f"topic {self.topic} stamp {t_ns}",
+                    hint="a camera stream must keep one resolution",
+                )
             assert self._vw is not None
             self._vw.write(rgb)
         self._t.append(int(t_ns))
@@ -279,7 +306,10 @@ class CameraSink:
             return
         n0 = self.count - len(self._t)
         table = pa.Table.from_arrays(
-            [pa.array(self._t, type=pa.int64()), pa.array(np.arange(n0, self.count, dtype=np.int64))],
+            [
+                pa.array(self._t, type=pa.int64()),
+                pa.array(np.arange(n0, self.count, dtype=np.int64)),
+            ],
             schema=self.schema,
         )
         if self._pw is None:

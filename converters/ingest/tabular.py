@@ -61,7 +61,7 @@ import yaml
 from robogs_format.dataset import Dataset
 from robogs_format.errors import InputError, RobogsError
 from robogs_format.kinematics import Chain
-from robogs_format.urdf import load_urdf, mesh_refs
+from robogs_format.urdf import load_urdf
 
 __all__ = [
     "ColumnMap",
@@ -78,7 +78,15 @@ _SUFFIXES = (".csv", ".parquet", ".pq")
 _TIME_SCALE = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
 _POS_SCALE = {"rad": 1.0, "deg": math.pi / 180.0, "m": 1.0, "mm": 1e-3}
 _VEL_SCALE = {"rad/s": 1.0, "deg/s": math.pi / 180.0, "m/s": 1.0, "mm/s": 1e-3}
-_EFFORT_UNITS = {"n m": "N m", "nm": "N m", "n*m": "N m", "n.m": "N m", "n·m": "N m", "n": "N", "a": "A"}
+_EFFORT_UNITS = {
+    "n m": "N m",
+    "nm": "N m",
+    "n*m": "N m",
+    "n.m": "N m",
+    "n·m": "N m",
+    "n": "N",
+    "a": "A",
+}
 _MAX_BACK_FRACTION = 0.01
 _EXAMPLES = 5
 
@@ -141,21 +149,47 @@ class ColumnMap:
             "time": {"column": self.time_column, "unit": self.time_unit, "epoch_ns": self.epoch_ns},
             "effort_kind": self.effort_kind,
             "joints": {
-                j: {k: v for k, v in (("position", c.position), ("velocity", c.velocity), ("effort", c.effort),
-                                      ("units", c.units), ("effort_scale", c.effort_scale)) if v}
+                j: {
+                    k: v
+                    for k, v in (
+                        ("position", c.position),
+                        ("velocity", c.velocity),
+                        ("effort", c.effort),
+                        ("units", c.units),
+                        ("effort_scale", c.effort_scale),
+                    )
+                    if v
+                }
                 for j, c in self.joints.items()
             },
         }
 
 
-def _norm_unit(u: Any, table: dict[str, float], what: str, path: Path | None, where: str) -> tuple[str, float]:
+def _norm_unit(
+    u: Any, table: dict[str, float], what: str, path: Path | None, where: str
+) -> tuple[str, float]:
     key = str(u).strip().lower().replace(" ", "")
-    aliases = {"radian": "rad", "radians": "rad", "degree": "deg", "degrees": "deg", "rad/sec": "rad/s",
-               "deg/sec": "deg/s", "sec": "s", "second": "s", "seconds": "s", "µs": "us", "nanoseconds": "ns"}
+    aliases = {
+        "radian": "rad",
+        "radians": "rad",
+        "degree": "deg",
+        "degrees": "deg",
+        "rad/sec": "rad/s",
+        "deg/sec": "deg/s",
+        "sec": "s",
+        "second": "s",
+        "seconds": "s",
+        "µs": "us",
+        "nanoseconds": "ns",
+    }
     key = aliases.get(key, key)
     if key not in table:
-        raise InputError(f"unknown {what} unit {u!r}", path=path, where=where,
-                         hint=f"use one of {', '.join(table)}")
+        raise InputError(
+            f"unknown {what} unit {u!r}",
+            path=path,
+            where=where,
+            hint=f"use one of {', '.join(table)}",
+        )
     return key, table[key]
 
 
@@ -181,17 +215,25 @@ def read_mapping(path: str | Path, joint_names: list[str]) -> ColumnMap:
     except FileNotFoundError:
         raise InputError("mapping file not found", path=path) from None
     except yaml.YAMLError as exc:
-        raise InputError(f"mapping is not valid YAML ({str(exc).splitlines()[0]})", path=path) from None
+        raise InputError(
+            f"mapping is not valid YAML ({str(exc).splitlines()[0]})", path=path
+        ) from None
     if not isinstance(doc, dict):
         raise InputError("mapping must be a YAML mapping with 'time' and 'joints'", path=path)
     t = doc.get("time")
     tcol, tspec = _col_spec(t, path, "time")
     if tcol is None:
-        raise InputError("mapping has no time column", path=path, where="time", hint="time: {column: t, unit: s}")
+        raise InputError(
+            "mapping has no time column", path=path, where="time", hint="time: {column: t, unit: s}"
+        )
     tunit, _ = _norm_unit(tspec.get("unit", "s"), _TIME_SCALE, "time", path, "time/unit")
     kind = str(doc.get("effort_kind", "torque")).lower()
     if kind not in ("torque", "current"):
-        raise InputError(f"effort_kind {kind!r} is neither 'torque' nor 'current'", path=path, where="effort_kind")
+        raise InputError(
+            f"effort_kind {kind!r} is neither 'torque' nor 'current'",
+            path=path,
+            where="effort_kind",
+        )
     joints_doc = doc.get("joints")
     if not isinstance(joints_doc, dict) or not joints_doc:
         raise InputError("mapping has no joints", path=path, where="joints")
@@ -199,7 +241,8 @@ def read_mapping(path: str | Path, joint_names: list[str]) -> ColumnMap:
     if unknown:
         raise InputError(
             f"joints {unknown} of the mapping are not in the URDF",
-            path=path, where="joints",
+            path=path,
+            where="joints",
             hint=f"URDF joints: {joint_names}",
         )
     joints: dict[str, JointColumns] = {}
@@ -211,9 +254,13 @@ def read_mapping(path: str | Path, joint_names: list[str]) -> ColumnMap:
         pcol, pspec = _col_spec(spec.get("position"), path, f"{w}/position")
         if pcol is None:
             raise InputError("joint has no position column", path=path, where=f"{w}/position")
-        punit, pscale = _norm_unit(pspec.get("unit", "rad"), _POS_SCALE, "position", path, f"{w}/position/unit")
+        punit, pscale = _norm_unit(
+            pspec.get("unit", "rad"), _POS_SCALE, "position", path, f"{w}/position/unit"
+        )
         vcol, vspec = _col_spec(spec.get("velocity"), path, f"{w}/velocity")
-        vunit, vscale = _norm_unit(vspec.get("unit", "rad/s"), _VEL_SCALE, "velocity", path, f"{w}/velocity/unit")
+        vunit, vscale = _norm_unit(
+            vspec.get("unit", "rad/s"), _VEL_SCALE, "velocity", path, f"{w}/velocity/unit"
+        )
         ecol, espec = _col_spec(spec.get("effort"), path, f"{w}/effort")
         units = {"position": punit}
         if vcol:
@@ -221,28 +268,49 @@ def read_mapping(path: str | Path, joint_names: list[str]) -> ColumnMap:
         escale = 1.0
         if ecol:
             eunit_raw = str(espec.get("unit", "A" if kind == "current" else "N m")).strip().lower()
-            eunit = _EFFORT_UNITS.get(eunit_raw.replace(" ", "") if eunit_raw.replace(" ", "") in _EFFORT_UNITS
-                                      else eunit_raw)
+            eunit = _EFFORT_UNITS.get(
+                eunit_raw.replace(" ", "")
+                if eunit_raw.replace(" ", "") in _EFFORT_UNITS
+                else eunit_raw
+            )
             if eunit is None:
-                raise InputError(f"unknown effort unit {espec.get('unit')!r}", path=path, where=f"{w}/effort/unit",
-                                 hint="use N m, N or A")
+                raise InputError(
+                    f"unknown effort unit {espec.get('unit')!r}",
+                    path=path,
+                    where=f"{w}/effort/unit",
+                    hint="use N m, N or A",
+                )
             if eunit == "A" or kind == "current":
                 kt, gear = espec.get("torque_constant"), espec.get("gear_ratio", 1.0)
                 if kt is None:
-                    raise InputError("a motor current needs torque_constant (N m/A)", path=path,
-                                     where=f"{w}/effort/torque_constant",
-                                     hint="add torque_constant and gear_ratio, or give a torque column")
+                    raise InputError(
+                        "a motor current needs torque_constant (N m/A)",
+                        path=path,
+                        where=f"{w}/effort/torque_constant",
+                        hint="add torque_constant and gear_ratio, or give a torque column",
+                    )
                 escale = float(kt) * float(gear)
                 eunit = "A"
             units["effort"] = eunit
         joints[j] = JointColumns(pcol, vcol, ecol, pscale, vscale, escale, units)
     missing = [j for j in joint_names if j not in joints]
     if missing:
-        raise InputError(f"mapping does not cover joints {missing}", path=path, where="joints",
-                         hint=f"URDF joints: {joint_names}")
+        raise InputError(
+            f"mapping does not cover joints {missing}",
+            path=path,
+            where="joints",
+            hint=f"URDF joints: {joint_names}",
+        )
     gap = doc.get("gap_s")
-    return ColumnMap("map", tcol, tunit, joints, int(tspec.get("epoch_ns", 0)), kind,
-                     None if gap is None else float(gap))
+    return ColumnMap(
+        "map",
+        tcol,
+        tunit,
+        joints,
+        int(tspec.get("epoch_ns", 0)),
+        kind,
+        None if gap is None else float(gap),
+    )
 
 
 def _indexed(names: set[str], pattern: str) -> dict[int, str]:
@@ -258,7 +326,8 @@ def _indexed(names: set[str], pattern: str) -> dict[int, str]:
 def _mismatch(path: Path, found: list[str], joint_names: list[str], layout: str) -> InputError:
     return InputError(
         f"the {layout} columns name joints {found} but the URDF has {joint_names}",
-        path=path, where="header",
+        path=path,
+        where="header",
         hint="rename the columns or pass --map MAP.yaml",
     )
 
@@ -277,9 +346,14 @@ def auto_mapping(columns: list[str], joint_names: list[str], path: Path) -> Colu
             raise _mismatch(path, [pos[k] for k in sorted(pos)], joint_names, layout)
         joints = {}
         for i, j in enumerate(joint_names):
-            joints[j] = JointColumns(pos[i], vel.get(i), eff.get(i), units={"position": "rad"}
-                                     | ({"velocity": "rad/s"} if i in vel else {})
-                                     | ({"effort": "N m"} if i in eff else {}))
+            joints[j] = JointColumns(
+                pos[i],
+                vel.get(i),
+                eff.get(i),
+                units={"position": "rad"}
+                | ({"velocity": "rad/s"} if i in vel else {})
+                | ({"effort": "N m"} if i in eff else {}),
+            )
         if len(vel) != nj:
             for jc in joints.values():
                 jc.velocity = None
@@ -291,20 +365,33 @@ def auto_mapping(columns: list[str], joint_names: list[str], path: Path) -> Colu
         return ColumnMap(layout, tcol, tunit, joints)
 
     if "timestamp" in names and _indexed(names, r"actual_q_(\d+)"):
-        return by_index("rtde", "timestamp", "s", _indexed(names, r"actual_q_(\d+)"),
-                        _indexed(names, r"actual_qd_(\d+)"), _indexed(names, r"target_moment_(\d+)"))
+        return by_index(
+            "rtde",
+            "timestamp",
+            "s",
+            _indexed(names, r"actual_q_(\d+)"),
+            _indexed(names, r"actual_qd_(\d+)"),
+            _indexed(names, r"target_moment_(\d+)"),
+        )
     tcol, tunit = None, None
     for c, u in (("t_ns", "ns"), ("time", "s"), ("t", "s"), ("timestamp", "s"), ("stamp", "s")):
         if c in names:
             tcol, tunit = c, u
             break
     if tcol is not None and _indexed(names, r"q(\d+)") and tcol == "time":
-        return by_index("franka", tcol, tunit, _indexed(names, r"q(\d+)"), _indexed(names, r"dq(\d+)"),
-                        _indexed(names, r"tau_J(\d+)"))
+        return by_index(
+            "franka",
+            tcol,
+            tunit,
+            _indexed(names, r"q(\d+)"),
+            _indexed(names, r"dq(\d+)"),
+            _indexed(names, r"tau_J(\d+)"),
+        )
     if tcol is None:
         raise InputError(
             "no time column found (looked for t_ns, time, t, timestamp, stamp)",
-            path=path, where="header",
+            path=path,
+            where="header",
             hint="pass --map MAP.yaml naming the time column and its unit",
         )
     pos_pat = r"(?:position\.|q_|pos_)(.+)"
@@ -319,21 +406,32 @@ def auto_mapping(columns: list[str], joint_names: list[str], path: Path) -> Colu
     if not pos:
         raise InputError(
             "no joint position columns found (position.<joint>, q_<joint>, pos_<joint>)",
-            path=path, where="header",
+            path=path,
+            where="header",
             hint="pass --map MAP.yaml naming the columns",
         )
     if all(k.isdigit() for k in pos):
-        return by_index("generic", tcol, tunit, {int(k): v for k, v in pos.items()},
-                        {int(k): v for k, v in vel.items() if k.isdigit()},
-                        {int(k): v for k, v in eff.items() if k.isdigit()})
+        return by_index(
+            "generic",
+            tcol,
+            tunit,
+            {int(k): v for k, v in pos.items()},
+            {int(k): v for k, v in vel.items() if k.isdigit()},
+            {int(k): v for k, v in eff.items() if k.isdigit()},
+        )
     if set(pos) != set(joint_names):
         raise _mismatch(path, sorted(pos), joint_names, "generic")
     has_v = set(vel) >= set(joint_names)
     has_e = set(eff) >= set(joint_names)
     joints = {
-        j: JointColumns(pos[j], vel[j] if has_v else None, eff[j] if has_e else None,
-                        units={"position": "rad"} | ({"velocity": "rad/s"} if has_v else {})
-                        | ({"effort": "N m"} if has_e else {}))
+        j: JointColumns(
+            pos[j],
+            vel[j] if has_v else None,
+            eff[j] if has_e else None,
+            units={"position": "rad"}
+            | ({"velocity": "rad/s"} if has_v else {})
+            | ({"effort": "N m"} if has_e else {}),
+        )
         for j in joint_names
     }
     return ColumnMap("generic", tcol, tunit, joints)
@@ -378,11 +476,16 @@ def _find_header(lines: list[str], path: Path) -> tuple[int, str | None]:
                 if not nxt.strip():
                     continue
                 vals = _split(nxt, delim)
-                if len(vals) == len(fields) and sum(_is_number(v) or v == "" for v in vals) >= 0.8 * len(vals):
+                if len(vals) == len(fields) and sum(
+                    _is_number(v) or v == "" for v in vals
+                ) >= 0.8 * len(vals):
                     return i, delim
                 break
-    raise InputError("no header line followed by numeric rows in the first 200 lines", path=path,
-                     hint="the file needs one header line naming the columns")
+    raise InputError(
+        "no header line followed by numeric rows in the first 200 lines",
+        path=path,
+        hint="the file needs one header line naming the columns",
+    )
 
 
 def _read_csv(path: Path) -> _Raw:
@@ -420,7 +523,8 @@ def _read_csv(path: Path) -> _Raw:
             col = columns[min(n, len(columns) - 1)]
             raise InputError(
                 f"row has {n} fields but the header has {len(columns)} (columns of different lengths)",
-                path=path, where=f"line {ln}, column {col!r}",
+                path=path,
+                where=f"line {ln}, column {col!r}",
                 hint="repair or remove the row; only truncated rows at the end of a file are dropped",
             )
         dropped["truncated rows at the end of the file"] = [ln for ln, _ in short]
@@ -433,7 +537,9 @@ def _read_parquet(path: Path) -> _Raw:
     try:
         table = pq.read_table(path)
     except (pa.ArrowException, OSError) as exc:
-        raise InputError(f"unreadable parquet log ({str(exc).splitlines()[0][:200]})", path=path) from None
+        raise InputError(
+            f"unreadable parquet log ({str(exc).splitlines()[0][:200]})", path=path
+        ) from None
     data = {}
     for name in table.schema.names:
         col = table.column(name)
@@ -441,7 +547,9 @@ def _read_parquet(path: Path) -> _Raw:
             data[name] = col.to_numpy(zero_copy_only=False)
         else:
             data[name] = np.asarray(col.cast(pa.string()).to_pylist(), dtype=object).astype(str)
-    return _Raw(list(table.schema.names), data, np.arange(1, table.num_rows + 1, dtype=np.int64), "parquet")
+    return _Raw(
+        list(table.schema.names), data, np.arange(1, table.num_rows + 1, dtype=np.int64), "parquet"
+    )
 
 
 def _to_float(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -537,8 +645,16 @@ class _FileReport:
         lst.extend(int(x) for x in np.asarray(lines).ravel())
 
 
-def _check_degrees(path: Path, cmap: ColumnMap, q: np.ndarray, lines: np.ndarray, lower: np.ndarray,
-                   upper: np.ndarray, joint_names: list[str], report: _FileReport) -> None:
+def _check_degrees(
+    path: Path,
+    cmap: ColumnMap,
+    q: np.ndarray,
+    lines: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    joint_names: list[str],
+    report: _FileReport,
+) -> None:
     for k, j in enumerate(joint_names):
         lo, hi = lower[k], upper[k]
         if not (np.isfinite(lo) and np.isfinite(hi)) or len(q) == 0:
@@ -556,7 +672,8 @@ def _check_degrees(path: Path, cmap: ColumnMap, q: np.ndarray, lines: np.ndarray
             raise InputError(
                 f"positions of joint {j!r} reach {qj[worst]:.4g} rad, far outside its URDF limits "
                 f"[{lo:.4g}, {hi:.4g}] rad but inside them if read as degrees",
-                path=path, where=f"line {lines[worst]}, column {col!r}",
+                path=path,
+                where=f"line {lines[worst]}, column {col!r}",
                 hint="the column is probably in degrees: pass --map with 'unit: deg' for it",
             )
         report.notes.append(
@@ -565,8 +682,15 @@ def _check_degrees(path: Path, cmap: ColumnMap, q: np.ndarray, lines: np.ndarray
         )
 
 
-def _clean_file(path: Path, raw: _Raw, cmap: ColumnMap, joint_names: list[str], lower: np.ndarray,
-                upper: np.ndarray, gap_s: float | None) -> tuple[list[LogSegment], _FileReport]:
+def _clean_file(
+    path: Path,
+    raw: _Raw,
+    cmap: ColumnMap,
+    joint_names: list[str],
+    lower: np.ndarray,
+    upper: np.ndarray,
+    gap_s: float | None,
+) -> tuple[list[LogSegment], _FileReport]:
     report = _FileReport(rows=len(raw.lines) + sum(len(v) for v in raw.dropped.values()))
     for reason, lns in raw.dropped.items():
         report.drop(reason, lns)
@@ -575,7 +699,8 @@ def _clean_file(path: Path, raw: _Raw, cmap: ColumnMap, joint_names: list[str], 
         raise InputError(
             f"column {missing[0]!r} named by the {cmap.layout} mapping is missing"
             + (f" (and {len(missing) - 1} more: {missing[1:4]})" if len(missing) > 1 else ""),
-            path=path, where="header",
+            path=path,
+            where="header",
             hint=f"the file has columns {raw.columns[:12]}{' ...' if len(raw.columns) > 12 else ''}",
         )
     lines = raw.lines
@@ -590,25 +715,48 @@ def _clean_file(path: Path, raw: _Raw, cmap: ColumnMap, joint_names: list[str], 
         vals, bad = _to_float(raw.data[col])
         nan = ~np.isfinite(vals) & ~bad
         if bool((bad | nan).all()) and len(vals):
-            raise InputError(f"column {col!r} has no numeric value", path=path, where=f"column {col!r}",
-                             hint="check the mapping and the delimiter")
-        for mask, reason in ((bad & keep, f"unparseable value in column {col!r}"),
-                             (nan & keep, f"NaN or empty value in column {col!r}")):
+            raise InputError(
+                f"column {col!r} has no numeric value",
+                path=path,
+                where=f"column {col!r}",
+                hint="check the mapping and the delimiter",
+            )
+        for mask, reason in (
+            (bad & keep, f"unparseable value in column {col!r}"),
+            (nan & keep, f"NaN or empty value in column {col!r}"),
+        ):
             if mask.any():
                 report.drop(reason, lines[mask])
         keep = keep & ~bad & ~nan
         return vals * scale
 
-    q = np.stack([numeric(cmap.joints[j].position, cmap.joints[j].position_scale) for j in joint_names], axis=1)
+    q = np.stack(
+        [numeric(cmap.joints[j].position, cmap.joints[j].position_scale) for j in joint_names],
+        axis=1,
+    )
     has_v = all(cmap.joints[j].velocity for j in joint_names)
     has_e = all(cmap.joints[j].effort for j in joint_names)
-    qd = (np.stack([numeric(cmap.joints[j].velocity, cmap.joints[j].velocity_scale) for j in joint_names], axis=1)
-          if has_v else None)
-    tau = (np.stack([numeric(cmap.joints[j].effort, cmap.joints[j].effort_scale) for j in joint_names], axis=1)
-           if has_e else None)
+    qd = (
+        np.stack(
+            [numeric(cmap.joints[j].velocity, cmap.joints[j].velocity_scale) for j in joint_names],
+            axis=1,
+        )
+        if has_v
+        else None
+    )
+    tau = (
+        np.stack(
+            [numeric(cmap.joints[j].effort, cmap.joints[j].effort_scale) for j in joint_names],
+            axis=1,
+        )
+        if has_e
+        else None
+    )
     idx = np.flatnonzero(keep)
     if len(idx) == 0:
-        raise InputError("no usable row", path=path, hint="every row was dropped; see the provenance reasons")
+        raise InputError(
+            "no usable row", path=path, hint="every row was dropped; see the provenance reasons"
+        )
     # stamps: drop duplicates and samples that go back (kept order is the file order)
     t_k = t_ns[idx]
     run_max = np.maximum.accumulate(t_k)
@@ -619,7 +767,8 @@ def _clean_file(path: Path, raw: _Raw, cmap: ColumnMap, joint_names: list[str], 
         first = int(np.argmax(back))
         raise InputError(
             f"{int(back.sum())} of {len(t_k)} stamps go back in time (not monotonic)",
-            path=path, where=f"line {lines[idx[first]]}, column {cmap.time_column!r}",
+            path=path,
+            where=f"line {lines[idx[first]]}, column {cmap.time_column!r}",
             hint="sort the log by time, or check the time column and its unit",
         )
     if dup.any():
@@ -645,11 +794,23 @@ def _clean_file(path: Path, raw: _Raw, cmap: ColumnMap, joint_names: list[str], 
             continue
         qs = q[sel]
         qds = qd[sel] if qd is not None else savgol_derivative(t_ns[sel], qs, order=1)
-        segments.append(LogSegment(path.name, len(segments), t_ns[sel], qs, qds,
-                                   tau[sel] if tau is not None else None, qd is None, lines[sel]))
+        segments.append(
+            LogSegment(
+                path.name,
+                len(segments),
+                t_ns[sel],
+                qs,
+                qds,
+                tau[sel] if tau is not None else None,
+                qd is None,
+                lines[sel],
+            )
+        )
         report.written += len(sel)
     if len(cuts):
-        report.notes.append(f"{len(cuts)} time gap(s) over {gap_ns / 1e9:g} s split the file into {len(bounds) - 1} segments")
+        report.notes.append(
+            f"{len(cuts)} time gap(s) over {gap_ns / 1e9:g} s split the file into {len(bounds) - 1} segments"
+        )
     return segments, report
 
 
@@ -659,7 +820,11 @@ def _clean_file(path: Path, raw: _Raw, cmap: ColumnMap, joint_names: list[str], 
 def _log_files(log: Path) -> list[Path]:
     if log.is_file():
         if log.suffix.lower() not in _SUFFIXES:
-            raise InputError("not a CSV or Parquet log", path=log, hint="pass a .csv or .parquet file or a folder")
+            raise InputError(
+                "not a CSV or Parquet log",
+                path=log,
+                hint="pass a .csv or .parquet file or a folder",
+            )
         return [log]
     if log.is_dir():
         files = sorted(p for p in log.iterdir() if p.is_file() and p.suffix.lower() in _SUFFIXES)
@@ -677,8 +842,9 @@ def detect_tabular(path: Path) -> bool:
     if path.is_dir():
         files = [p for p in path.iterdir() if p.is_file()]
         logs = [p for p in files if p.suffix.lower() in _SUFFIXES]
-        return bool(logs) and all(p.suffix.lower() in _SUFFIXES + (".json", ".yaml", ".yml", ".md", ".txt")
-                                  for p in files)
+        return bool(logs) and all(
+            p.suffix.lower() in _SUFFIXES + (".json", ".yaml", ".yml", ".md", ".txt") for p in files
+        )
     return False
 
 
@@ -756,8 +922,10 @@ def _attach_robot(writer, urdf_path: Path, package_roots: dict[str, Path] | None
     urdf = load_urdf(urdf_path, load_meshes=False)
     root = Chain.from_urdf(urdf).link_names[0]
     writer.set_robot("robot/robot.urdf", base_link=root)
-    prov.note(f"robot meshes not copied ({reason}); {n} mesh geometries removed from the URDF "
-              "(loaded with load_meshes=False)")
+    prov.note(
+        f"robot meshes not copied ({reason}); {n} mesh geometries removed from the URDF "
+        "(loaded with load_meshes=False)"
+    )
     prov.extra["robot"] = {"urdf": urdf_path.name, "meshes": 0, "root_link": root}
 
 
@@ -790,8 +958,9 @@ def write_tabular(
         raw = read_log_file(f)
         cmap = fixed_map or auto_mapping(raw.columns, joint_names, f)
         maps[f.name] = cmap.to_dict()
-        segs, rep = _clean_file(f, raw, cmap, joint_names, lower, upper,
-                                gap_s if gap_s is not None else cmap.gap_s)
+        segs, rep = _clean_file(
+            f, raw, cmap, joint_names, lower, upper, gap_s if gap_s is not None else cmap.gap_s
+        )
         rec = prov.topic(f.name, f.suffix.lstrip(".").lower(), "joint_states")
         rec.messages += rep.rows
         rec.written += rep.written
@@ -799,27 +968,41 @@ def write_tabular(
         for reason, lns in rep.dropped.items():
             prov.drop(f.name, reason, len(lns))
             first = ", ".join(str(x) for x in lns[:_EXAMPLES])
-            prov.note(f"{f.name}: {len(lns)} row(s) dropped: {reason} (line {first}{', ...' if len(lns) > _EXAMPLES else ''})")
+            prov.note(
+                f"{f.name}: {len(lns)} row(s) dropped: {reason} (line {first}{', ...' if len(lns) > _EXAMPLES else ''})"
+            )
         for note in rep.notes:
             prov.note(f"{f.name}: {note}")
         if cmap.layout == "rtde" and any(c.startswith("actual_current_") for c in raw.columns):
-            prov.note(f"{f.name}: efforts from target_moment_* (N m); actual_current_* (A) ignored "
-                      "(map them with torque constants to use them)")
+            prov.note(
+                f"{f.name}: efforts from target_moment_* (N m); actual_current_* (A) ignored "
+                "(map them with torque constants to use them)"
+            )
         if all(jc.effort is None for jc in cmap.joints.values()):
             prov.note(f"{f.name}: no effort columns")
         for seg in segs:
             eid = _episode_id(f.stem, seg.index, len(segs), used)
             rel = f"episodes/{eid}/joint_states.parquet"
             writer.write_table(rel, _joint_table(seg, joint_names), kind="joint_states")
-            stream: dict[str, Any] = {"kind": "joint_states", "path": rel, "stamp_source": "log_time",
-                                      "offset_ns": int(cmap.epoch_ns), "source": f.name}
+            stream: dict[str, Any] = {
+                "kind": "joint_states",
+                "path": rel,
+                "stamp_source": "log_time",
+                "offset_ns": int(cmap.epoch_ns),
+                "source": f.name,
+            }
             steps = np.diff(seg.t_ns)
             stream["nominal_rate_hz"] = float(1e9 / np.median(steps)) if len(steps) else None
             if seg.derived_velocity:
                 stream["derived"] = [f"velocity.{j}" for j in joint_names]
                 prov.note(f"velocities derived from positions: {describe_differentiator(1)}")
-            writer.add_episode(eid, start_ns=int(seg.t_ns[0]), end_ns=int(seg.t_ns[-1]),
-                               streams={"joint_states": stream}, segment=f"{f.name}#{seg.index}")
+            writer.add_episode(
+                eid,
+                start_ns=int(seg.t_ns[0]),
+                end_ns=int(seg.t_ns[-1]),
+                streams={"joint_states": stream},
+                segment=f"{f.name}#{seg.index}",
+            )
             written.append(eid)
     if not written:
         raise InputError("nothing was converted (every row was dropped)", path=log_path)
@@ -865,9 +1048,17 @@ def convert_tabular(
     prov = Provenance("tabular", log_path.name)
     writer = Dataset.create(out, overwrite=force)
     with writer:
-        write_tabular(writer, log_path, urdf_path=urdf_path, mapping=Path(mapping) if mapping else None,
-                      prov=prov, gap_s=gap_s)
-        _attach_robot(writer, urdf_path, {k: Path(v) for k, v in (package_roots or {}).items()} or None, prov)
+        write_tabular(
+            writer,
+            log_path,
+            urdf_path=urdf_path,
+            mapping=Path(mapping) if mapping else None,
+            prov=prov,
+            gap_s=gap_s,
+        )
+        _attach_robot(
+            writer, urdf_path, {k: Path(v) for k, v in (package_roots or {}).items()} or None, prov
+        )
         writer.manifest["provenance"] = prov.to_dict()
         writer.commit()
     return out
@@ -876,7 +1067,9 @@ def convert_tabular(
 def _convert(src: Path, ctx) -> None:
     """Registry entry: write the episodes through the driver's writer (robot attached by it)."""
     mapping = getattr(ctx.options, "mapping", None)
-    write_tabular(ctx.writer, Path(src), urdf_path=_require_urdf(ctx), mapping=mapping, prov=ctx.provenance)
+    write_tabular(
+        ctx.writer, Path(src), urdf_path=_require_urdf(ctx), mapping=mapping, prov=ctx.provenance
+    )
 
 
 def _require_urdf(ctx) -> Path:
@@ -891,9 +1084,13 @@ def _register() -> None:
     except ImportError:  # pragma: no cover - registry not installed
         return
     try:
-        register_converter("tabular", detect_tabular, _convert,
-                           description="CSV/Parquet joint logs (UR RTDE, Franka-like, generic, or --map YAML)",
-                           priority=-10)
+        register_converter(
+            "tabular",
+            detect_tabular,
+            _convert,
+            description="CSV/Parquet joint logs (UR RTDE, Franka-like, generic, or --map YAML)",
+            priority=-10,
+        )
     except ValueError:
         pass
 

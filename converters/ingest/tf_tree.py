@@ -12,7 +12,13 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["StaticTfTree", "pose_to_matrix", "matrix_to_pose", "quat_to_matrix_np", "matrix_to_quat_np"]
+__all__ = [
+    "StaticTfTree",
+    "pose_to_matrix",
+    "matrix_to_pose",
+    "quat_to_matrix_np",
+    "matrix_to_quat_np",
+]
 
 
 def quat_to_matrix_np(q_wxyz: np.ndarray) -> np.ndarray:
@@ -26,11 +32,13 @@ def quat_to_matrix_np(q_wxyz: np.ndarray) -> np.ndarray:
     if not np.isfinite(n) or n < 1e-12:
         raise ValueError("zero or non-finite quaternion")
     w, x, y, z = q / n
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def matrix_to_quat_np(R: np.ndarray) -> np.ndarray:
@@ -45,11 +53,17 @@ def matrix_to_quat_np(R: np.ndarray) -> np.ndarray:
     if k == 0:
         q = np.array([1 + tr, R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
     elif k == 1:
-        q = np.array([R[2, 1] - R[1, 2], 1 + 2 * R[0, 0] - tr, R[0, 1] + R[1, 0], R[0, 2] + R[2, 0]])
+        q = np.array(
+            [R[2, 1] - R[1, 2], 1 + 2 * R[0, 0] - tr, R[0, 1] + R[1, 0], R[0, 2] + R[2, 0]]
+        )
     elif k == 2:
-        q = np.array([R[0, 2] - R[2, 0], R[0, 1] + R[1, 0], 1 + 2 * R[1, 1] - tr, R[1, 2] + R[2, 1]])
+        q = np.array(
+            [R[0, 2] - R[2, 0], R[0, 1] + R[1, 0], 1 + 2 * R[1, 1] - tr, R[1, 2] + R[2, 1]]
+        )
     else:
-        q = np.array([R[1, 0] - R[0, 1], R[0, 2] + R[2, 0], R[1, 2] + R[2, 1], 1 + 2 * R[2, 2] - tr])
+        q = np.array(
+            [R[1, 0] - R[0, 1], R[0, 2] + R[2, 0], R[1, 2] + R[2, 1], 1 + 2 * R[2, 2] - tr]
+        )
     q /= np.linalg.norm(q)
     return -q if q[0] < 0 else q
 
@@ -71,7 +85,11 @@ def _transform_of(ts: Any) -> tuple[str, str, np.ndarray]:
     tr = ts.transform
     t = np.array([tr.translation.x, tr.translation.y, tr.translation.z], dtype=np.float64)
     q = np.array([tr.rotation.w, tr.rotation.x, tr.rotation.y, tr.rotation.z], dtype=np.float64)
-    return str(ts.header.frame_id).lstrip("/"), str(ts.child_frame_id).lstrip("/"), pose_to_matrix(t, q)
+    return (
+        str(ts.header.frame_id).lstrip("/"),
+        str(ts.child_frame_id).lstrip("/"),
+        pose_to_matrix(t, q),
+    )
 
 
 class StaticTfTree:

@@ -36,8 +36,16 @@ from .context import IngestContext
 from .roles import safe_name
 from .sinks import CameraSink
 
-__all__ = ["convert_video", "convert_image_folder", "detect_video", "detect_image_folder", "read_stamps_csv",
-           "write_joints_csv", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES"]
+__all__ = [
+    "convert_video",
+    "convert_image_folder",
+    "detect_video",
+    "detect_image_folder",
+    "read_stamps_csv",
+    "write_joints_csv",
+    "VIDEO_SUFFIXES",
+    "IMAGE_SUFFIXES",
+]
 
 VIDEO_SUFFIXES = frozenset({".mp4", ".mkv", ".mov", ".avi", ".webm"})
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
@@ -53,7 +61,10 @@ def _images_in(folder: Path) -> list[Path]:
     def natural(p: Path) -> list:
         return [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", p.name)]
 
-    return sorted((p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES), key=natural)
+    return sorted(
+        (p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES),
+        key=natural,
+    )
 
 
 def detect_image_folder(path: Path) -> bool:
@@ -76,14 +87,20 @@ def read_stamps_csv(path: Path) -> dict[int, int]:
     out: dict[int, int] = {}
     with fh:
         reader = csv.DictReader(fh)
-        if reader.fieldnames is None or not {"frame_index", "t_ns"} <= {f.strip() for f in reader.fieldnames}:
-            raise InputError("stamps CSV needs a header with frame_index,t_ns", path=path, where="line 1")
+        if reader.fieldnames is None or not {"frame_index", "t_ns"} <= {
+            f.strip() for f in reader.fieldnames
+        }:
+            raise InputError(
+                "stamps CSV needs a header with frame_index,t_ns", path=path, where="line 1"
+            )
         for n, row in enumerate(reader, 2):
             row = {k.strip(): v for k, v in row.items() if k is not None}
             try:
                 i, t = int(row["frame_index"]), int(row["t_ns"])
             except (TypeError, ValueError):
-                raise InputError("frame_index and t_ns must be integers", path=path, where=f"line {n}") from None
+                raise InputError(
+                    "frame_index and t_ns must be integers", path=path, where=f"line {n}"
+                ) from None
             if i in out:
                 raise InputError(f"frame_index {i} appears twice", path=path, where=f"line {n}")
             out[i] = t
@@ -95,9 +112,13 @@ def _camera(ctx: IngestContext, default: str) -> tuple[str, tuple[int, int] | No
     if opts.camera_file is not None:
         cam = read_calibration(opts.camera_file, name=opts.camera_name)
         ctx.writer.set_camera(cam)
-        ctx.provenance.note(f"intrinsics from {opts.camera_file.name}; T_world_cam not known (not written)")
+        ctx.provenance.note(
+            f"intrinsics from {opts.camera_file.name}; T_world_cam not known (not written)"
+        )
         return cam.name, (cam.width, cam.height)
-    ctx.provenance.note("no calibration given (--camera): the camera has no intrinsics in the dataset")
+    ctx.provenance.note(
+        "no calibration given (--camera): the camera has no intrinsics in the dataset"
+    )
     return safe_name(opts.camera_name or default), None
 
 
@@ -124,15 +145,22 @@ class _Stamper:
                 raise InputError("--assume-fps must be positive", where="--assume-fps")
             self.kind = "derived"
             self.where = "--assume-fps"
-            ctx.provenance.note(f"frame stamps derived as i / {self.fps:g} fps (asked with --assume-fps)")
+            ctx.provenance.note(
+                f"frame stamps derived as i / {self.fps:g} fps (asked with --assume-fps)"
+            )
         else:
-            raise InputError("no frame stamps for an image folder", path=source,
-                             hint="add stamps.csv (frame_index,t_ns), pass --stamps, or --assume-fps FPS")
+            raise InputError(
+                "no frame stamps for an image folder",
+                path=source,
+                hint="add stamps.csv (frame_index,t_ns), pass --stamps, or --assume-fps FPS",
+            )
 
     def stamp(self, i: int, pts_ms: float | None) -> int:
         if self.sidecar is not None:
             if i not in self.sidecar:
-                raise InputError(f"no stamp for frame {i}", path=self.where, hint="one row per frame")
+                raise InputError(
+                    f"no stamp for frame {i}", path=self.where, hint="one row per frame"
+                )
             return self.sidecar[i] + self.offset
         if self.kind == "container_pts":
             assert pts_ms is not None
@@ -142,7 +170,9 @@ class _Stamper:
 
     def check_count(self, n: int) -> None:
         if self.sidecar is not None and len(self.sidecar) != n:
-            raise InputError(f"stamps CSV has {len(self.sidecar)} rows for {n} frames", path=self.where)
+            raise InputError(
+                f"stamps CSV has {len(self.sidecar)} rows for {n} frames", path=self.where
+            )
 
 
 def _video_frames(path: Path) -> Iterator[tuple[np.ndarray, float]]:
@@ -159,32 +189,69 @@ def _video_frames(path: Path) -> Iterator[tuple[np.ndarray, float]]:
         cap.release()
 
 
-def _write_frames(ctx: IngestContext, src: Path, cam: str, frames: Iterator[tuple[np.ndarray | None, float | None]],
-                  stamper: _Stamper, total: int | None, fps_hint: float, size: tuple[int, int] | None) -> None:
+def _write_frames(
+    ctx: IngestContext,
+    src: Path,
+    cam: str,
+    frames: Iterator[tuple[np.ndarray | None, float | None]],
+    stamper: _Stamper,
+    total: int | None,
+    fps_hint: float,
+    size: tuple[int, int] | None,
+) -> None:
     ep = ctx.episode_dir()
     w = ctx.writer
-    sink = CameraSink(w.path(f"{ep}/cameras/{cam}/frames.parquet"), w.path(f"{ep}/cameras/{cam}/rgb.mp4"),
-                      topic=src.name, provenance=ctx.provenance, video=ctx.options.video, fps_hint=fps_hint)
-    rec = ctx.provenance.topic(src.name, "video" if src.is_file() else "image folder", f"camera_image:{cam}")
+    sink = CameraSink(
+        w.path(f"{ep}/cameras/{cam}/frames.parquet"),
+        w.path(f"{ep}/cameras/{cam}/rgb.mp4"),
+        topic=src.name,
+        provenance=ctx.provenance,
+        video=ctx.options.video,
+        fps_hint=fps_hint,
+    )
+    rec = ctx.provenance.topic(
+        src.name, "video" if src.is_file() else "image folder", f"camera_image:{cam}"
+    )
     rec.stamp_source = stamper.kind
-    ctx.clock = {"container_pts": "video container time (+ offset_ns)", "sidecar": "sidecar stamps (+ offset_ns)",
-                 "derived": "derived from --assume-fps (+ offset_ns)"}[stamper.kind]
+    ctx.clock = {
+        "container_pts": "video container time (+ offset_ns)",
+        "sidecar": "sidecar stamps (+ offset_ns)",
+        "derived": "derived from --assume-fps (+ offset_ns)",
+    }[stamper.kind]
     ctx.progress.start(f"reading {src.name}", total, unit="frames")
     n = 0
     prev_pts: float | None = None
     for bgr, pts in frames:
-        if stamper.kind == "container_pts" and n > 0 and pts is not None and prev_pts is not None and pts <= prev_pts:
-            raise InputError(f"container time stamps do not increase (frame {n}: {pts} ms after {prev_pts} ms)",
-                             path=src, hint="pass --stamps CSV, or --assume-fps if the rate is truly constant")
+        if (
+            stamper.kind == "container_pts"
+            and n > 0
+            and pts is not None
+            and prev_pts is not None
+            and pts <= prev_pts
+        ):
+            raise InputError(
+                f"container time stamps do not increase (frame {n}: {pts} ms after {prev_pts} ms)",
+                path=src,
+                hint="pass --stamps CSV, or --assume-fps if the rate is truly constant",
+            )
         prev_pts = pts
         if n == 0 and bgr is not None and size is not None and (bgr.shape[1], bgr.shape[0]) != size:
-            raise InputError(f"the calibration is for {size[0]}x{size[1]} images but the frames are "
-                             f"{bgr.shape[1]}x{bgr.shape[0]}", path=src, where="frame 0",
-                             hint="pass the calibration made for this resolution")
+            raise InputError(
+                f"the calibration is for {size[0]}x{size[1]} images but the frames are "
+                f"{bgr.shape[1]}x{bgr.shape[0]}",
+                path=src,
+                where="frame 0",
+                hint="pass the calibration made for this resolution",
+            )
         t = stamper.stamp(n, pts)
         rec.messages += 1
         if sink.accepts(t):
-            sink.add(t, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB) if (bgr is not None and ctx.options.video) else None)
+            sink.add(
+                t,
+                cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+                if (bgr is not None and ctx.options.video)
+                else None,
+            )
             rec.written += 1
         n += 1
         ctx.progress.advance()
@@ -193,9 +260,15 @@ def _write_frames(ctx: IngestContext, src: Path, cam: str, frames: Iterator[tupl
         raise InputError("no frames could be decoded", path=src)
     stamper.check_count(n)
     st = sink.close()
-    entry = {"kind": "camera", "camera": cam, "frames": f"{ep}/cameras/{cam}/frames.parquet",
-             "stamp_source": stamper.kind, "offset_ns": int(ctx.options.offset_ns), "nominal_rate_hz": st.rate_hz,
-             "source": src.name}
+    entry = {
+        "kind": "camera",
+        "camera": cam,
+        "frames": f"{ep}/cameras/{cam}/frames.parquet",
+        "stamp_source": stamper.kind,
+        "offset_ns": int(ctx.options.offset_ns),
+        "nominal_rate_hz": st.rate_hz,
+        "source": src.name,
+    }
     if ctx.options.video:
         entry["video"] = f"{ep}/cameras/{cam}/rgb.mp4"
     ctx.add_stream(f"camera/{cam}", entry, start_ns=st.start_ns, end_ns=st.end_ns)
@@ -208,17 +281,25 @@ def write_joints_csv(ctx: IngestContext, path: Path) -> None:
         InputError: missing ``t_ns`` or positions, non-numeric values, stamps that do not increase.
     """
     try:
-        reader = pacsv.open_csv(path, convert_options=pacsv.ConvertOptions(column_types={"t_ns": pa.int64()}))
+        reader = pacsv.open_csv(
+            path, convert_options=pacsv.ConvertOptions(column_types={"t_ns": pa.int64()})
+        )
     except (pa.ArrowInvalid, OSError) as exc:
-        raise InputError(f"cannot read joint log ({str(exc).splitlines()[0][:200]})", path=path) from None
+        raise InputError(
+            f"cannot read joint log ({str(exc).splitlines()[0][:200]})", path=path
+        ) from None
     names = reader.schema.names
     cols = [c for c in names if c.startswith(("position.", "velocity.", "effort."))]
     if "t_ns" not in names or not any(c.startswith("position.") for c in cols):
-        raise InputError("joint log needs a t_ns column and position.<joint> columns", path=path, where="header")
+        raise InputError(
+            "joint log needs a t_ns column and position.<joint> columns", path=path, where="header"
+        )
     ignored = [c for c in names if c != "t_ns" and c not in cols]
     if ignored:
         ctx.provenance.note(f"{path.name}: columns {ignored[:10]} not converted")
-    schema = pa.schema([pa.field("t_ns", pa.int64(), nullable=False)] + [pa.field(c, pa.float64()) for c in cols])
+    schema = pa.schema(
+        [pa.field("t_ns", pa.int64(), nullable=False)] + [pa.field(c, pa.float64()) for c in cols]
+    )
     rel = f"{ctx.episode_dir()}/joint_states.parquet"
     out = ctx.writer.path(rel)
     rec = ctx.provenance.topic(path.name, "joint log CSV", "joint_states")
@@ -236,9 +317,15 @@ def write_joints_csv(ctx: IngestContext, path: Path) -> None:
                 bad = np.flatnonzero(np.diff(seq) <= 0)
                 if bad.size:
                     row = rows + int(bad[0]) + (1 if last is None else 0) + 1
-                    raise InputError("t_ns does not increase", path=path, where=f"data row {row}",
-                                     hint="sort the log by t_ns and remove duplicate stamps")
-                arrays = [pa.array(tn, pa.int64())] + [batch.column(c).cast(pa.float64()) for c in cols]
+                    raise InputError(
+                        "t_ns does not increase",
+                        path=path,
+                        where=f"data row {row}",
+                        hint="sort the log by t_ns and remove duplicate stamps",
+                    )
+                arrays = [pa.array(tn, pa.int64())] + [
+                    batch.column(c).cast(pa.float64()) for c in cols
+                ]
                 pw.write_table(pa.Table.from_arrays(arrays, schema=schema))
                 first = int(tn[0]) if first is None and tn.size else first
                 last = int(tn[-1]) if tn.size else last
@@ -246,16 +333,27 @@ def write_joints_csv(ctx: IngestContext, path: Path) -> None:
                     stamps_head.extend(int(v) for v in tn[: 2001 - len(stamps_head)])
                 rows += tn.size
         except (pa.ArrowInvalid, pa.ArrowTypeError) as exc:
-            raise InputError(f"joint log has non-numeric values ({str(exc).splitlines()[0][:200]})", path=path) \
-                from None
+            raise InputError(
+                f"joint log has non-numeric values ({str(exc).splitlines()[0][:200]})", path=path
+            ) from None
     if rows == 0:
         raise InputError("joint log has no rows", path=path)
     rec.messages = rec.written = rows
     from .sinks import median_rate_hz
 
-    ctx.add_stream("joint_states", {"kind": "joint_states", "path": rel, "stamp_source": "sidecar", "offset_ns": 0,
-                                    "nominal_rate_hz": median_rate_hz(stamps_head), "source": path.name},
-                   start_ns=first, end_ns=last)
+    ctx.add_stream(
+        "joint_states",
+        {
+            "kind": "joint_states",
+            "path": rel,
+            "stamp_source": "sidecar",
+            "offset_ns": 0,
+            "nominal_rate_hz": median_rate_hz(stamps_head),
+            "source": path.name,
+        },
+        start_ns=first,
+        end_ns=last,
+    )
 
 
 def convert_video(src: Path, ctx: IngestContext) -> None:
@@ -263,8 +361,11 @@ def convert_video(src: Path, ctx: IngestContext) -> None:
     cam, size = _camera(ctx, src.stem)
     cap = cv2.VideoCapture(str(src))
     if not cap.isOpened():
-        raise InputError("video cannot be opened (unknown container or codec)", path=src,
-                         hint="re-encode as mp4 (H.264 or mp4v) or mkv")
+        raise InputError(
+            "video cannot be opened (unknown container or codec)",
+            path=src,
+            hint="re-encode as mp4 (H.264 or mp4v) or mkv",
+        )
     total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) or None
     fps = float(cap.get(cv2.CAP_PROP_FPS)) or 30.0
     cap.release()
@@ -291,12 +392,24 @@ def convert_image_folder(src: Path, ctx: IngestContext) -> None:
                 raise InputError("image cannot be decoded", path=p)
             yield img, None
 
-    _write_frames(ctx, src, cam, frames(), stamper, len(files), ctx.options.assume_fps or 30.0, size)
+    _write_frames(
+        ctx, src, cam, frames(), stamper, len(files), ctx.options.assume_fps or 30.0, size
+    )
     if ctx.options.joints_csv is not None:
         write_joints_csv(ctx, ctx.options.joints_csv)
 
 
-register_converter("video", detect_video, convert_video, description="video file (.mp4 .mkv .mov .avi)",
-                   priority=40)
-register_converter("images", detect_image_folder, convert_image_folder,
-                   description="folder of images (+ stamps.csv or --assume-fps)", priority=10)
+register_converter(
+    "video",
+    detect_video,
+    convert_video,
+    description="video file (.mp4 .mkv .mov .avi)",
+    priority=40,
+)
+register_converter(
+    "images",
+    detect_image_folder,
+    convert_image_folder,
+    description="folder of images (+ stamps.csv or --assume-fps)",
+    priority=10,
+)

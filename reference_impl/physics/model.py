@@ -21,6 +21,8 @@ Dynamics (per step ``dt``, default 1 ms), for ``M`` parameter sets x ``T`` traje
   ``gap/dt + rate + K lambda >= 0, lambda >= 0`` with complementarity, where ``K`` holds the
   effective inverse masses ``n_i.n_j/m + (r_i x n_i)(r_j x n_j)/I`` (velocity-level contact
   of Stewart & Trinkle 1996 / Catto's speculative contacts; the 2x2 LCP is solved exactly).
+  When both capsule ends are within 1 mm of the box the capsule acts as a flat paddle: both
+  contact rates are matched (no rigid-body rocking between the two end points).
   A point (sphere) pusher makes pushing unstable in yaw (tiny offsets grow), so scenarios use
   a capsule: a flat push is stable.
 * **Grasp** - while the grasp flag is set, the object follows the EE with the relative transform
@@ -277,7 +279,9 @@ def _pusher_impulse(
     rxn = rcx * ny - rcy * nx  # [M, T, J]
     m_, i_ = mass.unsqueeze(-1), inertia.unsqueeze(-1)
     active = (dz.abs() <= hz) & ~grasping.view(1, -1, 1)
-    b = torch.where(active, -gap / dt - rate_n, torch.full_like(gap, -1.0))
+    # speculative for open gaps, soft (Baumgarte 0.2) push-out of penetrations
+    target = torch.where(gap > 0, -gap, -0.2 * gap) / dt
+    b = torch.where(active, target - rate_n, torch.full_like(gap, -1.0))
     if b.shape[-1] == 1:
         lam = (b / (1.0 / m_ + rxn * rxn / i_)).clamp(min=0.0)
     else:
@@ -297,6 +301,11 @@ def _pusher_impulse(
         l1 = torch.where(none, zero[..., 0], torch.where(only1, l1s, torch.where(only2, zero[..., 0], l1b)))
         l2 = torch.where(none, zero[..., 0], torch.where(only1, zero[..., 0], torch.where(only2, l2s, l2b)))
         lam = torch.stack([l1, l2], -1).clamp(min=0.0)
+        # flush face: both ends within 1 mm and pushing -> the capsule holds the face like a
+        # paddle (both rates matched, one end may pull slightly), which stops rigid rocking
+        flush = (gap[..., 0] < 1e-3) & (gap[..., 1] < 1e-3) & active[..., 0] & active[..., 1]
+        flush = flush & (l1b + l2b > 0)
+        lam = torch.where(flush.unsqueeze(-1), torch.stack([l1b, l2b], -1), lam)
     vx = vx - (lam * nx).sum(-1) / mass
     vy = vy - (lam * ny).sum(-1) / mass
     wf = wf - (lam * rxn).sum(-1) / inertia

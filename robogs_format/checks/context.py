@@ -26,6 +26,7 @@ from ..errors import FormatError, PathEscapeError, RobogsError, VersionError
 from ..jsonio import read_json
 from ..paths import resolve_inside
 from ..schemas import schema_problems
+from ..tables import check_table_schema
 
 if TYPE_CHECKING:
     import trimesh
@@ -336,11 +337,35 @@ class CheckContext:
         t = self.table(rel, columns=("t_ns",)).column("t_ns").to_numpy(zero_copy_only=False)
         return (int(t.min()), int(t.max())) if t.size else None
 
+    def table_kinds(self) -> dict[str, str]:
+        """Table kind of every table a stream names, keyed by relative path."""
+        key = ("table-kinds",)
+        if key not in self._cache:
+            kinds: dict[str, str] = {}
+            for _ep, _name, st in self.streams():
+                for fld in STREAM_FILE_FIELDS:
+                    kind = table_kind(st, fld)
+                    if kind and isinstance(st.get(fld), str):
+                        kinds.setdefault(st[fld], kind)
+            self._cache[key] = kinds
+        return self._cache[key]
+
     def table(self, rel: str, *, columns: tuple[str, ...] | None = None) -> pa.Table:
-        """A whole parquet table (or some of its columns), cached per file and column set."""
+        """A whole parquet table (or some of its columns), cached per file and column set.
+
+        Tables that are unreadable or do not match their kind's columns and types raise
+        :class:`InputReported` (the integrity and schema checks report them).
+        """
         if self.quick:
             raise RuntimeError("a quick check tried to read a table body")
-        self.footer(rel)  # unreadable footers were reported by the integrity checks
+        md = self.footer(rel)  # unreadable footers were reported by the integrity checks
+        kind = self.table_kinds().get(rel)
+        if kind is not None:
+            ok_key = ("table-ok", rel)
+            if ok_key not in self._cache:
+                self._cache[ok_key] = not check_table_schema(kind, md.schema.to_arrow_schema())
+            if not self._cache[ok_key]:
+                raise InputReported(rel)
         key = ("table", rel, columns)
         if key not in self._cache:
             full = self._cache.get(("table", rel, None))

@@ -112,6 +112,12 @@ def _load_mesh_file(path: Path, scale: Any) -> np.ndarray:
             hint="re-export the mesh as STL, OBJ, PLY, GLB or DAE",
         ) from None
     v = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), np.float64)
+    if v.size == 0 or not np.all(np.isfinite(v)):
+        raise FormatError(
+            "mesh has no (finite) vertices",
+            path=path,
+            hint="the file is empty or corrupt; re-export the mesh",
+        )
     if scale is not None:
         v = v * np.broadcast_to(np.asarray(scale, np.float64), (3,))
     return v

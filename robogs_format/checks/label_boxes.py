@@ -1,14 +1,19 @@
 """Per-label bounding boxes of panoptic label images, computed in one streaming pass.
 
-Label images are decoded in batches (never all at once) on a small thread pool
-(OpenCV's PNG decoder releases the GIL). Boxes come from run-length encoding
-each image: a run starts wherever the label changes or a row begins, so the
-work after decoding is one comparison over the pixels plus a few operations on
-the (few thousand) runs, instead of one mask per label.
+Label tables are read in batches (never all images at once) and the images are
+processed on a small thread pool (zlib and OpenCV release the GIL). Boxes come
+from run-length encoding: a run starts wherever the label changes or a row
+begins, so the work per image is one comparison over the pixels plus a few
+operations on the (few thousand) runs, instead of one mask per label.
+
+PNGs as the writer stores them (16-bit grey, every row Sub-filtered) skip the
+pixel decode altogether: the run starts are read off the inflated, still
+filtered bytes (see :func:`_png_sub_runs`). Any other PNG is decoded by OpenCV.
 """
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -19,7 +24,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ..errors import FormatError
-from ..images import decode_label_png
+from ..images import MAX_PIXELS, decode_label_png
 
 __all__ = ["LabelBoxes", "boxes_of_label_image", "scan_label_boxes"]
 
@@ -67,20 +72,27 @@ def boxes_of_label_image(img: np.ndarray) -> tuple[np.ndarray, ...]:
     H, W = img.shape
     flat = np.ascontiguousarray(img).ravel()
     if flat.size == 0:
-        empty = np.zeros(0, np.int64)
-        return (empty,) * 6
+        return _empty()
     start = np.empty(flat.size, bool)
     start[0] = True
     np.not_equal(flat[1:], flat[:-1], out=start[1:])
     start[::W] = True
     st = np.flatnonzero(start)
-    ends = np.append(st[1:], flat.size)
-    lab = flat[st]
+    return _boxes_from_runs(st, flat[st].astype(np.int64), W, flat.size)
+
+
+def _empty() -> tuple[np.ndarray, ...]:
+    empty = np.zeros(0, np.int64)
+    return (empty,) * 6
+
+
+def _boxes_from_runs(st: np.ndarray, lab: np.ndarray, W: int, size: int) -> tuple[np.ndarray, ...]:
+    """Boxes from run starts (flat indices, every row start included) and their labels."""
+    ends = np.append(st[1:], size)
     keep = lab != 0
-    st, ends, lab = st[keep], ends[keep], lab[keep].astype(np.int64)
+    st, ends, lab = st[keep], ends[keep], lab[keep]
     if st.size == 0:
-        empty = np.zeros(0, np.int64)
-        return (empty,) * 6
+        return _empty()
     row = st // W
     c0 = st - row * W
     c1 = ends - row * W  # exclusive
@@ -97,10 +109,70 @@ def boxes_of_label_image(img: np.ndarray) -> tuple[np.ndarray, ...]:
     )
 
 
+def _png_sub_runs(blob: bytes) -> tuple[tuple[int, int], tuple[np.ndarray, ...]] | None:
+    """Boxes straight from the filtered bytes of a 16-bit grey PNG whose rows use the Sub filter.
+
+    With the Sub filter (PNG spec, W3C 2003, section 9.2) each stored pixel is its
+    difference from its left neighbour, byte by byte modulo 256. A pixel starts a
+    new run exactly where that difference is non-zero, and a run's label is the
+    running sum of the differences at the run starts of its row. So the boxes come
+    from the inflated bytes without undoing the filter pixel by pixel. Returns None
+    (use a full decode) for any other kind of PNG.
+    """
+    if blob[:8] != b"\x89PNG\r\n\x1a\n":
+        return None
+    pos, idat, header = 8, [], None
+    n = len(blob)
+    while pos + 8 <= n:
+        length = int.from_bytes(blob[pos : pos + 4], "big")
+        ctype = blob[pos + 4 : pos + 8]
+        body = blob[pos + 8 : pos + 8 + length]
+        if ctype == b"IHDR" and len(body) == 13:
+            header = body
+        elif ctype == b"IDAT":
+            idat.append(body)
+        elif ctype == b"IEND":
+            break
+        pos += 12 + length
+    if header is None or not idat:
+        return None
+    W, H = int.from_bytes(header[0:4], "big"), int.from_bytes(header[4:8], "big")
+    if header[8:13] != bytes([16, 0, 0, 0, 0]) or W * H == 0 or W * H > MAX_PIXELS:
+        return None  # not 16-bit grey, or interlaced
+    try:
+        raw = zlib.decompress(b"".join(idat))
+    except zlib.error:
+        return None
+    if len(raw) != H * (1 + 2 * W):
+        return None
+    rows = np.frombuffer(raw, np.uint8).reshape(H, 1 + 2 * W)
+    if np.any(rows[:, 0] != 1):
+        return None  # None/Up/Average/Paeth rows: decode fully
+    hi, lo = rows[:, 1::2], rows[:, 2::2]
+    start = (hi | lo) != 0
+    start[:, 0] = True
+    st = np.flatnonzero(start)
+    # per-lane running sums of the deltas at run starts, restarted at each row (mod 256)
+    d_hi = np.cumsum(hi.ravel()[st], dtype=np.int64)
+    d_lo = np.cumsum(lo.ravel()[st], dtype=np.int64)
+    row_first = np.flatnonzero(st % W == 0)
+    before_hi = np.repeat(
+        np.concatenate([[0], d_hi[row_first[1:] - 1]]), np.diff(np.append(row_first, st.size))
+    )
+    before_lo = np.repeat(
+        np.concatenate([[0], d_lo[row_first[1:] - 1]]), np.diff(np.append(row_first, st.size))
+    )
+    lab = ((d_hi - before_hi) % 256) * 256 + (d_lo - before_lo) % 256
+    return (H, W), _boxes_from_runs(st, lab, W, H * W)
+
+
 def _decode_boxes(
     item: tuple[int, bytes, Path],
 ) -> tuple[int, tuple[int, int], tuple[np.ndarray, ...]]:
     idx, blob, path = item
+    fast = _png_sub_runs(blob) if blob else None
+    if fast is not None:
+        return idx, fast[0], fast[1]
     img = decode_label_png(blob, path=path, where=f"frame_index {idx}")
     return idx, img.shape, boxes_of_label_image(img)
 

@@ -187,9 +187,10 @@ def _budget_names(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         yield chk.finding(problem, file=MANIFEST_NAME, where="/budgets")
 
 
-def _strings(table: pa.Table, column: str) -> set[str]:
+def _strings(table: pa.Table, column: str) -> set[str | None]:
+    """Distinct values of a name column; nulls appear as ``None``."""
     col = table.column(column)
-    return {str(v) for v in col.unique().to_pylist() if v is not None}
+    return {None if v is None else str(v) for v in col.unique().to_pylist()}
 
 
 @check(
@@ -215,8 +216,10 @@ def _names(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     assets = set(ctx.asset_names())
     cameras = set(ctx.manifest.get("cameras") or {})
 
-    def unknown(found: set[str], known: set[str] | None) -> list[str]:
-        return [] if known is None else sorted(found - known)
+    def unknown(found: set[str | None], known: set[str] | None) -> list[str]:
+        """Names not in ``known`` (all of them count when ``known`` is None), and nulls."""
+        bad = {v for v in found if v is None or (known is not None and v not in known)}
+        return sorted("<null>" if v is None else v for v in bad)
 
     for ep, name, st in ctx.streams():
         kind = st.get("kind")

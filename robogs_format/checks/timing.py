@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from ..findings import Finding
 from .context import ENTITY_COLUMNS, PERIODIC_KINDS, CheckContext, InputReported
@@ -52,11 +53,8 @@ def _split(t: np.ndarray, keys: pa.ChunkedArray | None) -> list[tuple[str | None
     """Row indices of each entity (table order kept within an entity)."""
     if keys is None:
         return [(None, np.arange(t.size))]
-    enc = (
-        keys.combine_chunks().dictionary_encode()
-        if not pa.types.is_dictionary(keys.type)
-        else keys.combine_chunks()
-    )
+    keys = pc.fill_null(pc.cast(keys, pa.string()), "<null>")
+    enc = keys.combine_chunks().dictionary_encode()
     codes = enc.indices.to_numpy(zero_copy_only=False)
     names = enc.dictionary.to_pylist()
     order = np.argsort(codes, kind="stable")

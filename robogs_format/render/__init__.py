@@ -6,7 +6,9 @@ and conventions.
 
 from __future__ import annotations
 
-from .backends import available_backends, register_backend
+import importlib.util
+
+from .backends import available_backends, mark_unavailable, register_backend
 from .camera import Camera
 from .config import RenderConfig
 from .dense import render_dense
@@ -42,12 +44,13 @@ __all__ = [
 def _register_builtins() -> None:
     register_backend("torch", render_tiled)
     register_backend("dense", lambda g, c, cfg: render_dense(g, c, cfg))
+    if importlib.util.find_spec("numba") is None:
+        mark_unavailable("numba", "needs the optional package numba (pip install numba)")
+        return
     try:
         from .fused import render_fused
-    except ImportError as exc:
-        from .backends import mark_unavailable
-
-        mark_unavailable("numba", f"needs numba ({exc}); install with pip install numba")
+    except Exception as exc:  # numba present but broken (e.g. numpy too new for it)
+        mark_unavailable("numba", f"numba failed to load: {exc}")
     else:
         register_backend("numba", render_fused)
 

@@ -17,7 +17,13 @@ from .config import RenderConfig
 from .gaussians import Gaussians
 from .output import RenderOutput
 
-__all__ = ["BackendFn", "register_backend", "available_backends", "get_backend", "ENTRY_POINT_GROUP"]
+__all__ = [
+    "BackendFn",
+    "register_backend",
+    "available_backends",
+    "get_backend",
+    "ENTRY_POINT_GROUP",
+]
 
 BackendFn = Callable[[Gaussians, Camera, RenderConfig], RenderOutput]
 

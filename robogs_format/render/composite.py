@@ -29,6 +29,7 @@ import math
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 
 from .binning import TileBins
 from .constants import MAX_ALPHA, MEDIAN_TRANSMITTANCE, TRANSMITTANCE_THRESHOLD
@@ -36,7 +37,10 @@ from .projection import Projected
 
 __all__ = ["CompositeImages", "composite_tiles"]
 
-_LOG_MAX_ALPHA = math.log(MAX_ALPHA)
+#: F.threshold keeps x > t; a tiny negative t keeps the exact boundary e == exp_min (alpha = 1/255)
+_THRESHOLD_EPS = -1e-30
+#: exponent given to masked pairs (see the step); exp of it is a normal float32 number
+_MASKED_EXPONENT = -80.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,19 +81,27 @@ def _pack(proj: Projected, features: torch.Tensor) -> tuple[torch.Tensor, int]:
     return packed, packed.shape[1] - features.shape[1]
 
 
-def _coefficients_3dgs(gp: torch.Tensor, ox: torch.Tensor, oy: torch.Tensor) -> torch.Tensor:
-    """[A, 6, K] coefficients of e = ln o - sigma in the tile-local monomials."""
+def _coefficients_3dgs(
+    gp: torch.Tensor, e0: torch.Tensor, ox: torch.Tensor, oy: torch.Tensor
+) -> torch.Tensor:
+    """[A, 6, K] coefficients of e0 - sigma in the tile-local monomials (e0 = ln o - exp_min)."""
     ex = gp[..., 0] - ox
     ey = gp[..., 1] - oy
     cA, cB, cC = gp[..., 2], gp[..., 3], gp[..., 4]
     k1 = cA * ex + cB * ey
     k2 = cB * ex + cC * ey
-    k0 = gp[..., 5] - 0.5 * (k1 * ex + k2 * ey)
+    k0 = e0 - 0.5 * (k1 * ex + k2 * ey)
     return torch.stack([k0, k1, k2, -0.5 * cA, -cB, -0.5 * cC], dim=1)
 
 
 def _exponent_2dgs(
-    mono: torch.Tensor, gp: torch.Tensor, ox: torch.Tensor, oy: torch.Tensor, near: float, s: float
+    mono: torch.Tensor,
+    gp: torch.Tensor,
+    lo: torch.Tensor,
+    ox: torch.Tensor,
+    oy: torch.Tensor,
+    near: float,
+    s: float,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Exponent ln o - rho / 2 and depth of every 2DGS pair, [A, P, K] each.
 
@@ -103,11 +115,19 @@ def _exponent_2dgs(
     zero = torch.zeros_like(ox.expand_as(gp[..., 0]))
     ex = gp[..., 0] - ox
     ey = gp[..., 1] - oy
-    cols = [torch.stack([h0[..., i], Px[..., i], Py[..., i], zero, zero, zero], dim=1) for i in range(3)]
+    cols = [
+        torch.stack([h0[..., i], Px[..., i], Py[..., i], zero, zero, zero], dim=1) for i in range(3)
+    ]
     cols.append(
-        torch.stack([(Tw * h0).sum(-1), (Tw * Px).sum(-1), (Tw * Py).sum(-1), zero, zero, zero], dim=1)
+        torch.stack(
+            [(Tw * h0).sum(-1), (Tw * Px).sum(-1), (Tw * Py).sum(-1), zero, zero, zero], dim=1
+        )
     )
-    cols.append(torch.stack([s * (ex * ex + ey * ey), -2 * s * ex, -2 * s * ey, zero + s, zero, zero + s], dim=1))
+    cols.append(
+        torch.stack(
+            [s * (ex * ex + ey * ey), -2 * s * ex, -2 * s * ey, zero + s, zero, zero + s], dim=1
+        )
+    )
     q = torch.matmul(mono, torch.cat(cols, dim=2)).unflatten(2, (5, -1))  # [A, P, 5, K]
     h0_, h1_, h2_, zn, rho2 = q.unbind(2)
     ok = h2_ != 0
@@ -119,7 +139,7 @@ def _exponent_2dgs(
     use3 = ok & (zhit > near) & (rho3 <= rho2)
     rho = torch.where(use3, rho3, rho2)
     z = torch.where(use3, zhit, gp[:, None, :, 4])
-    return gp[:, None, :, 2] - 0.5 * rho, z
+    return lo[:, None, :] - 0.5 * rho, z
 
 
 def composite_tiles(
@@ -162,7 +182,18 @@ def composite_tiles(
     rows: list[torch.Tensor] = []
     for b0 in range(0, tiles.numel(), max(batch, 1)):
         t_ids, t_rows = _composite_batch(
-            tiles[b0 : b0 + batch], packed, n_head, D, proj, mono, bins, width, height, chunk, near, grad
+            tiles[b0 : b0 + batch],
+            packed,
+            n_head,
+            D,
+            proj,
+            mono,
+            bins,
+            width,
+            height,
+            chunk,
+            near,
+            grad,
         )
         ids += t_ids
         rows += t_rows
@@ -194,7 +225,6 @@ def _composite_batch(
     dtype, device = packed.dtype, packed.device
     ts = bins.tile_size
     P = ts * ts
-    K1 = chunk + 1
     is_3dgs = proj.kind == "3dgs"
     inv_sq = proj.lowpass_inv_sq
     start = bins.offsets[tiles]
@@ -205,55 +235,82 @@ def _composite_batch(
     px = ox.long()[:, :, None] + local[None, None, :]
     py = oy.long()[:, :, None] + local[None, :, None]
     T = ((px < width) & (py < height)).reshape(-1, P).to(dtype)  # pixels off the image: ended
-    acc = packed.new_zeros((tiles.numel(), P, D + 2))
+    acc = packed.new_zeros((tiles.numel(), P, D + 1))  # (sum w z, sum w f)
+    acc_med = packed.new_zeros((tiles.numel(), P))
     ar = torch.arange(-1, chunk, device=device)  # column -1 is the masked leading column
     done_ids: list[torch.Tensor] = []
     done_rows: list[torch.Tensor] = []
     step = 0
+    lo_col, emin_col = (5, 6) if is_3dgs else (2, 3)
     while tiles.numel() > 0:
         idx = start[:, None] + step * chunk + ar
         valid = (idx < end[:, None]) & (ar >= 0)
-        gid = bins.gaussian_ids[torch.where(valid, idx, start[:, None])]
-        gp = packed[gid]  # [A, K1, Q]
-        exp_min = gp[..., 6 if is_3dgs else 3].masked_fill(~valid, math.inf)
-        feats = gp[:, 1:, n_head:]
+        gid = bins.gaussian_ids.index_select(0, torch.where(valid, idx, start[:, None]).flatten())
+        gp = packed.index_select(0, gid).unflatten(0, idx.shape)  # [A, K + 1, Q]
+        # masked columns get ln o = -inf (alpha 0); e is measured from exp_min: pair valid iff >= 0
+        lo = gp[..., lo_col].masked_fill(~valid, -math.inf)
+        exp_min = gp[..., emin_col].masked_fill(~valid, 0.0)
         if is_3dgs:
-            e = torch.matmul(mono, _coefficients_3dgs(gp, ox, oy))
+            e = torch.matmul(mono, _coefficients_3dgs(gp, lo - exp_min, ox, oy))
             zp = None
         else:
-            e, zp = _exponent_2dgs(mono, gp, ox, oy, near, inv_sq)
-        off = e < exp_min[:, None, :]
+            e, zp = _exponent_2dgs(mono, gp, lo, ox, oy, near, inv_sq)
+            e = e - exp_min[:, None, :]
+        # Boolean-mask ops (where, masked_fill) are ~30x slower than arithmetic on CPU: mask by
+        # F.threshold (x if x > t else value) and scale by exp(exp_min) instead. Masked pairs
+        # get exp(-80) ~ 2e-35, so 1 - alpha rounds to exactly 1 (float32 and float64) and they
+        # add exactly nothing; -inf or denormal results would make exp ~10x slower.
+        scale = torch.exp(exp_min)[:, None, :]
         if grad:
-            c = torch.cumprod(1.0 - torch.exp(e.clamp_max(_LOG_MAX_ALPHA)).masked_fill(off, 0.0), dim=-1)
+            alpha = (torch.exp(F.threshold(e, _THRESHOLD_EPS, _MASKED_EXPONENT)) * scale).clamp_max(MAX_ALPHA)
+            c = torch.cumprod(1.0 - alpha, dim=-1)
+            w = c[..., :-1] - c[..., 1:]
         else:
-            c = e.clamp_max_(_LOG_MAX_ALPHA).exp_().masked_fill_(off, 0.0)
-            c = torch.cumprod(torch.sub(1.0, c, out=c), dim=-1, out=c)
-        # keep pair k iff T c[k] >= 1e-4; ended pixels (T = 0) keep nothing
-        limit = torch.where(T > 0, TRANSMITTANCE_THRESHOLD / T.clamp_min(1e-38), math.inf)
-        drop = c[..., 1:] < limit[..., None]
-        if grad:
-            w = (c[..., :-1] - c[..., 1:]).masked_fill(drop, 0.0)
-        else:
-            w = torch.sub(c[..., :-1], c[..., 1:]).masked_fill_(drop, 0.0)
-        inc = torch.matmul(w, feats)  # [A, P, D]
+            c = F.threshold(e, _THRESHOLD_EPS, _MASKED_EXPONENT, inplace=True).exp_().mul_(scale)
+            c = c.clamp_max_(MAX_ALPHA).neg_().add_(1.0)
+            c = torch.cumprod(c, dim=-1, out=c)
+            w = torch.sub(c[..., :-1], c[..., 1:])
+        w = _apply_stop_rule(w, T, c, grad)
         if is_3dgs:
-            dsum = torch.matmul(w, gp[:, 1:, 7:8])[..., 0]
+            inc = torch.matmul(w, gp[:, 1:, n_head - 1 :])  # [A, P, 1 + D]: (z, features)
         else:
-            dsum = (w * zp[..., 1:]).sum(-1)  # type: ignore[index]
+            dsum = (w * zp[..., 1:]).sum(-1, keepdim=True)  # type: ignore[index]
+            inc = torch.cat([dsum, torch.matmul(w, gp[:, 1:, n_head:])], dim=-1)
         T_raw = T * c[..., -1]
         med = _median_step(T, T_raw, c, gp, zp, is_3dgs)
-        acc = acc + torch.cat([T[..., None] * inc, (T * dsum)[..., None], med[..., None]], dim=-1)
+        acc = acc + T[..., None] * inc
+        acc_med = acc_med + med
         T = torch.where(T_raw < TRANSMITTANCE_THRESHOLD, 0.0, T_raw)
         step += 1
         alive = (start + step * chunk < end) & (T > 0).any(dim=1)
         if not bool(alive.all()):
             gone = ~alive
             done_ids.append(tiles[gone])
-            done_rows.append(acc[gone])
+            done_rows.append(torch.cat([acc[gone][..., 1:], acc[gone][..., :1], acc_med[gone][..., None]], -1))
             keep = torch.nonzero(alive).flatten()
             tiles, start, end, ox, oy = tiles[keep], start[keep], end[keep], ox[keep], oy[keep]
-            T, acc = T[keep], acc[keep]
+            T, acc, acc_med = T[keep], acc[keep], acc_med[keep]
     return done_ids, done_rows
+
+
+def _apply_stop_rule(w: torch.Tensor, T: torch.Tensor, c: torch.Tensor, grad: bool) -> torch.Tensor:
+    """Zero the weights from the first pair that would push T below 1e-4 on.
+
+    Only pixels whose transmittance ends below the threshold in this step can be affected, and
+    each pixel ends once, so only their rows are masked (a gather, not a full pass).
+    """
+    T_raw = T * c[..., -1]
+    sel = torch.nonzero(((T_raw < TRANSMITTANCE_THRESHOLD) & (T > 0)).flatten()).flatten()
+    if sel.numel() == 0:
+        return w
+    K = w.shape[-1]
+    rows = w.reshape(-1, K)[sel]
+    keep = (T.flatten()[sel, None] * c.reshape(-1, K + 1)[sel, 1:]) >= TRANSMITTANCE_THRESHOLD
+    rows = rows * keep.to(rows.dtype)
+    if grad:
+        return w.reshape(-1, K).index_put((sel,), rows).reshape(w.shape)
+    w.reshape(-1, K)[sel] = rows
+    return w
 
 
 def _median_step(

@@ -32,10 +32,14 @@ from .sh import eval_sh
 __all__ = ["render_dense"]
 
 
+#: the default options (frozen, so sharing one instance is safe)
+_DEFAULT_CONFIG = RenderConfig()
+
+
 def render_dense(
     gaussians: Gaussians,
     camera: Camera,
-    config: RenderConfig = RenderConfig(),
+    config: RenderConfig = _DEFAULT_CONFIG,
     *,
     pixels: torch.Tensor | None = None,
 ) -> RenderOutput:
@@ -96,7 +100,9 @@ def render_dense(
         J[:, 1, 1] = fy / z
         J[:, 1, 2] = -fy * ty / (z * z)
         cov2 = J @ W_rot @ cov3 @ W_rot.T @ J.transpose(1, 2)
-        cov2_lp = cov2 + LOWPASS_3DGS_PX2 * config.lowpass_scale**2 * torch.eye(2, dtype=dtype, device=device)
+        cov2_lp = cov2 + LOWPASS_3DGS_PX2 * config.lowpass_scale**2 * torch.eye(
+            2, dtype=dtype, device=device
+        )
         if config.antialiased:
             o = o * torch.sqrt(torch.linalg.det(cov2).clamp_min(0) / torch.linalg.det(cov2_lp))
         conic = torch.linalg.inv(cov2_lp)
@@ -110,7 +116,9 @@ def render_dense(
         a_u = (W_rot @ R[:, :, 0:1]).squeeze(-1) * s[:, 0:1]
         a_v = (W_rot @ R[:, :, 1:2]).squeeze(-1) * s[:, 1:2]
         n = torch.linalg.cross(a_u, a_v)
-        ray = torch.stack([(pix[:, 0] - cx) / fx, (pix[:, 1] - cy) / fy, torch.ones_like(pix[:, 0])], -1)
+        ray = torch.stack(
+            [(pix[:, 0] - cx) / fx, (pix[:, 1] - cy) / fy, torch.ones_like(pix[:, 0])], -1
+        )
         denom = ray @ n.T  # [HW, N]
         numer = (n * p_c).sum(-1)[None, :]
         ok = denom != 0
@@ -177,4 +185,3 @@ def render_dense(
         means2d=torch.where(vis[:, None], centre, 0.0),
         radii=radii,
     )
-

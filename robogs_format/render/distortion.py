@@ -123,7 +123,9 @@ def undistort_points(
     raise ValueError(f"unknown distortion model {model!r}")
 
 
-def pinhole_render_camera(camera: Camera, scale: float = 1.0) -> tuple[Camera, torch.Tensor, torch.Tensor]:
+def pinhole_render_camera(
+    camera: Camera, scale: float = 1.0
+) -> tuple[Camera, torch.Tensor, torch.Tensor]:
     """The pinhole camera to render for a distorted ``camera`` and where to sample it.
 
     Args:
@@ -143,7 +145,9 @@ def pinhole_render_camera(camera: Camera, scale: float = 1.0) -> tuple[Camera, t
         indexing="ij",
     )
     xy_d = torch.stack([(xs - camera.cx) / camera.fx, (ys - camera.cy) / camera.fy], dim=-1)
-    xy, ok = undistort_points(xy_d, camera.distortion_model, tuple(float(c) for c in camera.distortion))
+    xy, ok = undistort_points(
+        xy_d, camera.distortion_model, tuple(float(c) for c in camera.distortion)
+    )
     fx, fy = camera.fx * scale, camera.fy * scale
     u = xy[..., 0] * fx
     v = xy[..., 1] * fy
@@ -165,7 +169,13 @@ def pinhole_render_camera(camera: Camera, scale: float = 1.0) -> tuple[Camera, t
         distortion_model="none", distortion=(),
     )  # fmt: skip
     grid = torch.stack([u - umin, v - vmin], dim=-1)
-    ok = ok & (grid[..., 0] >= 0) & (grid[..., 0] <= width) & (grid[..., 1] >= 0) & (grid[..., 1] <= height)
+    ok = (
+        ok
+        & (grid[..., 0] >= 0)
+        & (grid[..., 0] <= width)
+        & (grid[..., 1] >= 0)
+        & (grid[..., 1] <= height)
+    )
     return cam, grid, ok
 
 

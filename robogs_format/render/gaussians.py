@@ -35,7 +35,7 @@ class Gaussians:
 
     @property
     def kind(self) -> str:
-        """"3dgs" for three scales, "2dgs" for two."""
+        """ "3dgs" for three scales, "2dgs" for two."""
         return "2dgs" if self.log_scales.shape[-1] == 2 else "3dgs"
 
     @property

@@ -17,11 +17,15 @@ from .validation import InputProblem, raise_on_problems, validate_camera, valida
 __all__ = ["render"]
 
 
+#: the default options (frozen, so sharing one instance is safe)
+_DEFAULT_CONFIG = RenderConfig()
+
+
 def render(
     gaussians: Gaussians,
     camera: Camera,
     *,
-    config: RenderConfig = RenderConfig(),
+    config: RenderConfig = _DEFAULT_CONFIG,
     backend: str = "torch",
 ) -> RenderOutput:
     """Render Gaussians into a camera: colour, alpha, depths, normals and extra channels.
@@ -54,14 +58,20 @@ def render(
         (0.99, 2.0)
     """
     if config.validate:
-        problems: list[InputProblem] = validate_camera(camera) + validate_gaussians(gaussians, config.kind)
+        problems: list[InputProblem] = validate_camera(camera) + validate_gaussians(
+            gaussians, config.kind
+        )
         problems += _config_problems(config)
         raise_on_problems(problems)
     fn = get_backend(backend)
     if not camera.is_distorted:
         return fn(gaussians, camera, config)
     pin_cam, grid, ok = pinhole_render_camera(camera, config.undistort_scale)
-    out = fn(gaussians, pin_cam, replace(config, lowpass_scale=config.lowpass_scale * config.undistort_scale))
+    out = fn(
+        gaussians,
+        pin_cam,
+        replace(config, lowpass_scale=config.lowpass_scale * config.undistort_scale),
+    )
     return _warp(out, grid.to(out.alpha.device), ok.to(out.alpha.device), config)
 
 
@@ -69,20 +79,44 @@ def _config_problems(config: RenderConfig) -> list[InputProblem]:
     problems = []
     if config.kind not in ("3dgs", "2dgs"):
         problems.append(InputProblem("config.kind", f"is {config.kind!r}", 'use "3dgs" or "2dgs"'))
-    if config.tile_size is not None and (not isinstance(config.tile_size, int) or config.tile_size <= 0):
-        problems.append(InputProblem("config.tile_size", f"is {config.tile_size!r}", "use None or a positive int (8 or 16)"))
-    if config.tile_batch is not None and (not isinstance(config.tile_batch, int) or config.tile_batch <= 0):
-        problems.append(InputProblem("config.tile_batch", f"is {config.tile_batch!r}", "use None or a positive int"))
+    if config.tile_size is not None and (
+        not isinstance(config.tile_size, int) or config.tile_size <= 0
+    ):
+        problems.append(
+            InputProblem(
+                "config.tile_size",
+                f"is {config.tile_size!r}",
+                "use None or a positive int (8 or 16)",
+            )
+        )
+    if config.tile_batch is not None and (
+        not isinstance(config.tile_batch, int) or config.tile_batch <= 0
+    ):
+        problems.append(
+            InputProblem(
+                "config.tile_batch", f"is {config.tile_batch!r}", "use None or a positive int"
+            )
+        )
     if not isinstance(config.chunk, int) or config.chunk <= 0:
-        problems.append(InputProblem("config.chunk", f"is {config.chunk!r}", "use a positive int (16 or 32)"))
+        problems.append(
+            InputProblem("config.chunk", f"is {config.chunk!r}", "use a positive int (16 or 32)")
+        )
     if len(config.background) != 3:
-        problems.append(InputProblem("config.background", f"is {config.background!r}", "give 3 floats"))
+        problems.append(
+            InputProblem("config.background", f"is {config.background!r}", "give 3 floats")
+        )
     if not config.undistort_scale > 0:
-        problems.append(InputProblem("config.undistort_scale", f"is {config.undistort_scale!r}", "use a value > 0"))
+        problems.append(
+            InputProblem(
+                "config.undistort_scale", f"is {config.undistort_scale!r}", "use a value > 0"
+            )
+        )
     return problems
 
 
-def _warp(out: RenderOutput, grid: torch.Tensor, ok: torch.Tensor, config: RenderConfig) -> RenderOutput:
+def _warp(
+    out: RenderOutput, grid: torch.Tensor, ok: torch.Tensor, config: RenderConfig
+) -> RenderOutput:
     """Resample a pinhole render at the undistorted positions of the output pixels."""
     a = out.alpha
     bg = torch.tensor(config.background, dtype=a.dtype, device=a.device)

@@ -157,14 +157,24 @@ def project(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> Proje
     else:
         col_u = R_c[:, :, 0] * scales[:, 0:1]
         col_v = R_c[:, :, 1] * scales[:, 1:2]
-        Tm = torch.stack([_apply_K(col_u, camera), _apply_K(col_v, camera), _apply_K(p_c, camera)], dim=-1)
+        Tm = torch.stack(
+            [_apply_K(col_u, camera), _apply_K(col_v, camera), _apply_K(p_c, camera)], dim=-1
+        )
         Tu, Tv, Tw = Tm[:, 0, :], Tm[:, 1, :], Tm[:, 2, :]
         ray = torch.stack(
-            [torch.linalg.cross(Tv, Tw), torch.linalg.cross(Tw, Tu), torch.linalg.cross(Tu, Tv), Tw], dim=1
+            [
+                torch.linalg.cross(Tv, Tw),
+                torch.linalg.cross(Tw, Tu),
+                torch.linalg.cross(Tu, Tv),
+                Tw,
+            ],
+            dim=1,
         )
         with torch.no_grad():
             s_max = _exponent_range(log_o)
-            bbox = _surfel_bbox(Tm.detach(), means2d.detach(), 2.0 * s_max, camera, lowpass_inv_sq(config))
+            bbox = _surfel_bbox(
+                Tm.detach(), means2d.detach(), 2.0 * s_max, camera, lowpass_inv_sq(config)
+            )
             ok = torch.ones_like(in_depth)
 
     with torch.no_grad():
@@ -209,7 +219,11 @@ def _shortest_axis(R_c: torch.Tensor, log_scales: torch.Tensor) -> torch.Tensor:
 def _apply_K(v: torch.Tensor, camera: Camera) -> torch.Tensor:
     """K @ v for [N, 3] camera-frame vectors."""
     return torch.stack(
-        [camera.fx * v[:, 0] + camera.cx * v[:, 2], camera.fy * v[:, 1] + camera.cy * v[:, 2], v[:, 2]],
+        [
+            camera.fx * v[:, 0] + camera.cx * v[:, 2],
+            camera.fy * v[:, 1] + camera.cy * v[:, 2],
+            v[:, 2],
+        ],
         dim=-1,
     )
 
@@ -226,7 +240,10 @@ def _surfel_bbox(
     low-pass circle 2 |x - c|^2 <= rho_max. Disks reaching behind the camera get the full screen."""
     r2 = rho_max[:, None, None]
     c0, c1, c2 = Tm[:, :, 0], Tm[:, :, 1], Tm[:, :, 2]
-    D = r2 * (c0[:, :, None] * c0[:, None, :] + c1[:, :, None] * c1[:, None, :]) - c2[:, :, None] * c2[:, None, :]
+    D = (
+        r2 * (c0[:, :, None] * c0[:, None, :] + c1[:, :, None] * c1[:, None, :])
+        - c2[:, :, None] * c2[:, None, :]
+    )
     d22 = D[:, 2, 2]
     bounded = d22 < 0
     d22s = torch.where(bounded, d22, -torch.ones_like(d22))

@@ -123,7 +123,11 @@ def validate_gaussians(gaussians: Gaussians, kind: str | None = None) -> list[In
             )
     if g.means.dim() != 2 or g.means.shape[1] != 3:
         problems.append(
-            InputProblem("gaussians.means", f"has shape {tuple(g.means.shape)}, not [N, 3]", "pass one xyz row per Gaussian")
+            InputProblem(
+                "gaussians.means",
+                f"has shape {tuple(g.means.shape)}, not [N, 3]",
+                "pass one xyz row per Gaussian",
+            )
         )
         return problems
     n = g.means.shape[0]
@@ -137,16 +141,26 @@ def validate_gaussians(gaussians: Gaussians, kind: str | None = None) -> list[In
         expected["extra"] = ((n, None), "[N, C]")
     for name, (shape, text) in expected.items():
         x = fields[name]
-        ok = x.dim() == len(shape) and all(s is None or x.shape[i] == s for i, s in enumerate(shape))
+        ok = x.dim() == len(shape) and all(
+            s is None or x.shape[i] == s for i, s in enumerate(shape)
+        )
         if not ok:
             problems.append(
-                InputProblem(f"gaussians.{name}", f"has shape {tuple(x.shape)}, expected {text} with N = {n}", "give every field one row per Gaussian")
+                InputProblem(
+                    f"gaussians.{name}",
+                    f"has shape {tuple(x.shape)}, expected {text} with N = {n}",
+                    "give every field one row per Gaussian",
+                )
             )
     if problems:
         return problems
     if g.log_scales.shape[1] not in (2, 3):
         problems.append(
-            InputProblem("gaussians.log_scales", f"has {g.log_scales.shape[1]} columns", "use 3 log-scales (3DGS) or 2 (2DGS)")
+            InputProblem(
+                "gaussians.log_scales",
+                f"has {g.log_scales.shape[1]} columns",
+                "use 3 log-scales (3DGS) or 2 (2DGS)",
+            )
         )
     elif kind is not None and g.kind != kind:
         problems.append(
@@ -158,20 +172,50 @@ def validate_gaussians(gaussians: Gaussians, kind: str | None = None) -> list[In
         )
     if g.sh.shape[1] not in _SH_SIZES:
         problems.append(
-            InputProblem("gaussians.sh", f"has K = {g.sh.shape[1]} coefficients", "K must be 1, 4, 9 or 16 (SH degree 0..3)")
+            InputProblem(
+                "gaussians.sh",
+                f"has K = {g.sh.shape[1]} coefficients",
+                "K must be 1, 4, 9 or 16 (SH degree 0..3)",
+            )
         )
     devices = {str(x.device) for x in fields.values()}
     dtypes = {x.dtype for x in fields.values()}
     if len(devices) > 1:
-        problems.append(InputProblem("gaussians", f"fields live on several devices {sorted(devices)}", "move all fields to one device"))
+        problems.append(
+            InputProblem(
+                "gaussians",
+                f"fields live on several devices {sorted(devices)}",
+                "move all fields to one device",
+            )
+        )
     if len(dtypes) > 1:
-        problems.append(InputProblem("gaussians", f"fields mix dtypes {sorted(map(str, dtypes))}", "cast all fields to one dtype"))
+        problems.append(
+            InputProblem(
+                "gaussians",
+                f"fields mix dtypes {sorted(map(str, dtypes))}",
+                "cast all fields to one dtype",
+            )
+        )
     if problems:
         return problems
-    _check_values(problems, "means", g.means, hint="drop or fix the Gaussians with non-finite positions")
+    _check_values(
+        problems, "means", g.means, hint="drop or fix the Gaussians with non-finite positions"
+    )
     _check_values(problems, "quats", g.quats, hint="rotations must be finite (w, x, y, z)")
-    _check_values(problems, "log_scales", g.log_scales, allow_neg_inf=True, hint="log-scales must be finite (or -inf for a zero scale)")
-    _check_values(problems, "opacity_logits", g.opacity_logits, allow_inf=True, hint="opacity logits must not be NaN")
+    _check_values(
+        problems,
+        "log_scales",
+        g.log_scales,
+        allow_neg_inf=True,
+        hint="log-scales must be finite (or -inf for a zero scale)",
+    )
+    _check_values(
+        problems,
+        "opacity_logits",
+        g.opacity_logits,
+        allow_inf=True,
+        hint="opacity logits must not be NaN",
+    )
     _check_values(problems, "sh", g.sh, hint="SH coefficients must be finite")
     if g.extra is not None:
         _check_values(problems, "extra", g.extra, hint="extra channels must be finite")
@@ -180,7 +224,11 @@ def validate_gaussians(gaussians: Gaussians, kind: str | None = None) -> list[In
         if bool(zero.any()):
             count, row = _first_bad_row(zero)
             problems.append(
-                InputProblem(f"gaussians.quats[{row}]", f"{count} quaternion(s) have zero norm", "use (1, 0, 0, 0) for no rotation")
+                InputProblem(
+                    f"gaussians.quats[{row}]",
+                    f"{count} quaternion(s) have zero norm",
+                    "use (1, 0, 0, 0) for no rotation",
+                )
             )
     return problems
 
@@ -203,22 +251,44 @@ def validate_camera(camera: Camera) -> list[InputProblem]:
     for name in ("width", "height"):
         v = getattr(c, name)
         if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
-            problems.append(InputProblem(f"camera.{name}", f"is {v!r}", "image size must be a positive int, px"))
+            problems.append(
+                InputProblem(f"camera.{name}", f"is {v!r}", "image size must be a positive int, px")
+            )
     for name in ("fx", "fy"):
         v = getattr(c, name)
         if not _finite(v) or float(v) <= 0:
-            problems.append(InputProblem(f"camera.{name}", f"is {v!r}", "focal lengths must be finite and > 0, px"))
+            problems.append(
+                InputProblem(
+                    f"camera.{name}", f"is {v!r}", "focal lengths must be finite and > 0, px"
+                )
+            )
     for name in ("cx", "cy"):
         v = getattr(c, name)
         if not _finite(v):
-            problems.append(InputProblem(f"camera.{name}", f"is {v!r}", "the principal point must be finite, px"))
+            problems.append(
+                InputProblem(
+                    f"camera.{name}", f"is {v!r}", "the principal point must be finite, px"
+                )
+            )
     if not _finite(c.near) or float(c.near) <= 0:
-        problems.append(InputProblem("camera.near", f"is {c.near!r}", "the near plane must be > 0, m"))
+        problems.append(
+            InputProblem("camera.near", f"is {c.near!r}", "the near plane must be > 0, m")
+        )
     if not _finite(c.far) or (_finite(c.near) and float(c.far) <= float(c.near)):
-        problems.append(InputProblem("camera.far", f"is {c.far!r} (near {c.near!r})", "the far plane must be finite and beyond near, m"))
+        problems.append(
+            InputProblem(
+                "camera.far",
+                f"is {c.far!r} (near {c.near!r})",
+                "the far plane must be finite and beyond near, m",
+            )
+        )
     if c.distortion_model not in DISTORTION_MODELS:
         problems.append(
-            InputProblem("camera.distortion_model", f"is {c.distortion_model!r}", f"use one of {sorted(DISTORTION_MODELS)}")
+            InputProblem(
+                "camera.distortion_model",
+                f"is {c.distortion_model!r}",
+                f"use one of {sorted(DISTORTION_MODELS)}",
+            )
         )
     else:
         want = DISTORTION_MODELS[c.distortion_model]
@@ -231,15 +301,27 @@ def validate_camera(camera: Camera) -> list[InputProblem]:
                 )
             )
         elif not all(_finite(v) for v in c.distortion):
-            problems.append(InputProblem("camera.distortion", f"holds non-finite values {c.distortion!r}", "use finite coefficients"))
+            problems.append(
+                InputProblem(
+                    "camera.distortion",
+                    f"holds non-finite values {c.distortion!r}",
+                    "use finite coefficients",
+                )
+            )
     T = c.T_world_cam
     if not isinstance(T, torch.Tensor) or tuple(T.shape) != (4, 4):
         shape = tuple(T.shape) if isinstance(T, torch.Tensor) else type(T).__name__
-        problems.append(InputProblem("camera.T_world_cam", f"is {shape}, not a [4, 4] tensor", "pass a 4x4 torch.Tensor"))
+        problems.append(
+            InputProblem(
+                "camera.T_world_cam", f"is {shape}, not a [4, 4] tensor", "pass a 4x4 torch.Tensor"
+            )
+        )
         return problems
     Td = T.detach().to(torch.float64)
     if not bool(torch.isfinite(Td).all()):
-        problems.append(InputProblem("camera.T_world_cam", "holds NaN or inf", "use a finite rigid transform"))
+        problems.append(
+            InputProblem("camera.T_world_cam", "holds NaN or inf", "use a finite rigid transform")
+        )
         return problems
     R = Td[:3, :3]
     ortho = float((R.T @ R - torch.eye(3, dtype=torch.float64)).abs().max())
@@ -254,7 +336,13 @@ def validate_camera(camera: Camera) -> list[InputProblem]:
             )
         )
     if bottom > 1e-9:
-        problems.append(InputProblem("camera.T_world_cam", f"last row is {Td[3].tolist()}", "the last row must be (0, 0, 0, 1)"))
+        problems.append(
+            InputProblem(
+                "camera.T_world_cam",
+                f"last row is {Td[3].tolist()}",
+                "the last row must be (0, 0, 0, 1)",
+            )
+        )
     return problems
 
 

@@ -96,3 +96,23 @@ def test_hull_distance_against_a_unit_cube() -> None:
 def test_quaternion_matrix_matches_frames_module() -> None:
     q = np.random.default_rng(2).normal(size=(50, 4))
     np.testing.assert_allclose(quat_to_matrix_np(q), quat_to_matrix(q), atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_png_fast_path_matches_full_decode(seed: int) -> None:
+    import cv2
+
+    from robogs_format.checks.label_boxes import _png_sub_runs
+
+    rng = np.random.default_rng(seed)
+    img = np.zeros((37, 53), np.uint16)
+    for _ in range(8):
+        x0, y0 = rng.integers(0, 53), rng.integers(0, 37)
+        img[y0 : y0 + rng.integers(1, 20), x0 : x0 + rng.integers(1, 20)] = rng.integers(1, 65535)
+    fast = _png_sub_runs(encode_label_png(img))  # the writer's PNGs use the Sub filter
+    assert fast is not None and fast[0] == img.shape
+    expect = _brute_boxes(img)
+    got = {int(i): (a, b, c, d, e) for i, a, b, c, d, e in zip(*fast[1], strict=True)}
+    assert got == expect
+    ok, paeth = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_PAETH])
+    assert ok and _png_sub_runs(paeth.tobytes()) is None  # other filters: full decode

@@ -81,11 +81,13 @@ def _quat_xyzw(rng: np.random.Generator) -> list[float]:
 
 def _mat_from_xyzw(q: list[float]) -> np.ndarray:
     x, y, z, w = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def write_ros2_mcap(
@@ -139,9 +141,13 @@ def write_ros2_mcap(
         eff = [float(v) for v in rng.normal(size=3)]
         # the publisher sends names in a different order every other message
         order = [0, 1, 2] if i % 2 == 0 else [2, 0, 1]
-        msg = {"header": {"stamp": _stamp(stamp), "frame_id": ""}, "name": [joints[k] for k in order],
-               "position": [pos[k] for k in order], "velocity": [vel[k] for k in order],
-               "effort": [eff[k] for k in order]}
+        msg = {
+            "header": {"stamp": _stamp(stamp), "frame_id": ""},
+            "name": [joints[k] for k in order],
+            "position": [pos[k] for k in order],
+            "velocity": [vel[k] for k in order],
+            "effort": [eff[k] for k in order],
+        }
         events.append((log, 1, "/joint_states", msg))
         if hostile.get("clock_jump_at") != i and hostile.get("zero_stamp_at") != i:
             sc.joint_t.append(stamp)
@@ -166,9 +172,16 @@ def write_ros2_mcap(
             step = w * 3
             data = bgr.tobytes()
             if hostile.get("bad_image_at") == i:
-                data = data[:-w * 3]  # one row short
-            msg = {"header": hdr, "height": h, "width": w, "encoding": "bgr8", "is_bigendian": 0, "step": step,
-                   "data": data}
+                data = data[: -w * 3]  # one row short
+            msg = {
+                "header": hdr,
+                "height": h,
+                "width": w,
+                "encoding": "bgr8",
+                "is_bigendian": 0,
+                "step": step,
+                "data": data,
+            }
             events.append((log, 2, "/camera/cam0/image_raw", msg))
         sc.image_t.append(stamp)
         sc.images.append(img)
@@ -177,42 +190,74 @@ def write_ros2_mcap(
             lab[img[..., 2] == 200] = 1000 + i  # the block carries a 16-bit id
             ok, buf = cv2.imencode(".png", lab)
             assert ok
-            events.append((log + 1, 2, "/camera/cam0/labels/compressed",
-                           {"header": hdr, "format": "png", "data": buf.tobytes()}))
+            events.append(
+                (
+                    log + 1,
+                    2,
+                    "/camera/cam0/labels/compressed",
+                    {"header": hdr, "format": "png", "data": buf.tobytes()},
+                )
+            )
             sc.labels.append(lab)
-        info = {"header": hdr, "height": h, "width": w, "distortion_model": distortion_model, "d": list(distortion),
-                "k": sc.K, "r": [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
-                "p": [sc.K[0], 0.0, sc.K[2], 0.0, 0.0, sc.K[4], sc.K[5], 0.0, 0.0, 0.0, 1.0, 0.0],
-                "binning_x": 0, "binning_y": 0,
-                "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False}}
+        info = {
+            "header": hdr,
+            "height": h,
+            "width": w,
+            "distortion_model": distortion_model,
+            "d": list(distortion),
+            "k": sc.K,
+            "r": [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
+            "p": [sc.K[0], 0.0, sc.K[2], 0.0, 0.0, sc.K[4], sc.K[5], 0.0, 0.0, 0.0, 1.0, 0.0],
+            "binning_x": 0,
+            "binning_y": 0,
+            "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False},
+        }
         events.append((log, 3, "/camera/cam0/camera_info", info))
 
-    tf = {"transforms": [
-        {"header": {"stamp": _stamp(T0), "frame_id": "world"}, "child_frame_id": "cam0_optical_frame",
-         "transform": {"translation": dict(zip("xyz", t_cam, strict=True)),
-                       "rotation": dict(zip("xyzw", q_cam, strict=True))}},
-    ]}
+    tf = {
+        "transforms": [
+            {
+                "header": {"stamp": _stamp(T0), "frame_id": "world"},
+                "child_frame_id": "cam0_optical_frame",
+                "transform": {
+                    "translation": dict(zip("xyz", t_cam, strict=True)),
+                    "rotation": dict(zip("xyzw", q_cam, strict=True)),
+                },
+            },
+        ]
+    }
     events.append((T0, 0, "/tf_static", tf))
 
-    for name, hz, topic, store in (("box", 100.0, "/objects/box/pose", sc.poses),
-                                   ("tool0", 100.0, "/ee/tool0/pose", sc.ee)):
+    for name, hz, topic, store in (
+        ("box", 100.0, "/objects/box/pose", sc.poses),
+        ("tool0", 100.0, "/ee/tool0/pose", sc.ee),
+    ):
         rows = store.setdefault(name, [])
         for i in range(int(duration_s * hz)):
             log = T0 + 11_000_000 + int(round(i * 1e9 / hz))
             stamp = log - LATENCY
             p = [float(v) for v in rng.normal(size=3)]
             q = _quat_xyzw(rng)
-            msg = {"header": {"stamp": _stamp(stamp), "frame_id": "world"},
-                   "pose": {"position": dict(zip("xyz", p, strict=True)),
-                            "orientation": dict(zip("xyzw", q, strict=True))}}
+            msg = {
+                "header": {"stamp": _stamp(stamp), "frame_id": "world"},
+                "pose": {
+                    "position": dict(zip("xyz", p, strict=True)),
+                    "orientation": dict(zip("xyzw", q, strict=True)),
+                },
+            }
             events.append((log, 4, topic, msg))
             rows.append((stamp, [*p, q[3], q[0], q[1], q[2]]))
     for i in range(int(duration_s * 200)):
         log = T0 + 13_000_000 + int(round(i * 1e9 / 200))
         stamp = log - LATENCY
         v = [float(x) for x in rng.normal(size=6)]
-        msg = {"header": {"stamp": _stamp(stamp), "frame_id": "ft_sensor"},
-               "wrench": {"force": dict(zip("xyz", v[:3], strict=True)), "torque": dict(zip("xyz", v[3:], strict=True))}}
+        msg = {
+            "header": {"stamp": _stamp(stamp), "frame_id": "ft_sensor"},
+            "wrench": {
+                "force": dict(zip("xyz", v[:3], strict=True)),
+                "torque": dict(zip("xyz", v[3:], strict=True)),
+            },
+        }
         events.append((log, 5, "/wrench/ft_sensor", msg))
         sc.wrench.append((stamp, v))
     events.append((T0 + 1, 6, "/rosout_like", {"data": "hello"}))
@@ -236,7 +281,7 @@ def write_ros2_mcap(
     with open(path, "wb") as fh:
         writer = Writer(fh, chunk_size=chunk_size)
         schemas = {}
-        for topic, typ in types.items():
+        for typ in types.values():
             if typ not in schemas:
                 schemas[typ] = writer.register_msgdef(typ, msgdef(typ))
         for log, _, topic, msg in events:
@@ -246,8 +291,15 @@ def write_ros2_mcap(
     return sc
 
 
-def write_ros1_bag(path: Path, *, duration_s: float = 0.4, joint_hz: float = 500.0, cam_hz: float = 30.0,
-                   compression: str | None = None, seed: int = 1) -> Scene:
+def write_ros1_bag(
+    path: Path,
+    *,
+    duration_s: float = 0.4,
+    joint_hz: float = 500.0,
+    cam_hz: float = 30.0,
+    compression: str | None = None,
+    seed: int = 1,
+) -> Scene:
     """A ROS 1 bag: JointState, raw rgb8 Image, CameraInfo (upper-case K, D), PoseStamped."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
@@ -262,16 +314,24 @@ def write_ros1_bag(path: Path, *, duration_s: float = 0.4, joint_hz: float = 500
     sc.D = [0.1, 0.0, 0.0, 0.0, 0.0]
 
     def header(t: int, frame: str = "") -> Any:
-        return M["std_msgs/msg/Header"](seq=0, stamp=M["builtin_interfaces/msg/Time"](sec=t // 10**9,
-                                        nanosec=t % 10**9), frame_id=frame)
+        return M["std_msgs/msg/Header"](
+            seq=0,
+            stamp=M["builtin_interfaces/msg/Time"](sec=t // 10**9, nanosec=t % 10**9),
+            frame_id=frame,
+        )
 
     events: list[tuple[int, str, Any]] = []
     for i in range(int(duration_s * joint_hz)):
         log = T0 + 5_000_000 + int(round(i * 1e9 / joint_hz))
         stamp = log - LATENCY
         pos = rng.normal(size=2)
-        msg = M["sensor_msgs/msg/JointState"](header=header(stamp), name=joints, position=pos,
-                                              velocity=np.zeros(0), effort=np.zeros(0))
+        msg = M["sensor_msgs/msg/JointState"](
+            header=header(stamp),
+            name=joints,
+            position=pos,
+            velocity=np.zeros(0),
+            effort=np.zeros(0),
+        )
         events.append((log, "/joint_states", msg))
         sc.joint_t.append(stamp)
         sc.joint_pos.append([float(v) for v in pos])
@@ -279,20 +339,41 @@ def write_ros1_bag(path: Path, *, duration_s: float = 0.4, joint_hz: float = 500
         log = T0 + 7_000_000 + int(round(i * 1e9 / cam_hz))
         stamp = log - LATENCY
         img = frame_image(i, w, h)
-        msg = M["sensor_msgs/msg/Image"](header=header(stamp, "cam_optical"), height=h, width=w, encoding="rgb8",
-                                         is_bigendian=0, step=w * 3, data=img.reshape(-1).copy())
+        msg = M["sensor_msgs/msg/Image"](
+            header=header(stamp, "cam_optical"),
+            height=h,
+            width=w,
+            encoding="rgb8",
+            is_bigendian=0,
+            step=w * 3,
+            data=img.reshape(-1).copy(),
+        )
         events.append((log, "/cam/image_raw", msg))
-        roi = M["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
-        info = M["sensor_msgs/msg/CameraInfo"](header=header(stamp, "cam_optical"), height=h, width=w,
-                                               distortion_model="plumb_bob", D=np.array(sc.D), K=np.array(sc.K),
-                                               R=np.eye(3).reshape(-1), P=np.zeros(12), binning_x=0, binning_y=0,
-                                               roi=roi)
+        roi = M["sensor_msgs/msg/RegionOfInterest"](
+            x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+        )
+        info = M["sensor_msgs/msg/CameraInfo"](
+            header=header(stamp, "cam_optical"),
+            height=h,
+            width=w,
+            distortion_model="plumb_bob",
+            D=np.array(sc.D),
+            K=np.array(sc.K),
+            R=np.eye(3).reshape(-1),
+            P=np.zeros(12),
+            binning_x=0,
+            binning_y=0,
+            roi=roi,
+        )
         events.append((log, "/cam/camera_info", info))
         sc.image_t.append(stamp)
         sc.images.append(img)
     events.sort(key=lambda e: e[0])
-    types = {"/joint_states": "sensor_msgs/msg/JointState", "/cam/image_raw": "sensor_msgs/msg/Image",
-             "/cam/camera_info": "sensor_msgs/msg/CameraInfo"}
+    types = {
+        "/joint_states": "sensor_msgs/msg/JointState",
+        "/cam/image_raw": "sensor_msgs/msg/Image",
+        "/cam/camera_info": "sensor_msgs/msg/CameraInfo",
+    }
     writer = Writer(path)
     if compression:
         writer.set_compression(getattr(Writer.CompressionFormat, compression.upper()))
@@ -307,8 +388,15 @@ def write_ros1_bag(path: Path, *, duration_s: float = 0.4, joint_hz: float = 500
 @pytest.fixture(scope="session")
 def synth() -> SimpleNamespace:
     """The synthetic-data helpers of this folder (tests use them through this fixture)."""
-    return SimpleNamespace(write_ros2_mcap=write_ros2_mcap, write_ros1_bag=write_ros1_bag, frame_image=frame_image,
-                           msgdef=msgdef, LATENCY=LATENCY, T0=T0, Scene=Scene)
+    return SimpleNamespace(
+        write_ros2_mcap=write_ros2_mcap,
+        write_ros1_bag=write_ros1_bag,
+        frame_image=frame_image,
+        msgdef=msgdef,
+        LATENCY=LATENCY,
+        T0=T0,
+        Scene=Scene,
+    )
 
 
 @pytest.fixture(scope="session")

@@ -41,8 +41,17 @@ def _views(n: int = 5, seed: int = 0) -> list[dict]:
         R_wc = _rot(rng)  # camera (OpenCV axes) to world
         ray = np.array([(u - cx) / fx, (v - cy) / fy, 1.0]) * d
         C = X - R_wc @ ray
-        out.append({"name": f"img_{i:03d}.png", "cam": i % 2 + 1, "u": u, "v": v, "R_wc": R_wc, "C": C,
-                    "K": (fx, fy, cx, cy)})
+        out.append(
+            {
+                "name": f"img_{i:03d}.png",
+                "cam": i % 2 + 1,
+                "u": u,
+                "v": v,
+                "R_wc": R_wc,
+                "C": C,
+                "K": (fx, fy, cx, cy),
+            }
+        )
     return out
 
 
@@ -56,21 +65,37 @@ def _images(folder: Path, views: list[dict]) -> None:
 def _qvec(R: np.ndarray) -> np.ndarray:
     w = np.sqrt(max(0.0, 1 + np.trace(R))) / 2
     if w > 1e-3:
-        return np.array([w, (R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w), (R[1, 0] - R[0, 1]) / (4 * w)])
+        return np.array(
+            [
+                w,
+                (R[2, 1] - R[1, 2]) / (4 * w),
+                (R[0, 2] - R[2, 0]) / (4 * w),
+                (R[1, 0] - R[0, 1]) / (4 * w),
+            ]
+        )
     raise AssertionError("test rotation too close to a half turn; change the seed")
 
 
 def _colmap_text(model: Path, views: list[dict]) -> None:
     model.mkdir(parents=True)
-    cams = ["# Camera list", *(f"{k + 1} PINHOLE {W} {H} {fx!r} {fy!r} {cx!r} {cy!r}"
-                               for k, (fx, fy, cx, cy) in enumerate(INTR))]
+    cams = [
+        "# Camera list",
+        *(
+            f"{k + 1} PINHOLE {W} {H} {fx!r} {fy!r} {cx!r} {cy!r}"
+            for k, (fx, fy, cx, cy) in enumerate(INTR)
+        ),
+    ]
     (model / "cameras.txt").write_text("\n".join(cams) + "\n")
     lines = ["# Image list with two lines of data per image:"]
     for i, v in enumerate(views):
         R_cw = v["R_wc"].T
         t = -R_cw @ v["C"]
         q = _qvec(R_cw)
-        lines.append(" ".join(repr(float(x)) for x in [*q, *t]).join([f"{i + 1} ", f" {v['cam']} {v['name']}"]))
+        lines.append(
+            " ".join(repr(float(x)) for x in [*q, *t]).join(
+                [f"{i + 1} ", f" {v['cam']} {v['name']}"]
+            )
+        )
         lines.append("" if i % 2 else "12.5 7.25 -1")  # POINTS2D lines, some empty
     (model / "images.txt").write_text("\n".join(lines) + "\n")
     (model / "points3D.txt").write_text("# 3D point list\n1 0.3 -0.2 0.5 255 0 0 0.1 1 0\n")
@@ -87,11 +112,15 @@ def _colmap_binary(model: Path, views: list[dict]) -> None:
         for i, v in enumerate(views):
             R_cw = v["R_wc"].T
             t = -R_cw @ v["C"]
-            fh.write(struct.pack("<I7di", i + 1, *_qvec(R_cw), *t, v["cam"]) + v["name"].encode() + b"\x00")
+            fh.write(
+                struct.pack("<I7di", i + 1, *_qvec(R_cw), *t, v["cam"])
+                + v["name"].encode()
+                + b"\x00"
+            )
             fh.write(struct.pack("<Q", 2) + struct.pack("<ddq", 1.0, 2.0, -1) * 2)
 
 
-def _projections(ds, world: np.ndarray = np.eye(4)) -> dict[str, tuple[float, float]]:
+def _projections(ds, world: np.ndarray) -> dict[str, tuple[float, float]]:
     """Pixel of X (re-expressed by ``world``) in every view, read back through the dataset."""
     ep = ds.episode()
     out = {}
@@ -103,15 +132,18 @@ def _projections(ds, world: np.ndarray = np.eye(4)) -> dict[str, tuple[float, fl
         for k, t in enumerate(ext["t_ns"]):
             from converters.ingest.tf_tree import pose_to_matrix
 
-            T = pose_to_matrix(np.array([ext[c][k] for c in "xyz"]), np.array([ext[c][k] for c in ("qw", "qx", "qy", "qz")]))
-            Xw = (world @ np.append(X, 1.0))
+            T = pose_to_matrix(
+                np.array([ext[c][k] for c in "xyz"]),
+                np.array([ext[c][k] for c in ("qw", "qx", "qy", "qz")]),
+            )
+            Xw = world @ np.append(X, 1.0)
             p = np.linalg.inv(T) @ Xw
             out[t] = (cam.fx * p[0] / p[2] + cam.cx, cam.fy * p[1] / p[2] + cam.cy)
     return out
 
 
-def _check(ds, views: list[dict], world: np.ndarray = np.eye(4)) -> None:
-    proj = _projections(ds, world)
+def _check(ds, views: list[dict], world: np.ndarray | None = None) -> None:
+    proj = _projections(ds, np.eye(4) if world is None else world)
     assert sorted(proj) == list(range(len(views)))  # t_ns = view ordinal
     for i, v in enumerate(views):
         u, w = proj[i]
@@ -171,8 +203,9 @@ def test_nerfstudio_world_up(tmp_path: Path) -> None:
         fx, fy, cx, cy = INTR[0]
         v["C"] = X - v["R_wc"] @ (np.array([(v["u"] - cx) / fx, (v["v"] - cy) / fy, 1.0]) * 1.5)
     _nerfstudio(tmp_path / "ns", views, per_frame=False)
-    ds = convert_path(tmp_path / "ns" / "transforms.json", tmp_path / "out",
-                      options=ConvertOptions(world_up="+y"))
+    ds = convert_path(
+        tmp_path / "ns" / "transforms.json", tmp_path / "out", options=ConvertOptions(world_up="+y")
+    )
     T_up = np.eye(4)
     T_up[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]  # y-up -> z-up: (x, y, z) -> (x, -z, y)
     _check(ds, views, world=T_up)

@@ -18,7 +18,9 @@ CR3_JOINTS = ["joint1", "joint2", "joint3"]
 
 
 def test_builtin_converters_and_detection(tmp_path: Path, synth) -> None:
-    assert {"ros1", "ros2", "mcap", "video", "images", "nerfstudio", "colmap"} <= set(registry.available_converters())
+    assert {"ros1", "ros2", "mcap", "video", "images", "nerfstudio", "colmap"} <= set(
+        registry.available_converters()
+    )
     synth.write_ros2_mcap(tmp_path / "a.mcap", duration_s=0.05)
     (tmp_path / "b.bin").write_bytes((tmp_path / "a.mcap").read_bytes())  # MCAP by its magic bytes
     assert registry.detect_format(tmp_path / "a.mcap").name == "mcap"
@@ -56,53 +58,92 @@ def test_register_and_entry_points(tmp_path: Path, monkeypatch) -> None:
             return registry.Converter("plugfmt", lambda p: False, convert, "from a plug-in")
 
     monkeypatch.setattr(registry, "_LOADED", False)
-    monkeypatch.setattr(registry, "entry_points", lambda group: [_EP()] if group == "robogs.converters" else [])
+    monkeypatch.setattr(
+        registry, "entry_points", lambda group: [_EP()] if group == "robogs.converters" else []
+    )
     assert "plugfmt" in registry.available_converters()
 
 
 def test_cli_convert_json_and_errors(tmp_path: Path, synth, capsys) -> None:
     synth.write_ros2_mcap(tmp_path / "a.mcap", duration_s=0.1)
     out = tmp_path / "out"
-    assert main(["convert", str(tmp_path / "a.mcap"), str(out), "--json", "--topic", "ignore=/wrench/ft_sensor"]) == 0
+    assert (
+        main(
+            [
+                "convert",
+                str(tmp_path / "a.mcap"),
+                str(out),
+                "--json",
+                "--topic",
+                "ignore=/wrench/ft_sensor",
+            ]
+        )
+        == 0
+    )
     summary = json.loads(capsys.readouterr().out)
-    assert summary["episodes"][0]["streams"] == ["camera/cam0", "ee_poses", "joint_states", "object_poses"]
+    assert summary["episodes"][0]["streams"] == [
+        "camera/cam0",
+        "ee_poses",
+        "joint_states",
+        "object_poses",
+    ]
     assert {d["topic"] for d in summary["dropped"]} == {"/rosout_like", "/wrench/ft_sensor"}
     assert main(["convert", str(tmp_path / "a.mcap"), str(out)]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "already exists" in err and "--force" in err and "Traceback" not in err
+    assert (
+        err.count("\n") == 1
+        and "already exists" in err
+        and "--force" in err
+        and "Traceback" not in err
+    )
     assert main(["convert", str(tmp_path / "a.mcap"), str(out), "--force", "--from", "ros1"]) == 2
     assert "not a ROS 1 bag" in capsys.readouterr().err
     assert main(["convert", "--list-formats"]) == 0
     assert "nerfstudio" in capsys.readouterr().out
 
 
+@pytest.mark.realdata
 def test_urdf_copied_with_meshes(tmp_path: Path, synth, real: Path) -> None:
     synth.write_ros2_mcap(tmp_path / "a.mcap", duration_s=0.1, joints=CR3_JOINTS)
     opts = ConvertOptions(urdf=real / CR3, roles={"/ee/tool0/pose": "ee_pose:Link6"})
     ds = convert_path(tmp_path / "a.mcap", tmp_path / "out", options=opts)
     assert ds.manifest["robot"] == {"urdf": "robot/robot.urdf", "base_link": "dummy_link"}
     meshes = sorted(r for r in ds.files if r.startswith("robot/meshes/"))
-    assert meshes == [f"robot/meshes/{n}.STL" for n in ("Link1", "Link2", "Link3", "Link4", "Link5", "Link6",
-                                                         "base_link")]
+    assert meshes == [
+        f"robot/meshes/{n}.STL"
+        for n in ("Link1", "Link2", "Link3", "Link4", "Link5", "Link6", "base_link")
+    ]
     urdf = ds.urdf(load_meshes=True)
     assert len(urdf.robot.links) == 8
-    errors = [f"{f.code} {f.message}" for f in validate(tmp_path / "out").findings if f.severity == "error"]
+    errors = [
+        f"{f.code} {f.message}"
+        for f in validate(tmp_path / "out").findings
+        if f.severity == "error"
+    ]
     # the synthetic end-effector poses are random, so only forward kinematics may disagree
     assert all(e.startswith("G008") for e in errors), errors
 
 
 def test_robot_description_topic(tmp_path: Path, synth) -> None:
-    urdf = ('<robot name="r"><link name="base"/><link name="l1"/>'
-            '<joint name="shoulder_pan" type="revolute"><parent link="base"/><child link="l1"/>'
-            '<axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint></robot>')
+    urdf = (
+        '<robot name="r"><link name="base"/><link name="l1"/>'
+        '<joint name="shoulder_pan" type="revolute"><parent link="base"/><child link="l1"/>'
+        '<axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint></robot>'
+    )
     synth.write_ros2_mcap(tmp_path / "a.mcap", duration_s=0.05, robot_description=urdf)
     ds = convert_path(tmp_path / "a.mcap", tmp_path / "out")
     assert ds.manifest["robot"]["base_link"] == "base"
     assert ds.manifest["provenance"]["robot"]["urdf"] == "robot_description topic"
-    bad = urdf.replace('<link name="l1"/>', '<link name="l1"><visual><geometry><mesh filename="package://nowhere/'
-                       'm.stl"/></geometry></visual></link>')
+    bad = urdf.replace(
+        '<link name="l1"/>',
+        '<link name="l1"><visual><geometry><mesh filename="package://nowhere/'
+        'm.stl"/></geometry></visual></link>',
+    )
     synth.write_ros2_mcap(tmp_path / "b.mcap", duration_s=0.05, robot_description=bad)
     ds = convert_path(tmp_path / "b.mcap", tmp_path / "out2")
     assert "robot" not in ds.manifest
-    assert any("robot_description from the source not used" in n for n in ds.manifest["provenance"]["notes"])
+    assert any(
+        "robot_description from the source not used" in n
+        for n in ds.manifest["provenance"]["notes"]
+    )
     assert not any(r.startswith("robot/") for r in ds.files)

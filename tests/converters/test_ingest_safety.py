@@ -11,8 +11,13 @@ from robogs_format.errors import DatasetExistsError, InputError, RobogsError
 
 
 def _leftovers(parent: Path, name: str = "out") -> list[str]:
-    return sorted(p.name for p in parent.iterdir() if p.name == name or p.name.startswith(f".{name}.tmp-")
-                  or p.name.startswith(f".{name}.old-"))
+    return sorted(
+        p.name
+        for p in parent.iterdir()
+        if p.name == name
+        or p.name.startswith(f".{name}.tmp-")
+        or p.name.startswith(f".{name}.old-")
+    )
 
 
 @pytest.fixture
@@ -45,7 +50,9 @@ def test_force_never_replaces_a_folder_that_is_not_a_dataset(small: Path, tmp_pa
 def test_failure_midway_leaves_nothing(tmp_path: Path, synth) -> None:
     # frame 5 of 9 has one row of pixel data missing: the conversion fails after writing
     # joint states and four video frames
-    synth.write_ros2_mcap(tmp_path / "bad.mcap", image_kind="raw", duration_s=0.3, hostile={"bad_image_at": 5})
+    synth.write_ros2_mcap(
+        tmp_path / "bad.mcap", image_kind="raw", duration_s=0.3, hostile={"bad_image_at": 5}
+    )
     with pytest.raises(InputError) as ei:
         convert_path(tmp_path / "bad.mcap", tmp_path / "out")
     msg = str(ei.value)
@@ -54,10 +61,14 @@ def test_failure_midway_leaves_nothing(tmp_path: Path, synth) -> None:
     assert _leftovers(tmp_path) == []
 
 
-def test_existing_dataset_survives_a_failed_forced_conversion(small: Path, tmp_path: Path, synth) -> None:
+def test_existing_dataset_survives_a_failed_forced_conversion(
+    small: Path, tmp_path: Path, synth
+) -> None:
     out = tmp_path / "out"
     before = convert_path(small, out).manifest["files"]
-    synth.write_ros2_mcap(tmp_path / "bad.mcap", image_kind="raw", duration_s=0.3, hostile={"bad_image_at": 2})
+    synth.write_ros2_mcap(
+        tmp_path / "bad.mcap", image_kind="raw", duration_s=0.3, hostile={"bad_image_at": 2}
+    )
     with pytest.raises(InputError):
         convert_path(tmp_path / "bad.mcap", out, force=True)
     from robogs_format.dataset import Dataset
@@ -104,7 +115,10 @@ def test_four_coefficient_plumb_bob_is_an_error(tmp_path: Path, synth) -> None:
     with pytest.raises(InputError) as ei:
         convert_path(tmp_path / "a.mcap", tmp_path / "out")
     msg = str(ei.value)
-    assert "plumb_bob needs 5 coefficients, got 4" in msg and "topic /camera/cam0/camera_info stamp" in msg
+    assert (
+        "plumb_bob needs 5 coefficients, got 4" in msg
+        and "topic /camera/cam0/camera_info stamp" in msg
+    )
     assert "equidistant" in msg  # the hint names the likely intent
     assert _leftovers(tmp_path) == []
 

@@ -18,7 +18,9 @@ def _cubic(t):
 def test_exact_on_cubics(uniform):
     rng = np.random.default_rng(0)
     step = 8_000_000
-    t_ns = np.cumsum(np.full(400, step) if uniform else rng.integers(step // 2, 2 * step, 400)).astype(np.int64)
+    t_ns = np.cumsum(
+        np.full(400, step) if uniform else rng.integers(step // 2, 2 * step, 400)
+    ).astype(np.int64)
     t = (t_ns - t_ns[0]) * 1e-9
     y, dy, ddy = _cubic(t)
     two = np.stack([y, 2 * y], axis=1)

@@ -17,7 +17,15 @@ from robogs_format.dataset import Dataset
 
 REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "fixtures" / "real"
 UR5_REAL = REAL / "ur5" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"
-REQUIRED = {"name", "family", "reported", "delta_bic", "heldout_rms_before", "heldout_rms_after", "params"}
+REQUIRED = {
+    "name",
+    "family",
+    "reported",
+    "delta_bic",
+    "heldout_rms_before",
+    "heldout_rms_after",
+    "params",
+}
 
 
 @pytest.fixture(autouse=True)
@@ -37,7 +45,9 @@ def ur5(tmp_path_factory) -> Path:
 
 def _dataset(root: Path, urdf: Path, effect: str, seed: int = 3) -> tuple[Path, dict]:
     logs = root / f"logs_{effect}"
-    truth = generate_armlog(logs, urdf, ArmLogSpec(effect=effect, seed=seed, segments=4, duration_s=6.0))
+    truth = generate_armlog(
+        logs, urdf, ArmLogSpec(effect=effect, seed=seed, segments=4, duration_s=6.0)
+    )
     out = root / f"ds_{effect}"
     convert_tabular(logs, out, urdf=urdf)
     return out, truth
@@ -47,21 +57,31 @@ def _relerr(est: dict, truth: dict, effect: str, joints: list[str]) -> dict[str,
     """Relative error of every recovered parameter."""
     p = {k: v["value"] for k, v in est.items()}
     if effect == "joint_friction":
-        return {f"{n}.{j}": abs(p[f"{n}.{j}"] - truth[n][i]) / truth[n][i]
-                for n in ("fc", "fv") for i, j in enumerate(joints)}
+        return {
+            f"{n}.{j}": abs(p[f"{n}.{j}"] - truth[n][i]) / truth[n][i]
+            for n in ("fc", "fv")
+            for i, j in enumerate(joints)
+        }
     if effect == "armature":
-        return {f"ia.{j}": abs(p[f"ia.{j}"] - truth["ia"][i]) / truth["ia"][i] for i, j in enumerate(joints)}
+        return {
+            f"ia.{j}": abs(p[f"ia.{j}"] - truth["ia"][i]) / truth["ia"][i]
+            for i, j in enumerate(joints)
+        }
     if effect == "payload":
         c = np.array(truth["com"])
         c_hat = np.array([p["cx"], p["cy"], p["cz"]])
-        return {"mass": abs(p["mass"] - truth["mass"]) / truth["mass"],
-                "com": float(np.linalg.norm(c_hat - c) / np.linalg.norm(c))}
+        return {
+            "mass": abs(p["mass"] - truth["mass"]) / truth["mass"],
+            "com": float(np.linalg.norm(c_hat - c) / np.linalg.norm(c)),
+        }
     return {"delta": abs(p["delta"] - truth["delta"]) / truth["delta"]}
 
 
 def test_arm_effects_are_registered():
     names = available_effects(model="arm")
-    assert {"joint_friction", "payload", "armature", "mass_scale", "effort_time_offset"} <= set(names)
+    assert {"joint_friction", "payload", "armature", "mass_scale", "effort_time_offset"} <= set(
+        names
+    )
     assert get_effect("joint_friction").family == "joint"
     assert get_effect("effort_time_offset").family == "sensor"
 
@@ -73,7 +93,9 @@ def test_hidden_effect_ranks_first_and_is_recovered(tmp_path, ur5, effect):
     json.dumps(report)
     top = report["effects"][0]
     assert REQUIRED <= set(top)
-    assert top["name"] == effect and top["reported"], [(e["name"], e["delta_bic"]) for e in report["effects"]]
+    assert top["name"] == effect and top["reported"], [
+        (e["name"], e["delta_bic"]) for e in report["effects"]
+    ]
     assert top["delta_bic"] <= -10 and top["heldout_rms_after"] < top["heldout_rms_before"]
     errs = _relerr(top["params"], truth["params"], effect, truth["joints"])
     assert max(errs.values()) < 0.10, errs
@@ -89,7 +111,9 @@ def test_null_log_reports_nothing_and_noise_floor_is_measured(tmp_path, ur5):
     np.testing.assert_allclose(sigma, truth["effort_noise"], rtol=0.15)
     cmp = compare_arm(ds)
     rms = np.array([cmp["joints"][j]["rms_nm"] for j in truth["joints"]])
-    np.testing.assert_allclose(rms, truth["effort_noise"], rtol=0.2)  # the true model leaves only noise
+    np.testing.assert_allclose(
+        rms, truth["effort_noise"], rtol=0.2
+    )  # the true model leaves only noise
     assert {e["name"] for e in report["skipped"]} >= {"kinematic_offsets", "backlash"}
 
 
@@ -105,8 +129,14 @@ def test_fit_add_writes_physics_revision_and_the_error_falls(tmp_path, ur5):
     phys = d.physics()
     assert phys["parent_revision"] == 1
     for i, j in enumerate(truth["joints"]):
-        assert abs(phys["joints"][j]["friction"] - truth["params"]["fc"][i]) < 0.1 * truth["params"]["fc"][i]
-        assert abs(phys["joints"][j]["damping"] - truth["params"]["fv"][i]) < 0.1 * truth["params"]["fv"][i]
+        assert (
+            abs(phys["joints"][j]["friction"] - truth["params"]["fc"][i])
+            < 0.1 * truth["params"]["fc"][i]
+        )
+        assert (
+            abs(phys["joints"][j]["damping"] - truth["params"]["fv"][i])
+            < 0.1 * truth["params"]["fv"][i]
+        )
     after = compare_arm(ds)
     for j in truth["joints"]:
         assert after["joints"][j]["rms_nm"] < 1.1 * after["joints"][j]["noise_nm"]
@@ -123,7 +153,9 @@ def test_fit_add_payload_writes_link_mass_and_com(tmp_path, ur5):
     pay = Dataset.open(ds).physics()["payload"]
     assert pay["link"] == truth["payload_link"]
     assert abs(pay["mass_kg"] - 1.5) < 0.15
-    assert np.linalg.norm(np.array(pay["com_m"]) - truth["params"]["com"]) < 0.1 * np.linalg.norm(truth["params"]["com"])
+    assert np.linalg.norm(np.array(pay["com_m"]) - truth["params"]["com"]) < 0.1 * np.linalg.norm(
+        truth["params"]["com"]
+    )
 
 
 @pytest.mark.realdata

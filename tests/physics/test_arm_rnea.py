@@ -67,8 +67,11 @@ def _urdf(tmp_path: Path, text: str, name: str):
 
 
 def _states(rng: np.random.Generator, n: int, j: int):
-    return (torch.tensor(rng.uniform(-1.5, 1.5, (n, j))), torch.tensor(rng.uniform(-2, 2, (n, j))),
-            torch.tensor(rng.uniform(-4, 4, (n, j))))
+    return (
+        torch.tensor(rng.uniform(-1.5, 1.5, (n, j))),
+        torch.tensor(rng.uniform(-2, 2, (n, j))),
+        torch.tensor(rng.uniform(-4, 4, (n, j))),
+    )
 
 
 def test_two_link_planar_closed_form(tmp_path):
@@ -101,7 +104,9 @@ def _lagrangian_torque(chain: Chain, urdf, q, qd, qdd, g=9.81):
         if ine is None or not ine.mass or k == 0:
             continue
         o = np.eye(4) if ine.origin is None else np.asarray(ine.origin, float)
-        bodies.append((k, float(ine.mass), torch.tensor(o), torch.tensor(np.asarray(ine.inertia, float))))
+        bodies.append(
+            (k, float(ine.mass), torch.tensor(o), torch.tensor(np.asarray(ine.inertia, float)))
+        )
     nj = chain.num_joints
 
     def lagr(x):
@@ -146,17 +151,27 @@ def test_regressor_reproduces_rnea(tmp_path):
     q, qd, qdd = _states(np.random.default_rng(2), 32, 3)
     y = regressor(model, q, qd, qdd)
     pi = torch.as_tensor(inertial_vector(model.inertials))
-    torch.testing.assert_close(torch.einsum("njbk,bk->nj", y, pi), inverse_dynamics(model, q, qd, qdd),
-                               atol=1e-11, rtol=0)
+    torch.testing.assert_close(
+        torch.einsum("njbk,bk->nj", y, pi), inverse_dynamics(model, q, qd, qdd), atol=1e-11, rtol=0
+    )
     # linear in the parameters: doubling all inertials doubles the torques
-    torch.testing.assert_close(inverse_dynamics(model, q, qd, qdd, inertials=model.inertials.scaled(2.0)),
-                               2 * inverse_dynamics(model, q, qd, qdd), atol=1e-11, rtol=0)
+    torch.testing.assert_close(
+        inverse_dynamics(model, q, qd, qdd, inertials=model.inertials.scaled(2.0)),
+        2 * inverse_dynamics(model, q, qd, qdd),
+        atol=1e-11,
+        rtol=0,
+    )
 
 
 def test_independent_world_frame_implementation_agrees(tmp_path):
     """The generator's world-frame Newton-Euler (unfolded links) gives the same torques."""
-    urdf, path = _urdf(tmp_path, MIXED.replace('<mimic joint="j1" multiplier="0.5" offset="0.1"/>', "")
-                       .replace('name="jm" type="revolute"', 'name="jm" type="fixed"'), "nomimic")
+    urdf, path = _urdf(
+        tmp_path,
+        MIXED.replace('<mimic joint="j1" multiplier="0.5" offset="0.1"/>', "").replace(
+            'name="jm" type="revolute"', 'name="jm" type="fixed"'
+        ),
+        "nomimic",
+    )
     model = ArmModel.from_urdf(urdf)
     q, qd, qdd = _states(np.random.default_rng(3), 50, 3)
     ref = world_inverse_dynamics(parse_arm(path), q.numpy(), qd.numpy(), qdd.numpy())

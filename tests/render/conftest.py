@@ -30,7 +30,9 @@ def random_gaussians(
     means = torch.randn(n, 3, generator=gen, dtype=dtype) * spread
     means[:, 2] += centre_z
     ns = 3 if kind == "3dgs" else 2
-    log_scales = torch.log(torch.rand(n, ns, generator=gen, dtype=dtype) * (scale[1] - scale[0]) + scale[0])
+    log_scales = torch.log(
+        torch.rand(n, ns, generator=gen, dtype=dtype) * (scale[1] - scale[0]) + scale[0]
+    )
     g = Gaussians(
         means=means,
         quats=torch.randn(n, 4, generator=gen, dtype=dtype),
@@ -43,18 +45,31 @@ def random_gaussians(
 
 
 def small_camera(
-    width: int = 37, height: int = 29, *, dtype: torch.dtype = torch.float64, device: str = "cpu", pose: bool = True
+    width: int = 37,
+    height: int = 29,
+    *,
+    dtype: torch.dtype = torch.float64,
+    device: str = "cpu",
+    pose: bool = True,
 ) -> Camera:
     """A small camera; with ``pose`` it is displaced and rotated, still looking at (0, 0, 2)."""
     T = torch.eye(4, dtype=dtype)
     if pose:
         a = 0.2
-        R = torch.tensor([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]], dtype=dtype)
+        R = torch.tensor(
+            [[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]], dtype=dtype
+        )
         centre = torch.tensor([0.0, 0.0, 2.0], dtype=dtype)
-        cam_pos = centre - R @ torch.tensor([0.0, 0.0, 2.0], dtype=dtype) + torch.tensor([0.0, 0.05, 0.0], dtype=dtype)
+        cam_pos = (
+            centre
+            - R @ torch.tensor([0.0, 0.0, 2.0], dtype=dtype)
+            + torch.tensor([0.0, 0.05, 0.0], dtype=dtype)
+        )
         T[:3, :3] = R
         T[:3, 3] = cam_pos
-    return Camera(width=width, height=height, fx=40.0, fy=42.0, cx=18.3, cy=14.1, T_world_cam=T.to(device))
+    return Camera(
+        width=width, height=height, fx=40.0, fy=42.0, cx=18.3, cy=14.1, T_world_cam=T.to(device)
+    )
 
 
 @pytest.fixture

@@ -44,9 +44,15 @@ def test_unknown_backend_raises(make_gaussians, make_camera):
 
 
 def test_entry_points_are_loaded(monkeypatch, make_gaussians, make_camera):
-    good = metadata.EntryPoint("ep-dense", "robogs_format.render.dense:render_dense", backends.ENTRY_POINT_GROUP)
+    good = metadata.EntryPoint(
+        "ep-dense", "robogs_format.render.dense:render_dense", backends.ENTRY_POINT_GROUP
+    )
     broken = metadata.EntryPoint("ep-broken", "no_such_module_xyz:fn", backends.ENTRY_POINT_GROUP)
-    monkeypatch.setattr(backends.metadata, "entry_points", lambda group: [good, broken] if group == backends.ENTRY_POINT_GROUP else [])
+    monkeypatch.setattr(
+        backends.metadata,
+        "entry_points",
+        lambda group: [good, broken] if group == backends.ENTRY_POINT_GROUP else [],
+    )
     monkeypatch.setattr(backends, "_entry_points_loaded", False)
     monkeypatch.setattr(backends, "_REGISTRY", dict(backends._REGISTRY))
     monkeypatch.setattr(backends, "_UNAVAILABLE", dict(backends._UNAVAILABLE))

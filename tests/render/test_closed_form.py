@@ -18,7 +18,9 @@ F64 = torch.float64
 
 def one_camera(size: int = 33, f: float = 50.0) -> Camera:
     c = size / 2
-    return Camera(width=size, height=size, fx=f, fy=f, cx=c, cy=c, T_world_cam=torch.eye(4, dtype=F64))
+    return Camera(
+        width=size, height=size, fx=f, fy=f, cx=c, cy=c, T_world_cam=torch.eye(4, dtype=F64)
+    )
 
 
 def gaussians(means, log_scale, logits, dc) -> Gaussians:
@@ -80,7 +82,9 @@ def test_opaque_front_gaussian_hides_the_back_one(backend):
     assert out.rgb[16, 16].numpy() == pytest.approx(expect_rgb, abs=1e-12)
     assert float(out.alpha[16, 16]) == pytest.approx(alpha, abs=1e-12)
     assert float(out.depth_median[16, 16]) == 1.0
-    assert float(out.depth_expected[16, 16]) == pytest.approx((w_f * 1.0 + w_b * 2.0) / alpha, abs=1e-12)
+    assert float(out.depth_expected[16, 16]) == pytest.approx(
+        (w_f * 1.0 + w_b * 2.0) / alpha, abs=1e-12
+    )
 
 
 @pytest.mark.parametrize("backend", ["torch", "dense"])
@@ -106,7 +110,9 @@ def test_sh_degree0_colour():
     dc = torch.tensor([[[0.7, -0.4, -3.0]]], dtype=F64)
     dirs = torch.tensor([[0.0, 0.6, 0.8]], dtype=F64)
     rgb = eval_sh(dc, dirs)
-    assert rgb[0].tolist() == pytest.approx([0.5 + SH_C0 * 0.7, 0.5 - SH_C0 * 0.4, 0.0])  # clamped at 0
+    assert rgb[0].tolist() == pytest.approx(
+        [0.5 + SH_C0 * 0.7, 0.5 - SH_C0 * 0.4, 0.0]
+    )  # clamped at 0
 
 
 def test_sh_basis_is_orthonormal_and_matches_closed_forms():

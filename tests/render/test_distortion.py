@@ -34,9 +34,13 @@ def test_equidistant_matches_opencv_fisheye():
     np.testing.assert_allclose(ours.numpy(), ref[:, 0], atol=1e-10)
 
 
-@pytest.mark.parametrize(("model", "coeffs", "r"), [("plumb_bob", PLUMB_BOB, 0.6), ("equidistant", FISHEYE, 1.5)])
+@pytest.mark.parametrize(
+    ("model", "coeffs", "r"), [("plumb_bob", PLUMB_BOB, 0.6), ("equidistant", FISHEYE, 1.5)]
+)
 def test_undistort_inverts_distort(model, coeffs, r):
-    xy = (torch.rand(500, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(2)) * 2 - 1) * r
+    xy = (
+        torch.rand(500, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(2)) * 2 - 1
+    ) * r
     back, ok = undistort_points(distort_points(xy, model, coeffs), model, coeffs)
     assert bool(ok.all())
     assert float((back - xy).abs().max()) < 1e-9
@@ -51,7 +55,11 @@ def test_distorted_render_matches_exact_oracle(make_gaussians, make_camera, kind
     out = render(g, cam, config=cfg)
     _, _, ok = pinhole_render_camera(cam, 1.0)
     # exact: evaluate every output pixel at its undistorted pinhole position
-    ys, xs = torch.meshgrid(torch.arange(40, dtype=torch.float64) + 0.5, torch.arange(48, dtype=torch.float64) + 0.5, indexing="ij")
+    ys, xs = torch.meshgrid(
+        torch.arange(40, dtype=torch.float64) + 0.5,
+        torch.arange(48, dtype=torch.float64) + 0.5,
+        indexing="ij",
+    )
     xy_d = torch.stack([(xs - cam.cx) / cam.fx, (ys - cam.cy) / cam.fy], -1)
     xy, valid = undistort_points(xy_d, model, coeffs)
     pixels = torch.stack([xy[..., 0] * cam.fx + cam.cx, xy[..., 1] * cam.fy + cam.cy], -1)
@@ -64,7 +72,9 @@ def test_distorted_render_matches_exact_oracle(make_gaussians, make_camera, kind
     assert float((out.alpha - exact.alpha).abs().mean()) < 2.5e-3
     # the distortion is strong enough to matter: the pinhole render differs much more
     pin = render(g, cam.pinhole(), config=cfg)
-    assert float((pin.alpha - exact.alpha).abs().mean()) > 5 * float((out.alpha - exact.alpha).abs().mean())
+    assert float((pin.alpha - exact.alpha).abs().mean()) > 5 * float(
+        (out.alpha - exact.alpha).abs().mean()
+    )
 
 
 def test_zero_coefficients_equal_pinhole(make_gaussians, make_camera):

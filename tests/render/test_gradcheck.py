@@ -10,9 +10,13 @@ from robogs_format.render import Gaussians, RenderConfig, render
 
 @pytest.mark.parametrize("kind", ["3dgs", "2dgs"])
 def test_gradcheck(make_gaussians, make_camera, kind):
-    g = make_gaussians(6, kind, seed=1, sh_coeffs=4, extra=0, centre_z=1.0, spread=0.12, scale=(0.03, 0.08))
+    g = make_gaussians(
+        6, kind, seed=1, sh_coeffs=4, extra=0, centre_z=1.0, spread=0.12, scale=(0.03, 0.08)
+    )
     cam = make_camera(width=12, height=10, pose=False)
-    cam = type(cam)(width=12, height=10, fx=12.0, fy=12.0, cx=6.2, cy=4.9, T_world_cam=cam.T_world_cam)
+    cam = type(cam)(
+        width=12, height=10, fx=12.0, fy=12.0, cx=6.2, cy=4.9, T_world_cam=cam.T_world_cam
+    )
     params = [g.means, g.quats, g.log_scales, g.opacity_logits, g.sh]
     for p in params:
         p.requires_grad_(True)
@@ -29,7 +33,9 @@ def test_gradcheck(make_gaussians, make_camera, kind):
 
 def test_gradcheck_camera_pose(make_gaussians, make_camera):
     """The render is differentiable w.r.t. T_world_cam (for pose refinement)."""
-    g = make_gaussians(5, "3dgs", seed=4, extra=0, sh_coeffs=1, centre_z=1.0, spread=0.1, scale=(0.03, 0.08))
+    g = make_gaussians(
+        5, "3dgs", seed=4, extra=0, sh_coeffs=1, centre_z=1.0, spread=0.1, scale=(0.03, 0.08)
+    )
     base = make_camera(pose=False)
     xi = torch.zeros(3, dtype=torch.float64, requires_grad=True)
     cfg = RenderConfig(tile_size=4, chunk=4)

@@ -20,8 +20,12 @@ def max_diffs(a, b) -> dict[str, float]:
 @pytest.mark.parametrize("tile_size", [4, 8, 16])
 @pytest.mark.parametrize("sh_coeffs", [1, 4, 9, 16])
 @pytest.mark.parametrize("kind", ["3dgs", "2dgs"])
-def test_torch_matches_dense_random(make_gaussians, make_camera, kind, sh_coeffs, tile_size, device):
-    g = make_gaussians(80, kind, seed=sh_coeffs + tile_size, sh_coeffs=sh_coeffs, extra=3, device=device)
+def test_torch_matches_dense_random(
+    make_gaussians, make_camera, kind, sh_coeffs, tile_size, device
+):
+    g = make_gaussians(
+        80, kind, seed=sh_coeffs + tile_size, sh_coeffs=sh_coeffs, extra=3, device=device
+    )
     cam = make_camera(device=device)
     cfg = RenderConfig(kind=kind, tile_size=tile_size, chunk=5, background=(0.2, 0.4, 0.6))
     a = render(g, cam, config=cfg)
@@ -69,7 +73,9 @@ def test_result_independent_of_tile_size_and_chunk(make_gaussians, make_camera, 
     cam = make_camera()
     ref = render(g, cam, config=RenderConfig(kind=kind, tile_size=16, chunk=64))
     for ts, chunk, batch in [(3, 1, 1), (5, 7, None), (32, 2, 2)]:
-        out = render(g, cam, config=RenderConfig(kind=kind, tile_size=ts, chunk=chunk, tile_batch=batch))
+        out = render(
+            g, cam, config=RenderConfig(kind=kind, tile_size=ts, chunk=chunk, tile_batch=batch)
+        )
         d = max_diffs(out, ref)
         assert max(d.values()) <= TOL, (ts, chunk, d)
 
@@ -87,14 +93,24 @@ def test_gradients_match_dense(make_gaussians, make_camera, kind, device):
     grads = []
     for backend in ("torch", "dense"):
         out = render(g, cam, config=cfg, backend=backend)
-        loss = sum(
-            (getattr(out, f) * torch.randn(getattr(out, f).shape, generator=gen, dtype=torch.float64).to(device)).sum()
-            for f in FIELDS
-            if f != "depth_median"
-        ) + out.depth_median.sum()
+        loss = (
+            sum(
+                (
+                    getattr(out, f)
+                    * torch.randn(getattr(out, f).shape, generator=gen, dtype=torch.float64).to(
+                        device
+                    )
+                ).sum()
+                for f in FIELDS
+                if f != "depth_median"
+            )
+            + out.depth_median.sum()
+        )
         grads.append(torch.autograd.grad(loss, params))
         gen.manual_seed(0)
-    for name, a, b in zip(("means", "quats", "log_scales", "opacity", "sh", "extra"), *grads):
+    for name, a, b in zip(
+        ("means", "quats", "log_scales", "opacity", "sh", "extra"), *grads, strict=True
+    ):
         scale = float(b.abs().max()) + 1e-12
         assert float((a - b).abs().max()) <= 1e-8 * max(1.0, scale), name
 

@@ -25,7 +25,15 @@ def surfel(mean, quat_wxyz, scales, logit=3.0) -> Gaussians:
 
 
 def camera(size=40, f=60.0) -> Camera:
-    return Camera(width=size, height=size, fx=f, fy=f, cx=size / 2, cy=size / 2, T_world_cam=torch.eye(4, dtype=F64))
+    return Camera(
+        width=size,
+        height=size,
+        fx=f,
+        fy=f,
+        cx=size / 2,
+        cy=size / 2,
+        T_world_cam=torch.eye(4, dtype=F64),
+    )
 
 
 @pytest.mark.parametrize("backend", ["torch", "dense"])
@@ -35,7 +43,9 @@ def test_facing_surfel_normal_and_plane_depth(backend):
     hit = out.alpha > 0
     assert int(hit.sum()) > 100
     # the surfel's normal is +z (away from the camera); it is flipped to face the camera
-    np.testing.assert_allclose(out.normals[hit].numpy(), np.tile([0.0, 0.0, -1.0], (int(hit.sum()), 1)), atol=1e-12)
+    np.testing.assert_allclose(
+        out.normals[hit].numpy(), np.tile([0.0, 0.0, -1.0], (int(hit.sum()), 1)), atol=1e-12
+    )
     np.testing.assert_allclose(out.depth_expected[hit].numpy(), 1.5, atol=1e-12)
     med = out.depth_median[out.alpha >= 0.5]
     assert med.numel() > 0 and torch.allclose(med, torch.tensor(1.5, dtype=F64), atol=1e-12)
@@ -57,7 +67,9 @@ def test_tilted_surfel_depth_is_the_ray_plane_intersection(backend):
     assert hit.sum() > 100
     np.testing.assert_allclose(out.depth_expected.numpy()[hit], t[hit], atol=1e-9)
     facing = -n if n @ p > 0 else n
-    np.testing.assert_allclose(out.normals.numpy()[hit], np.tile(facing, (hit.sum(), 1)), atol=1e-12)
+    np.testing.assert_allclose(
+        out.normals.numpy()[hit], np.tile(facing, (hit.sum(), 1)), atol=1e-12
+    )
 
 
 def test_edge_on_surfel_renders_through_the_low_pass_filter():

@@ -129,5 +129,7 @@ def test_empty_set_renders_the_background(make_gaussians, make_camera):
     g = make_gaussians(0, "3dgs")
     out = render(g, make_camera(), config=RenderConfig(background=(0.1, 0.2, 0.3)))
     assert out.rgb.shape == (29, 37, 3) and out.extra.shape == (29, 37, 2)
-    assert torch.allclose(out.rgb, torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64).expand(29, 37, 3))
+    assert torch.allclose(
+        out.rgb, torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64).expand(29, 37, 3)
+    )
     assert float(out.alpha.abs().max()) == 0.0

@@ -27,7 +27,6 @@ from reference_impl.physics.arm.torque_model import (
     ArmProblem,
     fixed_effects,
     load_arm_data,
-    predict,
     prepare_arm,
 )
 from robogs_format.dataset import Dataset
@@ -52,8 +51,12 @@ class ArmSession:
     problem: ArmProblem
 
 
-def open_arm(path: str | Path | Dataset, *, payload_link: str | None = None,
-             device: torch.device | str | None = None) -> ArmSession:
+def open_arm(
+    path: str | Path | Dataset,
+    *,
+    payload_link: str | None = None,
+    device: torch.device | str | None = None,
+) -> ArmSession:
     """Read the robot, the physics and the joint logs with efforts of a dataset.
 
     Args:
@@ -68,8 +71,11 @@ def open_arm(path: str | Path | Dataset, *, payload_link: str | None = None,
         physics = ds.physics()
     except FormatError:
         physics = None
-    link = payload_link or ((physics or {}).get("payload") or {}).get("link") \
+    link = (
+        payload_link
+        or ((physics or {}).get("payload") or {}).get("link")
         or (ds.manifest.get("robot") or {}).get("ee_link")
+    )
     if link is not None and link not in model.link_body:
         link = None
     data = load_arm_data(ds, model.joint_names)
@@ -85,8 +91,9 @@ def compare_arm(path: str | Path | Dataset, **kwargs: Any) -> dict[str, Any]:
     return out
 
 
-def diagnose_arm(path: str | Path | Dataset, *, candidates: Sequence[str] | None = None,
-                 **kwargs: Any) -> dict[str, Any]:
+def diagnose_arm(
+    path: str | Path | Dataset, *, candidates: Sequence[str] | None = None, **kwargs: Any
+) -> dict[str, Any]:
     """Ranked candidate effects (see :func:`.diagnose.diagnose_torques`)."""
     s = open_arm(path)
     out = diagnose_torques(s.problem, s.fixed, candidates=candidates, **kwargs)
@@ -116,11 +123,13 @@ def fit_arm(
     fit = fit_effects(pb, effects, fixed=s.fixed)
     sig = pb.sigma.cpu().numpy()
     before = (pb.tau - base_prediction(pb, s.fixed)).cpu().numpy()
-    th = torch.as_tensor(fit.theta[None], dtype=pb.Y.dtype, device=pb.Y.device)
-    after = (pb.tau - predict(th, fit.space, pb, s.fixed)[0]).cpu().numpy()
+    after = fit.resid * sig
     names = pb.data.joint_names
-    doc = copy.deepcopy(s.physics) if s.physics else {"revision": 0, "objects": {},
-                                                      "gravity_mps2": [0.0, 0.0, -9.81]}
+    doc = (
+        copy.deepcopy(s.physics)
+        if s.physics
+        else {"revision": 0, "objects": {}, "gravity_mps2": [0.0, 0.0, -9.81]}
+    )
     doc.pop("parent_revision", None)
     doc.pop("note", None)
     clamped: list[str] = []
@@ -128,15 +137,20 @@ def fit_arm(
     for eff in expand_effects(effects, names):
         vals = fit.values(eff.name)
         params[eff.name] = fit.intervals(eff.name)
-        clamped += [f"{eff.name}.{k}" for k, v in vals.items()
-                    if v < 0 and eff.name in ("joint_friction", "armature")]
+        clamped += [
+            f"{eff.name}.{k}"
+            for k, v in vals.items()
+            if v < 0 and eff.name in ("joint_friction", "armature")
+        ]
         if eff.name == "payload":
             doc["payload"] = {**(doc.get("payload") or {}), "link": pb.ctx.payload_link}
         assert isinstance(eff, ArmEffect)
         eff.write_physics(vals, doc)
     out: dict[str, Any] = {
         "params": params,
-        "rms_before_nm": {j: float(np.sqrt(np.mean(before[:, k] ** 2))) for k, j in enumerate(names)},
+        "rms_before_nm": {
+            j: float(np.sqrt(np.mean(before[:, k] ** 2))) for k, j in enumerate(names)
+        },
         "rms_after_nm": {j: float(np.sqrt(np.mean(after[:, k] ** 2))) for k, j in enumerate(names)},
         "noise_floor_nm": {j: float(sig[k]) for k, j in enumerate(names)},
         "clamped": clamped,

@@ -24,7 +24,9 @@ __all__ = ["ARM_PHASES", "label_phases", "compare_torques", "base_prediction"]
 ARM_PHASES = ("rest", "reversal", "accelerating", "cruising")
 
 
-def label_phases(pb: ArmProblem, *, reversal_s: float = 0.1, rest_speed: float = 0.01) -> np.ndarray:
+def label_phases(
+    pb: ArmProblem, *, reversal_s: float = 0.1, rest_speed: float = 0.01
+) -> np.ndarray:
     """Phase index into :data:`ARM_PHASES` of every sample and joint, [N, J]."""
     d = pb.data
     qd, qdd = d.qd, d.qdd
@@ -37,7 +39,7 @@ def label_phases(pb: ArmProblem, *, reversal_s: float = 0.1, rest_speed: float =
     for k in range(d.num_traj):
         rows = np.flatnonzero(d.traj == k)
         s = np.sign(qd[rows])
-        flips = (s[1:] * s[:-1] < 0)  # [n-1, J]
+        flips = s[1:] * s[:-1] < 0  # [n-1, J]
         for jj in range(j):
             at = rows[1:][flips[:, jj]]
             if len(at) == 0:
@@ -88,7 +90,10 @@ def compare_torques(
         for p, name in enumerate(ARM_PHASES):
             sel = lab[:, k] == p
             if sel.any():
-                phases[name] = {"rms_nm": float(np.sqrt(np.mean(r[sel] ** 2))), "fraction": float(sel.mean())}
+                phases[name] = {
+                    "rms_nm": float(np.sqrt(np.mean(r[sel] ** 2))),
+                    "fraction": float(sel.mean()),
+                }
         joints[jn] = {
             "rms_nm": float(np.sqrt(np.mean(r**2))),
             "noise_nm": float(sig[k]),
@@ -108,15 +113,17 @@ def compare_torques(
             per_joint = np.sqrt(np.mean(z**2, axis=0))
             jj = int(np.argmax(per_joint))
             counts = np.bincount(lab[sel, jj], minlength=len(ARM_PHASES))
-            worst.append({
-                "trajectory": d.traj_names[tr],
-                "t_start_ns": int(t[sel[0]]),
-                "t_end_ns": int(t[sel[-1]]),
-                "joint": d.joint_names[jj],
-                "rms_nm": float(np.sqrt(np.mean(res[sel, jj] ** 2))),
-                "rms_sigma": float(per_joint[jj]),
-                "phase": ARM_PHASES[int(np.argmax(counts))],
-            })
+            worst.append(
+                {
+                    "trajectory": d.traj_names[tr],
+                    "t_start_ns": int(t[sel[0]]),
+                    "t_end_ns": int(t[sel[-1]]),
+                    "joint": d.joint_names[jj],
+                    "rms_nm": float(np.sqrt(np.mean(res[sel, jj] ** 2))),
+                    "rms_sigma": float(per_joint[jj]),
+                    "phase": ARM_PHASES[int(np.argmax(counts))],
+                }
+            )
     worst.sort(key=lambda e: -e["rms_sigma"])
     return {
         "model": "arm",

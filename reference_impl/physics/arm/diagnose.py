@@ -9,10 +9,10 @@ all of the gate's tests pass (research notes, sections 6.3-6.4):
    noise variances profiled out, so the figure does not rest on the noise estimate);
 2. held-out error: the data are split by trajectory (leave one trajectory out; 5 groups above
    five trajectories; a single trajectory is cut into 4 contiguous blocks, never by sample).
-   Each fold's parameters come from a Gauss-Newton step from the full-data fit on the training
-   rows (exact for the linear effects). The held-out mean squared whitened residual must fall
-   by more than the 95th percentile of the fall the same effect achieves on null data (white
-   noise at the estimated noise floor, 40 draws, same split);
+   Each fold is refitted on its training units by the physics fitter. The held-out mean squared
+   whitened residual must fall by more than the 95th percentile of the fall the same effect
+   achieves on null data (white noise at the estimated noise floor, 40 draws, same split; the
+   effect linearised at its full-data optimum, exact for the linear effects);
 3. effect size: the fitted effect must move the predicted efforts by at least
    ``effect_size_min`` (0.5) noise standard deviations RMS over a whole trajectory of at least
    one joint (aggregated, so single noisy samples cannot pass it).
@@ -28,46 +28,44 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import torch
 
 from reference_impl.physics.arm.compare import ARM_PHASES, base_prediction, label_phases
 from reference_impl.physics.arm.effects import ArmEffect, payload_com
-from reference_impl.physics.arm.identify import ArmFit, fit_effects
-from reference_impl.physics.arm.torque_model import ArmProblem, predict
+from reference_impl.physics.arm.identify import ArmFit, UnitLayout, fit_many, unit_layout
+from reference_impl.physics.arm.torque_model import ArmProblem
 from reference_impl.physics.effects import available_effects, get_effect
 
-__all__ = ["diagnose_torques", "trajectory_folds", "DEFAULT_GATE"]
+__all__ = ["diagnose_torques", "unit_folds", "DEFAULT_GATE"]
 
-DEFAULT_GATE: dict[str, float] = {"delta_bic_max": -10.0, "effect_size_min": 0.5, "null_quantile": 0.95}
+DEFAULT_GATE: dict[str, float] = {
+    "delta_bic_max": -10.0,
+    "effect_size_min": 0.5,
+    "null_quantile": 0.95,
+}
 
 _NOT_IN_TORQUE_MODEL = {
     "joint_elasticity": "gravity droop shows in end-effector or camera positions, not in joint torques; "
-                        "needs an ee_poses stream and a kinematic residual (not implemented)",
+    "needs an ee_poses stream and a kinematic residual (not implemented)",
     "backlash": "a dead band between motor and link angle; needs link-side or end-effector measurements "
-                "(not implemented)",
+    "(not implemented)",
     "kinematic_offsets": "MDH offsets need end-effector or camera measurements (not implemented)",
 }
 
 
-def trajectory_folds(pb: ArmProblem) -> tuple[list[np.ndarray], str]:
-    """Held-out row sets, whole trajectories (or contiguous blocks of a single one)."""
-    d = pb.data
-    if d.num_traj >= 2:
-        groups = [[k] for k in range(d.num_traj)] if d.num_traj <= 5 else [
-            list(range(g, d.num_traj, 5)) for g in range(5)]
-        folds = [np.flatnonzero(np.isin(d.traj, g)) for g in groups]
-        how = f"by trajectory ({len(folds)} folds over {d.num_traj} trajectories)"
-    else:
-        folds = [b for b in np.array_split(np.arange(pb.n), 4) if len(b)]
-        how = "single trajectory cut into 4 contiguous blocks"
-    return folds, how
+def unit_folds(layout: UnitLayout) -> list[np.ndarray]:
+    """Held-out unit groups: each unit alone up to five units, else five round-robin groups."""
+    n = layout.n_units
+    groups = [[k] for k in range(n)] if n <= 5 else [list(range(g, n, 5)) for g in range(5)]
+    return [np.asarray(g, dtype=np.int64) for g in groups]
 
 
 def _ms(x: np.ndarray) -> float:
     return float(np.mean(x * x)) if x.size else 0.0
 
 
-def _candidates(names: Sequence[str] | None, pb: ArmProblem) -> tuple[list[ArmEffect], list[dict[str, str]]]:
+def _candidates(
+    names: Sequence[str] | None, pb: ArmProblem
+) -> tuple[list[ArmEffect], list[dict[str, str]]]:
     given = names
     names = list(names) if names is not None else available_effects(model="arm")
     out, skipped = [], []
@@ -83,17 +81,24 @@ def _candidates(names: Sequence[str] | None, pb: ArmProblem) -> tuple[list[ArmEf
         out.append(e)
     if given is None:
         registered = set(available_effects())
-        skipped += [{"name": k, "reason": v} for k, v in _NOT_IN_TORQUE_MODEL.items() if k not in registered]
+        skipped += [
+            {"name": k, "reason": v} for k, v in _NOT_IN_TORQUE_MODEL.items() if k not in registered
+        ]
     return out, skipped
 
 
 def _params(fit: ArmFit, eff: ArmEffect) -> dict[str, Any]:
     params = fit.intervals(eff.name)
     if eff.name == "payload":
-        cols = fit.space.owner_columns("payload")
-        com = payload_com(fit.values("payload"), fit.cov[np.ix_(cols, cols)])
+        com = payload_com(fit.values("payload"), fit.effect_cov("payload"))
         for k, (v, sd) in com.items():
-            params[k] = {"value": v, "low": v - 1.96 * sd, "high": v + 1.96 * sd, "unit": "m", "derived": True}
+            params[k] = {
+                "value": v,
+                "low": v - 1.96 * sd,
+                "high": v + 1.96 * sd,
+                "unit": "m",
+                "derived": True,
+            }
     return params
 
 
@@ -128,45 +133,51 @@ def diagnose_torques(
     base = base_prediction(pb, fixed)
     r0 = ((pb.tau - base) / pb.sigma).cpu().numpy()  # [N, J] whitened
     rss0 = (r0**2).sum(axis=0) * sig**2
-    folds, how = trajectory_folds(pb)
+    layout = unit_layout(pb)
+    folds = unit_folds(layout)
+    test_rows = [np.flatnonzero(np.isin(layout.unit, f)) for f in folds]
+    groups, masks = [], []
+    for eff in effs:
+        groups.append([eff.name])
+        masks.append(None)
+        for f in folds:
+            m = np.ones(layout.n_units, bool)
+            m[f] = False
+            groups.append([eff.name])
+            masks.append(m)
+    fits = fit_many(pb, groups, fixed=fixed, masks=masks, layout=layout) if groups else []
     lab = label_phases(pb)
     rng = np.random.default_rng(seed)
     noise = rng.standard_normal((n * nj, null_draws))
-    rows_flat = [(f[:, None] * nj + np.arange(nj)[None, :]).ravel() for f in folds]
+    rows_flat = [(t[:, None] * nj + np.arange(nj)[None, :]).ravel() for t in test_rows]
     rows_out = []
     deltas: dict[str, np.ndarray] = {}
-    for eff in effs:
-        fit = fit_effects(pb, [eff.name], fixed=fixed)
-        k = len(fit.theta)
-        pred = predict(torch.as_tensor(fit.theta[None], dtype=pb.Y.dtype, device=pb.Y.device), fit.space, pb, fixed)[0]
-        r1 = ((pb.tau - pred) / pb.sigma).cpu().numpy()
+    per = 1 + len(folds)
+    for c, eff in enumerate(effs):
+        fit = fits[c * per]
+        k = len(fit.free)
+        r1 = fit.resid
         rss1 = (r1**2).sum(axis=0) * sig**2
-        dbic = float(np.sum(n * np.log(np.maximum(rss1, 1e-300) / np.maximum(rss0, 1e-300))) + k * np.log(n * nj))
-        jac = fit.jac  # [N*J, k] d r / d theta at theta-hat
-        rf = r1.ravel()
-        before, after, before_nm, after_nm, null_gain = [], [], [], [], np.zeros(null_draws)
-        n_test = 0
-        h_all, g_all, gn_all = jac.T @ jac, jac.T @ rf, jac.T @ noise
-        for test in rows_flat:
-            js = jac[test]
-            h_tr = h_all - js.T @ js  # normal equations of the training rows
-            h_inv = np.linalg.pinv(h_tr, rcond=1e-12, hermitian=True)
-            step = -h_inv @ (g_all - js.T @ rf[test])
-            r_test = rf[test] + js @ step
-            b = r0.ravel()[test]
-            before.append(b)
-            after.append(r_test)
-            sig_rows = np.tile(sig, len(test) // nj)
-            before_nm.append(b * sig_rows)
-            after_nm.append(r_test * sig_rows)
-            e_test = noise[test]
-            coef = h_inv @ (gn_all - js.T @ e_test)
-            null_gain += (e_test**2).sum(0) - ((e_test - js @ coef) ** 2).sum(0)
-            n_test += len(test)
-        null_gain /= max(n_test, 1)
-        gain = _ms(np.concatenate(before)) - _ms(np.concatenate(after))
+        dbic = float(
+            np.sum(n * np.log(np.maximum(rss1, 1e-300) / np.maximum(rss0, 1e-300)))
+            + k * np.log(n * nj)
+        )
+        before = np.concatenate([r0[t] for t in test_rows])
+        after = np.concatenate([fits[c * per + 1 + i].resid[t] for i, t in enumerate(test_rows)])
+        gain = _ms(before) - _ms(after)
+        # null: the same effect fitted (linearised at its optimum) to white noise, same split
+        jac = fit.jac
+        h_all, gn_all = jac.T @ jac, jac.T @ noise
+        null_gain = np.zeros(null_draws)
+        for rows in rows_flat:
+            js = jac[rows]
+            coef = np.linalg.pinv(h_all - js.T @ js, rcond=1e-12, hermitian=True) @ (
+                gn_all - js.T @ noise[rows]
+            )
+            null_gain += (noise[rows] ** 2).sum(0) - ((noise[rows] - js @ coef) ** 2).sum(0)
+        null_gain /= max(sum(len(r) for r in rows_flat), 1)
         null_thr = float(np.quantile(null_gain, g["null_quantile"]))
-        delta = (r0 - r1)  # whitened change of the prediction, [N, J]
+        delta = r0 - r1  # whitened change of the prediction, [N, J]
         deltas[eff.name] = delta.ravel()
         size = 0.0
         for tr in range(pb.data.num_traj):
@@ -176,7 +187,9 @@ def diagnose_torques(
         if not dbic <= g["delta_bic_max"]:
             reasons.append(f"dBIC {dbic:.1f} > {g['delta_bic_max']:g}")
         if not gain > max(null_thr, 0.0):
-            reasons.append(f"held-out gain {gain:.3g} sigma^2 not above null {max(null_thr, 0.0):.3g}")
+            reasons.append(
+                f"held-out gain {gain:.3g} sigma^2 not above null {max(null_thr, 0.0):.3g}"
+            )
         if not size >= g["effect_size_min"]:
             reasons.append(f"effect size {size:.2f} sigma < {g['effect_size_min']:g}")
         drop = r0**2 - r1**2
@@ -186,24 +199,27 @@ def diagnose_torques(
             if sel.any():
                 phase_gain[name] = float(drop[sel].mean())
         phases = [p for p, v in sorted(phase_gain.items(), key=lambda kv: -kv[1]) if v > 0][:2]
-        rows_out.append({
-            "name": eff.name,
-            "family": eff.family,
-            "reported": not reasons,
-            "delta_bic": dbic,
-            "heldout_rms_before": float(np.sqrt(_ms(np.concatenate(before_nm)))),
-            "heldout_rms_after": float(np.sqrt(_ms(np.concatenate(after_nm)))),
-            "heldout_gain_sigma2": gain,
-            "null_gain_p95_sigma2": null_thr,
-            "effect_size_sigma": size,
-            "params": _params(fit, eff),
-            "phases": phases,
-            "rivals": [],
-            "separate_by": eff.separate_by,
-            "description": eff.description,
-            "converged": fit.converged,
-            "reasons": reasons,
-        })
+        sig_rows = np.tile(sig, before.size // nj)
+        rows_out.append(
+            {
+                "name": eff.name,
+                "family": eff.family,
+                "reported": not reasons,
+                "delta_bic": dbic,
+                "heldout_rms_before": float(np.sqrt(_ms(before.ravel() * sig_rows))),
+                "heldout_rms_after": float(np.sqrt(_ms(after.ravel() * sig_rows))),
+                "heldout_gain_sigma2": gain,
+                "null_gain_p95_sigma2": null_thr,
+                "effect_size_sigma": size,
+                "params": _params(fit, eff),
+                "phases": phases,
+                "rivals": [],
+                "separate_by": eff.separate_by,
+                "description": eff.description,
+                "converged": fit.converged,
+                "reasons": reasons,
+            }
+        )
     for row in rows_out:
         a = deltas[row["name"]]
         na = np.linalg.norm(a)
@@ -220,8 +236,10 @@ def diagnose_torques(
         "n_samples": n,
         "n_trajectories": pb.data.num_traj,
         "noise_floor_nm": {j: float(s) for j, s in zip(pb.data.joint_names, sig, strict=True)},
-        "baseline_rms_nm": {j: float(np.sqrt(r / n)) for j, r in zip(pb.data.joint_names, rss0, strict=True)},
-        "split": how,
+        "baseline_rms_nm": {
+            j: float(np.sqrt(r / n)) for j, r in zip(pb.data.joint_names, rss0, strict=True)
+        },
+        "split": layout.how + f", {len(folds)} held-out folds",
         "gate": g,
         "effects": rows_out,
         "skipped": skipped,

@@ -33,7 +33,9 @@ POLYORDER = 3
 """Default polynomial degree."""
 
 
-def describe_differentiator(order: int, *, window_s: float = WINDOW_S, polyorder: int = POLYORDER) -> str:
+def describe_differentiator(
+    order: int, *, window_s: float = WINDOW_S, polyorder: int = POLYORDER
+) -> str:
     """One-line description recorded in a stream's ``derived`` entry."""
     return f"savitzky_golay(deriv={order}, window_s={window_s:g}, polyorder={polyorder}, t_ns time base)"
 
@@ -75,7 +77,9 @@ def savgol_derivative(
     y = np.asarray(y, dtype=np.float64)
     n = t_ns.shape[0]
     if order > polyorder:
-        raise InputError(f"derivative order {order} exceeds polyorder {polyorder}", where="differentiator")
+        raise InputError(
+            f"derivative order {order} exceeds polyorder {polyorder}", where="differentiator"
+        )
     if n < polyorder + 2:
         raise InputError(
             f"{n} samples are too few to differentiate (need at least {polyorder + 2})",
@@ -89,7 +93,9 @@ def savgol_derivative(
     w = _window(n, step_med, window_s, polyorder)
     p = min(polyorder, w - 1)
     if order > p:
-        raise InputError(f"window of {w} samples too short for derivative order {order}", where="differentiator")
+        raise InputError(
+            f"window of {w} samples too short for derivative order {order}", where="differentiator"
+        )
     uniform = np.max(np.abs(steps - np.median(steps))) <= 0.01 * np.median(steps)
     if uniform:
         return savgol_filter(y, w, p, deriv=order, delta=step_med, axis=0, mode="interp")

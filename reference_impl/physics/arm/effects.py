@@ -101,7 +101,11 @@ class ArmEffect(Effect):
 
     # --- hooks (no-ops) --------------------------------------------------------------------
     def inertial(
-        self, th: dict[str, torch.Tensor], links: torch.Tensor, extra: torch.Tensor, ctx: InertialContext
+        self,
+        th: dict[str, torch.Tensor],
+        links: torch.Tensor,
+        extra: torch.Tensor,
+        ctx: InertialContext,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Changed link and extra inertial parameters, both [M, B, 10]."""
         return links, extra
@@ -126,11 +130,19 @@ class ArmEffect(Effect):
     def write_physics(self, values: dict[str, float], doc: dict[str, Any]) -> None:
         """Store fitted values in ``doc`` (in place)."""
         effects = [e for e in doc.get("effects", []) or [] if e.get("name") != self.name]
-        effects.append({"name": self.name, "target": "robot", "params": {k: float(v) for k, v in values.items()}})
+        effects.append(
+            {
+                "name": self.name,
+                "target": "robot",
+                "params": {k: float(v) for k, v in values.items()},
+            }
+        )
         doc["effects"] = effects
 
 
-def _joint_field(self: ArmEffect, doc: dict[str, Any], mapping: dict[str, str]) -> dict[str, float] | None:
+def _joint_field(
+    self: ArmEffect, doc: dict[str, Any], mapping: dict[str, str]
+) -> dict[str, float] | None:
     joints = doc.get("joints") or {}
     found = False
     vals: dict[str, float] = {}
@@ -143,7 +155,9 @@ def _joint_field(self: ArmEffect, doc: dict[str, Any], mapping: dict[str, str]) 
     return vals if found else None
 
 
-def _write_joint_field(self: ArmEffect, values: dict[str, float], doc: dict[str, Any], mapping: dict[str, str]) -> None:
+def _write_joint_field(
+    self: ArmEffect, values: dict[str, float], doc: dict[str, Any], mapping: dict[str, str]
+) -> None:
     joints = {k: dict(v) for k, v in (doc.get("joints") or {}).items()}
     for pname, key in mapping.items():
         for j in self.joints:
@@ -167,7 +181,9 @@ class JointFriction(ArmEffect):
     )
     per_joint: bool = True
     v_s: float = SMOOTHING_VELOCITY
-    separate_by: str = "slow and fast passes of each joint (Coulomb is constant in speed, viscous grows with it)"
+    separate_by: str = (
+        "slow and fast passes of each joint (Coulomb is constant in speed, viscous grows with it)"
+    )
     description: str = "Coulomb and viscous friction in the joints (largest at velocity reversals)"
 
     def joint_torque(self, th, st: ArmState):
@@ -221,7 +237,9 @@ class Payload(ArmEffect):
         Param("my", "kg m", -5.0, 5.0, 0.0, 0.05),
         Param("mz", "kg m", -5.0, 5.0, 0.0, 0.05),
     )
-    separate_by: str = "poses with the last links pointing in several directions (gravity torque of the load)"
+    separate_by: str = (
+        "poses with the last links pointing in several directions (gravity torque of the load)"
+    )
     description: str = "an unmodelled load (tool, grasped object) on the last link"
 
     def inertial(self, th, links, extra, ctx: InertialContext):
@@ -232,7 +250,10 @@ class Payload(ArmEffect):
         m_eff = m.clamp(min=MIN_INERTIA_MASS)
         hh = (h * h).sum(-1)
         x, y, z = h[:, 0], h[:, 1], h[:, 2]
-        iu = torch.stack([hh - x * x, -x * y, -x * z, hh - y * y, -y * z, hh - z * z], dim=-1) / m_eff[:, None]
+        iu = (
+            torch.stack([hh - x * x, -x * y, -x * z, hh - y * y, -y * z, hh - z * z], dim=-1)
+            / m_eff[:, None]
+        )
         add = torch.cat([m[:, None], h, iu], dim=-1)  # [M, 10]
         onehot = torch.zeros(ctx.num_bodies, dtype=h.dtype, device=h.device)
         onehot[ctx.payload_body] = 1.0
@@ -256,7 +277,9 @@ class Payload(ArmEffect):
         doc["payload"] = out
 
 
-def payload_com(values: dict[str, float], cov: np.ndarray | None = None) -> dict[str, tuple[float, float]]:
+def payload_com(
+    values: dict[str, float], cov: np.ndarray | None = None
+) -> dict[str, tuple[float, float]]:
     """CoM ``h / m`` of a fitted payload and its standard deviation (delta method).
 
     Args:
@@ -302,7 +325,9 @@ class EffortTimeOffset(ArmEffect):
     name: str = "effort_time_offset"
     family: str = "sensor"
     params: tuple[Param, ...] = (Param("delta", "s", -0.2, 0.2, 0.0, 0.004),)
-    separate_by: str = "sharp accelerations (the torque leads or lags the motion by a constant delay)"
+    separate_by: str = (
+        "sharp accelerations (the torque leads or lags the motion by a constant delay)"
+    )
     description: str = "clock offset between the effort and the position samples"
 
     def time_shift(self, th):

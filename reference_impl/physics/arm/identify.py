@@ -1,16 +1,16 @@
-"""Fit arm effects to joint-torque logs: bounded Levenberg-Marquardt with intervals.
+"""Fit arm effects to joint-torque logs with the physics fitter (:mod:`reference_impl.physics.fit`).
 
-Residuals are whitened per joint by the effort noise floor (``r = (tau_meas - tau_model) /
-sigma_j``). The Jacobian comes from central differences of :func:`~.torque_model.predict`,
-evaluated for all perturbed parameter sets in one batched call; most arm effects are linear
-in their parameters (friction, armature, mass scale, payload mass and first moment), for which
-central differences are exact and the first Gauss-Newton step is the linear least-squares
-solution. The payload CoM (point-mass inertia) and the time offset are mildly nonlinear and
-take a few more steps (Marquardt 1963 damping, bounds by projection).
+The torque model is handed to :func:`~reference_impl.physics.fit.fit_problems` as a weighted
+residual function ``fn(theta [M, Q], local [M, U, 0]) -> [M, U, K]``: residuals are whitened
+per joint by the effort noise floor, ``(tau_meas - tau_model) / sigma_j``, and grouped by
+*unit* (a trajectory, or one of 4 contiguous blocks when the data hold a single trajectory),
+each unit padded with zeros to the longest. There are no local parameters. Units are what
+held-out splits select, so a fold is simply a problem whose ``traj`` mask leaves units out.
 
-The covariance is ``s^2 (J^T J)^-1`` with ``s^2`` the whitened residual variance; directions
-of ``J^T J`` with eigenvalues below 1e-10 of the largest are unidentifiable and give infinite
-intervals for the parameters they involve (the convention of ``mujoco.sysid``).
+The fitter is bounded Levenberg-Marquardt with forward differences; most arm effects are
+linear in their parameters (friction, armature, mass scale, payload mass and first moment), so
+the first step is the linear least-squares solution and the covariance ``s^2 (J^T J)^-1`` is
+exact; the payload's point-mass inertia and the time offset take a few more steps.
 """
 
 from __future__ import annotations
@@ -24,53 +24,132 @@ import torch
 from reference_impl.physics.arm.effects import ArmEffect
 from reference_impl.physics.arm.torque_model import ArmProblem, predict
 from reference_impl.physics.effects import get_effect
+from reference_impl.physics.fit import FitOutcome, Problem, ResidualFn, fit_problems
 from reference_impl.physics.space import ParamSpace
 from robogs_format.errors import InputError
 
-__all__ = ["ArmFit", "fit_effects", "expand_effects", "residuals"]
+__all__ = [
+    "ArmFit",
+    "UnitLayout",
+    "fit_effects",
+    "fit_many",
+    "expand_effects",
+    "unit_layout",
+    "residual_fn",
+]
 
 _Z95 = 1.959963984540054
 
 
 @dataclass
-class ArmFit:
-    """Result of :func:`fit_effects`.
+class UnitLayout:
+    """Grouping of the samples into units (trajectories or blocks) for the fitter.
 
     Attributes:
-        space: the fitted slots (effects expanded for the robot).
-        theta: [Q] fitted values.
-        cov: [Q, Q] covariance (inf on the diagonal for unidentifiable parameters).
-        rss: [J] residual sum of squares per joint on the fitted rows, N^2 m^2.
-        n_rows: samples per joint used.
-        iterations: LM iterations; converged: whether the cost settled.
-        jac: [R, Q] whitened Jacobian of the model at ``theta`` on the fitted rows.
+        unit: [N] unit of every sample; slot: [N] flat index ``unit * max_len + position``.
+        n_units, max_len: padded layout sizes.
+        how: description of the split.
+    """
+
+    unit: np.ndarray
+    slot: np.ndarray
+    n_units: int
+    max_len: int
+    how: str
+
+
+def unit_layout(pb: ArmProblem, *, blocks: int = 4) -> UnitLayout:
+    """Trajectories as units, or ``blocks`` contiguous blocks of a single trajectory."""
+    d = pb.data
+    if d.num_traj >= 2:
+        unit = d.traj.astype(np.int64)
+        how = f"by trajectory ({d.num_traj} trajectories)"
+    else:
+        unit = np.zeros(pb.n, dtype=np.int64)
+        for k, b in enumerate(np.array_split(np.arange(pb.n), blocks)):
+            unit[b] = k
+        how = f"single trajectory cut into {blocks} contiguous blocks"
+    n_units = int(unit.max()) + 1
+    pos = np.zeros(pb.n, dtype=np.int64)
+    counts = np.zeros(n_units, dtype=np.int64)
+    for u in range(n_units):
+        rows = np.flatnonzero(unit == u)
+        pos[rows] = np.arange(len(rows))
+        counts[u] = len(rows)
+    max_len = int(counts.max())
+    return UnitLayout(unit, unit * max_len + pos, n_units, max_len, how)
+
+
+def residual_fn(pb: ArmProblem, space: ParamSpace, fixed, layout: UnitLayout) -> ResidualFn:
+    """The whitened torque residuals in the fitter's ``[M, U, K]`` layout (K = max_len * J)."""
+    slot = torch.as_tensor(layout.slot, device=pb.Y.device)
+    nj = len(pb.state.joint_names)
+
+    def fn(theta: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
+        theta = theta.to(pb.Y.device)
+        r = (pb.tau - predict(theta, space, pb, fixed)) / pb.sigma  # [M, N, J]
+        out = torch.zeros(
+            theta.shape[0], layout.n_units * layout.max_len, nj, dtype=r.dtype, device=r.device
+        )
+        out[:, slot] = r
+        return out.reshape(theta.shape[0], layout.n_units, layout.max_len * nj)
+
+    return fn
+
+
+@dataclass
+class ArmFit:
+    """Result of fitting some effects.
+
+    Attributes:
+        space: the parameter space (all effects of the call).
+        free: fitted columns of ``space``.
+        theta: [Q] values (columns not free at their start values).
+        std: [P] standard deviations of the free columns (inf: unidentifiable).
+        cov: [P, P] covariance of the free columns.
+        resid: [N, J] whitened residuals at ``theta`` (all samples).
+        jac: [N * J, P] whitened Jacobian d resid / d theta_free (all samples, row-major).
+        rss: [J] residual sum of squares per joint over the fitted units, N^2 m^2.
+        iterations, converged: optimiser bookkeeping.
     """
 
     space: ParamSpace
+    free: list[int]
     theta: np.ndarray
+    std: np.ndarray
     cov: np.ndarray
+    resid: np.ndarray
+    jac: np.ndarray
     rss: np.ndarray
-    n_rows: int
     iterations: int
     converged: bool
-    jac: np.ndarray
 
     def values(self, effect: str) -> dict[str, float]:
         """Fitted parameters of one effect."""
-        return {self.space.slots[i].param.name: float(self.theta[i]) for i in self.space.owner_columns(effect)}
+        return {
+            self.space.slots[i].param.name: float(self.theta[i])
+            for i in self.space.owner_columns(effect)
+        }
+
+    def effect_cov(self, effect: str) -> np.ndarray:
+        """Covariance block of one effect's parameters."""
+        idx = [self.free.index(i) for i in self.space.owner_columns(effect)]
+        return self.cov[np.ix_(idx, idx)]
 
     def intervals(self, effect: str) -> dict[str, dict[str, float | str]]:
         """``name -> {value, low, high, unit}`` (95 %) for one effect."""
         out: dict[str, dict[str, float | str]] = {}
         for i in self.space.owner_columns(effect):
-            sd = float(np.sqrt(self.cov[i, i])) if np.isfinite(self.cov[i, i]) else float("inf")
+            sd = float(self.std[self.free.index(i)]) if i in self.free else 0.0
             v = float(self.theta[i])
             p = self.space.slots[i].param
             out[p.name] = {"value": v, "low": v - _Z95 * sd, "high": v + _Z95 * sd, "unit": p.unit}
         return out
 
 
-def expand_effects(effects: Sequence[str | ArmEffect], joint_names: Sequence[str]) -> list[ArmEffect]:
+def expand_effects(
+    effects: Sequence[str | ArmEffect], joint_names: Sequence[str]
+) -> list[ArmEffect]:
     """Registry names or instances -> arm effects expanded for the robot's joints."""
     out: list[ArmEffect] = []
     for e in effects:
@@ -85,47 +164,79 @@ def expand_effects(effects: Sequence[str | ArmEffect], joint_names: Sequence[str
     return out
 
 
-def residuals(pb: ArmProblem, tau_model: torch.Tensor) -> torch.Tensor:
-    """Whitened residuals ``(tau - tau_model) / sigma`` [..., N, J]."""
-    return (pb.tau - tau_model) / pb.sigma
+def _outcome(
+    o: FitOutcome,
+    space: ParamSpace,
+    free: list[int],
+    layout: UnitLayout,
+    pb: ArmProblem,
+    mask: np.ndarray,
+) -> ArmFit:
+    nj = len(pb.state.joint_names)
+    r = o.resid.reshape(layout.n_units * layout.max_len, nj)[layout.slot]
+    jac = o.jac.reshape(layout.n_units * layout.max_len, nj, -1)[layout.slot].reshape(pb.n * nj, -1)
+    sig = pb.sigma.cpu().numpy()
+    rows = mask[layout.unit]
+    rss = ((r[rows] * sig) ** 2).sum(axis=0)
+    cov = o.cov if o.cov.size else np.zeros((len(free), len(free)))
+    std = o.std if o.std.size else np.zeros(len(free))
+    return ArmFit(space, free, o.theta, std, cov, r, jac, rss, o.iterations, o.converged)
 
 
-def _whitened(theta: torch.Tensor, space: ParamSpace, pb: ArmProblem, fixed, rows: torch.Tensor) -> torch.Tensor:
-    """[M, R] whitened residuals on ``rows`` (flattened sample x joint)."""
-    r = residuals(pb, predict(theta, space, pb, fixed))[:, rows]
-    return r.reshape(theta.shape[0], -1)
+def fit_many(
+    pb: ArmProblem,
+    groups: Sequence[Sequence[str | ArmEffect]],
+    *,
+    fixed: dict[str, dict[str, float]] | None = None,
+    masks: Sequence[np.ndarray | None] | None = None,
+    layout: UnitLayout | None = None,
+    max_iter: int = 30,
+) -> list[ArmFit]:
+    """Fit several effect sets (and unit subsets) at once with one batched model per iteration.
 
-
-def _jacobian(theta: np.ndarray, space: ParamSpace, pb: ArmProblem, fixed, rows, step: np.ndarray,
-              chunk: int = 8) -> np.ndarray:
-    q = len(theta)
-    cols = []
-    dt, dev = pb.Y.dtype, pb.Y.device
-    for a in range(0, q, chunk):
-        idx = list(range(a, min(q, a + chunk)))
-        th = np.repeat(theta[None, :], 2 * len(idx), axis=0)
-        for k, i in enumerate(idx):
-            th[2 * k, i] += step[i]
-            th[2 * k + 1, i] -= step[i]
-        r = _whitened(torch.as_tensor(th, dtype=dt, device=dev), space, pb, fixed, rows).cpu().numpy()
-        for k, i in enumerate(idx):
-            cols.append((r[2 * k] - r[2 * k + 1]) / (2 * step[i]))
-    return np.stack(cols, axis=1) if cols else np.zeros((0, 0))
-
-
-def _covariance(jac: np.ndarray, s2: float, scale: np.ndarray) -> np.ndarray:
-    js = jac * scale[None, :]
-    h = js.T @ js
-    w, v = np.linalg.eigh(h)
-    tol = 1e-10 * max(float(w.max()), 1e-300)
-    good = w > tol
-    inv = (v[:, good] / w[good]) @ v[:, good].T
-    cov = s2 * inv * np.outer(scale, scale)
-    if not good.all():
-        involved = (np.abs(v[:, ~good]) > 0.1).any(axis=1)
-        cov[involved, :] = np.inf
-        cov[:, involved] = np.inf
-    return cov
+    Args:
+        pb: prepared data.
+        groups: effect sets, one problem each (their effects may overlap).
+        fixed: effects held at given values (physics.json); fitted effects replace them and
+            start from them.
+        masks: per problem, [U] bool units in the objective (None: all).
+        layout: unit layout (default :func:`unit_layout`).
+        max_iter: LM iterations at most.
+    """
+    names = tuple(pb.state.joint_names)
+    all_effects: dict[str, ArmEffect] = {}
+    for g in groups:
+        for e in expand_effects(g, names):
+            all_effects.setdefault(e.name, e)
+    space = ParamSpace((), tuple(all_effects.values()))
+    layout = layout or unit_layout(pb)
+    fn = residual_fn(pb, space, fixed, layout)
+    masks = list(masks) if masks is not None else [None] * len(groups)
+    # every effect of the space starts at its physics.json value (or its zero): effects that a
+    # problem does not fit then act exactly as in the base model
+    theta0 = space.zero.copy()
+    for name in all_effects:
+        for k, v in ((fixed or {}).get(name) or {}).items():
+            if (name, k) in space._index:
+                theta0[space.index(name, k)] = v
+    theta0 = np.clip(theta0, space.lower, space.upper)
+    problems, frees = [], []
+    for g, m in zip(groups, masks, strict=True):
+        free = [i for e in expand_effects(g, names) for i in space.owner_columns(e.name)]
+        problems.append(Problem(free, traj=m, theta0=theta0, fit_local=False))
+        frees.append(free)
+    outs = fit_problems(fn, space, problems, n_traj=layout.n_units, n_local=0, max_iter=max_iter)
+    return [
+        _outcome(
+            o,
+            space,
+            f,
+            layout,
+            pb,
+            np.ones(layout.n_units, bool) if m is None else np.asarray(m, bool),
+        )
+        for o, f, m in zip(outs, frees, masks, strict=True)
+    ]
 
 
 def fit_effects(
@@ -133,82 +244,7 @@ def fit_effects(
     effects: Sequence[str | ArmEffect],
     *,
     fixed: dict[str, dict[str, float]] | None = None,
-    rows: np.ndarray | None = None,
-    start: dict[str, dict[str, float]] | None = None,
     max_iter: int = 30,
 ) -> ArmFit:
-    """Fit the parameters of ``effects`` (together) to the efforts.
-
-    Args:
-        pb: prepared data.
-        effects: registry names or arm effects.
-        fixed: effects held at given values (physics.json); fitted effects replace them.
-        rows: sample indices to fit on (whole trajectories for held-out tests); default all.
-        start: effect -> {param: value} starting point (default: the ``fixed`` values of the
-            same effect, else the parameters' zero values).
-        max_iter: LM iterations.
-
-    Returns:
-        The fit (values, covariance, per-joint RSS).
-    """
-    effs = expand_effects(effects, pb.state.joint_names)
-    space = ParamSpace((), effs)
-    dt, dev = pb.Y.dtype, pb.Y.device
-    theta = space.zero.copy()
-    for e in effs:
-        init = (start or {}).get(e.name) or (fixed or {}).get(e.name) or {}
-        for k, v in init.items():
-            if (e.name, k) in space._index:
-                theta[space.index(e.name, k)] = v
-    lo, hi = space.lower, space.upper
-    theta = np.clip(theta, lo, hi)
-    row_idx = torch.arange(pb.n, device=dev) if rows is None else torch.as_tensor(rows, dtype=torch.long, device=dev)
-    step = 1e-4 * space.scale
-
-    def cost_of(th: np.ndarray) -> float:
-        r = _whitened(torch.as_tensor(th[None], dtype=dt, device=dev), space, pb, fixed, row_idx)
-        return float((r * r).sum())
-
-    r0 = _whitened(torch.as_tensor(theta[None], dtype=dt, device=dev), space, pb, fixed, row_idx)[0].cpu().numpy()
-    cost = float(r0 @ r0)
-    lam = 1e-6
-    it = 0
-    converged = len(theta) == 0
-    jac = np.zeros((r0.size, len(theta)))
-    for it in range(1, max_iter + 1):
-        if len(theta) == 0:
-            break
-        jac = _jacobian(theta, space, pb, fixed, row_idx, step)
-        # residual r = meas - model, so d r / d theta = -jac_model; jac here is d r / d theta
-        g = jac.T @ r0
-        h = jac.T @ jac
-        d = np.maximum(np.diag(h), 1e-12 * max(np.diag(h).max(), 1e-300))
-        improved = False
-        for _ in range(12):
-            try:
-                delta = -np.linalg.solve(h + lam * np.diag(d), g)
-            except np.linalg.LinAlgError:
-                lam *= 10
-                continue
-            cand = np.clip(theta + delta, lo, hi)
-            c_new = cost_of(cand)
-            if c_new <= cost:
-                improved = True
-                rel = (cost - c_new) / max(cost, 1e-300)
-                step_small = np.all(np.abs(cand - theta) <= 1e-9 * np.maximum(space.scale, np.abs(theta)))
-                theta, cost = cand, c_new
-                lam = max(lam / 10, 1e-12)
-                break
-            lam *= 10
-        r0 = _whitened(torch.as_tensor(theta[None], dtype=dt, device=dev), space, pb, fixed, row_idx)[0].cpu().numpy()
-        if not improved or rel < 1e-9 or step_small:
-            converged = True
-            break
-    if len(theta):
-        jac = _jacobian(theta, space, pb, fixed, row_idx, step)
-    n_obs = r0.size
-    s2 = cost / max(n_obs - len(theta), 1)
-    cov = _covariance(jac, s2, space.scale) if len(theta) else np.zeros((0, 0))
-    sig = pb.sigma.cpu().numpy()
-    r_nm = r0.reshape(-1, len(sig)) * sig
-    return ArmFit(space, theta, cov, (r_nm**2).sum(axis=0), int(r_nm.shape[0]), it, converged, jac)
+    """Fit the parameters of ``effects`` together on all samples (see :func:`fit_many`)."""
+    return fit_many(pb, [effects], fixed=fixed, max_iter=max_iter)[0]

@@ -181,9 +181,15 @@ class ArmModel:
                 continue
             m = float(inert.mass or 0.0)
             t_li = np.eye(4) if inert.origin is None else np.asarray(inert.origin, dtype=float)
-            i_c = np.zeros((3, 3)) if inert.inertia is None else np.asarray(inert.inertia, dtype=float)
+            i_c = (
+                np.zeros((3, 3))
+                if inert.inertia is None
+                else np.asarray(inert.inertia, dtype=float)
+            )
             if not np.isfinite(m) or m < 0 or not np.all(np.isfinite(i_c)):
-                raise FormatError("negative or non-finite inertial", where=f"link '{name}' <inertial>")
+                raise FormatError(
+                    "negative or non-finite inertial", where=f"link '{name}' <inertial>"
+                )
             t_bi = t_group_link[k] @ t_li
             r, c = t_bi[:3, :3], t_bi[:3, 3]
             first[b] += m * c
@@ -191,7 +197,8 @@ class ArmModel:
             inertia_o[b] += r @ i_c @ r.T + m * (c @ c * np.eye(3) - np.outer(c, c))
         com = np.where(mass[:, None] > 0, first / np.maximum(mass, 1e-300)[:, None], 0.0)
         inertia_c = inertia_o - mass[:, None, None] * (
-            np.einsum("bi,bi->b", com, com)[:, None, None] * np.eye(3) - np.einsum("bi,bj->bij", com, com)
+            np.einsum("bi,bi->b", com, com)[:, None, None] * np.eye(3)
+            - np.einsum("bi,bj->bij", com, com)
         )
         link_body = {n: (group[k], t_group_link[k]) for k, n in enumerate(chain.link_names)}
         dyn: dict[str, dict[str, float]] = {}
@@ -224,7 +231,9 @@ class ArmModel:
         try:
             return self.link_body[link]
         except KeyError:
-            raise InputError(f"unknown link {link!r}", hint=f"links: {sorted(self.link_body)}") from None
+            raise InputError(
+                f"unknown link {link!r}", hint=f"links: {sorted(self.link_body)}"
+            ) from None
 
 
 # ----------------------------------------------------------------------------- kinematics
@@ -291,7 +300,9 @@ def _kinematics(model: ArmModel, q, qd, qdd, gravity) -> _Kinematics:
     kz = kz - kz.transpose(-1, -2)
     is_rev = torch.tensor([t == "revolute" for t in model.joint_type], device=dev)
     ang = torch.where(is_rev, qb, torch.zeros_like(qb))[..., None, None]
-    rot = torch.eye(3, dtype=dt, device=dev) + torch.sin(ang) * kz + (1 - torch.cos(ang)) * (kz @ kz)
+    rot = (
+        torch.eye(3, dtype=dt, device=dev) + torch.sin(ang) * kz + (1 - torch.cos(ang)) * (kz @ kz)
+    )
     R_pb = r_o @ rot  # [N, B, 3, 3]
     disp = torch.where(is_rev, torch.zeros_like(qb), qb)
     p_pb = t_o + disp[..., None] * _mv(r_o, z)  # [N, B, 3]
@@ -365,7 +376,10 @@ def inverse_dynamics(
     force = mass[:, None] * a_c  # [N, B, 3]
     moment = _mv(i_c, dw) + _cross(w, _mv(i_c, w))
     f = [force[:, b] for b in range(model.num_bodies)]
-    nm = [moment[:, b] + _cross(com[b].expand_as(force[:, b]), force[:, b]) for b in range(model.num_bodies)]
+    nm = [
+        moment[:, b] + _cross(com[b].expand_as(force[:, b]), force[:, b])
+        for b in range(model.num_bodies)
+    ]
     tau_b = [None] * model.num_bodies
     for b in reversed(range(model.num_bodies)):
         z = kin.z[b]
@@ -386,7 +400,9 @@ def inverse_dynamics(
 def inertial_vector(inertials: Inertials) -> np.ndarray:
     """The [B, 10] parameter vectors ``(m, m c, I_origin xx xy xz yy yz zz)`` of the bodies."""
     m, c, i_c = inertials.mass, inertials.com, inertials.inertia
-    i_o = i_c + m[:, None, None] * (np.einsum("bi,bi->b", c, c)[:, None, None] * np.eye(3) - np.einsum("bi,bj->bij", c, c))
+    i_o = i_c + m[:, None, None] * (
+        np.einsum("bi,bi->b", c, c)[:, None, None] * np.eye(3) - np.einsum("bi,bj->bij", c, c)
+    )
     iu = i_o[:, [0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]]
     return np.concatenate([m[:, None], m[:, None] * c, iu], axis=1)
 
@@ -396,7 +412,10 @@ def point_mass_vector(mass: torch.Tensor, com: torch.Tensor) -> torch.Tensor:
     h = mass[..., None] * com
     cc = (com * com).sum(-1)
     x, y, z = com[..., 0], com[..., 1], com[..., 2]
-    iu = torch.stack([cc - x * x, -x * y, -x * z, cc - y * y, -y * z, cc - z * z], dim=-1) * mass[..., None]
+    iu = (
+        torch.stack([cc - x * x, -x * y, -x * z, cc - y * y, -y * z, cc - z * z], dim=-1)
+        * mass[..., None]
+    )
     return torch.cat([mass[..., None], h, iu], dim=-1)
 
 
@@ -431,7 +450,9 @@ def regressor(
         return s - s.transpose(-1, -2)
 
     sw, sdw, sa = skew(w), skew(dw), skew(a)
-    a_f = torch.cat([a.unsqueeze(-1), sdw + sw @ sw, torch.zeros(n, n_b, 3, 6, dtype=dt, device=dev)], -1)
+    a_f = torch.cat(
+        [a.unsqueeze(-1), sdw + sw @ sw, torch.zeros(n, n_b, 3, 6, dtype=dt, device=dev)], -1
+    )
 
     def lin_i(v: torch.Tensor) -> torch.Tensor:
         # I v = L(v) @ (Ixx, Ixy, Ixz, Iyy, Iyz, Izz)

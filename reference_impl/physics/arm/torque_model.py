@@ -80,24 +80,37 @@ class ArmData:
         keep = np.isin(self.traj, idx)
         remap = {k: i for i, k in enumerate(idx)}
         return ArmData(
-            self.joint_names, self.t_ns[keep], np.array([remap[k] for k in self.traj[keep]], dtype=np.int64),
-            [self.traj_names[k] for k in idx], self.q[keep], self.qd[keep], self.qdd[keep], self.tau[keep],
-            list(self.derived), set(self.has),
+            self.joint_names,
+            self.t_ns[keep],
+            np.array([remap[k] for k in self.traj[keep]], dtype=np.int64),
+            [self.traj_names[k] for k in idx],
+            self.q[keep],
+            self.qd[keep],
+            self.qdd[keep],
+            self.tau[keep],
+            list(self.derived),
+            set(self.has),
         )
 
 
-def _rates(t_ns: np.ndarray, q: np.ndarray, qd: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def _rates(
+    t_ns: np.ndarray, q: np.ndarray, qd: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
     derived = []
     if qd is None:
         qd = savgol_derivative(t_ns, q, order=1)
         qdd = savgol_derivative(t_ns, q, order=2)
-        derived += [f"velocity: {describe_differentiator(1)} of position",
-                    f"acceleration: {describe_differentiator(2)} of position"]
+        derived += [
+            f"velocity: {describe_differentiator(1)} of position",
+            f"acceleration: {describe_differentiator(2)} of position",
+        ]
     else:
         qdd = savgol_derivative(t_ns, q, order=2)
         qd = savgol_derivative(t_ns, qd, order=0)
-        derived += [f"velocity: measured, smoothed by {describe_differentiator(0)}",
-                    f"acceleration: {describe_differentiator(2)} of position"]
+        derived += [
+            f"velocity: measured, smoothed by {describe_differentiator(0)}",
+            f"acceleration: {describe_differentiator(2)} of position",
+        ]
     return qd, qdd, derived
 
 
@@ -122,12 +135,22 @@ def load_arm_data(ds: Dataset, joint_names: tuple[str, ...] | list[str]) -> ArmD
             skipped.append(ep.id)
             continue
         t = table.column("t_ns").to_numpy().astype(np.int64)
-        q = np.stack([table.column(f"position.{j}").to_numpy() for j in joints], axis=1).astype(float)
-        tau = np.stack([table.column(f"effort.{j}").to_numpy() for j in joints], axis=1).astype(float)
+        q = np.stack([table.column(f"position.{j}").to_numpy() for j in joints], axis=1).astype(
+            float
+        )
+        tau = np.stack([table.column(f"effort.{j}").to_numpy() for j in joints], axis=1).astype(
+            float
+        )
         qd = None
         if all(f"velocity.{j}" in names for j in joints):
-            qd = np.stack([table.column(f"velocity.{j}").to_numpy() for j in joints], axis=1).astype(float)
-        good = np.isfinite(q).all(1) & np.isfinite(tau).all(1) & (np.isfinite(qd).all(1) if qd is not None else True)
+            qd = np.stack(
+                [table.column(f"velocity.{j}").to_numpy() for j in joints], axis=1
+            ).astype(float)
+        good = (
+            np.isfinite(q).all(1)
+            & np.isfinite(tau).all(1)
+            & (np.isfinite(qd).all(1) if qd is not None else True)
+        )
         if not good.all():
             t, q, tau = t[good], q[good], tau[good]
             qd = qd[good] if qd is not None else None
@@ -155,8 +178,18 @@ def load_arm_data(ds: Dataset, joint_names: tuple[str, ...] | list[str]) -> ArmD
     has = {"efforts"}
     if any(ep.has("ee_poses") for ep in ds.episodes):
         has.add("ee_poses")
-    return ArmData(joints, np.concatenate(ts), np.concatenate(trs), [p[0] for p in parts], np.concatenate(qs),
-                   np.concatenate(qds), np.concatenate(qdds), np.concatenate(taus), derived, has)
+    return ArmData(
+        joints,
+        np.concatenate(ts),
+        np.concatenate(trs),
+        [p[0] for p in parts],
+        np.concatenate(qs),
+        np.concatenate(qds),
+        np.concatenate(qdds),
+        np.concatenate(taus),
+        derived,
+        has,
+    )
 
 
 def effort_noise(data: ArmData) -> np.ndarray:
@@ -250,7 +283,9 @@ def prepare_arm(
     )
 
 
-def fixed_effects(physics: dict[str, Any] | None, joint_names: tuple[str, ...]) -> dict[str, dict[str, float]]:
+def fixed_effects(
+    physics: dict[str, Any] | None, joint_names: tuple[str, ...]
+) -> dict[str, dict[str, float]]:
     """Arm effects already stored in ``physics.json``: effect name -> parameter values."""
     from reference_impl.physics.effects import available_effects
 
@@ -316,7 +351,9 @@ def predict(
         if not isinstance(eff, ArmEffect):
             continue
         eff = eff.for_robot(pb.state.joint_names)
-        active.append((eff, {k: torch.full((m, 1), float(v), dtype=dt, device=dev) for k, v in vals.items()}))
+        active.append(
+            (eff, {k: torch.full((m, 1), float(v), dtype=dt, device=dev) for k, v in vals.items()})
+        )
     for eff in space.effects:
         if isinstance(eff, ArmEffect) and eff.model == "arm":
             active.append((eff, space.theta_dict(theta, eff.name)))

@@ -1,0 +1,290 @@
+"""Validation speed on a 10-minute episode: ``--quick`` and full (no re-rendering).
+
+Builds, in a temp folder outside the repository, a dataset with one 10-minute
+episode: joint states at 500 Hz (6 joints, positions and velocities), a 30 fps
+frame index, 640x480 panoptic label images (a pool of simple moving-rectangle
+images, repeated), 2D boxes derived from them, segments and a 6-joint URDF. Then
+it times, in this process after a warm-up import:
+
+* ``validate(quick=True)`` (target <= 3 s) against a baseline that reads the
+  manifest and every parquet footer with plain pyarrow;
+* ``validate()`` (target <= 30 s) against a baseline that reads every parquet
+  file with ``pyarrow.parquet.read_table`` (bodies, no PNG decoding).
+
+Usage: ``PYTHONPATH=. .venv/bin/python -W ignore bench/validate.py [--minutes 10] [--threads 2] [--append]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+T0 = 1_700_000_000_000_000_000
+W, H = 640, 480
+JOINTS = [f"j{i}" for i in range(1, 7)]
+
+
+def _urdf() -> str:
+    links = [
+        '<link name="base"><inertial><mass value="2"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" '
+        'iyz="0" izz="0.01"/></inertial><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>'
+    ]
+    joints = []
+    parent = "base"
+    for k, j in enumerate(JOINTS, 1):
+        links.append(
+            f'<link name="l{k}"><inertial><origin xyz="0.05 0 0"/><mass value="1"/><inertia ixx="0.001" '
+            'ixy="0" ixz="0" iyy="0.004" iyz="0" izz="0.004"/></inertial><collision><origin xyz="0.05 0 0"/>'
+            '<geometry><box size="0.1 0.03 0.03"/></geometry></collision></link>'
+        )
+        axis = "0 0 1" if k % 2 else "0 1 0"
+        joints.append(
+            f'<joint name="{j}" type="revolute"><parent link="{parent}"/><child link="l{k}"/>'
+            f'<origin xyz="0.1 0 0"/><axis xyz="{axis}"/><limit lower="-3" upper="3" effort="10" '
+            'velocity="3"/></joint>'
+        )
+        parent = f"l{k}"
+    return '<?xml version="1.0"?>\n<robot name="bench6">' + "".join(links + joints) + "</robot>\n"
+
+
+def _label_pool(n: int) -> tuple[list[bytes], list[list[tuple[int, int, int, int, int]]]]:
+    """``n`` label images (PNG) of rectangles and their exact boxes (label, x0, y0, x1, y1)."""
+    from robogs_format.images import encode_label_png
+
+    blobs, boxes = [], []
+    for i in range(n):
+        img = np.zeros((H, W), np.uint16)
+        rects = []
+        for label, (x, y, w, h) in (
+            (200, (0, 300, W, 180)),
+            (1, (100 + 5 * i, 120, 80, 200)),
+            (2, (180 + 5 * i, 100, 120, 40)),
+            (100, (400 - 3 * i, 260, 60, 50)),
+        ):
+            img[y : y + h, x : x + w] = label
+        for label in (200, 1, 2, 100):
+            ys, xs = np.nonzero(img == label)
+            rects.append(
+                (label, int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1)
+            )
+        blobs.append(encode_label_png(img))
+        boxes.append(rects)
+    return blobs, boxes
+
+
+def build(root: Path, minutes: float) -> Path:
+    """Write the benchmark dataset to ``root``."""
+    import pyarrow as pa
+
+    from robogs_format import Dataset
+
+    dur_ns = int(minutes * 60e9)
+    rng = np.random.default_rng(0)
+    tj = (
+        T0
+        + np.arange(0, dur_ns + 1, 2_000_000, dtype=np.int64)
+        + rng.integers(-20_000, 20_000, dur_ns // 2_000_000 + 1)
+    )
+    tj[0], tj[-1] = T0, T0 + dur_ns
+    s = (tj - T0) / 1e9
+    cols = {"t_ns": tj}
+    for k, j in enumerate(JOINTS):
+        cols[f"position.{j}"] = 1.2 * np.sin(2 * np.pi * (0.05 + 0.01 * k) * s + k)
+        cols[f"velocity.{j}"] = np.gradient(cols[f"position.{j}"], s)
+    tc = T0 + np.rint(np.arange(0, minutes * 60 * 30 + 1) * (1e9 / 30)).astype(np.int64)
+    n = tc.size
+    blobs, boxes = _label_pool(30)
+    ep = "episodes/ep000"
+    with Dataset.create(root) as w:
+        w.write_text("robot/robot.urdf", _urdf())
+        w.set_robot("robot/robot.urdf", base_link="base")
+        w.write_table(f"{ep}/joint_states.parquet", pa.table(cols), kind="joint_states")
+        w.write_table(
+            f"{ep}/cameras/cam0/frames.parquet",
+            pa.table({"t_ns": tc, "frame_index": np.arange(n, dtype=np.int64)}),
+            kind="camera_frames",
+        )
+        pool = np.arange(n) % len(blobs)
+        # labels are written in chunks so the builder never holds 18000 images either
+        import pyarrow.parquet as pq
+
+        path = w.path(f"{ep}/cameras/cam0/labels.parquet")
+        schema = pa.schema([("frame_index", pa.int64()), ("png", pa.binary())])
+        with pq.ParquetWriter(path, schema, compression="zstd") as pw:
+            for s0 in range(0, n, 2000):
+                idx = np.arange(s0, min(n, s0 + 2000))
+                pw.write_table(
+                    pa.table(
+                        {"frame_index": idx, "png": [blobs[p] for p in pool[idx]]}, schema=schema
+                    )
+                )
+        rows = [(int(tc[i]), i, *b) for i in range(n) for b in boxes[pool[i]]]
+        arr = np.array(rows, dtype=np.int64)
+        w.write_table(
+            f"{ep}/boxes2d.parquet",
+            pa.table(
+                {
+                    "t_ns": arr[:, 0],
+                    "camera": ["cam0"] * len(rows),
+                    "frame_index": arr[:, 1],
+                    "label_id": arr[:, 2].astype(np.int32),
+                    **{
+                        c: arr[:, 3 + k].astype(float)
+                        for k, c in enumerate(("x_min", "y_min", "x_max", "y_max"))
+                    },
+                }
+            ),
+            kind="boxes2d",
+        )
+        w.write_table(
+            f"{ep}/segments.parquet",
+            pa.table(
+                {
+                    "label_id": pa.array([1, 2, 100, 200], pa.int32()),
+                    "category": ["robot", "robot", "box", "table"],
+                    "instance": pa.array([1, 2, 1, 1], pa.int32()),
+                    "kind": ["robot_link", "robot_link", "object", "background"],
+                    "target": ["l1", "l2", "box", "table"],
+                }
+            ),
+            kind="segments",
+        )
+        from robogs_format.cameras import CameraModel
+
+        w.set_camera(CameraModel("cam0", W, H, 500.0, 500.0, W / 2, H / 2, T_world_cam=np.eye(4)))
+        w.set_asset("box", kind="object")
+        w.set_asset("table", kind="table")
+        w.add_episode(
+            "ep000",
+            start_ns=T0,
+            end_ns=T0 + dur_ns,
+            streams={
+                "joint_states": {
+                    "kind": "joint_states",
+                    "path": f"{ep}/joint_states.parquet",
+                    "stamp_source": "synthetic",
+                    "offset_ns": 0,
+                    "nominal_rate_hz": 500.0,
+                },
+                "boxes2d": {
+                    "kind": "boxes2d",
+                    "path": f"{ep}/boxes2d.parquet",
+                    "stamp_source": "derived",
+                    "offset_ns": 0,
+                    "nominal_rate_hz": None,
+                },
+                "segments": {
+                    "kind": "segments",
+                    "path": f"{ep}/segments.parquet",
+                    "stamp_source": "none",
+                    "offset_ns": 0,
+                },
+                "camera/cam0": {
+                    "kind": "camera",
+                    "camera": "cam0",
+                    "frames": f"{ep}/cameras/cam0/frames.parquet",
+                    "labels": f"{ep}/cameras/cam0/labels.parquet",
+                    "stamp_source": "synthetic",
+                    "offset_ns": 0,
+                    "nominal_rate_hz": 30.0,
+                },
+            },
+        )
+        w.commit()
+    return root
+
+
+def _baseline_quick(root: Path) -> float:
+    import pyarrow.parquet as pq
+
+    t = time.perf_counter()
+    json.loads((root / "manifest.json").read_text())
+    for p in root.rglob("*.parquet"):
+        _ = pq.ParquetFile(p).metadata.num_rows
+    return time.perf_counter() - t
+
+
+def _baseline_full(root: Path) -> float:
+    import pyarrow.parquet as pq
+
+    t = time.perf_counter()
+    json.loads((root / "manifest.json").read_text())
+    for p in root.rglob("*.parquet"):
+        pq.read_table(p)
+    return time.perf_counter() - t
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--minutes", type=float, default=10.0)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--append", action="store_true", help="append the result to bench/RESULTS.md")
+    args = ap.parse_args(argv)
+
+    t = time.perf_counter()
+    import torch
+
+    from robogs_format.checks import available_checks
+    from robogs_format.validate import validate
+
+    available_checks()
+    import_s = time.perf_counter() - t
+    torch.set_num_threads(args.threads)
+
+    tmp = Path(tempfile.mkdtemp(prefix="robogs-bench-validate-"))
+    try:
+        t = time.perf_counter()
+        root = build(tmp / "ds", args.minutes)
+        build_s = time.perf_counter() - t
+        size_mb = sum(p.stat().st_size for p in root.rglob("*") if p.is_file()) / 1e6
+        base_q = min(_baseline_quick(root) for _ in range(3))
+        t = time.perf_counter()
+        rq = validate(root, quick=True, label_threads=args.threads)
+        quick_s = time.perf_counter() - t
+        base_f = _baseline_full(root)
+        t = time.perf_counter()
+        rf = validate(root, label_threads=args.threads)
+        full_s = time.perf_counter() - t
+        slowest = sorted(rf.runs, key=lambda r: -r.seconds)[:5]
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+    lines = [
+        f"machine: {platform.machine()} {platform.processor() or ''}".rstrip()
+        + f", cpu_count={os.cpu_count()}, "
+        f"torch {torch.__version__}, torch threads={torch.get_num_threads()}, label decoder threads={args.threads}",
+        f"dataset: {args.minutes:g} min episode, 500 Hz joints ({len(JOINTS)} joints), 30 fps frame index, "
+        f"{W}x{H} labels, {size_mb:.0f} MB (built in {build_s:.1f} s); import {import_s:.2f} s (not timed below)",
+        f"quick: {quick_s:.3f} s (target <= 3 s), {len(rq.runs)} checks, {len(rq.findings)} findings; "
+        f"baseline pyarrow footers {base_q:.3f} s; ratio {quick_s / base_q:.1f}x",
+        f"full:  {full_s:.2f} s (target <= 30 s), {len(rf.runs)} checks, {len(rf.findings)} findings; "
+        f"baseline pyarrow read_table of every table {base_f:.2f} s; ratio {full_s / base_f:.1f}x",
+        "slowest checks (full): " + ", ".join(f"{r.code} {r.seconds:.2f} s" for r in slowest),
+    ]
+    for f in rf.findings[:5]:
+        lines.append(f"finding: {f.code} {f.severity} {f.message}")
+    print("\n".join(lines))
+    if args.append:
+        cmd = "PYTHONPATH=. .venv/bin/python -W ignore bench/validate.py " + " ".join(
+            argv or sys.argv[1:]
+        )
+        text = (
+            f"\n## validate — robogs-validate speed on a 10-minute episode (2026-11-22)\n\n"
+            f"Command: `{cmd.strip()}`\n\n```\n" + "\n".join(lines) + "\n```\n"
+        )
+        with open(Path(__file__).resolve().parent / "RESULTS.md", "a", encoding="utf-8") as fh:
+            fh.write(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
