@@ -250,10 +250,32 @@ def main(argv: list[str] | None = None) -> int:
         t = time.perf_counter()
         rq = validate(root, quick=True, label_threads=args.threads)
         quick_s = time.perf_counter() - t
-        base_f = _baseline_full(root)
+        import subprocess
+
+        cli = [
+            sys.executable,
+            "-W",
+            "ignore",
+            "-c",
+            "import sys; from robogs_format.cli.main import validate_main; "
+            "sys.exit(validate_main(sys.argv[1:]))",
+            str(root),
+            "--quick",
+            "--json",
+        ]
         t = time.perf_counter()
+        subprocess.run(
+            cli,
+            check=True,
+            capture_output=True,
+            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])},
+        )
+        quick_cli_s = time.perf_counter() - t
+        base_f = _baseline_full(root)
+        load_before = os.getloadavg()[0]
+        t, c = time.perf_counter(), time.process_time()
         rf = validate(root, label_threads=args.threads)
-        full_s = time.perf_counter() - t
+        full_s, full_cpu = time.perf_counter() - t, time.process_time() - c
         slowest = sorted(rf.runs, key=lambda r: -r.seconds)[:5]
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -265,9 +287,11 @@ def main(argv: list[str] | None = None) -> int:
         f"dataset: {args.minutes:g} min episode, 500 Hz joints ({len(JOINTS)} joints), 30 fps frame index, "
         f"{W}x{H} labels, {size_mb:.0f} MB (built in {build_s:.1f} s); import {import_s:.2f} s (not timed below)",
         f"quick: {quick_s:.3f} s (target <= 3 s), {len(rq.runs)} checks, {len(rq.findings)} findings; "
-        f"baseline pyarrow footers {base_q:.3f} s; ratio {quick_s / base_q:.1f}x",
+        f"baseline pyarrow footers {base_q:.3f} s; ratio {quick_s / base_q:.1f}x; "
+        f"whole CLI process (robogs-validate --quick --json, imports included) {quick_cli_s:.2f} s",
         f"full:  {full_s:.2f} s (target <= 30 s), {len(rf.runs)} checks, {len(rf.findings)} findings; "
-        f"baseline pyarrow read_table of every table {base_f:.2f} s; ratio {full_s / base_f:.1f}x",
+        f"baseline pyarrow read_table of every table {base_f:.2f} s; ratio {full_s / base_f:.1f}x; "
+        f"process CPU {full_cpu:.1f} s (load average {load_before:.1f} on {os.cpu_count()} cores when started)",
         "slowest checks (full): " + ", ".join(f"{r.code} {r.seconds:.2f} s" for r in slowest),
     ]
     for f in rf.findings[:5]:

@@ -38,7 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--force", action="store_true", help="replace an existing dataset at OUT")
     g = parser.add_argument_group("bags and MCAP")
-    g.add_argument("--map", type=Path, metavar="YAML", help="topic -> role mapping (YAML)")
+    g.add_argument("--map", type=Path, metavar="YAML", help="topic -> role mapping (YAML); for a tabular joint log, its column mapping")
     g.add_argument(
         "--topic",
         action="append",
@@ -135,8 +135,12 @@ def run(args: argparse.Namespace) -> int:
     if args.src is None or args.out is None:
         print("robogs convert: error: SRC and OUT are required", file=sys.stderr)
         return 2
+    from .registry import detect_format
+
     roles = {}
-    if args.map is not None:
+    fmt = args.fmt or (detect_format(args.src).name if args.src.exists() else None)
+    tabular = fmt == "tabular"
+    if args.map is not None and not tabular:
         roles.update({t: str(r) for t, r in load_role_map(args.map).items()})
     roles.update({t: str(r) for t, r in parse_topic_flags(args.topic).items()})
     if args.assume_fps is not None and not args.assume_fps > 0:
@@ -157,6 +161,7 @@ def run(args: argparse.Namespace) -> int:
         images=args.images,
         world_up=args.world_up,
         video=not args.no_video,
+        mapping=args.map if tabular else None,
         progress=progress,
         command="robogs convert " + " ".join(shlex.quote(a) for a in sys.argv[2:])
         if sys.argv[1:2] == ["convert"]

@@ -51,6 +51,8 @@ class ConvertOptions:
         jump_back_ns: a stamp going back by more than this is a clock jump (sample dropped).
         jump_forward_ns: a stamp jumping forward by more than this is reported.
         command: the command line, for the provenance record.
+        mapping: column mapping YAML of a tabular joint log (``--map`` for that format).
+        gap_s: a jump in time longer than this splits a tabular log into segments.
     """
 
     roles: dict[str, str] = field(default_factory=dict)
@@ -72,6 +74,8 @@ class ConvertOptions:
     jump_back_ns: int = 1_000_000_000
     jump_forward_ns: int = 3600 * 1_000_000_000
     command: str | None = None
+    mapping: Path | None = None
+    gap_s: float | None = None
 
 
 @dataclass

@@ -100,7 +100,7 @@ def convert_path(
                 streams=ctx.streams,
                 segment=src.name,
             )
-        elif not writer.manifest.get("cameras"):
+        elif not writer.manifest.get("cameras") and not writer.manifest.get("episodes"):
             raise InputError(
                 "nothing was converted (every message was dropped)",
                 path=src,

@@ -33,7 +33,7 @@ every effort column is a motor current in A and ``torque_constant`` (N m/A, moto
 ``gear_ratio`` are required: ``tau = I * k_t * gear_ratio``.
 
 Missing velocities are derived from the positions by the Savitzky-Golay differentiator of
-:mod:`reference_impl.physics.arm.differentiate` (listed in the stream's ``derived``); missing
+:mod:`robogs_format.differentiate` (listed in the stream's ``derived``); missing
 efforts simply give no effort columns.
 
 Bad input is never silently dropped: rows before the header line, unparseable rows, rows with
@@ -60,7 +60,6 @@ import yaml
 
 from robogs_format.dataset import Dataset
 from robogs_format.errors import InputError, RobogsError
-from robogs_format.kinematics import Chain
 from robogs_format.urdf import load_urdf
 
 __all__ = [
@@ -785,7 +784,7 @@ def _clean_file(
     cuts = np.flatnonzero(steps > gap_ns) + 1
     bounds = np.concatenate([[0], cuts, [len(idx)]])
     segments: list[LogSegment] = []
-    from reference_impl.physics.arm.differentiate import savgol_derivative
+    from robogs_format.differentiate import savgol_derivative
 
     for s in range(len(bounds) - 1):
         sel = idx[bounds[s] : bounds[s + 1]]
@@ -919,6 +918,8 @@ def _attach_robot(writer, urdf_path: Path, package_roots: dict[str, Path] | None
         reason = exc.message
     data, n = _strip_meshes(urdf_path)
     writer.write_bytes("robot/robot.urdf", data)
+    from robogs_format.kinematics import Chain
+
     urdf = load_urdf(urdf_path, load_meshes=False)
     root = Chain.from_urdf(urdf).link_names[0]
     writer.set_robot("robot/robot.urdf", base_link=root)
@@ -943,7 +944,8 @@ def write_tabular(
     Returns:
         The episode ids written.
     """
-    from reference_impl.physics.arm.differentiate import describe_differentiator
+    from robogs_format.differentiate import describe_differentiator
+    from robogs_format.kinematics import Chain
 
     urdf = load_urdf(urdf_path, load_meshes=False)
     chain = Chain.from_urdf(urdf)

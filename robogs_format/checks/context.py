@@ -26,6 +26,7 @@ from ..errors import FormatError, PathEscapeError, RobogsError, VersionError
 from ..jsonio import read_json
 from ..paths import resolve_inside
 from ..schemas import schema_problems
+from ..spec_version import SPEC_VERSION, parse_version
 from ..tables import check_table_schema
 
 if TYPE_CHECKING:
@@ -180,8 +181,27 @@ class CheckContext:
     # -- manifest facts ---------------------------------------------------------------
     @property
     def manifest_valid(self) -> bool:
-        """True when the manifest follows its JSON Schema (and its version is readable)."""
-        return not self.manifest_problems and self.version_error is None
+        """True when the manifest follows its JSON Schema (and its version is readable).
+
+        Fields unknown to this reader do not count when the dataset declares a newer
+        minor spec version (they are reported as warnings and ignored).
+        """
+        if self.version_error is not None:
+            return False
+        problems = self.manifest_problems
+        if self.newer_minor:
+            problems = [p for p in problems if not p.message.startswith("Additional properties")]
+        return not problems
+
+    @property
+    def newer_minor(self) -> bool:
+        """True when the manifest's spec version is a newer minor of this reader's major."""
+        try:
+            theirs = parse_version(str(self.manifest.get("spec_version", "")))
+        except FormatError:
+            return False
+        ours = parse_version(SPEC_VERSION)
+        return theirs[0] == ours[0] and theirs[1] > ours[1]
 
     @property
     def files(self) -> dict[str, dict[str, Any]]:

@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
 from ..errors import FormatError, RobogsError
 from ..findings import Finding
@@ -487,8 +486,10 @@ def _joint_limits(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 )
 
 
-def _world_from_root(ctx: CheckContext, T_root: torch.Tensor, chain: Any) -> torch.Tensor:
-    """Re-express FK poses (root frame) in the world frame, whose origin is the robot base."""
+def _world_from_root(ctx: CheckContext, T_root: Any, chain: Any) -> Any:
+    """Re-express FK poses (root frame, [..., L, 4, 4] torch) in the world frame (origin at the robot base)."""
+    import torch
+
     robot = ctx.manifest.get("robot") or {}
     base = robot.get("base_link")
     if not isinstance(base, str) or base == chain.link_names[0] or base not in chain.link_names:
@@ -508,6 +509,8 @@ def _world_from_root(ctx: CheckContext, T_root: torch.Tensor, chain: Any) -> tor
     hint="check the URDF (link lengths, joint offsets), the joint sign convention and the ee_poses link frame",
 )
 def _fk_ee(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    import torch
+
     from ..interp import interp_linear
 
     _robot_or_skip(ctx)

@@ -29,8 +29,7 @@ def _theirs(ctx: CheckContext) -> tuple[int, int, int] | None:
 
 
 def _newer_minor(ctx: CheckContext) -> bool:
-    theirs, ours = _theirs(ctx), parse_version(SPEC_VERSION)
-    return theirs is not None and theirs[0] == ours[0] and theirs[1] > ours[1]
+    return ctx.newer_minor
 
 
 @check(

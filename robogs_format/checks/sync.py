@@ -18,7 +18,6 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from ..errors import RobogsError
 from ..findings import Finding
@@ -91,6 +90,8 @@ class _Model:
         self, t_ns: np.ndarray, link_of_obs: np.ndarray, frame_of_obs: np.ndarray, delta_ns: float
     ) -> np.ndarray:
         """[n_obs, 4] projected (x_min, y_min, x_max, y_max) px; NaN where undefined."""
+        import torch
+
         from ..interp import interp_linear
 
         tq = np.rint(t_ns + delta_ns).astype(np.int64)

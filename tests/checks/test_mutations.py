@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -85,6 +86,17 @@ def test_newer_minor_version_is_a_warning(clean_copy: Path) -> None:
     report = validate(clean_copy)
     assert _errors(report) == set()
     assert "S004" in report.codes(min_severity="warning")
+
+
+def test_newer_minor_version_fields_are_warnings_and_checks_still_run(clean_copy: Path) -> None:
+    mut.set_spec_version(clean_copy, "1.9.0")
+    m = json.loads((clean_copy / "manifest.json").read_text())
+    m["calibration_report"] = {"added_in": "1.9"}
+    (clean_copy / "manifest.json").write_text(json.dumps(m))
+    mut.gap_in_stream(clean_copy)
+    report = validate(clean_copy)
+    assert _errors(report) == {"T003"}
+    assert {"S001", "S004"} <= report.codes(min_severity="warning")
 
 
 def test_rigid_object_without_inertia_is_a_warning(clean_copy: Path) -> None:

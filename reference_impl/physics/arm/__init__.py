@@ -33,7 +33,7 @@ _LAZY = {
     "Inertials": "reference_impl.physics.arm.rnea",
     "inverse_dynamics": "reference_impl.physics.arm.rnea",
     "regressor": "reference_impl.physics.arm.rnea",
-    "savgol_derivative": "reference_impl.physics.arm.differentiate",
+    "savgol_derivative": "robogs_format.differentiate",
     "open_arm": "reference_impl.physics.arm.api",
     "compare_arm": "reference_impl.physics.arm.api",
     "diagnose_arm": "reference_impl.physics.arm.api",

@@ -14,7 +14,7 @@ filter (order 0; it keeps the encoder-rate noise out of the Coulomb term near re
 Accelerations always come from the second derivative of the *positions* (encoder positions are
 far less noisy than logged velocities, whose derivative would put noise on every inertial
 torque), and missing velocities from the first derivative; both by
-:func:`~reference_impl.physics.arm.differentiate.savgol_derivative`. The noise floor
+:func:`~robogs_format.differentiate.savgol_derivative`. The noise floor
 of each joint's effort is estimated from the data (1.4826 MAD of second differences / sqrt 6),
 never assumed.
 """
@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from reference_impl.physics.arm.differentiate import describe_differentiator, savgol_derivative
+from robogs_format.differentiate import describe_differentiator, savgol_derivative
 from reference_impl.physics.arm.effects import ArmEffect, ArmState, InertialContext
 from reference_impl.physics.arm.rnea import ArmModel, inertial_vector, regressor
 from reference_impl.physics.effects import get_effect

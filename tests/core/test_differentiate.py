@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reference_impl.physics.arm.differentiate import savgol_derivative
+from robogs_format.differentiate import savgol_derivative
 from robogs_format.errors import InputError
 
 
