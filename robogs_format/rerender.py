@@ -52,6 +52,8 @@ __all__ = [
     "FrameMetrics",
     "compare_frame",
     "label_edges",
+    "void_band",
+    "VOID_BAND_PX",
     "pose_stream",
     "boundary_distance",
     "recorded_soft_labels",
@@ -65,6 +67,8 @@ __all__ = [
     "BLUR_SCHEDULE_PX",
 ]
 
+#: half-width (px) of the void band around recorded label edges that IoU leaves out
+VOID_BAND_PX = 2
 #: Gaussians with a standard deviation above e^MAX_LOG_SCALE m (10 m) are absurd and not rendered
 MAX_LOG_SCALE = math.log(10.0)
 
@@ -405,13 +409,22 @@ def label_edges(labels: np.ndarray) -> np.ndarray:
     return edge
 
 
+def void_band(labels: np.ndarray, width_px: int = VOID_BAND_PX) -> np.ndarray:
+    """[H, W] bool: pixels within ``width_px`` of a label edge (Chebyshev distance, both sides)."""
+    edge = label_edges(labels).astype(np.uint8)
+    if width_px <= 1:
+        return edge.astype(bool)
+    k = 2 * width_px - 1
+    return cv2.dilate(edge, np.ones((k, k), np.uint8)).astype(bool)
+
+
 def compare_frame(prob: np.ndarray, depth: np.ndarray, recorded_channels: np.ndarray, num_channels: int) -> FrameMetrics:
     """Compare a re-render with a recorded label image.
 
-    Intersection and union leave out a void band of one pixel on both sides of every recorded
-    label edge (as PASCAL VOC's void band, Everingham et al. 2010): sub-pixel boundary placement
-    is measured by the boundary distance, so IoU measures gross errors (wrong, missing or extra
-    labels) and stays meaningful for thin links.
+    Intersection and union leave out a void band of :data:`VOID_BAND_PX` pixels on both sides of
+    every recorded label edge (as PASCAL VOC's void band, Everingham et al. 2010): boundary
+    placement is measured by the boundary distance, so IoU measures gross errors (wrong, missing
+    or extra labels) and is not dominated by the splats' silhouette growth on thin links.
 
     Args:
         prob: [h, w, C+1] soft labels on the render grid.
@@ -427,7 +440,7 @@ def compare_frame(prob: np.ndarray, depth: np.ndarray, recorded_channels: np.nda
     low = prob.argmax(-1)
     rendered = _upsample(prob, W, H).argmax(-1)
     rec = recorded_channels
-    keep = ~label_edges(rec)
+    keep = ~void_band(rec)
     pair = (rec * (C + 1) + rendered)[keep]
     conf = np.bincount(pair, minlength=(C + 1) ** 2).reshape(C + 1, C + 1)
     inter = np.diag(conf)[1:].astype(np.int64)
@@ -508,13 +521,19 @@ class AlignmentFit:
 
 
 def select_fit_frames(stamps: np.ndarray, motion: np.ndarray, k: int) -> np.ndarray:
-    """Indices of up to ``k`` frames with the fastest image motion, spread over the episode."""
+    """Indices of up to ``k`` frames with the fastest image motion, a few frames apart.
+
+    Frames moving at least a quarter of the fastest come first (fastest first, at least
+    ``len(stamps) // (10 k)`` frames apart); slower ones fill up the remaining places.
+    """
     n = len(stamps)
     if n <= k:
         return np.arange(n)
-    gap = max(1, n // (3 * k))
+    gap = max(1, n // (10 * k))
+    order = np.argsort(-motion, kind="stable")
+    fast = motion[order] >= 0.25 * motion.max(initial=0.0)
     chosen: list[int] = []
-    for i in np.argsort(-motion, kind="stable"):
+    for i in [*order[fast], *order[~fast]]:
         if all(abs(int(i) - j) >= gap for j in chosen):
             chosen.append(int(i))
         if len(chosen) == k:
@@ -531,6 +550,9 @@ def _depth_filled(depth: np.ndarray) -> np.ndarray:
 #: Gauss–Newton blur schedule (px on the render grid): coarse to fine widens the basin of
 #: convergence to offsets that move edges by several pixels (Bouguet 2001, pyramidal Lucas–Kanade)
 BLUR_SCHEDULE_PX: tuple[float, ...] = (4.0, 2.0, 1.0, 0.0, 0.0)
+
+
+_DEBUG = False
 
 
 def _blur(x: np.ndarray, sigma: float) -> np.ndarray:
@@ -628,6 +650,8 @@ def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[
         if it == 0:
             cost0 = sharp
         history.append((sharp, theta.copy()))
+        if _DEBUG:
+            print("fit", it, sigma, round(sharp, 2), np.round(theta, 3))
         if last:
             break
         for k in ([0] if not observable else []) + ([3] if not fit_depth else []):
@@ -641,7 +665,8 @@ def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[
             break
         dx[0] = float(np.clip(dx[0], -50.0, 50.0))
         dx[1:4] = np.clip(dx[1:4], -10.0, 10.0)
-        theta = theta + dx
+        theta[:4] += dx[:4]
+        theta[4] = dx[4]  # the growth is not rendered: it is solved afresh, not accumulated
         theta[0] = float(np.clip(theta[0], -max_offset_ms, max_offset_ms))
     # the last iterations are unblurred: keep the best of them
     fine = [h for h, s in zip(history, [*schedule, 0.0], strict=False) if s == 0.0] or history

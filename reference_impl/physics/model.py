@@ -139,6 +139,8 @@ class Drive:
         init_yaw: measured initial object yaw [T] rad (sensor frame).
         obs_t: object-pose stamps [T, N] s from the trajectory start; obs_mask [T, N] valid.
         init_vel: optional initial CoM velocity [T, 3] m/s (default: at rest).
+        carry_vel: optional smoothed EE velocity [T, S, 3] m/s given to a carried object
+            (default: ``pusher_vel``).
     """
 
     dt: float
@@ -152,6 +154,7 @@ class Drive:
     obs_t: torch.Tensor
     obs_mask: torch.Tensor
     init_vel: torch.Tensor | None = None
+    carry_vel: torch.Tensor | None = None
 
     @property
     def n_traj(self) -> int:
@@ -169,6 +172,7 @@ class Drive:
             *(getattr(self, f)[ii] for f in ("pusher", "pusher_vel", "ee_yaw", "ee_yaw_rate", "grasp")),
             *(getattr(self, f)[ii] for f in ("init_pos", "init_yaw", "obs_t", "obs_mask")),
             None if self.init_vel is None else self.init_vel[ii],
+            None if self.carry_vel is None else self.carry_vel[ii],
         )
 
 
@@ -355,6 +359,7 @@ def simulate(
 
     pusher = drive.pusher.to(dev, dt_)
     pvel = drive.pusher_vel.to(dev, dt_)
+    cvel_all = pvel if drive.carry_vel is None else drive.carry_vel.to(dev, dt_)
     ee_yaw = drive.ee_yaw.to(dev, dt_)
     ee_rate = drive.ee_yaw_rate.to(dev, dt_)
     grasp = drive.grasp.to(dev)
@@ -480,7 +485,7 @@ def simulate(
             cp = pusher[:, k + 1].unsqueeze(0)
             p_att = torch.stack([cp[..., 0] + rx, cp[..., 1] + ry, cp[..., 2] + rel_p[..., 2]], dim=-1)
             rate_ = ee_rate[:, k + 1].unsqueeze(0)
-            cv = pvel[:, k].unsqueeze(0)
+            cv = cvel_all[:, k + 1].unsqueeze(0)
             v_att = torch.stack([cv[..., 0] - rate_ * ry, cv[..., 1] + rate_ * rx, cv[..., 2].expand_as(rx)], dim=-1)
             p = torch.where(att.unsqueeze(-1), p_att, p)
             v = torch.where(att.unsqueeze(-1), v_att, v)

@@ -68,16 +68,14 @@ def _initial_pose(pos: np.ndarray, yaw: np.ndarray, lab: PhaseLabels) -> tuple[n
     return pos[0].copy(), float(yaw[0])
 
 
-def _smooth(t: np.ndarray, x: np.ndarray, window: float) -> np.ndarray:
-    """Savitzky-Golay smoothing (quadratic, ``window`` seconds) of EE samples [E, D]."""
-    if len(t) < 7 or window <= 0:
-        return x
-    period = float(np.median(np.diff(t)))
+def _smooth_velocity(t: np.ndarray, x: np.ndarray, window: float) -> np.ndarray:
+    """Savitzky-Golay velocity (quadratic fit over ``window`` seconds) of EE samples [E, D]."""
+    period = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
     n = int(round(window / period)) | 1
-    n = max(5, min(n, (len(t) - 1) | 1 if len(t) % 2 == 0 else len(t)))
-    if n > len(t):
-        return x
-    return savgol_filter(x, n, 2, axis=0, mode="interp")
+    if window <= 0 or len(t) < 5 or n < 3:
+        return np.gradient(x, t, axis=0)
+    n = min(n, len(t) if len(t) % 2 else len(t) - 1)
+    return savgol_filter(x, n, 2, deriv=1, delta=period, axis=0, mode="interp")
 
 
 def build_drive(
@@ -86,12 +84,13 @@ def build_drive(
     labels: list[PhaseLabels],
     dt: float,
     z_snap: float = 0.003,
-    ee_window: float = 0.016,
+    ee_window: float = 0.024,
 ) -> tuple[Drive, np.ndarray]:
     """Resample the EE onto a grid of step ``dt`` from each trajectory's first stamp.
 
-    The EE poses are smoothed first (Savitzky & Golay 1964, quadratic over ``ee_window`` s) so
-    that encoder noise does not turn into spurious release velocities.
+    Contacts use the measured EE positions as they are. The velocity an object inherits when
+    the grasp opens is a Savitzky & Golay (1964) derivative over ``ee_window`` s, so that
+    encoder noise does not turn into spurious release velocities.
 
     The initial object pose is the median of the first static samples; a start height within
     ``z_snap`` of the resting height is snapped onto the table.
@@ -108,6 +107,7 @@ def build_drive(
     n_t = len(trs)
     pusher = np.zeros((n_t, n_s, 3))
     eyaw = np.zeros((n_t, n_s))
+    carry = np.zeros((n_t, n_s, 3))
     grasp = np.zeros((n_t, n_s), dtype=bool)
     obs_t = np.zeros((n_t, n_obs))
     obs_mask = np.zeros((n_t, n_obs), dtype=bool)
@@ -115,10 +115,11 @@ def build_drive(
     iyaw = np.zeros(n_t)
     for i, (tr, lab) in enumerate(zip(trs, labels, strict=True)):
         te = (tr.ee_t_ns - t0[i]) * 1e-9
-        ee_pos = _smooth(te, tr.ee_pos, ee_window)
-        ee_yaw = _smooth(te, np.unwrap(yaw_of(tr.ee_quat))[:, None], ee_window)[:, 0]
+        ee_yaw = np.unwrap(yaw_of(tr.ee_quat))
+        ee_v = _smooth_velocity(te, tr.ee_pos, ee_window)
         for a in range(3):
-            pusher[i, :, a] = np.interp(grid, te, ee_pos[:, a])
+            pusher[i, :, a] = np.interp(grid, te, tr.ee_pos[:, a])
+            carry[i, :, a] = np.interp(grid, te, ee_v[:, a])
         eyaw[i] = np.interp(grid, te, ee_yaw)
         j = np.clip(np.searchsorted(te, grid, side="right") - 1, 0, len(te) - 1)
         grasp[i] = tr.grasp[j]
@@ -145,6 +146,7 @@ def build_drive(
         init_yaw=torch.as_tensor(iyaw, dtype=f),
         obs_t=torch.as_tensor(obs_t, dtype=f),
         obs_mask=torch.as_tensor(obs_mask),
+        carry_vel=torch.as_tensor(carry, dtype=f),
     )
     return drive, t0
 
@@ -172,7 +174,9 @@ def excitations(rec: Recording, labels: list[PhaseLabels]) -> set[str]:
     return have
 
 
-def prepare(recording: object, *, dt: float = 1e-3, noise: NoiseModel | None = None) -> Prepared:
+def prepare(
+    recording: object, *, dt: float = 1e-3, noise: NoiseModel | None = None, ee_window: float = 0.024
+) -> Prepared:
     """Prepare a recording (or recording-like object) for rollouts and residuals."""
     rec = as_recording(recording)
     scene = scene_from_physics(rec.physics, rec.object_name, dt=dt)
@@ -188,7 +192,7 @@ def prepare(recording: object, *, dt: float = 1e-3, noise: NoiseModel | None = N
     if noise is None:
         noise = estimate_noise(rec, labels)
         labels = [segment_phases(tr, sigma_pos=noise.sigma_pos, **seg) for tr in rec.trajectories]
-    drive, t0 = build_drive(rec, scene, labels, dt, z_snap=max(0.003, 4 * noise.sigma_z))
+    drive, t0 = build_drive(rec, scene, labels, dt, z_snap=max(0.003, 4 * noise.sigma_z), ee_window=ee_window)
     n_t, n_obs = drive.obs_t.shape
     mpos = np.zeros((n_t, n_obs, 3))
     myaw = np.zeros((n_t, n_obs))

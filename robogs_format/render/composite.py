@@ -39,6 +39,8 @@ __all__ = ["CompositeImages", "composite_tiles"]
 
 #: F.threshold keeps x > t; a tiny negative t keeps the exact boundary e == exp_min (alpha = 1/255)
 _THRESHOLD_EPS = -1e-30
+#: rho given to ray-splat intersections that do not count (behind the near plane, parallel)
+_FAR_RHO = 1e30
 #: exponent given to masked pairs (see the step); exp of it is a normal float32 number
 _MASKED_EXPONENT = -80.0
 
@@ -105,9 +107,11 @@ def _exponent_2dgs(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Exponent ln o - rho / 2 and depth of every 2DGS pair, [A, P, K] each.
 
-    rho = min(u^2 + v^2, 2 |x - c|^2) with (u, v) from the ray-splat intersection (Huang et al.
-    2024, Eq. 8-10); the intersection counts only in front of the near plane. The depth is that
-    of the intersection, or of the centre where the low-pass term wins.
+    rho = min(u^2 + v^2, s |x - c|^2) with (u, v) from the ray-splat intersection (Huang et al.
+    2024, Eq. 8-11); the intersection counts only in front of the near plane and for rays not
+    parallel to the surfel. The depth is that of the intersection, or of the centre where the
+    low-pass term wins. Selections are written as arithmetic on 0/1 masks: ``torch.where`` is
+    ~20x slower than a multiply on CPU.
     """
     ray = gp[..., 5:17].unflatten(-1, (4, 3))
     Px, Py, Pa, Tw = ray.unbind(-2)
@@ -115,30 +119,32 @@ def _exponent_2dgs(
     zero = torch.zeros_like(ox.expand_as(gp[..., 0]))
     ex = gp[..., 0] - ox
     ey = gp[..., 1] - oy
-    cols = [
-        torch.stack([h0[..., i], Px[..., i], Py[..., i], zero, zero, zero], dim=1) for i in range(3)
-    ]
-    cols.append(
-        torch.stack(
-            [(Tw * h0).sum(-1), (Tw * Px).sum(-1), (Tw * Py).sum(-1), zero, zero, zero], dim=1
-        )
-    )
-    cols.append(
+
+    def poly(c0: torch.Tensor, cx: torch.Tensor, cy: torch.Tensor) -> torch.Tensor:
+        return torch.matmul(mono[:, :3], torch.stack([c0, cx, cy], dim=1))
+
+    hx = poly(h0[..., 0], Px[..., 0], Py[..., 0])
+    hy = poly(h0[..., 1], Px[..., 1], Py[..., 1])
+    hz = poly(h0[..., 2], Px[..., 2], Py[..., 2])
+    zn = poly((Tw * h0).sum(-1), (Tw * Px).sum(-1), (Tw * Py).sum(-1))
+    rho2 = torch.matmul(
+        mono,
         torch.stack(
             [s * (ex * ex + ey * ey), -2 * s * ex, -2 * s * ey, zero + s, zero, zero + s], dim=1
-        )
+        ),
     )
-    q = torch.matmul(mono, torch.cat(cols, dim=2)).unflatten(2, (5, -1))  # [A, P, 5, K]
-    h0_, h1_, h2_, zn, rho2 = q.unbind(2)
-    ok = h2_ != 0
-    h2s = torch.where(ok, h2_, torch.ones_like(h2_))
-    u = h0_ / h2s
-    v = h1_ / h2s
-    zhit = zn / h2s
-    rho3 = u * u + v * v
-    use3 = ok & (zhit > near) & (rho3 <= rho2)
-    rho = torch.where(use3, rho3, rho2)
-    z = torch.where(use3, zhit, gp[:, None, :, 4])
+    dtype = hx.dtype
+    parallel = hz == 0
+    inv = 1.0 / (hz + parallel.to(dtype))
+    u = hx * inv
+    v = hy * inv
+    zhit = zn * inv
+    off = ((zhit <= near) | parallel).to(dtype)
+    rho3 = u * u + v * v + off * _FAR_RHO
+    rho = torch.minimum(rho3, rho2)
+    use3 = (rho3 <= rho2).to(dtype)
+    zc = gp[:, None, :, 4]
+    z = zc + use3 * (zhit - zc)
     return lo[:, None, :] - 0.5 * rho, z
 
 
@@ -262,13 +268,19 @@ def _composite_batch(
         # add exactly nothing; -inf or denormal results would make exp ~10x slower.
         scale = torch.exp(exp_min)[:, None, :]
         if grad:
-            alpha = (torch.exp(F.threshold(e, _THRESHOLD_EPS, _MASKED_EXPONENT)) * scale).clamp_max(MAX_ALPHA)
+            alpha = (torch.exp(F.threshold(e, _THRESHOLD_EPS, _MASKED_EXPONENT)) * scale).clamp_max(
+                MAX_ALPHA
+            )
             c = torch.cumprod(1.0 - alpha, dim=-1)
             w = c[..., :-1] - c[..., 1:]
         else:
             c = F.threshold(e, _THRESHOLD_EPS, _MASKED_EXPONENT, inplace=True).exp_().mul_(scale)
             c = c.clamp_max_(MAX_ALPHA).neg_().add_(1.0)
-            c = torch.cumprod(c, dim=-1, out=c)
+            c = (
+                torch.cumprod(c, dim=-1, out=c)
+                if c.device.type == "cpu"
+                else torch.cumprod(c, dim=-1)
+            )
             w = torch.sub(c[..., :-1], c[..., 1:])
         w = _apply_stop_rule(w, T, c, grad)
         if is_3dgs:
@@ -286,7 +298,9 @@ def _composite_batch(
         if not bool(alive.all()):
             gone = ~alive
             done_ids.append(tiles[gone])
-            done_rows.append(torch.cat([acc[gone][..., 1:], acc[gone][..., :1], acc_med[gone][..., None]], -1))
+            done_rows.append(
+                torch.cat([acc[gone][..., 1:], acc[gone][..., :1], acc_med[gone][..., None]], -1)
+            )
             keep = torch.nonzero(alive).flatten()
             tiles, start, end, ox, oy = tiles[keep], start[keep], end[keep], ox[keep], oy[keep]
             T, acc, acc_med = T[keep], acc[keep], acc_med[keep]

@@ -317,7 +317,7 @@ def validate_camera(camera: Camera) -> list[InputProblem]:
             )
         )
         return problems
-    Td = T.detach().to(torch.float64)
+    Td = T.detach().to(device="cpu", dtype=torch.float64)
     if not bool(torch.isfinite(Td).all()):
         problems.append(
             InputProblem("camera.T_world_cam", "holds NaN or inf", "use a finite rigid transform")

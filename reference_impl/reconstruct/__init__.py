@@ -1,0 +1,1 @@
+"""Reference reconstructor (work in progress)."""

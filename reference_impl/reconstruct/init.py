@@ -1,0 +1,266 @@
+"""Initial Gaussians: samples on the URDF meshes, on the visual hull of the labels, or random.
+
+* ``urdf``: area-uniform samples on every link's visual mesh at the recorded joint state (and,
+  with ``use_assets``, on the asset meshes at their recorded poses); surfels lie in the faces.
+* ``hull``: the visual hull of the labelled foreground (Laurentini 1994): voxels whose
+  projection is foreground (label > 0) in every view that sees them; samples on its boundary
+  with normals from the smoothed occupancy gradient. Hull samples closer than two voxels to a
+  mesh sample are dropped, so known geometry is not doubled.
+* ``random``: uniform points in the workspace box (Kerbl et al. 2023 for scenes without SfM).
+
+Colours are the mean of the pixels the points project to in the views where they face the
+camera and are not hidden behind other points (a point z-buffer at the image resolution).
+Scales are the mean distance to the 3 nearest samples (Kerbl et al. 2023).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import trimesh
+from scipy.spatial import cKDTree
+
+from robogs_format.dataset import Dataset
+from robogs_format.frames import matrix_to_quat, quat_to_matrix
+from robogs_format.render import rgb_to_sh_dc
+
+from .robot_geometry import link_meshes
+from .views import Capture, View
+
+__all__ = ["InitConfig", "InitPoints", "workspace_bounds", "initial_points", "initial_tensors"]
+
+
+@dataclass(frozen=True)
+class InitConfig:
+    """How to seed the Gaussians.
+
+    Attributes:
+        mode: ``auto`` (URDF meshes plus visual hull), ``urdf``, ``hull`` or ``random``.
+        spacing_m: target distance between samples, m (None: 1/150 of the workspace diagonal).
+        hull_resolution: voxels along the longest workspace axis for the visual hull.
+        random_count: number of random points (``random`` mode).
+        use_assets: also sample the asset meshes already in the dataset.
+        seed: sampling seed.
+    """
+
+    mode: str = "auto"
+    spacing_m: float | None = None
+    hull_resolution: int = 96
+    random_count: int = 20_000
+    use_assets: bool = False
+    seed: int = 0
+
+
+@dataclass
+class InitPoints:
+    """Seed points: positions [N, 3] (m, world), unit normals [N, 3] (or NaN) and RGB [N, 3]."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    colors: np.ndarray
+
+
+def _ray_centre(views: list[View]) -> tuple[np.ndarray, float]:
+    """Least-squares point nearest to every optical axis, and the median camera distance to it."""
+    A = np.zeros((3, 3))
+    b = np.zeros(3)
+    centres = []
+    for v in views:
+        T = v.camera.T_world_cam.numpy()
+        c, d = T[:3, 3], T[:3, 2]
+        P = np.eye(3) - np.outer(d, d)
+        A += P
+        b += P @ c
+        centres.append(c)
+    p = np.linalg.lstsq(A, b, rcond=None)[0]
+    return p, float(np.median(np.linalg.norm(np.asarray(centres) - p, axis=1)))
+
+
+def workspace_bounds(capture: Capture, extra_points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned box (lo, hi) [3] m that the cameras look into, grown to hold ``extra_points``."""
+    p, dist = _ray_centre(capture.views)
+    cams = [v.camera for v in capture.views]
+    half = min(math.atan(0.5 * c.height / c.fy) for c in cams)
+    r = dist * math.tan(half)
+    lo, hi = p - r, p + r
+    if extra_points is not None and len(extra_points):
+        pad = 0.05 * np.linalg.norm(extra_points.max(0) - extra_points.min(0))
+        lo = np.minimum(lo, extra_points.min(0) - pad)
+        hi = np.maximum(hi, extra_points.max(0) + pad)
+    return lo, hi
+
+
+def _mesh_samples(meshes: list[trimesh.Trimesh], spacing: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    pts, nrm = [], []
+    for k, m in enumerate(meshes):
+        n = max(8, int(math.ceil(m.area / spacing**2)))
+        p, f = trimesh.sample.sample_surface_even(m, n, radius=0.5 * spacing, seed=seed + k)
+        pts.append(np.asarray(p))
+        nrm.append(np.asarray(m.face_normals)[f])
+    if not pts:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    return np.concatenate(pts), np.concatenate(nrm)
+
+
+def _project(views: list[View], pts: torch.Tensor, v: View) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Pixel (col, row) float coordinates and camera depth of world points [N, 3] (float64)."""
+    T = v.camera.T_world_cam
+    pc = (pts - T[:3, 3]) @ T[:3, :3]
+    z = pc[:, 2]
+    zs = torch.where(z > 1e-9, z, torch.ones_like(z))
+    u = v.camera.fx * pc[:, 0] / zs + v.camera.cx
+    w = v.camera.fy * pc[:, 1] / zs + v.camera.cy
+    return u, w, z
+
+
+def _visual_hull(views: list[View], lo: np.ndarray, hi: np.ndarray, res: int) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary samples [M, 3] and outward normals of the labelled foreground's visual hull."""
+    size = hi - lo
+    vox = float(size.max()) / res
+    dims = np.maximum(np.ceil(size / vox).astype(int), 2)
+    axes = [torch.arange(d, dtype=torch.float64) * vox + lo[i] + 0.5 * vox for i, d in enumerate(dims)]
+    grid = torch.stack(torch.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    occ = torch.ones(len(grid), dtype=torch.bool)
+    seen = torch.zeros(len(grid), dtype=torch.int32)
+    for v in views:
+        if v.labels is None:
+            continue
+        u, w, z = _project(views, grid, v)
+        H, W = v.labels.shape
+        inside = (z > 0) & (u >= 0) & (u < W) & (w >= 0) & (w < H)
+        iu = u.clamp(0, W - 1).long()
+        iw = w.clamp(0, H - 1).long()
+        fg = torch.from_numpy(v.labels > 0)[iw, iu]
+        occ &= ~inside | fg
+        seen += inside.to(torch.int32)
+    occ &= seen >= 2
+    vol = occ.reshape(*dims).to(torch.float64)
+    if vol.sum() == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    pad = torch.nn.functional.pad(vol[None, None], (1, 1, 1, 1, 1, 1))[0, 0]
+    neigh_empty = torch.zeros_like(vol, dtype=torch.bool)
+    for ax in range(3):
+        for s in (0, 2):
+            sl = [slice(1, -1)] * 3
+            sl[ax] = slice(s, s + vol.shape[ax])
+            neigh_empty |= pad[tuple(sl)] == 0
+    surf = (vol > 0) & neigh_empty
+    smooth = torch.nn.functional.avg_pool3d(pad[None, None], 3, stride=1)[0, 0]
+    g = torch.stack(torch.gradient(smooth, spacing=vox), -1)
+    idx = torch.nonzero(surf)
+    n = -g[idx[:, 0], idx[:, 1], idx[:, 2]]
+    n = n / n.norm(dim=1, keepdim=True).clamp(min=1e-12)
+    p = torch.as_tensor(lo) + (idx.to(torch.float64) + 0.5) * vox
+    return p.numpy(), n.numpy()
+
+
+def _point_colors(views: list[View], pts: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Mean pixel colour [N, 3] over the views where each point faces the camera and is frontmost."""
+    P = torch.as_tensor(pts, dtype=torch.float64)
+    N = torch.as_tensor(np.nan_to_num(normals), dtype=torch.float64)
+    acc = torch.zeros(len(P), 3, dtype=torch.float64)
+    cnt = torch.zeros(len(P), dtype=torch.float64)
+    for v in views:
+        u, w, z = _project(views, P, v)
+        H, W = v.rgb.shape[:2]
+        inside = (z > 0) & (u >= 0) & (u < W) & (w >= 0) & (w < H)
+        centre = v.camera.T_world_cam[:3, 3]
+        facing = ((centre - P) * N).sum(1) > 0
+        facing |= N.abs().sum(1) == 0
+        pix = w.clamp(0, H - 1).long() * W + u.clamp(0, W - 1).long()
+        zbuf = torch.full((H * W,), float("inf"), dtype=torch.float64)
+        zbuf.scatter_reduce_(0, pix[inside], z[inside], reduce="amin")
+        front = inside & (z <= zbuf[pix] * 1.02 + 1e-3)
+        ok = front & facing
+        acc[ok] += v.rgb.reshape(-1, 3).to(torch.float64)[pix[ok]]
+        cnt[ok] += 1
+    col = acc / cnt.clamp(min=1)[:, None]
+    col[cnt == 0] = 0.5
+    return col.numpy()
+
+
+def initial_points(ds: Dataset, capture: Capture, train_views: list[View], cfg: InitConfig) -> InitPoints:
+    """Seed points for ``cfg.mode`` (see the module docstring)."""
+    meshes: list[trimesh.Trimesh] = []
+    if cfg.mode in ("auto", "urdf") and ds.manifest.get("robot") and capture.joint_positions:
+        meshes += [lm.world_mesh() for lm in link_meshes(ds, capture.joint_positions).values()]
+    if cfg.use_assets:
+        for name, entry in sorted(ds.assets.items()):
+            if "mesh" not in entry:
+                continue
+            m = ds.mesh(name).copy()
+            pose = capture.object_poses.get(name)
+            if pose is not None:
+                T = np.eye(4)
+                T[:3, :3] = quat_to_matrix(np.asarray(pose[3:], np.float64))
+                T[:3, 3] = pose[:3]
+                m.apply_transform(T)
+            meshes.append(m)
+    mesh_pts = np.concatenate([m.vertices for m in meshes]) if meshes else None
+    lo, hi = workspace_bounds(capture, mesh_pts)
+    spacing = cfg.spacing_m or float(np.linalg.norm(hi - lo)) / 150.0
+    pts, nrm = _mesh_samples(meshes, spacing, cfg.seed)
+    if cfg.mode in ("auto", "hull"):
+        hp, hn = _visual_hull(train_views, lo, hi, cfg.hull_resolution)
+        vox = float((hi - lo).max()) / cfg.hull_resolution
+        if len(pts) and len(hp):
+            d, _ = cKDTree(pts).query(hp, k=1)
+            far = d > 2.0 * vox
+            hp, hn = hp[far], hn[far]
+        if len(hp) and vox < spacing:  # thin hull samples to the target spacing
+            keep = np.random.default_rng(cfg.seed).random(len(hp)) < (vox / spacing) ** 2
+            hp, hn = hp[keep], hn[keep]
+        pts, nrm = np.concatenate([pts, hp]), np.concatenate([nrm, hn])
+    if cfg.mode == "random" or len(pts) == 0:
+        rng = np.random.default_rng(cfg.seed)
+        pts = lo + rng.random((cfg.random_count, 3)) * (hi - lo)
+        nrm = np.full_like(pts, np.nan)
+    colors = _point_colors(train_views, pts, nrm)
+    return InitPoints(pts, nrm, colors)
+
+
+def _quats_from_normals(normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Quaternions (w, x, y, z) whose rotation maps +z to each normal (random where NaN)."""
+    n = normals.copy()
+    bad = ~np.isfinite(n).all(1)
+    n[bad] = rng.normal(size=(int(bad.sum()), 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    a = np.where(np.abs(n[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    t1 = np.cross(a, n)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(n, t1)
+    R = np.stack([t1, t2, n], axis=2)
+    return matrix_to_quat(torch.as_tensor(R)).numpy()
+
+
+def initial_tensors(init: InitPoints, *, kind: str, sh_degree: int, seed: int = 0,
+                    device: torch.device | str = "cpu") -> dict[str, torch.Tensor]:
+    """Parameter tensors (pre-activation) of the seed points, float32 on ``device``."""
+    pts = init.points
+    k = min(4, len(pts))
+    d, _ = cKDTree(pts).query(pts, k=k)
+    dist = np.maximum(d[:, 1:].mean(1) if k > 1 else np.full(len(pts), 1e-2), 1e-5)
+    has_normal = np.isfinite(init.normals).all(1)
+    rng = np.random.default_rng(seed)
+    quats = _quats_from_normals(init.normals, rng)
+    ns = 2 if kind == "2dgs" else 3
+    log_scales = np.repeat(np.log(dist)[:, None], ns, 1)
+    if ns == 3:
+        log_scales[has_normal, 2] = np.log(dist[has_normal] * 0.1)
+    opacity = np.where(has_normal, 0.5, 0.1)
+    K = (sh_degree + 1) ** 2
+
+    def t(x: np.ndarray) -> torch.Tensor:
+        return torch.as_tensor(np.ascontiguousarray(x), dtype=torch.float32, device=device)
+
+    return {
+        "means": t(pts),
+        "quats": t(quats),
+        "log_scales": t(log_scales),
+        "opacity_logits": t(np.log(opacity / (1 - opacity))),
+        "sh_dc": rgb_to_sh_dc(t(init.colors))[:, None, :],
+        "sh_rest": torch.zeros(len(pts), K - 1, 3, dtype=torch.float32, device=device),
+    }
