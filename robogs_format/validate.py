@@ -198,6 +198,7 @@ def validate(
     progress: bool | Callable[[str, int, int], None] = False,
     max_per_code: int = DEFAULT_MAX_PER_CODE,
     label_threads: int = 2,
+    options: dict[str, Any] | None = None,
 ) -> Report:
     """Validate a dataset folder.
 
@@ -210,6 +211,8 @@ def validate(
         progress: True for a progress bar on stderr, or a callback ``(title, done, total)``.
         max_per_code: findings kept per code; the rest are counted in ``Report.dropped``.
         label_threads: threads decoding label images.
+        options: settings for checks that take them (``CheckContext.options``), e.g.
+            ``{"stride": 4}`` for the binding re-render.
 
     Returns:
         The :class:`Report`.
@@ -222,7 +225,9 @@ def validate(
     select_l = list(select or [])
     ignore_l = list(ignore or [])
     checks = select_checks(available_checks(), select=select_l, ignore=ignore_l, quick=quick)
-    ctx = CheckContext(path, quick=quick, budgets=budgets, label_threads=label_threads)
+    ctx = CheckContext(
+        path, quick=quick, budgets=budgets, label_threads=label_threads, options=options
+    )
     runner = _Runner(ctx, max_per_code)
     for msg in plugin_errors():
         runner.add(Finding("X004", "warning", msg, Location(), hint="fix or uninstall the plug-in"))

@@ -68,6 +68,16 @@ def _initial_pose(pos: np.ndarray, yaw: np.ndarray, lab: PhaseLabels) -> tuple[n
     return pos[0].copy(), float(yaw[0])
 
 
+def _smooth(t: np.ndarray, x: np.ndarray, window: float) -> np.ndarray:
+    """Savitzky-Golay smoothing (quadratic over ``window`` seconds) of EE samples [E, D]."""
+    period = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    n = int(round(window / period)) | 1
+    if window <= 0 or len(t) < 5 or n < 5:
+        return x
+    n = min(n, len(t) if len(t) % 2 else len(t) - 1)
+    return savgol_filter(x, n, 2, axis=0, mode="interp")
+
+
 def _smooth_velocity(t: np.ndarray, x: np.ndarray, window: float) -> np.ndarray:
     """Savitzky-Golay velocity (quadratic fit over ``window`` seconds) of EE samples [E, D]."""
     period = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
@@ -85,10 +95,12 @@ def build_drive(
     dt: float,
     z_snap: float = 0.003,
     ee_window: float = 0.024,
+    pos_window: float = 0.016,
 ) -> tuple[Drive, np.ndarray]:
     """Resample the EE onto a grid of step ``dt`` from each trajectory's first stamp.
 
-    Contacts use the measured EE positions as they are. The velocity an object inherits when
+    Contacts use the EE positions lightly smoothed (quadratic Savitzky-Golay over
+    ``pos_window`` s: wider windows round off sharp pusher stops). The velocity an object inherits when
     the grasp opens is a Savitzky & Golay (1964) derivative over ``ee_window`` s, so that
     encoder noise does not turn into spurious release velocities.
 
@@ -117,8 +129,9 @@ def build_drive(
         te = (tr.ee_t_ns - t0[i]) * 1e-9
         ee_yaw = np.unwrap(yaw_of(tr.ee_quat))
         ee_v = _smooth_velocity(te, tr.ee_pos, ee_window)
+        ee_p = _smooth(te, tr.ee_pos, pos_window)
         for a in range(3):
-            pusher[i, :, a] = np.interp(grid, te, tr.ee_pos[:, a])
+            pusher[i, :, a] = np.interp(grid, te, ee_p[:, a])
             carry[i, :, a] = np.interp(grid, te, ee_v[:, a])
         eyaw[i] = np.interp(grid, te, ee_yaw)
         j = np.clip(np.searchsorted(te, grid, side="right") - 1, 0, len(te) - 1)

@@ -116,8 +116,14 @@ def _project(views: list[View], pts: torch.Tensor, v: View) -> tuple[torch.Tenso
     return u, w, z
 
 
-def _visual_hull(views: list[View], lo: np.ndarray, hi: np.ndarray, res: int) -> tuple[np.ndarray, np.ndarray]:
-    """Boundary samples [M, 3] and outward normals of the labelled foreground's visual hull."""
+def _visual_hull(views: list[View], lo: np.ndarray, hi: np.ndarray, res: int,
+                 known: set[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary samples [M, 3] and outward normals of the labelled foreground's visual hull.
+
+    With ``known`` label ids (parts already seeded from meshes), a hull voxel is kept only if
+    more views see it as another label than as a known one: the hull's excess around the known
+    parts (concavities, too few views) would otherwise become floaters.
+    """
     size = hi - lo
     vox = float(size.max()) / res
     dims = np.maximum(np.ceil(size / vox).astype(int), 2)
@@ -125,6 +131,10 @@ def _visual_hull(views: list[View], lo: np.ndarray, hi: np.ndarray, res: int) ->
     grid = torch.stack(torch.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     occ = torch.ones(len(grid), dtype=torch.bool)
     seen = torch.zeros(len(grid), dtype=torch.int32)
+    votes = torch.zeros(len(grid), dtype=torch.int32)
+    known_lut = torch.zeros(1 << 16, dtype=torch.bool)
+    if known:
+        known_lut[torch.tensor(sorted(known), dtype=torch.long)] = True
     for v in views:
         if v.labels is None:
             continue
@@ -133,10 +143,16 @@ def _visual_hull(views: list[View], lo: np.ndarray, hi: np.ndarray, res: int) ->
         inside = (z > 0) & (u >= 0) & (u < W) & (w >= 0) & (w < H)
         iu = u.clamp(0, W - 1).long()
         iw = w.clamp(0, H - 1).long()
-        fg = torch.from_numpy(v.labels > 0)[iw, iu]
+        lab = torch.from_numpy(v.labels)[iw, iu]
+        fg = lab > 0
         occ &= ~inside | fg
         seen += inside.to(torch.int32)
+        if known:
+            is_known = known_lut[lab.clamp(0, (1 << 16) - 1)]
+            votes += (inside & fg & ~is_known).to(torch.int32) - (inside & is_known).to(torch.int32)
     occ &= seen >= 2
+    if known:
+        occ &= votes > 0
     vol = occ.reshape(*dims).to(torch.float64)
     if vol.sum() == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
@@ -185,8 +201,11 @@ def _point_colors(views: list[View], pts: np.ndarray, normals: np.ndarray) -> np
 def initial_points(ds: Dataset, capture: Capture, train_views: list[View], cfg: InitConfig) -> InitPoints:
     """Seed points for ``cfg.mode`` (see the module docstring)."""
     meshes: list[trimesh.Trimesh] = []
+    known: set[int] = set()
     if cfg.mode in ("auto", "urdf") and ds.manifest.get("robot") and capture.joint_positions:
-        meshes += [lm.world_mesh() for lm in link_meshes(ds, capture.joint_positions).values()]
+        lms = link_meshes(ds, capture.joint_positions)
+        meshes += [lm.world_mesh() for lm in lms.values()]
+        known |= {s.label_id for s in capture.segments.values() if s.target in lms}
     if cfg.use_assets:
         for name, entry in sorted(ds.assets.items()):
             if "mesh" not in entry:
@@ -199,12 +218,13 @@ def initial_points(ds: Dataset, capture: Capture, train_views: list[View], cfg: 
                 T[:3, 3] = pose[:3]
                 m.apply_transform(T)
             meshes.append(m)
+            known |= {s.label_id for s in capture.segments.values() if s.target == name}
     mesh_pts = np.concatenate([m.vertices for m in meshes]) if meshes else None
     lo, hi = workspace_bounds(capture, mesh_pts)
-    spacing = cfg.spacing_m or float(np.linalg.norm(hi - lo)) / 150.0
+    spacing = cfg.spacing_m or float(np.linalg.norm(hi - lo)) / 110.0
     pts, nrm = _mesh_samples(meshes, spacing, cfg.seed)
     if cfg.mode in ("auto", "hull"):
-        hp, hn = _visual_hull(train_views, lo, hi, cfg.hull_resolution)
+        hp, hn = _visual_hull(train_views, lo, hi, cfg.hull_resolution, known)
         vox = float((hi - lo).max()) / cfg.hull_resolution
         if len(pts) and len(hp):
             d, _ = cKDTree(pts).query(hp, k=1)
@@ -236,13 +256,17 @@ def _quats_from_normals(normals: np.ndarray, rng: np.random.Generator) -> np.nda
     return matrix_to_quat(torch.as_tensor(R)).numpy()
 
 
-def initial_tensors(init: InitPoints, *, kind: str, sh_degree: int, seed: int = 0,
+def initial_tensors(init: InitPoints, *, kind: str, sh_degree: int, seed: int = 0, scale_factor: float = 0.5,
                     device: torch.device | str = "cpu") -> dict[str, torch.Tensor]:
-    """Parameter tensors (pre-activation) of the seed points, float32 on ``device``."""
+    """Parameter tensors (pre-activation) of the seed points, float32 on ``device``.
+
+    Standard deviations are ``scale_factor`` times the mean distance to the 3 nearest seeds
+    (Kerbl et al. use 1; half keeps surfels seeded on a surface from bleeding past its edges).
+    """
     pts = init.points
     k = min(4, len(pts))
     d, _ = cKDTree(pts).query(pts, k=k)
-    dist = np.maximum(d[:, 1:].mean(1) if k > 1 else np.full(len(pts), 1e-2), 1e-5)
+    dist = scale_factor * np.maximum(d[:, 1:].mean(1) if k > 1 else np.full(len(pts), 1e-2), 1e-5)
     has_normal = np.isfinite(init.normals).all(1)
     rng = np.random.default_rng(seed)
     quats = _quats_from_normals(init.normals, rng)

@@ -112,6 +112,9 @@ class CheckContext:
         quick: only the manifest and parquet footers may be read.
         budgets: budget overrides on top of the dataset's (e.g. from ``--budget``).
         label_threads: decoder threads for label images.
+        progress: called with a short note when a long step starts.
+        options: free-form settings for checks that take them (e.g. the binding
+            re-render's ``stride``); unknown keys are ignored.
 
     Raises:
         FormatError: the folder or its manifest cannot be read at all (the caller
@@ -126,8 +129,10 @@ class CheckContext:
         budgets: dict[str, float] | None = None,
         label_threads: int = 2,
         progress: Callable[[str], None] | None = None,
+        options: dict[str, Any] | None = None,
     ) -> None:
         self.root = Path(root)
+        self.options: dict[str, Any] = dict(options or {})
         self.quick = quick
         self.label_threads = label_threads
         self.progress = progress or (lambda _msg: None)
@@ -473,14 +478,29 @@ class CheckContext:
         Link meshes are loaded by the geometry checks themselves (faster than building
         yourdfpy's scene graph).
         """
-        from ..urdf import load_urdf
-
         robot = self.manifest.get("robot") or {}
         rel = robot.get("urdf") if isinstance(robot, dict) else None
         if not isinstance(rel, str):
             raise InputReported("robot/urdf")
         path = self.existing(rel)
-        return self._cached(("urdf",), lambda: load_urdf(path, root=self.root, load_meshes=False))
+        return self._cached(("urdf",), lambda: self._load_urdf(path))
+
+    def _load_urdf(self, path: Path) -> yourdfpy.URDF:
+        """Kinematic model plus ``robogs_mesh_refs`` (resolved mesh paths), without loading meshes."""
+        from ..urdf import MeshRef, load_urdf, mesh_refs, resolve_mesh_uri
+
+        urdf = load_urdf(path, root=self.root, load_meshes=False)
+        refs: list[MeshRef] = []
+        cache: dict[str, Path] = {}
+        for ref in mesh_refs(urdf):
+            try:
+                resolved = resolve_mesh_uri(ref.uri, path, self.root, _cache=cache)
+            except RobogsError:
+                continue  # reported by I007 (escapes) or G001 (unresolvable)
+            if resolved.is_file():
+                refs.append(MeshRef(ref.link, ref.kind, ref.uri, resolved))
+        urdf.robogs_mesh_refs = refs
+        return urdf
 
     def urdf_path(self) -> Path:
         """Absolute path of the robot URDF (unsafe or missing: :class:`InputReported`)."""
