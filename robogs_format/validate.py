@@ -162,8 +162,11 @@ def select_checks(
     select = [s for s in (select or []) if s.strip()]
     ignore = [s for s in (ignore or []) if s.strip()]
     for s in (*select, *ignore):
-        if not any(_matches(c, s) for c in checks) and not any(
-            k.startswith(s.strip().upper()) for k in RUNNER_CODES
+        known_group = s.strip().lower() in GROUPS
+        if (
+            not known_group
+            and not any(_matches(c, s) for c in checks)
+            and not any(k.startswith(s.strip().upper()) for k in RUNNER_CODES)
         ):
             raise FormatError(
                 f"no check matches {s!r}",

@@ -26,7 +26,7 @@ from .constants import (
 )
 from .gaussians import Gaussians
 from .output import RenderOutput
-from .rotation import quat_to_rotmat
+from ..frames import quat_to_matrix as quat_to_rotmat
 from .sh import eval_sh
 
 __all__ = ["render_dense"]

@@ -37,7 +37,7 @@ from .constants import (
     MAX_EXPONENT,
 )
 from .gaussians import Gaussians
-from .rotation import quat_to_rotmat
+from ..frames import quat_to_matrix as quat_to_rotmat
 from .sh import eval_sh
 
 __all__ = ["Projected", "project", "lowpass_inv_sq"]

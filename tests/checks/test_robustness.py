@@ -12,7 +12,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from robogs_format.validate import validate
+from .scope import validate
 
 
 def _edit_manifest(root: Path, fn: Callable[[dict], None]) -> None:
