@@ -139,8 +139,9 @@ class LabelChannels:
 def label_channels(binding: Binding, segments: pa.Table) -> LabelChannels:
     """Map the binding's targets to label ids through a ``segments`` table.
 
-    A target is matched by name against the ``target`` column (first row wins). Targets that no
-    segment names get no channel (listed in ``unlabelled_targets``).
+    A target is matched by name against the ``target`` column (first row wins); a labelled
+    target keeps its channel even when no Gaussian is bound to it (it then re-renders empty).
+    Targets with Gaussians that no segment names get no channel (``unlabelled_targets``).
     """
     names = [str(x) for x in segments.column("target").to_pylist()]
     ids = segments.column("label_id").to_numpy().astype(np.int64)
@@ -150,6 +151,7 @@ def label_channels(binding: Binding, segments: pa.Table) -> LabelChannels:
             by_name[n] = int(i)
     present = np.zeros(len(binding.targets), bool)
     present[np.unique(binding.target_index[binding.target_index >= 0].cpu().numpy())] = True
+    present |= np.array([tg.name in by_name for tg in binding.targets], bool)
     label_ids: list[int] = []
     cnames: list[str] = []
     kinds: list[str] = []
@@ -574,7 +576,7 @@ def _growth_into_background(gu: np.ndarray, gv: np.ndarray) -> np.ndarray:
 
 def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[np.ndarray], *,
                   fit_offset: bool = True, fit_depth: bool = False, schedule: Sequence[float] = BLUR_SCHEDULE_PX,
-                  max_offset_ms: float = 200.0, refine_ms: float = 4.0,
+                  max_offset_ms: float = 200.0, refine_ms: float = 0.0,
                   motion_px: Sequence[float] | None = None) -> AlignmentFit:
     """Estimate the camera time offset and a camera translation from label disagreement.
 
@@ -588,9 +590,9 @@ def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[
     (Longuet-Higgins & Prazdny 1980). A nuisance parameter grows every label into the background
     by the same amount (:func:`_growth_into_background`): it absorbs the silhouette growth of
     splats over their mesh, which one-sided edges (a table cut by the image border) would
-    otherwise read as a camera translation. Last, the offset is refined by the vertex of a
-    parabola through the unblurred disagreement at ``offset ± refine_ms`` (renders, no
-    linearisation).
+    otherwise read as a camera translation. With ``refine_ms > 0`` the offset is last refined by
+    the vertex of a parabola through the unblurred disagreement at ``offset ± refine_ms``
+    (two more renders per frame).
 
     Args:
         rr: the re-renderer.
@@ -601,8 +603,8 @@ def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[
             trades off against the label growth).
         schedule: blur (px) of each iteration; its length is the number of iterations.
         max_offset_ms: offsets are kept within ±this.
-        refine_ms: half-width of the final parabola fit of the offset on the unblurred
-            disagreement (0: none).
+        refine_ms: half-width of an optional final parabola fit of the offset on the unblurred
+            disagreement (0: none; on small, slowly moving images it is no more precise).
         motion_px: image speed of each frame (reported; all zero makes the offset unobservable).
 
     Returns:

@@ -99,7 +99,7 @@ class Engine:
         problems: Sequence[Problem],
         *,
         progress: Callable[[int, int], None] | None = None,
-        max_iter: int = 25,
+        max_iter: int = 20,
     ) -> list[FitOutcome]:
         """Fit problems over ``space`` (all at once)."""
         fn = residual_fn(self.prep, space)

@@ -193,19 +193,32 @@ def _normal_equations(
 
 
 def _step(st: _State, space: ParamSpace, mask_t: np.ndarray, n_local: int) -> tuple[np.ndarray, np.ndarray]:
+    """Damped Gauss-Newton step; globals pinned at a bound they push against are held there
+    (active set), the rest re-solved, then the step is projected on the bounds."""
     a, g, tsel = _normal_equations(st, mask_t, n_local)
+    p = len(st.prob.free)
+    free = np.asarray(st.prob.free, dtype=int)
     d = np.diag(a).copy()
     d = np.where(d > 0, d, 1.0)
     lhs = a + st.lam * np.diag(d) + 1e-12 * np.eye(len(d)) * d.max()
-    try:
-        delta = -np.linalg.solve(lhs, g)
-    except np.linalg.LinAlgError:
-        delta = -g / np.diag(lhs)
-    p = len(st.prob.free)
+    keep = np.ones(len(d), dtype=bool)
+    lo, hi = space.lower[free], space.upper[free]
+    th = st.theta[free]
+    delta = np.zeros(len(d))
+    for _ in range(3):
+        idx = np.flatnonzero(keep)
+        try:
+            sol = -np.linalg.solve(lhs[np.ix_(idx, idx)], g[idx])
+        except np.linalg.LinAlgError:
+            sol = -g[idx] / np.diag(lhs)[idx]
+        delta = np.zeros(len(d))
+        delta[idx] = sol
+        stuck = ((th <= lo + 1e-12) & (delta[:p] < 0)) | ((th >= hi - 1e-12) & (delta[:p] > 0))
+        if not stuck.any():
+            break
+        keep[:p] &= ~stuck
     theta = st.theta.copy()
-    theta[st.prob.free] = np.clip(
-        theta[st.prob.free] + delta[:p], space.lower[st.prob.free], space.upper[st.prob.free]
-    )
+    theta[free] = np.clip(th + delta[:p], lo, hi)
     local = st.local.copy()
     if st.prob.fit_local:
         for k, t in enumerate(tsel):
@@ -224,10 +237,10 @@ def fit_problems(
     *,
     n_traj: int,
     n_local: int = 3,
-    max_iter: int = 30,
+    max_iter: int = 20,
     rel_step: float = 1e-3,
     local_h: Sequence[float] = (1e-4, 1e-4, 1e-3),
-    ftol: float = 1e-7,
+    ftol: float = 1e-5,
     progress: Callable[[int, int], None] | None = None,
 ) -> list[FitOutcome]:
     """Solve all ``problems`` together (see module docstring).
@@ -277,8 +290,8 @@ def fit_problems(
                 if not first and improve < ftol:
                     st.done, st.converged = True, True
             else:
-                st.lam *= 4.0
-                if st.lam > 1e8:
+                st.lam *= 10.0
+                if st.lam > 1e6:
                     st.done, st.converged = True, True
             st.it += 1
             if not st.done and st.it >= max_iter:

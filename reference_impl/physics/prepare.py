@@ -61,10 +61,12 @@ class Prepared:
 
 def _initial_pose(pos: np.ndarray, yaw: np.ndarray, lab: PhaseLabels) -> tuple[np.ndarray, float]:
     static = ~lab.moving & np.isin(lab.label, [PHASES.index("rest"), PHASES.index("grasp")])
-    r = runs(static)
-    if r and r[0][0] == 0 and r[0][1] >= 3:
-        b = r[0][1] - 1
-        return np.median(pos[:b], axis=0), float(np.median(yaw[:b]))
+    for a, b in runs(static):
+        if a > 5:
+            break
+        if b - a >= 3:
+            b = b - 1  # the last static sample may already move
+            return np.median(pos[a:b], axis=0), float(np.median(yaw[a:b]))
     return pos[0].copy(), float(yaw[0])
 
 

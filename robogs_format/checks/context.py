@@ -203,7 +203,7 @@ class CheckContext:
         """True when the manifest's spec version is a newer minor of this reader's major."""
         try:
             theirs = parse_version(str(self.manifest.get("spec_version", "")))
-        except FormatError:
+        except VersionError:
             return False
         ours = parse_version(SPEC_VERSION)
         return theirs[0] == ours[0] and theirs[1] > ours[1]

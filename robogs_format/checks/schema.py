@@ -9,7 +9,7 @@ import numpy as np
 import pyarrow as pa
 
 from ..dataset import MANIFEST_NAME
-from ..errors import FormatError, RobogsError
+from ..errors import FormatError, RobogsError, VersionError
 from ..findings import Finding
 from ..jsonio import read_json
 from ..schemas import schema_problems
@@ -24,7 +24,7 @@ __all__: list[str] = []
 def _theirs(ctx: CheckContext) -> tuple[int, int, int] | None:
     try:
         return parse_version(str(ctx.manifest.get("spec_version", "")))
-    except FormatError:
+    except VersionError:
         return None
 
 

@@ -258,3 +258,20 @@ def test_bad_splats_do_not_stop_the_rerender(scene_copy) -> None:
     assert [f.code for f in findings if f.severity != "info"] == ["B007"]
     ep, stream = _stream(root)
     assert all(math.isfinite(x.iou) for x in label_summary(ctx, ep, stream) if x.pixels)
+
+
+def test_scaled_render_camera_keeps_pixel_edges() -> None:
+    from robogs_format.cameras import CameraModel
+    from robogs_format.errors import InputError
+    from robogs_format.rerender import RerenderOptions, _render_camera
+
+    model = CameraModel("c", 640, 480, 500.0, 510.0, 320.5, 240.25, T_world_cam=np.eye(4))
+    cam = _render_camera(model, np.eye(4), 0.5)
+    assert (cam.width, cam.height) == (320, 240)
+    x = np.array([0.1, -0.05, 1.3])  # a point in the camera frame
+    full = np.array([model.fx * x[0] / x[2] + model.cx, model.fy * x[1] / x[2] + model.cy])
+    half = np.array([cam.fx * x[0] / x[2] + cam.cx, cam.fy * x[1] / x[2] + cam.cy])
+    assert np.allclose(half, 0.5 * full)  # pixel-edge coordinates scale exactly
+    for bad in ({"stride": 0}, {"scale": 0.0}, {"scale": -1.0}, {"fit_frames": 0}):
+        with pytest.raises(InputError):
+            RerenderOptions(**bad)
