@@ -404,9 +404,35 @@ def simulate(
         rel_p = torch.where(on.unsqueeze(-1), torch.stack([rx, ry, d[..., 2]], dim=-1), rel_p)
         rel_yaw = torch.where(on, yaw - ee_yaw[:, 0].unsqueeze(0), rel_yaw)
 
+    # from which step on the drive no longer changes (EE within 0.5 mm of its final position,
+    # grasp constant): once every object is also at rest (exact zeros thanks to the
+    # velocity-level sticking), the rest of the rollout is constant and is not integrated
+    to_end = (drive.pusher - drive.pusher[:, -1:]).norm(dim=-1).cpu().numpy()  # [T, S]
+    moving_drive = np.flip(np.maximum.accumulate(np.flip(to_end, axis=1), axis=1), axis=1) > 5e-4
+    moving_drive = moving_drive.any(axis=0)
+    moving_drive[1:] |= (grasp_np[:, 1:] != grasp_np[:, :-1]).any(axis=0)
+    idx = np.flatnonzero(moving_drive)
+    static_from = int(idx[-1]) + 2 if idx.size else 0
+
+    # until the first step where some pusher gets near its box (or a grasp starts), resting
+    # boxes stay as they are: those steps are skipped once the first step shows them at rest
+    reach = 0.5 * float(np.hypot(*scene.size[:2])) + scene.pusher_radius + 0.5 * scene.pusher_length + 0.01
+    near = (drive.pusher[..., :2] - drive.init_pos[:, None, :2]).norm(dim=-1).cpu().numpy() < reach
+    near |= grasp_np
+    quiet_until = int(np.argmax(near.any(axis=0))) if near.any() else n_s - 1
+    quiet_until = max(quiet_until - 2, 0)
+
     traj_p = [p]
     traj_y = [yaw]
-    for k in range(n_s - 1):
+    k = -1
+    while k < n_s - 2:
+        k += 1
+        if k == 1 and quiet_until > 1 and not bool((v.abs().amax() > 0) | (w.abs().amax() > 0)):
+            traj_p.extend([p] * (quiet_until - 1))
+            traj_y.extend([yaw] * (quiet_until - 1))
+            k = quiet_until
+        if k >= static_from and k % 20 == 0 and not bool((v.abs().amax() > 0) | (w.abs().amax() > 0)):
+            break
         if onset_any[k + 1]:
             # relative transform of the object in the EE frame at grasp onset (yaw-only EE frame)
             on = onset[:, k + 1].view(1, n_t)
@@ -496,6 +522,10 @@ def simulate(
 
     dense_p = torch.stack(traj_p, dim=2)  # CoM [M, T, S, 3]
     dense_y = torch.stack(traj_y, dim=2)
+    if dense_p.shape[2] < n_s:  # stopped early: everything rests from here on
+        pad = n_s - dense_p.shape[2]
+        dense_p = torch.cat([dense_p, dense_p[:, :, -1:].expand(-1, -1, pad, -1)], dim=2)
+        dense_y = torch.cat([dense_y, dense_y[:, :, -1:].expand(-1, -1, pad)], dim=2)
     offx, offy = yaw_rotate(com_x.unsqueeze(-1), com_y.unsqueeze(-1), dense_y)
     dense_o = torch.stack([dense_p[..., 0] - offx, dense_p[..., 1] - offy, dense_p[..., 2]], dim=-1)
 

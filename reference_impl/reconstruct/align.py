@@ -102,7 +102,7 @@ class AlignmentResult:
 
 
 def align_to_meshes(points: dict[str, np.ndarray], meshes: dict[str, trimesh.Trimesh], *,
-                    with_scale: bool = True, iterations: int = 30, samples: int = 20_000,
+                    with_scale: bool = True, iterations: int = 100, samples: int = 20_000,
                     seed: int = 0) -> AlignmentResult:
     """Fit a similarity taking labelled points onto the meshes of the same names (ICP + Umeyama).
 

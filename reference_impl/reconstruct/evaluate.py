@@ -3,9 +3,11 @@
 Image metrics render the dataset's *bound* Gaussians (posed through the binding at each view's
 stamp, so the whole Gaussian–Mesh–Pixel chain is evaluated) into the held-out views and compare
 with the recorded frames and labels: PSNR, SSIM (``image_metrics``) and the label IoU per link
-and object (argmax of one-hot label channels rendered with the colour; a pixel is "nothing" when
-the rendered label mass is below one half of the remainder). Held-out views default to those the
-reconstruction left out (``manifest.provenance.reconstruction.heldout``).
+and object (argmax over "nothing" = 1 - rendered label mass and the one-hot label channels
+rendered with the colour). The report's IoU per label pools intersections and unions over all
+held-out views (as PASCAL VOC does), and mIoU is their mean; per-view values are kept too.
+Held-out views default to those the reconstruction left out
+(``manifest.provenance.reconstruction.heldout``).
 
 Mesh metrics compare ``reconstruction/mesh.ply`` (or ``mesh=``) with a reference mesh
 (``mesh_metrics``). With ``visible_only`` the reference keeps only the samples that some camera
@@ -15,7 +17,6 @@ like the observation masks of the DTU benchmark: surfaces no camera saw cannot b
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,13 +41,15 @@ __all__ = ["ViewMetrics", "EvaluationReport", "evaluate", "visible_mask"]
 
 @dataclass
 class ViewMetrics:
-    """Metrics of one held-out view (IoU per label id)."""
+    """Metrics of one held-out view: IoU per label id, and the pixel counts behind it."""
 
     key: str
     psnr_db: float
     ssim: float
     miou: float
     iou: dict[int, float]
+    inter: dict[int, int] = field(default_factory=dict)
+    union: dict[int, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -58,6 +61,7 @@ class EvaluationReport:
     psnr_db: float = float("nan")
     ssim: float = float("nan")
     miou: float = float("nan")
+    iou: dict[int, float] = field(default_factory=dict)
     mesh: MeshMetrics | None = None
     robogs_compat: dict[str, float] | None = None
     reference: str | None = None
@@ -143,6 +147,10 @@ def _image_metrics(ds: Dataset, views: list[View], episode: str, device: str) ->
             present = sorted(set(np.unique(pred).tolist() + np.unique(truth).tolist()) - {0})
             ious = label_iou(pred, truth, present)
             miou = float(np.mean(list(ious.values()))) if ious else float("nan")
+            inter = {lab: int(((pred == lab) & (truth == lab)).sum()) for lab in present}
+            union = {lab: int(((pred == lab) | (truth == lab)).sum()) for lab in present}
+            out.append(ViewMetrics(v.key, p, s, miou, ious, inter, union))
+            continue
         out.append(ViewMetrics(v.key, p, s, miou, ious))
     return out
 
@@ -184,8 +192,14 @@ def evaluate(
                              hint="run robogs reconstruct first") from None
         rep.psnr_db = float(np.mean([m.psnr_db for m in rep.views]))
         rep.ssim = float(np.mean([m.ssim for m in rep.views]))
-        mi = [m.miou for m in rep.views if math.isfinite(m.miou)]
-        rep.miou = float(np.mean(mi)) if mi else float("nan")
+        inter: dict[int, int] = {}
+        union: dict[int, int] = {}
+        for m in rep.views:
+            for lab, n in m.inter.items():
+                inter[lab] = inter.get(lab, 0) + n
+                union[lab] = union.get(lab, 0) + m.union[lab]
+        rep.iou = {lab: inter[lab] / union[lab] for lab in sorted(union) if union[lab] > 0}
+        rep.miou = float(np.mean(list(rep.iou.values()))) if rep.iou else float("nan")
     if reference is not None:
         pred_path = Path(mesh) if mesh is not None else ds.resolve("reconstruction/mesh.ply")
         pred = _load_mesh(pred_path)

@@ -95,7 +95,7 @@ def fuse_tsdf(
     *,
     resolution: int = 128,
     trunc_voxels: float = 4.0,
-    block: int = 8,
+    block: int = 4,
     max_voxels: int = 64_000_000,
 ) -> TSDFVolume:
     """Fuse depth maps into a narrow-band TSDF over the box [lo, hi].

@@ -148,20 +148,18 @@ def _png_sub_runs(blob: bytes) -> tuple[tuple[int, int], tuple[np.ndarray, ...]]
     rows = np.frombuffer(raw, np.uint8).reshape(H, 1 + 2 * W)
     if np.any(rows[:, 0] != 1):
         return None  # None/Up/Average/Paeth rows: decode fully
-    hi, lo = rows[:, 1::2], rows[:, 2::2]
-    start = (hi | lo) != 0
+    delta = np.ascontiguousarray(rows[:, 1:]).view(">u2")  # [H, W] bytewise deltas, as pairs
+    start = delta != 0
     start[:, 0] = True
     st = np.flatnonzero(start)
+    d = delta.ravel()[st].astype(np.int64)
     # per-lane running sums of the deltas at run starts, restarted at each row (mod 256)
-    d_hi = np.cumsum(hi.ravel()[st], dtype=np.int64)
-    d_lo = np.cumsum(lo.ravel()[st], dtype=np.int64)
+    d_hi = np.cumsum(d >> 8)
+    d_lo = np.cumsum(d & 255)
     row_first = np.flatnonzero(st % W == 0)
-    before_hi = np.repeat(
-        np.concatenate([[0], d_hi[row_first[1:] - 1]]), np.diff(np.append(row_first, st.size))
-    )
-    before_lo = np.repeat(
-        np.concatenate([[0], d_lo[row_first[1:] - 1]]), np.diff(np.append(row_first, st.size))
-    )
+    per_row = np.diff(np.append(row_first, st.size))
+    before_hi = np.repeat(np.concatenate([[0], d_hi[row_first[1:] - 1]]), per_row)
+    before_lo = np.repeat(np.concatenate([[0], d_lo[row_first[1:] - 1]]), per_row)
     lab = ((d_hi - before_hi) % 256) * 256 + (d_lo - before_lo) % 256
     return (H, W), _boxes_from_runs(st, lab, W, H * W)
 
