@@ -431,7 +431,7 @@ def simulate(
             traj_p.extend([p] * (quiet_until - 1))
             traj_y.extend([yaw] * (quiet_until - 1))
             k = quiet_until
-        if k >= static_from and k % 20 == 0 and not bool((v.abs().amax() > 0) | (w.abs().amax() > 0)):
+        if k > static_from and k % 20 == 0 and not bool((v.abs().amax() > 0) | (w.abs().amax() > 0)):
             break
         if onset_any[k + 1]:
             # relative transform of the object in the EE frame at grasp onset (yaw-only EE frame)

@@ -789,20 +789,11 @@ def _boxes3d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 )
 
 
-def _rest_pose(ctx: CheckContext, name: str) -> np.ndarray | None:
-    """[7] (x, y, z, qw, qx, qy, qz) of a static object from a splat entry's rest state, if declared."""
-    entries = [(ctx.manifest.get("robot") or {}).get("splats")]
-    entries += [
-        a.get("splats") for a in (ctx.manifest.get("assets") or {}).values() if isinstance(a, dict)
-    ]
-    for e in entries:
-        pose = (
-            ((e or {}).get("rest") or {}).get("object_poses", {}).get(name)
-            if isinstance(e, dict)
-            else None
-        )
-        if isinstance(pose, list) and len(pose) == 7:
-            return np.asarray(pose, np.float64)
+def _static_pose(ctx: CheckContext, name: str) -> np.ndarray | None:
+    """[7] (x, y, z, qw, qx, qy, qz) of a static asset from ``assets.<name>.pose``, if declared."""
+    pose = ((ctx.manifest.get("assets") or {}).get(name) or {}).get("pose")
+    if isinstance(pose, list) and len(pose) == 7:
+        return np.asarray(pose, np.float64)
     return None
 
 
@@ -812,7 +803,7 @@ def _table_top(
     """(top z in m, xy min, xy max) of a table asset in the world.
 
     The table is static: its pose is the first ``object_poses`` sample, else the
-    rest pose declared with the splats, else the identity.
+    asset's declared ``pose``, else the identity.
     """
     verts = _usable_mesh(ctx, table)
     if verts is None:
@@ -821,7 +812,7 @@ def _table_top(
     if poses is not None:
         pose = np.concatenate([poses[1][0], poses[2][0]])
     else:
-        pose = _rest_pose(ctx, table)
+        pose = _static_pose(ctx, table)
     if pose is not None:
         verts = verts @ quat_to_matrix_np(pose[None, 3:])[0].T + pose[:3]
     return float(verts[:, 2].max()), verts[:, :2].min(axis=0), verts[:, :2].max(axis=0)
