@@ -69,7 +69,11 @@ def _one(args: tuple[str, str, int]) -> dict:
     true_row = next((r for r in rows if r.name == effect), None)
     if true_row is not None:
         truth = rec.meta["true_params"]
-        errs = [abs(p.value - truth[p.name]) / abs(truth[p.name]) for p in true_row.params if truth.get(p.name)]
+        errs = [
+            abs(p.value - truth[p.name]) / abs(truth[p.name])
+            for p in true_row.params
+            if truth.get(p.name)
+        ]
         out["param_rel_err"] = float(np.median(errs)) if errs else None
         out["rms_after_true"] = true_row.rms_after
         if effect == "time_offset":
@@ -110,7 +114,9 @@ def _table(results: list[dict], noise: str) -> tuple[list[str], dict]:
             continue
         fam = np.mean([r["top_family"] == r["family"] for r in ok])
         exact = np.mean([r["top"] == eff for r in ok])
-        top3 = np.mean([r["rank_true"] is not None and r["rank_true"] <= 3 and r["true_reported"] for r in ok])
+        top3 = np.mean(
+            [r["rank_true"] is not None and r["rank_true"] <= 3 and r["true_reported"] for r in ok]
+        )
         perr = [r["param_rel_err"] for r in ok if r.get("param_rel_err") is not None]
         off = [r["offset_err_ms"] for r in ok if r.get("offset_err_ms") is not None]
         ratio = [r["rms_after_top"] / r["noise_floor"] for r in ok if r.get("rms_after_top")]
@@ -148,6 +154,7 @@ def main() -> None:
     ap.add_argument("--effects", nargs="+", default=None)
     ap.add_argument("--out", default=str(ROOT / "bench" / "diagnose_results.jsonl"))
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--report-only", action="store_true", help="tabulate --out without running")
     a = ap.parse_args()
     from fixtures.scenarios import TRUE_PARAMS
 
@@ -158,17 +165,22 @@ def main() -> None:
     if out.exists():
         done = [json.loads(line) for line in out.read_text().splitlines() if line.strip()]
     have = {(r["effect"], r["noise"], r["seed"]) for r in done}
-    todo = [j for j in jobs if j not in have]
+    todo = [] if a.report_only else [j for j in jobs if j not in have]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=a.jobs) as ex, out.open("a") as fh:
         for i, r in enumerate(ex.map(_one, todo)):
             fh.write(json.dumps(r) + "\n")
             fh.flush()
             done.append(r)
-            print(f"[{i + 1}/{len(todo)}] {r['effect']} {r['noise']} seed {r['seed']}: top={r.get('top')}", flush=True)
+            print(
+                f"[{i + 1}/{len(todo)}] {r['effect']} {r['noise']} seed {r['seed']}: top={r.get('top')}",
+                flush=True,
+            )
     results = [r for r in done if (r["effect"], r["noise"], r["seed"]) in set(jobs)]
+    n_done = len(results)
     text = [
-        f"### diagnose hidden-effect suite ({a.seeds} seeds per effect and noise level)",
+        f"### diagnose hidden-effect suite ({a.seeds} seeds per effect and noise level; "
+        f"{n_done} of {len(jobs)} cases finished)",
         "",
         f"Command: `.venv/bin/python bench/diagnose.py --seeds {a.seeds} --jobs {a.jobs}`  ",
         f"Machine: {platform.processor() or platform.machine()}, {__import__('os').cpu_count()} CPUs; "
@@ -178,7 +190,8 @@ def main() -> None:
     for n in a.noise:
         lines, _ = _table(results, n)
         text += lines + [""]
-    text.append(_timing())
+    if not a.report_only:
+        text.append(_timing())
     print("\n".join(text))
     if not a.no_write:
         res_md = ROOT / "bench" / "RESULTS.md"

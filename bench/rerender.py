@@ -66,10 +66,12 @@ def main() -> int:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--stride", type=int, default=5)
     ap.add_argument("--scale", type=float, default=1.0)
-    ap.add_argument("--fit-frames", type=int, default=4)
+    ap.add_argument("--fit-frames", type=int, default=8)
     ap.add_argument("--dataset", type=Path, help="use this dataset instead of generating one")
     ap.add_argument("--device", default="cpu")
-    ap.add_argument("--dense-frames", type=int, default=2, help="frames rendered by the dense baseline")
+    ap.add_argument(
+        "--dense-frames", type=int, default=2, help="frames rendered by the dense baseline"
+    )
     ap.add_argument("--append", action="store_true", help=f"append the result to {RESULTS}")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
@@ -79,8 +81,12 @@ def main() -> int:
         root = args.dataset or _scene(Path(tmp) / "bench60")
         gen = time.perf_counter() - t0
         ctx = CheckContext(root)
-        ctx.options = {"stride": args.stride, "scale": args.scale,  # type: ignore[attr-defined]
-                       "fit_frames": args.fit_frames, "device": args.device}
+        ctx.options = {
+            "stride": args.stride,
+            "scale": args.scale,  # type: ignore[attr-defined]
+            "fit_frames": args.fit_frames,
+            "device": args.device,
+        }
         ep = ctx.episodes[0]
         stream = next(n for n, s in ep.streams.items() if s.get("kind") == "camera")
         n_frames = ctx.table(ep.streams[stream]["frames"], columns=("t_ns",)).num_rows
@@ -114,18 +120,24 @@ def main() -> int:
         f"baseline dense oracle: {dense:.2f} s/frame -> {dense * n_cmp:.0f} s for {n_cmp} frames; "
         f"ratio baseline/measured pass {dense * n_cmp / max(times['B002'], 1e-9):.1f}x",
         "clean-scene numbers: "
-        + ", ".join(f"{s.name} IoU {s.iou:.3f} / {s.boundary_px:.2f} px" for s in summary if s.pixels)[:400],
+        + ", ".join(
+            f"{s.name} IoU {s.iou:.3f} / {s.boundary_px:.2f} px" for s in summary if s.pixels
+        )[:400],
     ]
     if fit is not None:
-        lines.append(f"fit: offset {fit.offset_ms:+.2f} ms, camera {fit.shift_2d_mm:.2f} mm, "
-                     f"{len([f for f in findings if f.severity != 'info'])} warnings/errors")
+        lines.append(
+            f"fit: offset {fit.offset_ms:+.2f} ms, camera {fit.shift_2d_mm:.2f} mm, "
+            f"{len([f for f in findings if f.severity != 'info'])} warnings/errors"
+        )
     text = "\n".join(lines)
     print(text)
     if args.append:
         cmd = "PYTHONPATH=. .venv/bin/python bench/rerender.py " + " ".join(sys.argv[1:])
         with RESULTS.open("a", encoding="utf-8") as f:
-            f.write(f"\n\n## rerender — binding re-render validation speed (2026-11-22)\n\nCommand: `{cmd}`\n\n"
-                    f"```\n{text}\n```\n")
+            f.write(
+                f"\n\n## rerender — binding re-render validation speed (2026-11-22)\n\nCommand: `{cmd}`\n\n"
+                f"```\n{text}\n```\n"
+            )
     return 0
 
 

@@ -91,13 +91,15 @@ class RerenderOptions:
     stride: int = 1
     scale: float = 1.0
     backend: str = "torch"
-    fit_frames: int = 4
+    fit_frames: int = 8
     max_offset_ms: float = 200.0
     device: str = "cpu"
 
     def __post_init__(self) -> None:
         if not isinstance(self.stride, int) or isinstance(self.stride, bool) or self.stride < 1:
-            raise InputError(f"stride must be an integer >= 1, got {self.stride!r}", where="--stride")
+            raise InputError(
+                f"stride must be an integer >= 1, got {self.stride!r}", where="--stride"
+            )
         if not (isinstance(self.scale, int | float) and 0.0 < float(self.scale) <= 4.0):
             raise InputError(f"scale must be in (0, 4], got {self.scale!r}", where="--scale")
         if self.fit_frames < 1:
@@ -174,15 +176,24 @@ def label_channels(binding: Binding, segments: pa.Table) -> LabelChannels:
     return LabelChannels(np.asarray(label_ids, np.int64), cnames, kinds, target_channel, unlabelled)
 
 
-def valid_gaussian_mask(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
-                        opacity_logits: torch.Tensor, sh: torch.Tensor) -> torch.Tensor:
+def valid_gaussian_mask(
+    means: torch.Tensor,
+    quats: torch.Tensor,
+    log_scales: torch.Tensor,
+    opacity_logits: torch.Tensor,
+    sh: torch.Tensor,
+) -> torch.Tensor:
     """[N] bool: Gaussians that can be rendered (finite, non-zero rotation, scale below 10 m).
 
     ``-inf`` log-scales (zero extent) and NaN anywhere, infinite centres or colours, zero
     quaternions and standard deviations above 10 m are excluded; the validator reports them.
     """
     ok = torch.isfinite(means).all(1) & torch.isfinite(quats).all(1) & (quats.norm(dim=1) > 1e-12)
-    ok &= ~torch.isnan(log_scales).any(1) & (log_scales < MAX_LOG_SCALE).all(1) & torch.isfinite(log_scales).all(1)
+    ok &= (
+        ~torch.isnan(log_scales).any(1)
+        & (log_scales < MAX_LOG_SCALE).all(1)
+        & torch.isfinite(log_scales).all(1)
+    )
     ok &= ~torch.isnan(opacity_logits) & torch.isfinite(sh).flatten(1).all(1)
     return ok
 
@@ -193,9 +204,15 @@ def _render_camera(model: CameraModel, T_world_cam: np.ndarray, scale: float) ->
     h = max(1, int(round(model.height * scale)))
     sx, sy = w / model.width, h / model.height
     return Camera(
-        width=w, height=h, fx=model.fx * sx, fy=model.fy * sy, cx=model.cx * sx, cy=model.cy * sy,
+        width=w,
+        height=h,
+        fx=model.fx * sx,
+        fy=model.fy * sy,
+        cx=model.cx * sx,
+        cy=model.cy * sy,
         T_world_cam=torch.as_tensor(np.asarray(T_world_cam, np.float64)),
-        distortion_model=model.distortion_model, distortion=tuple(model.distortion),
+        distortion_model=model.distortion_model,
+        distortion=tuple(model.distortion),
     )
 
 
@@ -223,23 +240,37 @@ class SceneRerenderer:
         InputError: the camera has no extrinsics.
     """
 
-    def __init__(self, binding: Binding, camera: CameraModel, channels: LabelChannels, *, scale: float = 1.0,
-                 backend: str = "torch", pose_of: Callable[[int], np.ndarray] | None = None) -> None:
+    def __init__(
+        self,
+        binding: Binding,
+        camera: CameraModel,
+        channels: LabelChannels,
+        *,
+        scale: float = 1.0,
+        backend: str = "torch",
+        pose_of: Callable[[int], np.ndarray] | None = None,
+    ) -> None:
         self.binding = binding
         self.model = camera
         self.channels = channels
         self.scale = float(scale)
         self.backend = backend
         if pose_of is None and camera.T_world_cam is None:
-            raise InputError(f"camera {camera.name!r} has no T_world_cam", where=f"cameras/{camera.name}")
+            raise InputError(
+                f"camera {camera.name!r} has no T_world_cam", where=f"cameras/{camera.name}"
+            )
         self._pose_of = pose_of
         rest = binding.rest
-        self.valid = valid_gaussian_mask(rest.means, rest.quats, rest.log_scales, rest.opacity_logits, rest.sh)
+        self.valid = valid_gaussian_mask(
+            rest.means, rest.quats, rest.log_scales, rest.opacity_logits, rest.sh
+        )
         self.num_invalid = int((~self.valid).sum())
         tid = binding.target_index
         ch = torch.as_tensor(channels.target_channel, device=tid.device)
         chan = torch.where(tid >= 0, ch[tid.clamp(min=0)], torch.zeros_like(tid))[self.valid]
-        onehot = torch.zeros(int(chan.shape[0]), channels.count + 1, dtype=rest.means.dtype, device=tid.device)
+        onehot = torch.zeros(
+            int(chan.shape[0]), channels.count + 1, dtype=rest.means.dtype, device=tid.device
+        )
         onehot[torch.arange(chan.shape[0], device=tid.device), chan] = 1.0
         self.extra = onehot[:, 1:].contiguous()
         cpu = rest.means.device.type == "cpu"
@@ -258,8 +289,14 @@ class SceneRerenderer:
         """The render camera at ``t_ns``, optionally moved by ``shift_m`` [3] m in its own frame."""
         return _render_camera(self.model, _shifted(self.T_world_cam(t_ns), shift_m), self.scale)
 
-    def render(self, t_ns: int, *, offset_ns: float = 0.0, shift_m: np.ndarray | None = None,
-               velocity: bool = False) -> RenderOutput:
+    def render(
+        self,
+        t_ns: int,
+        *,
+        offset_ns: float = 0.0,
+        shift_m: np.ndarray | None = None,
+        velocity: bool = False,
+    ) -> RenderOutput:
         """Render the Gaussians posed at ``t_ns + offset_ns`` into the (shifted) camera.
 
         With ``velocity`` two more extra channels carry each Gaussian's image velocity (px/ms,
@@ -272,7 +309,9 @@ class SceneRerenderer:
         if velocity:
             vel = self._velocity(t, self.T_world_cam(t_ns), shift_m)
             extra = torch.cat([extra, vel.to(dtype=extra.dtype, device=extra.device)], 1)
-        g = Gaussians(g.means[v], g.quats[v], g.log_scales[v], g.opacity_logits[v], g.sh[v], extra=extra)
+        g = Gaussians(
+            g.means[v], g.quats[v], g.log_scales[v], g.opacity_logits[v], g.sh[v], extra=extra
+        )
         return render(g, self.camera(t_ns, shift_m), config=self.config, backend=self.backend)
 
     def probabilities(self, out: RenderOutput) -> np.ndarray:
@@ -298,8 +337,9 @@ class SceneRerenderer:
         moved = (M[:, :3, :3] @ x0[..., None])[..., 0] + M[:, :3, 3]
         return torch.where((tid >= 0)[:, None], moved, x0)
 
-    def _velocity(self, t_ns: int, T_world_cam: np.ndarray, shift_m: np.ndarray | None,
-                  dt_ns: int = 2_000_000) -> torch.Tensor:
+    def _velocity(
+        self, t_ns: int, T_world_cam: np.ndarray, shift_m: np.ndarray | None, dt_ns: int = 2_000_000
+    ) -> torch.Tensor:
         """[N_valid, 2] image velocity of every rendered Gaussian, px/ms (0 where not projectable)."""
         T = _shifted(T_world_cam, shift_m)
         uv0 = self._project(self._moved(t_ns - dt_ns), T)
@@ -307,15 +347,21 @@ class SceneRerenderer:
         vel = (uv1 - uv0) / (2 * dt_ns * 1e-6)
         return torch.nan_to_num(vel, nan=0.0, posinf=0.0, neginf=0.0)
 
-    def image_motion_px(self, t_ns: Sequence[int], *, dt_ns: int = 10_000_000, sample: int = 2048) -> np.ndarray:
+    def image_motion_px(
+        self, t_ns: Sequence[int], *, dt_ns: int = 10_000_000, sample: int = 2048
+    ) -> np.ndarray:
         """[F] mean image displacement over ``2 dt_ns`` (px, render grid) of moving Gaussians.
 
         A fixed subsample of the Gaussians bound to links and objects is projected at
         ``t - dt_ns`` and ``t + dt_ns``; used to pick the frames that constrain the time offset.
         """
         b = self.binding
-        kinds = torch.as_tensor([tg.kind != "static" for tg in b.targets] + [False], device=b.target_index.device)
-        moving = self.valid & kinds[torch.where(b.target_index >= 0, b.target_index, len(b.targets))]
+        kinds = torch.as_tensor(
+            [tg.kind != "static" for tg in b.targets] + [False], device=b.target_index.device
+        )
+        moving = (
+            self.valid & kinds[torch.where(b.target_index >= 0, b.target_index, len(b.targets))]
+        )
         idx = torch.nonzero(moving)[:, 0]
         if idx.numel() == 0:
             return np.zeros(len(t_ns))
@@ -324,11 +370,14 @@ class SceneRerenderer:
         out = np.zeros(len(t_ns))
         for i, t in enumerate(t_ns):
             T = self.T_world_cam(int(t))
-            d = self._project(self._moved(int(t) + dt_ns, idx), T) - self._project(self._moved(int(t) - dt_ns, idx), T)
+            d = self._project(self._moved(int(t) + dt_ns, idx), T) - self._project(
+                self._moved(int(t) - dt_ns, idx), T
+            )
             d = d.norm(dim=1)
             d = d[torch.isfinite(d)]
             out[i] = float(d.mean()) if d.numel() else 0.0
         return out
+
 
 # --------------------------------------------------------------------------------- comparison
 
@@ -396,7 +445,9 @@ def _upsample(p: np.ndarray, width: int, height: int) -> np.ndarray:
     """Bilinear resampling with pixel centres aligned (OpenCV's half-pixel convention)."""
     if p.shape[1] == width and p.shape[0] == height:
         return p
-    return cv2.resize(p, (width, height), interpolation=cv2.INTER_LINEAR).reshape(height, width, p.shape[-1])
+    return cv2.resize(p, (width, height), interpolation=cv2.INTER_LINEAR).reshape(
+        height, width, p.shape[-1]
+    )
 
 
 def label_edges(labels: np.ndarray) -> np.ndarray:
@@ -420,7 +471,9 @@ def void_band(labels: np.ndarray, width_px: int = VOID_BAND_PX) -> np.ndarray:
     return cv2.dilate(edge, np.ones((k, k), np.uint8)).astype(bool)
 
 
-def compare_frame(prob: np.ndarray, depth: np.ndarray, recorded_channels: np.ndarray, num_channels: int) -> FrameMetrics:
+def compare_frame(
+    prob: np.ndarray, depth: np.ndarray, recorded_channels: np.ndarray, num_channels: int
+) -> FrameMetrics:
     """Compare a re-render with a recorded label image.
 
     Intersection and union leave out a void band of :data:`VOID_BAND_PX` pixels on both sides of
@@ -462,12 +515,16 @@ def compare_frame(prob: np.ndarray, depth: np.ndarray, recorded_channels: np.nda
     return FrameMetrics(inter, n_rec + n_ren - inter, n_rec, n_ren, bsum, bcnt, dep)
 
 
-def recorded_soft_labels(recorded_channels: np.ndarray, num_channels: int, width: int, height: int) -> np.ndarray:
+def recorded_soft_labels(
+    recorded_channels: np.ndarray, num_channels: int, width: int, height: int
+) -> np.ndarray:
     """[height, width, C+1] float32 one-hot of the recorded channels, area-averaged to the render grid."""
     onehot = np.eye(num_channels + 1, dtype=np.float32)[recorded_channels]
     if onehot.shape[:2] == (height, width):
         return onehot
-    return cv2.resize(onehot, (width, height), interpolation=cv2.INTER_AREA).reshape(height, width, -1)
+    return cv2.resize(onehot, (width, height), interpolation=cv2.INTER_AREA).reshape(
+        height, width, -1
+    )
 
 
 def foreground_psnr(rgb: np.ndarray, alpha: np.ndarray, frame: np.ndarray) -> float:
@@ -479,7 +536,11 @@ def foreground_psnr(rgb: np.ndarray, alpha: np.ndarray, frame: np.ndarray) -> fl
         frame: [H, W, 3] uint8 video frame (area-resampled to the render grid).
     """
     h, w = alpha.shape
-    f = frame if frame.shape[:2] == (h, w) else cv2.resize(frame, (w, h), interpolation=cv2.INTER_AREA)
+    f = (
+        frame
+        if frame.shape[:2] == (h, w)
+        else cv2.resize(frame, (w, h), interpolation=cv2.INTER_AREA)
+    )
     m = alpha >= 0.5
     if not m.any():
         return float("nan")
@@ -574,10 +635,18 @@ def _growth_into_background(gu: np.ndarray, gv: np.ndarray) -> np.ndarray:
     return np.concatenate([-gain.sum(-1, keepdims=True), gain], -1)
 
 
-def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[np.ndarray], *,
-                  fit_offset: bool = True, fit_depth: bool = False, schedule: Sequence[float] = BLUR_SCHEDULE_PX,
-                  max_offset_ms: float = 200.0, refine_ms: float = 0.0,
-                  motion_px: Sequence[float] | None = None) -> AlignmentFit:
+def fit_alignment(
+    rr: SceneRerenderer,
+    stamps: Sequence[int],
+    targets: Sequence[np.ndarray],
+    *,
+    fit_offset: bool = True,
+    fit_depth: bool = False,
+    schedule: Sequence[float] = BLUR_SCHEDULE_PX,
+    max_offset_ms: float = 200.0,
+    refine_ms: float = 4.0,
+    motion_px: Sequence[float] | None = None,
+) -> AlignmentFit:
     """Estimate the camera time offset and a camera translation from label disagreement.
 
     Minimises ``sum over frames, pixels, channels of (p(t + offset; shift) - y)^2`` where ``p``
@@ -604,7 +673,7 @@ def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[
         schedule: blur (px) of each iteration; its length is the number of iterations.
         max_offset_ms: offsets are kept within ±this.
         refine_ms: half-width of an optional final parabola fit of the offset on the unblurred
-            disagreement (0: none; on small, slowly moving images it is no more precise).
+            disagreement (0: none).
         motion_px: image speed of each frame (reported; all zero makes the offset unobservable).
 
     Returns:
@@ -620,6 +689,7 @@ def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[
             p = rr.probabilities(rr.render(t, offset_ns=off_ms * 1e6, shift_m=shift_mm * 1e-3))
             total += float(np.square(p - ys[f]).sum())
         return total
+
     observable = bool(fit_offset and motion.max(initial=0.0) > 1e-6)
     H, W = rr.height, rr.width
     u = (np.arange(W) + 0.5 - rr.cx)[None, :, None]
@@ -633,7 +703,12 @@ def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[
         b = np.zeros(5)
         sharp = 0.0
         for f, t in enumerate(stamps):
-            o = rr.render(t, offset_ns=theta[0] * 1e6, shift_m=theta[1:4] * 1e-3, velocity=observable and not last)
+            o = rr.render(
+                t,
+                offset_ns=theta[0] * 1e6,
+                shift_m=theta[1:4] * 1e-3,
+                velocity=observable and not last,
+            )
             p0 = rr.probabilities(o)
             sharp += float(np.square(p0 - ys[f]).sum())
             if last:
@@ -646,15 +721,22 @@ def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[
             inv_z = _blur(inv_z.astype(np.float32), sigma).astype(np.float64)[..., None]
             if observable:
                 alpha = o.alpha.detach().cpu().numpy().astype(np.float64)
-                vel = o.extra[..., rr.channels.count:].detach().cpu().numpy().astype(np.float64)
-                vel = np.where(alpha[..., None] > 1e-3, vel / np.maximum(alpha, 1e-3)[..., None], 0.0)
+                vel = o.extra[..., rr.channels.count :].detach().cpu().numpy().astype(np.float64)
+                vel = np.where(
+                    alpha[..., None] > 1e-3, vel / np.maximum(alpha, 1e-3)[..., None], 0.0
+                )
                 vel = _blur(vel.astype(np.float32), sigma).astype(np.float64)
                 j_off = -(gu * vel[..., :1] + gv * vel[..., 1:2])
             else:
                 j_off = np.zeros_like(r)
             grow = _growth_into_background(gu, gv)
-            cols = [j_off, rr.fx * inv_z * gu * 1e-3, rr.fy * inv_z * gv * 1e-3,
-                    -(u * gu + v * gv) * inv_z * 1e-3 if fit_depth else np.zeros_like(r), grow]
+            cols = [
+                j_off,
+                rr.fx * inv_z * gu * 1e-3,
+                rr.fy * inv_z * gv * 1e-3,
+                -(u * gu + v * gv) * inv_z * 1e-3 if fit_depth else np.zeros_like(r),
+                grow,
+            ]
             J = np.stack([c.ravel() for c in cols], 1)
             A += J.T @ J
             b += J.T @ r.ravel()
@@ -689,14 +771,24 @@ def fit_alignment(rr: SceneRerenderer, stamps: Sequence[int], targets: Sequence[
         den = c_minus - 2.0 * final + c_plus
         if den > 0:
             theta[0] += refine_ms * float(np.clip(0.5 * (c_minus - c_plus) / den, -1.0, 1.0))
-    return AlignmentFit(float(theta[0]) if observable else float("nan"), theta[1:4].copy(), cost0, final,
-                        stamps, [float(m) for m in motion], observable, float(theta[4]))
+    return AlignmentFit(
+        float(theta[0]) if observable else float("nan"),
+        theta[1:4].copy(),
+        cost0,
+        final,
+        stamps,
+        [float(m) for m in motion],
+        observable,
+        float(theta[4]),
+    )
 
 
 # ---------------------------------------------------------------------------------- reading
 
 
-def read_label_frames(path: Path, wanted: Sequence[int], *, batch_rows: int = 32) -> Iterator[tuple[int, np.ndarray]]:
+def read_label_frames(
+    path: Path, wanted: Sequence[int], *, batch_rows: int = 32
+) -> Iterator[tuple[int, np.ndarray]]:
     """Yield ``(frame_index, labels [H, W] uint16)`` for the wanted frame indices, in table order.
 
     Only the wanted rows are decoded; the table is read in batches (never whole).
@@ -717,8 +809,11 @@ def read_label_frames(path: Path, wanted: Sequence[int], *, batch_rows: int = 32
                 i = int(idx[k])
                 yield i, decode_label_png(blobs[k].as_py(), path=path, where=f"frame_index {i}")
     except (pa.ArrowException, OSError) as exc:
-        raise FormatError(f"unreadable label table ({str(exc)[:200]})", path=path,
-                          hint="the file is truncated or not parquet; re-export it") from None
+        raise FormatError(
+            f"unreadable label table ({str(exc)[:200]})",
+            path=path,
+            hint="the file is truncated or not parquet; re-export it",
+        ) from None
 
 
 def read_video_frames(path: Path, wanted: Sequence[int]) -> Iterator[tuple[int, np.ndarray]]:
@@ -732,7 +827,9 @@ def read_video_frames(path: Path, wanted: Sequence[int]) -> Iterator[tuple[int, 
             yield i, img
 
 
-def pose_stream(t_ns: np.ndarray, xyz: np.ndarray, qwxyz: np.ndarray) -> Callable[[int], np.ndarray]:
+def pose_stream(
+    t_ns: np.ndarray, xyz: np.ndarray, qwxyz: np.ndarray
+) -> Callable[[int], np.ndarray]:
     """``t -> T_world_cam`` [4, 4] interpolating a ``camera_extrinsics`` table (clamped at the ends)."""
     from .interp import interp_pose
 

@@ -9,7 +9,14 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["register_effect", "available_effects", "get_effect", "Effect", "Param", "load_recording"]
+__all__ = [
+    "register_effect",
+    "available_effects",
+    "get_effect",
+    "Effect",
+    "Param",
+    "load_recording",
+]
 
 _LAZY = {
     "load_recording": "reference_impl.physics.recording",

@@ -82,7 +82,13 @@ class FitResult:
     def to_dict(self) -> dict[str, Any]:
         return {
             "params": [
-                {"name": p.name, "value": p.value, "low": _fin(p.low), "high": _fin(p.high), "unit": p.unit}
+                {
+                    "name": p.name,
+                    "value": p.value,
+                    "low": _fin(p.low),
+                    "high": _fin(p.high),
+                    "unit": p.unit,
+                }
                 for p in self.params
             ],
             "rms_before_mm": self.rms_before,
@@ -112,7 +118,15 @@ def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
     for j, c in enumerate(free):
         s = space.slots[c]
         sd = float(out.std[j])
-        params.append(ParamEstimate(s.key, float(out.theta[c]), out.theta[c] - 1.96 * sd, out.theta[c] + 1.96 * sd, s.param.unit))
+        params.append(
+            ParamEstimate(
+                s.key,
+                float(out.theta[c]),
+                out.theta[c] - 1.96 * sd,
+                out.theta[c] + 1.96 * sd,
+                s.param.unit,
+            )
+        )
         if not np.isfinite(sd):
             unident.append(s.key)
     doc = copy.deepcopy(eng.prep.rec.physics)
@@ -120,10 +134,16 @@ def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
     ob = doc.setdefault("objects", {}).setdefault(obj, {"equation": "rigid"})
     for c in space.owner_columns("base"):
         ob[space.slots[c].param.name] = float(out.theta[c])
-    effects = [e for e in doc.get("effects", []) if e.get("name") not in {x.name for x in space.effects}]
+    effects = [
+        e for e in doc.get("effects", []) if e.get("name") not in {x.name for x in space.effects}
+    ]
     for e in space.effects:
         effects.append(
-            {"name": e.name, "target": obj, "params": {p.name: float(out.theta[space.index(e.name, p.name)]) for p in e.params}}
+            {
+                "name": e.name,
+                "target": obj,
+                "params": {p.name: float(out.theta[space.index(e.name, p.name)]) for p in e.params},
+            }
         )
     doc["effects"] = effects
     return FitResult(
@@ -138,7 +158,14 @@ def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
     )
 
 
-def fit(dataset: Any, add: Sequence[str] = (), *, write: bool = True, note: str | None = None, dt: float = 1e-3) -> FitResult:
+def fit(
+    dataset: Any,
+    add: Sequence[str] = (),
+    *,
+    write: bool = True,
+    note: str | None = None,
+    dt: float = 1e-3,
+) -> FitResult:
     """Refit the base model (and the effects already present) plus ``add``.
 
     With a dataset and ``write=True`` the fitted values become a new physics.json revision
@@ -151,16 +178,22 @@ def fit(dataset: Any, add: Sequence[str] = (), *, write: bool = True, note: str 
     if res.unidentifiable:
         bad = set(res.unidentifiable)
         res.physics["effects"] = [
-            e for e in res.physics["effects"] if not any(f"{e['name']}.{k}" in bad for k in e["params"])
+            e
+            for e in res.physics["effects"]
+            if not any(f"{e['name']}.{k}" in bad for k in e["params"])
         ]
     if ds is not None and write:
         with ds.edit() as w:
-            res.revision = w.set_physics(res.physics, note=note or f"fit: added {', '.join(add) or 'nothing'}")
+            res.revision = w.set_physics(
+                res.physics, note=note or f"fit: added {', '.join(add) or 'nothing'}"
+            )
             w.commit()
     return res
 
 
-def report(dataset: Any, out_html: str | Path, *, add: Sequence[str] = (), dt: float = 1e-3) -> Path:
+def report(
+    dataset: Any, out_html: str | Path, *, add: Sequence[str] = (), dt: float = 1e-3
+) -> Path:
     """Write an HTML report of residuals before (stored physics) and after refitting with ``add``.
 
     Plots are inline SVG (matplotlib is not required).
@@ -196,4 +229,3 @@ def revert(dataset: Any, revision: int) -> int:
         rev = w.set_physics(old, note=f"revert to revision {revision}")
         w.commit()
     return rev
-

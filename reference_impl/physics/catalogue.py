@@ -32,7 +32,9 @@ __all__ = [
 ]
 
 _SPEED_RANGE = "slides over a wider range of start speeds (viscous grows with v, drag with v^2)"
-_DIRECTIONS = "pushes in opposite directions (tilt flips sign with the direction, anisotropy does not)"
+_DIRECTIONS = (
+    "pushes in opposite directions (tilt flips sign with the direction, anisotropy does not)"
+)
 
 
 @dataclass(frozen=True)

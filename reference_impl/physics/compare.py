@@ -156,7 +156,9 @@ def residual_table(eng: Engine, raw: np.ndarray) -> CompareResult:
     )
 
 
-def compare_recording(recording: object, *, dt: float = 1e-3, engine: Engine | None = None) -> CompareResult:
+def compare_recording(
+    recording: object, *, dt: float = 1e-3, engine: Engine | None = None
+) -> CompareResult:
     """Compare the model with stored (physics.json) parameters against the measurements.
 
     Nothing is refitted; the initial object pose of every trajectory is the measured one.

@@ -89,8 +89,15 @@ class EffectRow:
         """JSON-ready dict (the documented keys first)."""
         d = asdict(self)
         d["params"] = [asdict(p) for p in self.params]
-        for k in ("delta_bic", "heldout_rms_before", "heldout_rms_after", "heldout_gain", "effect_size",
-                  "explained", "rms_after"):
+        for k in (
+            "delta_bic",
+            "heldout_rms_before",
+            "heldout_rms_after",
+            "heldout_gain",
+            "effect_size",
+            "explained",
+            "rms_after",
+        ):
             d[k] = _finite(d[k])
         for p in d["params"]:
             for k in ("value", "low", "high"):
@@ -132,7 +139,9 @@ class DiagnoseResult:
         }
 
 
-def _estimates(space: ParamSpace, out: FitOutcome, cols: list[int], free: list[int]) -> list[ParamEstimate]:
+def _estimates(
+    space: ParamSpace, out: FitOutcome, cols: list[int], free: list[int]
+) -> list[ParamEstimate]:
     res = []
     for c in cols:
         j = free.index(c)
@@ -281,7 +290,9 @@ def diagnose_recording(
                 params=params,
                 phases=[p for _, p in sorted(phases, reverse=True)],
                 separate_by=e.separate_by,
-                note="" if ident else f"Fisher information near-singular (condition {out.cond:.1e})",
+                note=""
+                if ident
+                else f"Fisher information near-singular (condition {out.cond:.1e})",
             )
         )
     # rivals: nearly collinear predicted changes among effects that move predictions at all
@@ -315,5 +326,9 @@ def diagnose_recording(
             "source": prep.noise.source,
         },
         n_residuals=n,
-        gate={"delta_bic_max": DBIC_MAX, "heldout_min_gain": HELDOUT_MIN_GAIN, "effect_size_min": EFFECT_SIZE_MIN},
+        gate={
+            "delta_bic_max": DBIC_MAX,
+            "heldout_min_gain": HELDOUT_MIN_GAIN,
+            "effect_size_min": EFFECT_SIZE_MIN,
+        },
     )

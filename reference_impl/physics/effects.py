@@ -158,7 +158,9 @@ def _validate(effect: Effect) -> None:
         )
     names = [p.name for p in effect.params]
     if len(set(names)) != len(names):
-        raise InputError(f"effect {effect.name!r} repeats a parameter name", where="register_effect")
+        raise InputError(
+            f"effect {effect.name!r} repeats a parameter name", where="register_effect"
+        )
 
 
 def register_effect(effect: Effect | type[Effect], *, replace: bool = False) -> Effect:

@@ -103,7 +103,9 @@ class Engine:
     ) -> list[FitOutcome]:
         """Fit problems over ``space`` (all at once)."""
         fn = residual_fn(self.prep, space)
-        return fit_problems(fn, space, problems, n_traj=self.prep.n_traj, progress=progress, max_iter=max_iter)
+        return fit_problems(
+            fn, space, problems, n_traj=self.prep.n_traj, progress=progress, max_iter=max_iter
+        )
 
     def evaluate(self, space: ParamSpace, thetas: np.ndarray, locals_: np.ndarray) -> np.ndarray:
         """Weighted residuals [M, T, N*4] of parameter sets ``thetas`` [M, Q]."""
@@ -119,7 +121,9 @@ class Engine:
     def summarise(self, out: FitOutcome, free: list[int]) -> FitSummary:
         raw = self.raw(out.resid)
         yaw = raw[self.mask][:, 3]
-        return FitSummary(out, free, rms_mm(raw, self.mask), float(np.degrees(np.sqrt(np.mean(yaw**2)))))
+        return FitSummary(
+            out, free, rms_mm(raw, self.mask), float(np.degrees(np.sqrt(np.mean(yaw**2))))
+        )
 
     def check_effects(self, names: Sequence[str]) -> list[Effect]:
         """Registered rigid-model effects by name (InputError for unknown or foreign ones)."""

@@ -105,7 +105,12 @@ def _fd_steps(space: ParamSpace, cols: Sequence[int], theta: np.ndarray, rel: fl
 
 
 def _rows_for(
-    space: ParamSpace, st: _State, theta: np.ndarray, local: np.ndarray, rel: float, local_h: np.ndarray
+    space: ParamSpace,
+    st: _State,
+    theta: np.ndarray,
+    local: np.ndarray,
+    rel: float,
+    local_h: np.ndarray,
 ) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
     """Rollout rows: base point, one per free column, one per local dimension."""
     thetas, locals_ = [theta], [local]
@@ -155,10 +160,20 @@ def _run(fn: ResidualFn, thetas: list[np.ndarray], locals_: list[np.ndarray]) ->
 
 
 def _assemble(
-    out: np.ndarray, start: int, n_free: int, hs: np.ndarray, lh: np.ndarray, fit_local: bool, n_local: int
+    out: np.ndarray,
+    start: int,
+    n_free: int,
+    hs: np.ndarray,
+    lh: np.ndarray,
+    fit_local: bool,
+    n_local: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r = out[start]
-    jac = np.stack([(out[start + 1 + j] - r) / hs[j] for j in range(n_free)], axis=-1) if n_free else r[..., None][..., :0]
+    jac = (
+        np.stack([(out[start + 1 + j] - r) / hs[j] for j in range(n_free)], axis=-1)
+        if n_free
+        else r[..., None][..., :0]
+    )
     if fit_local:
         base = start + 1 + n_free
         jl = np.stack([(out[base + d] - r) / lh[d] for d in range(n_local)], axis=-1)
@@ -192,7 +207,9 @@ def _normal_equations(
     return a, g, list(tsel)
 
 
-def _step(st: _State, space: ParamSpace, mask_t: np.ndarray, n_local: int) -> tuple[np.ndarray, np.ndarray]:
+def _step(
+    st: _State, space: ParamSpace, mask_t: np.ndarray, n_local: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Damped Gauss-Newton step; globals pinned at a bound they push against are held there
     (active set), the rest re-solved, then the step is projected on the bounds."""
     a, g, tsel = _normal_equations(st, mask_t, n_local)
@@ -262,7 +279,10 @@ def fit_problems(
     for pr in problems:
         th0 = space.zero.copy() if pr.theta0 is None else np.asarray(pr.theta0, float).copy()
         states.append(_State(pr, th0, np.zeros((n_traj, n_local))))
-    masks = [np.ones(n_traj, bool) if s.prob.traj is None else np.asarray(s.prob.traj, bool) for s in states]
+    masks = [
+        np.ones(n_traj, bool) if s.prob.traj is None else np.asarray(s.prob.traj, bool)
+        for s in states
+    ]
     # iteration 0: evaluate everything at the start points
     pending = [(i, s.theta, s.local) for i, s in enumerate(states)]
     it = 0
@@ -279,7 +299,9 @@ def fit_problems(
         nxt = []
         for i, start, hs, th, lo in meta:
             st = states[i]
-            r, jac, jl = _assemble(out, start, len(st.prob.free), hs, lh, st.prob.fit_local, n_local)
+            r, jac, jl = _assemble(
+                out, start, len(st.prob.free), hs, lh, st.prob.fit_local, n_local
+            )
             c = _cost(r, masks[i])
             first = st.resid is None
             if first or c < st.cost:
@@ -298,7 +320,9 @@ def fit_problems(
                 st.done = True
             if not st.done:
                 nt, nl = _step(st, space, masks[i], n_local)
-                if np.allclose(nt, st.theta, rtol=0, atol=1e-12) and np.allclose(nl, st.local, rtol=0, atol=1e-12):
+                if np.allclose(nt, st.theta, rtol=0, atol=1e-12) and np.allclose(
+                    nl, st.local, rtol=0, atol=1e-12
+                ):
                     st.done, st.converged = True, True
                 else:
                     nxt.append((i, nt, nl))

@@ -169,7 +169,10 @@ class Drive:
         ii = torch.as_tensor(idx, dtype=torch.long, device=self.pusher.device)
         return Drive(
             self.dt,
-            *(getattr(self, f)[ii] for f in ("pusher", "pusher_vel", "ee_yaw", "ee_yaw_rate", "grasp")),
+            *(
+                getattr(self, f)[ii]
+                for f in ("pusher", "pusher_vel", "ee_yaw", "ee_yaw_rate", "grasp")
+            ),
             *(getattr(self, f)[ii] for f in ("init_pos", "init_yaw", "obs_t", "obs_mask")),
             None if self.init_vel is None else self.init_vel[ii],
             None if self.carry_vel is None else self.carry_vel[ii],
@@ -190,7 +193,9 @@ class SimResult:
     dense_yaw: torch.Tensor
 
 
-def yaw_rotate(x: torch.Tensor, y: torch.Tensor, yaw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def yaw_rotate(
+    x: torch.Tensor, y: torch.Tensor, yaw: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Rotate planar vectors (x, y) by ``yaw`` [rad] about z."""
     c, s = torch.cos(yaw), torch.sin(yaw)
     return c * x - s * y, s * x + c * y
@@ -206,7 +211,11 @@ def _base_body(scene: BoxScene, theta: torch.Tensor, space: ParamSpace) -> Body:
     mu_d = base.get("friction_dynamic", const(scene.friction_dynamic))
     mu_s = base.get("friction_static", const(scene.friction_static))
     mu_s = torch.maximum(mu_s, mu_d)
-    com = torch.tensor(scene.com, dtype=theta.dtype, device=theta.device).view(1, 1, 2).expand(m, 1, 2)
+    com = (
+        torch.tensor(scene.com, dtype=theta.dtype, device=theta.device)
+        .view(1, 1, 2)
+        .expand(m, 1, 2)
+    )
     return Body(
         mass=base.get("mass", const(scene.mass)),
         inertia_z=const(scene.inertia_z),
@@ -227,8 +236,13 @@ def _pusher_points(
     half = 0.5 * scene.pusher_length
     ax, ay = -torch.sin(psi) * half, torch.cos(psi) * half  # EE y axis
     off = torch.stack([torch.stack([ax, ay, 0 * ax], -1), torch.stack([-ax, -ay, 0 * ax], -1)], 1)
-    voff = torch.stack([torch.stack([-rate * ay, rate * ax, 0 * ax], -1),
-                        torch.stack([rate * ay, -rate * ax, 0 * ax], -1)], 1)
+    voff = torch.stack(
+        [
+            torch.stack([-rate * ay, rate * ax, 0 * ax], -1),
+            torch.stack([rate * ay, -rate * ax, 0 * ax], -1),
+        ],
+        1,
+    )
     return c.unsqueeze(1) + off, cv.unsqueeze(1) + voff
 
 
@@ -302,8 +316,12 @@ def _pusher_impulse(
         only1 = (b1 > 0) & (b2 - k12 * l1s <= 0)
         only2 = (b2 > 0) & (b1 - k12 * l2s <= 0)
         none = (b1 <= 0) & (b2 <= 0)
-        l1 = torch.where(none, zero[..., 0], torch.where(only1, l1s, torch.where(only2, zero[..., 0], l1b)))
-        l2 = torch.where(none, zero[..., 0], torch.where(only1, zero[..., 0], torch.where(only2, l2s, l2b)))
+        l1 = torch.where(
+            none, zero[..., 0], torch.where(only1, l1s, torch.where(only2, zero[..., 0], l1b))
+        )
+        l2 = torch.where(
+            none, zero[..., 0], torch.where(only1, zero[..., 0], torch.where(only2, l2s, l2b))
+        )
         lam = torch.stack([l1, l2], -1).clamp(min=0.0)
         # flush face: both ends within 1 mm and pushing -> the capsule holds the face like a
         # paddle (both rates matched, one end may pull slightly), which stops rigid rocking
@@ -416,7 +434,12 @@ def simulate(
 
     # until the first step where some pusher gets near its box (or a grasp starts), resting
     # boxes stay as they are: those steps are skipped once the first step shows them at rest
-    reach = 0.5 * float(np.hypot(*scene.size[:2])) + scene.pusher_radius + 0.5 * scene.pusher_length + 0.01
+    reach = (
+        0.5 * float(np.hypot(*scene.size[:2]))
+        + scene.pusher_radius
+        + 0.5 * scene.pusher_length
+        + 0.01
+    )
     near = (drive.pusher[..., :2] - drive.init_pos[:, None, :2]).norm(dim=-1).cpu().numpy() < reach
     near |= grasp_np
     quiet_until = int(np.argmax(near.any(axis=0))) if near.any() else n_s - 1
@@ -431,7 +454,11 @@ def simulate(
             traj_p.extend([p] * (quiet_until - 1))
             traj_y.extend([yaw] * (quiet_until - 1))
             k = quiet_until
-        if k > static_from and k % 20 == 0 and not bool((v.abs().amax() > 0) | (w.abs().amax() > 0)):
+        if (
+            k > static_from
+            and k % 20 == 0
+            and not bool((v.abs().amax() > 0) | (w.abs().amax() > 0))
+        ):
             break
         if onset_any[k + 1]:
             # relative transform of the object in the EE frame at grasp onset (yaw-only EE frame)
@@ -495,8 +522,22 @@ def simulate(
         # ---- pusher: frictionless inelastic speculative contact on the box sides ------------
         if pusher_low[k]:
             vx, vy, wf = _pusher_impulse(
-                scene, p, yaw, vx, vy, wf, com_x, com_y, mass, inertia,
-                pusher[:, k], pvel[:, k], ee_yaw[:, k], ee_rate[:, k], grasp[:, k], dt,
+                scene,
+                p,
+                yaw,
+                vx,
+                vy,
+                wf,
+                com_x,
+                com_y,
+                mass,
+                inertia,
+                pusher[:, k],
+                pvel[:, k],
+                ee_yaw[:, k],
+                ee_rate[:, k],
+                grasp[:, k],
+                dt,
             )
 
         v_new = torch.stack([vx, vy, vz], dim=-1)
@@ -509,10 +550,14 @@ def simulate(
             ey_ = ee_yaw[:, k + 1].unsqueeze(0)
             rx, ry = yaw_rotate(rel_p[..., 0], rel_p[..., 1], ey_)
             cp = pusher[:, k + 1].unsqueeze(0)
-            p_att = torch.stack([cp[..., 0] + rx, cp[..., 1] + ry, cp[..., 2] + rel_p[..., 2]], dim=-1)
+            p_att = torch.stack(
+                [cp[..., 0] + rx, cp[..., 1] + ry, cp[..., 2] + rel_p[..., 2]], dim=-1
+            )
             rate_ = ee_rate[:, k + 1].unsqueeze(0)
             cv = cvel_all[:, k + 1].unsqueeze(0)
-            v_att = torch.stack([cv[..., 0] - rate_ * ry, cv[..., 1] + rate_ * rx, cv[..., 2].expand_as(rx)], dim=-1)
+            v_att = torch.stack(
+                [cv[..., 0] - rate_ * ry, cv[..., 1] + rate_ * rx, cv[..., 2].expand_as(rx)], dim=-1
+            )
             p = torch.where(att.unsqueeze(-1), p_att, p)
             v = torch.where(att.unsqueeze(-1), v_att, v)
             yaw = torch.where(att, ey_ + rel_yaw, yaw)

@@ -1,7 +1,8 @@
 """Measurement noise estimated from the data itself (never assumed).
 
-* position / yaw noise: pooled scatter of the tracked pose in rest segments (the object does
-  not move there), with a fallback on the second differences of the whole stream;
+* position / yaw noise: pooled scatter of the tracked pose about a straight line in quiet
+  segments (on the table, no contact, slower than 5 cm/s), with a fallback on the second
+  differences of the whole stream;
 * stamp jitter: scatter of the pose stamps around a regular frame grid fitted per trajectory
   (frame numbers from the median period, so dropped frames do not count as jitter).
 
@@ -96,18 +97,27 @@ def estimate_noise(rec: Recording, labels: list[PhaseLabels] | None = None) -> N
     dof = 0
     n_rest = 0
     if labels is not None:
-        rest_id = PHASES.index("rest")
+        # "quiet" runs: on the table, no contact, smoothed speed < 5 cm/s. The threshold is far
+        # above the speed noise so that the selection does not prefer low-noise samples; slow
+        # creep is removed by a straight-line fit per run (2 dof lost per axis).
+        ok_ids = [PHASES.index("rest"), PHASES.index("sliding")]
         for tr, lab in zip(rec.trajectories, labels, strict=True):
             yaw = np.unwrap(yaw_of(tr.object_quat))
-            for a, b in runs(lab.label == rest_id):
-                a, b = a + 1, b - 1  # stay clear of the phase edges
-                if b - a < 4:
+            speed = np.hypot(lab.vel[:, 0], lab.vel[:, 1])
+            quiet = np.isin(lab.label, ok_ids) & (speed < 0.05)
+            t = (tr.t_ns - tr.t_ns[0]) * 1e-9
+            for a, b in runs(quiet):
+                if b - a < 6:
                     continue
+                tt = t[a:b] - t[a:b].mean()
+                basis = np.vstack([np.ones_like(tt), tt]).T
+                proj = basis @ np.linalg.pinv(basis)
                 seg = tr.object_pos[a:b]
-                devs_xy.append((seg[:, :2] - seg[:, :2].mean(axis=0)).ravel())
-                devs_z.append(seg[:, 2] - seg[:, 2].mean())
-                devs_yaw.append(yaw[a:b] - yaw[a:b].mean())
-                dof += b - a - 1
+                res = seg - proj @ seg
+                devs_xy.append(res[:, :2].ravel())
+                devs_z.append(res[:, 2])
+                devs_yaw.append(yaw[a:b] - proj @ yaw[a:b])
+                dof += b - a - 2
                 n_rest += b - a
     if n_rest >= 8:
         return NoiseModel(

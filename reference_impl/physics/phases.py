@@ -71,7 +71,9 @@ def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
 
 
-def _box_gap(tr: Trajectory, size: tuple[float, float, float], radius: float, length: float) -> np.ndarray:
+def _box_gap(
+    tr: Trajectory, size: tuple[float, float, float], radius: float, length: float
+) -> np.ndarray:
     ex = np.stack([np.interp(tr.t_ns, tr.ee_t_ns, tr.ee_pos[:, i]) for i in range(3)], axis=-1)
     psi = np.interp(tr.t_ns, tr.ee_t_ns, np.unwrap(yaw_of(tr.ee_quat)))
     yaw = yaw_of(tr.object_quat)
@@ -126,4 +128,6 @@ def segment_phases(
         lo, hi = max(a, b - 1), min(len(t), b + 2)
         label[lo:hi] = PHASES.index("impact")
     label[grasp] = PHASES.index("grasp")
-    return PhaseLabels(label=label, vel=vel, yaw_rate=yaw_rate, height=height, pusher_gap=gap, moving=moving)
+    return PhaseLabels(
+        label=label, vel=vel, yaw_rate=yaw_rate, height=height, pusher_gap=gap, moving=moving
+    )

@@ -114,7 +114,9 @@ def build_drive(
     """
     trs = rec.trajectories
     t0 = np.array([min(int(t.t_ns[0]), int(t.ee_t_ns[0])) for t in trs], dtype=np.int64)
-    dur = max((max(int(t.t_ns[-1]), int(t.ee_t_ns[-1])) - s) * 1e-9 for t, s in zip(trs, t0, strict=True))
+    dur = max(
+        (max(int(t.t_ns[-1]), int(t.ee_t_ns[-1])) - s) * 1e-9 for t, s in zip(trs, t0, strict=True)
+    )
     n_s = int(np.ceil(dur / dt)) + 2
     grid = np.arange(n_s) * dt
     n_obs = max(len(t.t_ns) for t in trs)
@@ -190,7 +192,11 @@ def excitations(rec: Recording, labels: list[PhaseLabels]) -> set[str]:
 
 
 def prepare(
-    recording: object, *, dt: float = 1e-3, noise: NoiseModel | None = None, ee_window: float = 0.024
+    recording: object,
+    *,
+    dt: float = 1e-3,
+    noise: NoiseModel | None = None,
+    ee_window: float = 0.024,
 ) -> Prepared:
     """Prepare a recording (or recording-like object) for rollouts and residuals."""
     rec = as_recording(recording)
@@ -207,7 +213,9 @@ def prepare(
     if noise is None:
         noise = estimate_noise(rec, labels)
         labels = [segment_phases(tr, sigma_pos=noise.sigma_pos, **seg) for tr in rec.trajectories]
-    drive, t0 = build_drive(rec, scene, labels, dt, z_snap=max(0.003, 4 * noise.sigma_z), ee_window=ee_window)
+    drive, t0 = build_drive(
+        rec, scene, labels, dt, z_snap=max(0.003, 4 * noise.sigma_z), ee_window=ee_window
+    )
     n_t, n_obs = drive.obs_t.shape
     mpos = np.zeros((n_t, n_obs, 3))
     myaw = np.zeros((n_t, n_obs))

@@ -93,7 +93,9 @@ def check_finite(rec: Recording) -> None:
                     )
         for stream, stamps in (("object_poses", tr.t_ns), ("ee_poses", tr.ee_t_ns)):
             if len(stamps) < 2:
-                raise InputError(f"{stream} has fewer than 2 samples", where=f"episodes/{tr.name}/{stream}")
+                raise InputError(
+                    f"{stream} has fewer than 2 samples", where=f"episodes/{tr.name}/{stream}"
+                )
             if np.any(np.diff(stamps) <= 0):
                 i = int(np.argmax(np.diff(stamps) <= 0))
                 raise InputError(
@@ -134,7 +136,9 @@ def as_recording(obj: Any) -> Recording:
 def _pose_columns(table: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
     pos = np.stack([table.column(c).to_numpy().astype(float) for c in ("x", "y", "z")], axis=-1)
-    quat = np.stack([table.column(c).to_numpy().astype(float) for c in ("qw", "qx", "qy", "qz")], axis=-1)
+    quat = np.stack(
+        [table.column(c).to_numpy().astype(float) for c in ("qw", "qx", "qy", "qz")], axis=-1
+    )
     return t, pos, quat
 
 

@@ -49,7 +49,9 @@ def svg_panel(
     def y(v: np.ndarray | float) -> np.ndarray | float:
         return pad_t + h - np.asarray(v) / ymax * h
 
-    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" font-size="11">']
+    parts = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" font-size="11">'
+    ]
     parts.append(f'<text x="{pad_l}" y="14" font-weight="bold">{html.escape(title)}</text>')
     # phase bands
     edges = np.concatenate([[t0], 0.5 * (t[1:] + t[:-1]), [t1]])
@@ -63,7 +65,9 @@ def svg_panel(
                 f"<title>{phases[start]}</title></rect>"
             )
             start = i
-    parts.append(f'<rect x="{pad_l}" y="{pad_t}" width="{w}" height="{h}" fill="none" stroke="#888"/>')
+    parts.append(
+        f'<rect x="{pad_l}" y="{pad_t}" width="{w}" height="{h}" fill="none" stroke="#888"/>'
+    )
     for series, colour in ((before, "#888888"), (after, "#1f5fbf")):
         pts = " ".join(f"{a:.1f},{b:.1f}" for a, b in zip(x(t), y(series), strict=True))
         parts.append(f'<polyline points="{pts}" fill="none" stroke="{colour}" stroke-width="1.4"/>')
@@ -82,7 +86,9 @@ def svg_panel(
 
 def _table(rows: list[list[str]], header: list[str]) -> str:
     head = "".join(f"<th>{html.escape(c)}</th>" for c in header)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows
+    )
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
@@ -98,17 +104,26 @@ def render_report(
     """Write the report; ``params`` rows are (name, value, low, high, unit)."""
     out = Path(out_html)
     phase_rows = [
-        [p, f"{before.phases_mm.get(p, float('nan')):.2f}", f"{after.phases_mm.get(p, float('nan')):.2f}"]
+        [
+            p,
+            f"{before.phases_mm.get(p, float('nan')):.2f}",
+            f"{after.phases_mm.get(p, float('nan')):.2f}",
+        ]
         for p in _PHASE_COLOURS
         if p in before.phases_mm
     ]
-    worst = [[s.trajectory, s.phase, f"{s.t_start:.2f}-{s.t_end:.2f} s", f"{s.rms_mm:.2f}"] for s in before.worst]
+    worst = [
+        [s.trajectory, s.phase, f"{s.t_start:.2f}-{s.t_end:.2f} s", f"{s.rms_mm:.2f}"]
+        for s in before.worst
+    ]
     prm = [[n, f"{v:.5g}", f"[{lo:.4g}, {hi:.4g}]", u] for n, v, lo, hi, u in params]
     panels = []
     for sb, sa in zip(before.series, after.series, strict=True):
         nb = np.linalg.norm(sb["residual_mm"], axis=-1)
         na = np.linalg.norm(sa["residual_mm"], axis=-1)
-        panels.append(svg_panel(sb["t"], nb, na, sb["phase"], after.noise_floor_mm, sb["trajectory"]))
+        panels.append(
+            svg_panel(sb["t"], nb, na, sb["phase"], after.noise_floor_mm, sb["trajectory"])
+        )
     legend = " ".join(
         f'<span style="background:{c};padding:1px 6px;border:1px solid #ccc">{p}</span>'
         for p, c in _PHASE_COLOURS.items()

@@ -30,13 +30,17 @@ def scene_from_physics(physics: dict[str, Any], object_name: str, *, dt: float =
     """
     objects = physics.get("objects", {})
     if object_name not in objects:
-        raise FormatError(f"physics.json has no object {object_name!r}", path="physics.json", where="objects")
+        raise FormatError(
+            f"physics.json has no object {object_name!r}", path="physics.json", where="objects"
+        )
     ob = objects[object_name]
     where = f"objects/{object_name}"
     size = tuple(float(s) for s in _need(ob, "size_m", where))
     mass = float(_need(ob, "mass_kg", where))
     inertia = ob.get("inertia_kgm2")
-    izz = float(inertia[2][2]) if inertia is not None else mass * (size[0] ** 2 + size[1] ** 2) / 12.0
+    izz = (
+        float(inertia[2][2]) if inertia is not None else mass * (size[0] ** 2 + size[1] ** 2) / 12.0
+    )
     com = ob.get("com_m", [0.0, 0.0, 0.0])
     grav = physics.get("gravity_mps2", [0.0, 0.0, -9.81])
     return BoxScene(

@@ -75,7 +75,9 @@ class ParamSpace:
             s.param.name: theta[:, i : i + 1] for i, s in enumerate(self.slots) if s.owner == owner
         }
 
-    def defaults(self, m: int = 1, *, dtype: torch.dtype = torch.float64, device=None) -> torch.Tensor:
+    def defaults(
+        self, m: int = 1, *, dtype: torch.dtype = torch.float64, device=None
+    ) -> torch.Tensor:
         """``[m, Q]`` with every slot at its zero value (the base model)."""
         z = torch.as_tensor(self.zero, dtype=dtype, device=device)
         return z.unsqueeze(0).repeat(m, 1)

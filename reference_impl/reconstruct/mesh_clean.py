@@ -4,7 +4,9 @@
 triangles; a scene holds several objects, so here every component with at least
 ``min_fraction`` of the faces (and ``min_faces`` faces) stays. Components with a negative signed
 volume are inner shells: marching cubes orients faces towards free space (positive TSDF), so a
-shell facing inwards is the truncation boundary behind a surface, not a surface.
+shell facing inwards is the truncation boundary behind a surface, not a surface. Only (nearly)
+closed components are judged by their volume: an open sheet (a table top seen from above) has
+no meaningful inside.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ def clean_mesh(mesh: trimesh.Trimesh, *, min_fraction: float = 0.005, min_faces:
         if len(p.faces) < max(min_faces, min_fraction * total):
             small += 1
             continue
-        if _signed_volume(p) < 0:
+        if _is_closed(p) and _signed_volume(p) < 0:
             inner += 1
             continue
         keep.append(p)
@@ -57,6 +59,15 @@ def clean_mesh(mesh: trimesh.Trimesh, *, min_fraction: float = 0.005, min_faces:
         trimesh.repair.fill_holes(out)
     trimesh.repair.fix_winding(out)
     return out, CleanReport(len(parts), inner, small, n_in, len(out.faces))
+
+
+def _is_closed(m: trimesh.Trimesh, max_open: float = 0.01) -> bool:
+    """Nearly closed: boundary edges (used by one face) are below ``max_open`` of the faces."""
+    edges = m.edges_sorted
+    if len(edges) == 0:
+        return False
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return int((counts == 1).sum()) < max_open * len(m.faces)
 
 
 def _signed_volume(m: trimesh.Trimesh) -> float:

@@ -97,6 +97,7 @@ def fuse_tsdf(
     trunc_voxels: float = 4.0,
     block: int = 4,
     max_voxels: int = 64_000_000,
+    narrow_band: bool = True,
 ) -> TSDFVolume:
     """Fuse depth maps into a narrow-band TSDF over the box [lo, hi].
 
@@ -108,6 +109,8 @@ def fuse_tsdf(
         trunc_voxels: truncation distance in voxels.
         block: block edge in voxels (the allocation unit of the narrow band).
         max_voxels: refuse grids larger than this (dense extraction needs it in memory).
+        narrow_band: allocate only blocks near the surface (False: every block, a dense grid;
+            the same result, slower; kept as the baseline of ``bench/reconstruct.py``).
 
     Returns:
         The fused volume (tensors on the device of the first depth map).
@@ -149,6 +152,8 @@ def fuse_tsdf(
     if not keys:
         raise InputError("no depth map has a valid pixel: nothing to fuse", hint="check the rendered depths")
     key = torch.unique(torch.cat(keys))
+    if not narrow_band:
+        key = torch.arange(int(nb.prod()), device=device)
     blocks = torch.stack([key // (nb[1] * nb[2]), (key // nb[2]) % nb[1], key % nb[2]], -1)
     # -- voxel centres of the band -------------------------------------------------------------
     local = torch.stack(torch.meshgrid(*[torch.arange(block, device=device)] * 3, indexing="ij"), -1).reshape(-1, 3)

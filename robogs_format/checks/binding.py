@@ -48,7 +48,15 @@ from ..rerender import (
 from .context import CheckContext, InputReported
 from .registry import Check, check
 
-__all__ = ["rerender_options", "alignment_fit", "label_summary", "LabelSummary", "IOU_MIN_PIXELS", "QUAT_NORM_TOL", "MIN_MOTION_PX"]
+__all__ = [
+    "rerender_options",
+    "alignment_fit",
+    "label_summary",
+    "LabelSummary",
+    "IOU_MIN_PIXELS",
+    "QUAT_NORM_TOL",
+    "MIN_MOTION_PX",
+]
 
 #: a label needs this many non-void pixels (summed over the compared frames) for its IoU to count
 IOU_MIN_PIXELS = 200
@@ -117,8 +125,13 @@ def _binding(ctx: CheckContext, ep: Episode) -> Binding:
     if not _splat_owners(ctx):
         raise InputReported("splats")
     opts = rerender_options(ctx)
-    return _cached(ctx, ("binding", ep.id),
-                   lambda: Binding(ctx.dataset, ep.id, owners=[o for o, _ in _splat_owners(ctx)], device=opts.device))
+    return _cached(
+        ctx,
+        ("binding", ep.id),
+        lambda: Binding(
+            ctx.dataset, ep.id, owners=[o for o, _ in _splat_owners(ctx)], device=opts.device
+        ),
+    )
 
 
 @dataclass
@@ -156,12 +169,24 @@ def _render_camera_ok(model: CameraModel) -> list[str]:
 
     T = model.T_world_cam if model.T_world_cam is not None else np.eye(4)
     try:
-        cam = Camera(width=model.width, height=model.height, fx=model.fx, fy=model.fy, cx=model.cx, cy=model.cy,
-                     T_world_cam=torch.as_tensor(np.asarray(T, np.float64)),
-                     distortion_model=model.distortion_model, distortion=tuple(model.distortion))
+        cam = Camera(
+            width=model.width,
+            height=model.height,
+            fx=model.fx,
+            fy=model.fy,
+            cx=model.cx,
+            cy=model.cy,
+            T_world_cam=torch.as_tensor(np.asarray(T, np.float64)),
+            distortion_model=model.distortion_model,
+            distortion=tuple(model.distortion),
+        )
     except (TypeError, ValueError) as exc:
         return [str(exc)]
-    return [f"{p.where} {p.message}" for p in validate_camera(cam) if p.where != "camera.distortion_model"]
+    return [
+        f"{p.where} {p.message}"
+        for p in validate_camera(cam)
+        if p.where != "camera.distortion_model"
+    ]
 
 
 def _pose_of(ctx: CheckContext, job: _CameraJob) -> Any:
@@ -171,9 +196,15 @@ def _pose_of(ctx: CheckContext, job: _CameraJob) -> Any:
     if not isinstance(rel, str):
         raise InputReported(f"{job.stream}/extrinsics")
     tab = ctx.table(rel)
-    col = {c: tab.column(c).to_numpy(zero_copy_only=False) for c in ("t_ns", "x", "y", "z", "qw", "qx", "qy", "qz")}
-    return pose_stream(col["t_ns"].astype(np.int64), np.stack([col["x"], col["y"], col["z"]], -1),
-                       np.stack([col["qw"], col["qx"], col["qy"], col["qz"]], -1))
+    col = {
+        c: tab.column(c).to_numpy(zero_copy_only=False)
+        for c in ("t_ns", "x", "y", "z", "qw", "qx", "qy", "qz")
+    }
+    return pose_stream(
+        col["t_ns"].astype(np.int64),
+        np.stack([col["x"], col["y"], col["z"]], -1),
+        np.stack([col["qw"], col["qx"], col["qy"], col["qz"]], -1),
+    )
 
 
 # ------------------------------------------------------------------------------- re-render pass
@@ -209,13 +240,21 @@ def _rerenderer(ctx: CheckContext, job: _CameraJob) -> tuple[SceneRerenderer, np
         from ..render.camera import DISTORTION_MODELS
 
         if job.model.distortion_model not in DISTORTION_MODELS:
-            raise FormatError(f"the renderer has no {job.model.distortion_model!r} lens model",
-                              hint=f"re-render supports {', '.join(sorted(DISTORTION_MODELS))}")
+            raise FormatError(
+                f"the renderer has no {job.model.distortion_model!r} lens model",
+                hint=f"re-render supports {', '.join(sorted(DISTORTION_MODELS))}",
+            )
         b = _binding(ctx, job.ep)
         channels = label_channels(b, _segments(ctx, job.ep))
         opts = rerender_options(ctx)
-        rr = SceneRerenderer(b, job.model, channels, scale=opts.scale, backend=opts.backend,
-                             pose_of=_pose_of(ctx, job))
+        rr = SceneRerenderer(
+            b,
+            job.model,
+            channels,
+            scale=opts.scale,
+            backend=opts.backend,
+            pose_of=_pose_of(ctx, job),
+        )
         return rr, channels.lookup()
 
     return _cached(ctx, ("rerenderer", job.ep.id, job.stream), build)
@@ -235,7 +274,9 @@ def _run_pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
     ch = rr.channels
     t, fi = _frames(ctx, job)
     C, F = ch.count, len(fi)
-    arrays = {k: np.zeros((F, C)) for k in ("inter", "union", "recorded", "rendered", "bsum", "bcnt")}
+    arrays = {
+        k: np.zeros((F, C)) for k in ("inter", "union", "recorded", "rendered", "bsum", "bcnt")
+    }
     depth = np.full((F, C), np.nan)
     psnr = np.full(F, np.nan)
     pos = {int(i): k for k, i in enumerate(fi)}
@@ -255,14 +296,22 @@ def _run_pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
             continue
         seen[k] = True
         if lab.shape != (job.model.height, job.model.width):
-            result.notes.append(f"frame {i}: label image is {lab.shape[1]}x{lab.shape[0]}, "
-                                f"camera says {job.model.width}x{job.model.height}")
+            result.notes.append(
+                f"frame {i}: label image is {lab.shape[1]}x{lab.shape[0]}, "
+                f"camera says {job.model.width}x{job.model.height}"
+            )
             continue
         out = rr.render(int(t[k]))
         p = rr.probabilities(out)
         m = compare_frame(p, out.depth_median.detach().cpu().numpy(), lut[lab], C)
-        for name, value in (("inter", m.inter), ("union", m.union), ("recorded", m.recorded),
-                            ("rendered", m.rendered), ("bsum", m.boundary_sum), ("bcnt", m.boundary_count)):
+        for name, value in (
+            ("inter", m.inter),
+            ("union", m.union),
+            ("recorded", m.recorded),
+            ("rendered", m.rendered),
+            ("bsum", m.boundary_sum),
+            ("bcnt", m.boundary_count),
+        ):
             getattr(result, name)[k] = value
         result.depth[k] = m.depth_m
         if isinstance(video, str):
@@ -297,16 +346,24 @@ def _fit(ctx: CheckContext, job: _CameraJob) -> AlignmentFit | None:
         opts = rerender_options(ctx)
         motion = rr.image_motion_px(t)
         sel = select_fit_frames(t, motion, opts.fit_frames)
-        ys = {i: recorded_soft_labels(lut[lab], rr.channels.count, rr.width, rr.height)
-              for i, lab in read_label_frames(ctx.existing(job.entry["labels"]), fi[sel])
-              if lab.shape == (job.model.height, job.model.width)}
+        ys = {
+            i: recorded_soft_labels(lut[lab], rr.channels.count, rr.width, rr.height)
+            for i, lab in read_label_frames(ctx.existing(job.entry["labels"]), fi[sel])
+            if lab.shape == (job.model.height, job.model.width)
+        }
         keep = [k for k in sel if int(fi[k]) in ys]
         if not keep:
             return None
         ctx.progress(f"fitting time offset and camera {job.ep.id}/{job.stream}")
         moving = motion[keep]
-        return fit_alignment(rr, t[keep], [ys[int(fi[k])] for k in keep], motion_px=moving,
-                             fit_offset=bool(moving.max() >= MIN_MOTION_PX), max_offset_ms=opts.max_offset_ms)
+        return fit_alignment(
+            rr,
+            t[keep],
+            [ys[int(fi[k])] for k in keep],
+            motion_px=moving,
+            fit_offset=bool(moving.max() >= MIN_MOTION_PX),
+            max_offset_ms=opts.max_offset_ms,
+        )
 
     return _cached(ctx, ("fit", job.ep.id, job.stream), build)
 
@@ -362,16 +419,25 @@ def label_summary(ctx: CheckContext, episode: str, stream: str) -> list[LabelSum
         if job.ep.id != episode or job.stream != stream:
             continue
         ps = _pass(ctx, job)
-        depth = np.where(np.isnan(ps.depth), np.nanmedian(ps.depth) if np.isfinite(ps.depth).any() else np.nan,
-                         ps.depth)
+        depth = np.where(
+            np.isnan(ps.depth),
+            np.nanmedian(ps.depth) if np.isfinite(ps.depth).any() else np.nan,
+            ps.depth,
+        )
         mm = ps.bsum * depth / ps.fx * 1e3
         out = []
         for c, name in enumerate(ps.channels.names):
             u, n = ps.union[:, c].sum(), ps.bcnt[:, c].sum()
-            out.append(LabelSummary(name, int(ps.channels.label_ids[c]),
-                                    float(ps.inter[:, c].sum() / u) if u else float("nan"),
-                                    float(ps.bsum[:, c].sum() / n) if n else float("nan"),
-                                    float(np.nansum(mm[:, c]) / n) if n else float("nan"), int(u)))
+            out.append(
+                LabelSummary(
+                    name,
+                    int(ps.channels.label_ids[c]),
+                    float(ps.inter[:, c].sum() / u) if u else float("nan"),
+                    float(ps.bsum[:, c].sum() / n) if n else float("nan"),
+                    float(np.nansum(mm[:, c]) / n) if n else float("nan"),
+                    int(u),
+                )
+            )
         return out
     raise InputReported(f"{episode}/{stream}")
 
@@ -390,9 +456,12 @@ def _rest_q(ctx: CheckContext, entry: dict[str, Any]) -> torch.Tensor:
     rest = (entry.get("rest") or {}).get("joint_positions") or {}
     missing = [j for j in chain.joint_names if j not in rest]
     if missing:
-        raise FormatError(f"robot splats' rest state lacks joints {', '.join(missing[:5])}",
-                          path=ctx.dataset.manifest_path, where="/robot/splats/rest/joint_positions",
-                          hint="record every actuated joint's position at the rest state")
+        raise FormatError(
+            f"robot splats' rest state lacks joints {', '.join(missing[:5])}",
+            path=ctx.dataset.manifest_path,
+            where="/robot/splats/rest/joint_positions",
+            hint="record every actuated joint's position at the rest state",
+        )
     return torch.tensor([float(rest[j]) for j in chain.joint_names], dtype=torch.float64)
 
 
@@ -409,7 +478,10 @@ def _link_triangles(ctx: CheckContext, entry: dict[str, Any]) -> dict[str, np.nd
     resolved = {(r.link, r.kind, r.uri): r.path for r in getattr(urdf, "robogs_mesh_refs", [])}
     out: dict[str, np.ndarray | str] = {}
     for link in urdf.robot.links:
-        visual = next((v for v in link.visuals if v.geometry is not None and v.geometry.mesh is not None), None)
+        visual = next(
+            (v for v in link.visuals if v.geometry is not None and v.geometry.mesh is not None),
+            None,
+        )
         if visual is None:
             out[link.name] = "has no visual mesh"
             continue
@@ -427,7 +499,8 @@ def _link_triangles(ctx: CheckContext, entry: dict[str, Any]) -> dict[str, np.nd
         if visual.geometry.mesh.scale is not None:
             v = v * np.broadcast_to(np.asarray(visual.geometry.mesh.scale, np.float64), (3,))
         M = T[chain.link_index(link.name)].numpy() @ np.asarray(
-            visual.origin if visual.origin is not None else np.eye(4), np.float64)
+            visual.origin if visual.origin is not None else np.eye(4), np.float64
+        )
         out[link.name] = (v @ M[:3, :3].T + M[:3, 3])[f]
     return out
 
@@ -449,7 +522,9 @@ def _asset_triangles(ctx: CheckContext, name: str, entry: dict[str, Any]) -> np.
     return (v @ M[:3, :3].T + M[:3, 3])[np.asarray(mesh.faces, np.int64)]
 
 
-def _face_points(tri: np.ndarray, face: np.ndarray, uv: np.ndarray, offset: np.ndarray) -> np.ndarray:
+def _face_points(
+    tri: np.ndarray, face: np.ndarray, uv: np.ndarray, offset: np.ndarray
+) -> np.ndarray:
     """Bound positions [N, 3]: barycentric point of ``face`` plus ``offset`` along its unit normal (NaN if degenerate)."""
     t = tri[face]
     n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
@@ -460,11 +535,17 @@ def _face_points(tri: np.ndarray, face: np.ndarray, uv: np.ndarray, offset: np.n
     return p + np.where(offset[:, None] != 0.0, offset[:, None] * n, 0.0)
 
 
-@check("B001", group="binding", severity="error", title="bound Gaussians sit on their faces",
-       quantity="largest distance of a Gaussian centre to its face point plus offset", unit="mm",
-       budget="binding.face_distance_mm",
-       hint="re-run the binding (nearest face, barycentric weights and normal offset at the rest state), "
-            "or check bind_id, the rest state and the target mesh")
+@check(
+    "B001",
+    group="binding",
+    severity="error",
+    title="bound Gaussians sit on their faces",
+    quantity="largest distance of a Gaussian centre to its face point plus offset",
+    unit="mm",
+    budget="binding.face_distance_mm",
+    hint="re-run the binding (nearest face, barycentric weights and normal offset at the rest state), "
+    "or check bind_id, the rest state and the target mesh",
+)
 def _face_distance(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("binding.face_distance_mm")
     for owner, entry in _splat_owners(ctx):
@@ -489,15 +570,23 @@ def _face_distance(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             kind = "robot_link" if owner == "robot" else "object"
             loc = {"file": rel, "link" if kind == "robot_link" else "object": name}
             if isinstance(tri, str):
-                yield chk.finding(f"{sel.size} Gaussians are bound to faces of {name!r}, which {tri}",
-                                  value=None, hint="bind them to a target with a mesh, or set bind_face to -1", **loc)
+                yield chk.finding(
+                    f"{sel.size} Gaussians are bound to faces of {name!r}, which {tri}",
+                    value=None,
+                    hint="bind them to a target with a mesh, or set bind_face to -1",
+                    **loc,
+                )
                 continue
             face = s.bind_face[sel].astype(np.int64)
             out_of_range = face >= len(tri)
             if out_of_range.any():
-                yield chk.finding(f"{int(out_of_range.sum())} Gaussians bound to {name!r} name faces beyond its "
-                                  f"{len(tri)} triangles (largest {int(face.max())})",
-                                  hint="bind_face must index the target mesh's triangles", where="bind_face", **loc)
+                yield chk.finding(
+                    f"{int(out_of_range.sum())} Gaussians bound to {name!r} name faces beyond its "
+                    f"{len(tri)} triangles (largest {int(face.max())})",
+                    hint="bind_face must index the target mesh's triangles",
+                    where="bind_face",
+                    **loc,
+                )
             ok = sel[~out_of_range]
             if ok.size == 0:
                 continue
@@ -509,16 +598,27 @@ def _face_distance(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 continue
             worst = int(ok[np.nanargmax(np.where(np.isnan(d), np.inf, d))])
             value = float(np.nanmax(np.where(np.isnan(d), np.inf, d)))
-            msg = (f"{int(bad.sum())} of {ok.size} Gaussians bound to {name!r} lie off their face "
-                   f"(largest {value:.4g} mm at Gaussian {worst}, median {float(np.nanmedian(d)):.4g} mm)")
-            other = _better_target(tris, name, means[ok[bad]], s.bind_face[ok[bad]], uv[ok[bad]], off[ok[bad]], budget)
+            msg = (
+                f"{int(bad.sum())} of {ok.size} Gaussians bound to {name!r} lie off their face "
+                f"(largest {value:.4g} mm at Gaussian {worst}, median {float(np.nanmedian(d)):.4g} mm)"
+            )
+            other = _better_target(
+                tris, name, means[ok[bad]], s.bind_face[ok[bad]], uv[ok[bad]], off[ok[bad]], budget
+            )
             if other is not None:
                 msg += f"; they lie on the same faces of {other!r}: their bind_id names the wrong target"
             yield chk.finding(msg, value=value, budget=budget, where=f"vertex {worst}", **loc)
 
 
-def _better_target(tris: dict[str, np.ndarray | str], name: str, x: np.ndarray, face: np.ndarray, uv: np.ndarray,
-                   off: np.ndarray, budget: float) -> str | None:
+def _better_target(
+    tris: dict[str, np.ndarray | str],
+    name: str,
+    x: np.ndarray,
+    face: np.ndarray,
+    uv: np.ndarray,
+    off: np.ndarray,
+    budget: float,
+) -> str | None:
     """The other target whose same faces the misplaced Gaussians sit on (median within budget)."""
     take = np.arange(min(len(x), 2000))
     best, best_d = None, budget
@@ -539,21 +639,33 @@ def _better_target(tris: dict[str, np.ndarray | str], name: str, x: np.ndarray, 
 # ------------------------------------------------------------------------------- B002-B004 labels
 
 
-@check("B002", group="binding", severity="warning", title="re-rendered labels overlap the recorded ones",
-       quantity="IoU per link/object over the compared frames, outside a 2 px void band at label edges",
-       unit="ratio", budget="binding.iou_min",
-       hint="a link or object re-renders where the recorded labels do not have it: check its bind_id, "
-            "its poses (joint states, object poses) and the segments table")
+@check(
+    "B002",
+    group="binding",
+    severity="warning",
+    title="re-rendered labels overlap the recorded ones",
+    quantity="IoU per link/object over the compared frames, outside a 2 px void band at label edges",
+    unit="ratio",
+    budget="binding.iou_min",
+    hint="a link or object re-renders where the recorded labels do not have it: check its bind_id, "
+    "its poses (joint states, object poses) and the segments table",
+)
 def _iou(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("binding.iou_min")
     for job in _camera_jobs(ctx):
         ps = _pass(ctx, job)
         if ps.skipped:
-            yield chk.finding(f"labels not re-rendered: {ps.skipped}", severity="info",
-                              episode=job.ep.id, stream=job.stream)
+            yield chk.finding(
+                f"labels not re-rendered: {ps.skipped}",
+                severity="info",
+                episode=job.ep.id,
+                stream=job.stream,
+            )
             continue
         for note in ps.notes:
-            yield chk.finding(f"re-render: {note}", severity="info", episode=job.ep.id, stream=job.stream)
+            yield chk.finding(
+                f"re-render: {note}", severity="info", episode=job.ep.id, stream=job.stream
+            )
         inter, union = ps.inter.sum(0), ps.union.sum(0)
         for c, name in enumerate(ps.channels.names):
             loc = _where(job, name, ps.channels.kinds[c])
@@ -562,20 +674,34 @@ def _iou(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             iou = inter[c] / union[c]
             if iou >= budget:
                 continue
-            per = np.where(ps.union[:, c] > 0, ps.inter[:, c] / np.maximum(ps.union[:, c], 1), np.inf)
+            per = np.where(
+                ps.union[:, c] > 0, ps.inter[:, c] / np.maximum(ps.union[:, c], 1), np.inf
+            )
             k = int(np.argmin(per))
             yield chk.finding(
                 f"{name!r} re-renders with IoU {iou:.3f} against label {int(ps.channels.label_ids[c])} over "
                 f"{len(ps.frame_index)} frames (worst frame {int(ps.frame_index[k])}: IoU {per[k]:.3f}, "
                 f"{int(ps.recorded[k, c])} recorded vs {int(ps.rendered[k, c])} re-rendered px)",
-                value=float(iou), budget=budget, frame=int(ps.frame_index[k]), t_ns=int(ps.t_ns[k]), **loc)
+                value=float(iou),
+                budget=budget,
+                frame=int(ps.frame_index[k]),
+                t_ns=int(ps.t_ns[k]),
+                **loc,
+            )
 
 
-@check("B003", group="binding", severity="warning", title="re-rendered label boundaries match the recorded ones",
-       quantity="mean symmetric boundary distance per link/object, flagged above both the px and the mm "
-                "(binding.boundary_mm, at the rendered depth) budgets", unit="px", budget="binding.boundary_px",
-       hint="boundaries are off by more than the budget: check the splat scales, the binding and the camera "
-            "intrinsics; B005 and B006 tell a time offset or a camera displacement apart")
+@check(
+    "B003",
+    group="binding",
+    severity="warning",
+    title="re-rendered label boundaries match the recorded ones",
+    quantity="mean symmetric boundary distance per link/object, flagged above both the px and the mm "
+    "(binding.boundary_mm, at the rendered depth) budgets",
+    unit="px",
+    budget="binding.boundary_px",
+    hint="boundaries are off by more than the budget: check the splat scales, the binding and the camera "
+    "intrinsics; B005 and B006 tell a time offset or a camera displacement apart",
+)
 def _boundary(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     b_px = ctx.budget("binding.boundary_px")
     b_mm = ctx.budget("binding.boundary_mm")
@@ -583,7 +709,11 @@ def _boundary(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         ps = _pass(ctx, job)
         if ps.skipped:
             continue
-        depth = np.where(np.isnan(ps.depth), np.nanmedian(ps.depth) if np.isfinite(ps.depth).any() else np.nan, ps.depth)
+        depth = np.where(
+            np.isnan(ps.depth),
+            np.nanmedian(ps.depth) if np.isfinite(ps.depth).any() else np.nan,
+            ps.depth,
+        )
         mm = ps.bsum * depth / ps.fx * 1e3
         for c, name in enumerate(ps.channels.names):
             n = ps.bcnt[:, c].sum()
@@ -600,13 +730,23 @@ def _boundary(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 f"{name!r} re-renders with boundaries {px:.3g} px ({mean_mm:.3g} mm at its depth) from the recorded "
                 f"ones, above both budgets ({b_px:g} px, {b_mm:g} mm; worst frame {int(ps.frame_index[k])}: "
                 f"{per[k]:.3g} px)",
-                value=px, budget=b_px,
-                frame=int(ps.frame_index[k]), t_ns=int(ps.t_ns[k]), **loc)
+                value=px,
+                budget=b_px,
+                frame=int(ps.frame_index[k]),
+                t_ns=int(ps.t_ns[k]),
+                **loc,
+            )
 
 
-@check("B004", group="binding", severity="info", title="re-rendered colour matches the video",
-       quantity="PSNR of the re-rendered foreground against the video frames", unit="dB",
-       hint="low PSNR with good labels points at colour (exposure, white balance, SH) rather than geometry")
+@check(
+    "B004",
+    group="binding",
+    severity="info",
+    title="re-rendered colour matches the video",
+    quantity="PSNR of the re-rendered foreground against the video frames",
+    unit="dB",
+    hint="low PSNR with good labels points at colour (exposure, white balance, SH) rather than geometry",
+)
 def _psnr(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for job in _camera_jobs(ctx):
         ps = _pass(ctx, job)
@@ -617,16 +757,27 @@ def _psnr(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         yield chk.finding(
             f"re-rendered colour has PSNR {float(np.mean(ps.psnr[ok])):.2f} dB over {int(ok.sum())} frames "
             f"(foreground only; worst frame {int(ps.frame_index[k])}: {ps.psnr[k]:.2f} dB)",
-            value=float(np.mean(ps.psnr[ok])), episode=job.ep.id, stream=job.stream,
-            frame=int(ps.frame_index[k]), t_ns=int(ps.t_ns[k]))
+            value=float(np.mean(ps.psnr[ok])),
+            episode=job.ep.id,
+            stream=job.stream,
+            frame=int(ps.frame_index[k]),
+            t_ns=int(ps.t_ns[k]),
+        )
 
 
 # ------------------------------------------------------------------------------- B005-B006 alignment
 
 
-@check("B005", group="binding", severity="error", title="camera stamps agree with the re-render in time",
-       quantity="time shift that best aligns re-rendered and recorded labels", unit="ms", budget="time.offset_ms",
-       hint="correct the camera stream's offset_ns (or its stamp source) by the estimate")
+@check(
+    "B005",
+    group="binding",
+    severity="error",
+    title="camera stamps agree with the re-render in time",
+    quantity="time shift that best aligns re-rendered and recorded labels",
+    unit="ms",
+    budget="time.offset_ms",
+    hint="correct the camera stream's offset_ns (or its stamp source) by the estimate",
+)
 def _time_offset(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("time.offset_ms")
     for job in _camera_jobs(ctx):
@@ -635,7 +786,11 @@ def _time_offset(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             continue
         loc = {"episode": job.ep.id, "stream": job.stream}
         if not fit.offset_observable:
-            yield chk.finding("time offset not estimated: the compared frames show no motion", severity="info", **loc)
+            yield chk.finding(
+                "time offset not estimated: the compared frames show no motion",
+                severity="info",
+                **loc,
+            )
             continue
         late = -fit.offset_ms
         declared = float(job.entry.get("offset_ns") or 0) * 1e-6
@@ -645,13 +800,22 @@ def _time_offset(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             f"camera {job.model.name!r} frames are stamped {late:+.2f} ms late against the joint and object "
             f"streams (from {len(fit.frames)} moving frames; declared offset_ns {declared:g} ms, "
             f"aligned with {declared - late:.2f} ms)",
-            value=late, budget=budget, **loc)
+            value=late,
+            budget=budget,
+            **loc,
+        )
 
 
-@check("B006", group="binding", severity="error", title="camera extrinsics agree with the re-render",
-       quantity="camera displacement across the optical axis that best aligns the labels", unit="mm",
-       budget="binding.extrinsic_mm",
-       hint="re-calibrate T_world_cam (hand-eye or a target); the estimate gives the direction")
+@check(
+    "B006",
+    group="binding",
+    severity="error",
+    title="camera extrinsics agree with the re-render",
+    quantity="camera displacement across the optical axis that best aligns the labels",
+    unit="mm",
+    budget="binding.extrinsic_mm",
+    hint="re-calibrate T_world_cam (hand-eye or a target); the estimate gives the direction",
+)
 def _extrinsic(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("binding.extrinsic_mm")
     for job in _camera_jobs(ctx):
@@ -666,16 +830,25 @@ def _extrinsic(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             f"camera {job.model.name!r} appears displaced by {mm:.2f} mm across its optical axis "
             f"(x {err[0]:+.2f} mm, y {err[1]:+.2f} mm in the camera frame; from {len(fit.frames)} frames, "
             f"label disagreement {fit.cost_before:.0f} -> {fit.cost_after:.0f} px)",
-            value=mm, budget=budget, episode=job.ep.id, stream=job.stream,
-            file=(ctx.manifest.get("cameras") or {}).get(job.model.name))
+            value=mm,
+            budget=budget,
+            episode=job.ep.id,
+            stream=job.stream,
+            file=(ctx.manifest.get("cameras") or {}).get(job.model.name),
+        )
 
 
 # ------------------------------------------------------------------------------- B007-B011 inputs
 
 
-@check("B007", group="binding", severity="error", title="splat values are finite and plausible",
-       quantity="Gaussians with NaN/inf values, zero or absurd scales, zero rotations or bad bind ids",
-       hint="drop or re-fit these Gaussians; log-scales must be finite and below log(10 m)")
+@check(
+    "B007",
+    group="binding",
+    severity="error",
+    title="splat values are finite and plausible",
+    quantity="Gaussians with NaN/inf values, zero or absurd scales, zero rotations or bad bind ids",
+    hint="drop or re-fit these Gaussians; log-scales must be finite and below log(10 m)",
+)
 def _bad_splats(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for owner, entry in _splat_owners(ctx):
         rel = entry["path"]
@@ -687,23 +860,44 @@ def _bad_splats(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         tests = [
             ("non-finite centre", ~np.isfinite(s.means).all(1)),
             ("non-finite rotation", ~np.isfinite(s.quats).all(1)),
-            ("zero rotation quaternion", np.isfinite(s.quats).all(1) & (np.linalg.norm(s.quats, axis=1) < 1e-8)),
+            (
+                "zero rotation quaternion",
+                np.isfinite(s.quats).all(1) & (np.linalg.norm(s.quats, axis=1) < 1e-8),
+            ),
             ("NaN or +inf log-scale", (np.isnan(ls) | np.isposinf(ls)).any(1)),
             ("zero scale (log-scale -inf)", np.isneginf(ls).any(1)),
-            (f"scale above {math.exp(MAX_LOG_SCALE):g} m", (ls >= MAX_LOG_SCALE).any(1) & np.isfinite(ls).all(1)),
+            (
+                f"scale above {math.exp(MAX_LOG_SCALE):g} m",
+                (ls >= MAX_LOG_SCALE).any(1) & np.isfinite(ls).all(1),
+            ),
             ("NaN opacity", np.isnan(s.opacity_logits)),
             ("non-finite colour", ~np.isfinite(s.sh.reshape(n, -1)).all(1)),
-            ("bind_id outside the targets", (s.bind_id < -1) | (s.bind_id >= len(entry.get("targets") or []))),
+            (
+                "bind_id outside the targets",
+                (s.bind_id < -1) | (s.bind_id >= len(entry.get("targets") or [])),
+            ),
         ]
         for what, mask in tests:
             if mask.any():
                 first = int(np.flatnonzero(mask)[0])
-                yield chk.finding(f"{int(mask.sum())} of {n} Gaussians of {owner!r} have a {what} (first: vertex {first})",
-                                  value=float(mask.sum()), unit="Gaussians", file=rel, where=f"vertex {first}")
+                yield chk.finding(
+                    f"{int(mask.sum())} of {n} Gaussians of {owner!r} have a {what} (first: vertex {first})",
+                    value=float(mask.sum()),
+                    unit="Gaussians",
+                    file=rel,
+                    where=f"vertex {first}",
+                )
 
 
-@check("B008", group="binding", severity="warning", title="splat quaternions are normalised",
-       quantity="largest deviation of |q| from 1", unit="", hint="normalise rot_0..3 when writing the PLY")
+@check(
+    "B008",
+    group="binding",
+    severity="warning",
+    title="splat quaternions are normalised",
+    quantity="largest deviation of |q| from 1",
+    unit="",
+    hint="normalise rot_0..3 when writing the PLY",
+)
 def _quat_norms(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for owner, entry in _splat_owners(ctx):
         s = ctx.dataset.splats(owner)
@@ -712,14 +906,24 @@ def _quat_norms(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         bad = np.isfinite(dev) & (dev > QUAT_NORM_TOL) & (norm > 1e-8)
         if bad.any():
             k = int(np.flatnonzero(bad)[np.argmax(dev[bad])])
-            yield chk.finding(f"{int(bad.sum())} of {len(s)} quaternions of {owner!r} have |q| off 1 by more than "
-                              f"{QUAT_NORM_TOL:g} (worst {norm[k]:.6g} at vertex {k})",
-                              value=float(dev[k]), budget=QUAT_NORM_TOL, file=entry["path"], where=f"vertex {k}")
+            yield chk.finding(
+                f"{int(bad.sum())} of {len(s)} quaternions of {owner!r} have |q| off 1 by more than "
+                f"{QUAT_NORM_TOL:g} (worst {norm[k]:.6g} at vertex {k})",
+                value=float(dev[k]),
+                budget=QUAT_NORM_TOL,
+                file=entry["path"],
+                where=f"vertex {k}",
+            )
 
 
-@check("B009", group="binding", severity="error", title="cameras can be rendered from",
-       quantity="degenerate camera parameters",
-       hint="focal lengths > 0, finite principal point, positive image size and a rigid T_world_cam")
+@check(
+    "B009",
+    group="binding",
+    severity="error",
+    title="cameras can be rendered from",
+    quantity="degenerate camera parameters",
+    hint="focal lengths > 0, finite principal point, positive image size and a rigid T_world_cam",
+)
 def _cameras(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     cams = ctx.manifest.get("cameras")
     for name, rel in sorted(cams.items()) if isinstance(cams, dict) else []:
@@ -734,9 +938,14 @@ def _cameras(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             yield chk.finding(f"camera {name!r}: {p}", file=rel)
 
 
-@check("B010", group="binding", severity="error", title="every label id has a segment",
-       quantity="label ids in label images that the segments table does not define",
-       hint="add the ids to segments.parquet (label_id, category, instance, kind, target) or relabel the images")
+@check(
+    "B010",
+    group="binding",
+    severity="error",
+    title="every label id has a segment",
+    quantity="label ids in label images that the segments table does not define",
+    hint="add the ids to segments.parquet (label_id, category, instance, kind, target) or relabel the images",
+)
 def _unknown_labels(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for job in _camera_jobs(ctx):
         try:
@@ -751,15 +960,26 @@ def _unknown_labels(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             continue
         rows = np.isin(ids, unknown)
         first = int(np.asarray(lb.frame_index)[rows][0])
-        yield chk.finding(f"label ids {unknown[:10]}{' ...' if len(unknown) > 10 else ''} appear in "
-                          f"{len(np.unique(np.asarray(lb.frame_index)[rows]))} frames but no segment defines them",
-                          value=float(len(unknown)), unit="ids", episode=job.ep.id, stream=job.stream,
-                          frame=first, file=job.entry["labels"])
+        yield chk.finding(
+            f"label ids {unknown[:10]}{' ...' if len(unknown) > 10 else ''} appear in "
+            f"{len(np.unique(np.asarray(lb.frame_index)[rows]))} frames but no segment defines them",
+            value=float(len(unknown)),
+            unit="ids",
+            episode=job.ep.id,
+            stream=job.stream,
+            frame=first,
+            file=job.entry["labels"],
+        )
 
 
-@check("B011", group="binding", severity="warning", title="bound targets and segments name each other",
-       quantity="bound targets without a label, segments naming no link or object",
-       hint="give every link/object with Gaussians a segment row whose target is its name")
+@check(
+    "B011",
+    group="binding",
+    severity="warning",
+    title="bound targets and segments name each other",
+    quantity="bound targets without a label, segments naming no link or object",
+    hint="give every link/object with Gaussians a segment row whose target is its name",
+)
 def _segment_targets(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     links: set[str] = set()
     if ctx.has_robot():
@@ -779,12 +999,21 @@ def _segment_targets(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         for r in rows:
             tgt, kind = str(r.get("target") or ""), str(r.get("kind") or "")
             if kind == "robot_link" and links and tgt not in links:
-                yield chk.finding(f"segment {r.get('label_id')} names link {tgt!r}, which the URDF does not have",
-                                  episode=ep.id, link=tgt)
+                yield chk.finding(
+                    f"segment {r.get('label_id')} names link {tgt!r}, which the URDF does not have",
+                    episode=ep.id,
+                    link=tgt,
+                )
             elif kind == "object" and tgt not in assets:
-                yield chk.finding(f"segment {r.get('label_id')} names object {tgt!r}, which is not an asset",
-                                  episode=ep.id, object=tgt)
+                yield chk.finding(
+                    f"segment {r.get('label_id')} names object {tgt!r}, which is not an asset",
+                    episode=ep.id,
+                    object=tgt,
+                )
         missing = sorted(bound - named)
         if missing:
-            yield chk.finding(f"bound targets {missing[:8]} have no segment, so their re-render cannot be checked",
-                              severity="info", episode=ep.id)
+            yield chk.finding(
+                f"bound targets {missing[:8]} have no segment, so their re-render cannot be checked",
+                severity="info",
+                episode=ep.id,
+            )

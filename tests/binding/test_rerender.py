@@ -27,8 +27,8 @@ from robogs_format.rerender import boundary_distance, compare_frame, void_band
 from robogs_format.splats import read_splat_ply, write_splat_ply
 
 B_CODES = [f"B{i:03d}" for i in range(1, 12)]
-#: speed options of these tests: every 8th frame for the label pass, 3 frames for the fit
-FAST = {"stride": 8, "fit_frames": 3}
+#: speed options of these tests: every 8th frame for the label pass, 8 frames for the fit
+FAST = {"stride": 8, "fit_frames": 8}
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +55,11 @@ def _rehash(root: Path, *rels: str) -> None:
     m = json.loads(mpath.read_text(encoding="utf-8"))
     for rel in rels:
         data = (root / rel).read_bytes()
-        m["files"][rel] = {**m["files"][rel], "sha256": hashlib.sha256(data).hexdigest(), "size": len(data)}
+        m["files"][rel] = {
+            **m["files"][rel],
+            "sha256": hashlib.sha256(data).hexdigest(),
+            "size": len(data),
+        }
     mpath.write_text(json.dumps(m, indent=2, sort_keys=True), encoding="utf-8")
 
 
@@ -224,7 +228,9 @@ def test_bad_inputs_are_findings_not_crashes(scene_copy) -> None:
     T[:3, :3] *= 1.2  # not a rotation
     cam["T_world_cam"] = T.tolist()
     (root / cam_rel).write_text(json.dumps(cam, indent=2))
-    labels_rel = next(s for s in m["episodes"][0]["streams"].values() if s["kind"] == "camera")["labels"]
+    labels_rel = next(s for s in m["episodes"][0]["streams"].values() if s["kind"] == "camera")[
+        "labels"
+    ]
     tab = pq.read_table(root / labels_rel)
     pngs = tab.column("png").to_pylist()
     img = decode_label_png(pngs[3]).copy()

@@ -11,19 +11,35 @@ from reference_impl.physics.model import BoxScene, Drive, simulate
 from reference_impl.physics.space import ParamSpace
 
 F = torch.float64
-SCENE = BoxScene(size=(0.08, 0.06, 0.05), mass=0.4, inertia_z=0.4 * 0.01 / 12, friction_static=0.45,
-                 friction_dynamic=0.3, pusher_radius=0.01, pusher_length=0.04)
+SCENE = BoxScene(
+    size=(0.08, 0.06, 0.05),
+    mass=0.4,
+    inertia_z=0.4 * 0.01 / 12,
+    friction_static=0.45,
+    friction_dynamic=0.3,
+    pusher_radius=0.01,
+    pusher_length=0.04,
+)
 MU = Param("friction_dynamic", "-", 0.02, 2.0, 0.3, 0.3)
 
 
-def _free_drive(n_traj: int, steps: int, v0: np.ndarray, z0: float = 0.025, dt: float = 1e-3) -> Drive:
+def _free_drive(
+    n_traj: int, steps: int, v0: np.ndarray, z0: float = 0.025, dt: float = 1e-3
+) -> Drive:
     far = torch.zeros(n_traj, steps, 3, dtype=F)
     far[..., 2] = 1.0  # EE far above: no contact
     t = torch.arange(0, steps - 1, 10, dtype=F) * dt
     return Drive(
-        dt, far, torch.zeros_like(far), torch.zeros(n_traj, steps, dtype=F), torch.zeros(n_traj, steps, dtype=F),
-        torch.zeros(n_traj, steps, dtype=torch.bool), torch.tensor([[0.0, 0.0, z0]] * n_traj, dtype=F),
-        torch.zeros(n_traj, dtype=F), t.repeat(n_traj, 1), torch.ones(n_traj, len(t), dtype=torch.bool),
+        dt,
+        far,
+        torch.zeros_like(far),
+        torch.zeros(n_traj, steps, dtype=F),
+        torch.zeros(n_traj, steps, dtype=F),
+        torch.zeros(n_traj, steps, dtype=torch.bool),
+        torch.tensor([[0.0, 0.0, z0]] * n_traj, dtype=F),
+        torch.zeros(n_traj, dtype=F),
+        t.repeat(n_traj, 1),
+        torch.ones(n_traj, len(t), dtype=torch.bool),
         init_vel=torch.as_tensor(v0, dtype=F),
     )
 
@@ -94,10 +110,18 @@ def test_pusher_moves_box_and_grasp_carries_it():
     vel = np.zeros_like(pos)
     vel[:, :-1] = np.diff(pos, axis=1) / dt
     obs = torch.tensor(t[::20], dtype=F).repeat(2, 1)
-    drive = Drive(dt, torch.tensor(pos), torch.tensor(vel), torch.zeros(2, steps, dtype=F),
-                  torch.zeros(2, steps, dtype=F), torch.tensor(grasp),
-                  torch.tensor([[0.0, 0.0, 0.025], [0.0, 0.0, 0.225]], dtype=F), torch.zeros(2, dtype=F),
-                  obs, torch.ones_like(obs, dtype=torch.bool))
+    drive = Drive(
+        dt,
+        torch.tensor(pos),
+        torch.tensor(vel),
+        torch.zeros(2, steps, dtype=F),
+        torch.zeros(2, steps, dtype=F),
+        torch.tensor(grasp),
+        torch.tensor([[0.0, 0.0, 0.025], [0.0, 0.0, 0.225]], dtype=F),
+        torch.zeros(2, dtype=F),
+        obs,
+        torch.ones_like(obs, dtype=torch.bool),
+    )
     space = ParamSpace([MU], [])
     res = simulate(space.defaults(1), space, drive, SCENE)
     # pushed box: its back face (x - 0.04) stays at the capsule surface (x + 0.01) while pushed

@@ -129,3 +129,13 @@ def test_empty_depths_are_refused():
     cams = _cameras(3)
     with pytest.raises(InputError, match="no depth map has a valid pixel"):
         fuse_tsdf([torch.zeros(H, W)] * 3, cams, np.full(3, -0.3), np.full(3, 0.3), resolution=32)
+
+
+def test_narrow_band_gives_the_dense_grid_result(sphere_volume):
+    cams = _cameras()
+    depths = [_sphere_depth(c, 0.25) for c in cams]
+    dense = fuse_tsdf(depths, cams, np.full(3, -0.32), np.full(3, 0.32), resolution=64, narrow_band=False)
+    assert dense.allocated_voxels == math.prod(dense.dims) > sphere_volume.allocated_voxels
+    a, b = extract_mesh(sphere_volume), extract_mesh(dense)
+    assert len(a.faces) == len(b.faces)
+    assert np.allclose(np.sort(a.vertices, axis=0), np.sort(b.vertices, axis=0), atol=1e-9)

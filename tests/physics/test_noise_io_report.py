@@ -1,0 +1,49 @@
+"""Noise floor from the data, dataset round trip, physics revisions, HTML report."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import scenario
+
+from fixtures.scenarios import write_scenario
+from reference_impl.physics import api
+from reference_impl.physics.prepare import prepare
+from reference_impl.physics.recording import load_recording
+from robogs_format.dataset import Dataset
+
+
+def test_noise_is_estimated_from_the_data():
+    rec = scenario("none", seed=3)
+    nz = prepare(rec).noise
+    truth = rec.meta["noise_levels"]
+    assert nz.source == "rest"
+    assert nz.sigma_pos == pytest.approx(truth["pos"], rel=0.15)
+    assert nz.sigma_yaw == pytest.approx(truth["rot"], rel=0.2)
+    assert nz.sigma_t == pytest.approx(truth["jitter"], rel=0.25)
+
+
+def test_dataset_round_trip_fit_revision_and_revert(tmp_path):
+    rec = scenario("table_tilt", seed=4)
+    ds = write_scenario(rec, tmp_path / "ds")
+    back = load_recording(ds)
+    assert [t.name for t in back.trajectories] == [t.name for t in rec.trajectories]
+    for a, b in zip(back.trajectories, rec.trajectories, strict=True):
+        assert np.array_equal(a.t_ns, b.t_ns) and np.allclose(a.object_pos, b.object_pos)
+        assert np.array_equal(a.grasp, b.grasp) and np.allclose(a.ee_quat, b.ee_quat)
+    before = api.compare(ds)
+    res = api.fit(ds, add=["table_tilt"])
+    assert res.revision == 2 and res.rms_after < before.rms_mm
+    ds2 = Dataset.open(tmp_path / "ds")
+    assert ds2.physics_history() == [1]
+    assert [e["name"] for e in ds2.physics()["effects"]] == ["table_tilt"]
+    after = api.compare(ds2)
+    assert after.rms_mm < 0.8 * before.rms_mm
+    assert api.revert(ds2, 1) == 3
+    assert Dataset.open(tmp_path / "ds").physics()["effects"] == []
+
+
+def test_report_writes_html_with_svg_plots(tmp_path):
+    out = api.report(scenario("none", seed=3), tmp_path / "r.html")
+    text = out.read_text()
+    assert text.count("<svg") == 6 and "noise floor" in text and "sliding" in text
