@@ -136,21 +136,27 @@ def fuse_tsdf(
     o_t = torch.as_tensor(lo, dtype=torch.float64, device=device)
     nb_t = torch.as_tensor(nb, device=device)
     # -- allocate the blocks within trunc of any surface sample --------------------------
-    reach = int(math.ceil(2 * trunc / bsize)) + 1
-    offs = torch.stack(torch.meshgrid(*[torch.arange(reach, device=device)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    # blocks holding a back-projected depth sample, dilated by ceil(trunc / block edge) blocks:
+    # a superset of the blocks within trunc of the samples
+    r = int(math.ceil(trunc / bsize))
+    offs = torch.stack(torch.meshgrid(*[torch.arange(-r, r + 1, device=device)] * 3, indexing="ij"), -1).reshape(-1, 3)
     keys = []
     for d, cam in zip(depths, cameras, strict=True):
         pts = _backproject(d, cam, 1)
         if len(pts) == 0:
             continue
-        bmin = torch.floor((pts - trunc - o_t) / bsize).long()
-        bmax = torch.floor((pts + trunc - o_t) / bsize).long()
-        cand = bmin[:, None, :] + offs[None]
-        ok = (cand <= bmax[:, None, :]).all(-1) & (cand >= 0).all(-1) & (cand < nb_t).all(-1)
-        c = cand[ok]
-        keys.append(torch.unique((c[:, 0] * nb[1] + c[:, 1]) * nb[2] + c[:, 2]))
+        b = torch.floor((pts - o_t) / bsize).long()
+        ok = ((b >= -r) & (b < nb_t + r)).all(-1)
+        b = b[ok] + r  # shifted so keys stay non-negative
+        keys.append(torch.unique(((b[:, 0] * (nb[1] + 2 * r)) + b[:, 1]) * (nb[2] + 2 * r) + b[:, 2]))
     if not keys:
         raise InputError("no depth map has a valid pixel: nothing to fuse", hint="check the rendered depths")
+    k = torch.unique(torch.cat(keys))
+    ny, nz = nb[1] + 2 * r, nb[2] + 2 * r
+    seed = torch.stack([k // (ny * nz), (k // nz) % ny, k % nz], -1) - r
+    cand = (seed[:, None, :] + offs[None]).reshape(-1, 3)
+    cand = cand[((cand >= 0) & (cand < nb_t)).all(-1)]
+    keys = [(cand[:, 0] * nb[1] + cand[:, 1]) * nb[2] + cand[:, 2]]
     key = torch.unique(torch.cat(keys))
     if not narrow_band:
         key = torch.arange(int(nb.prod()), device=device)
@@ -162,13 +168,22 @@ def fuse_tsdf(
     tsdf = torch.ones(len(centres), dtype=torch.float32, device=device)
     weight = torch.zeros(len(centres), dtype=torch.float32, device=device)
     # -- integrate view by view ----------------------------------------------------------------
+    ones = torch.ones(len(centres), 1, dtype=torch.float32, device=device)
+    centres_h = torch.cat([centres, ones], 1)
     for d, cam in zip(depths, cameras, strict=True):
-        T = cam.T_world_cam.to(device=device, dtype=torch.float32)
-        pc = (centres - T[:3, 3]) @ T[:3, :3]
-        z = pc[:, 2]
-        zs = torch.where(z > 1e-9, z, torch.ones_like(z))
-        u = torch.floor(cam.fx * pc[:, 0] / zs + cam.cx).long()
-        v = torch.floor(cam.fy * pc[:, 1] / zs + cam.cy).long()
+        # one [4, 3] matrix: world -> (fx x + cx z, fy y + cy z, z) in the camera
+        T = cam.T_world_cam.to(device=device, dtype=torch.float64)
+        Rcw = T[:3, :3].T
+        P = torch.zeros(4, 3, dtype=torch.float64, device=device)
+        Kmat = torch.tensor([[cam.fx, 0.0, cam.cx], [0.0, cam.fy, cam.cy], [0.0, 0.0, 1.0]], dtype=torch.float64,
+                            device=device)
+        P[:3] = (Kmat @ Rcw).T
+        P[3] = Kmat @ (-(Rcw @ T[:3, 3]))
+        h = centres_h @ P.to(torch.float32)
+        z = h[:, 2]
+        zs = torch.where(z > cam.near, z, torch.ones_like(z))
+        u = torch.floor(h[:, 0] / zs).long()
+        v = torch.floor(h[:, 1] / zs).long()
         H, W = d.shape
         inside = (z > cam.near) & (u >= 0) & (u < W) & (v >= 0) & (v < H)
         dd = d.reshape(-1).to(torch.float32)[(v.clamp(0, H - 1) * W + u.clamp(0, W - 1))]
