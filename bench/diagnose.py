@@ -132,7 +132,7 @@ def _table(results: list[dict], noise: str) -> tuple[list[str], dict]:
 def _timing() -> str:
     import torch
 
-    torch.set_num_threads(2)
+    torch.set_num_threads(1)
     from fixtures.scenarios import make_scenario
     from reference_impl.physics.diagnose import diagnose_recording
 
@@ -142,7 +142,7 @@ def _timing() -> str:
     wall = time.perf_counter() - t0
     return (
         f"diagnose, full catalogue ({len(res.rows)} candidates), 9-push scenario: {wall:.1f} s "
-        f"(target 60 s; ratio {wall / 60:.2f}); torch threads 2"
+        f"(target 60 s; ratio {wall / 60:.2f}); torch threads 1"
     )
 
 

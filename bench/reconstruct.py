@@ -48,19 +48,28 @@ def _open3d_fusion(truth, vox: float, trunc: float, origin: np.ndarray, res: int
     # Open3D puts pixel centres at integers: principal point - 0.5
     intr = o3d.camera.PinholeCameraIntrinsic(W, H, K[0, 0], K[1, 1], K[0, 2] - 0.5, K[1, 2] - 0.5)
     vol = o3d.pipelines.integration.UniformTSDFVolume(
-        length=vox * res, resolution=res, sdf_trunc=trunc,
-        color_type=o3d.pipelines.integration.TSDFVolumeColorType.NoColor, origin=np.asarray(origin, np.float64))
+        length=vox * res,
+        resolution=res,
+        sdf_trunc=trunc,
+        color_type=o3d.pipelines.integration.TSDFVolumeColorType.NoColor,
+        origin=np.asarray(origin, np.float64),
+    )
     t0 = time.perf_counter()
     for d, T in zip(truth._depth, truth.T_world_cam, strict=True):
         depth = o3d.geometry.Image(np.ascontiguousarray(d, dtype=np.float32))
         color = o3d.geometry.Image(np.zeros((H, W, 3), np.uint8))
-        rgbd = o3d.geometry.RGBDImage.create_from_color_and_depth(color, depth, depth_scale=1.0, depth_trunc=100.0,
-                                                                  convert_rgb_to_intensity=False)
+        rgbd = o3d.geometry.RGBDImage.create_from_color_and_depth(
+            color, depth, depth_scale=1.0, depth_trunc=100.0, convert_rgb_to_intensity=False
+        )
         vol.integrate(rgbd, intr, np.linalg.inv(T))
     t_fuse = time.perf_counter() - t0
     m = vol.extract_triangle_mesh()
     t_all = time.perf_counter() - t0
-    return trimesh.Trimesh(np.asarray(m.vertices), np.asarray(m.triangles), process=False), t_fuse, t_all
+    return (
+        trimesh.Trimesh(np.asarray(m.vertices), np.asarray(m.triangles), process=False),
+        t_fuse,
+        t_all,
+    )
 
 
 def open3d_version() -> str:
@@ -88,27 +97,45 @@ def main() -> None:
     from reference_impl.reconstruct.tsdf import extract_mesh, fuse_tsdf
     from robogs_format.render import Camera
 
-    print(f"machine: {platform.machine()} {platform.processor() or '?'}, cpu_count={os.cpu_count()}, "
-          f"torch {torch.__version__}, torch threads={torch.get_num_threads()}, "
-          f"load average {os.getloadavg()[0]:.1f} (shared machine: wall times include contention)")
+    print(
+        f"machine: {platform.machine()} {platform.processor() or '?'}, cpu_count={os.cpu_count()}, "
+        f"torch {torch.__version__}, torch threads={torch.get_num_threads()}, "
+        f"load average {os.getloadavg()[0]:.1f} (shared machine: wall times include contention)"
+    )
     tmp = Path(tempfile.mkdtemp(prefix="robogs-bench-recon-"))
     t0 = time.perf_counter()
-    truth = synthesize_multiview(tmp / "ur5", robot="ur5", n_views=args.views, width=args.width, height=args.height)
-    print(f"scene: UR5 + box + table, {args.views} views {args.width}x{args.height}, "
-          f"generated in {time.perf_counter() - t0:.1f} s")
+    truth = synthesize_multiview(
+        tmp / "ur5", robot="ur5", n_views=args.views, width=args.width, height=args.height
+    )
+    print(
+        f"scene: UR5 + box + table, {args.views} views {args.width}x{args.height}, "
+        f"generated in {time.perf_counter() - t0:.1f} s"
+    )
     scene = truth.scene_mesh
     lo, hi = scene.bounds
     diag = float(np.linalg.norm(hi - lo))
     tau = 0.01 * diag * 1e3
     taus = (tau, 5.0)
     ref, ref_n = truth.visible_surface_points(args.samples)
-    print(f"scene diagonal {diag:.3f} m -> F-score threshold 1 % = {tau:.2f} mm; "
-          f"{len(ref)} visible reference samples")
+    print(
+        f"scene diagonal {diag:.3f} m -> F-score threshold 1 % = {tau:.2f} mm; "
+        f"{len(ref)} visible reference samples"
+    )
 
     # -- 1. TSDF fusion of the true depths ----------------------------------------------------
     K = truth.K
-    cams = [Camera(width=args.width, height=args.height, fx=K[0, 0], fy=K[1, 1], cx=K[0, 2], cy=K[1, 2],
-                   T_world_cam=torch.as_tensor(T)) for T in truth.T_world_cam]
+    cams = [
+        Camera(
+            width=args.width,
+            height=args.height,
+            fx=K[0, 0],
+            fy=K[1, 1],
+            cx=K[0, 2],
+            cy=K[1, 2],
+            T_world_cam=torch.as_tensor(T),
+        )
+        for T in truth.T_world_cam
+    ]
     depths = [torch.as_tensor(d, dtype=torch.float32) for d in truth._depth]
     pad = 0.03 * (hi - lo).max()
     box_lo, box_hi = lo - pad, hi + pad
@@ -123,26 +150,40 @@ def main() -> None:
     vol_dense = fuse_tsdf(depths, cams, box_lo, box_hi, resolution=args.tsdf_res, narrow_band=False)
     t_dense = time.perf_counter() - t0
     m_ours = _fscore(mesh_ours, ref, ref_n, taus)
-    print(f"TSDF {vol.dims} voxels of {vol.voxel_size * 1e3:.2f} mm, trunc {vol.trunc * 1e3:.1f} mm, "
-          f"{args.views} views:")
-    print(f"  ours narrow band: fusion {t_ours:.2f} s ({vol.allocated_voxels / np.prod(vol.dims):.1%} of the grid "
-          f"allocated), marching cubes + cleaning {t_mc:.2f} s (target fusion <= 10 s)")
-    print(f"  baseline dense grid: fusion {t_dense:.2f} s -> narrow band is {t_dense / t_ours:.2f}x faster")
-    print(f"  mesh: F@{tau:.2f}mm {m_ours.fscore[tau]:.4f}, F@5mm {m_ours.fscore[5.0]:.4f}, "
-          f"Chamfer-L1 {m_ours.chamfer_l1_mm:.2f} mm, NC {m_ours.normal_consistency:.4f}")
+    print(
+        f"TSDF {vol.dims} voxels of {vol.voxel_size * 1e3:.2f} mm, trunc {vol.trunc * 1e3:.1f} mm, "
+        f"{args.views} views:"
+    )
+    print(
+        f"  ours narrow band: fusion {t_ours:.2f} s ({vol.allocated_voxels / np.prod(vol.dims):.1%} of the grid "
+        f"allocated), marching cubes + cleaning {t_mc:.2f} s (target fusion <= 10 s)"
+    )
+    print(
+        f"  baseline dense grid: fusion {t_dense:.2f} s -> narrow band is {t_dense / t_ours:.2f}x faster"
+    )
+    print(
+        f"  mesh: F@{tau:.2f}mm {m_ours.fscore[tau]:.4f}, F@5mm {m_ours.fscore[5.0]:.4f}, "
+        f"Chamfer-L1 {m_ours.chamfer_l1_mm:.2f} mm, NC {m_ours.normal_consistency:.4f}"
+    )
     del vol_dense
     try:
-        mesh_o3d, t_o3d, t_o3d_all = _open3d_fusion(truth, vol.voxel_size, vol.trunc, box_lo, args.tsdf_res)
+        mesh_o3d, t_o3d, t_o3d_all = _open3d_fusion(
+            truth, vol.voxel_size, vol.trunc, box_lo, args.tsdf_res
+        )
     except ImportError as exc:
         print(f"  Open3D: not importable ({exc}); no comparison")
     else:
         m_o3d = _fscore(mesh_o3d, ref, ref_n, taus)
-        print(f"  Open3D {open3d_version()} UniformTSDFVolume {args.tsdf_res}^3: integrate {t_o3d:.2f} s, +extract {t_o3d_all:.2f} s; "
-              f"F@{tau:.2f}mm {m_o3d.fscore[tau]:.4f}, F@5mm {m_o3d.fscore[5.0]:.4f}, "
-              f"Chamfer-L1 {m_o3d.chamfer_l1_mm:.2f} mm")
-        print(f"  ratios ours/Open3D: fusion time {t_ours / t_o3d:.2f}, fusion+mesh time "
-              f"{(t_ours + t_mc) / t_o3d_all:.2f}, F@1% {m_ours.fscore[tau] / max(m_o3d.fscore[tau], 1e-9):.3f}, "
-              f"F@5mm {m_ours.fscore[5.0] / max(m_o3d.fscore[5.0], 1e-9):.3f}")
+        print(
+            f"  Open3D {open3d_version()} UniformTSDFVolume {args.tsdf_res}^3: integrate {t_o3d:.2f} s, +extract {t_o3d_all:.2f} s; "
+            f"F@{tau:.2f}mm {m_o3d.fscore[tau]:.4f}, F@5mm {m_o3d.fscore[5.0]:.4f}, "
+            f"Chamfer-L1 {m_o3d.chamfer_l1_mm:.2f} mm"
+        )
+        print(
+            f"  ratios ours/Open3D: fusion time {t_ours / t_o3d:.2f}, fusion+mesh time "
+            f"{(t_ours + t_mc) / t_o3d_all:.2f}, F@1% {m_ours.fscore[tau] / max(m_o3d.fscore[tau], 1e-9):.3f}, "
+            f"F@5mm {m_ours.fscore[5.0] / max(m_o3d.fscore[5.0], 1e-9):.3f}"
+        )
     if args.skip_train:
         return
 
@@ -159,8 +200,12 @@ def main() -> None:
     for label, iters in (("seeds only (1 step)", 1), (f"{args.iterations} steps", args.iterations)):
         root = tmp / f"run{iters}"
         shutil.copytree(tmp / "ur5", root)
-        opts = ReconstructOptions(train=TrainConfig(iterations=iters, checkpoint_every=0), lr_scale=args.lr_scale,
-                                  tsdf_resolution=args.tsdf_res, work_dir=tmp / f"work{iters}")
+        opts = ReconstructOptions(
+            train=TrainConfig(iterations=iters, checkpoint_every=0),
+            lr_scale=args.lr_scale,
+            tsdf_resolution=args.tsdf_res,
+            work_dir=tmp / f"work{iters}",
+        )
         t0 = time.perf_counter()
         rep = reconstruct(root, opts)
         wall = time.perf_counter() - t0
@@ -169,15 +214,19 @@ def main() -> None:
         m = _fscore(p, ref, ref_n, taus)
         results[label] = (wall, rep, ev, m)
         t = rep.timings_s
-        print(f"reconstruct, {label}: {wall:.1f} s (train {t['train']:.1f}, mesh {t['mesh']:.1f}, init {t['init']:.1f}); "
-              f"{sum(rep.gaussians.values())} Gaussians; held-out PSNR {ev.psnr_db:.2f} dB, SSIM {ev.ssim:.4f}, "
-              f"mIoU {ev.miou:.4f}; mesh F@{tau:.2f}mm {m.fscore[tau]:.4f}, F@5mm {m.fscore[5.0]:.4f}, "
-              f"Chamfer-L1 {m.chamfer_l1_mm:.2f} mm; URDF alignment rms {rep.alignment['rms_mm']:.2f} mm "
-              f"(scale {rep.alignment['scale']:.4f})")
+        print(
+            f"reconstruct, {label}: {wall:.1f} s (train {t['train']:.1f}, mesh {t['mesh']:.1f}, init {t['init']:.1f}); "
+            f"{sum(rep.gaussians.values())} Gaussians; held-out PSNR {ev.psnr_db:.2f} dB, SSIM {ev.ssim:.4f}, "
+            f"mIoU {ev.miou:.4f}; mesh F@{tau:.2f}mm {m.fscore[tau]:.4f}, F@5mm {m.fscore[5.0]:.4f}, "
+            f"Chamfer-L1 {m.chamfer_l1_mm:.2f} mm; URDF alignment rms {rep.alignment['rms_mm']:.2f} mm "
+            f"(scale {rep.alignment['scale']:.4f})"
+        )
         del p, pn
     (w0, _, e0, m0), (w1, _, e1, m1) = results.values()
-    print(f"training gain over the seeds: PSNR {e1.psnr_db - e0.psnr_db:+.2f} dB, "
-          f"F@1% x{m1.fscore[tau] / max(m0.fscore[tau], 1e-9):.2f}, time x{w1 / w0:.1f}")
+    print(
+        f"training gain over the seeds: PSNR {e1.psnr_db - e0.psnr_db:+.2f} dB, "
+        f"F@1% x{m1.fscore[tau] / max(m0.fscore[tau], 1e-9):.2f}, time x{w1 / w0:.1f}"
+    )
 
 
 if __name__ == "__main__":

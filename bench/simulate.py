@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 
 
 def main() -> None:
-    torch.set_num_threads(2)
+    torch.set_num_threads(1)  # small tensors: one thread is fastest (and fair on a shared machine)
     from fixtures.scenarios import make_scenario
     from reference_impl.physics.effects import available_effects, get_effect
     from reference_impl.physics.engine import Engine

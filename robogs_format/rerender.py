@@ -15,10 +15,11 @@ does that comparison:
   distance transforms, ``cv2.distanceTransform``).
 * :func:`fit_alignment` estimates the time offset of the camera stamps and a systematic camera
   displacement by least squares on the soft label disagreement ``sum (p - y)^2`` (``y``: the
-  recorded one-hot labels, area-averaged to the render grid): a coarse grid over the offset, then
-  Gauss–Newton on (offset, camera translation) with the offset column by central differences of
-  renders and the translation columns from the image gradient of ``p`` and the rendered depth
-  (the rigid-motion optical-flow field, Longuet-Higgins & Prazdny 1980).
+  recorded one-hot labels, area-averaged to the render grid): coarse-to-fine Gauss–Newton on
+  (offset, camera translation, label growth), whose Jacobian chains the image gradient of ``p``
+  with the optical flow of each parameter (rendered image velocities for the offset; the
+  rigid-motion flow field at the rendered depth for the translation, Longuet-Higgins & Prazdny
+  1980), then a parabola through the unblurred disagreement around the offset.
 
 Frames are read lazily (label PNGs decoded only for the frames used, video decoded in order).
 """

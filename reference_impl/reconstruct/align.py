@@ -46,7 +46,9 @@ class Similarity:
 
     def compose(self, other: Similarity) -> Similarity:
         """``self ∘ other``."""
-        return Similarity(self.scale * other.scale, self.R @ other.R, self.scale * self.R @ other.t + self.t)
+        return Similarity(
+            self.scale * other.scale, self.R @ other.R, self.scale * self.R @ other.t + self.t
+        )
 
     @property
     def rotation_deg(self) -> float:
@@ -101,9 +103,15 @@ class AlignmentResult:
     per_target_mm: dict[str, float] = field(default_factory=dict)
 
 
-def align_to_meshes(points: dict[str, np.ndarray], meshes: dict[str, trimesh.Trimesh], *,
-                    with_scale: bool = True, iterations: int = 100, samples: int = 20_000,
-                    seed: int = 0) -> AlignmentResult:
+def align_to_meshes(
+    points: dict[str, np.ndarray],
+    meshes: dict[str, trimesh.Trimesh],
+    *,
+    with_scale: bool = True,
+    iterations: int = 100,
+    samples: int = 20_000,
+    seed: int = 0,
+) -> AlignmentResult:
     """Fit a similarity taking labelled points onto the meshes of the same names (ICP + Umeyama).
 
     Args:
@@ -118,8 +126,10 @@ def align_to_meshes(points: dict[str, np.ndarray], meshes: dict[str, trimesh.Tri
     """
     names = [n for n in sorted(points) if n in meshes and len(points[n]) > 0]
     if not names:
-        raise InputError("no reconstructed points are labelled as a link with a mesh: nothing to align",
-                         hint="check the panoptic labels and the segments table")
+        raise InputError(
+            "no reconstructed points are labelled as a link with a mesh: nothing to align",
+            hint="check the panoptic labels and the segments table",
+        )
     trees, surf = {}, {}
     for k, n in enumerate(names):
         p, _ = trimesh.sample.sample_surface(meshes[n], samples, seed=seed + k)
@@ -142,7 +152,8 @@ def align_to_meshes(points: dict[str, np.ndarray], meshes: dict[str, trimesh.Tri
     x = src.copy()
     it = 0
     pairs = len(x)
-    for it in range(1, iterations + 1):
+    for k in range(1, iterations + 1):
+        it = k
         d, y = match(x)
         keep = d <= 3.0 * max(float(np.median(d)), 1e-9)
         pairs = int(keep.sum())
@@ -151,10 +162,21 @@ def align_to_meshes(points: dict[str, np.ndarray], meshes: dict[str, trimesh.Tri
         step = umeyama(x[keep], y[keep], with_scale=with_scale)
         x = step.apply(x)
         total = step.compose(total)
-        if abs(step.scale - 1) < 1e-7 and step.rotation_deg < 1e-5 and np.linalg.norm(step.t) < 1e-8:
+        if (
+            abs(step.scale - 1) < 1e-7
+            and step.rotation_deg < 1e-5
+            and np.linalg.norm(step.t) < 1e-8
+        ):
             break
     d, _ = match(x)
     per = {n: float(np.median(d[owner == i]) * 1e3) for i, n in enumerate(names)}
-    return AlignmentResult(total, float(np.sqrt((d**2).mean()) * 1e3), float(np.median(d) * 1e3),
-                           float(np.percentile(d, 90) * 1e3), float(np.sqrt((d0**2).mean()) * 1e3),
-                           pairs, it, per)
+    return AlignmentResult(
+        total,
+        float(np.sqrt((d**2).mean()) * 1e3),
+        float(np.median(d) * 1e3),
+        float(np.percentile(d, 90) * 1e3),
+        float(np.sqrt((d0**2).mean()) * 1e3),
+        pairs,
+        it,
+        per,
+    )

@@ -16,7 +16,9 @@ import trimesh
 __all__ = ["bind_to_mesh", "bound_positions"]
 
 
-def bind_to_mesh(points: np.ndarray, mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def bind_to_mesh(
+    points: np.ndarray, mesh: trimesh.Trimesh
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Face [N] int32, (u, v) [N, 2] and offset [N] (m) binding ``points`` [N, 3] to ``mesh``.
 
     ``points`` and ``mesh`` must be in the same frame. Points whose nearest face is degenerate
@@ -48,7 +50,9 @@ def bind_to_mesh(points: np.ndarray, mesh: trimesh.Trimesh) -> tuple[np.ndarray,
     return face_out, uv, np.where(ok, off, 0.0).astype(np.float32)
 
 
-def bound_positions(mesh: trimesh.Trimesh, face: np.ndarray, uv: np.ndarray, offset: np.ndarray) -> np.ndarray:
+def bound_positions(
+    mesh: trimesh.Trimesh, face: np.ndarray, uv: np.ndarray, offset: np.ndarray
+) -> np.ndarray:
     """Positions [N, 3] that a binding describes (the inverse of :func:`bind_to_mesh`)."""
     tri = np.asarray(mesh.vertices, np.float64)[np.asarray(mesh.faces)[face]]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])

@@ -21,8 +21,16 @@ __all__ = ["save_checkpoint", "load_checkpoint", "CHECKPOINT_FORMAT"]
 CHECKPOINT_FORMAT = "robogs-reconstruct-checkpoint-1"
 
 
-def save_checkpoint(path: Path, *, fingerprint: str, iteration: int, model_state: dict[str, Any],
-                    grad: torch.Tensor, count: torch.Tensor, psnr_history: list[float]) -> None:
+def save_checkpoint(
+    path: Path,
+    *,
+    fingerprint: str,
+    iteration: int,
+    model_state: dict[str, Any],
+    grad: torch.Tensor,
+    count: torch.Tensor,
+    psnr_history: list[float],
+) -> None:
     """Write a checkpoint atomically (``.part`` then rename)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     doc = {
@@ -50,11 +58,17 @@ def load_checkpoint(path: Path, fingerprint: str) -> dict[str, Any] | None:
     try:
         doc = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many types for damaged files
-        raise InputError(f"checkpoint cannot be read ({type(exc).__name__})", path=path,
-                         hint="delete it or pass --restart to train from scratch") from None
+        raise InputError(
+            f"checkpoint cannot be read ({type(exc).__name__})",
+            path=path,
+            hint="delete it or pass --restart to train from scratch",
+        ) from None
     if not isinstance(doc, dict) or doc.get("format") != CHECKPOINT_FORMAT:
-        raise InputError("not a robogs reconstruction checkpoint", path=path,
-                         hint="delete it or pass --restart to train from scratch")
+        raise InputError(
+            "not a robogs reconstruction checkpoint",
+            path=path,
+            hint="delete it or pass --restart to train from scratch",
+        )
     if doc.get("fingerprint") != fingerprint:
         return None
     return doc

@@ -49,7 +49,8 @@ class GradientStats:
         """Accumulate one view: ``means2d_grad`` [N, 2] (px), ``radii`` [N, 2] (0 where culled)."""
         visible = (radii > 0).any(dim=1)
         g = means2d_grad.detach().to(torch.float64) * torch.tensor(
-            [0.5 * width, 0.5 * height], dtype=torch.float64, device=means2d_grad.device)
+            [0.5 * width, 0.5 * height], dtype=torch.float64, device=means2d_grad.device
+        )
         self.grad += torch.where(visible, g.norm(dim=1), 0.0)
         self.count += visible.to(torch.float64)
 
@@ -61,11 +62,15 @@ class GradientStats:
         self.count = torch.zeros(n, device=self.grad.device, dtype=torch.float64)
 
 
-def _split_samples(model: GaussianModel, idx: torch.Tensor, gen: torch.Generator) -> dict[str, torch.Tensor]:
+def _split_samples(
+    model: GaussianModel, idx: torch.Tensor, gen: torch.Generator
+) -> dict[str, torch.Tensor]:
     """Two Gaussians per index, centres drawn from N(mean, Sigma), scales / 1.6."""
     p = model.params
     means = p["means"].detach()[idx]
-    R = quat_to_matrix(p["quats"].detach()[idx] / p["quats"].detach()[idx].norm(dim=1, keepdim=True))
+    R = quat_to_matrix(
+        p["quats"].detach()[idx] / p["quats"].detach()[idx].norm(dim=1, keepdim=True)
+    )
     s = p["log_scales"].detach()[idx].exp()
     if s.shape[1] == 2:
         s = torch.cat([s, torch.zeros_like(s[:, :1])], dim=1)
@@ -81,8 +86,15 @@ def _split_samples(model: GaussianModel, idx: torch.Tensor, gen: torch.Generator
     return out
 
 
-def refine(model: GaussianModel, stats: GradientStats, cfg: DensifyConfig, step: int, *,
-           seed: int = 0, densify: bool = True) -> dict[str, int]:
+def refine(
+    model: GaussianModel,
+    stats: GradientStats,
+    cfg: DensifyConfig,
+    step: int,
+    *,
+    seed: int = 0,
+    densify: bool = True,
+) -> dict[str, int]:
     """One refinement: clone, split, prune. Returns counts (cloned, split, pruned, total)."""
     n0 = len(model)
     extent = model.extent
@@ -120,4 +132,9 @@ def refine(model: GaussianModel, stats: GradientStats, cfg: DensifyConfig, step:
         keep[int(torch.argmax(opacity))] = True
     model.keep(keep)
     stats.reset(len(model))
-    return {"cloned": cloned, "split": split, "pruned": int(n1 - len(model)) - split, "total": len(model)}
+    return {
+        "cloned": cloned,
+        "split": split,
+        "pruned": int(n1 - len(model)) - split,
+        "total": len(model),
+    }

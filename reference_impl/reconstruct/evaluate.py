@@ -93,21 +93,27 @@ def visible_mask(points: np.ndarray, cameras: list[Camera], *, rel_tol: float = 
     return seen.numpy()
 
 
-def _heldout_views(ds: Dataset, views: list[View], heldout: list[str] | None, every: int | None) -> list[View]:
+def _heldout_views(
+    ds: Dataset, views: list[View], heldout: list[str] | None, every: int | None
+) -> list[View]:
     by_key = {v.key: v for v in views}
     if heldout:
         missing = [k for k in heldout if k not in by_key]
         if missing:
-            raise InputError(f"held-out view(s) {', '.join(missing[:5])} are not static views of the episode",
-                             hint="name views as <camera>/<frame_index>")
+            raise InputError(
+                f"held-out view(s) {', '.join(missing[:5])} are not static views of the episode",
+                hint="name views as <camera>/<frame_index>",
+            )
         return [by_key[k] for k in heldout]
     if every:
         return split_heldout(views, every)[1]
     rec = (ds.manifest.get("provenance") or {}).get(REPORT_KEY) or {}
     keys = [k for k in rec.get("heldout", []) if k in by_key]
     if not keys:
-        raise InputError("no held-out views: the reconstruction recorded none",
-                         hint="pass --heldout CAMERA/FRAME ... or --heldout-every N")
+        raise InputError(
+            "no held-out views: the reconstruction recorded none",
+            hint="pass --heldout CAMERA/FRAME ... or --heldout-every N",
+        )
     return [by_key[k] for k in keys]
 
 
@@ -122,7 +128,9 @@ def _image_metrics(ds: Dataset, views: list[View], episode: str, device: str) ->
     if channels is not None and channels.count:
         ch = torch.as_tensor(channels.target_channel, device=tid.device)[tid.clamp(min=0)]
         ch = torch.where(tid >= 0, ch, torch.zeros_like(ch))
-        onehot = torch.zeros(len(tid), channels.count + 1, dtype=b.rest.means.dtype, device=tid.device)
+        onehot = torch.zeros(
+            len(tid), channels.count + 1, dtype=b.rest.means.dtype, device=tid.device
+        )
         onehot[torch.arange(len(tid), device=tid.device), ch] = 1.0
         extra = onehot[:, 1:].contiguous()
     cfg = RenderConfig(kind=b.rest.kind, background=bg, validate=False)
@@ -179,8 +187,9 @@ def evaluate(
     rec = (ds.manifest.get("provenance") or {}).get(REPORT_KEY) or {}
     capture = None
     if images or visible_only:
-        capture = load_capture(ds, episode=rec.get("episode"), scale=float(rec.get("scale", 1.0)),
-                               require_labels=False)
+        capture = load_capture(
+            ds, episode=rec.get("episode"), scale=float(rec.get("scale", 1.0)), require_labels=False
+        )
     if images:
         views = _heldout_views(ds, capture.views, heldout, heldout_every)
         try:
@@ -188,8 +197,11 @@ def evaluate(
         except FormatError as exc:
             if "has no splats" not in exc.message:
                 raise
-            raise InputError("the dataset has no splats to evaluate", path=path,
-                             hint="run robogs reconstruct first") from None
+            raise InputError(
+                "the dataset has no splats to evaluate",
+                path=path,
+                hint="run robogs reconstruct first",
+            ) from None
         rep.psnr_db = float(np.mean([m.psnr_db for m in rep.views]))
         rep.ssim = float(np.mean([m.ssim for m in rep.views]))
         inter: dict[int, int] = {}
@@ -208,7 +220,9 @@ def evaluate(
         r, rn = sample_mesh(ref, samples, 1)
         if visible_only:
             keep = visible_mask(r, [v.camera for v in capture.views])
-            rep.notes.append(f"reference restricted to the {keep.mean():.1%} of its surface the cameras see")
+            rep.notes.append(
+                f"reference restricted to the {keep.mean():.1%} of its surface the cameras see"
+            )
             r, rn = r[keep], rn[keep]
         rep.mesh = point_metrics(p, r, pred_normals=pn, ref_normals=rn, taus_mm=taus_mm)
         rep.robogs_compat = robogs_compat(p, r)

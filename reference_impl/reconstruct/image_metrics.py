@@ -23,8 +23,13 @@ _RADIUS = 5  # int(3.5 * sigma + 0.5): scipy's truncate=3.5 at sigma 1.5
 _K1, _K2 = 0.01, 0.03
 
 
-def gaussian_window(sigma: float = _SIGMA, radius: int = _RADIUS, *, dtype: torch.dtype = torch.float32,
-                    device: torch.device | str = "cpu") -> torch.Tensor:
+def gaussian_window(
+    sigma: float = _SIGMA,
+    radius: int = _RADIUS,
+    *,
+    dtype: torch.dtype = torch.float32,
+    device: torch.device | str = "cpu",
+) -> torch.Tensor:
     """[2 radius + 1] normalised 1-D Gaussian taps."""
     x = torch.arange(-radius, radius + 1, dtype=torch.float64)
     w = torch.exp(-0.5 * (x / sigma) ** 2)
@@ -66,7 +71,9 @@ def ssim_map(a: torch.Tensor, b: torch.Tensor, *, data_range: float = 1.0) -> to
     return ((2 * mx * my + c1) * (2 * cxy + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2))
 
 
-def ssim(a: torch.Tensor, b: torch.Tensor, *, data_range: float = 1.0, crop: bool = True) -> torch.Tensor:
+def ssim(
+    a: torch.Tensor, b: torch.Tensor, *, data_range: float = 1.0, crop: bool = True
+) -> torch.Tensor:
     """Mean SSIM (scalar tensor), channels averaged; ``crop`` leaves out the 5-px border (skimage)."""
     s = ssim_map(a, b, data_range=data_range)
     if crop and s.shape[-1] > 2 * _RADIUS and s.shape[-2] > 2 * _RADIUS:
@@ -74,8 +81,13 @@ def ssim(a: torch.Tensor, b: torch.Tensor, *, data_range: float = 1.0, crop: boo
     return s.mean()
 
 
-def psnr(a: torch.Tensor | np.ndarray, b: torch.Tensor | np.ndarray, *, data_range: float = 1.0,
-         mask: np.ndarray | torch.Tensor | None = None) -> float:
+def psnr(
+    a: torch.Tensor | np.ndarray,
+    b: torch.Tensor | np.ndarray,
+    *,
+    data_range: float = 1.0,
+    mask: np.ndarray | torch.Tensor | None = None,
+) -> float:
     """PSNR in dB: ``10 log10(range^2 / MSE)``, over ``mask`` pixels if given; inf for equal images."""
     x = torch.as_tensor(a, dtype=torch.float64)
     y = torch.as_tensor(b, dtype=torch.float64)

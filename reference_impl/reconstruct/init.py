@@ -79,7 +79,9 @@ def _ray_centre(views: list[View]) -> tuple[np.ndarray, float]:
     return p, float(np.median(np.linalg.norm(np.asarray(centres) - p, axis=1)))
 
 
-def workspace_bounds(capture: Capture, extra_points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def workspace_bounds(
+    capture: Capture, extra_points: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Axis-aligned box (lo, hi) [3] m that the cameras look into, grown to hold ``extra_points``."""
     p, dist = _ray_centre(capture.views)
     cams = [v.camera for v in capture.views]
@@ -93,7 +95,9 @@ def workspace_bounds(capture: Capture, extra_points: np.ndarray | None = None) -
     return lo, hi
 
 
-def _mesh_samples(meshes: list[trimesh.Trimesh], spacing: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def _mesh_samples(
+    meshes: list[trimesh.Trimesh], spacing: float, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
     pts, nrm = [], []
     for k, m in enumerate(meshes):
         n = max(8, int(math.ceil(m.area / spacing**2)))
@@ -105,7 +109,7 @@ def _mesh_samples(meshes: list[trimesh.Trimesh], spacing: float, seed: int) -> t
     return np.concatenate(pts), np.concatenate(nrm)
 
 
-def _project(views: list[View], pts: torch.Tensor, v: View) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _project(pts: torch.Tensor, v: View) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Pixel (col, row) float coordinates and camera depth of world points [N, 3] (float64)."""
     T = v.camera.T_world_cam
     pc = (pts - T[:3, 3]) @ T[:3, :3]
@@ -116,8 +120,9 @@ def _project(views: list[View], pts: torch.Tensor, v: View) -> tuple[torch.Tenso
     return u, w, z
 
 
-def _visual_hull(views: list[View], lo: np.ndarray, hi: np.ndarray, res: int,
-                 known: set[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _visual_hull(
+    views: list[View], lo: np.ndarray, hi: np.ndarray, res: int, known: set[int] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Boundary samples [M, 3] and outward normals of the labelled foreground's visual hull.
 
     With ``known`` label ids (parts already seeded from meshes), a hull voxel is kept only if
@@ -127,7 +132,9 @@ def _visual_hull(views: list[View], lo: np.ndarray, hi: np.ndarray, res: int,
     size = hi - lo
     vox = float(size.max()) / res
     dims = np.maximum(np.ceil(size / vox).astype(int), 2)
-    axes = [torch.arange(d, dtype=torch.float64) * vox + lo[i] + 0.5 * vox for i, d in enumerate(dims)]
+    axes = [
+        torch.arange(d, dtype=torch.float64) * vox + lo[i] + 0.5 * vox for i, d in enumerate(dims)
+    ]
     grid = torch.stack(torch.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     occ = torch.ones(len(grid), dtype=torch.bool)
     seen = torch.zeros(len(grid), dtype=torch.int32)
@@ -138,7 +145,7 @@ def _visual_hull(views: list[View], lo: np.ndarray, hi: np.ndarray, res: int,
     for v in views:
         if v.labels is None:
             continue
-        u, w, z = _project(views, grid, v)
+        u, w, z = _project(grid, v)
         H, W = v.labels.shape
         inside = (z > 0) & (u >= 0) & (u < W) & (w >= 0) & (w < H)
         iu = u.clamp(0, W - 1).long()
@@ -168,7 +175,8 @@ def _visual_hull(views: list[View], lo: np.ndarray, hi: np.ndarray, res: int,
     g = torch.stack(torch.gradient(smooth, spacing=vox), -1)
     idx = torch.nonzero(surf)
     n = -g[idx[:, 0], idx[:, 1], idx[:, 2]]
-    n = n / n.norm(dim=1, keepdim=True).clamp(min=1e-12)
+    norm = n.norm(dim=1, keepdim=True)
+    n = torch.where(norm > 1e-9, n / norm.clamp(min=1e-12), torch.full_like(n, float("nan")))
     p = torch.as_tensor(lo) + (idx.to(torch.float64) + 0.5) * vox
     return p.numpy(), n.numpy()
 
@@ -180,7 +188,7 @@ def _point_colors(views: list[View], pts: np.ndarray, normals: np.ndarray) -> np
     acc = torch.zeros(len(P), 3, dtype=torch.float64)
     cnt = torch.zeros(len(P), dtype=torch.float64)
     for v in views:
-        u, w, z = _project(views, P, v)
+        u, w, z = _project(P, v)
         H, W = v.rgb.shape[:2]
         inside = (z > 0) & (u >= 0) & (u < W) & (w >= 0) & (w < H)
         centre = v.camera.T_world_cam[:3, 3]
@@ -198,7 +206,9 @@ def _point_colors(views: list[View], pts: np.ndarray, normals: np.ndarray) -> np
     return col.numpy()
 
 
-def initial_points(ds: Dataset, capture: Capture, train_views: list[View], cfg: InitConfig) -> InitPoints:
+def initial_points(
+    ds: Dataset, capture: Capture, train_views: list[View], cfg: InitConfig
+) -> InitPoints:
     """Seed points for ``cfg.mode`` (see the module docstring)."""
     meshes: list[trimesh.Trimesh] = []
     known: set[int] = set()
@@ -246,6 +256,7 @@ def _quats_from_normals(normals: np.ndarray, rng: np.random.Generator) -> np.nda
     """Quaternions (w, x, y, z) whose rotation maps +z to each normal (random where NaN)."""
     n = normals.copy()
     bad = ~np.isfinite(n).all(1)
+    bad[~bad] = np.linalg.norm(n[~bad], axis=1) < 1e-9  # no gradient: no orientation either
     n[bad] = rng.normal(size=(int(bad.sum()), 3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     a = np.where(np.abs(n[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
@@ -256,8 +267,15 @@ def _quats_from_normals(normals: np.ndarray, rng: np.random.Generator) -> np.nda
     return matrix_to_quat(torch.as_tensor(R)).numpy()
 
 
-def initial_tensors(init: InitPoints, *, kind: str, sh_degree: int, seed: int = 0, scale_factor: float = 0.5,
-                    device: torch.device | str = "cpu") -> dict[str, torch.Tensor]:
+def initial_tensors(
+    init: InitPoints,
+    *,
+    kind: str,
+    sh_degree: int,
+    seed: int = 0,
+    scale_factor: float = 0.5,
+    device: torch.device | str = "cpu",
+) -> dict[str, torch.Tensor]:
     """Parameter tensors (pre-activation) of the seed points, float32 on ``device``.
 
     Standard deviations are ``scale_factor`` times the mean distance to the 3 nearest seeds

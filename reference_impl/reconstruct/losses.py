@@ -20,10 +20,18 @@ from robogs_format.render import Camera
 
 from .image_metrics import ssim
 
-__all__ = ["photometric_loss", "depth_normals", "normal_consistency", "depth_distortion", "depth_channels"]
+__all__ = [
+    "photometric_loss",
+    "depth_normals",
+    "normal_consistency",
+    "depth_distortion",
+    "depth_channels",
+]
 
 
-def photometric_loss(pred: torch.Tensor, target: torch.Tensor, lambda_dssim: float = 0.2) -> torch.Tensor:
+def photometric_loss(
+    pred: torch.Tensor, target: torch.Tensor, lambda_dssim: float = 0.2
+) -> torch.Tensor:
     """``(1 - l) L1 + l (1 - SSIM)`` of two [H, W, 3] images in [0, 1]."""
     l1 = (pred - target).abs().mean()
     if lambda_dssim == 0.0:
@@ -52,7 +60,12 @@ def depth_normals(depth: torch.Tensor, camera: Camera) -> tuple[torch.Tensor, to
     n = n / n.norm(dim=-1, keepdim=True).clamp(min=1e-12)
     # face the camera: n . P < 0
     n = torch.where(((n * P[1:-1, 1:-1]).sum(-1, keepdim=True) > 0), -n, n)
-    ok = (depth[1:-1, 2:] > 0) & (depth[1:-1, :-2] > 0) & (depth[2:, 1:-1] > 0) & (depth[:-2, 1:-1] > 0)
+    ok = (
+        (depth[1:-1, 2:] > 0)
+        & (depth[1:-1, :-2] > 0)
+        & (depth[2:, 1:-1] > 0)
+        & (depth[:-2, 1:-1] > 0)
+    )
     full = torch.zeros(H, W, 3, dtype=dt, device=depth.device)
     mask = torch.zeros(H, W, dtype=torch.bool, device=depth.device)
     full[1:-1, 1:-1] = torch.where(ok[..., None], n, 0.0)
@@ -60,8 +73,9 @@ def depth_normals(depth: torch.Tensor, camera: Camera) -> tuple[torch.Tensor, to
     return full, mask
 
 
-def normal_consistency(rendered_normals: torch.Tensor, alpha: torch.Tensor, depth: torch.Tensor,
-                       camera: Camera) -> torch.Tensor:
+def normal_consistency(
+    rendered_normals: torch.Tensor, alpha: torch.Tensor, depth: torch.Tensor, camera: Camera
+) -> torch.Tensor:
     """``mean(alpha (1 - n . N))`` over pixels with a depth normal; the depth normal is detached
     from neither side (both the surfels' orientation and their depths are pulled together)."""
     N, ok = depth_normals(depth, camera)

@@ -4,9 +4,10 @@
 triangles; a scene holds several objects, so here every component with at least
 ``min_fraction`` of the faces (and ``min_faces`` faces) stays. Components with a negative signed
 volume are inner shells: marching cubes orients faces towards free space (positive TSDF), so a
-shell facing inwards is the truncation boundary behind a surface, not a surface. Only (nearly)
-closed components are judged by their volume: an open sheet (a table top seen from above) has
-no meaningful inside.
+shell facing inwards is the truncation boundary behind a surface, not a surface. A component
+counts as an inner shell only when its volume is negative *and* its bounding box lies inside
+that of a larger component with a positive volume: an open sheet (a table top seen from above)
+has no meaningful inside, and its volume sign says nothing.
 """
 
 from __future__ import annotations
@@ -30,8 +31,13 @@ class CleanReport:
     faces_out: int
 
 
-def clean_mesh(mesh: trimesh.Trimesh, *, min_fraction: float = 0.005, min_faces: int = 50,
-               fill_holes: bool = True) -> tuple[trimesh.Trimesh, CleanReport]:
+def clean_mesh(
+    mesh: trimesh.Trimesh,
+    *,
+    min_fraction: float = 0.005,
+    min_faces: int = 50,
+    fill_holes: bool = True,
+) -> tuple[trimesh.Trimesh, CleanReport]:
     """Clean ``mesh`` (not modified); returns the cleaned copy and a report."""
     n_in = len(mesh.faces)
     if n_in == 0:
@@ -40,16 +46,20 @@ def clean_mesh(mesh: trimesh.Trimesh, *, min_fraction: float = 0.005, min_faces:
     m.merge_vertices()
     m.update_faces(m.nondegenerate_faces())
     m.remove_unreferenced_vertices()
-    parts = m.split(only_watertight=False)
+    parts = sorted(m.split(only_watertight=False), key=lambda p: -len(p.faces))
     total = sum(len(p.faces) for p in parts)
     keep, inner, small = [], 0, 0
+    outer_boxes: list[np.ndarray] = []
     for p in parts:
         if len(p.faces) < max(min_faces, min_fraction * total):
             small += 1
             continue
-        if _is_closed(p) and _signed_volume(p) < 0:
+        vol = _signed_volume(p)
+        if vol < 0 and any(_box_inside(p.bounds, b) for b in outer_boxes):
             inner += 1
             continue
+        if vol > 0:
+            outer_boxes.append(p.bounds)
         keep.append(p)
     if not keep:
         out = trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), process=False)
@@ -61,13 +71,9 @@ def clean_mesh(mesh: trimesh.Trimesh, *, min_fraction: float = 0.005, min_faces:
     return out, CleanReport(len(parts), inner, small, n_in, len(out.faces))
 
 
-def _is_closed(m: trimesh.Trimesh, max_open: float = 0.01) -> bool:
-    """Nearly closed: boundary edges (used by one face) are below ``max_open`` of the faces."""
-    edges = m.edges_sorted
-    if len(edges) == 0:
-        return False
-    _, counts = np.unique(edges, axis=0, return_counts=True)
-    return int((counts == 1).sum()) < max_open * len(m.faces)
+def _box_inside(inner: np.ndarray, outer: np.ndarray) -> bool:
+    """Axis-aligned box [2, 3] ``inner`` within ``outer``."""
+    return bool((inner[0] >= outer[0]).all() and (inner[1] <= outer[1]).all())
 
 
 def _signed_volume(m: trimesh.Trimesh) -> float:

@@ -29,7 +29,14 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-__all__ = ["MeshMetrics", "point_metrics", "mesh_metrics", "sample_mesh", "robogs_compat", "COMPAT_TAU_M"]
+__all__ = [
+    "MeshMetrics",
+    "point_metrics",
+    "mesh_metrics",
+    "sample_mesh",
+    "robogs_compat",
+    "COMPAT_TAU_M",
+]
 
 #: squared-distance tolerance of the Robo-GS-compatible F-score, m^2, and its tau, m
 COMPAT_SQ_TOL_M2 = 1e-5
@@ -54,12 +61,16 @@ class MeshMetrics:
 
     def to_json(self) -> dict[str, object]:
         return {
-            "accuracy_mm": self.accuracy_mm, "completeness_mm": self.completeness_mm,
-            "chamfer_l1_mm": self.chamfer_l1_mm, "chamfer_l2_mm2": self.chamfer_l2_mm2,
+            "accuracy_mm": self.accuracy_mm,
+            "completeness_mm": self.completeness_mm,
+            "chamfer_l1_mm": self.chamfer_l1_mm,
+            "chamfer_l2_mm2": self.chamfer_l2_mm2,
             "fscore": {f"{k:g}mm": v for k, v in self.fscore.items()},
             "precision": {f"{k:g}mm": v for k, v in self.precision.items()},
             "recall": {f"{k:g}mm": v for k, v in self.recall.items()},
-            "normal_consistency": self.normal_consistency, "n_pred": self.n_pred, "n_ref": self.n_ref,
+            "normal_consistency": self.normal_consistency,
+            "n_pred": self.n_pred,
+            "n_ref": self.n_ref,
             **self.extra,
         }
 
@@ -70,15 +81,23 @@ def sample_mesh(mesh: trimesh.Trimesh, n: int, seed: int = 0) -> tuple[np.ndarra
     return np.asarray(pts), np.asarray(mesh.face_normals)[fid]
 
 
-def point_metrics(pred: np.ndarray, ref: np.ndarray, *, pred_normals: np.ndarray | None = None,
-                  ref_normals: np.ndarray | None = None, taus_mm: tuple[float, ...] = (1.0, 2.0, 5.0),
-                  workers: int = 1) -> MeshMetrics:
+def point_metrics(
+    pred: np.ndarray,
+    ref: np.ndarray,
+    *,
+    pred_normals: np.ndarray | None = None,
+    ref_normals: np.ndarray | None = None,
+    taus_mm: tuple[float, ...] = (1.0, 2.0, 5.0),
+    workers: int = 1,
+) -> MeshMetrics:
     """Metrics of two sampled surfaces (points [N, 3] and [M, 3] in metres, same frame)."""
     pred, ref = np.asarray(pred, np.float64), np.asarray(ref, np.float64)
     if len(pred) == 0 or len(ref) == 0:
         nan = float("nan")
         zero = {float(t): 0.0 for t in taus_mm}
-        return MeshMetrics(nan, nan, nan, nan, dict(zero), dict(zero), dict(zero), nan, len(pred), len(ref))
+        return MeshMetrics(
+            nan, nan, nan, nan, dict(zero), dict(zero), dict(zero), nan, len(pred), len(ref)
+        )
     d_pr, i_pr = cKDTree(ref).query(pred, k=1, workers=workers)
     d_rp, i_rp = cKDTree(pred).query(ref, k=1, workers=workers)
     acc, comp = float(d_pr.mean()), float(d_rp.mean())
@@ -93,12 +112,29 @@ def point_metrics(pred: np.ndarray, ref: np.ndarray, *, pred_normals: np.ndarray
         a = np.abs(np.einsum("ij,ij->i", pred_normals, ref_normals[i_pr])).mean()
         b = np.abs(np.einsum("ij,ij->i", ref_normals, pred_normals[i_rp])).mean()
         nc = float(0.5 * (a + b))
-    return MeshMetrics(acc * 1e3, comp * 1e3, 0.5 * (acc + comp) * 1e3,
-                       0.5 * float((d_pr**2).mean() + (d_rp**2).mean()) * 1e6, fs, pr, rc, nc, len(pred), len(ref))
+    return MeshMetrics(
+        acc * 1e3,
+        comp * 1e3,
+        0.5 * (acc + comp) * 1e3,
+        0.5 * float((d_pr**2).mean() + (d_rp**2).mean()) * 1e6,
+        fs,
+        pr,
+        rc,
+        nc,
+        len(pred),
+        len(ref),
+    )
 
 
-def mesh_metrics(pred: trimesh.Trimesh, ref: trimesh.Trimesh, *, n: int = 200_000,
-                 taus_mm: tuple[float, ...] = (1.0, 2.0, 5.0), seed: int = 0, workers: int = 1) -> MeshMetrics:
+def mesh_metrics(
+    pred: trimesh.Trimesh,
+    ref: trimesh.Trimesh,
+    *,
+    n: int = 200_000,
+    taus_mm: tuple[float, ...] = (1.0, 2.0, 5.0),
+    seed: int = 0,
+    workers: int = 1,
+) -> MeshMetrics:
     """Sample both meshes with ``n`` points each and compare (see :func:`point_metrics`)."""
     p, pn = sample_mesh(pred, n, seed)
     r, rn = sample_mesh(ref, n, seed + 1)
@@ -109,9 +145,11 @@ def robogs_compat(pred: np.ndarray, ref: np.ndarray, workers: int = 1) -> dict[s
     """The Robo-GS "MSE / F-score (tolerance 1e-5)" under the reading in the module docstring.
 
     Returns:
-        ``mse_m2`` (Chamfer-L2, m^2), ``fscore`` at squared distance < 1e-5 m^2, ``tau_mm`` and
-        ``assumptions`` as a flag (1.0) that this is a reading, not the paper's code.
+        ``mse_m2`` (Chamfer-L2, m^2), ``fscore`` at squared distance < 1e-5 m^2 and ``tau_mm``.
     """
     m = point_metrics(pred, ref, taus_mm=(COMPAT_TAU_M * 1e3,), workers=workers)
-    return {"mse_m2": m.chamfer_l2_mm2 * 1e-6, "fscore": m.fscore[COMPAT_TAU_M * 1e3],
-            "tau_mm": COMPAT_TAU_M * 1e3}
+    return {
+        "mse_m2": m.chamfer_l2_mm2 * 1e-6,
+        "fscore": m.fscore[COMPAT_TAU_M * 1e3],
+        "tau_mm": COMPAT_TAU_M * 1e3,
+    }

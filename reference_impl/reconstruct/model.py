@@ -65,7 +65,9 @@ class GaussianModel:
         """The differentiable :class:`Gaussians` of the current parameters."""
         p = self.params
         sh = torch.cat([p["sh_dc"], p["sh_rest"]], dim=1)
-        return Gaussians(p["means"], p["quats"], p["log_scales"], p["opacity_logits"], sh, extra=extra)
+        return Gaussians(
+            p["means"], p["quats"], p["log_scales"], p["opacity_logits"], sh, extra=extra
+        )
 
     def set_means_lr(self, progress: float) -> None:
         """Log-linear decay of the centre learning rate from ``means`` to ``means_final``."""
@@ -94,7 +96,11 @@ class GaussianModel:
             st = self.optimizer.state.get(self.params[k])
             new_state = None
             if st:
-                new_state = {"step": st["step"], "exp_avg": st["exp_avg"][mask], "exp_avg_sq": st["exp_avg_sq"][mask]}
+                new_state = {
+                    "step": st["step"],
+                    "exp_avg": st["exp_avg"][mask],
+                    "exp_avg_sq": st["exp_avg_sq"][mask],
+                }
             self._replace(k, self.params[k][mask], new_state)
 
     def append(self, tensors: dict[str, torch.Tensor]) -> None:
@@ -105,24 +111,38 @@ class GaussianModel:
             new_state = None
             if st:
                 z = torch.zeros_like(tensors[k])
-                new_state = {"step": st["step"], "exp_avg": torch.cat([st["exp_avg"], z]),
-                             "exp_avg_sq": torch.cat([st["exp_avg_sq"], z])}
+                new_state = {
+                    "step": st["step"],
+                    "exp_avg": torch.cat([st["exp_avg"], z]),
+                    "exp_avg_sq": torch.cat([st["exp_avg_sq"], z]),
+                }
             self._replace(k, torch.cat([old.detach(), tensors[k].to(old)]), new_state)
 
     def reset_opacity(self, max_opacity: float = 0.01) -> None:
         """Clamp every opacity to ``max_opacity`` (logit space) and clear its moments."""
         cap = torch.logit(torch.tensor(max_opacity))
-        new = torch.minimum(self.params["opacity_logits"].detach(), cap.to(self.params["opacity_logits"]))
+        new = torch.minimum(
+            self.params["opacity_logits"].detach(), cap.to(self.params["opacity_logits"])
+        )
         st = self.optimizer.state.get(self.params["opacity_logits"])
         new_state = None
         if st:
-            new_state = {"step": st["step"], "exp_avg": torch.zeros_like(new), "exp_avg_sq": torch.zeros_like(new)}
+            new_state = {
+                "step": st["step"],
+                "exp_avg": torch.zeros_like(new),
+                "exp_avg_sq": torch.zeros_like(new),
+            }
         self._replace("opacity_logits", new, new_state)
 
     # -- checkpoint state ---------------------------------------------------------------------
     def state(self) -> dict[str, dict[str, torch.Tensor]]:
         """Tensors only: parameters and Adam moments (for ``torch.save``)."""
-        out: dict[str, dict[str, torch.Tensor]] = {"params": {}, "exp_avg": {}, "exp_avg_sq": {}, "step": {}}
+        out: dict[str, dict[str, torch.Tensor]] = {
+            "params": {},
+            "exp_avg": {},
+            "exp_avg_sq": {},
+            "step": {},
+        }
         for k in PARAM_NAMES:
             p = self.params[k]
             out["params"][k] = p.detach().clone()
@@ -134,8 +154,13 @@ class GaussianModel:
         return out
 
     @classmethod
-    def from_state(cls, state: dict[str, dict[str, torch.Tensor]], lrs: LearningRates, extent: float,
-                   device: torch.device) -> GaussianModel:
+    def from_state(
+        cls,
+        state: dict[str, dict[str, torch.Tensor]],
+        lrs: LearningRates,
+        extent: float,
+        device: torch.device,
+    ) -> GaussianModel:
         model = cls({k: v.to(device) for k, v in state["params"].items()}, lrs, extent)
         for k in PARAM_NAMES:
             if k in state["exp_avg"]:

@@ -33,13 +33,13 @@ import trimesh
 from robogs_format.dataset import Dataset
 from robogs_format.errors import InputError
 from robogs_format.frames import matrix_to_quat, quat_multiply, quat_to_matrix
-from robogs_format.render import Gaussians, RenderConfig, render
+from robogs_format.render import RenderConfig, render
 from robogs_format.splats import SplatSet
 
 from .align import AlignmentResult, Similarity, align_to_meshes
 from .bind import bind_to_mesh
 from .init import InitConfig, initial_points, initial_tensors, workspace_bounds
-from .mesh_clean import CleanReport, clean_mesh
+from .mesh_clean import clean_mesh
 from .model import GaussianModel, LearningRates
 from .robot_geometry import link_meshes
 from .segment import TargetMap, split_mesh, target_map, vote_targets
@@ -47,7 +47,13 @@ from .train import TrainConfig, TrainResult, train
 from .tsdf import extract_mesh, fuse_tsdf
 from .views import Capture, View, load_capture, split_heldout
 
-__all__ = ["ReconstructOptions", "ReconstructionReport", "reconstruct", "default_work_dir", "REPORT_KEY"]
+__all__ = [
+    "ReconstructOptions",
+    "ReconstructionReport",
+    "reconstruct",
+    "default_work_dir",
+    "REPORT_KEY",
+]
 
 #: key of the reconstruction report in ``manifest.provenance``
 REPORT_KEY = "reconstruction"
@@ -134,8 +140,12 @@ def _fingerprint(ds: Dataset, views: list[View], opts: ReconstructOptions) -> st
     files = ds.files
     rels = sorted({rel for v in views for rel in files if f"/cameras/{v.camera_name}/" in rel})
     doc = {
-        "train": opts.train.to_json(), "init": asdict(opts.init), "lr_scale": opts.lr_scale,
-        "scale": opts.scale, "views": [v.key for v in views], "device": opts.device,
+        "train": opts.train.to_json(),
+        "init": asdict(opts.init),
+        "lr_scale": opts.lr_scale,
+        "scale": opts.scale,
+        "views": [v.key for v in views],
+        "device": opts.device,
         "inputs": {r: files[r].get("sha256") for r in rels},
         "urdf": files.get((ds.manifest.get("robot") or {}).get("urdf", ""), {}).get("sha256"),
     }
@@ -156,12 +166,18 @@ def _render_depths(model: GaussianModel, views: list[View], cfg: TrainConfig) ->
     out = []
     for v in views:
         r = render(g, v.camera, config=rc)
-        out.append(torch.where(r.alpha >= 0.5, r.depth_median, torch.zeros_like(r.depth_median)).cpu())
+        out.append(
+            torch.where(r.alpha >= 0.5, r.depth_median, torch.zeros_like(r.depth_median)).cpu()
+        )
     return out
 
 
 def _fusion_box(means: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Robust bounds of the Gaussians (0.5-99.5 percentiles, 5 % margin), inside the workspace."""
+    means = means[np.isfinite(means).all(axis=1)]
+    if len(means) == 0:
+        raise InputError("training diverged: no Gaussian has a finite position",
+                         hint="lower --lr-scale or check the cameras")
     a, b = np.percentile(means, 0.5, axis=0), np.percentile(means, 99.5, axis=0)
     pad = 0.05 * (b - a).max() + 1e-3
     return np.maximum(a - pad, lo), np.minimum(b + pad, hi)
@@ -200,8 +216,9 @@ def _similarity_of_pose(S: Similarity, T: np.ndarray) -> np.ndarray:
     return out
 
 
-def reconstruct(path: str | Path, options: ReconstructOptions = ReconstructOptions(), *,
-                on_step: Any = None) -> ReconstructionReport:
+def reconstruct(
+    path: str | Path, options: ReconstructOptions = ReconstructOptions(), *, on_step: Any = None
+) -> ReconstructionReport:
     """Reconstruct the dataset at ``path`` and write splats, meshes and binding into it.
 
     Args:
@@ -221,17 +238,27 @@ def reconstruct(path: str | Path, options: ReconstructOptions = ReconstructOptio
     path = Path(path)
     ds = Dataset.open(path)
     device = torch.device(options.device)
-    capture = load_capture(ds, episode=options.episode, cameras=list(options.cameras) if options.cameras else None,
-                           scale=options.scale, max_views=options.max_views)
+    capture = load_capture(
+        ds,
+        episode=options.episode,
+        cameras=list(options.cameras) if options.cameras else None,
+        scale=options.scale,
+        max_views=options.max_views,
+    )
     train_views, held = split_heldout(capture.views, options.heldout_every)
     if len(train_views) < 2:
-        raise InputError(f"only {len(train_views)} training view(s) after holding out every "
-                         f"{options.heldout_every}-th view", hint="lower --heldout-every or add views")
+        raise InputError(
+            f"only {len(train_views)} training view(s) after holding out every "
+            f"{options.heldout_every}-th view",
+            hint="lower --heldout-every or add views",
+        )
     tcfg = replace(options.train, lrs=_scaled_lrs(options.train.lrs, options.lr_scale))
     timings["load"] = time.perf_counter() - t_start
     t0 = time.perf_counter()
     ip = initial_points(ds, capture, train_views, options.init)
-    init = initial_tensors(ip, kind=tcfg.kind, sh_degree=tcfg.sh_degree, seed=options.init.seed, device=device)
+    init = initial_tensors(
+        ip, kind=tcfg.kind, sh_degree=tcfg.sh_degree, seed=options.init.seed, device=device
+    )
     lo, hi = workspace_bounds(capture, ip.points)
     extent = float(np.linalg.norm(hi - lo))
     timings["init"] = time.perf_counter() - t0
@@ -241,8 +268,16 @@ def reconstruct(path: str | Path, options: ReconstructOptions = ReconstructOptio
         ckpt.unlink()
     fp = _fingerprint(ds, capture.views, replace(options, train=tcfg))
     t0 = time.perf_counter()
-    result: TrainResult = train(train_views, init, tcfg, extent=extent, checkpoint=ckpt, fingerprint=fp,
-                                progress=options.progress, on_step=on_step)
+    result: TrainResult = train(
+        train_views,
+        init,
+        tcfg,
+        extent=extent,
+        checkpoint=ckpt,
+        fingerprint=fp,
+        progress=options.progress,
+        on_step=on_step,
+    )
     timings["train"] = time.perf_counter() - t0
     model = result.model
     # -- mesh ---------------------------------------------------------------------------------
@@ -250,14 +285,24 @@ def reconstruct(path: str | Path, options: ReconstructOptions = ReconstructOptio
     depths = _render_depths(model, train_views, tcfg)
     means = model.params["means"].detach().cpu().numpy().astype(np.float64)
     flo, fhi = _fusion_box(means, lo, hi)
-    vol = fuse_tsdf(depths, [v.camera for v in train_views], flo, fhi, resolution=options.tsdf_resolution,
-                    trunc_voxels=options.trunc_voxels)
+    vol = fuse_tsdf(
+        depths,
+        [v.camera for v in train_views],
+        flo,
+        fhi,
+        resolution=options.tsdf_resolution,
+        trunc_voxels=options.trunc_voxels,
+    )
     raw_mesh = extract_mesh(vol)
     mesh, clean_rep = clean_mesh(raw_mesh)
     timings["mesh"] = time.perf_counter() - t0
     # -- segmentation -----------------------------------------------------------------------------
     t0 = time.perf_counter()
-    lmeshes = link_meshes(ds, capture.joint_positions) if ds.manifest.get("robot") and capture.joint_positions else {}
+    lmeshes = (
+        link_meshes(ds, capture.joint_positions)
+        if ds.manifest.get("robot") and capture.joint_positions
+        else {}
+    )
     links: set[str] = set()
     if ds.manifest.get("robot"):
         from robogs_format.kinematics import Chain
@@ -272,8 +317,11 @@ def reconstruct(path: str | Path, options: ReconstructOptions = ReconstructOptio
     # -- alignment ----------------------------------------------------------------------------------
     align_rep: AlignmentResult | None = None
     if options.align != "off" and lmeshes:
-        pts = {tmap.names[k - 1]: np.asarray(m.vertices) for k, m in parts.items()
-               if tmap.kinds[k - 1] == "robot_link"}
+        pts = {
+            tmap.names[k - 1]: np.asarray(m.vertices)
+            for k, m in parts.items()
+            if tmap.kinds[k - 1] == "robot_link"
+        }
         pts = {n: p for n, p in pts.items() if n in lmeshes}
         if pts:
             align_rep = align_to_meshes(pts, {n: lm.world_mesh() for n, lm in lmeshes.items()})
@@ -287,20 +335,51 @@ def reconstruct(path: str | Path, options: ReconstructOptions = ReconstructOptio
     # -- binding and writing ------------------------------------------------------------------------------
     t0 = time.perf_counter()
 
-    def make_report(written: list[str], counts: dict[str, int], bind_max: float) -> ReconstructionReport:
+    def make_report(
+        written: list[str], counts: dict[str, int], bind_max: float
+    ) -> ReconstructionReport:
         timings["bind_write"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_start
         return ReconstructionReport(
-            dataset=str(path), views_total=len(capture.views), views_train=[v.key for v in train_views],
-            views_heldout=[v.key for v in held], skipped=capture.skipped, iterations=result.iterations,
+            dataset=str(path),
+            views_total=len(capture.views),
+            views_train=[v.key for v in train_views],
+            views_heldout=[v.key for v in held],
+            skipped=capture.skipped,
+            iterations=result.iterations,
             resumed_from=result.resumed_from,
-            train_psnr_db=float(np.mean(result.psnr_history[-20:])) if result.psnr_history else float("nan"),
-            gaussians=counts, gaussians_unassigned=int((g_target == 0).sum()), mesh_faces=len(mesh.faces),
-            clean=asdict(clean_rep), alignment=_align_json(align_rep, options.align), binding_max_mm=bind_max,
-            kind=tcfg.kind, background=list(tcfg.background), timings_s=timings, written=written)
+            train_psnr_db=float(np.mean(result.psnr_history[-20:]))
+            if result.psnr_history
+            else float("nan"),
+            gaussians=counts,
+            gaussians_unassigned=int((g_target == 0).sum()),
+            mesh_faces=len(mesh.faces),
+            clean=asdict(clean_rep),
+            alignment=_align_json(align_rep, options.align),
+            binding_max_mm=bind_max,
+            kind=tcfg.kind,
+            background=list(tcfg.background),
+            timings_s=timings,
+            written=written,
+        )
 
-    report = _write(ds, capture, model, tcfg, tmap, g_target, means, mesh, parts, lmeshes, options, align_rep,
-                    held, train_views, make_report)
+    report = _write(
+        ds,
+        capture,
+        model,
+        tcfg,
+        tmap,
+        g_target,
+        means,
+        mesh,
+        parts,
+        lmeshes,
+        options,
+        align_rep,
+        held,
+        train_views,
+        make_report,
+    )
     if not options.keep_checkpoint and ckpt.exists():
         ckpt.unlink()
         try:
@@ -314,30 +393,64 @@ def _align_json(a: AlignmentResult | None, mode: str) -> dict[str, Any] | None:
     if a is None:
         return None
     S = a.transform
-    return {"mode": mode, "scale": S.scale, "rotation_deg": S.rotation_deg, "translation_mm": (S.t * 1e3).tolist(),
-            "rms_mm": a.rms_mm, "median_mm": a.median_mm, "p90_mm": a.p90_mm, "before_rms_mm": a.before_rms_mm,
-            "pairs": a.pairs, "iterations": a.iterations, "per_link_median_mm": a.per_target_mm,
-            "matrix": S.matrix().tolist()}
+    return {
+        "mode": mode,
+        "scale": S.scale,
+        "rotation_deg": S.rotation_deg,
+        "translation_mm": (S.t * 1e3).tolist(),
+        "rms_mm": a.rms_mm,
+        "median_mm": a.median_mm,
+        "p90_mm": a.p90_mm,
+        "before_rms_mm": a.before_rms_mm,
+        "pairs": a.pairs,
+        "iterations": a.iterations,
+        "per_link_median_mm": a.per_target_mm,
+        "matrix": S.matrix().tolist(),
+    }
 
 
-def _splat_subset(model: GaussianModel, idx: np.ndarray, bind_id: np.ndarray, face: np.ndarray, uv: np.ndarray,
-                  off: np.ndarray) -> SplatSet:
+def _splat_subset(
+    model: GaussianModel,
+    idx: np.ndarray,
+    bind_id: np.ndarray,
+    face: np.ndarray,
+    uv: np.ndarray,
+    off: np.ndarray,
+) -> SplatSet:
     p = {k: v.detach().cpu() for k, v in model.params.items()}
     q = p["quats"][idx]
     q = q / q.norm(dim=1, keepdim=True).clamp(min=1e-12)
     sh = torch.cat([p["sh_dc"], p["sh_rest"]], 1)[idx]
     return SplatSet(
-        means=p["means"][idx].numpy().astype(np.float32), quats=q.numpy().astype(np.float32),
+        means=p["means"][idx].numpy().astype(np.float32),
+        quats=q.numpy().astype(np.float32),
         log_scales=p["log_scales"][idx].numpy().astype(np.float32),
-        opacity_logits=p["opacity_logits"][idx].numpy().astype(np.float32), sh=sh.numpy().astype(np.float32),
-        bind_id=bind_id.astype(np.int32), bind_face=face.astype(np.int32), bind_uv=uv.astype(np.float32),
-        bind_offset=off.astype(np.float32))
+        opacity_logits=p["opacity_logits"][idx].numpy().astype(np.float32),
+        sh=sh.numpy().astype(np.float32),
+        bind_id=bind_id.astype(np.int32),
+        bind_face=face.astype(np.int32),
+        bind_uv=uv.astype(np.float32),
+        bind_offset=off.astype(np.float32),
+    )
 
 
-def _write(ds: Dataset, capture: Capture, model: GaussianModel, cfg: TrainConfig, tmap: TargetMap,
-           g_target: np.ndarray, means: np.ndarray, mesh: trimesh.Trimesh, parts: dict[int, trimesh.Trimesh],
-           lmeshes: dict[str, Any], options: ReconstructOptions, align: AlignmentResult | None,
-           held: list[View], train_views: list[View], make_report: Any) -> ReconstructionReport:
+def _write(
+    ds: Dataset,
+    capture: Capture,
+    model: GaussianModel,
+    cfg: TrainConfig,
+    tmap: TargetMap,
+    g_target: np.ndarray,
+    means: np.ndarray,
+    mesh: trimesh.Trimesh,
+    parts: dict[int, trimesh.Trimesh],
+    lmeshes: dict[str, Any],
+    options: ReconstructOptions,
+    align: AlignmentResult | None,
+    held: list[View],
+    train_views: list[View],
+    make_report: Any,
+) -> ReconstructionReport:
     rest: dict[str, Any] = {"t_ns": int(capture.rest_t_ns)}
     if capture.joint_positions:
         rest["joint_positions"] = dict(capture.joint_positions)
@@ -372,12 +485,25 @@ def _write(ds: Dataset, capture: Capture, model: GaussianModel, cfg: TrainConfig
                 offs.append(off)
             if sel_all:
                 idx = np.concatenate(sel_all)
-                w.write_splats("robot/splats.ply", _splat_subset(model, idx, np.concatenate(bid),
-                                                                 np.concatenate(faces), np.concatenate(uvs),
-                                                                 np.concatenate(offs)))
+                w.write_splats(
+                    "robot/splats.ply",
+                    _splat_subset(
+                        model,
+                        idx,
+                        np.concatenate(bid),
+                        np.concatenate(faces),
+                        np.concatenate(uvs),
+                        np.concatenate(offs),
+                    ),
+                )
                 robot = dict(w.manifest.get("robot", {}))
-                robot["splats"] = {"path": "robot/splats.ply", "kind": cfg.kind, "sh_degree": cfg.sh_degree,
-                                   "targets": targets, "rest": rest}
+                robot["splats"] = {
+                    "path": "robot/splats.ply",
+                    "kind": cfg.kind,
+                    "sh_degree": cfg.sh_degree,
+                    "targets": targets,
+                    "rest": rest,
+                }
                 w.manifest["robot"] = robot
                 written.append("robot/splats.ply")
             for k in link_ids:
@@ -385,7 +511,9 @@ def _write(ds: Dataset, capture: Capture, model: GaussianModel, cfg: TrainConfig
                 if k in parts and name in lmeshes:
                     T_inv = np.linalg.inv(lmeshes[name].T_world_link)
                     rel = f"reconstruction/links/{name}.ply"
-                    w.write_bytes(rel, parts[k].copy().apply_transform(T_inv).export(file_type="ply"))
+                    w.write_bytes(
+                        rel, parts[k].copy().apply_transform(T_inv).export(file_type="ply")
+                    )
                     written.append(rel)
         # objects
         assets = ds.assets
@@ -401,12 +529,17 @@ def _write(ds: Dataset, capture: Capture, model: GaussianModel, cfg: TrainConfig
             T_rest = _pose_T(pose) if pose is not None else np.eye(4)
             kind = entry.get("kind") or ("object" if pose is not None else "background")
             if kind == "object" and pose is None:
-                raise InputError(f"object {name!r} has no pose stream; its splats could not follow it",
-                                 hint="record object_poses for it, or declare it a table/background asset")
+                raise InputError(
+                    f"object {name!r} has no pose stream; its splats could not follow it",
+                    hint="record object_poses for it, or declare it a table/background asset",
+                )
             mesh_rel = entry.get("mesh")
             if k in parts and (mesh_rel is None or options.replace_meshes):
                 mesh_rel = f"assets/{name}/mesh.ply"
-                w.write_bytes(mesh_rel, parts[k].copy().apply_transform(np.linalg.inv(T_rest)).export(file_type="ply"))
+                w.write_bytes(
+                    mesh_rel,
+                    parts[k].copy().apply_transform(np.linalg.inv(T_rest)).export(file_type="ply"),
+                )
                 written.append(mesh_rel)
                 world = parts[k]
             elif mesh_rel is not None:
@@ -422,7 +555,13 @@ def _write(ds: Dataset, capture: Capture, model: GaussianModel, cfg: TrainConfig
             rel = f"assets/{name}/splats.ply"
             w.write_splats(rel, _splat_subset(model, sel, np.zeros(len(sel)), f, uv, off))
             written.append(rel)
-            splats = {"path": rel, "kind": cfg.kind, "sh_degree": cfg.sh_degree, "targets": [name], "rest": rest}
+            splats = {
+                "path": rel,
+                "kind": cfg.kind,
+                "sh_degree": cfg.sh_degree,
+                "targets": [name],
+                "rest": rest,
+            }
             fields: dict[str, Any] = {"kind": kind, "splats": splats}
             if mesh_rel is not None:
                 fields["mesh"] = mesh_rel
@@ -432,9 +571,14 @@ def _write(ds: Dataset, capture: Capture, model: GaussianModel, cfg: TrainConfig
         if apply:
             _transform_cameras(w, ds, capture, align.transform)
         prov = dict(w.manifest.get("provenance", {}))
-        prov[REPORT_KEY] = {"heldout": [v.key for v in held], "train": [v.key for v in train_views],
-                            "episode": capture.episode.id, "kind": cfg.kind,
-                            "background": list(cfg.background), "scale": options.scale}
+        prov[REPORT_KEY] = {
+            "heldout": [v.key for v in held],
+            "train": [v.key for v in train_views],
+            "episode": capture.episode.id,
+            "kind": cfg.kind,
+            "background": list(cfg.background),
+            "scale": options.scale,
+        }
         report = make_report(written, counts, bind_max)
         prov[REPORT_KEY]["report"] = json.loads(json.dumps(report.to_json(), default=float))
         w.manifest["provenance"] = prov
@@ -442,7 +586,9 @@ def _write(ds: Dataset, capture: Capture, model: GaussianModel, cfg: TrainConfig
     return report
 
 
-def _bind_residual_mm(mesh: trimesh.Trimesh, pts: np.ndarray, f: np.ndarray, uv: np.ndarray, off: np.ndarray) -> float:
+def _bind_residual_mm(
+    mesh: trimesh.Trimesh, pts: np.ndarray, f: np.ndarray, uv: np.ndarray, off: np.ndarray
+) -> float:
     from .bind import bound_positions
 
     ok = f >= 0
@@ -461,7 +607,9 @@ def _transform_cameras(w: Any, ds: Dataset, capture: Capture, S: Similarity) -> 
     for name in ds.camera_names:
         cam = ds.camera(name)
         if cam.T_world_cam is not None:
-            w.set_camera(replace(cam, T_world_cam=_similarity_of_pose(S, np.asarray(cam.T_world_cam))))
+            w.set_camera(
+                replace(cam, T_world_cam=_similarity_of_pose(S, np.asarray(cam.T_world_cam)))
+            )
     for ep in ds.episodes:
         for st in ep.streams.values():
             rel = st.get("extrinsics")

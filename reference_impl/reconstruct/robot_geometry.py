@@ -41,7 +41,9 @@ class LinkMesh:
         return m
 
 
-def link_poses(ds: Dataset, joint_positions: dict[str, float]) -> tuple[Chain, dict[str, np.ndarray]]:
+def link_poses(
+    ds: Dataset, joint_positions: dict[str, float]
+) -> tuple[Chain, dict[str, np.ndarray]]:
     """Forward kinematics of the dataset's URDF: link -> ``T_world_link`` [4, 4] (float64).
 
     The world origin is ``robot.base_link`` (spec §4), so poses are taken relative to it when
@@ -50,8 +52,10 @@ def link_poses(ds: Dataset, joint_positions: dict[str, float]) -> tuple[Chain, d
     chain = Chain.from_urdf(ds.urdf(load_meshes=False))
     missing = [j for j in chain.joint_names if j not in joint_positions]
     if missing:
-        raise FormatError(f"no recorded position for joints {', '.join(missing[:5])}",
-                          hint="record every actuated joint in joint_states")
+        raise FormatError(
+            f"no recorded position for joints {', '.join(missing[:5])}",
+            hint="record every actuated joint in joint_states",
+        )
     q = torch.tensor([float(joint_positions[j]) for j in chain.joint_names], dtype=torch.float64)
     T = chain.forward(q)
     base = (ds.manifest.get("robot") or {}).get("base_link")
@@ -67,7 +71,10 @@ def link_meshes(ds: Dataset, joint_positions: dict[str, float]) -> dict[str, Lin
     resolved = {(r.link, r.kind, r.uri): r.path for r in getattr(urdf, "robogs_mesh_refs", [])}
     out: dict[str, LinkMesh] = {}
     for link in urdf.robot.links:
-        visual = next((v for v in link.visuals if v.geometry is not None and v.geometry.mesh is not None), None)
+        visual = next(
+            (v for v in link.visuals if v.geometry is not None and v.geometry.mesh is not None),
+            None,
+        )
         if visual is None or link.name not in poses:
             continue
         path = resolved.get((link.name, "visual", visual.geometry.mesh.filename))
@@ -81,6 +88,7 @@ def link_meshes(ds: Dataset, joint_positions: dict[str, float]) -> dict[str, Lin
             v = v * np.broadcast_to(np.asarray(visual.geometry.mesh.scale, np.float64), (3,))
         M = np.asarray(visual.origin if visual.origin is not None else np.eye(4), np.float64)
         v = v @ M[:3, :3].T + M[:3, 3]
-        out[link.name] = LinkMesh(link.name, trimesh.Trimesh(v, np.asarray(mesh.faces), process=False),
-                                  poses[link.name])
+        out[link.name] = LinkMesh(
+            link.name, trimesh.Trimesh(v, np.asarray(mesh.faces), process=False), poses[link.name]
+        )
     return out

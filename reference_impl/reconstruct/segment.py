@@ -56,8 +56,9 @@ def target_map(segments: dict[int, Segment], links: set[str]) -> TargetMap:
     return TargetMap(names, kinds, lut)
 
 
-def vote_targets(points: np.ndarray, views: list[View], depths: list[torch.Tensor], tmap: TargetMap,
-                 tol_m: float) -> tuple[np.ndarray, np.ndarray]:
+def vote_targets(
+    points: np.ndarray, views: list[View], depths: list[torch.Tensor], tmap: TargetMap, tol_m: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Target index [N] (0 = none) and vote share [N] (0..1) of world points [N, 3]."""
     n_t = len(tmap.names) + 1
     votes = torch.zeros(len(points), n_t, dtype=torch.float32)
@@ -83,7 +84,9 @@ def vote_targets(points: np.ndarray, views: list[View], depths: list[torch.Tenso
         votes.index_put_((idx, t[idx]), torch.ones(len(idx)), accumulate=True)
     total = votes.sum(1)
     best = votes.argmax(1)
-    share = torch.where(total > 0, votes.max(1).values / total.clamp(min=1), torch.zeros_like(total))
+    share = torch.where(
+        total > 0, votes.max(1).values / total.clamp(min=1), torch.zeros_like(total)
+    )
     target = best.numpy().copy()
     seen_any = (total > 0).numpy()
     if seen_any.any() and not seen_any.all():
@@ -94,7 +97,9 @@ def vote_targets(points: np.ndarray, views: list[View], depths: list[torch.Tenso
     return target, share.numpy()
 
 
-def split_mesh(mesh: trimesh.Trimesh, vertex_target: np.ndarray, n_targets: int) -> dict[int, trimesh.Trimesh]:
+def split_mesh(
+    mesh: trimesh.Trimesh, vertex_target: np.ndarray, n_targets: int
+) -> dict[int, trimesh.Trimesh]:
     """Sub-mesh per target index 1..n: faces whose vertices' majority (else first vertex) is it."""
     f = np.asarray(mesh.faces)
     t = vertex_target[f]

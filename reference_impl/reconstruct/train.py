@@ -105,11 +105,24 @@ class _Progress:
         self.bar = None
         if not enabled:
             return
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeRemainingColumn,
+        )
 
-        self.bar = Progress(TextColumn("[bold]training"), BarColumn(), MofNCompleteColumn(),
-                            TextColumn("PSNR {task.fields[psnr]} dB"), TextColumn("{task.fields[n]} Gaussians"),
-                            TimeRemainingColumn(), transient=False, disable=not sys.stderr.isatty())
+        self.bar = Progress(
+            TextColumn("[bold]training"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("PSNR {task.fields[psnr]} dB"),
+            TextColumn("{task.fields[n]} Gaussians"),
+            TimeRemainingColumn(),
+            transient=False,
+            disable=not sys.stderr.isatty(),
+        )
         self.bar.start()
         self.task = self.bar.add_task("train", total=total, completed=start, psnr="--", n="--")
 
@@ -166,15 +179,25 @@ def train(
     resumed_from = start
     rcfg = RenderConfig(kind=cfg.kind, background=tuple(cfg.background), validate=False)
     n_views = len(views)
-    d_from, d_until = int(cfg.densify_from * cfg.iterations), int(cfg.densify_until * cfg.iterations)
+    d_from, d_until = (
+        int(cfg.densify_from * cfg.iterations),
+        int(cfg.densify_until * cfg.iterations),
+    )
     bar = _Progress(progress, cfg.iterations, start)
     step = start
     done = start
 
     def save(at: int) -> None:
         if checkpoint is not None:
-            save_checkpoint(checkpoint, fingerprint=fingerprint, iteration=at, model_state=model.state(),
-                            grad=stats.grad, count=stats.count, psnr_history=history)
+            save_checkpoint(
+                checkpoint,
+                fingerprint=fingerprint,
+                iteration=at,
+                model_state=model.state(),
+                grad=stats.grad,
+                count=stats.count,
+                psnr_history=history,
+            )
 
     try:
         for step in range(start, cfg.iterations):
@@ -183,14 +206,20 @@ def train(
             target = v.rgb.to(device)
             model.set_means_lr(step / max(cfg.iterations - 1, 1))
             use_dist = cfg.lambda_dist > 0 and step >= cfg.dist_from * cfg.iterations
-            use_normal = cfg.kind == "2dgs" and cfg.lambda_normal > 0 and step >= cfg.normal_from * cfg.iterations
+            use_normal = (
+                cfg.kind == "2dgs"
+                and cfg.lambda_normal > 0
+                and step >= cfg.normal_from * cfg.iterations
+            )
             extra = depth_channels(model.params["means"], cam) if use_dist else None
             out = render(model.gaussians(extra), cam, config=rcfg)
             if out.means2d.requires_grad:
                 out.means2d.retain_grad()
             loss = photometric_loss(out.rgb, target, cfg.lambda_dssim)
             if use_normal:
-                loss = loss + cfg.lambda_normal * normal_consistency(out.normals, out.alpha, out.depth_expected, cam)
+                loss = loss + cfg.lambda_normal * normal_consistency(
+                    out.normals, out.alpha, out.depth_expected, cam
+                )
             if use_dist:
                 loss = loss + cfg.lambda_dist * depth_distortion(out.alpha, out.extra)
             loss.backward()
@@ -203,7 +232,9 @@ def train(
             model.optimizer.zero_grad(set_to_none=True)
             s1 = step + 1
             if d_from <= step < d_until and s1 % cfg.densify_every == 0 and s1 > d_from:
-                refinements.append({"step": s1, **refine(model, stats, cfg.densify, s1, seed=cfg.seed)})
+                refinements.append(
+                    {"step": s1, **refine(model, stats, cfg.densify, s1, seed=cfg.seed)}
+                )
             if cfg.opacity_reset_every and s1 % cfg.opacity_reset_every == 0 and s1 < d_until:
                 model.reset_opacity()
             done = s1

@@ -119,7 +119,9 @@ def fuse_tsdf(
         InputError: no views, mismatched lists, an empty box or a grid that is too large.
     """
     if not depths or len(depths) != len(cameras):
-        raise InputError(f"TSDF fusion needs matching depth maps and cameras (got {len(depths)} and {len(cameras)})")
+        raise InputError(
+            f"TSDF fusion needs matching depth maps and cameras (got {len(depths)} and {len(cameras)})"
+        )
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     size = hi - lo
     if not (size > 0).all():
@@ -128,7 +130,9 @@ def fuse_tsdf(
     nb = np.maximum(np.ceil(size / (vox * block)).astype(np.int64), 1)
     dims = tuple(int(x) for x in nb * block)
     if math.prod(dims) > max_voxels:
-        raise InputError(f"TSDF grid {dims} exceeds {max_voxels} voxels", hint="lower --tsdf-resolution")
+        raise InputError(
+            f"TSDF grid {dims} exceeds {max_voxels} voxels", hint="lower --tsdf-resolution"
+        )
     device = depths[0].device
     trunc = trunc_voxels * vox
     origin = lo + 0.5 * vox
@@ -139,7 +143,9 @@ def fuse_tsdf(
     # blocks holding a back-projected depth sample, dilated by ceil(trunc / block edge) blocks:
     # a superset of the blocks within trunc of the samples
     r = int(math.ceil(trunc / bsize))
-    offs = torch.stack(torch.meshgrid(*[torch.arange(-r, r + 1, device=device)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    offs = torch.stack(
+        torch.meshgrid(*[torch.arange(-r, r + 1, device=device)] * 3, indexing="ij"), -1
+    ).reshape(-1, 3)
     keys = []
     for d, cam in zip(depths, cameras, strict=True):
         pts = _backproject(d, cam, 1)
@@ -148,9 +154,13 @@ def fuse_tsdf(
         b = torch.floor((pts - o_t) / bsize).long()
         ok = ((b >= -r) & (b < nb_t + r)).all(-1)
         b = b[ok] + r  # shifted so keys stay non-negative
-        keys.append(torch.unique(((b[:, 0] * (nb[1] + 2 * r)) + b[:, 1]) * (nb[2] + 2 * r) + b[:, 2]))
+        keys.append(
+            torch.unique(((b[:, 0] * (nb[1] + 2 * r)) + b[:, 1]) * (nb[2] + 2 * r) + b[:, 2])
+        )
     if not keys:
-        raise InputError("no depth map has a valid pixel: nothing to fuse", hint="check the rendered depths")
+        raise InputError(
+            "no depth map has a valid pixel: nothing to fuse", hint="check the rendered depths"
+        )
     k = torch.unique(torch.cat(keys))
     ny, nz = nb[1] + 2 * r, nb[2] + 2 * r
     seed = torch.stack([k // (ny * nz), (k // nz) % ny, k % nz], -1) - r
@@ -162,9 +172,13 @@ def fuse_tsdf(
         key = torch.arange(int(nb.prod()), device=device)
     blocks = torch.stack([key // (nb[1] * nb[2]), (key // nb[2]) % nb[1], key % nb[2]], -1)
     # -- voxel centres of the band -------------------------------------------------------------
-    local = torch.stack(torch.meshgrid(*[torch.arange(block, device=device)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    local = torch.stack(
+        torch.meshgrid(*[torch.arange(block, device=device)] * 3, indexing="ij"), -1
+    ).reshape(-1, 3)
     ijk = (blocks[:, None, :] * block + local[None]).reshape(-1, 3)
-    centres = (torch.as_tensor(origin, dtype=torch.float64, device=device) + ijk.to(torch.float64) * vox).float()
+    centres = (
+        torch.as_tensor(origin, dtype=torch.float64, device=device) + ijk.to(torch.float64) * vox
+    ).float()
     tsdf = torch.ones(len(centres), dtype=torch.float32, device=device)
     weight = torch.zeros(len(centres), dtype=torch.float32, device=device)
     # -- integrate view by view ----------------------------------------------------------------
@@ -175,8 +189,11 @@ def fuse_tsdf(
         T = cam.T_world_cam.to(device=device, dtype=torch.float64)
         Rcw = T[:3, :3].T
         P = torch.zeros(4, 3, dtype=torch.float64, device=device)
-        Kmat = torch.tensor([[cam.fx, 0.0, cam.cx], [0.0, cam.fy, cam.cy], [0.0, 0.0, 1.0]], dtype=torch.float64,
-                            device=device)
+        Kmat = torch.tensor(
+            [[cam.fx, 0.0, cam.cx], [0.0, cam.fy, cam.cy], [0.0, 0.0, 1.0]],
+            dtype=torch.float64,
+            device=device,
+        )
         P[:3] = (Kmat @ Rcw).T
         P[3] = Kmat @ (-(Rcw @ T[:3, 3]))
         h = centres_h @ P.to(torch.float32)
@@ -194,7 +211,9 @@ def fuse_tsdf(
         tsdf = torch.where(upd, (tsdf * weight + val) / w_new.clamp(min=1.0), tsdf)
         weight = w_new
     b3 = block**3
-    return TSDFVolume(origin, vox, dims, trunc, block, blocks, tsdf.reshape(-1, b3), weight.reshape(-1, b3))
+    return TSDFVolume(
+        origin, vox, dims, trunc, block, blocks, tsdf.reshape(-1, b3), weight.reshape(-1, b3)
+    )
 
 
 def extract_mesh(vol: TSDFVolume, *, erode: bool = True) -> trimesh.Trimesh:
@@ -212,9 +231,14 @@ def extract_mesh(vol: TSDFVolume, *, erode: bool = True) -> trimesh.Trimesh:
     from skimage.measure import marching_cubes
 
     t, observed = vol.dense()
-    mask = binary_erosion(observed, structure=np.ones((3, 3, 3), bool), border_value=0) if erode else observed
+    mask = (
+        binary_erosion(observed, structure=np.ones((3, 3, 3), bool), border_value=0)
+        if erode
+        else observed
+    )
     if not mask.any() or t[mask].min() > 0 or t[mask].max() < 0:
         return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), process=False)
-    verts, faces, _, _ = marching_cubes(t, level=0.0, spacing=(vol.voxel_size,) * 3, mask=mask,
-                                        allow_degenerate=False)
+    verts, faces, _, _ = marching_cubes(
+        t, level=0.0, spacing=(vol.voxel_size,) * 3, mask=mask, allow_degenerate=False
+    )
     return trimesh.Trimesh(verts + vol.origin, faces, process=True)

@@ -108,32 +108,51 @@ def _pose_T(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 def _check_intrinsics(model: CameraModel, where: str, path: Any) -> None:
     vals = (model.fx, model.fy, model.cx, model.cy)
     if not all(math.isfinite(v) for v in vals) or model.fx <= 0 or model.fy <= 0:
-        raise InputError(f"camera {model.name!r} has degenerate intrinsics fx={model.fx} fy={model.fy}",
-                         path=path, where=where, hint="focal lengths must be finite and > 0 px")
+        raise InputError(
+            f"camera {model.name!r} has degenerate intrinsics fx={model.fx} fy={model.fy}",
+            path=path,
+            where=where,
+            hint="focal lengths must be finite and > 0 px",
+        )
     if model.width <= 0 or model.height <= 0:
-        raise InputError(f"camera {model.name!r} has image size {model.width}x{model.height}",
-                         path=path, where=where)
+        raise InputError(
+            f"camera {model.name!r} has image size {model.width}x{model.height}",
+            path=path,
+            where=where,
+        )
     if not (0.0 < model.cx < model.width and 0.0 < model.cy < model.height):
         raise InputError(
             f"camera {model.name!r} principal point ({model.cx:g}, {model.cy:g}) px lies outside its "
-            f"{model.width}x{model.height} image", path=path, where=where,
-            hint="intrinsics and image size disagree (were the images resized?)")
+            f"{model.width}x{model.height} image",
+            path=path,
+            where=where,
+            hint="intrinsics and image size disagree (were the images resized?)",
+        )
     if model.distortion_model not in DISTORTION_MODELS:
-        raise InputError(f"camera {model.name!r} uses the {model.distortion_model!r} lens model, which "
-                         "the renderer cannot train with", path=path, where=where,
-                         hint=f"undistort the images first; supported: {', '.join(sorted(DISTORTION_MODELS))}")
+        raise InputError(
+            f"camera {model.name!r} uses the {model.distortion_model!r} lens model, which "
+            "the renderer cannot train with",
+            path=path,
+            where=where,
+            hint=f"undistort the images first; supported: {', '.join(sorted(DISTORTION_MODELS))}",
+        )
 
 
-def _camera_poses(ds: Dataset, ep: Episode, entry: dict[str, Any], model: CameraModel,
-                  t_ns: np.ndarray) -> np.ndarray:
+def _camera_poses(
+    ds: Dataset, ep: Episode, entry: dict[str, Any], model: CameraModel, t_ns: np.ndarray
+) -> np.ndarray:
     """[F, 4, 4] ``T_world_cam`` of every frame; raises for frames without a pose."""
     where = f"episodes/{ep.id}/camera/{model.name}"
     if model.extrinsics == "time_varying":
         rel = entry.get("extrinsics")
         if not isinstance(rel, str):
-            raise InputError(f"camera {model.name!r} has time-varying extrinsics but its stream has no "
-                             "extrinsics table: the views have no poses", path=ds.manifest_path, where=where,
-                             hint="add a camera_extrinsics table (t_ns, x, y, z, qw, qx, qy, qz)")
+            raise InputError(
+                f"camera {model.name!r} has time-varying extrinsics but its stream has no "
+                "extrinsics table: the views have no poses",
+                path=ds.manifest_path,
+                where=where,
+                hint="add a camera_extrinsics table (t_ns, x, y, z, qw, qx, qy, qz)",
+            )
         from robogs_format.dataset import read_parquet
 
         path = ds.resolve(rel, where=where)
@@ -142,24 +161,40 @@ def _camera_poses(ds: Dataset, ep: Episode, entry: dict[str, Any], model: Camera
         if len(et) == 0:
             raise InputError("the extrinsics table is empty: the views have no poses", path=path)
         xyz = np.stack([tab.column(c).to_numpy() for c in "xyz"], -1).astype(np.float64)
-        q = np.stack([tab.column(c).to_numpy() for c in ("qw", "qx", "qy", "qz")], -1).astype(np.float64)
-        outside = (t_ns < et[0]) | (t_ns > et[-1])
-        bad = outside | np.zeros(len(t_ns), bool)
-        if not np.isfinite(xyz).all() or not np.isfinite(q).all() or (np.linalg.norm(q, axis=1) < 1e-9).any():
-            raise InputError("the extrinsics table has non-finite or zero-quaternion poses", path=path)
+        q = np.stack([tab.column(c).to_numpy() for c in ("qw", "qx", "qy", "qz")], -1).astype(
+            np.float64
+        )
+        bad = (t_ns < et[0]) | (t_ns > et[-1])
+        if (
+            not np.isfinite(xyz).all()
+            or not np.isfinite(q).all()
+            or (np.linalg.norm(q, axis=1) < 1e-9).any()
+        ):
+            raise InputError(
+                "the extrinsics table has non-finite or zero-quaternion poses", path=path
+            )
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
-            raise InputError(f"{int(bad.sum())} of {len(t_ns)} frames of camera {model.name!r} have no pose "
-                             f"(first at t_ns={int(t_ns[k])}, extrinsics cover {int(et[0])}..{int(et[-1])})",
-                             path=path, hint="every view needs T_world_cam: extend the extrinsics table")
+            raise InputError(
+                f"{int(bad.sum())} of {len(t_ns)} frames of camera {model.name!r} have no pose "
+                f"(first at t_ns={int(t_ns[k])}, extrinsics cover {int(et[0])}..{int(et[-1])})",
+                path=path,
+                hint="every view needs T_world_cam: extend the extrinsics table",
+            )
         p, qq = interp_pose(t_ns, et, xyz, q, outside="clamp")
         return np.stack([_pose_T(p[i], qq[i]) for i in range(len(t_ns))])
     if model.T_world_cam is None:
-        raise InputError(f"camera {model.name!r} has no T_world_cam: the views have no poses",
-                         path=ds.manifest_path, where=where, hint="calibrate the camera's extrinsics")
+        raise InputError(
+            f"camera {model.name!r} has no T_world_cam: the views have no poses",
+            path=ds.manifest_path,
+            where=where,
+            hint="calibrate the camera's extrinsics",
+        )
     T = np.asarray(model.T_world_cam, np.float64)
     if T.shape != (4, 4) or not np.isfinite(T).all():
-        raise InputError(f"camera {model.name!r} T_world_cam is not a finite 4x4 matrix", where=where)
+        raise InputError(
+            f"camera {model.name!r} T_world_cam is not a finite 4x4 matrix", where=where
+        )
     return np.repeat(T[None], len(t_ns), 0)
 
 
@@ -169,13 +204,19 @@ def _segments(ep: Episode) -> dict[int, Segment]:
         return {}
     tab = ep.table(name)
     out = {}
-    for lab, kind, target in zip(tab.column("label_id").to_pylist(), tab.column("kind").to_pylist(),
-                                 tab.column("target").to_pylist(), strict=True):
+    for lab, kind, target in zip(
+        tab.column("label_id").to_pylist(),
+        tab.column("kind").to_pylist(),
+        tab.column("target").to_pylist(),
+        strict=True,
+    ):
         out.setdefault(int(lab), Segment(int(lab), str(kind), str(target or "")))
     return out
 
 
-def _state(ep: Episode, joint_names: list[str], t: np.ndarray) -> tuple[np.ndarray | None, dict[str, np.ndarray]]:
+def _state(
+    ep: Episode, joint_names: list[str], t: np.ndarray
+) -> tuple[np.ndarray | None, dict[str, np.ndarray]]:
     """Joint positions [F, J] and object poses {name: [F, 7]} at stamps ``t`` (None/{} if not recorded)."""
     q = None
     if joint_names and any(s.get("kind") == "joint_states" for s in ep.streams.values()):
@@ -207,9 +248,17 @@ def _render_camera(model: CameraModel, T: np.ndarray, scale: float) -> Camera:
     w = max(1, int(round(model.width * scale)))
     h = max(1, int(round(model.height * scale)))
     sx, sy = w / model.width, h / model.height
-    return Camera(width=w, height=h, fx=model.fx * sx, fy=model.fy * sy, cx=model.cx * sx, cy=model.cy * sy,
-                  T_world_cam=torch.as_tensor(T, dtype=torch.float64),
-                  distortion_model=model.distortion_model, distortion=tuple(model.distortion))
+    return Camera(
+        width=w,
+        height=h,
+        fx=model.fx * sx,
+        fy=model.fy * sy,
+        cx=model.cx * sx,
+        cy=model.cy * sy,
+        T_world_cam=torch.as_tensor(T, dtype=torch.float64),
+        distortion_model=model.distortion_model,
+        distortion=tuple(model.distortion),
+    )
 
 
 def load_capture(
@@ -231,16 +280,23 @@ def load_capture(
             empty, fewer than two static views.
     """
     ep = ds.episode(episode)
-    streams = {s["camera"]: s for s in ep.streams.values() if s.get("kind") == "camera" and "camera" in s}
+    streams = {
+        s["camera"]: s for s in ep.streams.values() if s.get("kind") == "camera" and "camera" in s
+    }
     if cameras:
         unknown = sorted(set(cameras) - set(streams))
         if unknown:
-            raise InputError(f"episode {ep.id!r} has no stream for camera(s) {', '.join(unknown)}",
-                             hint=f"available: {', '.join(sorted(streams)) or 'none'}")
+            raise InputError(
+                f"episode {ep.id!r} has no stream for camera(s) {', '.join(unknown)}",
+                hint=f"available: {', '.join(sorted(streams)) or 'none'}",
+            )
         streams = {c: streams[c] for c in cameras}
     if not streams:
-        raise InputError(f"episode {ep.id!r} has no camera streams to reconstruct from", path=ds.manifest_path,
-                         hint="import a multi-view capture (robogs convert) first")
+        raise InputError(
+            f"episode {ep.id!r} has no camera streams to reconstruct from",
+            path=ds.manifest_path,
+            hint="import a multi-view capture (robogs convert) first",
+        )
     chain_joints: list[str] = []
     if ds.manifest.get("robot"):
         from robogs_format.kinematics import Chain
@@ -252,8 +308,11 @@ def load_capture(
         where = f"cameras/{cam_name}"
         _check_intrinsics(model, where, ds.manifest_path)
         if not isinstance(entry.get("video"), str):
-            raise InputError(f"camera {cam_name!r} has no video in episode {ep.id!r}", path=ds.manifest_path,
-                             where=f"episodes/{ep.id}")
+            raise InputError(
+                f"camera {cam_name!r} has no video in episode {ep.id!r}",
+                path=ds.manifest_path,
+                where=f"episodes/{ep.id}",
+            )
         fr = ep.frames(cam_name)
         t = fr.column("t_ns").to_numpy().astype(np.int64)
         fi = fr.column("frame_index").to_numpy().astype(np.int64)
@@ -280,8 +339,10 @@ def load_capture(
     if max_views is not None and len(idx) > max_views:
         idx = idx[np.linspace(0, len(idx) - 1, max_views).round().astype(int)]
     if len(idx) < 2:
-        raise InputError(f"only {len(idx)} static view(s) in episode {ep.id!r}; a reconstruction needs several",
-                         hint="capture the scene standing still from many viewpoints")
+        raise InputError(
+            f"only {len(idx)} static view(s) in episode {ep.id!r}; a reconstruction needs several",
+            hint="capture the scene standing still from many viewpoints",
+        )
     segments = _segments(ep)
     views: list[View] = []
     by_cam: dict[str, list[int]] = {}
@@ -293,25 +354,34 @@ def load_capture(
         rgbs = dict(read_video_frames(ep.video_path(cam_name), sorted(wanted)))
         missing = sorted(set(wanted) - set(rgbs))
         if missing:
-            raise InputError(f"the video of camera {cam_name!r} lacks frames {missing[:5]}",
-                             path=ep.video_path(cam_name), hint="the frame table lists more frames than the video holds")
+            raise InputError(
+                f"the video of camera {cam_name!r} lacks frames {missing[:5]}",
+                path=ep.video_path(cam_name),
+                hint="the frame table lists more frames than the video holds",
+            )
         labs: dict[int, np.ndarray] = {}
         if isinstance(entry.get("labels"), str):
             labs = dict(read_label_frames(ep.labels_path(cam_name), sorted(wanted)))
         for fi_, k in sorted(wanted.items()):
             img = rgbs[fi_]
             if img.shape[:2] != (model.height, model.width):
-                raise InputError(f"frame {fi_} of camera {cam_name!r} is {img.shape[1]}x{img.shape[0]} px but "
-                                 f"its intrinsics are for {model.width}x{model.height}", path=ep.video_path(cam_name),
-                                 hint="inconsistent intrinsics: fix the camera file or the video")
+                raise InputError(
+                    f"frame {fi_} of camera {cam_name!r} is {img.shape[1]}x{img.shape[0]} px but "
+                    f"its intrinsics are for {model.width}x{model.height}",
+                    path=ep.video_path(cam_name),
+                    hint="inconsistent intrinsics: fix the camera file or the video",
+                )
             cam = _render_camera(model, raw[k][3], scale)
             if (cam.width, cam.height) != (model.width, model.height):
                 img = cv2.resize(img, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
             lab = labs.get(fi_)
             if lab is not None:
                 if lab.shape != (model.height, model.width):
-                    raise InputError(f"label image of frame {fi_} is {lab.shape[1]}x{lab.shape[0]} px, camera "
-                                     f"{cam_name!r} is {model.width}x{model.height}", path=ep.labels_path(cam_name))
+                    raise InputError(
+                        f"label image of frame {fi_} is {lab.shape[1]}x{lab.shape[0]} px, camera "
+                        f"{cam_name!r} is {model.width}x{model.height}",
+                        path=ep.labels_path(cam_name),
+                    )
                 if lab.shape != (cam.height, cam.width):
                     lab = cv2.resize(lab, (cam.width, cam.height), interpolation=cv2.INTER_NEAREST)
                 lab = lab.astype(np.int64)
@@ -320,15 +390,22 @@ def load_capture(
     if require_labels:
         with_labels = [v for v in views if v.labels is not None]
         if not with_labels:
-            raise InputError(f"no camera of episode {ep.id!r} has panoptic labels; segmentation into links "
-                             "and objects needs them", hint="add labels.parquet to the camera streams")
+            raise InputError(
+                f"no camera of episode {ep.id!r} has panoptic labels; segmentation into links "
+                "and objects needs them",
+                hint="add labels.parquet to the camera streams",
+            )
         if all(not (v.labels > 0).any() for v in with_labels):
-            raise InputError("every label image is empty (all pixels 0): nothing to segment or bind",
-                             path=ep.labels_path(with_labels[0].camera_name),
-                             hint="label the robot links and objects, or check the label export")
+            raise InputError(
+                "every label image is empty (all pixels 0): nothing to segment or bind",
+                path=ep.labels_path(with_labels[0].camera_name),
+                hint="label the robot links and objects, or check the label export",
+            )
         if not segments:
-            raise InputError(f"episode {ep.id!r} has no segments table mapping label ids to links and objects",
-                             hint="add segments.parquet (label_id, category, instance, kind, target)")
+            raise InputError(
+                f"episode {ep.id!r} has no segments table mapping label ids to links and objects",
+                hint="add segments.parquet (label_id, category, instance, kind, target)",
+            )
     first = int(idx[0])
     joints = {} if q is None else {j: float(q[first, i]) for i, j in enumerate(chain_joints)}
     poses = {o: [float(x) for x in P[first]] for o, P in objs.items()}

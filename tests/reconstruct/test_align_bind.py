@@ -46,10 +46,14 @@ def test_umeyama_refuses_degenerate_input():
 def test_icp_alignment_undoes_a_small_similarity():
     # two "links" (boxes) at the reference pose; the reconstruction is their surfaces moved by S
     a = trimesh.creation.box(extents=(0.2, 0.1, 0.05))
-    b = trimesh.creation.cylinder(radius=0.04, height=0.25, sections=32).apply_translation((0.2, 0.1, 0.1))
+    b = trimesh.creation.cylinder(radius=0.04, height=0.25, sections=32).apply_translation(
+        (0.2, 0.1, 0.1)
+    )
     S = _sim(3, 1.03, 4.0, 8.0)
-    pts = {n: S.apply(np.asarray(trimesh.sample.sample_surface(m, 4000, seed=k)[0]))
-           for k, (n, m) in enumerate({"a": a, "b": b}.items())}
+    pts = {
+        n: S.apply(np.asarray(trimesh.sample.sample_surface(m, 4000, seed=k)[0]))
+        for k, (n, m) in enumerate({"a": a, "b": b}.items())
+    }
     res = align_to_meshes(pts, {"a": a, "b": b}, samples=60_000)
     back = res.transform.compose(S)  # should be the identity
     assert back.scale == pytest.approx(1.0, abs=2e-3)
@@ -74,4 +78,6 @@ def test_binding_round_trip_is_exact_and_uses_the_nearest_face():
     assert np.allclose(np.linalg.norm(chosen - p, axis=1), dist, atol=1e-9)
     # offsets are signed along the outward face normal: points outside the sphere are positive
     r = np.linalg.norm(p, axis=1)
-    assert (np.sign(off[np.abs(r - 0.1) > 0.003]) == np.sign(r - 0.1)[np.abs(r - 0.1) > 0.003]).all()
+    assert (
+        np.sign(off[np.abs(r - 0.1) > 0.003]) == np.sign(r - 0.1)[np.abs(r - 0.1) > 0.003]
+    ).all()

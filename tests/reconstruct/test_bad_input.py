@@ -75,7 +75,12 @@ def test_principal_point_outside_the_image(capture_copy: Path):
 def test_empty_masks(capture_copy: Path):
     ds = Dataset.open(capture_copy)
     empty = encode_label_png(np.zeros((36, 48), np.uint16))
-    table = pa.table({"frame_index": pa.array(np.arange(8, dtype=np.int64)), "png": pa.array([empty] * 8, pa.binary())})
+    table = pa.table(
+        {
+            "frame_index": pa.array(np.arange(8, dtype=np.int64)),
+            "png": pa.array([empty] * 8, pa.binary()),
+        }
+    )
     with ds.edit() as w:
         w.write_table(f"{BASE}/labels.parquet", table, kind="camera_labels")
         w.commit()

@@ -19,13 +19,35 @@ from robogs_format.frames import matrix_to_quat, quat_to_matrix
 EXT = "episodes/static/cameras/orbit/extrinsics.parquet"
 
 
-def test_cli_reconstruct_3dgs_then_evaluate(capture_copy: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]):
-    code = main(["reconstruct", str(capture_copy), "--kind", "3dgs", "--iterations", "8", "--no-progress",
-                 "--tsdf-resolution", "32", "--heldout-every", "4", "--work-dir", str(tmp_path / "w"), "--json"])
+def test_cli_reconstruct_3dgs_then_evaluate(
+    capture_copy: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+):
+    code = main(
+        [
+            "reconstruct",
+            str(capture_copy),
+            "--kind",
+            "3dgs",
+            "--iterations",
+            "8",
+            "--no-progress",
+            "--tsdf-resolution",
+            "32",
+            "--heldout-every",
+            "4",
+            "--work-dir",
+            str(tmp_path / "w"),
+            "--json",
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0, out
     rep = json.loads(out)
-    assert rep["kind"] == "3dgs" and rep["iterations"] == 8 and rep["views_heldout"] == ["orbit/0", "orbit/4"]
+    assert (
+        rep["kind"] == "3dgs"
+        and rep["iterations"] == 8
+        and rep["views_heldout"] == ["orbit/0", "orbit/4"]
+    )
     ds = Dataset.open(capture_copy)
     assert ds.manifest["robot"]["splats"]["kind"] == "3dgs"
     assert ds.splats("robot").log_scales.shape[1] == 3
@@ -56,17 +78,42 @@ def test_align_apply_recovers_the_world_of_the_urdf(tmp_path: Path, capsys):
     # the visual hull (the URDF cannot seed a world it is not in); 16 views of 64x48 px
     capture_copy = tmp_path / "ds"
     synthesize_multiview(capture_copy, n_views=16, width=64, height=48, supersample=2)
-    S0 = Similarity(1.4, Rotation.from_euler("xyz", [20, -10, 35], degrees=True).as_matrix(), np.array([0.3, -0.2, 0.1]))
+    S0 = Similarity(
+        1.4,
+        Rotation.from_euler("xyz", [20, -10, 35], degrees=True).as_matrix(),
+        np.array([0.3, -0.2, 0.1]),
+    )
     tab = read_parquet(Dataset.open(capture_copy).resolve(EXT))
     original_centres = np.stack([tab.column(c).to_numpy() for c in "xyz"], -1)
     _move_world(capture_copy, S0)
-    code = main(["reconstruct", str(capture_copy), "--init", "hull", "--iterations", "60", "--lr-scale", "3",
-                 "--no-progress", "--tsdf-resolution", "48", "--heldout-every", "0", "--align", "apply",
-                 "--work-dir", str(tmp_path / "w"), "--json"])
+    code = main(
+        [
+            "reconstruct",
+            str(capture_copy),
+            "--init",
+            "hull",
+            "--iterations",
+            "60",
+            "--lr-scale",
+            "3",
+            "--no-progress",
+            "--tsdf-resolution",
+            "48",
+            "--heldout-every",
+            "0",
+            "--align",
+            "apply",
+            "--work-dir",
+            str(tmp_path / "w"),
+            "--json",
+        ]
+    )
     rep = json.loads(capsys.readouterr().out)
     assert code == 0
     a = rep["alignment"]
-    S = Similarity(a["scale"], np.asarray(a["matrix"])[:3, :3] / a["scale"], np.asarray(a["matrix"])[:3, 3])
+    S = Similarity(
+        a["scale"], np.asarray(a["matrix"])[:3, :3] / a["scale"], np.asarray(a["matrix"])[:3, 3]
+    )
     back = S.compose(S0)  # identity if the alignment undid the wrong world
     # the accuracy is that of the short reconstruction (a fat hull shrinks the scale by ~5 %)
     assert back.scale == pytest.approx(1.0, abs=0.07)
@@ -77,4 +124,6 @@ def test_align_apply_recovers_the_world_of_the_urdf(tmp_path: Path, capsys):
     tab = read_parquet(Dataset.open(capture_copy).resolve(EXT))
     back_c = np.stack([tab.column(c).to_numpy() for c in "xyz"], -1)
     assert np.allclose(back_c, S.apply(S0.apply(original_centres)), atol=1e-9)
-    assert np.abs(back_c - original_centres).max() < 0.05  # 0.7 m from the scene: scale error x distance
+    assert (
+        np.abs(back_c - original_centres).max() < 0.05
+    )  # 0.7 m from the scene: scale error x distance

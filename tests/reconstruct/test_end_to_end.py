@@ -11,7 +11,6 @@ the binding re-render checks.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -33,8 +32,11 @@ def scene(tmp_path_factory: pytest.TempPathFactory):
     torch.set_num_threads(1)
     root = tmp_path_factory.mktemp("e2e") / "scene"
     truth = synthesize_multiview(root, n_views=40, width=128, height=96)
-    opts = ReconstructOptions(train=TrainConfig(iterations=300, checkpoint_every=0), lr_scale=3.0,
-                              work_dir=root.parent / "work")
+    opts = ReconstructOptions(
+        train=TrainConfig(iterations=300, checkpoint_every=0),
+        lr_scale=3.0,
+        work_dir=root.parent / "work",
+    )
     report = reconstruct(root, opts)
     gt = root.parent / "truth.ply"
     truth.scene_mesh.export(gt)
@@ -56,7 +58,9 @@ def test_mesh_fscore_at_one_percent_of_the_diagonal(scene):
     root, truth, report, gt = scene
     diag = float(np.linalg.norm(np.ptp(truth.scene_mesh.vertices, axis=0)))
     tau_mm = 0.01 * diag * 1e3
-    ev = evaluate(root, reference=gt, visible_only=True, images=False, samples=60_000, taus_mm=(tau_mm, 5.0))
+    ev = evaluate(
+        root, reference=gt, visible_only=True, images=False, samples=60_000, taus_mm=(tau_mm, 5.0)
+    )
     assert ev.mesh.fscore[tau_mm] >= 0.9, ev.mesh.to_json()
     assert ev.mesh.chamfer_l1_mm <= 0.005 * diag * 1e3  # CD-L1 <= 0.5 % of the diagonal
     # the same against the fixture's own visibility of the true surface
@@ -85,7 +89,9 @@ def test_binding_and_written_dataset(scene):
     assert robot["kind"] == "2dgs" and robot["targets"] == ["base_link", "link1", "link2"]
     assert robot["rest"]["joint_positions"] == pytest.approx(truth.joint_positions)
     assert "mesh" in ds.assets["box"] and ds.assets["box"]["splats"]["targets"] == ["box"]
-    assert report.binding_max_mm < 0.01 and report.gaussians_unassigned < 0.05 * sum(report.gaussians.values())
+    assert report.binding_max_mm < 0.01 and report.gaussians_unassigned < 0.05 * sum(
+        report.gaussians.values()
+    )
     prov = ds.manifest["provenance"]["reconstruction"]
     assert prov["heldout"] == report.views_heldout and prov["report"]["iterations"] == 300
     # the box mesh is stored in its own frame: posed at its rest pose it lies on the true box
@@ -102,7 +108,7 @@ def test_binding_and_written_dataset(scene):
 
 def test_robogs_validate_passes(scene):
     root, _, _, _ = scene
-    rep = validate(root, select=["binding", "integrity", "schema", "geometry"])
+    rep = validate(root)
     errors = [f for f in rep.findings if f.severity == "error"]
     assert not errors, [f.message for f in errors]
     ran = {r.code for r in rep.runs if r.status != "skipped"}

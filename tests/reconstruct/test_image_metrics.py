@@ -16,8 +16,15 @@ def test_ssim_matches_skimage_gaussian_window():
     rng = np.random.default_rng(0)
     a = rng.random((37, 53, 3))
     b = np.clip(a + rng.normal(0.0, 0.08, a.shape), 0.0, 1.0)
-    ref = structural_similarity(a, b, gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
-                                data_range=1.0, channel_axis=2)
+    ref = structural_similarity(
+        a,
+        b,
+        gaussian_weights=True,
+        sigma=1.5,
+        use_sample_covariance=False,
+        data_range=1.0,
+        channel_axis=2,
+    )
     assert float(ssim(torch.tensor(a), torch.tensor(b))) == pytest.approx(ref, abs=1e-12)
 
 
@@ -26,7 +33,9 @@ def test_ssim_of_constant_images_is_the_luminance_term():
     a, b = 0.3, 0.7
     c1 = (0.01) ** 2
     expected = (2 * a * b + c1) / (a * a + b * b + c1)
-    got = ssim(torch.full((20, 20), a, dtype=torch.float64), torch.full((20, 20), b, dtype=torch.float64))
+    got = ssim(
+        torch.full((20, 20), a, dtype=torch.float64), torch.full((20, 20), b, dtype=torch.float64)
+    )
     assert float(got) == pytest.approx(expected, rel=1e-12)
     same = torch.rand(16, 16, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
     assert float(ssim(same, same)) == pytest.approx(1.0, abs=1e-12)

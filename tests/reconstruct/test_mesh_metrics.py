@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from reference_impl.reconstruct.mesh_metrics import COMPAT_TAU_M, mesh_metrics, point_metrics, robogs_compat
+from reference_impl.reconstruct.mesh_metrics import (
+    COMPAT_TAU_M,
+    mesh_metrics,
+    point_metrics,
+    robogs_compat,
+)
 
 
 def _grid(n: int = 60, z: float = 0.0) -> np.ndarray:

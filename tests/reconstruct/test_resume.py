@@ -18,9 +18,17 @@ from robogs_format.errors import InputError
 
 def _options(work: Path) -> ReconstructOptions:
     # densify every 4 steps so the resumed run also depends on the checkpointed gradient sums
-    tc = TrainConfig(iterations=12, checkpoint_every=5, densify_from=0.0, densify_until=1.0, densify_every=4,
-                     densify=DensifyConfig(grad_threshold=1e-7))
-    return ReconstructOptions(train=tc, heldout_every=4, tsdf_resolution=40, work_dir=work, lr_scale=3.0)
+    tc = TrainConfig(
+        iterations=12,
+        checkpoint_every=5,
+        densify_from=0.0,
+        densify_until=1.0,
+        densify_every=4,
+        densify=DensifyConfig(grad_threshold=1e-7),
+    )
+    return ReconstructOptions(
+        train=tc, heldout_every=4, tsdf_resolution=40, work_dir=work, lr_scale=3.0
+    )
 
 
 def _tree_digest(root: Path) -> str:
@@ -36,7 +44,9 @@ class _Stop(Exception):
     pass
 
 
-def test_interrupt_keeps_the_dataset_and_resume_matches_an_uninterrupted_run(tiny_capture: Path, tmp_path: Path):
+def test_interrupt_keeps_the_dataset_and_resume_matches_an_uninterrupted_run(
+    tiny_capture: Path, tmp_path: Path
+):
     a, b = tmp_path / "a", tmp_path / "b"
     copytree(tiny_capture, a)
     copytree(tiny_capture, b)
@@ -76,7 +86,9 @@ def test_a_checkpoint_of_other_options_is_not_resumed(tiny_capture: Path, tmp_pa
     with pytest.raises(_Stop):
         reconstruct(ds, opts, on_step=stop)
     assert (tmp_path / "work" / "checkpoint.pt").exists()  # the periodic one, at step 5
-    other = ReconstructOptions(**{**opts.__dict__, "train": TrainConfig(iterations=6, checkpoint_every=0)})
+    other = ReconstructOptions(
+        **{**opts.__dict__, "train": TrainConfig(iterations=6, checkpoint_every=0)}
+    )
     rep = reconstruct(ds, other)
     assert rep.resumed_from == 0 and rep.iterations == 6
 

@@ -29,13 +29,28 @@ def test_distortion_equals_the_pairwise_sum():
 
 
 def test_depth_normals_of_a_plane():
-    cam = Camera(width=20, height=16, fx=18.0, fy=18.0, cx=10.0, cy=8.0, T_world_cam=torch.eye(4, dtype=torch.float64))
+    cam = Camera(
+        width=20,
+        height=16,
+        fx=18.0,
+        fy=18.0,
+        cx=10.0,
+        cy=8.0,
+        T_world_cam=torch.eye(4, dtype=torch.float64),
+    )
     n_true = torch.tensor([0.3, -0.2, -1.0], dtype=torch.float64)
     n_true = n_true / n_true.norm()
     # plane n . X = -1 (in front of the camera); depth along each pixel ray: z = -1 / (n . r)
     u = (torch.arange(20, dtype=torch.float64) + 0.5 - 10.0) / 18.0
     v = (torch.arange(16, dtype=torch.float64) + 0.5 - 8.0) / 18.0
-    r = torch.stack([u[None, :].expand(16, 20), v[:, None].expand(16, 20), torch.ones(16, 20, dtype=torch.float64)], -1)
+    r = torch.stack(
+        [
+            u[None, :].expand(16, 20),
+            v[:, None].expand(16, 20),
+            torch.ones(16, 20, dtype=torch.float64),
+        ],
+        -1,
+    )
     depth = -1.0 / (r @ n_true)
     N, ok = depth_normals(depth, cam)
     assert ok[1:-1, 1:-1].all() and not ok[0].any()

@@ -34,8 +34,18 @@ def _cameras(n: int = 30, dist: float = 1.0) -> list[Camera]:
     r = np.sqrt(1 - z * z)
     phi = i * math.pi * (3 - math.sqrt(5))
     dirs = np.stack([r * np.cos(phi), r * np.sin(phi), z], 1)
-    return [Camera(width=W, height=H, fx=F, fy=F, cx=W / 2, cy=H / 2, T_world_cam=torch.tensor(_look_at(dist * d)))
-            for d in dirs]
+    return [
+        Camera(
+            width=W,
+            height=H,
+            fx=F,
+            fy=F,
+            cx=W / 2,
+            cy=H / 2,
+            T_world_cam=torch.tensor(_look_at(dist * d)),
+        )
+        for d in dirs
+    ]
 
 
 def _rays(cam: Camera) -> tuple[np.ndarray, np.ndarray]:
@@ -134,7 +144,9 @@ def test_empty_depths_are_refused():
 def test_narrow_band_gives_the_dense_grid_result(sphere_volume):
     cams = _cameras()
     depths = [_sphere_depth(c, 0.25) for c in cams]
-    dense = fuse_tsdf(depths, cams, np.full(3, -0.32), np.full(3, 0.32), resolution=64, narrow_band=False)
+    dense = fuse_tsdf(
+        depths, cams, np.full(3, -0.32), np.full(3, 0.32), resolution=64, narrow_band=False
+    )
     assert dense.allocated_voxels == math.prod(dense.dims) > sphere_volume.allocated_voxels
     a, b = extract_mesh(sphere_volume), extract_mesh(dense)
     assert len(a.faces) == len(b.faces)
