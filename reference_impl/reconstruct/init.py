@@ -39,8 +39,9 @@ class InitConfig:
 
     Attributes:
         mode: ``auto`` (URDF meshes plus visual hull), ``urdf``, ``hull`` or ``random``.
-        spacing_m: target distance between samples, m (None: 1/150 of the workspace diagonal).
-        hull_resolution: voxels along the longest workspace axis for the visual hull.
+        spacing_m: target distance between samples, m (None: 1/110 of the workspace diagonal).
+        hull_resolution: voxels along the longest workspace axis for the visual hull (None: the
+            workspace over the spacing, 32..192).
         random_count: number of random points (``random`` mode).
         use_assets: also sample the asset meshes already in the dataset.
         seed: sampling seed.
@@ -48,7 +49,7 @@ class InitConfig:
 
     mode: str = "auto"
     spacing_m: float | None = None
-    hull_resolution: int = 96
+    hull_resolution: int | None = None
     random_count: int = 20_000
     use_assets: bool = False
     seed: int = 0
@@ -56,11 +57,14 @@ class InitConfig:
 
 @dataclass
 class InitPoints:
-    """Seed points: positions [N, 3] (m, world), unit normals [N, 3] (or NaN) and RGB [N, 3]."""
+    """Seed points: positions [N, 3] (m, world), unit normals [N, 3] (or NaN), RGB [N, 3], and the
+    workspace box (lo, hi) [3] they were drawn in."""
 
     points: np.ndarray
     normals: np.ndarray
     colors: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
 
 
 def _ray_centre(views: list[View]) -> tuple[np.ndarray, float]:
@@ -80,14 +84,29 @@ def _ray_centre(views: list[View]) -> tuple[np.ndarray, float]:
 
 
 def workspace_bounds(
-    capture: Capture, extra_points: np.ndarray | None = None
+    capture: Capture, extra_points: np.ndarray | None = None, views: list[View] | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Axis-aligned box (lo, hi) [3] m that the cameras look into, grown to hold ``extra_points``."""
-    p, dist = _ray_centre(capture.views)
-    cams = [v.camera for v in capture.views]
-    half = min(math.atan(0.5 * c.height / c.fy) for c in cams)
-    r = dist * math.tan(half)
-    lo, hi = p - r, p + r
+    """Axis-aligned box (lo, hi) [3] m holding the labelled scene, grown to hold ``extra_points``.
+
+    The cameras look at the point nearest to all optical axes; the scene they all see lies within
+    the median camera distance of it. With labels, the box shrinks to the part of a coarse (48^3)
+    visual hull of the labelled foreground that some camera sees (the hull also holds the "shadow"
+    behind objects that few cameras see, which no camera sees directly), plus two coarse voxels;
+    without labels, it is the box that the vertical field of view spans at the median distance.
+    """
+    views = capture.views if views is None else views
+    p, dist = _ray_centre(views)
+    lo, hi = p - dist, p + dist
+    occ, vox = _hull_grid(views, lo, hi, 48, None)
+    idx = np.argwhere(occ) if occ is not None else np.zeros((0, 3), int)
+    if len(idx):
+        idx = idx[_frontmost(lo + (idx + 0.5) * vox, views, vox)]
+    if len(idx):
+        lo, hi = lo + (idx.min(0) - 1.5) * vox, lo + (idx.max(0) + 2.5) * vox
+    else:
+        half = min(math.atan(0.5 * v.camera.height / v.camera.fy) for v in views)
+        r = dist * math.tan(half)
+        lo, hi = p - r, p + r
     if extra_points is not None and len(extra_points):
         pad = 0.05 * np.linalg.norm(extra_points.max(0) - extra_points.min(0))
         lo = np.minimum(lo, extra_points.min(0) - pad)
@@ -120,15 +139,18 @@ def _project(pts: torch.Tensor, v: View) -> tuple[torch.Tensor, torch.Tensor, to
     return u, w, z
 
 
-def _visual_hull(
-    views: list[View], lo: np.ndarray, hi: np.ndarray, res: int, known: set[int] | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Boundary samples [M, 3] and outward normals of the labelled foreground's visual hull.
+def _hull_grid(
+    views: list[View], lo: np.ndarray, hi: np.ndarray, res: int, known: set[int] | None
+) -> tuple[np.ndarray | None, float]:
+    """Occupancy [X, Y, Z] of the labelled foreground's visual hull (None without labels), voxel m.
 
-    With ``known`` label ids (parts already seeded from meshes), a hull voxel is kept only if
-    more views see it as another label than as a known one: the hull's excess around the known
-    parts (concavities, too few views) would otherwise become floaters.
+    A voxel is kept when every view that sees it (inside the image, in front) labels it as
+    foreground, and at least two views see it. With ``known`` label ids (parts already seeded from
+    meshes), it is also dropped unless more views see it as another label than as a known one:
+    the hull's excess around the known parts (concavities, too few views) would be floaters.
     """
+    if not any(v.labels is not None for v in views):
+        return None, 0.0
     size = hi - lo
     vox = float(size.max()) / res
     dims = np.maximum(np.ceil(size / vox).astype(int), 2)
@@ -160,9 +182,18 @@ def _visual_hull(
     occ &= seen >= 2
     if known:
         occ &= votes > 0
-    vol = occ.reshape(*dims).to(torch.float64)
-    if vol.sum() == 0:
+    return occ.reshape(*dims).numpy(), vox
+
+
+def _visual_hull(
+    views: list[View], lo: np.ndarray, hi: np.ndarray, res: int, known: set[int] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary samples [M, 3] and outward normals of the visual hull (see :func:`_hull_grid`) that
+    some camera sees."""
+    occ, vox = _hull_grid(views, lo, hi, res, known)
+    if occ is None or not occ.any():
         return np.zeros((0, 3)), np.zeros((0, 3))
+    vol = torch.from_numpy(occ).to(torch.float64)
     pad = torch.nn.functional.pad(vol[None, None], (1, 1, 1, 1, 1, 1))[0, 0]
     neigh_empty = torch.zeros_like(vol, dtype=torch.bool)
     for ax in range(3):
@@ -177,8 +208,9 @@ def _visual_hull(
     n = -g[idx[:, 0], idx[:, 1], idx[:, 2]]
     norm = n.norm(dim=1, keepdim=True)
     n = torch.where(norm > 1e-9, n / norm.clamp(min=1e-12), torch.full_like(n, float("nan")))
-    p = torch.as_tensor(lo) + (idx.to(torch.float64) + 0.5) * vox
-    return p.numpy(), n.numpy()
+    p = (torch.as_tensor(lo) + (idx.to(torch.float64) + 0.5) * vox).numpy()
+    seen = _frontmost(p, views, vox)  # hull boundary no camera sees would never be trained
+    return p[seen], n.numpy()[seen]
 
 
 def _point_colors(views: list[View], pts: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -230,12 +262,13 @@ def initial_points(
             meshes.append(m)
             known |= {s.label_id for s in capture.segments.values() if s.target == name}
     mesh_pts = np.concatenate([m.vertices for m in meshes]) if meshes else None
-    lo, hi = workspace_bounds(capture, mesh_pts)
+    lo, hi = workspace_bounds(capture, mesh_pts, train_views)
     spacing = cfg.spacing_m or float(np.linalg.norm(hi - lo)) / 110.0
     pts, nrm = _mesh_samples(meshes, spacing, cfg.seed)
     if cfg.mode in ("auto", "hull"):
-        hp, hn = _visual_hull(train_views, lo, hi, cfg.hull_resolution, known)
-        vox = float((hi - lo).max()) / cfg.hull_resolution
+        res = cfg.hull_resolution or int(np.clip(np.ceil((hi - lo).max() / spacing), 32, 192))
+        hp, hn = _visual_hull(train_views, lo, hi, res, known)
+        vox = float((hi - lo).max()) / res
         if len(pts) and len(hp):
             d, _ = cKDTree(pts).query(hp, k=1)
             far = d > 2.0 * vox
@@ -249,7 +282,7 @@ def initial_points(
         pts = lo + rng.random((cfg.random_count, 3)) * (hi - lo)
         nrm = np.full_like(pts, np.nan)
     colors = _point_colors(train_views, pts, nrm)
-    return InitPoints(pts, nrm, colors)
+    return InitPoints(pts, nrm, colors, lo, hi)
 
 
 def _quats_from_normals(normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -38,7 +38,7 @@ from robogs_format.splats import SplatSet
 
 from .align import AlignmentResult, Similarity, align_to_meshes
 from .bind import bind_to_mesh
-from .init import InitConfig, initial_points, initial_tensors, workspace_bounds
+from .init import InitConfig, initial_points, initial_tensors
 from .mesh_clean import clean_mesh
 from .model import GaussianModel, LearningRates
 from .robot_geometry import link_meshes
@@ -115,6 +115,7 @@ class ReconstructionReport:
     iterations: int
     resumed_from: int
     train_psnr_db: float
+    refinements: dict[str, int]
     gaussians: dict[str, int]
     gaussians_unassigned: int
     mesh_faces: int
@@ -176,8 +177,10 @@ def _fusion_box(means: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.n
     """Robust bounds of the Gaussians (0.5-99.5 percentiles, 5 % margin), inside the workspace."""
     means = means[np.isfinite(means).all(axis=1)]
     if len(means) == 0:
-        raise InputError("training diverged: no Gaussian has a finite position",
-                         hint="lower --lr-scale or check the cameras")
+        raise InputError(
+            "training diverged: no Gaussian has a finite position",
+            hint="lower --lr-scale or check the cameras",
+        )
     a, b = np.percentile(means, 0.5, axis=0), np.percentile(means, 99.5, axis=0)
     pad = 0.05 * (b - a).max() + 1e-3
     return np.maximum(a - pad, lo), np.minimum(b + pad, hi)
@@ -259,7 +262,7 @@ def reconstruct(
     init = initial_tensors(
         ip, kind=tcfg.kind, sh_degree=tcfg.sh_degree, seed=options.init.seed, device=device
     )
-    lo, hi = workspace_bounds(capture, ip.points)
+    lo, hi = ip.lo, ip.hi
     extent = float(np.linalg.norm(hi - lo))
     timings["init"] = time.perf_counter() - t0
     work = Path(options.work_dir) if options.work_dir is not None else default_work_dir(path)
@@ -351,6 +354,9 @@ def reconstruct(
             train_psnr_db=float(np.mean(result.psnr_history[-20:]))
             if result.psnr_history
             else float("nan"),
+            refinements={
+                k: int(sum(r[k] for r in result.refinements)) for k in ("cloned", "split", "pruned")
+            },
             gaussians=counts,
             gaussians_unassigned=int((g_target == 0).sum()),
             mesh_faces=len(mesh.faces),
