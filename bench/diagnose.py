@@ -80,6 +80,18 @@ def _one(args: tuple[str, str, int]) -> dict:
             out["offset_err_ms"] = abs(true_row.params[0].value - truth["delta"]) * 1000
     if top is not None:
         out["rms_after_top"] = top.rms_after
+    out["rows"] = [
+        {
+            "name": r.name,
+            "family": r.family,
+            "dbic": r.delta_bic,
+            "gain": r.heldout_gain,
+            "size": r.effect_size,
+            "ident": r.verdict != "unidentifiable",
+            "reported": r.reported,
+        }
+        for r in rows
+    ]
     best_null = rows[0] if rows else None
     if best_null is not None:
         out["best_dbic"] = best_null.delta_bic
@@ -159,7 +171,7 @@ def main() -> None:
     from fixtures.scenarios import TRUE_PARAMS
 
     effects = a.effects or sorted(TRUE_PARAMS)
-    jobs = [(e, n, s) for n in a.noise for e in effects for s in range(a.seeds)]
+    jobs = [(e, n, s) for s in range(a.seeds) for n in a.noise for e in effects]  # seed-major
     out = Path(a.out)
     done = []
     if out.exists():

@@ -6,7 +6,9 @@ labels assign to link L are matched to the nearest point of L's URDF visual mesh
 joint state, and ``x -> s R x + t`` is fitted in closed form (Umeyama 1991, "Least-squares
 estimation of transformation parameters between two point patterns"), iterated as ICP with
 correspondences restricted to the same link (Besl & McKay 1992), rejecting pairs farther than
-3x the median distance. The residual is the point-to-surface distance after alignment, in mm.
+3x the median distance. ICP starts from Umeyama on the per-link centroids (the labels give the
+correspondence), so a capture in an arbitrary world (an SfM frame, scale and orientation) needs
+no manual pre-alignment. The residual is the point-to-surface distance after alignment, in mm.
 """
 
 from __future__ import annotations
@@ -103,6 +105,25 @@ class AlignmentResult:
     per_target_mm: dict[str, float] = field(default_factory=dict)
 
 
+def _initial_guess(src: list[np.ndarray], dst: list[np.ndarray], with_scale: bool) -> Similarity:
+    """Start of ICP: Umeyama on the per-target centroids when there are 3 or more targets
+    not on one line; else the overall centroids and RMS radii (no rotation)."""
+    cs = np.array([p.mean(0) for p in src])
+    cd = np.array([q.mean(0) for q in dst])
+    if len(cs) >= 3:
+        sv = np.linalg.svd(cs - cs.mean(0), compute_uv=False)
+        if sv[1] > 1e-3 * max(sv[0], 1e-12):
+            return umeyama(cs, cd, with_scale=with_scale)
+    a, b = np.concatenate(src), np.concatenate(dst)
+    ma, mb = a.mean(0), b.mean(0)
+    scale = 1.0
+    if with_scale:
+        ra = np.sqrt(((a - ma) ** 2).sum(1).mean())
+        rb = np.sqrt(((b - mb) ** 2).sum(1).mean())
+        scale = float(rb / ra) if ra > 0 else 1.0
+    return Similarity(scale, np.eye(3), mb - scale * ma)
+
+
 def align_to_meshes(
     points: dict[str, np.ndarray],
     meshes: dict[str, trimesh.Trimesh],
@@ -148,8 +169,8 @@ def align_to_meshes(
         return d, y
 
     d0, _ = match(src)
-    total = Similarity.identity()
-    x = src.copy()
+    total = _initial_guess([points[n] for n in names], [surf[n] for n in names], with_scale)
+    x = total.apply(src)
     it = 0
     pairs = len(x)
     for k in range(1, iterations + 1):

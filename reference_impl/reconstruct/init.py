@@ -41,7 +41,7 @@ class InitConfig:
         mode: ``auto`` (URDF meshes plus visual hull), ``urdf``, ``hull`` or ``random``.
         spacing_m: target distance between samples, m (None: 1/110 of the workspace diagonal).
         hull_resolution: voxels along the longest workspace axis for the visual hull (None: the
-            workspace over the spacing, 32..192).
+            workspace over half the spacing, 32..192).
         random_count: number of random points (``random`` mode).
         use_assets: also sample the asset meshes already in the dataset.
         seed: sampling seed.
@@ -90,19 +90,21 @@ def workspace_bounds(
 
     The cameras look at the point nearest to all optical axes; the scene they all see lies within
     the median camera distance of it. With labels, the box shrinks to the part of a coarse (48^3)
-    visual hull of the labelled foreground that some camera sees (the hull also holds the "shadow"
-    behind objects that few cameras see, which no camera sees directly), plus two coarse voxels;
+    visual hull of the labelled foreground that at least 20 % of the views see and some camera
+    sees directly (the hull also holds the "shadow" behind objects and the space just in front of
+    a camera that only its neighbours see), plus one coarse voxel;
     without labels, it is the box that the vertical field of view spans at the median distance.
     """
     views = capture.views if views is None else views
     p, dist = _ray_centre(views)
     lo, hi = p - dist, p + dist
-    occ, vox = _hull_grid(views, lo, hi, 48, None)
+    n_lab = sum(v.labels is not None for v in views)
+    occ, vox = _hull_grid(views, lo, hi, 48, None, min_seen=max(2, math.ceil(0.2 * n_lab)))
     idx = np.argwhere(occ) if occ is not None else np.zeros((0, 3), int)
     if len(idx):
         idx = idx[_frontmost(lo + (idx + 0.5) * vox, views, vox)]
     if len(idx):
-        lo, hi = lo + (idx.min(0) - 1.5) * vox, lo + (idx.max(0) + 2.5) * vox
+        lo, hi = lo + (idx.min(0) - 1.0) * vox, lo + (idx.max(0) + 2.0) * vox
     else:
         half = min(math.atan(0.5 * v.camera.height / v.camera.fy) for v in views)
         r = dist * math.tan(half)
@@ -140,12 +142,17 @@ def _project(pts: torch.Tensor, v: View) -> tuple[torch.Tensor, torch.Tensor, to
 
 
 def _hull_grid(
-    views: list[View], lo: np.ndarray, hi: np.ndarray, res: int, known: set[int] | None
+    views: list[View],
+    lo: np.ndarray,
+    hi: np.ndarray,
+    res: int,
+    known: set[int] | None,
+    min_seen: int = 2,
 ) -> tuple[np.ndarray | None, float]:
     """Occupancy [X, Y, Z] of the labelled foreground's visual hull (None without labels), voxel m.
 
     A voxel is kept when every view that sees it (inside the image, in front) labels it as
-    foreground, and at least two views see it. With ``known`` label ids (parts already seeded from
+    foreground, and at least ``min_seen`` views see it. With ``known`` label ids (parts already seeded from
     meshes), it is also dropped unless more views see it as another label than as a known one:
     the hull's excess around the known parts (concavities, too few views) would be floaters.
     """
@@ -179,10 +186,35 @@ def _hull_grid(
         if known:
             is_known = known_lut[lab.clamp(0, (1 << 16) - 1)]
             votes += (inside & fg & ~is_known).to(torch.int32) - (inside & is_known).to(torch.int32)
-    occ &= seen >= 2
+    occ &= seen >= min_seen
     if known:
         occ &= votes > 0
     return occ.reshape(*dims).numpy(), vox
+
+
+def _frontmost(points: np.ndarray, views: list[View], vox: float) -> np.ndarray:
+    """[N] bool: voxel centres that are the nearest occupied voxel along some camera's rays.
+
+    Per view, a z-buffer of the centres at a resolution where a buffer pixel spans 1.5 voxels at
+    the median depth (so the sampled centres leave no holes); a centre is frontmost where it lies
+    within 1.5 voxels of the buffer.
+    """
+    P = torch.as_tensor(points, dtype=torch.float64)
+    out = torch.zeros(len(P), dtype=torch.bool)
+    for v in views:
+        u, w, z = _project(P, v)
+        H, W = v.rgb.shape[:2]
+        inside = (z > 0) & (u >= 0) & (u < W) & (w >= 0) & (w < H)
+        if not inside.any():
+            continue
+        px_per_voxel = vox * v.camera.fx / float(z[inside].median())
+        s = float(np.clip(1.0 / (1.5 * px_per_voxel), 0.01, 1.0))  # buffer pixel > 1 voxel
+        Ws, Hs = max(1, int(W * s)), max(1, int(H * s))
+        pix = (w * s).clamp(0, Hs - 1).long() * Ws + (u * s).clamp(0, Ws - 1).long()
+        zbuf = torch.full((Hs * Ws,), float("inf"), dtype=torch.float64)
+        zbuf.scatter_reduce_(0, pix[inside], z[inside], reduce="amin")
+        out |= inside & (z <= zbuf[pix] + 1.5 * vox)
+    return out.numpy()
 
 
 def _visual_hull(
@@ -266,7 +298,7 @@ def initial_points(
     spacing = cfg.spacing_m or float(np.linalg.norm(hi - lo)) / 110.0
     pts, nrm = _mesh_samples(meshes, spacing, cfg.seed)
     if cfg.mode in ("auto", "hull"):
-        res = cfg.hull_resolution or int(np.clip(np.ceil((hi - lo).max() / spacing), 32, 192))
+        res = cfg.hull_resolution or int(np.clip(np.ceil(2.0 * (hi - lo).max() / spacing), 32, 192))
         hp, hn = _visual_hull(train_views, lo, hi, res, known)
         vox = float((hi - lo).max()) / res
         if len(pts) and len(hp):

@@ -28,7 +28,21 @@ from .losses import depth_channels, depth_distortion, normal_consistency, photom
 from .model import GaussianModel, LearningRates
 from .views import View
 
-__all__ = ["TrainConfig", "TrainResult", "train"]
+__all__ = ["TrainConfig", "TrainResult", "train", "screen_gradient"]
+
+
+def screen_gradient(grad_means: torch.Tensor, means: torch.Tensor, camera: Any) -> torch.Tensor:
+    """View-space positional gradient [N, 2], dL/d(px), from the gradient of the world centres.
+
+    Moving a centre at depth z by one pixel along the image x (y) axis moves it z / fx (z / fy)
+    along the camera's x (y) axis, so ``dL/du = (R_cw dL/dX)_x z / fx``. This is the quantity
+    3DGS accumulates for densification (there read from the rasterizer's screen-space means).
+    """
+    T = camera.T_world_cam.to(dtype=means.dtype, device=means.device)
+    R = T[:3, :3]
+    g_cam = grad_means.detach() @ R  # rows: (R^T g)^T, camera axes
+    z = ((means.detach() - T[:3, 3]) @ R[:, 2]).clamp(min=1e-6)
+    return torch.stack([g_cam[:, 0] * z / camera.fx, g_cam[:, 1] * z / camera.fy], dim=1)
 
 
 @dataclass(frozen=True)
@@ -213,8 +227,6 @@ def train(
             )
             extra = depth_channels(model.params["means"], cam) if use_dist else None
             out = render(model.gaussians(extra), cam, config=rcfg)
-            if out.means2d.requires_grad:
-                out.means2d.retain_grad()
             loss = photometric_loss(out.rgb, target, cfg.lambda_dssim)
             if use_normal:
                 loss = loss + cfg.lambda_normal * normal_consistency(
@@ -226,8 +238,14 @@ def train(
             with torch.no_grad():
                 p = psnr(out.rgb.detach().clamp(0, 1), target)
                 history.append(p if math.isfinite(p) else 99.0)
-                if d_from <= step < d_until and out.means2d.grad is not None:
-                    stats.add(out.means2d.grad, out.radii, cam.width, cam.height)
+                g3 = model.params["means"].grad
+                if d_from <= step < d_until and g3 is not None:
+                    stats.add(
+                        screen_gradient(g3, model.params["means"], cam),
+                        out.radii,
+                        cam.width,
+                        cam.height,
+                    )
             model.optimizer.step()
             model.optimizer.zero_grad(set_to_none=True)
             s1 = step + 1

@@ -75,9 +75,9 @@ def _move_world(root: Path, S: Similarity) -> None:
 
 def test_align_apply_recovers_the_world_of_the_urdf(tmp_path: Path, capsys):
     # cameras in a world scaled by 1.4, turned by ~40 deg and shifted by 37 cm; the seeds come from
-    # the visual hull (the URDF cannot seed a world it is not in); 16 views of 64x48 px
+    # the visual hull (the URDF cannot seed a world it is not in); 24 views of 80x60 px
     capture_copy = tmp_path / "ds"
-    synthesize_multiview(capture_copy, n_views=16, width=64, height=48, supersample=2)
+    synthesize_multiview(capture_copy, n_views=24, width=80, height=60, supersample=2)
     S0 = Similarity(
         1.4,
         Rotation.from_euler("xyz", [20, -10, 35], degrees=True).as_matrix(),
@@ -93,7 +93,7 @@ def test_align_apply_recovers_the_world_of_the_urdf(tmp_path: Path, capsys):
             "--init",
             "hull",
             "--iterations",
-            "60",
+            "80",
             "--lr-scale",
             "3",
             "--no-progress",
@@ -115,10 +115,11 @@ def test_align_apply_recovers_the_world_of_the_urdf(tmp_path: Path, capsys):
         a["scale"], np.asarray(a["matrix"])[:3, :3] / a["scale"], np.asarray(a["matrix"])[:3, 3]
     )
     back = S.compose(S0)  # identity if the alignment undid the wrong world
-    # the accuracy is that of the short reconstruction (a fat hull shrinks the scale by ~5 %)
-    assert back.scale == pytest.approx(1.0, abs=0.07)
-    assert back.rotation_deg < 3.0
-    assert np.linalg.norm(back.t) < 0.02
+    # the accuracy is that of the short reconstruction from the visual hull (measured: scale
+    # 0.96, 0.8 deg, 3 mm); a flat-coloured hull is photo-consistent, so it stays a little fat
+    assert back.scale == pytest.approx(1.0, abs=0.06)
+    assert back.rotation_deg < 2.0
+    assert np.linalg.norm(back.t) < 0.01
     assert a["rms_mm"] < 0.2 * a["before_rms_mm"]
     # the cameras were moved by the same transform, back to near their original places
     tab = read_parquet(Dataset.open(capture_copy).resolve(EXT))
