@@ -1,6 +1,6 @@
 """Re-render validation speed: the binding checks (B002-B006) on a 60 s episode at 30 fps.
 
-Generates the synthetic push scene with a 60 s, 320x240 preset (1 cm splat spacing, as the
+Generates the synthetic push scene with a 60 s (``--duration``), 320x240 preset (1 cm splat spacing, as the
 ``small`` preset) unless ``--dataset`` names one, then runs the re-render checks with
 ``stride`` 5 (every 5th frame: 360 of 1800) at ``scale`` 1 (320x240 renders), the time-offset
 and camera fit on ``fit_frames`` frames included. Target: <= 60 s on 2 threads.
@@ -35,11 +35,12 @@ RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
 CODES = ("B002", "B003", "B004", "B005", "B006")
 
 
-def _scene(out: Path) -> Path:
+def _scene(out: Path, duration_s: float) -> Path:
     from fixtures.synth import scene, synthesize
 
-    scene.SIZES.setdefault("bench60", scene.SizePreset(60.0, 320, 240, 0.010))
-    synthesize(out, seed=0, size="bench60", progress=False)
+    name = f"bench{duration_s:g}s"
+    scene.SIZES.setdefault(name, scene.SizePreset(float(duration_s), 320, 240, 0.010))
+    synthesize(out, seed=0, size=name, progress=False)
     return out
 
 
@@ -68,6 +69,9 @@ def main() -> int:
     ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--fit-frames", type=int, default=8)
     ap.add_argument("--dataset", type=Path, help="use this dataset instead of generating one")
+    ap.add_argument(
+        "--duration", type=float, default=60.0, help="length of the generated episode, s"
+    )
     ap.add_argument("--device", default="cpu")
     ap.add_argument(
         "--dense-frames", type=int, default=2, help="frames rendered by the dense baseline"
@@ -78,8 +82,9 @@ def main() -> int:
 
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        root = args.dataset or _scene(Path(tmp) / "bench60")
+        root = args.dataset or _scene(Path(tmp) / "bench", args.duration)
         gen = time.perf_counter() - t0
+        print(f"dataset ready after {gen:.1f} s", flush=True)
         ctx = CheckContext(root)
         ctx.options = {
             "stride": args.stride,
@@ -100,6 +105,7 @@ def main() -> int:
             except InputReported:
                 pass
             times[code] = time.perf_counter() - t1
+            print(f"{code}: {times[code]:.1f} s", flush=True)
         total = time.perf_counter() - t_all
         n_cmp = len(range(0, n_frames, args.stride))
         dense = _dense_frame_seconds(ctx, ep.id, stream, args.dense_frames)
