@@ -916,6 +916,13 @@ def _quat_norms(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             )
 
 
+def _has_splats(ctx: CheckContext) -> bool:
+    """Whether the dataset has splats to re-render (robot or any asset)."""
+    assets = ctx.manifest.get("assets")
+    entries = [ctx.manifest.get("robot") or {}, *(assets.values() if isinstance(assets, dict) else [])]
+    return any(isinstance(e, dict) and "splats" in e for e in entries)
+
+
 @check(
     "B009",
     group="binding",
@@ -932,8 +939,8 @@ def _cameras(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         except (InputReported, KeyError, ValueError, TypeError):
             continue  # unreadable or schema-invalid: reported by the schema checks
         problems = _render_camera_ok(model)
-        if model.T_world_cam is None and model.extrinsics != "time_varying":
-            problems.append("T_world_cam is missing for static extrinsics")
+        if model.T_world_cam is None and model.extrinsics != "time_varying" and _has_splats(ctx):
+            problems.append("T_world_cam is missing for static extrinsics (needed to re-render the splats)")
         for p in problems:
             yield chk.finding(f"camera {name!r}: {p}", file=rel)
 
