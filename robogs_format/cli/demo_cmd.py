@@ -20,8 +20,8 @@ __all__ = ["add_arguments", "run"]
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("out", nargs="?", default="out/demo", type=Path, help="output folder (default out/demo)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the scenes")
-    p.add_argument("--effect", default="viscous_damping",
-                   help="hidden effect of the physics scenario (default viscous_damping; 'none' for null data)")
+    p.add_argument("--effect", default="table_tilt",
+                   help="hidden effect of the physics scenario (default table_tilt; 'none' for null data)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
