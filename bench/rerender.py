@@ -74,7 +74,7 @@ def main() -> int:
     )
     ap.add_argument("--device", default="cpu")
     ap.add_argument(
-        "--dense-frames", type=int, default=2, help="frames rendered by the dense baseline"
+        "--dense-frames", type=int, default=0, help="frames rendered by the dense baseline"
     )
     ap.add_argument("--append", action="store_true", help=f"append the result to {RESULTS}")
     args = ap.parse_args()
@@ -115,8 +115,8 @@ def main() -> int:
         )
         summary = label_summary(ctx, ep.id, stream)
         fit = alignment_fit(ctx, ep.id, stream)
+        cam = ctx.camera(ep.streams[stream]["camera"])
 
-    cam = ctx.camera(ep.streams[stream]["camera"])
     lines = [
         f"machine: {platform.machine()} {platform.processor() or ''}, cpu_count={os.cpu_count()}, "
         f"torch {torch.__version__}, torch threads={torch.get_num_threads()}, device={args.device}",
