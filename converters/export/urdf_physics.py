@@ -15,7 +15,16 @@ are kept as they were):
 * ``<dynamics damping friction>`` of every non-fixed joint from ``physics.json`` ``joints``
   (URDF units: N·m·s/rad and N·m, or N·s/m and N for prismatic joints);
 * a link with visual geometry but no collision gets its visual geometry as collision;
-* mesh ``filename`` attributes point at the copies under ``meshes/``.
+* mesh ``filename`` attributes point at the copies under ``meshes/``;
+* a fitted ``mass_scale`` (``physics.json`` ``effects``) multiplies every link's mass and
+  inertia;
+* a fitted ``payload`` (``physics.json`` ``payload: {link, mass_kg, com_m}``) becomes a link
+  ``payload`` (a point mass: ``<inertial>`` origin at the CoM, zero inertia about it) welded by
+  a fixed joint ``payload_joint`` (identity origin) to the link it was fitted on, so that
+  inverse dynamics of the exported URDF equals the fitted torque model's rigid-body part.
+
+URDF has no rotor-inertia field: joint ``armature`` goes to the sidecar only (``joints``), as
+do the ``physics.json`` ``effects`` (each marked ``in_urdf``) and a summary of the payload.
 
 The sidecar schema is documented in ``docs/exports.md``.
 """
@@ -36,6 +45,7 @@ from robogs_format import Dataset
 from robogs_format.errors import FormatError, InputError
 
 from . import ExportReport, register_exporter
+from .arm_physics import PayloadSpec, mass_scale, payload_spec, unique_name
 from .physics_model import (
     BodyInertia,
     contact_material,
@@ -127,6 +137,41 @@ def _object_urdf(name: str, inertia: BodyInertia | None, mesh_rel: str | None) -
     return robot
 
 
+def _scale_inertials(root: etree._Element, s: float) -> int:
+    """Multiply every link's ``<mass>`` and ``<inertia>`` by ``s``; returns the links changed."""
+    n = 0
+    for link in root.findall("link"):
+        inertial = link.find("inertial")
+        if inertial is None:
+            continue
+        mass = inertial.find("mass")
+        if mass is not None and mass.get("value") is not None:
+            mass.set("value", _fmt(float(mass.get("value")) * s))
+        inertia = inertial.find("inertia")
+        if inertia is not None:
+            for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
+                if inertia.get(key) is not None:
+                    inertia.set(key, _fmt(float(inertia.get(key)) * s))
+        n += 1
+    return n
+
+
+def _add_payload(root: etree._Element, spec: PayloadSpec) -> tuple[str, str]:
+    """Append the payload link and its fixed joint; returns their names."""
+    link_name = unique_name("payload", {lk.get("name") for lk in root.findall("link")})
+    joint_name = unique_name("payload_joint", {j.get("name") for j in root.findall("joint")})
+    link = etree.SubElement(root, "link", name=link_name)
+    frame = np.eye(4)
+    frame[:3, 3] = spec.com
+    zero = np.zeros((3, 3))  # a point mass, as in the torque model
+    link.append(_inertial_element(BodyInertia(spec.mass, spec.com, zero, frame, zero)))
+    joint = etree.SubElement(root, "joint", name=joint_name, type="fixed")
+    etree.SubElement(joint, "parent", link=spec.parent)
+    etree.SubElement(joint, "child", link=link_name)
+    etree.SubElement(joint, "origin", xyz="0 0 0", rpy="0 0 0")
+    return link_name, joint_name
+
+
 def _write_xml(root: etree._Element, path: Path) -> None:
     path.write_bytes(
         etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True)
@@ -198,6 +243,27 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
             el = etree.SubElement(joint, "dynamics")
         el.set("damping", _fmt(dyn.damping or 0.0))
         el.set("friction", _fmt(dyn.friction or 0.0))
+    notes: list[str] = []
+    phys_path = ds.root / "physics.json"
+    scale = mass_scale(physics, path=phys_path)
+    if scale is not None:
+        n = _scale_inertials(root, scale)
+        notes.append(f"mass_scale {scale:.6g} applied to the mass and inertia of {n} link(s)")
+    payload = payload_spec(physics, urdf, ds.manifest, path=phys_path)
+    payload_entry: dict[str, Any] | None = None
+    if payload is not None:
+        link_name, joint_name = _add_payload(root, payload)
+        payload_entry = {
+            "link": link_name,
+            "joint": joint_name,
+            "parent": payload.parent,
+            "mass_kg": payload.mass,
+            "com_m": [float(v) for v in payload.com],
+            "inertia": "point mass (zero about the CoM)",
+        }
+        notes.append(
+            f"payload {payload.mass:.4g} kg written as link {link_name!r} fixed to {payload.parent!r}"
+        )
     _write_xml(root, out / f"{robot_name}.urdf")
 
     objs = scene_objects(ds, physics, {lk.name for lk in urdf.robot.links})
@@ -227,6 +293,14 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
     for jname, dyn in dynamics.items():
         if dyn.armature is not None:
             contact["joints"][jname] = {"armature": dyn.armature}
+    if payload_entry is not None:
+        contact["payload"] = payload_entry
+    effects = [
+        {**e, "in_urdf": e.get("name") == "mass_scale"}
+        for e in (physics or {}).get("effects", []) or []
+    ]
+    if effects:
+        contact["effects"] = effects
     files = [f"{robot_name}.urdf", f"{robot_name}.contact.json"]
     for obj in objs:
         entry: dict[str, Any] = {"equation": obj.equation, **obj.material.as_dict()}
@@ -249,10 +323,13 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
     return ExportReport(
         out=out,
         files=files,
+        notes=notes,
         facts={
-            "links": len(urdf.robot.links),
-            "joints": len(urdf.robot.joints),
+            "links": len(urdf.robot.links) + (payload is not None),
+            "joints": len(urdf.robot.joints) + (payload is not None),
             "objects": len(objs),
+            **({"payload": payload_entry} if payload_entry else {}),
+            **({"mass_scale": scale} if scale is not None else {}),
         },
     )
 

@@ -28,6 +28,11 @@ The YAML map::
         effort: {column: i0, unit: A, torque_constant: 0.12, gear_ratio: 101}
         # or effort: {column: tau0, unit: N m}            # N m | N
 
+A joint the log leaves out (a gripper finger, a rail) is held at a constant position (rad or
+m) with ``hold: {panda_finger_joint1: 0.0}``; a map that has only ``hold`` (and ``gap_s``)
+keeps the automatic layouts for the other joints. Held joints get constant ``position.<j>``
+and zero ``velocity.<j>`` columns, listed in the stream's ``derived``, and no effort column.
+
 A plain string (``position: q0``) names a column in SI units. With ``effort_kind: current``
 every effort column is a motor current in A and ``torque_constant`` (N m/A, motor side) and
 ``gear_ratio`` are required: ``tau = I * k_t * gear_ratio``.
@@ -124,6 +129,7 @@ class ColumnMap:
         joints: URDF joint name -> its columns, in URDF order.
         effort_kind: ``torque`` or ``current``.
         gap_s: segment split threshold (None: automatic).
+        hold: joints not in the log -> their constant position (rad or m).
     """
 
     layout: str
@@ -133,6 +139,7 @@ class ColumnMap:
     epoch_ns: int = 0
     effort_kind: str = "torque"
     gap_s: float | None = None
+    hold: dict[str, float] = field(default_factory=dict)
 
     def columns(self) -> list[str]:
         """Every source column used (time first)."""
@@ -143,7 +150,7 @@ class ColumnMap:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready description for the provenance."""
-        return {
+        out: dict[str, Any] = {
             "layout": self.layout,
             "time": {"column": self.time_column, "unit": self.time_unit, "epoch_ns": self.epoch_ns},
             "effort_kind": self.effort_kind,
@@ -162,6 +169,9 @@ class ColumnMap:
                 for j, c in self.joints.items()
             },
         }
+        if self.hold:
+            out["hold"] = dict(self.hold)
+        return out
 
 
 def _norm_unit(
@@ -219,6 +229,10 @@ def read_mapping(path: str | Path, joint_names: list[str]) -> ColumnMap:
         ) from None
     if not isinstance(doc, dict):
         raise InputError("mapping must be a YAML mapping with 'time' and 'joints'", path=path)
+    hold = _read_hold(doc.get("hold"), path, joint_names)
+    if doc.get("joints") is None and doc.get("time") is None and hold:
+        gap = doc.get("gap_s")  # only joints held: automatic layouts for the rest
+        return ColumnMap("auto", "", "s", {}, gap_s=None if gap is None else float(gap), hold=hold)
     t = doc.get("time")
     tcol, tspec = _col_spec(t, path, "time")
     if tcol is None:
@@ -245,6 +259,14 @@ def read_mapping(path: str | Path, joint_names: list[str]) -> ColumnMap:
             hint=f"URDF joints: {joint_names}",
         )
     joints: dict[str, JointColumns] = {}
+    held_too = sorted(set(joints_doc) & set(hold))
+    if held_too:
+        raise InputError(
+            f"joints {held_too} are both mapped to columns and held",
+            path=path,
+            where="hold",
+            hint="a joint is either in 'joints' or in 'hold'",
+        )
     for j in joint_names:
         if j not in joints_doc:
             continue
@@ -292,13 +314,14 @@ def read_mapping(path: str | Path, joint_names: list[str]) -> ColumnMap:
                 eunit = "A"
             units["effort"] = eunit
         joints[j] = JointColumns(pcol, vcol, ecol, pscale, vscale, escale, units)
-    missing = [j for j in joint_names if j not in joints]
+    missing = [j for j in joint_names if j not in joints and j not in hold]
     if missing:
         raise InputError(
             f"mapping does not cover joints {missing}",
             path=path,
             where="joints",
-            hint=f"URDF joints: {joint_names}",
+            hint=f"URDF joints: {joint_names}; a joint the log leaves out goes under "
+            "'hold: {joint: position}'",
         )
     gap = doc.get("gap_s")
     return ColumnMap(
@@ -309,7 +332,37 @@ def read_mapping(path: str | Path, joint_names: list[str]) -> ColumnMap:
         int(tspec.get("epoch_ns", 0)),
         kind,
         None if gap is None else float(gap),
+        hold,
     )
+
+
+def _read_hold(doc: Any, path: Path, joint_names: list[str]) -> dict[str, float]:
+    """The ``hold`` section: joint -> constant position (rad or m)."""
+    if doc is None:
+        return {}
+    if not isinstance(doc, dict):
+        raise InputError(
+            "'hold' must map joint names to positions", path=path, where="hold",
+            hint="hold: {panda_finger_joint1: 0.0}",
+        )  # fmt: skip
+    out: dict[str, float] = {}
+    for j, v in doc.items():
+        if j not in joint_names:
+            raise InputError(
+                f"held joint {j!r} is not an actuated joint of the URDF",
+                path=path,
+                where=f"hold/{j}",
+                hint=f"URDF joints: {joint_names}",
+            )
+        try:
+            out[j] = float(v)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"held position {v!r} is not a number (rad or m)", path=path, where=f"hold/{j}"
+            ) from None
+        if not math.isfinite(out[j]):
+            raise InputError("held position is not finite", path=path, where=f"hold/{j}")
+    return out
 
 
 def _indexed(names: set[str], pattern: str) -> dict[int, str]:
@@ -323,11 +376,15 @@ def _indexed(names: set[str], pattern: str) -> dict[int, str]:
 
 
 def _mismatch(path: Path, found: list[str], joint_names: list[str], layout: str) -> InputError:
+    hint = "rename the columns or pass --map MAP.yaml"
+    if len(found) < len(joint_names):
+        rest = joint_names[len(found) :]
+        hint += f"; if the log leaves out joints, hold them in a map: 'hold: {{{rest[0]}: 0.0}}'"
     return InputError(
         f"the {layout} columns name joints {found} but the URDF has {joint_names}",
         path=path,
         where="header",
-        hint="rename the columns or pass --map MAP.yaml",
+        hint=hint,
     )
 
 
@@ -617,9 +674,11 @@ class LogSegment:
 
     Attributes:
         source: file name; index: segment number in the file.
-        t_ns: [N] int64 stamps; q, qd, tau: [N, J] (qd/tau may be None).
+        t_ns: [N] int64 stamps; q, qd: [N, J] (all joints, held ones constant); tau:
+            [N, len(effort_joints)] or None.
         derived_velocity: velocities were differentiated from positions.
         lines: [N] source line numbers.
+        effort_joints: the joints ``tau`` covers (the logged ones, not the held ones).
     """
 
     source: str
@@ -630,6 +689,7 @@ class LogSegment:
     tau: np.ndarray | None
     derived_velocity: bool
     lines: np.ndarray
+    effort_joints: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -729,23 +789,27 @@ def _clean_file(
         keep = keep & ~bad & ~nan
         return vals * scale
 
-    q = np.stack(
-        [numeric(cmap.joints[j].position, cmap.joints[j].position_scale) for j in joint_names],
-        axis=1,
-    )
-    has_v = all(cmap.joints[j].velocity for j in joint_names)
-    has_e = all(cmap.joints[j].effort for j in joint_names)
-    qd = (
-        np.stack(
-            [numeric(cmap.joints[j].velocity, cmap.joints[j].velocity_scale) for j in joint_names],
-            axis=1,
-        )
-        if has_v
-        else None
-    )
+    logged = [j for j in joint_names if j not in cmap.hold]
+    n_rows = len(lines)
+
+    def per_joint(kind: str) -> np.ndarray:
+        cols = []
+        for j in joint_names:
+            jc = cmap.joints.get(j)
+            if jc is None:  # held joint
+                v = cmap.hold[j] if kind == "position" else 0.0
+                cols.append(np.full(n_rows, v))
+            else:
+                cols.append(numeric(getattr(jc, kind), getattr(jc, f"{kind}_scale")))
+        return np.stack(cols, axis=1)
+
+    q = per_joint("position")
+    has_v = all(cmap.joints[j].velocity for j in logged)
+    has_e = all(cmap.joints[j].effort for j in logged)
+    qd = per_joint("velocity") if has_v else None
     tau = (
         np.stack(
-            [numeric(cmap.joints[j].effort, cmap.joints[j].effort_scale) for j in joint_names],
+            [numeric(cmap.joints[j].effort, cmap.joints[j].effort_scale) for j in logged],
             axis=1,
         )
         if has_e
@@ -776,7 +840,10 @@ def _clean_file(
         report.drop("stamp earlier than the previous sample", lines[idx[back]])
     idx = idx[~dup & ~back]
     t_k = t_ns[idx]
-    _check_degrees(path, cmap, q[idx], lines[idx], lower, upper, joint_names, report)
+    cols = [k for k, j in enumerate(joint_names) if j in cmap.joints]
+    _check_degrees(
+        path, cmap, q[idx][:, cols], lines[idx], lower[cols], upper[cols], logged, report
+    )
     # segments at forward gaps
     steps = np.diff(t_k)
     med = float(np.median(steps)) if len(steps) else 0.0
@@ -803,6 +870,7 @@ def _clean_file(
                 tau[sel] if tau is not None else None,
                 qd is None,
                 lines[sel],
+                logged if tau is not None else [],
             )
         )
         report.written += len(sel)
@@ -864,7 +932,7 @@ def _joint_table(seg: LogSegment, joint_names: list[str]) -> pa.Table:
         for k, j in enumerate(joint_names):
             cols[f"velocity.{j}"] = pa.array(seg.qd[:, k], type=pa.float64())
     if seg.tau is not None:
-        for k, j in enumerate(joint_names):
+        for k, j in enumerate(seg.effort_joints):
             cols[f"effort.{j}"] = pa.array(seg.tau[:, k], type=pa.float64())
     return pa.table(cols)
 
@@ -952,13 +1020,32 @@ def write_tabular(
     joint_names = list(chain.joint_names)
     lower, upper = np.asarray(chain.joint_lower), np.asarray(chain.joint_upper)
     fixed_map = read_mapping(mapping, joint_names) if mapping is not None else None
+    hold = fixed_map.hold if fixed_map is not None else {}
+    for j, v in hold.items():
+        k = joint_names.index(j)
+        if not lower[k] - 1e-12 <= v <= upper[k] + 1e-12:
+            raise InputError(
+                f"held position {v:g} of joint {j!r} is outside its URDF limits "
+                f"[{lower[k]:g}, {upper[k]:g}]",
+                path=mapping,
+                where=f"hold/{j}",
+                hint="positions are in rad (revolute) or m (prismatic)",
+            )
+    logged = [j for j in joint_names if j not in hold]
+    if not logged:
+        raise InputError("every joint is held; the log maps none", path=mapping, where="hold")
     files = _log_files(Path(log_path))
     used: set[str] = set()
     written: list[str] = []
     maps: dict[str, Any] = {}
     for f in files:
         raw = read_log_file(f)
-        cmap = fixed_map or auto_mapping(raw.columns, joint_names, f)
+        if fixed_map is not None and fixed_map.joints:
+            cmap = fixed_map
+        else:
+            cmap = auto_mapping(raw.columns, logged, f)
+            if fixed_map is not None:
+                cmap.hold, cmap.gap_s = dict(hold), fixed_map.gap_s
         maps[f.name] = cmap.to_dict()
         segs, rep = _clean_file(
             f, raw, cmap, joint_names, lower, upper, gap_s if gap_s is not None else cmap.gap_s
@@ -982,6 +1069,11 @@ def write_tabular(
             )
         if all(jc.effort is None for jc in cmap.joints.values()):
             prov.note(f"{f.name}: no effort columns")
+        if hold:
+            prov.note(
+                f"{f.name}: joints not in the log, held at a constant position (rad or m): "
+                + ", ".join(f"{j} = {v:g}" for j, v in hold.items())
+            )
         for seg in segs:
             eid = _episode_id(f.stem, seg.index, len(segs), used)
             rel = f"episodes/{eid}/joint_states.parquet"
@@ -995,9 +1087,14 @@ def write_tabular(
             }
             steps = np.diff(seg.t_ns)
             stream["nominal_rate_hz"] = float(1e9 / np.median(steps)) if len(steps) else None
+            derived = [f"position.{j}" for j in hold]
             if seg.derived_velocity:
-                stream["derived"] = [f"velocity.{j}" for j in joint_names]
+                derived += [f"velocity.{j}" for j in joint_names]
                 prov.note(f"velocities derived from positions: {describe_differentiator(1)}")
+            elif hold:
+                derived += [f"velocity.{j}" for j in hold]
+            if derived:
+                stream["derived"] = derived
             writer.add_episode(
                 eid,
                 start_ns=int(seg.t_ns[0]),

@@ -74,6 +74,8 @@ def _relerr(est: dict, truth: dict, effect: str, joints: list[str]) -> dict[str,
             "mass": abs(p["mass"] - truth["mass"]) / truth["mass"],
             "com": float(np.linalg.norm(c_hat - c) / np.linalg.norm(c)),
         }
+    if effect == "mass_scale":  # relative to the effect (s - 1), stricter than to s
+        return {"s": abs(p["s"] - truth["s"]) / abs(truth["s"] - 1.0)}
     return {"delta": abs(p["delta"] - truth["delta"]) / truth["delta"]}
 
 
@@ -86,7 +88,9 @@ def test_arm_effects_are_registered():
     assert get_effect("effort_time_offset").family == "sensor"
 
 
-@pytest.mark.parametrize("effect", ["joint_friction", "payload", "armature", "effort_time_offset"])
+@pytest.mark.parametrize(
+    "effect", ["joint_friction", "payload", "armature", "mass_scale", "effort_time_offset"]
+)
 def test_hidden_effect_ranks_first_and_is_recovered(tmp_path, ur5, effect):
     ds, truth = _dataset(tmp_path, ur5, effect)
     report = diagnose_arm(ds)

@@ -21,6 +21,7 @@ from reference_impl.physics.arm import effects as _effects  # noqa: F401  (regis
 from reference_impl.physics.arm.compare import base_prediction, compare_torques
 from reference_impl.physics.arm.diagnose import diagnose_torques
 from reference_impl.physics.arm.effects import ArmEffect
+from reference_impl.physics.arm.held import freeze_joints, held_joints
 from reference_impl.physics.arm.identify import expand_effects, fit_effects
 from reference_impl.physics.arm.rnea import ArmModel
 from reference_impl.physics.arm.torque_model import (
@@ -59,6 +60,9 @@ def open_arm(
 ) -> ArmSession:
     """Read the robot, the physics and the joint logs with efforts of a dataset.
 
+    Joints logged without efforts at a constant position (``hold`` in the tabular import) are
+    fixed at that position in the model (:mod:`.held`).
+
     Args:
         path: dataset folder (or an open Dataset).
         payload_link: link carrying a payload (default: physics.json ``payload.link``, then the
@@ -66,7 +70,9 @@ def open_arm(
         device: torch device for the model tensors.
     """
     ds = path if isinstance(path, Dataset) else Dataset.open(path)
-    model = ArmModel.from_urdf(ds.urdf(load_meshes=False))
+    urdf = ds.urdf(load_meshes=False)
+    held = held_joints(ds, ArmModel.from_urdf(urdf).joint_names)
+    model = ArmModel.from_urdf(freeze_joints(urdf, held))
     try:
         physics = ds.physics()
     except FormatError:

@@ -19,7 +19,7 @@ import torch
 from reference_impl.physics.arm.torque_model import ArmProblem, predict
 from reference_impl.physics.space import ParamSpace
 
-__all__ = ["ARM_PHASES", "label_phases", "compare_torques", "base_prediction"]
+__all__ = ["ARM_PHASES", "label_phases", "compare_torques", "base_prediction", "worst_phases"]
 
 ARM_PHASES = ("rest", "reversal", "accelerating", "cruising")
 
@@ -77,7 +77,10 @@ def compare_torques(
 
     Returns:
         JSON-ready dict: ``joints`` (rms, noise floor, bias, max, per-phase rms),
-        ``rms_sigma`` (overall RMS in noise units), ``worst_segments``.
+        ``rms_sigma`` (overall RMS in noise units), ``worst_phases`` (:func:`worst_phases`) and
+        ``worst_segments``: the ``top`` windows of ``window_s`` with the largest whitened RMS on
+        one joint, each labelled with the phase that holds most of that joint's squared
+        residual in the window.
     """
     res = (pb.tau - base_prediction(pb, fixed)).cpu().numpy()  # [N, J]
     sig = pb.sigma.cpu().numpy()
@@ -112,7 +115,7 @@ def compare_torques(
             z = res[sel] / sig
             per_joint = np.sqrt(np.mean(z**2, axis=0))
             jj = int(np.argmax(per_joint))
-            counts = np.bincount(lab[sel, jj], minlength=len(ARM_PHASES))
+            energy = np.bincount(lab[sel, jj], weights=z[:, jj] ** 2, minlength=len(ARM_PHASES))
             worst.append(
                 {
                     "trajectory": d.traj_names[tr],
@@ -121,7 +124,7 @@ def compare_torques(
                     "joint": d.joint_names[jj],
                     "rms_nm": float(np.sqrt(np.mean(res[sel, jj] ** 2))),
                     "rms_sigma": float(per_joint[jj]),
-                    "phase": ARM_PHASES[int(np.argmax(counts))],
+                    "phase": ARM_PHASES[int(np.argmax(energy))],
                 }
             )
     worst.sort(key=lambda e: -e["rms_sigma"])
@@ -131,5 +134,44 @@ def compare_torques(
         "n_trajectories": d.num_traj,
         "joints": joints,
         "rms_sigma": float(np.sqrt(np.mean((res / sig) ** 2))),
+        "worst_phases": worst_phases(res / sig, lab, d.joint_names),
         "worst_segments": worst[:top],
     }
+
+
+def worst_phases(
+    z: np.ndarray, lab: np.ndarray, joint_names: tuple[str, ...] | list[str]
+) -> list[dict[str, Any]]:
+    """Phases ranked by their whitened residual RMS over all joints (largest first).
+
+    Args:
+        z: [N, J] residuals divided by each joint's noise floor.
+        lab: [N, J] phase index of every sample and joint (:func:`label_phases`).
+        joint_names: [J].
+
+    Returns:
+        ``[{"phase", "rms_sigma", "fraction", "joint", "joint_rms_sigma"}]``: ``fraction`` of
+        the samples (over all joints) in the phase, and the joint where it is worst.
+    """
+    out = []
+    for p, name in enumerate(ARM_PHASES):
+        sel = lab == p
+        if not sel.any():
+            continue
+        per_joint = [
+            (float(np.sqrt(np.mean(z[sel[:, k], k] ** 2))), k)
+            for k in range(z.shape[1])
+            if sel[:, k].any()
+        ]
+        jr, jk = max(per_joint)
+        out.append(
+            {
+                "phase": name,
+                "rms_sigma": float(np.sqrt(np.mean(z[sel] ** 2))),
+                "fraction": float(sel.mean()),
+                "joint": joint_names[jk],
+                "joint_rms_sigma": jr,
+            }
+        )
+    out.sort(key=lambda e: -e["rms_sigma"])
+    return out
