@@ -47,6 +47,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="give TOPIC a role, e.g. object_pose:box=/mocap/box/pose or ignore=/rosout",
     )
     g.add_argument("--world-frame", metavar="FRAME", help="TF frame that is the dataset world")
+    g.add_argument(
+        "--tf-object",
+        action="append",
+        default=[],
+        metavar="NAME=FRAME",
+        help="write TF frame FRAME as object NAME's poses (repeatable; replaces the default "
+        "choice of every moving frame that is not a robot link or camera)",
+    )
+    g.add_argument(
+        "--no-tf-objects", action="store_true", help="do not write moving TF frames as objects"
+    )
+    g.add_argument(
+        "--tf-camera",
+        action="append",
+        default=[],
+        metavar="CAM=FRAME",
+        help="TF frame (OpenCV axes) of camera CAM, instead of its images' frame_id",
+    )
+    g.add_argument(
+        "--tf-tolerance-ms",
+        type=float,
+        default=100.0,
+        metavar="MS",
+        help="how far a stamp may lie outside a moving TF frame's samples (default 100 ms)",
+    )
     g = parser.add_argument_group("robot")
     g.add_argument("--urdf", type=Path, help="robot URDF (copied with its meshes into robot/)")
     g.add_argument(
@@ -126,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
     """Run ``robogs convert``; returns the exit code."""
     from .ingest.context import ConvertOptions
     from .ingest.convert import convert_path
-    from .ingest.roles import load_role_map, parse_topic_flags
+    from .ingest.roles import load_frame_map, load_role_map, parse_frame_flags, parse_topic_flags
 
     if args.list_formats:
         for name in available_converters():
@@ -138,10 +163,17 @@ def run(args: argparse.Namespace) -> int:
     from .registry import detect_format
 
     roles = {}
+    tf_objects: dict[str, str] = {}
+    tf_cameras: dict[str, str] = {}
     fmt = args.fmt or (detect_format(args.src).name if args.src.exists() else None)
     tabular = fmt == "tabular"
     if args.map is not None and not tabular:
         roles.update({t: str(r) for t, r in load_role_map(args.map).items()})
+        tf_objects, tf_cameras = load_frame_map(args.map)
+    tf_objects.update(parse_frame_flags(args.tf_object, "--tf-object"))
+    tf_cameras.update(parse_frame_flags(args.tf_camera, "--tf-camera"))
+    if not args.tf_tolerance_ms >= 0:
+        raise InputError("--tf-tolerance-ms must be >= 0", where="--tf-tolerance-ms")
     roles.update({t: str(r) for t, r in parse_topic_flags(args.topic).items()})
     if args.assume_fps is not None and not args.assume_fps > 0:
         raise InputError("--assume-fps must be positive", where="--assume-fps")
@@ -162,6 +194,10 @@ def run(args: argparse.Namespace) -> int:
         world_up=args.world_up,
         video=not args.no_video,
         mapping=args.map if tabular else None,
+        tf_objects=tf_objects,
+        tf_auto_objects=not args.no_tf_objects,
+        tf_cameras=tf_cameras,
+        tf_tolerance_ns=int(round(args.tf_tolerance_ms * 1e6)),
         progress=progress,
         command="robogs convert " + " ".join(shlex.quote(a) for a in sys.argv[2:])
         if sys.argv[1:2] == ["convert"]

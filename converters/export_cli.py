@@ -65,6 +65,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         dest="max_hz",
         help="rerun: downsampling rate of transforms and images (default 60; 0 = all)",
     )
+    parser.add_argument(
+        "--rerender",
+        action="store_true",
+        default=None,
+        help="rerun: add labels re-rendered from the bound splats and their difference to the "
+        "recorded labels (slow: seconds per frame on a CPU)",
+    )
+    parser.add_argument(
+        "--rerender-stride",
+        type=int,
+        dest="rerender_stride",
+        metavar="K",
+        help="rerun: re-render every K-th labelled frame (default 10)",
+    )
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
 
 
@@ -75,6 +89,8 @@ _OPTION_FLAGS = {
     "objects": "--no-objects",
     "image_format": "--image-format",
     "max_hz": "--max-hz",
+    "rerender": "--rerender",
+    "rerender_stride": "--rerender-stride",
 }
 
 

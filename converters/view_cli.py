@@ -38,6 +38,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         dest="max_hz",
         help="downsampling rate of transforms and images (0 = all samples)",
     )
+    parser.add_argument(
+        "--rerender",
+        action="store_true",
+        help="add labels re-rendered from the bound splats (slow: seconds per frame on a CPU)",
+    )
+    parser.add_argument(
+        "--rerender-stride",
+        type=int,
+        default=10,
+        dest="rerender_stride",
+        metavar="K",
+        help="re-render every K-th labelled frame (default 10)",
+    )
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
 
 
@@ -58,7 +71,14 @@ def run(args: argparse.Namespace) -> int:
         )
     spawn = args.spawn if args.spawn is not None else args.out is None
     report = export(
-        "rerun", args.dataset, out, force=force, episode=args.episode, max_hz=args.max_hz
+        "rerun",
+        args.dataset,
+        out,
+        force=force,
+        episode=args.episode,
+        max_hz=args.max_hz,
+        rerender=args.rerender,
+        rerender_stride=args.rerender_stride,
     )
     print_report(report)
     if spawn:

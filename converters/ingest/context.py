@@ -53,6 +53,15 @@ class ConvertOptions:
         command: the command line, for the provenance record.
         mapping: column mapping YAML of a tabular joint log (``--map`` for that format).
         gap_s: a jump in time longer than this splits a tabular log into segments.
+        tf_objects: object name -> TF frame written as its ``object_poses`` (``--tf-object``);
+            when given, only these frames become objects.
+        tf_auto_objects: without ``tf_objects``, write every moving TF frame that is not a
+            robot link or camera frame as an object (``--no-tf-objects`` turns it off).
+        tf_cameras: camera name -> TF frame of the camera (OpenCV axes), instead of the
+            images' ``header.frame_id`` (``--tf-camera``).
+        tf_tolerance_ns: a stamp may lie this far outside a moving TF edge's samples (its first
+            or last sample is used); further out there is no transform.
+        tf_spill_rows: ``/tf`` samples per edge kept in RAM before spilling to a temp file.
     """
 
     roles: dict[str, str] = field(default_factory=dict)
@@ -76,6 +85,11 @@ class ConvertOptions:
     command: str | None = None
     mapping: Path | None = None
     gap_s: float | None = None
+    tf_objects: dict[str, str] = field(default_factory=dict)
+    tf_auto_objects: bool = True
+    tf_cameras: dict[str, str] = field(default_factory=dict)
+    tf_tolerance_ns: int = 100_000_000
+    tf_spill_rows: int = 1 << 18
 
 
 @dataclass

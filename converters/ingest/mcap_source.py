@@ -8,7 +8,10 @@ Decoders, chosen per channel from its message encoding and schema encoding:
   text stored in the file;
 * ``json``: the standard library; Foxglove schemas are mapped to ROS shapes
   (:mod:`converters.ingest.foxglove`);
-* ``protobuf``: ``mcap_protobuf`` when it is installed.
+* ``protobuf``: message classes built from the schema's ``FileDescriptorSet``
+  (:mod:`converters.ingest.protobuf_schema`); Foxglove schemas (``foxglove.CompressedImage``,
+  ``RawImage``, ``CameraCalibration``, ``FrameTransform(s)``, ``PoseInFrame``) are mapped to
+  ROS shapes like their JSON twins, other messages are listed as having no role.
 
 A channel with no usable decoder is listed in ``provenance.undecodable`` with its message
 count. Chunk CRCs are checked, so corrupt bytes stop the conversion with the topic and log time
@@ -117,12 +120,10 @@ def channel_decoder(
         return _rosbags_decoder(schema, enc)
     if enc == "json":
         return lambda data: foxglove.to_namespace(json.loads(data))
-    if enc == "protobuf" and schema is not None:
-        try:
-            from mcap_protobuf.decoder import DecoderFactory as PbFactory  # type: ignore[import-not-found]
-        except ImportError:
-            return None
-        return PbFactory().decoder_for(message_encoding, schema)
+    if enc == "protobuf" and senc == "protobuf":
+        from .protobuf_schema import protobuf_decoder
+
+        return protobuf_decoder(schema.name, schema.data)
     return None
 
 
@@ -278,6 +279,6 @@ register_converter(
     "mcap",
     detect_mcap,
     convert_mcap,
-    description="MCAP file (ROS 2, ROS 1, JSON/Foxglove)",
+    description="MCAP file (ROS 2, ROS 1, JSON/Foxglove, protobuf/Foxglove)",
     priority=60,
 )

@@ -1,9 +1,10 @@
 """Turn decoded ROS messages into dataset streams (shared by the bag and MCAP readers).
 
 A reader (``rosbag_source``, ``mcap_source``) lists its topics, asks :meth:`MessageIngest.plan`
-which to read, feeds the static topics (``/tf_static``, ``/robot_description``) first through
-:meth:`MessageIngest.handle`, then every other wanted message in log-time order, and finally
-calls :meth:`MessageIngest.finish`. Messages are duck-typed: rosbags and ``mcap_ros2`` objects
+which to read, feeds the first-pass topics (``/tf_static``, ``/tf``, ``/robot_description``, and
+``camera_info`` when there is a ``/tf``) first through :meth:`MessageIngest.handle`, then every
+other wanted message in log-time order, and finally calls :meth:`MessageIngest.finish`. Moving TF
+frames become object poses and camera extrinsics (:mod:`converters.ingest.tf_ingest`). Messages are duck-typed: rosbags and ``mcap_ros2`` objects
 both work, with ROS 1 (``K``, ``D``) or ROS 2 (``k``, ``d``) field names.
 
 Stamps: per topic, ``header.stamp`` is used when the first message's stamp is plausible
@@ -31,7 +32,9 @@ from .context import IngestContext
 from .roles import Role, camera_name_from_topic, default_role, normalize_type, parse_role, safe_name
 from .ros_images import decode_compressed_image, decode_raw_image
 from .sinks import CameraSink, TableSink
-from .tf_tree import StaticTfTree, matrix_to_pose, pose_to_matrix
+from .tf_buffer import Hop, poses_of
+from .tf_ingest import TfIngest, TfObject
+from .tf_tree import matrix_to_pose, pose_to_matrix
 
 __all__ = ["TopicInfo", "MessageIngest", "PRODUCTIVE_ROLES", "STATIC_ROLES"]
 
@@ -47,8 +50,8 @@ PRODUCTIVE_ROLES = frozenset(
         "wrench",
     }
 )
-#: roles read before everything else
-STATIC_ROLES = frozenset({"tf_static", "robot_description"})
+#: roles read before everything else (``/tf`` too: the whole tree is known before the main pass)
+STATIC_ROLES = frozenset({"tf_static", "tf", "robot_description"})
 
 _ROLE_TYPES: dict[str, set[str]] = {
     "joint_states": {"sensor_msgs/msg/JointState"},
@@ -139,7 +142,14 @@ class MessageIngest:
         self.types: dict[str, str] = {}
         self.counts: dict[str, int] = {}
         self.read: dict[str, int] = {}
-        self.tf = StaticTfTree()
+        self.tf = TfIngest(
+            self.prov,
+            self._plausible,
+            tolerance_ns=self.opts.tf_tolerance_ns,
+            spill_rows=self.opts.tf_spill_rows,
+        )
+        self._static_topics: set[str] = set()
+        self._main_started = False
         self._stamp_src: dict[str, str] = {}
         self._joint_topic: str | None = None
         self._joint_layout: _JointLayout | None = None
@@ -147,7 +157,7 @@ class MessageIngest:
         self._pose_sinks: dict[str, TableSink] = {}
         self._wrench_sink: TableSink | None = None
         self._cameras: dict[str, _Camera] = {}
-        self._pose_frames: dict[str, np.ndarray | None] = {}
+        self._pose_frames: dict[str, np.ndarray | list[Hop] | None] = {}
         self._pending_labels: dict[str, list[tuple[int, np.ndarray]]] = {}
         self._labels_writers: dict[str, tuple[pq.ParquetWriter, int]] = {}
         self._world: str | None = None
@@ -192,11 +202,6 @@ class MessageIngest:
                 reason = "mapped to ignore" if role.kind == "ignore" else None
             else:
                 role, reason = default_role(info.topic, t)
-            if role.kind == "tf":
-                role, reason = (
-                    Role("ignore"),
-                    "dynamic tf is not converted (record poses as PoseStamped)",
-                )
             self.roles[info.topic] = role
             if reason:
                 reasons[info.topic] = reason
@@ -210,7 +215,8 @@ class MessageIngest:
         productive = [
             t for t, r in self.roles.items() if r.kind in PRODUCTIVE_ROLES and self.counts[t] > 0
         ]
-        if not productive:
+        has_tf = any(r.kind == "tf" and self.counts[t] > 0 for t, r in self.roles.items())
+        if not productive and not has_tf:
             listing = (
                 "; ".join(f"{t.topic} {normalize_type(t.msgtype)} x{t.count}" for t in topics)
                 or "none"
@@ -221,6 +227,10 @@ class MessageIngest:
                 hint="map topics to roles with --topic ROLE=TOPIC or --map roles.yaml",
             )
         static = [t for t, r in self.roles.items() if r.kind in STATIC_ROLES and self.counts[t] > 0]
+        if has_tf:  # camera frames must be known before tf frames are chosen as objects
+            static += [t for t in productive if self.roles[t].kind == "camera_info"]
+            productive = [t for t in productive if self.roles[t].kind != "camera_info"]
+        self._static_topics = set(static)
         return sorted(static), sorted(productive)
 
     def _choose_joint_topic(self, overrides: dict[str, Role], reasons: dict[str, str]) -> None:
@@ -296,10 +306,16 @@ class MessageIngest:
         role = self.roles.get(topic)
         if role is None or role.kind == "ignore":
             return
+        if topic not in self._static_topics:
+            self._begin_main()
+            self.tf.emit_until(int(log_time), self._add_tf_pose)
         kind = role.kind
         if kind == "tf_static":
-            self.tf.add_message(msg)
+            self.tf.add_static(topic, msg)
             self.prov.topic(topic).written += 1
+            return
+        if kind == "tf":
+            self.tf.add_dynamic(topic, log_time, msg)
             return
         if kind == "robot_description":
             if self.ctx.robot_description is None:
@@ -601,7 +617,7 @@ class MessageIngest:
     def world_frame(self) -> str:
         """The TF frame taken as the dataset world."""
         if self._world is None:
-            frames = self.tf.frames
+            frames = self.tf.buf.frames
             cands = [self.opts.world_frame] if self.opts.world_frame else []
             cands += [self.ctx.robot_root_link] if self.ctx.robot_root_link else []
             cands += list(_WORLD_CANDIDATES)
@@ -610,24 +626,91 @@ class MessageIngest:
             )
         return self._world
 
-    def _frame_to_world(self, topic: str, frame: str) -> np.ndarray | None:
+    def _frame_to_world(self, topic: str, frame: str) -> np.ndarray | list[Hop] | None:
+        """``T_world_frame`` (static chain), the chain's hops (moving frame) or ``None``."""
         if topic in self._pose_frames:
             return self._pose_frames[topic]
         world = self.world_frame()
-        T = None
+        T: np.ndarray | list[Hop] | None = None
         if frame and frame != world:
-            T = self.tf.lookup(world, frame)
-            if T is None:
+            hops = self.tf.buf.chain(world, frame)
+            if hops is None:
                 self.prov.note(
-                    f"{topic}: frame {frame!r} is not connected to {world!r} in /tf_static; "
-                    "poses kept as given"
+                    f"{topic}: frame {frame!r} is not connected to {world!r} in /tf or "
+                    "/tf_static; poses kept as given"
+                )
+            elif any(h.dynamic for h in hops):
+                T = hops
+                self.tf.use(hops)
+                self.prov.note(
+                    f"{topic}: poses given in the moving frame {frame!r}, composed with the /tf "
+                    f"chain to {world!r} at each stamp"
                 )
             else:
+                T = self.tf.buf.lookup(world, frame)
                 self.prov.note(
                     f"{topic}: poses given in {frame!r}, composed with the static chain to {world!r}"
                 )
         self._pose_frames[topic] = T
         return T
+
+    # ------------------------------------------------------------------ tf
+    def _robot_links(self) -> set[str]:
+        """Link names of the robot (``--urdf`` or ``/robot_description``); empty if unknown."""
+        from xml.etree.ElementTree import ParseError
+
+        import defusedxml.ElementTree as ET
+
+        try:
+            if self.opts.urdf is not None:
+                root = ET.parse(str(self.opts.urdf)).getroot()
+            elif self.ctx.robot_description:
+                root = ET.fromstring(self.ctx.robot_description)
+            else:
+                return set()
+        except (OSError, ParseError, ValueError) as exc:
+            self.prov.note(f"robot links unknown for the tf frames ({type(exc).__name__})")
+            return set()
+        return {str(link.get("name")) for link in root.iter("link") if link.get("name")}
+
+    def _begin_main(self) -> None:
+        """Once, after the first pass: sort the transforms and choose the tf objects."""
+        if self._main_started:
+            return
+        self._main_started = True
+        if not self.tf.buf.dynamic_edges:
+            self.tf.finalize()
+            return
+        world = self.world_frame()
+        cam_frames = {c.frame_id for c in self._cameras.values() if c.frame_id}
+        cam_frames |= {f.lstrip("/") for f in self.opts.tf_cameras.values()}
+        taken = {r.name or safe_name(t) for t, r in self.roles.items() if r.kind == "object_pose"}
+        self.tf.select_objects(
+            world,
+            explicit=dict(self.opts.tf_objects),
+            auto=self.opts.tf_auto_objects,
+            camera_frames=cam_frames,
+            robot_links=self._robot_links(),
+            taken=taken,
+        )
+        for obj in self.tf.objects:
+            topic = obj.source.rsplit(":", 1)[0]
+            self._stamp_src[obj.source] = self.tf.stamp_source.get(topic, "log_time")
+
+    def _pose_sink(self, kind: str) -> TableSink:
+        sink = self._pose_sinks.get(kind)
+        if sink is None:
+            sink = self._pose_sinks[kind] = TableSink(
+                self.ctx.writer.path(f"{self.ctx.episode_dir()}/{kind}.parquet"),
+                kind,
+                _POSE_COLS,
+                label_column="link" if kind == "ee_poses" else "object",
+                **self._sink_kwargs(),
+            )
+        return sink
+
+    def _add_tf_pose(self, obj: TfObject, t: int, vals: list[float]) -> None:
+        self._pose_sink("object_poses").add(obj.source, t, vals, obj.name)
 
     def _pose(self, topic: str, role: Role, t: int, msg: Any) -> None:
         if hasattr(msg, "transform"):
@@ -643,20 +726,20 @@ class MessageIngest:
             )
             return
         T = self._frame_to_world(topic, str(msg.header.frame_id).lstrip("/"))
+        if isinstance(T, list):  # moving frame: the chain at this stamp
+            Ts, ok = self.tf.poses_at(T, np.array([t], np.int64))
+            if not ok[0]:
+                self.prov.issue(
+                    topic, "no /tf transform of the pose's frame near this stamp (dropped)", t
+                )
+                return
+            T = Ts[0]
         if T is not None:
             M = T @ pose_to_matrix(np.array(vals[:3]), np.array(vals[3:]))
             tr, qq = matrix_to_pose(M)
             vals = [*tr.tolist(), *qq.tolist()]
         kind = "ee_poses" if role.kind == "ee_pose" else "object_poses"
-        sink = self._pose_sinks.get(kind)
-        if sink is None:
-            sink = self._pose_sinks[kind] = TableSink(
-                self.ctx.writer.path(f"{self.ctx.episode_dir()}/{kind}.parquet"),
-                kind,
-                _POSE_COLS,
-                label_column="link" if kind == "ee_poses" else "object",
-                **self._sink_kwargs(),
-            )
+        sink = self._pose_sink(kind)
         label = role.name or safe_name(topic)
         if sink.add(topic, t, vals, label):
             self.prov.topic(topic).written += 1
@@ -692,6 +775,8 @@ class MessageIngest:
     def finish(self) -> None:
         """Close every sink, write cameras, declare streams, account for unread messages."""
         ctx, ep = self.ctx, self.ctx.episode_dir()
+        self._begin_main()
+        self.tf.emit_until(None, self._add_tf_pose)
         if self._joint_sink is not None:
             st = self._joint_sink.close()
             if st.rows:
@@ -750,6 +835,8 @@ class MessageIngest:
         for writer, _ in self._labels_writers.values():
             writer.close()
         self._finish_cameras()
+        self.tf.account([t for t, r in self.roles.items() if r.kind == "tf"])
+        self.tf.close()
         for topic, n_index in self.counts.items():
             role = self.roles.get(topic)
             if role is None or role.kind == "ignore":
@@ -772,20 +859,73 @@ class MessageIngest:
                     t,
                 )
 
-    def _finish_cameras(self) -> None:
-        ctx, ep = self.ctx, self.ctx.episode_dir()
+    def _camera_extrinsics(
+        self, name: str, cam: _Camera, frame: str
+    ) -> tuple[np.ndarray | None, str | None]:
+        """``(T_world_cam, extrinsics_rel)`` of a camera: a static transform, or ``None`` and the
+        path of a ``camera_extrinsics`` table written at the frame stamps (moving frame)."""
         world = self.world_frame()
+        hops = self.tf.buf.chain(world, frame) if frame else None
+        if hops is None:
+            self.prov.note(
+                f"camera {name}: no /tf or /tf_static chain from {world!r} to "
+                f"{frame or '(no frame_id)'!r}; T_world_cam set to identity"
+            )
+            return np.eye(4), None
+        if frame and "optical" not in frame and frame not in self.opts.tf_cameras.values():
+            self.prov.note(
+                f"camera {name}: frame {frame!r} is taken as an optical frame (x right, y down, "
+                "z forward); pass --tf-camera CAM=FRAME to choose another"
+            )
+        if not any(h.dynamic for h in hops):
+            return self.tf.buf.lookup(world, frame), None
+        self.tf.use(hops)
+        stamps = np.array(sorted(cam.frame_of or {}), dtype=np.int64)
+        T, ok = self.tf.poses_at(hops, stamps)
+        for t in stamps[~ok]:
+            self.prov.issue(
+                cam.image_topic or name,
+                "no /tf transform of the camera frame near this frame stamp (no extrinsics row)",
+                int(t),
+                drop=False,
+            )
+        if not ok.any():
+            t0 = self.tf.buf.times(*self.tf.buf.driver(hops).edge)[:1]  # type: ignore[union-attr]
+            T0, _ = self.tf.poses_at(hops, np.asarray(t0, np.int64))
+            self.prov.note(
+                f"camera {name}: frame {frame!r} moves in /tf but no frame stamp is covered; "
+                "static T_world_cam taken from the first transform"
+            )
+            return T0[0], None
+        vals = poses_of(T[ok])
+        cols = [pa.array(stamps[ok], pa.int64())] + [pa.array(vals[:, j]) for j in range(7)]
+        rel = f"{self.ctx.episode_dir()}/cameras/{name}/extrinsics.parquet"
+        table = pa.Table.from_arrays(cols, names=["t_ns", *_POSE_COLS])
+        self.ctx.writer.write_table(rel, table, kind="camera_extrinsics")
+        self.prov.note(
+            f"camera {name}: frame {frame!r} moves in /tf; T_world_cam written per frame "
+            f"({int(ok.sum())} rows, extrinsics time_varying)"
+        )
+        return None, rel
+
+    def _finish_cameras(self) -> None:
+        from dataclasses import replace
+
+        ctx, ep = self.ctx, self.ctx.episode_dir()
+        unknown = sorted(set(self.opts.tf_cameras) - set(self._cameras))
+        if unknown:
+            raise InputError(
+                f"--tf-camera names camera(s) not in the source: {', '.join(unknown)}",
+                where="--tf-camera / tf_cameras",
+                hint=f"cameras: {', '.join(sorted(self._cameras)) or 'none'}",
+            )
         for name, cam in sorted(self._cameras.items()):
             stats = cam.sink.close() if cam.sink is not None else None
             model = cam.model
+            extrinsics_rel = None
             if model is not None:
-                T = self.tf.lookup(world, cam.frame_id) if cam.frame_id else None
-                if T is None:
-                    T = np.eye(4)
-                    self.prov.note(
-                        f"camera {name}: no /tf_static chain from {world!r} to "
-                        f"{cam.frame_id or '(no frame_id)'!r}; T_world_cam set to identity"
-                    )
+                frame = self.opts.tf_cameras.get(name, cam.frame_id).lstrip("/")
+                T, extrinsics_rel = self._camera_extrinsics(name, cam, frame)
                 if stats is not None and cam.sink is not None and cam.sink.size is not None:
                     if cam.sink.size != (model.width, model.height):
                         self.prov.issue(
@@ -795,9 +935,8 @@ class MessageIngest:
                             None,
                             drop=False,
                         )
-                from dataclasses import replace
-
-                ctx.writer.set_camera(replace(model, T_world_cam=T))
+                ext = "time_varying" if extrinsics_rel else "static"
+                ctx.writer.set_camera(replace(model, T_world_cam=T, extrinsics=ext))
             elif cam.image_topic is not None:
                 self.prov.note(
                     f"camera {name}: images without a usable camera_info; no intrinsics written "
@@ -817,6 +956,8 @@ class MessageIngest:
                     entry["video"] = f"{ep}/cameras/{name}/rgb.mp4"
                 if name in self._labels_writers:
                     entry["labels"] = f"{ep}/cameras/{name}/labels.parquet"
+                if extrinsics_rel:
+                    entry["extrinsics"] = extrinsics_rel
                 ctx.add_stream(
                     f"camera/{name}", entry, start_ns=stats.start_ns, end_ns=stats.end_ns
                 )
@@ -831,3 +972,4 @@ class MessageIngest:
                 cam.sink.abort()
         for writer, _ in self._labels_writers.values():
             writer.close()
+        self.tf.close()

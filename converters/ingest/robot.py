@@ -4,7 +4,9 @@ Mesh URIs (``package://NAME/...`` or relative) are resolved with
 :func:`robogs_format.urdf.resolve_mesh_uri`, which refuses anything outside the allowed roots.
 Each mesh is copied under ``robot/meshes/`` keeping its path relative to the deepest folder
 common to all meshes, and the copied URDF refers to it by that relative path, so the dataset
-is self-contained.
+is self-contained. Image textures of COLLADA meshes are copied along, at the same place relative
+to their mesh (:mod:`converters.ingest.dae_textures`); a texture that is missing or would come
+from outside the mesh's package is left out and named in the provenance.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from robogs_format.errors import InputError, RobogsError
 from robogs_format.urdf import mesh_refs, parse_urdf_robot, resolve_mesh_uri
 
 from .context import IngestContext
+from .dae_textures import dae_texture_refs, texture_uri
 
 __all__ = ["attach_robot", "attach_robot_description", "urdf_root_link"]
 
@@ -74,15 +77,18 @@ def attach_robot(
                 hint="pass --package NAME=FOLDER for package:// URIs",
             )
         resolved[ref.uri] = p
-    common = (
-        Path(os.path.commonpath([str(p.parent) for p in resolved.values()])) if resolved else None
-    )
+    textures = _textures(ctx, urdf_path, resolved, roots)
+    files = list(resolved.values()) + list(textures)
+    common = Path(os.path.commonpath([str(p.parent) for p in files])) if files else None
     new_rel: dict[str, str] = {}
     for uri, p in sorted(resolved.items()):
         assert common is not None
         rel = "meshes/" + p.relative_to(common).as_posix()
         ctx.writer.copy_file(f"robot/{rel}", p)
         new_rel[uri] = rel
+    for p in sorted(textures):
+        assert common is not None
+        ctx.writer.copy_file(f"robot/meshes/{p.relative_to(common).as_posix()}", p)
     tree = _safe_parse(urdf_path)
     for mesh in tree.getroot().iter("mesh"):
         fn = mesh.get("filename")
@@ -94,8 +100,33 @@ def attach_robot(
     ctx.provenance.extra["robot"] = {
         "urdf": urdf_path.name,
         "meshes": len(resolved),
+        "textures": len(textures),
         "root_link": root,
     }
+
+
+def _textures(
+    ctx: IngestContext, urdf_path: Path, meshes: dict[str, Path], roots: dict[str, str]
+) -> set[Path]:
+    """Image files referenced by the COLLADA meshes, resolved like mesh URIs (see module doc)."""
+    out: set[Path] = set()
+    for uri, mesh in sorted(meshes.items()):
+        if mesh.suffix.lower() != ".dae":
+            continue
+        for ref in dae_texture_refs(mesh):
+            try:
+                p = resolve_mesh_uri(texture_uri(uri, ref), urdf_path, None, roots or None)
+            except RobogsError as exc:
+                ctx.provenance.note(
+                    f"texture {ref!r} of mesh {uri} not copied: {exc.message}"
+                    + (f" ({exc.hint})" if exc.hint else "")
+                )
+                continue
+            if not p.is_file():
+                ctx.provenance.note(f"texture {ref!r} of mesh {uri} not copied: file not found")
+                continue
+            out.add(p)
+    return out
 
 
 def attach_robot_description(

@@ -17,16 +17,18 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
-
 from robogs_format.errors import InputError
+
+from .yamlio import read_yaml
 
 __all__ = [
     "Role",
     "ROLE_KINDS",
     "parse_role",
     "load_role_map",
+    "load_frame_map",
     "parse_topic_flags",
+    "parse_frame_flags",
     "default_role",
     "normalize_type",
     "camera_name_from_topic",
@@ -108,23 +110,25 @@ def parse_role(text: str, *, where: str | None = None) -> Role:
     return Role(kind, safe_name(name) if sep else None)
 
 
+_FRAME_KEYS = ("tf_objects", "tf_cameras")
+
+
+def _read_map(p: Path) -> object:
+    return read_yaml(p, what="role map", max_bytes=_MAX_MAP_BYTES)
+
+
 def load_role_map(path: str | Path) -> dict[str, Role]:
     """Read a ``topic: role`` YAML mapping (optionally under a ``topics:`` key).
+
+    The keys ``tf_objects`` and ``tf_cameras`` are frame mappings (:func:`load_frame_map`).
 
     Raises:
         InputError: unreadable file, not a mapping, unknown role.
     """
     p = Path(path)
-    try:
-        if p.stat().st_size > _MAX_MAP_BYTES:
-            raise InputError("role map is too large", path=p)
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputError(f"cannot read role map ({exc.strerror})", path=p) from None
-    except yaml.YAMLError as exc:
-        raise InputError(
-            f"role map is not valid YAML ({str(exc).splitlines()[0]})", path=p
-        ) from None
+    doc = _read_map(p)
+    if isinstance(doc, dict):
+        doc = {k: v for k, v in doc.items() if k not in _FRAME_KEYS}
     if isinstance(doc, dict) and isinstance(doc.get("topics"), dict):
         doc = doc["topics"]
     if not isinstance(doc, dict):
@@ -136,6 +140,55 @@ def load_role_map(path: str | Path) -> dict[str, Role]:
     out: dict[str, Role] = {}
     for topic, role in doc.items():
         out[str(topic)] = parse_role(str(role), where=f"{p}: {topic}")
+    return out
+
+
+def load_frame_map(path: str | Path) -> tuple[dict[str, str], dict[str, str]]:
+    """The ``tf_objects: {object: frame}`` and ``tf_cameras: {camera: frame}`` sections of a
+    ``--map`` YAML (empty when absent).
+
+    Raises:
+        InputError: unreadable file, a section that is not a name -> frame mapping.
+    """
+    p = Path(path)
+    doc = _read_map(p)
+    out: list[dict[str, str]] = []
+    for key in _FRAME_KEYS:
+        sec = doc.get(key) if isinstance(doc, dict) else None
+        if sec is None:
+            out.append({})
+            continue
+        if not isinstance(sec, dict) or not all(
+            isinstance(v, str) and v.strip("/") for v in sec.values()
+        ):
+            raise InputError(
+                f"{key} must map names to TF frames",
+                path=p,
+                where=key,
+                hint=f"e.g. '{key}: {{box: box_link}}'",
+            )
+        out.append({str(k): str(v) for k, v in sec.items()})
+    return out[0], out[1]
+
+
+def parse_frame_flags(flags: list[str], flag: str) -> dict[str, str]:
+    """Parse ``NAME=FRAME`` (or ``FRAME``: the name is the frame's) flags.
+
+    Raises:
+        InputError: an empty name or frame.
+    """
+    out: dict[str, str] = {}
+    for item in flags:
+        name, sep, frame = item.partition("=")
+        if not sep:
+            name, frame = safe_name(item), item
+        if not name or not frame.strip("/"):
+            raise InputError(
+                f"{flag} expects NAME=FRAME or FRAME, got {item!r}",
+                where=flag,
+                hint=f"e.g. {flag} box=box_link",
+            )
+        out[name] = frame.lstrip("/")
     return out
 
 

@@ -216,6 +216,7 @@ class RerunContext:
         time: the ``time`` timeline.
         max_hz: downsampling rate for transforms and images (``<= 0``: every sample).
         notes: one-line remarks for the user (skipped content).
+        options: per-layer options, ``layer name -> {option: value}``.
     """
 
     rec: rr.RecordingStream
@@ -224,6 +225,7 @@ class RerunContext:
     time: TimeAxis
     max_hz: float = 60.0
     notes: list[str] = field(default_factory=list)
+    options: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def has_robot(self) -> bool:
@@ -653,6 +655,8 @@ def _layer_findings(ctx: RerunContext) -> None:
 
 
 Layer = Callable[[RerunContext], None]
+LayerViews = Callable[[Dataset], list[Any]]
+_LAYER_VIEWS: dict[str, LayerViews] = {}
 _LAYERS: dict[str, Layer] = {
     "robot": _layer_robot,
     "objects": _layer_objects,
@@ -666,16 +670,22 @@ _LAYERS: dict[str, Layer] = {
 DEFAULT_LAYERS: tuple[str, ...] = tuple(_LAYERS)
 
 
-def register_layer(name: str, fn: Layer, *, default: bool = False) -> None:
+def register_layer(
+    name: str, fn: Layer, *, default: bool = False, views: LayerViews | None = None
+) -> None:
     """Add a layer (``fn(ctx)``) that :func:`log_dataset` can run by name.
 
     Args:
         name: layer name.
         fn: logs its content through ``ctx.rec`` on ``ctx.time``.
         default: also run it when no layer list is given.
+        views: ``views(dataset) -> [rerun.blueprint views]`` added to the default blueprint's
+            right column when the layer runs.
     """
     global DEFAULT_LAYERS
     _LAYERS[name] = fn
+    if views is not None:
+        _LAYER_VIEWS[name] = views
     if default and name not in DEFAULT_LAYERS:
         DEFAULT_LAYERS = (*DEFAULT_LAYERS, name)
 
@@ -688,12 +698,19 @@ def available_layers() -> list[str]:
 # ----------------------------------------------------------------------------- recording
 
 
-def default_blueprint(ds: Dataset) -> rrb.Blueprint:
-    """3D scene on the left; camera views, joint plots and the findings log on the right."""
+def default_blueprint(ds: Dataset, layers: Iterable[str] | None = None) -> rrb.Blueprint:
+    """3D scene on the left; camera views, joint plots and the findings log on the right.
+
+    Layers registered with ``views`` add theirs after the camera views when they are in
+    ``layers``.
+    """
     right: list[Any] = [
         rrb.Spatial2DView(origin="world/cameras/" + entity(c) + "/image", name=c)
         for c in ds.camera_names
     ]
+    for name in layers or ():
+        if name in _LAYER_VIEWS:
+            right.extend(_LAYER_VIEWS[name](ds))
     right.append(
         rrb.Tabs(
             rrb.TimeSeriesView(origin="plots/joints/position", name="joint positions"),
@@ -720,6 +737,7 @@ def log_dataset(
     episode: str | None = None,
     max_hz: float = 60.0,
     layers: Iterable[str] | None = None,
+    layer_options: dict[str, dict[str, Any]] | None = None,
 ) -> RerunContext:
     """Log a dataset into an open recording.
 
@@ -729,13 +747,14 @@ def log_dataset(
         episode: episode id (default: the only/first one).
         max_hz: downsampling rate of transforms and images.
         layers: layer names (default :data:`DEFAULT_LAYERS`).
+        layer_options: ``layer name -> {option: value}`` (``ctx.options``).
 
     Returns:
         The context (``notes`` lists what was skipped).
     """
     eps = ds.episodes
     ep = ds.episode(episode) if episode is not None else (eps[0] if eps else None)
-    ctx = RerunContext(rec, ds, ep, time_axis(ds), max_hz)
+    ctx = RerunContext(rec, ds, ep, time_axis(ds), max_hz, options=dict(layer_options or {}))
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     names = list(DEFAULT_LAYERS if layers is None else layers)
     unknown = [n for n in names if n not in _LAYERS]
@@ -756,6 +775,7 @@ def write_rrd(
     max_hz: float = 60.0,
     layers: Iterable[str] | None = None,
     application_id: str = "robogs",
+    layer_options: dict[str, dict[str, Any]] | None = None,
 ) -> list[str]:
     """Write a dataset to a Rerun ``.rrd`` file with the default blueprint.
 
@@ -766,6 +786,7 @@ def write_rrd(
         max_hz: downsampling rate of transforms and images (``<= 0``: all samples).
         layers: layer names (default all).
         application_id: Rerun application id.
+        layer_options: ``layer name -> {option: value}`` for the layers that take options.
 
     Returns:
         Notes on skipped content.
@@ -777,10 +798,16 @@ def write_rrd(
     )
     rec.set_log_time_enabled(False)  # only the dataset clock, so recordings are reproducible
     rec.set_log_tick_enabled(False)
-    rec.save(str(path), default_blueprint=default_blueprint(ds))
+    names = list(DEFAULT_LAYERS if layers is None else layers)
+    rec.save(str(path), default_blueprint=default_blueprint(ds, names))
     try:
-        ctx = log_dataset(rec, ds, episode=episode, max_hz=max_hz, layers=layers)
+        ctx = log_dataset(
+            rec, ds, episode=episode, max_hz=max_hz, layers=names, layer_options=layer_options
+        )
     finally:
         rec.flush()
         rec.disconnect()
     return ctx.notes
+
+
+from . import rerun_rerender as _rerun_rerender  # noqa: E402,F401 - registers the "rerender" layer

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from converters.ingest import convert_path
+from converters.ingest.context import ConvertOptions
 from converters.registry import detect_format
 from robogs_format.errors import InputError
 from robogs_format.validate import validate
@@ -71,11 +72,20 @@ def test_real_pr2_camera_info_bag_converts(tmp_path: Path, real: Path) -> None:
 
 @pytest.mark.realdata
 @pytest.mark.parametrize("name", ["example-bz2.bag", "example-lz4.bag"])
-def test_real_turtlesim_bags_are_rejected_with_their_listing(
+def test_real_turtlesim_bags_without_tf_are_rejected_with_their_listing(
     tmp_path: Path, real: Path, name: str
 ) -> None:
+    # with /tf the turtles become objects (tests/converters/test_ingest_tf.py); without it the
+    # bag has nothing the format holds
+    src = real / "ros1_bags/rosbag.js/fixtures" / name
+    ds = convert_path(src, tmp_path / "tf")
+    assert sorted(set(ds.episode().table("object_poses").column("object").to_pylist())) == [
+        "turtle1",
+        "turtle2",
+    ]
+    opts = ConvertOptions(roles={"/tf": "ignore"})
     with pytest.raises(InputError) as ei:
-        convert_path(real / "ros1_bags/rosbag.js/fixtures" / name, tmp_path / "out")
+        convert_path(src, tmp_path / "out", options=opts)
     msg = str(ei.value)
     assert "nothing to convert" in msg and "/turtle1/pose turtlesim/msg/Pose x1344" in msg
     assert "/tf tf/msg/tfMessage x2688" in msg
