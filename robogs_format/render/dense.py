@@ -12,6 +12,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from ..frames import quat_to_matrix as quat_to_rotmat
 from .camera import Camera
 from .config import RenderConfig
 from .constants import (
@@ -26,7 +27,6 @@ from .constants import (
 )
 from .gaussians import Gaussians
 from .output import RenderOutput
-from ..frames import quat_to_matrix as quat_to_rotmat
 from .sh import eval_sh
 
 __all__ = ["render_dense"]
@@ -106,7 +106,9 @@ def render_dense(
         if config.antialiased:
             o = o * torch.sqrt(torch.linalg.det(cov2).clamp_min(0) / torch.linalg.det(cov2_lp))
         conic = torch.linalg.inv(cov2_lp)
-        d = pix[:, None, :] - centre[None, :, :]  # [HW, N, 2]
+        alive = in_depth & (o >= ALPHA_THRESHOLD)
+        means2d = torch.where(alive[:, None], centre, 0.0)  # the returned tensor (see below)
+        d = pix[:, None, :] - means2d[None, :, :]  # [HW, N, 2]
         power = 0.5 * torch.einsum("pni,nij,pnj->pn", d, conic, d)
         depth = z[None, :].expand(n_pix, -1)
         normal_axis = torch.gather(
@@ -128,7 +130,9 @@ def render_dense(
         u = (rel * a_u[None]).sum(-1) / (s[:, 0] ** 2)[None]
         v = (rel * a_v[None]).sum(-1) / (s[:, 1] ** 2)[None]
         rho3 = u * u + v * v
-        dd = pix[:, None, :] - centre[None, :, :]
+        alive = in_depth & (o >= ALPHA_THRESHOLD)
+        means2d = torch.where(alive[:, None], centre, 0.0)
+        dd = pix[:, None, :] - means2d[None, :, :]
         rho2 = LOWPASS_2DGS_INV_SQ / config.lowpass_scale**2 * (dd * dd).sum(-1)
         use3 = ok & (t > camera.near) & (rho3 <= rho2)
         power = 0.5 * torch.where(use3, rho3, rho2)
@@ -142,7 +146,6 @@ def render_dense(
     rgb_g = eval_sh(g.sh, dirs, config.sh_degree)
     extra_g = g.extra if g.extra is not None else g.means.new_zeros((len(g), 0))
 
-    alive = in_depth & (o >= ALPHA_THRESHOLD)
     order = torch.nonzero(alive).flatten()
     order = order[torch.argsort(z.detach()[order], stable=True)]
 
@@ -173,7 +176,6 @@ def render_dense(
     has = alpha_img > 0
     inv = 1.0 / torch.where(has, alpha_img, torch.ones_like(alpha_img))
     bg = torch.tensor(config.background, dtype=dtype, device=device)
-    vis = alive.clone()
     radii = torch.zeros(len(g), 2, dtype=dtype, device=device)
     return RenderOutput(
         rgb=(rgb + (1.0 - alpha_img)[:, None] * bg).reshape(H, W, 3),
@@ -182,6 +184,7 @@ def render_dense(
         depth_median=med.reshape(H, W),
         normals=torch.where(has[:, None], nrm * inv[:, None], 0.0).reshape(H, W, 3),
         extra=ext.reshape(H, W, -1),
-        means2d=torch.where(vis[:, None], centre, 0.0),
+        # the tensor the kernels were evaluated at: its gradient is dL/d(screen mean)
+        means2d=means2d,
         radii=radii,
     )

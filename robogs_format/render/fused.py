@@ -23,7 +23,7 @@ from .constants import MAX_ALPHA, MEDIAN_TRANSMITTANCE, TRANSMITTANCE_THRESHOLD
 from .gaussians import Gaussians
 from .output import RenderOutput
 from .projection import project
-from .tiled import finish_output
+from .tiled import finish_output, visible_means2d
 
 __all__ = ["render_fused"]
 
@@ -163,7 +163,7 @@ def render_fused(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> 
             img[..., :D],
             img[..., D],
             img[..., D + 1],
-            proj.means2d,
+            visible_means2d(proj.means2d, proj.visible),
             proj.bbox,
             proj.visible,
             config,

@@ -27,7 +27,11 @@ class RenderOutput:
             surface seen head-on gives (0, 0, -1). Not renormalised: |n| < 1 where normals mix.
         extra: [H, W, C] sum_i w_i e_i (no background); C = 0 without extra channels.
         means2d: [N, 2] projected means, px, on the render grid (the pinhole grid for distorted
-            cameras); rows of culled Gaussians are 0. Differentiable (for densification).
+            cameras); rows of culled Gaussians are 0. On the autograd graph: it is the tensor
+            the compositing read, so after ``out.means2d.retain_grad()`` and ``loss.backward()``
+            ``out.means2d.grad`` holds dL/d(means2d) with the 2D kernel shape held fixed, the
+            view-space positional gradient of 3DGS densification (0 for culled rows). Detached
+            for forward-only backends (``numba``).
         radii: [N, 2] half extents of the screen-space support box, px; 0 where culled (and
             everywhere for the dense oracle, which needs no boxes).
     """

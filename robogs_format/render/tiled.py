@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import torch
 
 from .binning import bin_tiles
@@ -34,6 +36,9 @@ def render_tiled(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> 
     """
     H, W = camera.height, camera.width
     proj = project(gaussians, camera, config)
+    # composite from the very tensor that is returned as ``means2d``, so that its gradient
+    # (after ``retain_grad``) is the screen-space gradient used for densification
+    proj = replace(proj, means2d=visible_means2d(proj.means2d, proj.visible))
     on_cpu = proj.depth.device.type == "cpu"
     tile_size = config.tile_size or (_CPU_TILE_SIZE if on_cpu else _GPU_TILE_SIZE)
     bins = bin_tiles(proj.bbox, proj.depth, proj.visible, W, H, tile_size)
@@ -48,6 +53,15 @@ def render_tiled(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> 
     return finish_output(
         img.features, img.depth, img.median, proj.means2d, proj.bbox, proj.visible, config
     )
+
+
+def visible_means2d(means2d: torch.Tensor, visible: torch.Tensor) -> torch.Tensor:
+    """[N, 2] projected means, px, with the rows of culled Gaussians set to 0.
+
+    Culled Gaussians are never composited, so compositing from this tensor gives the same
+    images as from ``means2d`` and puts the returned ``RenderOutput.means2d`` on the graph.
+    """
+    return torch.where(visible[:, None], means2d, 0.0)
 
 
 def finish_output(
@@ -65,7 +79,8 @@ def finish_output(
         features: [H, W, 7 + C] accumulated (rgb, alpha, normals, extra).
         depth_sum: [H, W] accumulated w z.
         median: [H, W] median depth.
-        means2d: [N, 2] projected means, px.
+        means2d: [N, 2] projected means, px, 0 where culled (see :func:`visible_means2d`);
+            returned as is, so it stays the tensor the compositing read.
         bbox: [N, 4] support boxes, px.
         visible: [N] bool.
         config: render options (background).
@@ -86,6 +101,6 @@ def finish_output(
         depth_median=median,
         normals=torch.where(has[..., None], normals * inv[..., None], 0.0),
         extra=extra,
-        means2d=torch.where(vis, means2d, 0.0),
+        means2d=means2d,
         radii=torch.where(vis, radii, 0.0),
     )
