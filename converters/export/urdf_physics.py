@@ -19,9 +19,11 @@ are kept as they were):
 * a fitted ``mass_scale`` (``physics.json`` ``effects``) multiplies every link's mass and
   inertia;
 * a fitted ``payload`` (``physics.json`` ``payload: {link, mass_kg, com_m}``) becomes a link
-  ``payload`` (a point mass: ``<inertial>`` origin at the CoM, zero inertia about it) welded by
-  a fixed joint ``payload_joint`` (identity origin) to the link it was fitted on, so that
-  inverse dynamics of the exported URDF equals the fitted torque model's rigid-body part.
+  ``payload`` welded by a fixed joint ``payload_joint`` (identity origin) to the link it was
+  fitted on: ``<inertial>`` origin at the CoM, and about it the inertia of a solid sphere of
+  1 cm radius (:func:`.arm_physics.payload_inertia`; the torque model's point mass has none, a
+  zero tensor is not positive definite), so that inverse dynamics of the exported URDF equals
+  the fitted torque model's rigid-body part up to ``I |w_dot|`` (below 1e-3 N m).
 
 URDF has no rotor-inertia field: joint ``armature`` goes to the sidecar only (``joints``), as
 do the ``physics.json`` ``effects`` (each marked ``in_urdf``) and a summary of the payload.
@@ -45,7 +47,14 @@ from robogs_format import Dataset
 from robogs_format.errors import FormatError, InputError
 
 from . import ExportReport, register_exporter
-from .arm_physics import PayloadSpec, mass_scale, payload_spec, unique_name
+from .arm_physics import (
+    PAYLOAD_RADIUS_M,
+    PayloadSpec,
+    mass_scale,
+    payload_inertia,
+    payload_spec,
+    unique_name,
+)
 from .physics_model import (
     BodyInertia,
     contact_material,
@@ -161,10 +170,7 @@ def _add_payload(root: etree._Element, spec: PayloadSpec) -> tuple[str, str]:
     link_name = unique_name("payload", {lk.get("name") for lk in root.findall("link")})
     joint_name = unique_name("payload_joint", {j.get("name") for j in root.findall("joint")})
     link = etree.SubElement(root, "link", name=link_name)
-    frame = np.eye(4)
-    frame[:3, 3] = spec.com
-    zero = np.zeros((3, 3))  # a point mass, as in the torque model
-    link.append(_inertial_element(BodyInertia(spec.mass, spec.com, zero, frame, zero)))
+    link.append(_inertial_element(payload_inertia(spec)))
     joint = etree.SubElement(root, "joint", name=joint_name, type="fixed")
     etree.SubElement(joint, "parent", link=spec.parent)
     etree.SubElement(joint, "child", link=link_name)
@@ -259,7 +265,8 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
             "parent": payload.parent,
             "mass_kg": payload.mass,
             "com_m": [float(v) for v in payload.com],
-            "inertia": "point mass (zero about the CoM)",
+            "inertia": f"solid sphere of radius {PAYLOAD_RADIUS_M} m about the CoM",
+            "inertia_kgm2": float(payload_inertia(payload).inertia[0, 0]),
         }
         notes.append(
             f"payload {payload.mass:.4g} kg written as link {link_name!r} fixed to {payload.parent!r}"

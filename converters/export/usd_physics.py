@@ -14,6 +14,8 @@ Stage: ``upAxis = Z``, ``metersPerUnit = 1``, ``kilogramsPerUnit = 1``; all angl
                                              MeshCollisionAPI(convexHull) + physics material
     /World/<robot>/joints/<joint>            Revolute/Prismatic/FixedJoint
     /World/<robot>/joints/root_fixed         FixedJoint world -> root link (fixed base)
+    /World/<robot>/payload                   fitted payload: RigidBodyAPI + MassAPI, at its link's
+                                             frame; FixedJoint joints/payload_joint to that link
     /World/Objects/<name>                    rigid: RigidBodyAPI + MassAPI; kinematic:
                                              kinematicEnabled; static: collider only
 
@@ -28,6 +30,13 @@ flange) is not a body: it becomes an Xform nested in its parent's body. Passive 
 damping becomes a zero-stiffness force drive (damping per degree for revolute joints); URDF
 damping, friction, armature and effort/velocity limits are also kept as ``robogs:*``
 attributes in SI units, since core UsdPhysics has no place for them.
+
+The arm torque model's fitted physics is carried as in the URDF export
+(:mod:`converters.export.urdf_physics`): a ``mass_scale`` multiplies every link's mass and
+inertia (recorded as ``robogs:massScale`` on the robot prim), and a ``payload`` becomes its own
+rigid body (mass, CoM in the parent link frame, the inertia of a 1 cm solid sphere about the
+CoM, :func:`.arm_physics.payload_inertia`) welded by a fixed joint to the link it was fitted on
+(``robogs:payloadLink``).
 """
 
 from __future__ import annotations
@@ -48,6 +57,7 @@ from robogs_format.kinematics import Chain
 from robogs_format.qa.rerun_log import rest_joint_positions, robot_link_meshes
 
 from . import ExportReport, register_exporter
+from .arm_physics import PAYLOAD_RADIUS_M, mass_scale, payload_inertia, payload_spec
 from .physics_model import (
     BodyInertia,
     ContactMaterial,
@@ -216,6 +226,17 @@ class _Builder:
         api.CreatePrincipalAxesAttr(_quatf(R))
 
 
+def _scaled(inertia: BodyInertia, s: float) -> BodyInertia:
+    """``inertia`` with mass and inertia tensor times ``s`` (same CoM and frame)."""
+    return BodyInertia(
+        inertia.mass * s,
+        inertia.com,
+        inertia.inertia * s,
+        inertia.frame,
+        inertia.inertia_in_frame * s,
+    )
+
+
 def _axis_frame(axis: np.ndarray) -> tuple[str, np.ndarray]:
     """USD axis token and rotation ``Ra`` with ``Ra @ e_token == axis`` (identity when aligned)."""
     a = np.asarray(axis, dtype=np.float64)
@@ -318,6 +339,15 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
     robot = UsdGeom.Xform.Define(stage, robot_path)
     UsdPhysics.ArticulationRootAPI.Apply(robot.GetPrim())
     inertias = link_inertias(urdf, physics)
+    phys_path = ds.root / "physics.json"
+    m_scale = mass_scale(physics, path=phys_path)
+    if m_scale is not None:
+        inertias = {k: _scaled(v, m_scale) for k, v in inertias.items()}
+        _custom(robot.GetPrim(), "massScale", m_scale)
+        b.notes.append(
+            f"mass_scale {m_scale:.6g} applied to the mass and inertia of {len(inertias)} link(s)"
+        )
+    payload = payload_spec(physics, urdf, ds.manifest, path=phys_path)
     visuals = robot_link_meshes(urdf)
     collisions = robot_link_meshes(urdf, collision=True)
     objects_phys = (physics or {}).get("objects", {})
@@ -416,6 +446,33 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
         joint.CreateBody0Rel().SetTargets([prim_path[body_of[j.parent]]])
         joint.CreateBody1Rel().SetTargets([prim_path[j.child]])
         n_joints += 1
+    payload_entry = None
+    if payload is not None:
+        parent = payload.parent
+        path = robot_path.AppendChild(_name("payload", link_used))
+        prim = UsdGeom.Xform.Define(stage, path).GetPrim()
+        _set_pose(prim, T_world[chain.link_index(parent)])  # the payload frame = its link's
+        UsdPhysics.RigidBodyAPI.Apply(prim)
+        b.mass(prim, payload_inertia(payload), where="payload")
+        prim.CreateAttribute("robogs:payloadLink", Sdf.ValueTypeNames.String, custom=True).Set(
+            parent
+        )
+        weld = UsdPhysics.FixedJoint.Define(
+            stage, joints_path.AppendChild(_name("payload_joint", jused))
+        )
+        _set_joint_frames(weld, T_body_link[parent], np.eye(4))
+        weld.CreateBody0Rel().SetTargets([prim_path[body_of[parent]]])
+        weld.CreateBody1Rel().SetTargets([path])
+        n_joints += 1
+        payload_entry = {
+            "prim": str(path),
+            "joint": str(weld.GetPath()),
+            "parent": parent,
+            "mass_kg": payload.mass,
+            "com_m": [float(v) for v in payload.com],
+            "inertia": f"solid sphere of radius {PAYLOAD_RADIUS_M} m about the CoM",
+        }
+        b.notes.append(f"payload {payload.mass:.4g} kg written as body {path} fixed to {parent!r}")
 
     n_objects = 0
     if objects:
@@ -457,7 +514,9 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
         files=[out.name],
         notes=b.notes,
         facts={
-            "bodies": sum(1 for link in chain.link_names if body_of[link] == link) + n_objects,
+            "bodies": sum(1 for link in chain.link_names if body_of[link] == link)
+            + n_objects
+            + (payload is not None),
             "joints": n_joints + 1,
             "objects": n_objects,
             "validators_run": [
@@ -465,6 +524,8 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
             ],
             "validator_errors": len(errors),
             "validator_issues": len(issues),
+            **({"payload": payload_entry} if payload_entry else {}),
+            **({"mass_scale": m_scale} if m_scale is not None else {}),
         },
     )
 

@@ -1,7 +1,8 @@
 """URDF export of the fitted arm physics: friction in <dynamics>, payload as a fixed link, mass scale.
 
 Oracle: the rigid-body torques of the exported URDF (our RNEA on the exported file) plus the
-friction written in its ``<dynamics>`` must equal the fitted torque model of the dataset.
+friction written in its ``<dynamics>`` must equal the fitted torque model of the dataset, up to
+the closed-form torques of the payload's sphere inertia (the model's payload is a point mass).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import torch
 import yourdfpy
 
 from converters.export import export
-from converters.export.arm_physics import deepest_moving_link, payload_spec
+from converters.export.arm_physics import PAYLOAD_RADIUS_M, deepest_moving_link, payload_spec
 from fixtures.armlogs import UR5_JOINTS, ArmLogSpec, generate_armlog, ur5_urdf
 from reference_impl.physics.arm.api import open_arm
 from reference_impl.physics.arm.compare import base_prediction
@@ -24,6 +25,7 @@ from reference_impl.physics.arm.rnea import ArmModel, inverse_dynamics
 from robogs_format.cli.main import main
 from robogs_format.dataset import Dataset
 from robogs_format.errors import FormatError
+from robogs_format.kinematics import Chain
 
 
 @pytest.fixture(autouse=True)
@@ -54,6 +56,34 @@ def _exported_torques(urdf_path: Path, ds_path: Path) -> tuple[np.ndarray, np.nd
     return tau, base_prediction(s.problem, s.fixed).numpy()
 
 
+def _sphere_torques(urdf_path: Path, ds_path: Path, parent: str, inertia: float) -> np.ndarray:
+    """Closed form of the joint torques an isotropic inertia ``inertia`` (kg m^2) on ``parent``
+    adds: ``I z_j . w_dot`` for the joints above it (no gyroscopic term for a sphere), with
+    ``w_dot = sum_k z_k qdd_k + (w_{k-1} x z_k) qd_k`` along the serial chain, [N, J] N m."""
+    st = open_arm(ds_path).problem.state
+    u = _load(urdf_path)
+    chain = Chain.from_urdf(u)
+    joints = [u.joint_map[j] for j in st.joint_names]
+    T = chain.forward_links(st.q, [j.child for j in joints]).numpy()  # [N, J, 4, 4]
+    z = np.einsum("njab,jb->nja", T[..., :3, :3], np.array([j.axis for j in joints]))
+    qd, qdd = st.qd.numpy(), st.qdd.numpy()
+    w = np.zeros((len(qd), 3))
+    w_dot = np.zeros((len(qd), 3))
+    above = set()
+    link = parent
+    parents = {j.child: j for j in u.robot.joints}
+    while link in parents:
+        above.add(parents[link].name)
+        link = parents[link].parent
+    for k, j in enumerate(joints):  # serial order, base first
+        if j.name not in above:
+            continue
+        w_dot += z[:, k] * qdd[:, k, None] + np.cross(w, z[:, k]) * qd[:, k, None]
+        w += z[:, k] * qd[:, k, None]
+    on = np.array([j.name in above for j in joints], dtype=float)
+    return inertia * np.einsum("nja,na->nj", z, w_dot) * on
+
+
 def test_cli_convert_fit_export_carries_payload_and_friction(tmp_path, capsys):
     urdf = tmp_path / "ur5.urdf"
     urdf.write_text(ur5_urdf())
@@ -74,7 +104,8 @@ def test_cli_convert_fit_export_carries_payload_and_friction(tmp_path, capsys):
     link = got.link_map["payload"]
     assert float(link.inertial.mass) == pay["mass_kg"]  # exact: floats written with repr
     np.testing.assert_array_equal(np.asarray(link.inertial.origin)[:3, 3], pay["com_m"])
-    np.testing.assert_array_equal(np.asarray(link.inertial.inertia), np.zeros((3, 3)))
+    i_sphere = 0.4 * pay["mass_kg"] * PAYLOAD_RADIUS_M**2  # solid sphere of 1 cm about the CoM
+    np.testing.assert_allclose(np.asarray(link.inertial.inertia), i_sphere * np.eye(3), rtol=1e-15)
     joint = got.joint_map["payload_joint"]
     assert joint.type == "fixed" and joint.parent == pay["link"] and joint.child == "payload"
     np.testing.assert_array_equal(np.asarray(joint.origin), np.eye(4))
@@ -86,7 +117,11 @@ def test_cli_convert_fit_export_carries_payload_and_friction(tmp_path, capsys):
     assert contact["payload"]["mass_kg"] == pay["mass_kg"]
 
     exported, fitted = _exported_torques(out / "ur5_arm.urdf", ds)
-    assert np.max(np.abs(exported - fitted)) < 1e-9
+    sphere = _sphere_torques(out / "ur5_arm.urdf", ds, pay["link"], i_sphere)
+    np.testing.assert_allclose(exported - fitted, sphere, rtol=0, atol=1e-9)
+    # the sphere's inertia is invisible in the torques: well under the effort noise floor
+    noise = np.array(list(open_arm(ds).problem.sigma.numpy()))
+    assert 0 < np.max(np.abs(sphere)) < 0.02 * noise.min()
     # the payload matters: the dataset's own URDF misses it by newtons
     s = open_arm(ds)
     bare = inverse_dynamics(ArmModel.from_urdf(_load(urdf)), s.problem.state.q,
@@ -137,7 +172,9 @@ def test_mass_scale_payload_on_welded_link_and_name_clash(tmp_path):
     assert set(fixed) == {"payload", "mass_scale", "joint_friction"}
     exported, _ = _exported_torques(tmp_path / "out" / "ur5_arm.urdf", tmp_path / "ds")
     fitted = base_prediction(s.problem, fixed).numpy()
-    assert np.max(np.abs(exported - fitted)) < 1e-9
+    sphere = _sphere_torques(tmp_path / "out" / "ur5_arm.urdf", tmp_path / "ds", "payload",
+                             0.4 * 0.8 * PAYLOAD_RADIUS_M**2)  # fmt: skip
+    np.testing.assert_allclose(exported - fitted, sphere, rtol=0, atol=1e-9)
 
 
 def test_payload_spec_defaults_and_errors(tmp_path):

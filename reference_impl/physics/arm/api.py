@@ -100,7 +100,7 @@ def compare_arm(path: str | Path | Dataset, **kwargs: Any) -> dict[str, Any]:
 def diagnose_arm(
     path: str | Path | Dataset, *, candidates: Sequence[str] | None = None, **kwargs: Any
 ) -> dict[str, Any]:
-    """Ranked candidate effects (see :func:`.diagnose.diagnose_torques`)."""
+    """Missing effects by forward selection, ranked (see :func:`.diagnose.diagnose_torques`)."""
     s = open_arm(path)
     out = diagnose_torques(s.problem, s.fixed, candidates=candidates, **kwargs)
     out["physics_revision"] = (s.physics or {}).get("revision")

@@ -1,30 +1,42 @@
-"""Rank the arm effects the torque model is missing (nested-model comparison on torque logs).
+"""Rank the arm effects the torque model is missing: forward selection of nested models.
 
-For every candidate effect (registered with ``model="arm"``, and whose ``needs`` the data
-meet) the effect is added to the base model (URDF + the effects already in physics.json) and
-fitted (:func:`~reference_impl.physics.arm.identify.fit_effects`). It is *reported* only when
-all of the gate's tests pass (research notes, sections 6.3-6.4):
+Candidates are the effects registered with ``model="arm"`` whose ``needs`` the data meet. The
+selection is forward stepwise (Efroymson 1960, "Multiple regression analysis"): at each step
+every remaining candidate ``C`` is fitted *together with* the effects accepted so far ``S``
+(:func:`~reference_impl.physics.arm.identify.fit_many`; step 1 has ``S`` empty, i.e. the
+base model = URDF + the effects already in physics.json) and judged against the model with
+``S`` alone by the gate below. The passing candidate with the lowest dBIC is accepted, and the
+next step refits the rest on top of ``S + C``; selection stops when no candidate passes. This
+keeps look-alikes out: a hidden payload lets a mass scale or an armature pass the gate against
+the bare base model, but not once the payload is in it.
+
+The gate (research notes, sections 6.3-6.4), every test against the model with ``S``:
 
 1. information criterion: ``dBIC = sum_j N ln(RSS_j' / RSS_j) + k ln(N J) <= -10`` (per-joint
-   noise variances profiled out, so the figure does not rest on the noise estimate);
+   noise variances profiled out, so the figure does not rest on the noise estimate; ``k`` the
+   candidate's parameters);
 2. held-out error: the data are split by trajectory (leave one trajectory out; 5 groups above
    five trajectories; a single trajectory is cut into 4 contiguous blocks, never by sample).
-   Each fold is refitted on its training units by the physics fitter. The held-out mean squared
-   whitened residual must fall by more than the 95th percentile of the fall the same effect
-   achieves on null data (white noise at the estimated noise floor, 40 draws, same split; the
-   effect linearised at its full-data optimum, exact for the linear effects);
-3. effect size: the fitted effect must move the predicted efforts by at least
-   ``effect_size_min`` (0.5) noise standard deviations RMS over a whole trajectory of at least
-   one joint (aggregated, so single noisy samples cannot pass it).
+   Each fold refits ``S`` and ``S + C`` on its training units with the physics fitter. The
+   held-out mean squared whitened residual must fall by more than the 95th percentile of the
+   fall that adding ``C`` to ``S`` achieves on null data (white noise at the estimated noise
+   floor, 40 draws, same split; the model linearised at the full-data optimum of ``S + C``,
+   exact for the linear effects);
+3. effect size: adding ``C`` must move the predicted efforts by at least ``effect_size_min``
+   (0.5) noise standard deviations RMS over a whole trajectory of at least one joint
+   (aggregated, so single noisy samples cannot pass it).
 
-Effects are ranked reported first, then by dBIC. Each row names the phases where the effect
-reduces the residual most, the rivals whose fitted corrections look alike (cosine > 0.7), and
-the experiment that separates them.
+Rows: the accepted effects first, in the order they were accepted (``step``), with the
+parameters of the final joint fit of all accepted effects; then the others by dBIC, judged at
+the last step (against the base model plus every accepted effect, named in ``given``). Each row
+names the phases where the effect reduces the residual most, the rivals whose fitted
+corrections alone look alike (cosine > 0.7), and the experiment that separates them.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -102,83 +114,101 @@ def _params(fit: ArmFit, eff: ArmEffect) -> dict[str, Any]:
     return params
 
 
-def diagnose_torques(
+@dataclass
+class _Split:
+    """The data split and null draws shared by every step."""
+
+    layout: UnitLayout
+    folds: list[np.ndarray]
+    test_rows: list[np.ndarray]  # [fold] sample rows held out
+    rows_flat: list[np.ndarray]  # [fold] flat (sample * J + joint) rows held out
+    noise: np.ndarray  # [N * J, D] white-noise draws
+    phases: np.ndarray  # [N, J] phase labels
+
+
+@dataclass
+class _Base:
+    """The model a step compares against: the base plus the accepted effects, fitted jointly."""
+
+    names: list[str]
+    resid: np.ndarray  # [N, J] whitened residual, all samples
+    held: np.ndarray  # [rows of all folds, J] whitened held-out residual
+    fit: ArmFit | None
+
+
+@dataclass
+class _Scored:
+    row: dict[str, Any]
+    fit: ArmFit
+    held: np.ndarray
+    delta: np.ndarray  # [N * J] whitened change of the prediction against the step's base
+
+
+def _held_sse(jac: np.ndarray, noise: np.ndarray, rows_flat: list[np.ndarray]) -> np.ndarray:
+    """Held-out sum of squared residuals [D] of linear least squares of ``noise`` on ``jac``."""
+    sse = np.zeros(noise.shape[1])
+    if jac.shape[1] == 0:
+        for rows in rows_flat:
+            sse += (noise[rows] ** 2).sum(0)
+        return sse
+    h_all, g_all = jac.T @ jac, jac.T @ noise
+    for rows in rows_flat:
+        js = jac[rows]
+        coef = np.linalg.pinv(h_all - js.T @ js, rcond=1e-12, hermitian=True) @ (
+            g_all - js.T @ noise[rows]
+        )
+        sse += ((noise[rows] - js @ coef) ** 2).sum(0)
+    return sse
+
+
+def _score(
     pb: ArmProblem,
-    fixed: dict[str, dict[str, float]] | None = None,
-    *,
-    candidates: Sequence[str] | None = None,
-    gate: dict[str, float] | None = None,
-    null_draws: int = 40,
-    seed: int = 0,
-) -> dict[str, Any]:
-    """Fit and rank candidate arm effects.
-
-    Args:
-        pb: prepared data; fixed: effects held at physics.json values.
-        candidates: effect names (default: every registered arm effect).
-        gate: thresholds overriding :data:`DEFAULT_GATE`.
-        null_draws: white-noise draws for the held-out null distribution.
-        seed: random seed of the null draws.
-
-    Returns:
-        JSON-ready dict with ``effects`` (ranked rows: name, family, reported, delta_bic,
-        heldout_rms_before, heldout_rms_after [N m], effect_size_sigma, params {value, low,
-        high, unit}, phases, rivals, separate_by, reasons), ``skipped``, ``noise_floor_nm``,
-        ``split`` and ``gate``.
-    """
-    g = {**DEFAULT_GATE, **(gate or {})}
-    effs, skipped = _candidates(candidates, pb)
+    fixed: dict[str, dict[str, float]] | None,
+    base: _Base,
+    effs: list[ArmEffect],
+    sp: _Split,
+    g: dict[str, float],
+) -> list[_Scored]:
+    """Fit every candidate together with ``base.names`` (and per fold), and apply the gate."""
     sig = pb.sigma.cpu().numpy()
     n, nj = pb.n, len(sig)
-    base = base_prediction(pb, fixed)
-    r0 = ((pb.tau - base) / pb.sigma).cpu().numpy()  # [N, J] whitened
-    rss0 = (r0**2).sum(axis=0) * sig**2
-    layout = unit_layout(pb)
-    folds = unit_folds(layout)
-    test_rows = [np.flatnonzero(np.isin(layout.unit, f)) for f in folds]
+    rss0 = (base.resid**2).sum(axis=0) * sig**2
     groups, masks = [], []
     for eff in effs:
-        groups.append([eff.name])
-        masks.append(None)
-        for f in folds:
-            m = np.ones(layout.n_units, bool)
-            m[f] = False
-            groups.append([eff.name])
-            masks.append(m)
-    fits = fit_many(pb, groups, fixed=fixed, masks=masks, layout=layout) if groups else []
-    lab = label_phases(pb)
-    rng = np.random.default_rng(seed)
-    noise = rng.standard_normal((n * nj, null_draws))
-    rows_flat = [(t[:, None] * nj + np.arange(nj)[None, :]).ravel() for t in test_rows]
-    rows_out = []
-    deltas: dict[str, np.ndarray] = {}
-    per = 1 + len(folds)
+        for f in [None, *sp.folds]:
+            groups.append([*base.names, eff.name])
+            if f is None:
+                masks.append(None)
+            else:
+                m = np.ones(sp.layout.n_units, bool)
+                m[f] = False
+                masks.append(m)
+    fits = fit_many(pb, groups, fixed=fixed, masks=masks, layout=sp.layout) if groups else []
+    per = 1 + len(sp.folds)
+    total_rows = max(sum(len(r) for r in sp.rows_flat), 1)
+    before = base.held
+    sig_rows = np.tile(sig, before.size // nj)
+    out = []
     for c, eff in enumerate(effs):
         fit = fits[c * per]
-        k = len(fit.free)
+        own = set(fit.space.owner_columns(eff.name))
+        k = sum(1 for i in fit.free if i in own)
         r1 = fit.resid
         rss1 = (r1**2).sum(axis=0) * sig**2
         dbic = float(
             np.sum(n * np.log(np.maximum(rss1, 1e-300) / np.maximum(rss0, 1e-300)))
             + k * np.log(n * nj)
         )
-        before = np.concatenate([r0[t] for t in test_rows])
-        after = np.concatenate([fits[c * per + 1 + i].resid[t] for i, t in enumerate(test_rows)])
+        after = np.concatenate([fits[c * per + 1 + i].resid[t] for i, t in enumerate(sp.test_rows)])
         gain = _ms(before) - _ms(after)
-        # null: the same effect fitted (linearised at its optimum) to white noise, same split
-        jac = fit.jac
-        h_all, gn_all = jac.T @ jac, jac.T @ noise
-        null_gain = np.zeros(null_draws)
-        for rows in rows_flat:
-            js = jac[rows]
-            coef = np.linalg.pinv(h_all - js.T @ js, rcond=1e-12, hermitian=True) @ (
-                gn_all - js.T @ noise[rows]
-            )
-            null_gain += (noise[rows] ** 2).sum(0) - ((noise[rows] - js @ coef) ** 2).sum(0)
-        null_gain /= max(sum(len(r) for r in rows_flat), 1)
+        # null: adding the effect to the accepted ones, fitted (linearised) to white noise
+        base_cols = [p for p, i in enumerate(fit.free) if i not in own]
+        null_gain = (
+            _held_sse(fit.jac[:, base_cols], sp.noise, sp.rows_flat)
+            - _held_sse(fit.jac, sp.noise, sp.rows_flat)
+        ) / total_rows
         null_thr = float(np.quantile(null_gain, g["null_quantile"]))
-        delta = r0 - r1  # whitened change of the prediction, [N, J]
-        deltas[eff.name] = delta.ravel()
+        delta = base.resid - r1  # whitened change of the prediction, [N, J]
         size = 0.0
         for tr in range(pb.data.num_traj):
             sel = pb.data.traj == tr
@@ -192,45 +222,139 @@ def diagnose_torques(
             )
         if not size >= g["effect_size_min"]:
             reasons.append(f"effect size {size:.2f} sigma < {g['effect_size_min']:g}")
-        drop = r0**2 - r1**2
+        drop = base.resid**2 - r1**2
         phase_gain = {}
         for p, name in enumerate(ARM_PHASES):
-            sel = lab == p
+            sel = sp.phases == p
             if sel.any():
                 phase_gain[name] = float(drop[sel].mean())
         phases = [p for p, v in sorted(phase_gain.items(), key=lambda kv: -kv[1]) if v > 0][:2]
-        sig_rows = np.tile(sig, before.size // nj)
-        rows_out.append(
+        row = {
+            "name": eff.name,
+            "family": eff.family,
+            "reported": False,
+            "step": None,
+            "given": list(base.names),
+            "delta_bic": dbic,
+            "heldout_rms_before": float(np.sqrt(_ms(before.ravel() * sig_rows))),
+            "heldout_rms_after": float(np.sqrt(_ms(after.ravel() * sig_rows))),
+            "heldout_gain_sigma2": gain,
+            "null_gain_p95_sigma2": null_thr,
+            "effect_size_sigma": size,
+            "params": _params(fit, eff),
+            "phases": phases,
+            "rivals": [],
+            "separate_by": eff.separate_by,
+            "description": eff.description,
+            "converged": fit.converged,
+            "reasons": reasons,
+        }
+        out.append(_Scored(row, fit, after, delta.ravel()))
+    return out
+
+
+def diagnose_torques(
+    pb: ArmProblem,
+    fixed: dict[str, dict[str, float]] | None = None,
+    *,
+    candidates: Sequence[str] | None = None,
+    gate: dict[str, float] | None = None,
+    null_draws: int = 40,
+    seed: int = 0,
+    max_effects: int | None = None,
+) -> dict[str, Any]:
+    """Select the missing arm effects by forward selection (see the module docstring).
+
+    Args:
+        pb: prepared data; fixed: effects held at physics.json values.
+        candidates: effect names (default: every registered arm effect).
+        gate: thresholds overriding :data:`DEFAULT_GATE`.
+        null_draws: white-noise draws for the held-out null distribution.
+        seed: random seed of the null draws.
+        max_effects: stop after accepting this many effects (default: no limit); the rows
+            not accepted then show the last step they were judged at (``given``).
+
+    Returns:
+        JSON-ready dict with ``effects`` (ranked rows: name, family, reported, step, given,
+        delta_bic, heldout_rms_before, heldout_rms_after [N m], effect_size_sigma, params
+        {value, low, high, unit}, phases, rivals, separate_by, reasons), ``selected`` (the
+        accepted effects in order), ``steps`` (per step: the effect added and its figures),
+        ``skipped``, ``noise_floor_nm``, ``split`` and ``gate``.
+    """
+    g = {**DEFAULT_GATE, **(gate or {})}
+    effs, skipped = _candidates(candidates, pb)
+    sig = pb.sigma.cpu().numpy()
+    n, nj = pb.n, len(sig)
+    r0 = ((pb.tau - base_prediction(pb, fixed)) / pb.sigma).cpu().numpy()  # [N, J] whitened
+    rss0 = (r0**2).sum(axis=0) * sig**2
+    layout = unit_layout(pb)
+    folds = unit_folds(layout)
+    test_rows = [np.flatnonzero(np.isin(layout.unit, f)) for f in folds]
+    rng = np.random.default_rng(seed)
+    sp = _Split(
+        layout,
+        folds,
+        test_rows,
+        [(t[:, None] * nj + np.arange(nj)[None, :]).ravel() for t in test_rows],
+        rng.standard_normal((n * nj, null_draws)),
+        label_phases(pb),
+    )
+    base = _Base([], r0, np.concatenate([r0[t] for t in test_rows]), None)
+    remaining = list(effs)
+    latest: dict[str, dict[str, Any]] = {}
+    alone: dict[str, _Scored] = {}
+    accepted_rows: list[dict[str, Any]] = []
+    steps: list[dict[str, Any]] = []
+    limit = len(effs) if max_effects is None else max_effects
+    while remaining:
+        scored = _score(pb, fixed, base, remaining, sp, g)
+        for s in scored:
+            latest[s.row["name"]] = s.row
+            alone.setdefault(s.row["name"], s)
+        passing = [s for s in scored if not s.row["reasons"]]
+        if not passing:
+            break
+        best = min(passing, key=lambda s: s.row["delta_bic"])
+        best.row["reported"] = True
+        best.row["step"] = len(accepted_rows) + 1
+        accepted_rows.append(best.row)
+        steps.append(
             {
-                "name": eff.name,
-                "family": eff.family,
-                "reported": not reasons,
-                "delta_bic": dbic,
-                "heldout_rms_before": float(np.sqrt(_ms(before.ravel() * sig_rows))),
-                "heldout_rms_after": float(np.sqrt(_ms(after.ravel() * sig_rows))),
-                "heldout_gain_sigma2": gain,
-                "null_gain_p95_sigma2": null_thr,
-                "effect_size_sigma": size,
-                "params": _params(fit, eff),
-                "phases": phases,
-                "rivals": [],
-                "separate_by": eff.separate_by,
-                "description": eff.description,
-                "converged": fit.converged,
-                "reasons": reasons,
+                "step": best.row["step"],
+                "added": best.row["name"],
+                "given": list(base.names),
+                "delta_bic": best.row["delta_bic"],
+                "heldout_rms_before": best.row["heldout_rms_before"],
+                "heldout_rms_after": best.row["heldout_rms_after"],
+                "effect_size_sigma": best.row["effect_size_sigma"],
+                "candidates_passing": [s.row["name"] for s in passing],
             }
         )
-    for row in rows_out:
-        a = deltas[row["name"]]
+        base = _Base([*base.names, best.row["name"]], best.fit.resid, best.held, best.fit)
+        remaining = [e for e in remaining if e.name != best.row["name"]]
+        if len(accepted_rows) >= limit:
+            break
+    if base.fit is not None:  # accepted effects: the parameters of the final joint fit
+        for row in accepted_rows:
+            row["params"] = _params(base.fit, get_effect(row["name"]))
+    others = [latest[e.name] for e in remaining if e.name in latest]
+    for row in others:
+        first = alone[row["name"]].row
+        if base.names and row["given"] == base.names and not first["reasons"]:
+            row["reasons"].insert(
+                0, f"passes alone, explained by {' + '.join(base.names)} once they are added"
+            )
+    # rivals: look-alike corrections, each effect fitted alone to the base model
+    for name, s in alone.items():
+        a = s.delta
         na = np.linalg.norm(a)
-        for other in rows_out:
-            if other is row or na == 0:
+        for other, o in alone.items():
+            if other == name or na == 0:
                 continue
-            b = deltas[other["name"]]
-            nb = np.linalg.norm(b)
-            if nb > 0 and float(a @ b) / (na * nb) > 0.7:
-                row["rivals"].append(other["name"])
-    rows_out.sort(key=lambda r: (not r["reported"], r["delta_bic"]))
+            nb = np.linalg.norm(o.delta)
+            if nb > 0 and float(a @ o.delta) / (na * nb) > 0.7:
+                latest[name]["rivals"].append(other)
+    others.sort(key=lambda r: r["delta_bic"])
     return {
         "model": "arm",
         "n_samples": n,
@@ -241,6 +365,9 @@ def diagnose_torques(
         },
         "split": layout.how + f", {len(folds)} held-out folds",
         "gate": g,
-        "effects": rows_out,
+        "selection": "forward: each step refits the candidates on top of the accepted effects",
+        "selected": [r["name"] for r in accepted_rows],
+        "steps": steps,
+        "effects": accepted_rows + others,
         "skipped": skipped,
     }
