@@ -179,10 +179,14 @@ class Dataset:
         """
         root = Path(path)
         if not root.is_dir():
+            olds = sorted(root.parent.glob(f".{root.name}.old-*")) if not root.exists() else []
             raise FormatError(
                 "not a dataset folder" if root.exists() else "dataset folder does not exist",
                 path=root,
-                hint="pass the folder that holds manifest.json",
+                hint=f"an interrupted write left the previous version in {olds[-1].name}; "
+                "the next robogs write restores it (or rename it back)"
+                if olds
+                else "pass the folder that holds manifest.json",
             )
         mpath = root / MANIFEST_NAME
         manifest = read_json(mpath, what="manifest")
@@ -343,6 +347,13 @@ class Dataset:
                               hint="re-export the mesh as PLY, OBJ, STL or GLB") from None
         if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
             raise FormatError("mesh has no triangles", path=path)
+        v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
+            raise FormatError(f"mesh has vertices {v.shape} and faces {f.shape}, expected [N, 3]",
+                              path=path, hint="re-export the mesh with 3D vertices and triangles")
+        if not np.all(np.isfinite(v)) or f.min() < 0 or f.max() >= len(v):
+            raise FormatError("mesh has non-finite vertices or faces that index no vertex",
+                              path=path, hint="re-export the mesh")
         return mesh
 
     def splat_entry(self, owner: str) -> dict[str, Any]:

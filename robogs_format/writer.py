@@ -7,6 +7,13 @@ fails or the process dies before the swap, the previous dataset is untouched;
 a stale temp folder is removed by the next writer. A lock file refuses a
 second concurrent writer.
 
+The swap exchanges the two folders in one ``renameat2(RENAME_EXCHANGE)`` call
+where the kernel and file system allow it, so the dataset path always holds a
+complete version; elsewhere it falls back to two renames, and a crash between
+them is undone by the next writer. The lock is an advisory ``flock`` on
+``.<name>.lock`` holding the writer's PID: the kernel releases it when the
+process dies (even by ``kill -9``), so a stale lock file never blocks anyone.
+
 Editing an existing dataset starts from hard links to its files (copies where
 links are impossible); every write replaces a file by rename, so the original
 files are never modified in place.
@@ -14,7 +21,9 @@ files are never modified in place.
 
 from __future__ import annotations
 
+import ctypes
 import datetime as _dt
+import errno
 import fcntl
 import hashlib
 import os
@@ -69,6 +78,41 @@ def _robogs_version() -> str:
         return "0+unknown"
 
 
+def _lock_holder(lock_path: Path) -> str:
+    """PID written in a lock file by its holder ('unknown' if not yet written)."""
+    try:
+        text = lock_path.read_text(encoding="ascii", errors="replace").strip()
+    except OSError:
+        return "unknown"
+    return text if text.isdigit() else "unknown"
+
+
+_AT_FDCWD = -100
+_RENAME_EXCHANGE = 2
+_renameat2: Any = None
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two existing paths atomically (Linux ``renameat2``); False where unsupported."""
+    global _renameat2
+    if _renameat2 is None:
+        try:
+            fn = ctypes.CDLL(None, use_errno=True).renameat2
+            fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+            fn.restype = ctypes.c_int
+            _renameat2 = fn
+        except (AttributeError, OSError):
+            _renameat2 = False
+    if _renameat2 is False:
+        return False
+    if _renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.ENOTSUP):
+        return False
+    raise OSError(err, f"cannot swap {a} and {b}: {os.strerror(err)}")
+
+
 class DatasetWriter:
     """Builds a dataset version in a temp folder and swaps it in on ``commit``.
 
@@ -105,15 +149,27 @@ class DatasetWriter:
             }
 
     # -- locking and recovery ----------------------------------------------------
+    @property
+    def lock_path(self) -> Path:
+        """The lock file beside the dataset, ``.<name>.lock``."""
+        return self.target.parent / f".{self.target.name}.lock"
+
     def _acquire_lock(self):
-        lock_path = self.target.parent / f".{self.target.name}.lock"
+        lock_path = self.lock_path
         fh = open(lock_path, "a+")
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             fh.close()
-            raise LockError("another robogs process is writing this dataset", path=self.target,
-                            hint="wait for it to finish; the lock is released when it exits") from None
+            holder = _lock_holder(lock_path)
+            raise LockError(f"another robogs process (PID {holder}) is writing this dataset; "
+                            f"lock file {lock_path}", path=self.target,
+                            hint="wait for it to finish; the lock is released when that process exits, "
+                                 "even if it is killed") from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(f"{os.getpid()}\n")
+        fh.flush()
         return fh
 
     def _release_lock(self) -> None:
@@ -144,12 +200,20 @@ class DatasetWriter:
 
     # -- low-level file operations -----------------------------------------------
     def path(self, rel: str) -> Path:
-        """Absolute path inside the temp folder for ``rel`` (parents created)."""
+        """Absolute path inside the temp folder for ``rel`` (parents created).
+
+        A file still hard-linked to the previous version is first replaced by a private
+        copy, so writing through this path can never change the previous version.
+        """
         rel = check_relpath(rel, where="writer")
         if rel == "manifest.json":
             raise FormatError("manifest.json is written by commit()", hint="set fields on writer.manifest")
         p = self.tmp / rel
         p.parent.mkdir(parents=True, exist_ok=True)
+        if p.is_file() and p.stat().st_nlink > 1:
+            part = p.with_name(p.name + ".part")
+            shutil.copy2(p, part)
+            os.replace(part, p)
         return p
 
     def _part(self, rel: str) -> tuple[Path, Path]:
@@ -307,9 +371,14 @@ class DatasetWriter:
         parent = self.target.parent
         old = None
         if self.target.exists():
-            old = parent / f".{self.target.name}.old-{uuid.uuid4().hex[:8]}"
-            os.rename(self.target, old)
-        os.rename(self.tmp, self.target)
+            if _exchange(self.tmp, self.target):
+                old = self.tmp  # now holds the previous version
+            else:
+                old = parent / f".{self.target.name}.old-{uuid.uuid4().hex[:8]}"
+                os.rename(self.target, old)
+                os.rename(self.tmp, self.target)
+        else:
+            os.rename(self.tmp, self.target)
         dir_fd = os.open(parent, os.O_RDONLY)
         try:
             os.fsync(dir_fd)

@@ -19,34 +19,25 @@ import math
 import weakref
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
 
-from ..binding import Binding
 from ..cameras import CameraModel
 from ..dataset import Episode
 from ..errors import FormatError, RobogsError
 from ..findings import Finding
-from ..rerender import (
-    MAX_LOG_SCALE,
-    AlignmentFit,
-    LabelChannels,
-    RerenderOptions,
-    SceneRerenderer,
-    compare_frame,
-    fit_alignment,
-    foreground_psnr,
-    label_channels,
-    pose_stream,
-    read_label_frames,
-    read_video_frames,
-    recorded_soft_labels,
-    select_fit_frames,
-)
+from ._common import MM, column, frame_stamps, stack_columns
 from .context import CheckContext, InputReported
 from .registry import Check, check
+
+# torch, the renderer and the binding load only when a binding check runs: registering these
+# checks must not cost ``robogs-validate --quick`` the ~2 s torch import
+if TYPE_CHECKING:
+    import torch
+
+    from ..binding import Binding
+    from ..rerender import AlignmentFit, LabelChannels, RerenderOptions, SceneRerenderer
 
 __all__ = [
     "rerender_options",
@@ -74,6 +65,8 @@ def rerender_options(ctx: CheckContext) -> RerenderOptions:
 
     Recognised keys: ``stride`` (int), ``scale`` (float), ``backend``, ``fit_frames``, ``device``.
     """
+    from ..rerender import RerenderOptions
+
     raw = getattr(ctx, "options", None) or {}
     keys = ("stride", "scale", "backend", "fit_frames", "device", "max_offset_ms")
     return RerenderOptions(**{k: raw[k] for k in keys if raw.get(k) is not None})
@@ -123,6 +116,8 @@ def _splat_owners(ctx: CheckContext) -> list[tuple[str, dict[str, Any]]]:
 
 def _binding(ctx: CheckContext, ep: Episode) -> Binding:
     """The episode's binding (cached); no splats at all: :class:`InputReported`."""
+    from ..binding import Binding
+
     if not _splat_owners(ctx):
         raise InputReported("splats")
     opts = rerender_options(ctx)
@@ -166,6 +161,8 @@ def _segments(ctx: CheckContext, ep: Episode) -> Any:
 
 def _render_camera_ok(model: CameraModel) -> list[str]:
     """Why a stored camera cannot be rendered from (degenerate values), as messages."""
+    import torch
+
     from ..render import Camera, validate_camera
 
     T = model.T_world_cam if model.T_world_cam is not None else np.eye(4)
@@ -191,20 +188,18 @@ def _render_camera_ok(model: CameraModel) -> list[str]:
 
 
 def _pose_of(ctx: CheckContext, job: _CameraJob) -> Any:
+    from ..rerender import pose_stream
+
     if job.model.extrinsics != "time_varying":
         return None
     rel = job.entry.get("extrinsics")
     if not isinstance(rel, str):
         raise InputReported(f"{job.stream}/extrinsics")
     tab = ctx.table(rel)
-    col = {
-        c: tab.column(c).to_numpy(zero_copy_only=False)
-        for c in ("t_ns", "x", "y", "z", "qw", "qx", "qy", "qz")
-    }
     return pose_stream(
-        col["t_ns"].astype(np.int64),
-        np.stack([col["x"], col["y"], col["z"]], -1),
-        np.stack([col["qw"], col["qx"], col["qy"], col["qz"]], -1),
+        column(tab, "t_ns").astype(np.int64),
+        stack_columns(tab, ("x", "y", "z")),
+        stack_columns(tab, ("qw", "qx", "qy", "qz")),
     )
 
 
@@ -235,6 +230,8 @@ class _Pass:
 
 def _rerenderer(ctx: CheckContext, job: _CameraJob) -> tuple[SceneRerenderer, np.ndarray]:
     def build() -> tuple[SceneRerenderer, np.ndarray]:
+        from ..rerender import SceneRerenderer, label_channels
+
         problems = _render_camera_ok(job.model)
         if problems or job.model.T_world_cam is None and job.model.extrinsics != "time_varying":
             raise InputReported(f"cameras/{job.model.name}")  # B009 reports it
@@ -263,14 +260,14 @@ def _rerenderer(ctx: CheckContext, job: _CameraJob) -> tuple[SceneRerenderer, np
 
 def _frames(ctx: CheckContext, job: _CameraJob) -> tuple[np.ndarray, np.ndarray]:
     """Stamps and frame indices of every ``stride``-th frame."""
-    tab = ctx.table(job.entry["frames"], columns=("t_ns", "frame_index"))
-    t = tab.column("t_ns").to_numpy(zero_copy_only=False).astype(np.int64)
-    fi = tab.column("frame_index").to_numpy(zero_copy_only=False).astype(np.int64)
+    t, fi = frame_stamps(ctx.table(job.entry["frames"], columns=("t_ns", "frame_index")))
     k = rerender_options(ctx).stride
     return t[::k], fi[::k]
 
 
 def _run_pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
+    from ..rerender import compare_frame, foreground_psnr, read_label_frames, read_video_frames
+
     rr, lut = _rerenderer(ctx, job)
     ch = rr.channels
     t, fi = _frames(ctx, job)
@@ -329,18 +326,34 @@ def _run_pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
     return result
 
 
+def _boundary_mm(ps: _Pass) -> np.ndarray:
+    """[F, C] summed boundary distances in mm: px x rendered depth / focal length (frames
+    without a depth use the median depth of the pass)."""
+    depth = np.where(
+        np.isnan(ps.depth),
+        np.nanmedian(ps.depth) if np.isfinite(ps.depth).any() else np.nan,
+        ps.depth,
+    )
+    return ps.bsum * depth / ps.fx * MM
+
+
 def _pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
     return _cached(ctx, ("pass", job.ep.id, job.stream), lambda: _run_pass(ctx, job))
 
 
 def _fit(ctx: CheckContext, job: _CameraJob) -> AlignmentFit | None:
     def build() -> AlignmentFit | None:
+        from ..rerender import (
+            fit_alignment,
+            read_label_frames,
+            recorded_soft_labels,
+            select_fit_frames,
+        )
+
         rr, lut = _rerenderer(ctx, job)
         if rr.channels.count == 0:
             return None
-        tab = ctx.table(job.entry["frames"], columns=("t_ns", "frame_index"))
-        t = tab.column("t_ns").to_numpy(zero_copy_only=False).astype(np.int64)
-        fi = tab.column("frame_index").to_numpy(zero_copy_only=False).astype(np.int64)
+        t, fi = frame_stamps(ctx.table(job.entry["frames"], columns=("t_ns", "frame_index")))
         # candidates: every frame of short episodes, about 600 spread frames of long ones
         step = max(1, len(t) // 600)
         t, fi = t[::step], fi[::step]
@@ -420,12 +433,7 @@ def label_summary(ctx: CheckContext, episode: str, stream: str) -> list[LabelSum
         if job.ep.id != episode or job.stream != stream:
             continue
         ps = _pass(ctx, job)
-        depth = np.where(
-            np.isnan(ps.depth),
-            np.nanmedian(ps.depth) if np.isfinite(ps.depth).any() else np.nan,
-            ps.depth,
-        )
-        mm = ps.bsum * depth / ps.fx * 1e3
+        mm = _boundary_mm(ps)
         out = []
         for c, name in enumerate(ps.channels.names):
             u, n = ps.union[:, c].sum(), ps.bcnt[:, c].sum()
@@ -453,6 +461,8 @@ def _where(job: _CameraJob, name: str, kind: str) -> dict[str, Any]:
 
 
 def _rest_q(ctx: CheckContext, entry: dict[str, Any]) -> torch.Tensor:
+    import torch
+
     chain = ctx.chain()
     rest = (entry.get("rest") or {}).get("joint_positions") or {}
     missing = [j for j in chain.joint_names if j not in rest]
@@ -468,6 +478,7 @@ def _rest_q(ctx: CheckContext, entry: dict[str, Any]) -> torch.Tensor:
 
 def _link_triangles(ctx: CheckContext, entry: dict[str, Any]) -> dict[str, np.ndarray | str]:
     """Per link: world triangles [F, 3, 3] of its first visual mesh at the rest state, or why none."""
+    import torch
     import trimesh
 
     urdf = ctx.urdf()
@@ -710,12 +721,7 @@ def _boundary(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         ps = _pass(ctx, job)
         if ps.skipped:
             continue
-        depth = np.where(
-            np.isnan(ps.depth),
-            np.nanmedian(ps.depth) if np.isfinite(ps.depth).any() else np.nan,
-            ps.depth,
-        )
-        mm = ps.bsum * depth / ps.fx * 1e3
+        mm = _boundary_mm(ps)
         for c, name in enumerate(ps.channels.names):
             n = ps.bcnt[:, c].sum()
             if n == 0:
@@ -794,7 +800,8 @@ def _offset_resolution_ms(fit: AlignmentFit) -> float:
     group="binding",
     severity="error",
     title="camera stamps agree with the re-render in time",
-    quantity="time shift that best aligns re-rendered and recorded labels",
+    quantity="time shift that best aligns re-rendered and recorded labels, reported beyond the "
+    "budget and three standard errors of what the image motion resolves",
     unit="ms",
     budget="time.offset_ms",
     hint="correct the camera stream's offset_ns (or its stamp source) by the estimate",
@@ -871,6 +878,8 @@ def _extrinsic(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     hint="drop or re-fit these Gaussians; log-scales must be finite and below log(10 m)",
 )
 def _bad_splats(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    from ..rerender import MAX_LOG_SCALE
+
     for owner, entry in _splat_owners(ctx):
         rel = entry["path"]
         s = ctx.dataset.splats(owner)

@@ -27,7 +27,7 @@ from ..jsonio import read_json
 from ..paths import resolve_inside
 from ..schemas import schema_problems
 from ..spec_version import SPEC_VERSION, parse_version
-from ..tables import check_table_schema
+from ..tables import check_table_schema, null_problems
 
 if TYPE_CHECKING:
     import trimesh
@@ -339,9 +339,12 @@ class CheckContext:
         Full mode falls back to reading the column when the footer has no statistics.
         """
         md = self.footer(rel)
-        names = md.schema.to_arrow_schema().names
+        schema = md.schema.to_arrow_schema()
+        names = schema.names
         if "t_ns" not in names or md.num_rows == 0:
             return None
+        if names.count("t_ns") != 1 or not pa.types.is_int64(schema.field("t_ns").type):
+            raise InputReported(rel)  # S003 reports the column
         j = names.index("t_ns")
         lo: list[int] = []
         hi: list[int] = []
@@ -383,7 +386,24 @@ class CheckContext:
         """
         if self.quick:
             raise RuntimeError("a quick check tried to read a table body")
-        md = self.footer(rel)  # unreadable footers were reported by the integrity checks
+        kind = self._require_schema(rel)
+        key = ("table", rel, columns)
+        if key not in self._cache:
+            full = self._cache.get(("table", rel, None))
+            if full is not None and columns is not None:
+                self._cache[key] = full.select(list(columns))
+            else:
+                tab = read_parquet(self.existing(rel), columns=list(columns) if columns else None)
+                if kind is not None and null_problems(kind, tab):
+                    self._cache[("table-ok", rel)] = False
+                    raise InputReported(rel)  # S003 reports the nulls
+                self._cache[key] = tab
+        return self._cache[key]
+
+    def _require_schema(self, rel: str) -> str | None:
+        """The table kind of ``rel``; :class:`InputReported` when its footer is unreadable or off
+        the kind's columns and types (the integrity and schema checks report those)."""
+        md = self.footer(rel)
         kind = self.table_kinds().get(rel)
         if kind is not None:
             ok_key = ("table-ok", rel)
@@ -391,16 +411,7 @@ class CheckContext:
                 self._cache[ok_key] = not check_table_schema(kind, md.schema.to_arrow_schema())
             if not self._cache[ok_key]:
                 raise InputReported(rel)
-        key = ("table", rel, columns)
-        if key not in self._cache:
-            full = self._cache.get(("table", rel, None))
-            if full is not None and columns is not None:
-                self._cache[key] = full.select(list(columns))
-            else:
-                self._cache[key] = read_parquet(
-                    self.existing(rel), columns=list(columns) if columns else None
-                )
-        return self._cache[key]
+        return kind
 
     def stream_table(
         self,
@@ -591,7 +602,7 @@ class CheckContext:
         if not isinstance(rel, str):
             raise InputReported(f"{stream}/labels")
         path = self.existing(rel)
-        self.footer(rel)
+        self._require_schema(rel)
         self.progress(f"label boxes {ep.id}/{stream}")
         return self._cached(
             ("labels", rel), lambda: scan_label_boxes(path, threads=self.label_threads)

@@ -7,7 +7,7 @@ boxes, rad (or m for prismatic joints) for joint limits.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -15,78 +15,28 @@ import numpy as np
 
 from ..errors import FormatError, RobogsError
 from ..findings import Finding
+from ._common import (
+    MM,
+    column,
+    com_outside_mm,
+    fmt3,
+    inertia_problem,
+    quat_to_matrix_np,
+    stack_columns,
+    stream_tables,
+    usable_mesh,
+)
 from .context import MM_SUSPECT_EXTENT_M, CheckContext, InputReported
 from .registry import Check, check
+from .streaming import MedianSketch, SampleWindow, batches
 
 __all__: list[str] = []
 
-_MM = 1000.0
-_FK_CHUNK = 65536
+#: end-effector rows per forward-kinematics batch (bounds the [rows, links, 4, 4] poses)
+_FK_ROWS = 1 << 13
 
 
 # --------------------------------------------------------------------------- shared helpers
-
-
-def quat_to_matrix_np(q: np.ndarray) -> np.ndarray:
-    """[N, 4] (w, x, y, z) quaternions (normalised here) -> [N, 3, 3] rotation matrices."""
-    q = np.asarray(q, np.float64)
-    q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty((*q.shape[:-1], 3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - w * z)
-    R[..., 0, 2] = 2 * (x * z + w * y)
-    R[..., 1, 0] = 2 * (x * y + w * z)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - w * x)
-    R[..., 2, 0] = 2 * (x * z - w * y)
-    R[..., 2, 1] = 2 * (y * z + w * x)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
-
-
-def inertia_problem(inertia: np.ndarray, rel: float) -> str | None:
-    """Why a 3x3 inertia tensor (kg m^2) is not physical, or None.
-
-    A rigid body's inertia is symmetric positive definite and its principal
-    moments satisfy the triangle inequality ``I_a + I_b >= I_c``; ``rel`` is the
-    slack relative to the trace.
-    """
-    inertia = np.asarray(inertia, np.float64)
-    if inertia.shape != (3, 3) or not np.all(np.isfinite(inertia)):
-        return "inertia is not a finite 3x3 matrix"
-    scale = max(float(np.abs(np.trace(inertia))), 1e-300)
-    if np.max(np.abs(inertia - inertia.T)) > rel * scale:
-        return "inertia is not symmetric"
-    ev = np.linalg.eigvalsh(0.5 * (inertia + inertia.T))
-    if ev[0] <= 0:
-        return f"inertia is not positive definite (principal moments {_fmt3(ev)} kg m^2)"
-    if ev[0] + ev[1] < ev[2] - rel * scale:
-        return f"principal moments {_fmt3(ev)} kg m^2 violate the triangle inequality I1 + I2 >= I3"
-    return None
-
-
-def _fmt3(v: np.ndarray) -> str:
-    return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
-
-
-def hull_distance_outside(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Distance (m) of points outside the convex hull of ``vertices`` (0 inside).
-
-    Uses the largest signed distance to the hull's facet planes, a lower bound of
-    the Euclidean distance that is exact where the nearest feature is a facet.
-
-    Args:
-        vertices: [V, 3] points spanning the hull, metres.
-        points: [P, 3] query points, same frame.
-    """
-    import trimesh
-
-    hull = trimesh.convex.convex_hull(np.asarray(vertices, np.float64))
-    normals = np.asarray(hull.face_normals)
-    offsets = np.einsum("fj,fj->f", normals, np.asarray(hull.triangles_center))
-    d = np.asarray(points, np.float64) @ normals.T - offsets
-    return np.maximum(d.max(axis=1), 0.0)
 
 
 @dataclass(frozen=True)
@@ -329,13 +279,10 @@ def _link_com(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             continue
         T = np.asarray(link.inertial.origin if link.inertial.origin is not None else np.eye(4))
         com = T[:3, 3]
-        try:
-            d_mm = float(hull_distance_outside(g.vertices, com[None])[0]) * _MM
-        except Exception:  # flat geometry has no volume hull
-            continue
-        if d_mm > budget:
+        d_mm = com_outside_mm(g.vertices, com)
+        if d_mm is not None and d_mm > budget:
             yield chk.finding(
-                f"CoM {_fmt3(com)} m is {d_mm:.4g} mm outside the link's geometry",
+                f"CoM {fmt3(com)} m is {d_mm:.4g} mm outside the link's geometry",
                 value=d_mm,
                 budget=budget,
                 file=urdf_rel,
@@ -407,12 +354,6 @@ def _asset_units(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 # --------------------------------------------------------------------------- joints and kinematics
 
 
-def _ordered_stamps(t: np.ndarray) -> np.ndarray:
-    if t.size == 0 or not np.all(np.diff(t) > 0):
-        raise InputReported("stamps")  # reported by T001
-    return t
-
-
 def joint_positions(
     ctx: CheckContext, ep: Any, stream: str, joints: list[str]
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -423,12 +364,8 @@ def joint_positions(
     if any(c not in names for c in cols) or "t_ns" not in names:
         raise InputReported("joint columns")  # reported by S003/S007
     tab = ctx.table(rel, columns=("t_ns", *cols))
-    t = np.array(tab.column("t_ns").to_numpy(zero_copy_only=False), dtype=np.int64)
-    q = (
-        np.stack([tab.column(c).to_numpy(zero_copy_only=False) for c in cols], axis=1)
-        if cols
-        else np.zeros((t.size, 0))
-    )
+    t = np.array(column(tab, "t_ns"), dtype=np.int64)
+    q = stack_columns(tab, tuple(cols)) if cols else np.zeros((t.size, 0))
     return t, q.astype(np.float64, copy=False)
 
 
@@ -456,33 +393,55 @@ def _joint_limits(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         present = [j for j in chain.joint_names if f"position.{j}" in names]
         if not present or "t_ns" not in names:
             continue
-        t, q = joint_positions(ctx, ep, name, present)
         idx = [chain.joint_names.index(j) for j in present]
         lo, hi = chain.joint_lower[idx], chain.joint_upper[idx]
-        excess = np.maximum(lo[None] - q, q - hi[None])  # [N, J]
-        excess = np.where(np.isfinite(excess), excess, 0.0)
+        worst = np.full(len(present), -np.inf)  # streamed: largest excess, its value, stamp, row
+        at_q, at_t, at_row = (
+            np.zeros(len(present)),
+            np.zeros(len(present), np.int64),
+            np.zeros(len(present), np.int64),
+        )
+        n_over = np.zeros(len(present), np.int64)
+        offset = 0
+        try:
+            for b in batches(ctx, rel, ("t_ns", *(f"position.{j}" for j in present))):
+                t = b.column(0).to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
+                q = np.stack(
+                    [b.column(k + 1).to_numpy(zero_copy_only=False) for k in range(len(present))],
+                    axis=1,
+                ).astype(np.float64, copy=False)
+                excess = np.maximum(lo[None] - q, q - hi[None])  # [B, J]
+                excess = np.where(np.isfinite(excess), excess, 0.0)
+                n_over += np.sum(excess > budget, axis=0)
+                i = np.argmax(excess, axis=0)
+                best = excess[i, np.arange(len(present))]
+                better = best > worst
+                worst[better] = best[better]
+                at_q[better] = q[i, np.arange(len(present))][better]
+                at_t[better] = t[i][better]
+                at_row[better] = offset + i[better]
+                offset += t.size
+        except InputReported:
+            continue
         for k, j in enumerate(present):
-            col = excess[:, k]
-            i = int(np.argmax(col))
-            if col[i] > budget:
-                n = int(np.sum(col > budget))
+            if worst[k] > budget:
                 unit = (
                     "m"
                     if chain.joint_types[chain.tree_joint_names.index(j)] == "prismatic"
                     else "rad"
                 )
                 yield chk.finding(
-                    f"joint {j!r} reaches {q[i, k]:.6g} {unit}, outside [{lo[k]:.6g}, {hi[k]:.6g}] "
-                    f"({urdf_rel}) in {n} samples",
-                    value=float(col[i]),
+                    f"joint {j!r} reaches {at_q[k]:.6g} {unit}, outside [{lo[k]:.6g}, {hi[k]:.6g}] "
+                    f"({urdf_rel}) in {int(n_over[k])} samples",
+                    value=float(worst[k]),
                     budget=budget,
                     unit=unit,
                     file=rel,
                     episode=ep.id,
                     stream=name,
                     link=j,
-                    t_ns=int(t[i]),
-                    where=f"row {i}",
+                    t_ns=int(at_t[k]),
+                    where=f"row {int(at_row[k])}",
                 )
 
 
@@ -496,6 +455,49 @@ def _world_from_root(ctx: CheckContext, T_root: Any, chain: Any) -> Any:
         return T_root
     T_root_base = T_root[..., chain.link_index(base), :, :]
     return torch.linalg.inv(T_root_base)[..., None, :, :] @ T_root
+
+
+def _strictly_increasing(ctx: CheckContext, rel: str) -> tuple[int, int] | None:
+    """(first, last) stamp of a table whose ``t_ns`` strictly increases; None otherwise."""
+    first = last = None
+    for b in batches(ctx, rel, ("t_ns",)):
+        t = b.column(0).to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
+        if t.size == 0:
+            continue
+        if last is not None and t[0] <= last or not np.all(np.diff(t) > 0):
+            return None
+        first = int(t[0]) if first is None else first
+        last = int(t[-1])
+    return None if first is None else (first, last)
+
+
+def _ordered_links(ctx: CheckContext, rel: str) -> dict[str, bool]:
+    """Per link of an ee_poses table: whether its stamps strictly increase (table order)."""
+    last: dict[str, int] = {}
+    ok: dict[str, bool] = {}
+    for b in batches(ctx, rel, ("t_ns", "link")):
+        t = b.column(0).to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
+        links = column(b, "link").astype(str)
+        for link in np.unique(links).tolist():
+            tl = t[links == link]
+            if link in last:
+                tl = np.concatenate(([last[link]], tl))
+            ok[link] = ok.get(link, True) and bool(np.all(np.diff(tl) > 0))
+            last[link] = int(tl[-1])
+    return ok
+
+
+@dataclass
+class _FkError:
+    """Streamed error statistics of one link."""
+
+    n: int = 0
+    over: int = 0
+    worst_mm: float = -np.inf
+    at_t: int = 0
+    at_row: int = 0
+    worst_deg: float = -np.inf
+    median: MedianSketch = field(default_factory=MedianSketch)
 
 
 @check(
@@ -516,60 +518,76 @@ def _fk_ee(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     _robot_or_skip(ctx)
     budget = ctx.budget("geometry.fk_ee_mm")
     chain = ctx.chain()
+    qcols = tuple(f"position.{j}" for j in chain.joint_names)
     for ep, name, st in ctx.streams(("ee_poses",)):
         js = ctx.find_stream(ep, "joint_states")
         rel = st.get("path")
         if js is None or not isinstance(rel, str):
             continue
+        js_rel = ep.streams[js]["path"]
         try:
-            t_js, q = joint_positions(ctx, ep, js, list(chain.joint_names))
-            t_js = _ordered_stamps(t_js)
-            tab = ctx.table(rel, columns=("t_ns", "link", "x", "y", "z", "qw", "qx", "qy", "qz"))
+            js_names = ctx.footer(js_rel).schema.to_arrow_schema().names
+            if any(c not in js_names for c in qcols) or "t_ns" not in js_names:
+                continue  # reported by S003/S007
+            js_range = _strictly_increasing(ctx, js_rel)
+            if js_range is None:
+                continue  # reported by T001
+            ok = _ordered_links(ctx, rel)  # unordered links are reported by T001
+            todo = {link for link, good in ok.items() if good and link in chain.link_names}
+            stats = {link: _FkError() for link in todo}
+            window = SampleWindow(ctx, js_rel, qcols)
+            offset = 0
+            cols = ("t_ns", "link", "x", "y", "z", "qw", "qx", "qy", "qz")
+            for b in batches(ctx, rel, cols, batch_rows=_FK_ROWS):
+                t_all = column(b, "t_ns").astype(np.int64)
+                links = column(b, "link").astype(str)
+                rows_all = np.arange(offset, offset + t_all.size)
+                offset += t_all.size
+                keep = np.isin(links, list(todo)) & (t_all >= js_range[0]) & (t_all <= js_range[1])
+                if not keep.any():
+                    continue
+                t_js, q = window.around(int(t_all[keep].min()), int(t_all[keep].max()))
+                for link in sorted(set(links[keep].tolist())):
+                    sel = np.flatnonzero(keep & (links == link))
+                    t = t_all[sel]
+                    qi = torch.as_tensor(interp_linear(t, t_js, q), dtype=torch.float64)
+                    k = chain.link_index(link)
+                    T = _world_from_root(ctx, chain.forward(qi), chain)[:, k].numpy()
+                    xyz = stack_columns(b, ("x", "y", "z"), sel)
+                    err_mm = np.linalg.norm(T[:, :3, 3] - xyz, axis=1) * MM
+                    R_rec = quat_to_matrix_np(stack_columns(b, ("qw", "qx", "qy", "qz"), sel))
+                    cos = (np.einsum("nij,nij->n", T[:, :3, :3], R_rec) - 1.0) / 2.0
+                    ang_deg = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+                    s = stats[link]
+                    s.n += t.size
+                    s.over += int(np.sum(err_mm > budget))
+                    s.median.add(err_mm)
+                    s.worst_deg = max(s.worst_deg, float(ang_deg.max()))
+                    i = int(np.argmax(err_mm))
+                    if err_mm[i] > s.worst_mm:
+                        s.worst_mm, s.at_t, s.at_row = (
+                            float(err_mm[i]),
+                            int(t[i]),
+                            int(rows_all[sel[i]]),
+                        )
         except InputReported:
             continue
-        links = tab.column("link").to_numpy(zero_copy_only=False).astype(str)
-        t_all = tab.column("t_ns").to_numpy(zero_copy_only=False).astype(np.int64)
-        xyz_all = np.stack([tab.column(c).to_numpy(zero_copy_only=False) for c in "xyz"], axis=1)
-        quat_all = np.stack(
-            [tab.column(c).to_numpy(zero_copy_only=False) for c in ("qw", "qx", "qy", "qz")], axis=1
-        )
-        for link in sorted(set(links.tolist())):
-            if link not in chain.link_names:
-                continue  # reported by S007
-            rows = np.flatnonzero(links == link)
-            t = t_all[rows]
-            if not np.all(np.diff(t) > 0):
-                continue  # reported by T001
-            inside = (t >= t_js[0]) & (t <= t_js[-1])
-            rows, t = rows[inside], t[inside]
-            if t.size == 0:
-                continue
-            k = chain.link_index(link)
-            err_mm = np.empty(t.size)
-            ang_deg = np.empty(t.size)
-            for s in range(0, t.size, _FK_CHUNK):
-                sl = slice(s, s + _FK_CHUNK)
-                qi = torch.as_tensor(interp_linear(t[sl], t_js, q), dtype=torch.float64)
-                T = _world_from_root(ctx, chain.forward(qi), chain)[:, k].numpy()
-                err_mm[sl] = np.linalg.norm(T[:, :3, 3] - xyz_all[rows[sl]], axis=1) * _MM
-                R_rec = quat_to_matrix_np(quat_all[rows[sl]])
-                cos = (np.einsum("nij,nij->n", T[:, :3, :3], R_rec) - 1.0) / 2.0
-                ang_deg[sl] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-            i = int(np.argmax(err_mm))
-            if err_mm[i] > budget:
-                n = int(np.sum(err_mm > budget))
+        for link in sorted(stats):
+            s = stats[link]
+            if s.n and s.worst_mm > budget:
+                approx = "" if s.median.exact else "~"
                 yield chk.finding(
-                    f"link {link!r}: FK differs from the recorded pose by up to {err_mm[i]:.4g} mm "
-                    f"(median {np.median(err_mm):.3g} mm, {n} of {t.size} samples over budget; "
-                    f"orientation up to {ang_deg.max():.3g} deg)",
-                    value=float(err_mm[i]),
+                    f"link {link!r}: FK differs from the recorded pose by up to {s.worst_mm:.4g} mm "
+                    f"(median {approx}{s.median.median():.3g} mm, {s.over} of {s.n} samples over "
+                    f"budget; orientation up to {s.worst_deg:.3g} deg)",
+                    value=s.worst_mm,
                     budget=budget,
                     file=rel,
                     episode=ep.id,
                     stream=name,
                     link=link,
-                    t_ns=int(t[i]),
-                    where=f"row {int(rows[i])}",
+                    t_ns=s.at_t,
+                    where=f"row {s.at_row}",
                 )
 
 
@@ -588,25 +606,9 @@ def _fk_ee(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 )
 def _boxes2d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("geometry.box2d_px")
-    for ep, name, st in ctx.streams(("boxes2d",)):
-        rel = st.get("path")
-        try:
-            boxes = ctx.table(
-                rel,
-                columns=(
-                    "t_ns",
-                    "camera",
-                    "frame_index",
-                    "label_id",
-                    "x_min",
-                    "y_min",
-                    "x_max",
-                    "y_max",
-                ),
-            )
-        except InputReported:
-            continue
-        cam_col = boxes.column("camera").to_numpy(zero_copy_only=False).astype(str)
+    cols = ("t_ns", "camera", "frame_index", "label_id", "x_min", "y_min", "x_max", "y_max")
+    for ep, name, rel, boxes in stream_tables(ctx, "boxes2d", cols):
+        cam_col = column(boxes, "camera").astype(str)
         for sname, cst in ep.streams.items():
             if (
                 not isinstance(cst, dict)
@@ -636,7 +638,7 @@ def _compare_boxes(
     stream: str,
 ) -> Iterator[Finding]:
     def col(c: str) -> np.ndarray:
-        return boxes.column(c).to_numpy(zero_copy_only=False)[rows]
+        return column(boxes, c, rows)
 
     fi, lid = col("frame_index").astype(np.int64), col("label_id").astype(np.int64)
     labelled = np.isin(fi, lb.frames)
@@ -678,7 +680,7 @@ def _compare_boxes(
         idx = np.flatnonzero(found)[k]
         yield chk.finding(
             f"{int(np.sum(err > budget))} boxes differ from their label's pixel bounds by more than the budget; "
-            f"worst: label {int(lid[idx])} edges off by {_fmt3(diff[k])[1:-1]} px (x_min, y_min, x_max, y_max)",
+            f"worst: label {int(lid[idx])} edges off by {fmt3(diff[k])[1:-1]} px (x_min, y_min, x_max, y_max)",
             value=float(err[k]),
             budget=budget,
             frame=int(fi[idx]),
@@ -700,28 +702,19 @@ def object_poses(
     )
     key = ("object-rows", ep.id, stream)
     if key not in ctx._cache:
-        names = tab.column("object").to_numpy(zero_copy_only=False).astype(str)
+        names = column(tab, "object").astype(str)
         ctx._cache[key] = {n: np.flatnonzero(names == n) for n in np.unique(names)}
     rows = ctx._cache[key].get(obj)
     if rows is None or rows.size == 0:
         return None
-
-    def cols(cs: tuple[str, ...]) -> np.ndarray:
-        return np.stack([tab.column(c).to_numpy(zero_copy_only=False)[rows] for c in cs], axis=1)
-
-    t = np.array(tab.column("t_ns").to_numpy(zero_copy_only=False)[rows], dtype=np.int64)
+    t = np.array(column(tab, "t_ns", rows), dtype=np.int64)
     if not np.all(np.diff(t) > 0):
         raise InputReported("object stamps")  # reported by T001
-    return t, cols(("x", "y", "z")), cols(("qw", "qx", "qy", "qz"))
-
-
-def _usable_mesh(ctx: CheckContext, name: str) -> np.ndarray | None:
-    try:
-        if ctx.mesh_unit_problem(name):
-            return None  # reported by G006
-        return ctx.asset_hull_vertices(name)
-    except InputReported:
-        return None
+    return (
+        t,
+        stack_columns(tab, ("x", "y", "z"), rows),
+        stack_columns(tab, ("qw", "qx", "qy", "qz"), rows),
+    )
 
 
 @check(
@@ -738,15 +731,10 @@ def _boxes3d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     from ..interp import interp_pose
 
     budget = ctx.budget("geometry.box3d_mm")
-    for ep, name, st in ctx.streams(("boxes3d",)):
-        rel = st.get("path")
-        try:
-            boxes = ctx.table(rel)
-        except InputReported:
-            continue
-        objs = boxes.column("object").to_numpy(zero_copy_only=False).astype(str)
+    for ep, name, rel, boxes in stream_tables(ctx, "boxes3d"):
+        objs = column(boxes, "object").astype(str)
         for obj in sorted(set(objs.tolist())):
-            verts = _usable_mesh(ctx, obj)
+            verts = usable_mesh(ctx, obj)
             try:
                 poses = object_poses(ctx, ep, obj) if verts is not None else None
             except InputReported:
@@ -755,23 +743,18 @@ def _boxes3d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 continue
             rows = np.flatnonzero(objs == obj)
 
-            def col(c: str, rows: np.ndarray = rows, boxes: Any = boxes) -> np.ndarray:
-                return boxes.column(c).to_numpy(zero_copy_only=False)[rows]
-
-            t = col("t_ns").astype(np.int64)
+            t = column(boxes, "t_ns", rows).astype(np.int64)
             p, qo = interp_pose(t, poses[0], poses[1], poses[2], outside="nan")
             ok = np.all(np.isfinite(p), axis=1)
             if not ok.any():
                 continue
             R_o = quat_to_matrix_np(qo[ok])
             world = np.einsum("nij,vj->nvi", R_o, verts) + p[ok][:, None, :]  # [N, V, 3]
-            c = np.stack([col("x"), col("y"), col("z")], axis=1)[ok]
-            R_b = quat_to_matrix_np(
-                np.stack([col("qw"), col("qx"), col("qy"), col("qz")], axis=1)[ok]
-            )
+            c = stack_columns(boxes, ("x", "y", "z"), rows)[ok]
+            R_b = quat_to_matrix_np(stack_columns(boxes, ("qw", "qx", "qy", "qz"), rows)[ok])
             local = np.einsum("nji,nvj->nvi", R_b, world - c[:, None, :])
-            half = 0.5 * np.stack([col("size_x"), col("size_y"), col("size_z")], axis=1)[ok]
-            out_mm = (np.abs(local) - half[:, None, :]).max(axis=(1, 2)) * _MM
+            half = 0.5 * stack_columns(boxes, ("size_x", "size_y", "size_z"), rows)[ok]
+            out_mm = (np.abs(local) - half[:, None, :]).max(axis=(1, 2)) * MM
             k = int(np.argmax(out_mm))
             if out_mm[k] > budget:
                 idx = np.flatnonzero(ok)[k]
@@ -805,7 +788,7 @@ def _table_top(
     The table is static: its pose is the first ``object_poses`` sample, else the
     asset's declared ``pose``, else the identity.
     """
-    verts = _usable_mesh(ctx, table)
+    verts = usable_mesh(ctx, table)
     if verts is None:
         return None
     poses = object_poses(ctx, ep, table)
@@ -845,7 +828,7 @@ def _penetration(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 continue
             z_top, xy_lo, xy_hi = top
             for obj in ctx.asset_names(("object",)):
-                verts = _usable_mesh(ctx, obj)
+                verts = usable_mesh(ctx, obj)
                 try:
                     poses = object_poses(ctx, ep, obj) if verts is not None else None
                 except InputReported:
@@ -856,7 +839,7 @@ def _penetration(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 R = quat_to_matrix_np(q)
                 zmin = (np.einsum("nj,vj->nv", R[:, 2, :], verts) + p[:, 2:3]).min(axis=1)
                 over = np.all((p[:, :2] >= xy_lo) & (p[:, :2] <= xy_hi), axis=1)
-                depth_mm = np.where(over, (z_top - zmin) * _MM, -np.inf)
+                depth_mm = np.where(over, (z_top - zmin) * MM, -np.inf)
                 k = int(np.argmax(depth_mm))
                 if depth_mm[k] > budget:
                     yield chk.finding(

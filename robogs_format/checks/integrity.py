@@ -43,6 +43,17 @@ def _listed(ctx: CheckContext) -> Iterator[tuple[str, dict, Path]]:
             continue
 
 
+def _differs(chk: Check, rel: str, text: str, actual: int, listed: int) -> Iterator[Finding]:
+    """A finding when a file's measured count (``text`` formats it) is not the listed one."""
+    if actual != listed:
+        yield chk.finding(
+            f"{text.format(actual)}, the manifest says {listed}",
+            file=rel,
+            value=actual - listed,
+            budget=0,
+        )
+
+
 @check(
     "I001",
     group="integrity",
@@ -101,14 +112,7 @@ def _extra(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 def _size(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for rel, entry, path in _listed(ctx):
         if path.is_file() and isinstance(entry.get("size"), int):
-            size = path.stat().st_size
-            if size != entry["size"]:
-                yield chk.finding(
-                    f"file is {size} bytes, the manifest says {entry['size']}",
-                    file=rel,
-                    value=size - entry["size"],
-                    budget=0,
-                )
+            yield from _differs(chk, rel, "file is {} bytes", path.stat().st_size, entry["size"])
 
 
 @check(
@@ -165,13 +169,7 @@ def _rows(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             rows = ctx.footer(rel).num_rows
         except InputReported:
             continue
-        if rows != entry["rows"]:
-            yield chk.finding(
-                f"table has {rows} rows, the manifest says {entry['rows']}",
-                file=rel,
-                value=rows - entry["rows"],
-                budget=0,
-            )
+        yield from _differs(chk, rel, "table has {} rows", rows, entry["rows"])
 
 
 @check(
@@ -199,7 +197,8 @@ def _readable(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         if ctx.quick:
             continue
         try:  # stream the body without keeping it, so corruption past the footer shows up here
-            for _batch in pq.ParquetFile(path).iter_batches(batch_size=1 << 16):
+            pf = pq.ParquetFile(path, pre_buffer=False)  # one row group in memory at a time
+            for _batch in pf.iter_batches(batch_size=1 << 16, use_threads=False):
                 pass
         except (pa.ArrowException, OSError, ValueError) as exc:
             yield chk.finding(

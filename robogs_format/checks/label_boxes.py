@@ -139,11 +139,12 @@ def _png_sub_runs(blob: bytes) -> tuple[tuple[int, int], tuple[np.ndarray, ...]]
     W, H = int.from_bytes(header[0:4], "big"), int.from_bytes(header[4:8], "big")
     if header[8:13] != bytes([16, 0, 0, 0, 0]) or W * H == 0 or W * H > MAX_PIXELS:
         return None  # not 16-bit grey, or interlaced
-    try:
-        raw = zlib.decompress(b"".join(idat))
+    want = H * (1 + 2 * W)
+    try:  # never inflate more than the header implies (a zlib bomb stops here)
+        raw = zlib.decompressobj().decompress(b"".join(idat), want + 1)
     except zlib.error:
         return None
-    if len(raw) != H * (1 + 2 * W):
+    if len(raw) != want:
         return None
     rows = np.frombuffer(raw, np.uint8).reshape(H, 1 + 2 * W)
     if np.any(rows[:, 0] != 1):
@@ -211,6 +212,12 @@ def scan_label_boxes(
     first_shape: tuple[int, int] | None = None
     with ThreadPoolExecutor(max_workers=max(1, threads)) as pool:
         for batch in _iter_batches(path, batch_rows):
+            if batch.column(0).null_count or batch.column(1).null_count:
+                raise FormatError(
+                    "label table holds null frame indices or images",
+                    path=path,
+                    hint="every row needs a frame_index and a PNG; re-export the labels",
+                )
             idx = batch.column(0).to_numpy(zero_copy_only=False).astype(np.int64)
             blobs = batch.column(1).to_pylist()
             frames.append(idx)

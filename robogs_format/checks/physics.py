@@ -12,8 +12,8 @@ from collections.abc import Iterator
 import numpy as np
 
 from ..findings import Finding
-from .context import CheckContext, InputReported
-from .geometry import hull_distance_outside, inertia_problem
+from ._common import com_outside_mm, inertia_problem, usable_mesh
+from .context import CheckContext
 from .registry import Check, check
 
 __all__: list[str] = []
@@ -110,19 +110,9 @@ def _com(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         com = obj.get("com_m")
         if com is None or name not in assets:
             continue
-        try:
-            if ctx.mesh_unit_problem(name):
-                continue  # reported by G006
-            verts = ctx.asset_hull_vertices(name)
-        except InputReported:
-            continue
-        try:
-            d_mm = (
-                float(hull_distance_outside(verts, np.asarray(com, np.float64)[None])[0]) * 1000.0
-            )
-        except Exception:  # a flat mesh has no volume hull
-            continue
-        if d_mm > budget:
+        verts = usable_mesh(ctx, name)  # None: unreadable or in mm, reported by G006
+        d_mm = None if verts is None else com_outside_mm(verts, com)
+        if d_mm is not None and d_mm > budget:
             yield chk.finding(
                 f"CoM {list(com)} m is {d_mm:.4g} mm outside the mesh",
                 value=d_mm,

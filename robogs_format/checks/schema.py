@@ -6,17 +6,17 @@ from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 
-from ..dataset import MANIFEST_NAME
+from ..dataset import MANIFEST_NAME, read_parquet
 from ..errors import FormatError, RobogsError, VersionError
 from ..findings import Finding
 from ..jsonio import read_json
 from ..schemas import schema_problems
 from ..spec_version import SPEC_VERSION, parse_version
-from ..tables import check_table_schema, family_columns
+from ..tables import check_table_schema, family_columns, non_null_columns
 from .context import STREAM_FILE_FIELDS, CheckContext, InputReported, table_kind
 from .registry import Check, check
+from .streaming import batches
 
 __all__: list[str] = []
 
@@ -126,11 +126,41 @@ def _table_schema(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 continue
             done.add(rel)
             try:
-                schema = ctx.footer(rel).schema.to_arrow_schema()
+                md = ctx.footer(rel)
             except InputReported:
                 continue
-            for problem in check_table_schema(kind, schema):
+            schema = md.schema.to_arrow_schema()
+            problems = check_table_schema(kind, schema) or _null_problems(ctx, rel, kind, md)
+            for problem in problems:
                 yield chk.finding(f"{kind} table: {problem}", file=rel, episode=ep.id, stream=name)
+
+
+def _null_problems(ctx: CheckContext, rel: str, kind: str, md: Any) -> list[str]:
+    """Nulls in columns that must not hold them, from the footer statistics.
+
+    When a column chunk has no statistics, full mode reads the column; quick mode trusts it.
+    """
+    names = md.schema.to_arrow_schema().names
+    cols = non_null_columns(kind, names)
+    counts: dict[str, int] = {}
+    unknown: list[str] = []
+    for name in cols:
+        j = names.index(name)
+        n = 0
+        for g in range(md.num_row_groups):
+            stats = md.row_group(g).column(j).statistics
+            if stats is None or not stats.has_null_count:
+                unknown.append(name)
+                break
+            n += stats.null_count
+        counts[name] = n
+    if unknown and not ctx.quick:
+        try:
+            tab = read_parquet(ctx.existing(rel), columns=unknown)
+        except (FormatError, InputReported):
+            return []  # unreadable bodies are reported by I006
+        counts.update({c: tab.column(c).null_count for c in unknown})
+    return [f"column {c!r} holds {n} nulls" for c, n in counts.items() if n]
 
 
 @check(
@@ -186,10 +216,12 @@ def _budget_names(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         yield chk.finding(problem, file=MANIFEST_NAME, where="/budgets")
 
 
-def _strings(table: pa.Table, column: str) -> set[str | None]:
-    """Distinct values of a name column; nulls appear as ``None``."""
-    col = table.column(column)
-    return {None if v is None else str(v) for v in col.unique().to_pylist()}
+def _strings(ctx: CheckContext, rel: str, column: str) -> set[str | None]:
+    """Distinct values of a name column, read batch by batch; nulls appear as ``None``."""
+    out: set[str | None] = set()
+    for b in batches(ctx, rel, (column,)):
+        out |= {None if v is None else str(v) for v in b.column(0).unique().to_pylist()}
+    return out
 
 
 @check(
@@ -258,18 +290,14 @@ def _names(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         elif kind == "actions":
             checks.append(("joint", unknown(set(family_columns(names, "command.")), joints)))
         elif kind == "ee_poses" and "link" in names:
-            checks.append(
-                ("link", unknown(_strings(ctx.table(rel, columns=("link",)), "link"), links))
-            )
+            checks.append(("link", unknown(_strings(ctx, rel, "link"), links)))
         elif kind in ("object_poses", "boxes3d") and "object" in names:
-            checks.append(
-                ("object", unknown(_strings(ctx.table(rel, columns=("object",)), "object"), assets))
-            )
+            checks.append(("object", unknown(_strings(ctx, rel, "object"), assets)))
         elif kind == "boxes2d" and "camera" in names:
             checks.append(
                 (
                     "camera",
-                    unknown(_strings(ctx.table(rel, columns=("camera",)), "camera"), cameras),
+                    unknown(_strings(ctx, rel, "camera"), cameras),
                 )
             )
             yield from _box_labels(chk, ctx, ep, rel, loc)

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import RobogsError
 from ..findings import Finding
+from ._common import frame_stamps
 from .context import CheckContext, InputReported
 from .geometry import _world_from_root, joint_positions, link_geometry
 from .registry import Check, check
@@ -165,9 +166,9 @@ def estimate_camera_lag(ctx: CheckContext, ep, stream: str) -> LagEstimate | Non
     if not links:
         return None
     model = _Model(ctx, ep, st, links)
-    frames = ctx.stream_table(ep, stream, field="frames", columns=("t_ns", "frame_index"))
-    f_idx = frames.column("frame_index").to_numpy(zero_copy_only=False)
-    f_t = frames.column("t_ns").to_numpy(zero_copy_only=False).astype(np.int64)
+    f_t, f_idx = frame_stamps(
+        ctx.stream_table(ep, stream, field="frames", columns=("t_ns", "frame_index"))
+    )
     if f_t.size < 3 or not np.all(np.diff(f_t) > 0) or not np.all(np.diff(f_idx) > 0):
         return None
     lb = ctx.label_boxes(ep, stream)

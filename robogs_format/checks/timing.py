@@ -15,38 +15,61 @@ T001 only.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
 from ..findings import Finding
+from ._common import MS, column, stream_tables
 from .context import ENTITY_COLUMNS, PERIODIC_KINDS, CheckContext, InputReported
 from .registry import Check, check
+from .streaming import batches, median, percentile
 
 __all__: list[str] = []
 
 _DROP_FACTOR = 1.5
 _MAX_GAPS_PER_SERIES = 5
-_MS = 1e-6  # ns -> ms
 
 
-@dataclass(frozen=True)
+@dataclass
 class _Series:
-    """The stamps of one entity of one stream, in table order."""
+    """One entity of one stream, with the facts of one scan of its stamps.
+
+    The stamps themselves are not kept: later passes read them again in batches
+    (:func:`_steps`), so memory does not grow with the length of a stream.
+    """
 
     episode: str
     stream: str
     kind: str
     rel: str
+    ent_col: str | None
     entity: str | None
-    t_ns: np.ndarray
-    rows: np.ndarray  # table row of each stamp
     strict: bool
     periodic: bool
     nominal_hz: float | None
+    n: int = 0
+    bad_steps: int = 0
+    first_bad: tuple[int, int, int] | None = None  # (t before, t after, row after)
+    last: tuple[int, int] | None = None  # (t, row) of the last stamp scanned
+
+    def absorb(self, t: np.ndarray, rows: np.ndarray) -> None:
+        """Scan the next stamps of the series (table order)."""
+        if self.last is not None:
+            t = np.concatenate(([self.last[0]], t))
+            rows = np.concatenate(([self.last[1]], rows))
+        d = np.diff(t)
+        bad = np.flatnonzero(d <= 0) if self.strict else np.flatnonzero(d < 0)
+        if bad.size:
+            if self.first_bad is None:
+                i = int(bad[0])
+                self.first_bad = (int(t[i]), int(t[i + 1]), int(rows[i + 1]))
+            self.bad_steps += int(bad.size)
+        self.n += t.size - (self.last is not None)
+        self.last = (int(t[-1]), int(rows[-1]))
 
 
 def _split(t: np.ndarray, keys: pa.ChunkedArray | None) -> list[tuple[str | None, np.ndarray]]:
@@ -62,8 +85,38 @@ def _split(t: np.ndarray, keys: pa.ChunkedArray | None) -> list[tuple[str | None
     return [(str(names[codes[g[0]]]), g) for g in np.split(order, bounds) if g.size]
 
 
+def _keys(col: pa.Array) -> pa.Array:
+    return pc.fill_null(pc.cast(col, pa.string()), "<null>")
+
+
+def _scan(ctx: CheckContext, ent_col: str | None, **meta: object) -> list[_Series]:
+    """The series of table ``meta['rel']`` (entities in order of first appearance), in one pass."""
+    rel = str(meta["rel"])
+    series: dict[str | None, _Series] = {}
+    offset = 0
+    for b in batches(ctx, rel, ("t_ns",) if ent_col is None else ("t_ns", ent_col)):
+        t = b.column(0).to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
+        rows = np.arange(offset, offset + t.size)
+        offset += t.size
+        if ent_col is None:
+            groups = [(None, t, rows)]
+        else:
+            enc = _keys(b.column(1)).dictionary_encode()
+            codes = enc.indices.to_numpy(zero_copy_only=False)
+            groups = [
+                (str(name), t[codes == c], rows[codes == c])
+                for c, name in enumerate(enc.dictionary.to_pylist())
+            ]
+        for entity, te, re in groups:
+            if te.size:
+                if entity not in series:
+                    series[entity] = _Series(ent_col=ent_col, entity=entity, **meta)  # type: ignore[arg-type]
+                series[entity].absorb(te, re)
+    return list(series.values())
+
+
 def _series(ctx: CheckContext) -> Iterator[_Series]:
-    """Every stamped series of the dataset (cached per context)."""
+    """Every stamped series of the dataset (cached per context: facts only, no stamps)."""
     key = ("timing-series",)
     if key not in ctx._cache:
         ctx._cache[key] = list(_build_series(ctx))
@@ -88,17 +141,44 @@ def _build_series(ctx: CheckContext) -> Iterator[_Series]:
             names = ctx.footer(rel).schema.to_arrow_schema().names
             if "t_ns" not in names:
                 continue  # reported by S003
-            cols = ("t_ns",) if ent_col is None or ent_col not in names else ("t_ns", ent_col)
-            table = ctx.table(rel, columns=cols)
+            yield from _scan(
+                ctx,
+                ent_col if ent_col in names else None,
+                episode=ep.id,
+                stream=name,
+                kind=str(kind),
+                rel=rel,
+                strict=kind not in ("boxes2d",),
+                periodic=periodic,
+                nominal_hz=nominal_hz,
+            )
         except InputReported:
             continue
-        t = table.column("t_ns").to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
-        keys = table.column(ent_col) if len(cols) == 2 else None
-        strict = kind not in ("boxes2d",)
-        for entity, rows in _split(t, keys):
-            yield _Series(
-                ep.id, name, str(kind), rel, entity, t[rows], rows, strict, periodic, nominal_hz
-            )
+
+
+def _steps(
+    ctx: CheckContext, s: _Series
+) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Consecutive stamps of a series, batch by batch: (period as float64 ns, t before,
+    t after, row before, row after)."""
+    prev: tuple[int, int] | None = None
+    offset = 0
+    cols = ("t_ns",) if s.ent_col is None else ("t_ns", s.ent_col)
+    for b in batches(ctx, s.rel, cols):
+        t = b.column(0).to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
+        rows = np.arange(offset, offset + t.size)
+        offset += t.size
+        if s.ent_col is not None:
+            mask = pc.equal(_keys(b.column(1)), s.entity).to_numpy(zero_copy_only=False)
+            t, rows = t[mask], rows[mask]
+        if t.size == 0:
+            continue
+        if prev is not None:
+            t = np.concatenate(([prev[0]], t))
+            rows = np.concatenate(([prev[1]], rows))
+        prev = (int(t[-1]), int(rows[-1]))
+        if t.size > 1:
+            yield np.diff(t).astype(np.float64), t[:-1], t[1:], rows[:-1], rows[1:]
 
 
 def _loc(s: _Series, **extra: object) -> dict[str, object]:
@@ -107,11 +187,6 @@ def _loc(s: _Series, **extra: object) -> dict[str, object]:
         loc["link" if s.kind == "ee_poses" else "object"] = s.entity
     loc.update(extra)
     return loc
-
-
-def _increasing(s: _Series) -> bool:
-    d = np.diff(s.t_ns)
-    return bool(np.all(d > 0)) if s.strict else bool(np.all(d >= 0))
 
 
 @check(
@@ -126,48 +201,95 @@ def _increasing(s: _Series) -> bool:
 )
 def _monotonic(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for s in _series(ctx):
-        d = np.diff(s.t_ns)
-        bad = np.flatnonzero(d <= 0) if s.strict else np.flatnonzero(d < 0)
-        if bad.size == 0:
+        if s.first_bad is None:
             continue
-        i = int(bad[0])
+        t_before, t_after, row = s.first_bad
         what = "strictly increasing" if s.strict else "non-decreasing"
         ent = f" ({s.entity})" if s.entity is not None else ""
         yield chk.finding(
-            f"stamps{ent} are not {what}: {bad.size} steps, first at row {int(s.rows[i + 1])} "
-            f"({int(s.t_ns[i])} -> {int(s.t_ns[i + 1])} ns)",
-            value=bad.size,
+            f"stamps{ent} are not {what}: {s.bad_steps} steps, first at row {row} "
+            f"({t_before} -> {t_after} ns)",
+            value=s.bad_steps,
             budget=0,
-            **_loc(s, t_ns=int(s.t_ns[i + 1]), where=f"row {int(s.rows[i + 1])}"),
+            **_loc(s, t_ns=t_after, where=f"row {row}"),
         )
 
 
-@dataclass(frozen=True)
+@dataclass
 class _Periods:
+    """Period statistics of one series (one streaming pass after the median).
+
+    ``gaps``, ``first_drop`` and ``jitter_at`` hold (period ns, t before, row before) or
+    (t after, row after); jitter is in ms. Jitter percentiles are computed on demand, exactly.
+    """
+
     period_ns: float
-    dt: np.ndarray
-    gaps: np.ndarray  # indices into dt
-    drops: np.ndarray
-    jitter_ms: np.ndarray
+    n_gaps: int
+    gaps: list[tuple[float, int, int]]
+    n_drops: int
+    lost: float
+    first_drop: tuple[float, int, int] | None
+    n_regular: int
+    jitter_max_ms: float
+    jitter_at: tuple[int, int] | None
+    jitter_values: Callable[[], Iterator[np.ndarray]]
+    _pct: dict[float, float] = field(default_factory=dict)
+
+    def jitter_pct(self, q: float) -> float:
+        if q not in self._pct:
+            self._pct[q] = percentile(self.jitter_values, self.n_regular, q)
+        return self._pct[q]
 
 
-def _periods(s: _Series, gap_factor: float) -> _Periods | None:
-    if not s.periodic or s.t_ns.size < 3 or not _increasing(s):
+def _periods(ctx: CheckContext, s: _Series, gap_factor: float) -> _Periods | None:
+    if not s.periodic or s.n < 3 or s.bad_steps:
         return None
-    dt = np.diff(s.t_ns).astype(np.float64)
-    p = float(np.median(dt))
+    p = median(lambda: (d for d, *_ in _steps(ctx, s)), s.n - 1)
     if p <= 0:
         return None
-    gaps = np.flatnonzero(dt > gap_factor * p)
-    drops = np.flatnonzero((dt > _DROP_FACTOR * p) & (dt <= gap_factor * p))
-    regular = dt[dt <= _DROP_FACTOR * p]
-    return _Periods(p, dt, gaps, drops, np.abs(regular - p) * _MS)
+    gaps: list[tuple[float, int, int]] = []
+    n_gaps = n_drops = n_regular = 0
+    lost = 0.0
+    first_drop = jitter_at = None
+    jmax = -1.0
+    for d, t0, t1, r0, r1 in _steps(ctx, s):
+        g = np.flatnonzero(d > gap_factor * p)
+        n_gaps += g.size
+        gaps += [
+            (float(d[i]), int(t0[i]), int(r0[i])) for i in g[: _MAX_GAPS_PER_SERIES - len(gaps)]
+        ]
+        drops = np.flatnonzero((d > _DROP_FACTOR * p) & (d <= gap_factor * p))
+        if drops.size:
+            if first_drop is None:
+                i = int(drops[0])
+                first_drop = (float(d[i]), int(t0[i]), int(r0[i]))
+            n_drops += drops.size
+            lost += float(np.sum(np.rint(d[drops] / p) - 1))
+        regular = np.flatnonzero(d <= _DROP_FACTOR * p)
+        if regular.size:
+            jit = np.abs(d[regular] - p) * MS
+            n_regular += jit.size
+            i = int(np.argmax(jit))
+            if jit[i] > jmax:
+                jmax = float(jit[i])
+                jitter_at = (int(t1[regular[i]]), int(r1[regular[i]]))
+
+    def jitter_values() -> Iterator[np.ndarray]:
+        for d, *_ in _steps(ctx, s):
+            yield np.abs(d[d <= _DROP_FACTOR * p] - p) * MS
+
+    return _Periods(
+        p, n_gaps, gaps, n_drops, lost, first_drop, n_regular, jmax, jitter_at, jitter_values
+    )
 
 
 def _all_periods(ctx: CheckContext) -> Iterator[tuple[_Series, _Periods]]:
     gf = ctx.budget("time.gap_factor")
-    for s in _series(ctx):
-        per = _periods(s, gf)
+    for i, s in enumerate(_series(ctx)):
+        key = ("timing-periods", i, gf)
+        if key not in ctx._cache:
+            ctx._cache[key] = _periods(ctx, s, gf)
+        per = ctx._cache[key]
         if per is not None:
             yield s, per
 
@@ -211,17 +333,16 @@ def _rate(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 def _gaps(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     gf = ctx.budget("time.gap_factor")
     for s, per in _all_periods(ctx):
-        for n, i in enumerate(per.gaps):
-            if n == _MAX_GAPS_PER_SERIES:
-                yield chk.finding(f"{per.gaps.size - n} more gaps in this series", **_loc(s))
-                break
+        for dt, t_ns, row in per.gaps:
             yield chk.finding(
-                f"gap of {per.dt[i] * _MS:.4g} ms ({per.dt[i] / per.period_ns:.1f} periods of "
-                f"{per.period_ns * _MS:.4g} ms) after t_ns {int(s.t_ns[i])}",
-                value=per.dt[i] * _MS,
-                budget=gf * per.period_ns * _MS,
-                **_loc(s, t_ns=int(s.t_ns[i]), where=f"row {int(s.rows[i])}"),
+                f"gap of {dt * MS:.4g} ms ({dt / per.period_ns:.1f} periods of "
+                f"{per.period_ns * MS:.4g} ms) after t_ns {t_ns}",
+                value=dt * MS,
+                budget=gf * per.period_ns * MS,
+                **_loc(s, t_ns=t_ns, where=f"row {row}"),
             )
+        if per.n_gaps > len(per.gaps):
+            yield chk.finding(f"{per.n_gaps - len(per.gaps)} more gaps in this series", **_loc(s))
 
 
 @check(
@@ -235,24 +356,23 @@ def _gaps(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 )
 def _drops(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for s, per in _all_periods(ctx):
-        if per.drops.size == 0:
+        if per.first_drop is None:
             continue
-        lost = int(np.sum(np.rint(per.dt[per.drops] / per.period_ns) - 1))
-        i = int(per.drops[0])
+        lost = int(per.lost)
+        dt, t_ns, row = per.first_drop
         yield chk.finding(
-            f"{max(lost, per.drops.size)} samples dropped in {per.drops.size} places; first after t_ns "
-            f"{int(s.t_ns[i])} (period {per.dt[i] * _MS:.4g} ms, median {per.period_ns * _MS:.4g} ms)",
-            value=max(lost, per.drops.size),
+            f"{max(lost, per.n_drops)} samples dropped in {per.n_drops} places; first after t_ns "
+            f"{t_ns} (period {dt * MS:.4g} ms, median {per.period_ns * MS:.4g} ms)",
+            value=max(lost, per.n_drops),
             budget=0,
-            **_loc(s, t_ns=int(s.t_ns[i]), where=f"row {int(s.rows[i])}"),
+            **_loc(s, t_ns=t_ns, where=f"row {row}"),
         )
 
 
 def _jitter_text(per: _Periods) -> str:
-    j = per.jitter_ms
     return (
-        f"jitter p50 {np.percentile(j, 50):.3g} ms, p99 {np.percentile(j, 99):.3g} ms, "
-        f"max {j.max():.3g} ms around a {per.period_ns * _MS:.4g} ms period"
+        f"jitter p50 {per.jitter_pct(50):.3g} ms, p99 {per.jitter_pct(99):.3g} ms, "
+        f"max {per.jitter_max_ms:.3g} ms around a {per.period_ns * MS:.4g} ms period"
     )
 
 
@@ -269,7 +389,7 @@ def _jitter_text(per: _Periods) -> str:
 def _jitter_p99(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("time.jitter_p99_ms")
     for s, per in _all_periods(ctx):
-        if per.jitter_ms.size and (p99 := float(np.percentile(per.jitter_ms, 99))) > budget:
+        if per.n_regular and per.jitter_max_ms > budget and (p99 := per.jitter_pct(99)) > budget:
             yield chk.finding(_jitter_text(per), value=p99, budget=budget, **_loc(s))
 
 
@@ -286,14 +406,13 @@ def _jitter_p99(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 def _jitter_max(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("time.jitter_max_ms")
     for s, per in _all_periods(ctx):
-        if per.jitter_ms.size and (mx := float(per.jitter_ms.max())) > budget:
-            regular = np.flatnonzero(per.dt <= _DROP_FACTOR * per.period_ns)
-            i = int(regular[np.argmax(per.jitter_ms)])
+        if per.n_regular and per.jitter_max_ms > budget and per.jitter_at is not None:
+            t_ns, row = per.jitter_at
             yield chk.finding(
                 _jitter_text(per),
-                value=mx,
+                value=per.jitter_max_ms,
                 budget=budget,
-                **_loc(s, t_ns=int(s.t_ns[i + 1]), where=f"row {int(s.rows[i + 1])}"),
+                **_loc(s, t_ns=t_ns, where=f"row {row}"),
             )
 
 
@@ -309,6 +428,15 @@ def _ranges(ctx: CheckContext) -> Iterator[tuple[object, str, dict, str, tuple[i
             continue
         if rng is not None:
             yield ep, name, st, rel, rng
+
+
+def _ends_beyond(
+    chk: Check, budget: float, loc: dict[str, object], *ends: tuple[float, int, str]
+) -> Iterator[Finding]:
+    """One finding per stream end beyond ``budget``: ``ends`` are (ms, t_ns, message template)."""
+    for ms, t_ns, text in ends:
+        if ms > budget:
+            yield chk.finding(text.format(ms), value=ms, budget=budget, t_ns=t_ns, **loc)
 
 
 @check(
@@ -327,24 +455,13 @@ def _coverage(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for ep, name, st, rel, (lo, hi) in _ranges(ctx):
         if st.get("kind") not in PERIODIC_KINDS:
             continue
-        late, early = (lo - ep.start_ns) * _MS, (ep.end_ns - hi) * _MS
-        loc = {"file": rel, "episode": ep.id, "stream": name}
-        if late > budget:
-            yield chk.finding(
-                f"stream starts {late:.4g} ms after the episode start",
-                value=late,
-                budget=budget,
-                t_ns=lo,
-                **loc,
-            )
-        if early > budget:
-            yield chk.finding(
-                f"stream ends {early:.4g} ms before the episode end",
-                value=early,
-                budget=budget,
-                t_ns=hi,
-                **loc,
-            )
+        yield from _ends_beyond(
+            chk,
+            budget,
+            {"file": rel, "episode": ep.id, "stream": name},
+            ((lo - ep.start_ns) * MS, lo, "stream starts {:.4g} ms after the episode start"),
+            ((ep.end_ns - hi) * MS, hi, "stream ends {:.4g} ms before the episode end"),
+        )
 
 
 @check(
@@ -362,32 +479,17 @@ def _coverage(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 def _bounds(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("time.sync_ms")
     for ep, name, _st, rel, (lo, hi) in _ranges(ctx):
-        before, after = (ep.start_ns - lo) * _MS, (hi - ep.end_ns) * _MS
-        loc = {"file": rel, "episode": ep.id, "stream": name}
-        if before > budget:
-            yield chk.finding(
-                f"first stamp is {before:.4g} ms before the episode start",
-                value=before,
-                budget=budget,
-                t_ns=lo,
-                **loc,
-            )
-        if after > budget:
-            yield chk.finding(
-                f"last stamp is {after:.4g} ms after the episode end",
-                value=after,
-                budget=budget,
-                t_ns=hi,
-                **loc,
-            )
+        yield from _ends_beyond(
+            chk,
+            budget,
+            {"file": rel, "episode": ep.id, "stream": name},
+            ((ep.start_ns - lo) * MS, lo, "first stamp is {:.4g} ms before the episode start"),
+            ((hi - ep.end_ns) * MS, hi, "last stamp is {:.4g} ms after the episode end"),
+        )
 
 
 def _frame_index(ctx: CheckContext, rel: str) -> np.ndarray:
-    return (
-        ctx.table(rel, columns=("frame_index",))
-        .column("frame_index")
-        .to_numpy(zero_copy_only=False)
-    )
+    return column(ctx.table(rel, columns=("frame_index",)), "frame_index")
 
 
 _EXACT_VIDEO_FRAMES = 3000
@@ -501,14 +603,7 @@ def _labels(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 )
 def _boxes2d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("time.sync_ms")
-    for ep, name, st in ctx.streams(("boxes2d",)):
-        rel = st.get("path")
-        if not isinstance(rel, str):
-            continue
-        try:
-            boxes = ctx.table(rel, columns=("t_ns", "camera", "frame_index"))
-        except InputReported:
-            continue
+    for ep, name, rel, boxes in stream_tables(ctx, "boxes2d", ("t_ns", "camera", "frame_index")):
         cams = {
             s["camera"]: s
             for s in ep.streams.values()
@@ -553,7 +648,7 @@ def _boxes2d(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                     **loc,
                 )
             if found.any():
-                diff_ms = (b_t[found] - f_t[order][pos[found]]) * _MS
+                diff_ms = (b_t[found] - f_t[order][pos[found]]) * MS
                 k = int(np.argmax(np.abs(diff_ms)))
                 worst = float(abs(diff_ms[k]))
                 if worst > budget:

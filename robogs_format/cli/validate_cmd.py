@@ -32,6 +32,26 @@ def _budget(text: str) -> tuple[str, float]:
     return name.strip(), number
 
 
+def _stride(text: str) -> int:
+    try:
+        k = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+    if k < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {k}")
+    return k
+
+
+def _scale(text: str) -> float:
+    try:
+        f = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 4], got {text!r}") from None
+    if not 0.0 < f <= 4.0:
+        raise argparse.ArgumentTypeError(f"must be in (0, 4], got {text}")
+    return f
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``validate`` options to ``parser``."""
     parser.add_argument(
@@ -76,6 +96,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="NAME=VALUE",
         help="override a budget, e.g. --budget geometry.fk_ee_mm=1.0 (repeatable)",
+    )
+    parser.add_argument(
+        "--stride",
+        type=_stride,
+        metavar="N",
+        help="binding checks: re-render and compare every N-th camera frame (default 1: all)",
+    )
+    parser.add_argument(
+        "--scale",
+        type=_scale,
+        metavar="F",
+        help="binding checks: re-render at F times the camera resolution, in (0, 4] (default 1)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     parser.add_argument(
@@ -139,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
     if args.dataset is None:
         return _err("the DATASET folder is required (or --list-checks)")
     progress = not args.no_progress and not args.json and sys.stderr.isatty()
+    options = {k: getattr(args, k) for k in ("stride", "scale") if getattr(args, k) is not None}
     try:
         report = validate(
             args.dataset,
@@ -147,6 +180,7 @@ def run(args: argparse.Namespace) -> int:
             quick=args.quick,
             budgets=dict(args.budget),
             progress=progress,
+            options=options,
         )
     except RobogsError as exc:
         return _err(exc.one_line())

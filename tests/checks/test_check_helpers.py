@@ -9,7 +9,12 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from robogs_format.checks.geometry import hull_distance_outside, inertia_problem, quat_to_matrix_np
+from robogs_format.checks._common import (
+    com_outside_mm,
+    hull_distance_outside,
+    inertia_problem,
+    quat_to_matrix_np,
+)
 from robogs_format.checks.label_boxes import boxes_of_label_image, scan_label_boxes
 from robogs_format.frames import quat_to_matrix
 from robogs_format.images import encode_label_png
@@ -91,6 +96,14 @@ def test_hull_distance_against_a_unit_cube() -> None:
     cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
     pts = np.array([[0.5, 0.5, 0.5], [1.25, 0.5, 0.5], [0.5, -0.1, 0.5], [0.5, 0.5, 3.0]])
     np.testing.assert_allclose(hull_distance_outside(cube, pts), [0.0, 0.25, 0.1, 2.0], atol=1e-12)
+
+
+def test_com_outside_in_mm_and_degenerate_input() -> None:
+    cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    assert com_outside_mm(cube, [0.5, 0.5, 0.5]) == 0.0
+    assert com_outside_mm(cube, [1.25, 0.5, 0.5]) == pytest.approx(250.0, abs=1e-9)
+    assert com_outside_mm(cube[:2], [0.5, 0.5, 1.0]) is None  # a segment spans no hull
+    assert com_outside_mm(cube, [0.5, 0.5]) is None  # malformed CoM: no verdict either
 
 
 def test_quaternion_matrix_matches_frames_module() -> None:

@@ -1,0 +1,114 @@
+"""``robogs-validate`` options: ``--quick`` never loads torch; ``--stride``/``--scale`` reach the
+binding re-render."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+import torch
+
+from robogs_format import rerender
+from robogs_format.cli.main import validate_main
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_quick_validation_does_not_import_torch(clean_root: Path) -> None:
+    """A fresh interpreter: quick validation (all checks registered) leaves torch unimported;
+    a binding check run afterwards does import it (the probe can see it)."""
+    code = textwrap.dedent(
+        f"""
+        import contextlib, io, json, sys
+        from robogs_format.checks import available_checks
+        from robogs_format.cli.main import validate_main
+        root = {str(clean_root)!r}
+        with contextlib.redirect_stdout(io.StringIO()) as report:
+            rc = validate_main([root, "--quick", "--no-progress", "--json"])
+        probe = {{"rc": rc, "report": json.loads(report.getvalue()),
+                  "torch": "torch" in sys.modules, "codes": [c.code for c in available_checks()]}}
+        with contextlib.redirect_stdout(io.StringIO()):
+            validate_main([root, "--select", "B009", "--no-progress", "--json"])
+        probe["torch_after_b009"] = "torch" in sys.modules
+        print(json.dumps(probe))
+        """
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True
+    )
+    probe = json.loads(out.stdout)
+    assert probe["rc"] == 0
+    summary = probe["report"]["summary"]
+    assert summary["quick"] is True and summary["checks_run"] > 5
+    assert "B005" in probe["codes"]  # the binding checks were imported and registered
+    assert probe["torch"] is False
+    assert probe["torch_after_b009"] is True
+
+
+def _camera_frames(root: Path) -> int:
+    m = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
+    rels = [
+        st["frames"]
+        for ep in m["episodes"]
+        for st in ep["streams"].values()
+        if st.get("kind") == "camera" and st.get("video")
+    ]
+    assert len(rels) == 1
+    return pq.read_metadata(root / rels[0]).num_rows
+
+
+@pytest.fixture
+def one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def test_stride_and_scale_reach_the_binding_checks(
+    clean_root: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    one_thread: None,
+) -> None:
+    """B004 reports how many frames it compared: ceil(frames / stride); the re-render grid is
+    the camera's resolution times ``--scale``."""
+    built: list[rerender.SceneRerenderer] = []
+
+    class Recording(rerender.SceneRerenderer):
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            built.append(self)
+
+    monkeypatch.setattr(rerender, "SceneRerenderer", Recording)
+    n = _camera_frames(clean_root)
+    compared = {}
+    for stride in (20, 45):
+        argv = [str(clean_root), "--select", "B004", "--stride", str(stride), "--scale", "0.25"]
+        assert validate_main([*argv, "--json", "--no-progress"]) == 0
+        doc = json.loads(capsys.readouterr().out)
+        (finding,) = [f for f in doc["findings"] if f["code"] == "B004"]
+        compared[stride] = int(re.search(r"over (\d+) frames", finding["message"]).group(1))
+    assert compared == {20: len(range(0, n, 20)), 45: len(range(0, n, 45))}
+    assert compared[20] > compared[45]
+    assert len(built) == 2
+    for rr in built:
+        assert rr.scale == 0.25
+        assert (rr.width, rr.height) == (round(rr.model.width / 4), round(rr.model.height / 4))
+
+
+@pytest.mark.parametrize(
+    ("flag", "value"), [("--stride", "0"), ("--scale", "5"), ("--stride", "x")]
+)
+def test_bad_speed_options_are_usage_errors(
+    tiny_root: Path, capsys: pytest.CaptureFixture[str], flag: str, value: str
+) -> None:
+    assert validate_main([str(tiny_root), flag, value, "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert f"argument {flag}" in err and "Traceback" not in err
