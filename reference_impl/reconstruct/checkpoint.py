@@ -30,6 +30,7 @@ def save_checkpoint(
     grad: torch.Tensor,
     count: torch.Tensor,
     psnr_history: list[float],
+    refinements: list[dict[str, int]] | None = None,
 ) -> None:
     """Write a checkpoint atomically (``.part`` then rename)."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -41,6 +42,7 @@ def save_checkpoint(
         "grad": grad.detach().cpu(),
         "count": count.detach().cpu(),
         "psnr_history": [float(x) for x in psnr_history],
+        "refinements": [{k: int(v) for k, v in r.items()} for r in refinements or []],
     }
     part = path.with_name(path.name + ".part")
     torch.save(doc, part)

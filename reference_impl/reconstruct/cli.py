@@ -78,6 +78,13 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
         "--init-assets", action="store_true", help="also seed from existing asset meshes"
     )
     p.add_argument(
+        "--carve-tau",
+        type=float,
+        default=0.03,
+        help="colour tolerance (RGB in [0, 1]) of the space carving of the visual-hull seeds; "
+        "0: seed on the visual hull itself",
+    )
+    p.add_argument(
         "--background", type=_rgb, default=(0.0, 0.0, 0.0), help="R,G,B behind the scene"
     )
     p.add_argument("--lambda-dist", type=float, default=10.0, help="depth-distortion weight (m^-2)")
@@ -146,7 +153,12 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
         max_views=args.max_views,
         heldout_every=args.heldout_every,
         train=tc,
-        init=InitConfig(mode=args.init, use_assets=args.init_assets, seed=args.seed),
+        init=InitConfig(
+            mode=args.init,
+            use_assets=args.init_assets,
+            carve_tau=args.carve_tau if args.carve_tau > 0 else None,
+            seed=args.seed,
+        ),
         lr_scale=args.lr_scale,
         tsdf_resolution=args.tsdf_resolution,
         align=args.align,

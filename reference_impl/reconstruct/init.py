@@ -3,9 +3,10 @@
 * ``urdf``: area-uniform samples on every link's visual mesh at the recorded joint state (and,
   with ``use_assets``, on the asset meshes at their recorded poses); surfels lie in the faces.
 * ``hull``: the visual hull of the labelled foreground (Laurentini 1994): voxels whose
-  projection is foreground (label > 0) in every view that sees them; samples on its boundary
-  with normals from the smoothed occupancy gradient. Hull samples closer than two voxels to a
-  mesh sample are dropped, so known geometry is not doubled.
+  projection is foreground (label > 0) in every view that sees them, carved to its photo hull
+  (``carve.py``, Kutulakos & Seitz 2000; ``carve_tau=None`` skips it); samples on the boundary
+  that several views confirm, with normals from the smoothed occupancy gradient. Hull samples
+  closer than two voxels to a mesh sample are dropped, so known geometry is not doubled.
 * ``random``: uniform points in the workspace box (Kerbl et al. 2023 for scenes without SfM).
 
 Colours are the mean of the pixels the points project to in the views where they face the
@@ -27,6 +28,7 @@ from robogs_format.dataset import Dataset
 from robogs_format.frames import matrix_to_quat, quat_to_matrix
 from robogs_format.render import rgb_to_sh_dc
 
+from .carve import carve_photo_hull
 from .robot_geometry import link_meshes
 from .views import Capture, View
 
@@ -44,6 +46,8 @@ class InitConfig:
             workspace over half the spacing, 32..192).
         random_count: number of random points (``random`` mode).
         use_assets: also sample the asset meshes already in the dataset.
+        carve_tau: colour tolerance (RGB in [0, 1]) of the space carving that shrinks the visual
+            hull to its photo hull (``carve.py``); None: seed on the visual hull itself.
         seed: sampling seed.
     """
 
@@ -52,6 +56,7 @@ class InitConfig:
     hull_resolution: int | None = None
     random_count: int = 20_000
     use_assets: bool = False
+    carve_tau: float | None = 0.03
     seed: int = 0
 
 
@@ -90,9 +95,11 @@ def workspace_bounds(
 
     The cameras look at the point nearest to all optical axes; the scene they all see lies within
     the median camera distance of it. With labels, the box shrinks to the part of a coarse (48^3)
-    visual hull of the labelled foreground that at least 20 % of the views see and some camera
-    sees directly (the hull also holds the "shadow" behind objects and the space just in front of
-    a camera that only its neighbours see), plus one coarse voxel;
+    visual hull of the labelled foreground that at least 20 % of the views see and that is the
+    first occupied voxel along the rays of at least 5 % of them (2 or more): the hull also holds
+    the "shadow" behind objects (a deep cone under a table seen only from above, which single
+    views glimpse through gaps of the coarse z-buffer) and the space just in front of a camera
+    that only its neighbours see. Plus one coarse voxel;
     without labels, it is the box that the vertical field of view spans at the median distance.
     """
     views = capture.views if views is None else views
@@ -101,8 +108,8 @@ def workspace_bounds(
     n_lab = sum(v.labels is not None for v in views)
     occ, vox = _hull_grid(views, lo, hi, 48, None, min_seen=max(2, math.ceil(0.2 * n_lab)))
     idx = np.argwhere(occ) if occ is not None else np.zeros((0, 3), int)
-    if len(idx):
-        idx = idx[_frontmost(lo + (idx + 0.5) * vox, views, vox)]
+    if len(idx):  # frontmost for a few cameras: one may see a sliver of the hull's "shadow"
+        idx = idx[_frontmost(lo + (idx + 0.5) * vox, views, vox, max(2, math.ceil(0.05 * n_lab)))]
     if len(idx):
         lo, hi = lo + (idx.min(0) - 1.0) * vox, lo + (idx.max(0) + 2.0) * vox
     else:
@@ -192,15 +199,16 @@ def _hull_grid(
     return occ.reshape(*dims).numpy(), vox
 
 
-def _frontmost(points: np.ndarray, views: list[View], vox: float) -> np.ndarray:
-    """[N] bool: voxel centres that are the nearest occupied voxel along some camera's rays.
+def _frontmost(points: np.ndarray, views: list[View], vox: float, min_views: int = 1) -> np.ndarray:
+    """[N] bool: voxel centres that are the nearest occupied voxel along the rays of at least
+    ``min_views`` cameras.
 
     Per view, a z-buffer of the centres at a resolution where a buffer pixel spans 1.5 voxels at
     the median depth (so the sampled centres leave no holes); a centre is frontmost where it lies
     within 1.5 voxels of the buffer.
     """
     P = torch.as_tensor(points, dtype=torch.float64)
-    out = torch.zeros(len(P), dtype=torch.bool)
+    count = torch.zeros(len(P), dtype=torch.int32)
     for v in views:
         u, w, z = _project(P, v)
         H, W = v.rgb.shape[:2]
@@ -213,18 +221,30 @@ def _frontmost(points: np.ndarray, views: list[View], vox: float) -> np.ndarray:
         pix = (w * s).clamp(0, Hs - 1).long() * Ws + (u * s).clamp(0, Ws - 1).long()
         zbuf = torch.full((Hs * Ws,), float("inf"), dtype=torch.float64)
         zbuf.scatter_reduce_(0, pix[inside], z[inside], reduce="amin")
-        out |= inside & (z <= zbuf[pix] + 1.5 * vox)
-    return out.numpy()
+        count += (inside & (z <= zbuf[pix] + 1.5 * vox)).to(torch.int32)
+    return (count >= min_views).numpy()
 
 
 def _visual_hull(
-    views: list[View], lo: np.ndarray, hi: np.ndarray, res: int, known: set[int] | None = None
+    views: list[View],
+    lo: np.ndarray,
+    hi: np.ndarray,
+    res: int,
+    known: set[int] | None = None,
+    carve_tau: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Boundary samples [M, 3] and outward normals of the visual hull (see :func:`_hull_grid`) that
-    some camera sees."""
+    some camera sees; with ``carve_tau``, of its photo hull (``carve.carve_photo_hull``), where
+    the photos confirm it."""
     occ, vox = _hull_grid(views, lo, hi, res, known)
     if occ is None or not occ.any():
         return np.zeros((0, 3)), np.zeros((0, 3))
+    confirmed = None
+    if carve_tau is not None:
+        cr = carve_photo_hull(occ, lo, vox, views, known or set(), tau=carve_tau)
+        occ, confirmed = cr.occupancy, cr.confirmed
+        if not occ.any():
+            return np.zeros((0, 3)), np.zeros((0, 3))
     vol = torch.from_numpy(occ).to(torch.float64)
     pad = torch.nn.functional.pad(vol[None, None], (1, 1, 1, 1, 1, 1))[0, 0]
     neigh_empty = torch.zeros_like(vol, dtype=torch.bool)
@@ -234,6 +254,8 @@ def _visual_hull(
             sl[ax] = slice(s, s + vol.shape[ax])
             neigh_empty |= pad[tuple(sl)] == 0
     surf = (vol > 0) & neigh_empty
+    if confirmed is not None:
+        surf &= torch.from_numpy(confirmed)
     smooth = torch.nn.functional.avg_pool3d(pad[None, None], 3, stride=1)[0, 0]
     g = torch.stack(torch.gradient(smooth, spacing=vox), -1)
     idx = torch.nonzero(surf)
@@ -241,6 +263,8 @@ def _visual_hull(
     norm = n.norm(dim=1, keepdim=True)
     n = torch.where(norm > 1e-9, n / norm.clamp(min=1e-12), torch.full_like(n, float("nan")))
     p = (torch.as_tensor(lo) + (idx.to(torch.float64) + 0.5) * vox).numpy()
+    if confirmed is not None:  # seen by several views already
+        return p, n.numpy()
     seen = _frontmost(p, views, vox)  # hull boundary no camera sees would never be trained
     return p[seen], n.numpy()[seen]
 
@@ -299,7 +323,7 @@ def initial_points(
     pts, nrm = _mesh_samples(meshes, spacing, cfg.seed)
     if cfg.mode in ("auto", "hull"):
         res = cfg.hull_resolution or int(np.clip(np.ceil(2.0 * (hi - lo).max() / spacing), 32, 192))
-        hp, hn = _visual_hull(train_views, lo, hi, res, known)
+        hp, hn = _visual_hull(train_views, lo, hi, res, known, cfg.carve_tau)
         vox = float((hi - lo).max()) / res
         if len(pts) and len(hp):
             d, _ = cKDTree(pts).query(hp, k=1)

@@ -297,7 +297,7 @@ def reconstruct(
         trunc_voxels=options.trunc_voxels,
     )
     raw_mesh = extract_mesh(vol)
-    mesh, clean_rep = clean_mesh(raw_mesh)
+    mesh, clean_rep = clean_mesh(raw_mesh, free_space=vol.sample, probe_m=vol.voxel_size)
     timings["mesh"] = time.perf_counter() - t0
     # -- segmentation -----------------------------------------------------------------------------
     t0 = time.perf_counter()

@@ -11,7 +11,6 @@ an uninterrupted one (same device and thread count).
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -113,12 +112,16 @@ def _view_at(step: int, n: int, seed: int) -> int:
 
 
 class _Progress:
-    """A rich progress bar with the running PSNR (silent when disabled or not a terminal)."""
+    """A rich progress bar on stderr with the running PSNR (silent when disabled or not a terminal).
 
-    def __init__(self, enabled: bool, total: int, start: int) -> None:
+    ``console`` replaces the stderr console (tests pass one that records).
+    """
+
+    def __init__(self, enabled: bool, total: int, start: int, console: Any = None) -> None:
         self.bar = None
         if not enabled:
             return
+        from rich.console import Console
         from rich.progress import (
             BarColumn,
             MofNCompleteColumn,
@@ -127,6 +130,7 @@ class _Progress:
             TimeRemainingColumn,
         )
 
+        console = console if console is not None else Console(stderr=True)
         self.bar = Progress(
             TextColumn("[bold]training"),
             BarColumn(),
@@ -134,8 +138,9 @@ class _Progress:
             TextColumn("PSNR {task.fields[psnr]} dB"),
             TextColumn("{task.fields[n]} Gaussians"),
             TimeRemainingColumn(),
+            console=console,
             transient=False,
-            disable=not sys.stderr.isatty(),
+            disable=not console.is_terminal,
         )
         self.bar.start()
         self.task = self.bar.add_task("train", total=total, completed=start, psnr="--", n="--")
@@ -158,6 +163,7 @@ def train(
     checkpoint: Path | None = None,
     fingerprint: str = "",
     progress: bool = False,
+    console: Any = None,
     on_step: Callable[[int, dict[str, float]], None] | None = None,
 ) -> TrainResult:
     """Fit Gaussians to ``views``.
@@ -169,12 +175,14 @@ def train(
         extent: scene extent, m (learning rate of the centres, densification scale limits).
         checkpoint: file to save to and resume from (None: no checkpoints).
         fingerprint: identifies the inputs; a checkpoint with another one is ignored.
-        progress: show a progress bar.
+        progress: show a progress bar (on stderr, when it is a terminal).
+        console: a ``rich.console.Console`` for the progress bar instead of stderr.
         on_step: called after every completed step with ``(step, {"psnr", "loss", "n"})``.
 
     Returns:
         The trained model and its history. KeyboardInterrupt propagates after the last
-        completed step is checkpointed.
+        completed step is checkpointed. With ``checkpoint``, the final state is saved too, so
+        that an interruption in the steps after training (meshing, binding) resumes there.
     """
     device = init["means"].device
     start = 0
@@ -187,6 +195,7 @@ def train(
         stats.grad, stats.count = doc["grad"].to(device), doc["count"].to(device)
         start = int(doc["iteration"])
         history = list(doc["psnr_history"])
+        refinements = [dict(r) for r in doc.get("refinements", [])]
     else:
         model = GaussianModel(init, cfg.lrs, extent)
         stats = GradientStats(len(model), device)
@@ -197,7 +206,7 @@ def train(
         int(cfg.densify_from * cfg.iterations),
         int(cfg.densify_until * cfg.iterations),
     )
-    bar = _Progress(progress, cfg.iterations, start)
+    bar = _Progress(progress, cfg.iterations, start, console)
     step = start
     done = start
 
@@ -211,6 +220,7 @@ def train(
                 grad=stats.grad,
                 count=stats.count,
                 psnr_history=history,
+                refinements=refinements,
             )
 
     try:
@@ -268,4 +278,6 @@ def train(
         raise
     finally:
         bar.close()
+    if done > start:
+        save(done)  # the steps after training can be interrupted too
     return TrainResult(model, done, resumed_from, history, refinements)

@@ -74,6 +74,14 @@ class TSDFVolume:
         w = w.permute(0, 3, 1, 4, 2, 5).reshape(X, Y, Z)
         return t.numpy(), (w > 0).numpy()
 
+    def sample(self, points: np.ndarray) -> np.ndarray:
+        """Trilinear TSDF / trunc at world points [N, 3] m (1 outside the band and the grid)."""
+        from scipy.ndimage import map_coordinates
+
+        t, _ = self.dense()
+        idx = (np.asarray(points, np.float64) - self.origin) / self.voxel_size
+        return map_coordinates(t, idx.T, order=1, mode="constant", cval=1.0)
+
 
 def _backproject(depth: torch.Tensor, cam: Camera, stride: int) -> torch.Tensor:
     """World points [M, 3] of every ``stride``-th valid depth pixel (float64)."""

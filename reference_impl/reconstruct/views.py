@@ -276,8 +276,8 @@ def load_capture(
 
     Raises:
         InputError: no camera streams or no video, views without poses, intrinsics that
-            disagree with the images, label images of the wrong size, every label image
-            empty, fewer than two static views.
+            disagree with the images, label images of the wrong size, an empty label
+            image (all pixels 0), fewer than two static views.
     """
     ep = ds.episode(episode)
     streams = {
@@ -395,11 +395,22 @@ def load_capture(
                 "and objects needs them",
                 hint="add labels.parquet to the camera streams",
             )
-        if all(not (v.labels > 0).any() for v in with_labels):
+        empty = [v for v in with_labels if not (v.labels > 0).any()]
+        if len(empty) == len(with_labels):
             raise InputError(
                 "every label image is empty (all pixels 0): nothing to segment or bind",
                 path=ep.labels_path(with_labels[0].camera_name),
                 hint="label the robot links and objects, or check the label export",
+            )
+        if empty:
+            # an empty mask would carve the whole visual hull in its view and vote every point
+            # it sees "unlabelled"
+            keys = ", ".join(v.key for v in empty[:5]) + (", ..." if len(empty) > 5 else "")
+            raise InputError(
+                f"{len(empty)} of {len(with_labels)} label images are empty (all pixels 0): {keys}",
+                path=ep.labels_path(empty[0].camera_name),
+                where=f"frame_index {empty[0].frame_index}",
+                hint="label those frames, or leave their cameras out with --cameras",
             )
         if not segments:
             raise InputError(

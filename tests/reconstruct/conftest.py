@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from fixtures.multiview import synthesize_multiview
+from fixtures.multiview import MultiviewTruth, synthesize_multiview
 
 
 @pytest.fixture(autouse=True)
@@ -21,11 +21,17 @@ def _one_thread():
 
 
 @pytest.fixture(scope="session")
-def tiny_capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 48x36-px, 8-view capture of the two-link scene (do not modify; copy it)."""
+def tiny_scene(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, MultiviewTruth]:
+    """A 48x36-px, 8-view capture of the two-link scene and its truth (do not modify; copy it)."""
     root = tmp_path_factory.mktemp("mv") / "tiny"
-    synthesize_multiview(root, n_views=8, width=48, height=36, supersample=2)
-    return root
+    truth = synthesize_multiview(root, n_views=8, width=48, height=36, supersample=2)
+    return root, truth
+
+
+@pytest.fixture(scope="session")
+def tiny_capture(tiny_scene: tuple[Path, MultiviewTruth]) -> Path:
+    """The tiny capture's folder (do not modify; copy it)."""
+    return tiny_scene[0]
 
 
 @pytest.fixture

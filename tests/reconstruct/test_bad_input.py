@@ -88,6 +88,23 @@ def test_empty_masks(capture_copy: Path):
         load_capture(Dataset.open(capture_copy))
 
 
+def test_one_empty_mask_is_named(capture_copy: Path):
+    # an empty mask would carve the whole visual hull in its view: it is refused, not ignored
+    ds = Dataset.open(capture_copy)
+    from robogs_format.dataset import read_parquet
+
+    tab = read_parquet(ds.resolve(f"{BASE}/labels.parquet"))
+    png = tab.column("png").to_pylist()
+    png[3] = encode_label_png(np.zeros((36, 48), np.uint16))
+    table = pa.table({"frame_index": tab.column("frame_index"), "png": pa.array(png, pa.binary())})
+    with ds.edit() as w:
+        w.write_table(f"{BASE}/labels.parquet", table, kind="camera_labels")
+        w.commit()
+    with pytest.raises(InputError, match=r"1 of 8 label images are empty .*: orbit/3") as exc:
+        load_capture(Dataset.open(capture_copy))
+    assert exc.value.where == "frame_index 3" and "--cameras" in exc.value.hint
+
+
 def test_no_labels_at_all(capture_copy: Path):
     ds = Dataset.open(capture_copy)
     with ds.edit() as w:

@@ -45,11 +45,11 @@ class _Stop(Exception):
 
 
 def test_interrupt_keeps_the_dataset_and_resume_matches_an_uninterrupted_run(
-    tiny_capture: Path, tmp_path: Path
+    tiny_capture: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ):
-    a, b = tmp_path / "a", tmp_path / "b"
-    copytree(tiny_capture, a)
-    copytree(tiny_capture, b)
+    a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
+    for d in (a, b, c):
+        copytree(tiny_capture, d)
     before = _tree_digest(a)
 
     def stop_after_7(step: int, info: dict) -> None:
@@ -72,6 +72,28 @@ def test_interrupt_keeps_the_dataset_and_resume_matches_an_uninterrupted_run(
     for rel in ("robot/splats.ply", "assets/box/splats.ply", "reconstruction/mesh.ply"):
         assert (a / rel).read_bytes() == (b / rel).read_bytes(), rel
     assert Dataset.open(a).manifest["robot"]["splats"]["targets"] == ["base_link", "link1", "link2"]
+    assert resumed.refinements == fresh.refinements  # the refinement counts are checkpointed
+
+    # Ctrl-C after training (here: in the TSDF fusion) resumes without training again
+    import reference_impl.reconstruct.pipeline as pipeline
+
+    fuse = pipeline.fuse_tsdf
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline, "fuse_tsdf", interrupted)
+    before = _tree_digest(c)
+    with pytest.raises(KeyboardInterrupt):
+        reconstruct(c, _options(tmp_path / "work_c"))
+    assert _tree_digest(c) == before
+    assert torch.load(tmp_path / "work_c" / "checkpoint.pt", weights_only=True)["iteration"] == 12
+    monkeypatch.setattr(pipeline, "fuse_tsdf", fuse)
+    steps: list[int] = []
+    again = reconstruct(c, _options(tmp_path / "work_c"), on_step=lambda k, _: steps.append(k))
+    assert again.resumed_from == 12 and not steps
+    for rel in ("robot/splats.ply", "assets/box/splats.ply", "reconstruction/mesh.ply"):
+        assert (c / rel).read_bytes() == (b / rel).read_bytes(), rel
 
 
 def test_a_checkpoint_of_other_options_is_not_resumed(tiny_capture: Path, tmp_path: Path):

@@ -129,3 +129,42 @@ def test_refine_is_deterministic_per_step():
         refine(m, stats, DensifyConfig(), step=300, seed=5)
         outs.append(m.params["means"].detach().clone())
     assert torch.equal(outs[0], outs[1])
+
+
+def test_progress_bar_shows_the_running_psnr():
+    from io import StringIO
+
+    from rich.console import Console
+
+    from reference_impl.reconstruct.train import TrainConfig, train
+    from reference_impl.reconstruct.views import View
+
+    cam = Camera(
+        width=16,
+        height=12,
+        fx=14.0,
+        fy=14.0,
+        cx=8.0,
+        cy=6.0,
+        T_world_cam=torch.eye(4, dtype=torch.float64),
+    )
+    target = torch.zeros(12, 16, 3)
+    target[:, :8] = torch.tensor([0.8, 0.2, 0.1])
+    views = [View(f"c/{i}", "c", i, i, cam, target, None) for i in range(2)]
+    m = _model(6)
+    init = {k: v.detach().clone() for k, v in m.params.items()}
+    init["means"] = init["means"] * 0.1 + torch.tensor([0.0, 0.0, 1.0])
+    buf = StringIO()
+    console = Console(file=buf, force_terminal=True, width=160, color_system=None)
+    res = train(
+        views,
+        init,
+        TrainConfig(iterations=3, checkpoint_every=0, densify_from=1.0),
+        extent=1.0,
+        progress=True,
+        console=console,
+    )
+    text = buf.getvalue()
+    assert "3/3" in text and "PSNR" in text
+    assert f"PSNR {res.psnr_history[-1]:5.2f} dB" in text  # the last step's training PSNR
+    assert len(res.psnr_history) == 3

@@ -151,3 +151,35 @@ def test_narrow_band_gives_the_dense_grid_result(sphere_volume):
     a, b = extract_mesh(sphere_volume), extract_mesh(dense)
     assert len(a.faces) == len(b.faces)
     assert np.allclose(np.sort(a.vertices, axis=0), np.sort(b.vertices, axis=0), atol=1e-9)
+
+
+def _outward(mesh: trimesh.Trimesh) -> float:
+    """Fraction of the faces of a mesh around the origin whose normal points away from it."""
+    return float((np.einsum("ij,ij->i", mesh.triangles_center, mesh.face_normals) > 0).mean())
+
+
+def test_cleaning_drops_small_parts_and_turns_every_face_to_free_space(sphere_volume):
+    raw = extract_mesh(sphere_volume)
+    ref = _outward(raw)  # marching cubes faces free space (all but a sliver at most)
+    assert ref > 0.9999
+    rng = np.random.default_rng(5)
+    faces = np.asarray(raw.faces).copy()
+    flip = rng.random(len(faces)) < 0.3  # inconsistent winding, face 0 included
+    flip[0] = True
+    faces[flip] = faces[flip][:, ::-1]
+    floater = trimesh.creation.icosphere(subdivisions=0, radius=0.01).apply_translation([0.28] * 3)
+    scrambled = trimesh.util.concatenate(
+        [trimesh.Trimesh(raw.vertices, faces, process=False), floater]
+    )
+    kw = {"free_space": sphere_volume.sample, "probe_m": sphere_volume.voxel_size}
+    for opts in (kw, {}):  # by the TSDF, and (closed surface) by the volume
+        cleaned, rep = clean_mesh(scrambled, **opts)
+        assert rep.small_components == 1 and rep.components_in == 2
+        assert cleaned.is_winding_consistent and _outward(cleaned) >= ref, opts
+        assert np.median(np.abs(np.linalg.norm(cleaned.vertices, axis=1) - 0.25)) < 2e-3
+    # an open sheet (the upper cap) wound inwards: only the TSDF can tell its outside
+    cap = raw.submesh([np.flatnonzero(raw.triangles_center[:, 2] > 0.1)], append=True)
+    cap = trimesh.Trimesh(cap.vertices, np.asarray(cap.faces)[:, ::-1], process=False)
+    assert _outward(cap) < 0.001
+    cleaned, rep = clean_mesh(cap, fill_holes=False, **kw)
+    assert rep.flipped == 1 and _outward(cleaned) > 0.999
