@@ -29,6 +29,11 @@ def decode_label_png(blob: bytes, *, path: str | Path | None = None, where: str 
     """Decode a label PNG into an [H, W] uint16 array."""
     if not blob:
         raise FormatError("empty label image", path=path, where=where)
+    if blob[:8] == b"\x89PNG\r\n\x1a\n" and blob[12:16] == b"IHDR":
+        w, h = int.from_bytes(blob[16:20], "big"), int.from_bytes(blob[20:24], "big")
+        if w * h > MAX_PIXELS:
+            raise FormatError(f"label image claims {w}x{h} pixels, over the {MAX_PIXELS} limit",
+                              path=path, where=where, hint="the PNG header is corrupt")
     arr = np.frombuffer(blob, np.uint8)
     img = cv2.imdecode(arr, cv2.IMREAD_UNCHANGED)
     if img is None:

@@ -801,6 +801,12 @@ def read_label_frames(
     try:
         pf = pq.ParquetFile(path)
         for batch in pf.iter_batches(batch_size=batch_rows, columns=["frame_index", "png"]):
+            if batch.column(0).null_count or batch.column(1).null_count:
+                raise FormatError(
+                    "label table holds null frame indices or images",
+                    path=path,
+                    hint="every row needs a frame_index and a PNG; re-export the labels",
+                )
             idx = batch.column(0).to_numpy()
             hit = [k for k, i in enumerate(idx) if int(i) in want]
             if not hit:

@@ -104,6 +104,9 @@ def _parse_header(path: Path, head: bytes) -> tuple[int, int, list[tuple[str, st
             if len(tok) != 3 or tok[1] not in _PLY_TYPES or not _NAME.match(tok[2]):
                 raise FormatError(f"unsupported property {line.strip()!r}", path=path, where=f"header line {no}",
                                   hint="splat PLYs hold scalar properties only")
+            if any(tok[2] == name for name, _ in props):
+                raise FormatError(f"property {tok[2]!r} is declared twice", path=path,
+                                  where=f"header line {no}", hint="each splat column appears once")
             props.append((tok[2], _PLY_TYPES[tok[1]]))
     if not fmt_ok:
         raise FormatError("splat PLY must be binary_little_endian", path=path, where="header format line")

@@ -11,7 +11,15 @@ from dataclasses import dataclass
 
 import pyarrow as pa
 
-__all__ = ["Column", "TableSpec", "TABLES", "check_table_schema", "family_columns"]
+__all__ = [
+    "Column",
+    "TableSpec",
+    "TABLES",
+    "check_table_schema",
+    "family_columns",
+    "non_null_columns",
+    "null_problems",
+]
 
 
 @dataclass(frozen=True)
@@ -155,6 +163,9 @@ def check_table_schema(kind: str, schema: pa.Schema) -> list[str]:
         return [f"unknown table kind {kind!r}"]
     problems: list[str] = []
     names = schema.names
+    dups = sorted({n for n in names if names.count(n) > 1})
+    if dups:
+        return [f"duplicate column names {dups}"]
     for col in spec.columns:
         checks = _ARROW_OK[col.dtype]
         if col.is_family:
@@ -173,3 +184,32 @@ def check_table_schema(kind: str, schema: pa.Schema) -> list[str]:
         if not any(c(typ) for c in checks):
             problems.append(f"column {col.name!r} has type {typ}, expected {col.dtype}")
     return problems
+
+
+#: column dtypes whose nulls have no meaning (a null stamp, frame index, label id or image)
+_NOT_NULL_DTYPES = ("int64", "int32", "binary")
+
+
+def non_null_columns(kind: str, schema_names: list[str]) -> list[str]:
+    """Columns of ``kind`` present in ``schema_names`` that must not hold nulls.
+
+    These are the integer and binary columns of the spec (``t_ns``, ``frame_index``,
+    ``label_id``, ``png`` ...): a null there cannot be read as a number or an image.
+    """
+    spec = TABLES.get(kind)
+    if spec is None:
+        return []
+    return [
+        c.name
+        for c in spec.columns
+        if not c.is_family and c.dtype in _NOT_NULL_DTYPES and c.name in schema_names
+    ]
+
+
+def null_problems(kind: str, table: pa.Table) -> list[str]:
+    """Problems of nulls in the columns of ``table`` that must not hold them."""
+    return [
+        f"column {name!r} holds {table.column(name).null_count} nulls"
+        for name in non_null_columns(kind, table.schema.names)
+        if table.column(name).null_count
+    ]

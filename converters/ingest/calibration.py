@@ -33,6 +33,8 @@ import yaml
 from robogs_format.cameras import DISTORTION_COEFFS, CameraModel
 from robogs_format.errors import InputError
 
+from .yamlio import NoAliasSafeLoader, load_yaml_text
+
 __all__ = [
     "OPENCV_PIXEL_SHIFT",
     "camera_from_info_msg",
@@ -144,7 +146,11 @@ def camera_from_matrices(
             path=path,
             where=where,
         )
-    if not (0 < int(width) <= 65536 and 0 < int(height) <= 65536):
+    try:
+        width, height = int(width), int(height)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"invalid image size {width}x{height}", path=path, where=where) from None
+    if not (0 < width <= 65536 and 0 < height <= 65536):
         raise InputError(f"invalid image size {width}x{height}", path=path, where=where)
     m, d = check_distortion(model, D, path=path, where=where)
     return CameraModel(
@@ -219,8 +225,8 @@ def camera_from_info_msg(
 # ----------------------------------------------------------------------------- files
 
 
-class _OpenCVLoader(yaml.SafeLoader):
-    """SafeLoader that also builds ``!!opencv-matrix`` nodes (as dicts)."""
+class _OpenCVLoader(NoAliasSafeLoader):
+    """SafeLoader (no aliases) that also builds ``!!opencv-matrix`` nodes (as dicts)."""
 
 
 def _opencv_matrix(loader: yaml.SafeLoader, node: yaml.Node) -> dict[str, Any]:
@@ -266,17 +272,12 @@ def _read_yaml(path: Path, text: str, name: str | None) -> CameraModel:
     opencv = text.lstrip().startswith("%YAML:")
     if opencv:  # OpenCV writes '%YAML:1.0', which PyYAML rejects as a directive
         text = re.sub(r"^\s*%YAML:[0-9.]+[^\n]*\n", "", text, count=1)
-    try:
-        doc = yaml.load(text, Loader=_OpenCVLoader)  # noqa: S506 - SafeLoader subclass
-    except yaml.YAMLError as exc:
-        raise InputError(
-            f"calibration is not valid YAML ({str(exc).splitlines()[0]})", path=path
-        ) from None
+    doc = load_yaml_text(text, path=path, what="calibration", loader=_OpenCVLoader)
     if not isinstance(doc, dict):
         raise InputError("calibration YAML must be a mapping", path=path)
     try:
         width, height = int(doc["image_width"]), int(doc["image_height"])
-    except (KeyError, TypeError, ValueError):
+    except (KeyError, TypeError, ValueError, OverflowError):
         raise InputError("calibration has no image_width/image_height", path=path) from None
     K = _matrix(doc, "camera_matrix", path)
     D = _matrix(doc, "distortion_coefficients", path) if "distortion_coefficients" in doc else []
@@ -351,6 +352,13 @@ def read_calibration(path: str | Path, *, name: str | None = None) -> CameraMode
     """
     p = Path(path)
     text = _read_text(p)
-    if p.suffix.lower() == ".ini" or text.lstrip().startswith("["):
-        return _read_ini(p, text, name)
-    return _read_yaml(p, text, name)
+    try:
+        if p.suffix.lower() == ".ini" or text.lstrip().startswith("["):
+            return _read_ini(p, text, name)
+        return _read_yaml(p, text, name)
+    except (TypeError, ValueError, OverflowError, AttributeError) as exc:
+        raise InputError(
+            f"calibration holds a value of the wrong type ({type(exc).__name__}: {str(exc)[:120]})",
+            path=p,
+            hint="image_width/image_height are integers; matrices hold numbers (rows, cols, data)",
+        ) from None

@@ -17,10 +17,18 @@ A channel with no usable decoder is listed in ``provenance.undecodable`` with it
 count. Chunk CRCs are checked, so corrupt bytes stop the conversion with the topic and log time
 of the last message read; a file without a summary (truncated while recording) is refused with
 a hint to run ``mcap recover``.
+
+Hostile files cannot make the reader allocate what they merely claim: reads never ask for more
+bytes than the file has left (:class:`_ClampedFile`), a chunk index whose chunk lies outside the
+file or claims more than :data:`~converters.ingest.decompress.MAX_CHUNK_BYTES` is refused up
+front, and chunk decompression itself stops at that limit
+(:func:`~converters.ingest.decompress.capped_decompression`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import struct
 from collections.abc import Callable
@@ -32,6 +40,7 @@ from robogs_format.errors import InputError, RobogsError
 from ..registry import register_converter
 from . import cdr_fast, foxglove
 from .context import IngestContext
+from .decompress import MAX_CHUNK_BYTES, DecompressionLimitError, capped_decompression
 from .messages import MessageIngest, TopicInfo
 
 __all__ = ["convert_mcap", "detect_mcap", "channel_decoder"]
@@ -49,6 +58,65 @@ def detect_mcap(path: Path) -> bool:
         return fh.read(8) == _MAGIC
 
 
+class _ClampedFile:
+    """A read-only binary file whose ``read(n)`` never asks for more than the bytes left.
+
+    ``BufferedReader.read(n)`` allocates ``n`` bytes before reading, so a record length of
+    2**62 read from a damaged file would be a MemoryError instead of a short read.
+    """
+
+    def __init__(self, fh: Any, size: int) -> None:
+        self._fh = fh
+        self._size = size
+
+    def read(self, n: int | None = -1) -> bytes:
+        left = max(self._size - self._fh.tell(), 0)
+        return self._fh.read(left if n is None or n < 0 or n > left else n)
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self._fh.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self._fh.tell()
+
+    def seekable(self) -> bool:
+        return True
+
+    def readable(self) -> bool:
+        return True
+
+
+def _check_chunk_indexes(summary: Any, size: int, src: Path) -> None:
+    """Refuse chunk indexes that point outside the file or claim more than the chunk limit."""
+    for ci in summary.chunk_indexes:
+        where = f"chunk at byte {ci.chunk_start_offset}"
+        if ci.chunk_start_offset + ci.chunk_length > size or ci.compressed_size > ci.chunk_length:
+            raise InputError(
+                "MCAP chunk index points past the end of the file",
+                path=src,
+                where=where,
+                hint="the file is truncated or damaged; `mcap recover` may salvage it",
+            )
+        if ci.uncompressed_size > MAX_CHUNK_BYTES:
+            raise DecompressionLimitError(
+                f"MCAP chunk claims {ci.uncompressed_size} bytes uncompressed, over the "
+                f"{MAX_CHUNK_BYTES}-byte limit",
+                path=src,
+                where=where,
+                hint="the file is corrupt or hostile; real recorders write chunks of a few MiB",
+            )
+
+
+def _misfit(src: Path, topic: str, log_time: int, exc: Exception) -> InputError:
+    """A decoded message that lacks the fields of its type (its stored schema is wrong)."""
+    return InputError(
+        f"message does not fit its type ({type(exc).__name__}: {str(exc)[:160]})",
+        path=src,
+        where=f"topic {topic} log time {log_time}",
+        hint="the message definition stored in the file does not match the topic's type",
+    )
+
+
 def _mcap_errors() -> tuple[type[BaseException], ...]:
     from mcap.exceptions import McapError
 
@@ -61,6 +129,7 @@ def _mcap_errors() -> tuple[type[BaseException], ...]:
         KeyError,
         IndexError,
         RuntimeError,
+        OverflowError,
     ]
     try:
         from zstandard import ZstdError
@@ -135,6 +204,12 @@ def _message_type(schema: Any) -> str:
 
 def convert_mcap(src: Path, ctx: IngestContext) -> None:
     """Convert a plain MCAP file (ROS 2 CDR, ROS 1, JSON/Foxglove, protobuf when available)."""
+    with capped_decompression():
+        _convert_mcap(src, ctx)
+
+
+def _convert_mcap(src: Path, ctx: IngestContext) -> None:
+    """:func:`convert_mcap` with chunk decompression already capped."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
@@ -143,10 +218,11 @@ def convert_mcap(src: Path, ctx: IngestContext) -> None:
     where = "while reading the summary"
     try:
         fh = open(src, "rb")
+        size = src.stat().st_size
     except OSError as exc:
         raise InputError(f"cannot open MCAP ({exc.strerror})", path=src) from None
     try:
-        reader = make_reader(fh, validate_crcs=True)
+        reader = make_reader(_ClampedFile(fh, size), validate_crcs=True)
         try:
             header = reader.get_header()
             summary = reader.get_summary()
@@ -163,6 +239,7 @@ def convert_mcap(src: Path, ctx: IngestContext) -> None:
                 path=src,
                 hint="run `mcap recover` on it, then convert the recovered file",
             )
+        _check_chunk_indexes(summary, size, src)
         unknown = sorted({ci.compression for ci in summary.chunk_indexes} - {"", "zstd", "lz4"})
         if unknown:
             raise InputError(
@@ -185,8 +262,9 @@ def convert_mcap(src: Path, ctx: IngestContext) -> None:
         for cid, ch in summary.channels.items():
             schema = summary.schemas.get(ch.schema_id) if ch.schema_id else None
             schema_of[cid] = schema
-            try:
-                decoders[cid] = channel_decoder(ch.message_encoding, schema, ros2)
+            try:  # the vendored ROS IDL parser prints its complaints; the note below says it
+                with contextlib.redirect_stderr(io.StringIO()):
+                    decoders[cid] = channel_decoder(ch.message_encoding, schema, ros2)
             except Exception as exc:  # noqa: BLE001 - a schema we cannot parse is reported, not fatal
                 decoders[cid] = None
                 prov.note(
@@ -254,13 +332,20 @@ def convert_mcap(src: Path, ctx: IngestContext) -> None:
                         )
                         ctx.progress.advance()
                         continue
-                    ingest.handle(channel.topic, message.log_time, msg)
+                    try:
+                        ingest.handle(channel.topic, message.log_time, msg)
+                    except (AttributeError, TypeError) as exc:
+                        raise _misfit(src, channel.topic, message.log_time, exc) from None
                     ctx.progress.advance()
                 ctx.progress.stop()
             ingest.finish()
         except BaseException:
             ingest.abort()
             raise
+    except DecompressionLimitError as exc:
+        if exc.path:
+            raise
+        raise DecompressionLimitError(exc.message, path=src, where=where, hint=exc.hint) from None
     except RobogsError:
         raise
     except errors as exc:

@@ -16,13 +16,13 @@ import struct
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from robogs_format.errors import InputError, RobogsError
 
 from ..registry import register_converter
 from .context import IngestContext
+from .decompress import DecompressionLimitError, capped_decompression
 from .messages import MessageIngest, TopicInfo
+from .yamlio import read_yaml
 
 __all__ = [
     "convert_ros1",
@@ -64,6 +64,7 @@ def _reader_errors() -> tuple[type[BaseException], ...]:
         sqlite3.Error,
         RuntimeError,
         AssertionError,
+        OverflowError,
     ]
     try:
         from rosbags.typesys import TypesysError
@@ -76,16 +77,7 @@ def _reader_errors() -> tuple[type[BaseException], ...]:
 
 def _read_metadata(folder: Path) -> dict[str, Any]:
     meta = folder / "metadata.yaml"
-    try:
-        if meta.stat().st_size > _MAX_META_BYTES:
-            raise InputError("metadata.yaml is too large", path=meta)
-        doc = yaml.safe_load(meta.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputError(f"cannot read metadata.yaml ({exc.strerror})", path=meta) from None
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise InputError(
-            f"metadata.yaml is not valid YAML ({str(exc).splitlines()[0]})", path=meta
-        ) from None
+    doc = read_yaml(meta, what="metadata.yaml", max_bytes=_MAX_META_BYTES)
     info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
     if not isinstance(info, dict):
         raise InputError(
@@ -201,13 +193,27 @@ def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
                         )
                         ctx.progress.advance()
                         continue
-                    ingest.handle(conn.topic, log_time, msg)
+                    try:
+                        ingest.handle(conn.topic, log_time, msg)
+                    except (AttributeError, TypeError) as exc:
+                        raise InputError(
+                            f"message does not fit its type ({type(exc).__name__}: "
+                            f"{str(exc)[:160]})",
+                            path=src,
+                            where=f"topic {conn.topic} log time {log_time}",
+                            hint="the message definition stored in the bag does not match "
+                            "the topic's type",
+                        ) from None
                     ctx.progress.advance()
                 ctx.progress.stop()
             ingest.finish()
         except BaseException:
             ingest.abort()
             raise
+    except DecompressionLimitError as exc:
+        if exc.path:
+            raise
+        raise DecompressionLimitError(exc.message, path=src, where=where, hint=exc.hint) from None
     except RobogsError:
         raise
     except errors as exc:
@@ -243,7 +249,8 @@ def convert_ros1(src: Path, ctx: IngestContext) -> None:
             hint="ROS 2 bags are folders with metadata.yaml; MCAP files use --from mcap",
         )
     ctx.provenance.extra["storage"] = "rosbag1"
-    _convert([src], src, ctx)
+    with capped_decompression():
+        _convert([src], src, ctx)
 
 
 def open_bag(paths: list[Path]) -> Any:
@@ -260,7 +267,8 @@ def convert_ros2(src: Path, ctx: IngestContext) -> None:
     if facts["direct"]:
         prov.extra["metadata_counts"] = facts["metadata_counts"]
         prov.note("storage files read directly; metadata.yaml used for its listing only")
-    _convert(paths, src, ctx)
+    with capped_decompression():
+        _convert(paths, src, ctx)
 
 
 register_converter(

@@ -61,11 +61,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
-import yaml
 
 from robogs_format.dataset import Dataset
 from robogs_format.errors import InputError, RobogsError
 from robogs_format.urdf import load_urdf
+
+from .yamlio import read_yaml
 
 __all__ = [
     "ColumnMap",
@@ -92,6 +93,7 @@ _EFFORT_UNITS = {
     "a": "A",
 }
 _MAX_BACK_FRACTION = 0.01
+_MAX_MAP_BYTES = 1 << 20
 _EXAMPLES = 5
 
 
@@ -216,23 +218,30 @@ def read_mapping(path: str | Path, joint_names: list[str]) -> ColumnMap:
     """Read a YAML column map (format in the module docstring).
 
     Raises:
-        InputError: unreadable YAML, unknown units, joints not in the URDF, missing keys.
+        InputError: unreadable YAML, unknown units, joints not in the URDF, missing keys,
+            values of the wrong type.
     """
     path = Path(path)
+    doc = read_yaml(path, what="mapping", max_bytes=_MAX_MAP_BYTES)
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError("mapping file not found", path=path) from None
-    except yaml.YAMLError as exc:
+        return _parse_mapping(doc, path, joint_names)
+    except (TypeError, ValueError, AttributeError, OverflowError) as exc:
         raise InputError(
-            f"mapping is not valid YAML ({str(exc).splitlines()[0]})", path=path
+            f"mapping holds a value of the wrong type ({type(exc).__name__}: {str(exc)[:120]})",
+            path=path,
+            hint="numbers for gap_s, epoch_ns, torque_constant, gear_ratio; a mapping or a "
+            "column name for time and each joint's position, velocity and effort",
         ) from None
+
+
+def _parse_mapping(doc: Any, path: Path, joint_names: list[str]) -> ColumnMap:
+    """The column map of a parsed YAML document (see :func:`read_mapping`)."""
     if not isinstance(doc, dict):
         raise InputError("mapping must be a YAML mapping with 'time' and 'joints'", path=path)
     hold = _read_hold(doc.get("hold"), path, joint_names)
     if doc.get("joints") is None and doc.get("time") is None and hold:
-        gap = doc.get("gap_s")  # only joints held: automatic layouts for the rest
-        return ColumnMap("auto", "", "s", {}, gap_s=None if gap is None else float(gap), hold=hold)
+        gap = _gap_s(doc.get("gap_s"), path)  # only joints held: automatic layouts for the rest
+        return ColumnMap("auto", "", "s", {}, gap_s=gap, hold=hold)
     t = doc.get("time")
     tcol, tspec = _col_spec(t, path, "time")
     if tcol is None:
@@ -311,6 +320,12 @@ def read_mapping(path: str | Path, joint_names: list[str]) -> ColumnMap:
                         hint="add torque_constant and gear_ratio, or give a torque column",
                     )
                 escale = float(kt) * float(gear)
+                if not (math.isfinite(escale) and escale != 0.0):
+                    raise InputError(
+                        "torque_constant * gear_ratio must be a finite, non-zero number",
+                        path=path,
+                        where=f"{w}/effort",
+                    )
                 eunit = "A"
             units["effort"] = eunit
         joints[j] = JointColumns(pcol, vcol, ecol, pscale, vscale, escale, units)
@@ -323,17 +338,30 @@ def read_mapping(path: str | Path, joint_names: list[str]) -> ColumnMap:
             hint=f"URDF joints: {joint_names}; a joint the log leaves out goes under "
             "'hold: {joint: position}'",
         )
-    gap = doc.get("gap_s")
-    return ColumnMap(
-        "map",
-        tcol,
-        tunit,
-        joints,
-        int(tspec.get("epoch_ns", 0)),
-        kind,
-        None if gap is None else float(gap),
-        hold,
-    )
+    epoch = int(tspec.get("epoch_ns", 0))
+    if not -(2**62) <= epoch <= 2**62:
+        raise InputError(
+            f"epoch_ns {epoch} is outside the int64 nanosecond range",
+            path=path,
+            where="time/epoch_ns",
+            hint="epoch_ns is the dataset-clock stamp (ns) of the log's time zero",
+        )
+    return ColumnMap("map", tcol, tunit, joints, epoch, kind, _gap_s(doc.get("gap_s"), path), hold)
+
+
+def _gap_s(value: Any, path: Path) -> float | None:
+    """The ``gap_s`` of a map: None, or a positive finite number of seconds."""
+    if value is None:
+        return None
+    gap = float(value)
+    if not (math.isfinite(gap) and 0.0 < gap <= 1e6):
+        raise InputError(
+            f"gap_s must be a positive number of seconds (at most 1e6), got {value!r}",
+            path=path,
+            where="gap_s",
+            hint="gap_s is the time jump (s) that starts a new segment",
+        )
+    return gap
 
 
 def _read_hold(doc: Any, path: Path, joint_names: list[str]) -> dict[str, float]:
@@ -631,10 +659,12 @@ def _to_float(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _to_ns(values: np.ndarray, unit: str) -> tuple[np.ndarray, np.ndarray]:
     """Exact int64 ns from decimal text (or numbers); mask of unparseable/NaN entries."""
     scale = _TIME_SCALE[unit]
+    limit = (2**63 - 1) // scale  # larger magnitudes do not fit int64 nanoseconds
     if values.dtype.kind in "iu":
-        return values.astype(np.int64) * scale, np.zeros(len(values), dtype=bool)
+        ok = (values <= limit) & (values >= -limit)
+        return np.where(ok, values, 0).astype(np.int64) * scale, ~ok
     if values.dtype.kind == "f":
-        ok = np.isfinite(values)
+        ok = np.isfinite(values) & (np.abs(values) < limit)
         return np.where(ok, np.round(np.where(ok, values, 0.0) * scale), 0).astype(np.int64), ~ok
     out = np.zeros(len(values), dtype=np.int64)
     bad = np.zeros(len(values), dtype=bool)
@@ -642,8 +672,15 @@ def _to_ns(values: np.ndarray, unit: str) -> tuple[np.ndarray, np.ndarray]:
     for i, s in enumerate(np.char.strip(values.astype(str))):
         m = re.fullmatch(r"([+-]?)(\d*)(?:\.(\d*))?", s)
         if m and (m.group(2) or m.group(3)):
+            whole = (m.group(2) or "0").lstrip("0") or "0"
+            if len(whole) > 19:  # beyond int64 in any unit
+                bad[i] = True
+                continue
             frac = (m.group(3) or "")[:digits].ljust(digits, "0") if digits else ""
-            v = int(m.group(2) or "0") * scale + (int(frac) if frac else 0)
+            v = int(whole) * scale + (int(frac) if frac else 0)
+            if v >= 2**63:
+                bad[i] = True
+                continue
             out[i] = -v if m.group(1) == "-" else v
             continue
         try:
@@ -651,7 +688,7 @@ def _to_ns(values: np.ndarray, unit: str) -> tuple[np.ndarray, np.ndarray]:
         except ValueError:
             bad[i] = True
             continue
-        if not math.isfinite(f):
+        if not math.isfinite(f) or abs(f) >= limit:
             bad[i] = True
         else:
             out[i] = int(round(f * scale))

@@ -85,25 +85,42 @@ def read_stamps_csv(path: Path) -> dict[int, int]:
     except OSError as exc:
         raise InputError(f"cannot read stamps CSV ({exc.strerror})", path=path) from None
     out: dict[int, int] = {}
+    n = 1
     with fh:
-        reader = csv.DictReader(fh)
-        if reader.fieldnames is None or not {"frame_index", "t_ns"} <= {
-            f.strip() for f in reader.fieldnames
-        }:
-            raise InputError(
-                "stamps CSV needs a header with frame_index,t_ns", path=path, where="line 1"
-            )
-        for n, row in enumerate(reader, 2):
-            row = {k.strip(): v for k, v in row.items() if k is not None}
-            try:
-                i, t = int(row["frame_index"]), int(row["t_ns"])
-            except (TypeError, ValueError):
+        try:
+            reader = csv.DictReader(fh)
+            if reader.fieldnames is None or not {"frame_index", "t_ns"} <= {
+                f.strip() for f in reader.fieldnames
+            }:
                 raise InputError(
-                    "frame_index and t_ns must be integers", path=path, where=f"line {n}"
-                ) from None
-            if i in out:
-                raise InputError(f"frame_index {i} appears twice", path=path, where=f"line {n}")
-            out[i] = t
+                    "stamps CSV needs a header with frame_index,t_ns", path=path, where="line 1"
+                )
+            for n, row in enumerate(reader, 2):
+                row = {k.strip(): v for k, v in row.items() if k is not None}
+                try:
+                    i, t = int(row["frame_index"]), int(row["t_ns"])
+                except (TypeError, ValueError):
+                    raise InputError(
+                        "frame_index and t_ns must be integers", path=path, where=f"line {n}"
+                    ) from None
+                if not (0 <= i < 2**63 and -(2**63) <= t < 2**63):
+                    raise InputError(
+                        "frame_index or t_ns is out of the int64 range",
+                        path=path,
+                        where=f"line {n}",
+                        hint="frame_index counts from 0; t_ns is nanoseconds",
+                    )
+                if i in out:
+                    raise InputError(f"frame_index {i} appears twice", path=path, where=f"line {n}")
+                out[i] = t
+        except UnicodeDecodeError:
+            raise InputError(
+                "stamps CSV is not UTF-8 text", path=path, where=f"after line {n}"
+            ) from None
+        except csv.Error as exc:
+            raise InputError(
+                f"stamps CSV is malformed ({exc})", path=path, where=f"line {n + 1}"
+            ) from None
     return out
 
 

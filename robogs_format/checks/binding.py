@@ -2,8 +2,8 @@
 
 * ``B001`` measures each bound Gaussian's distance to its face plus offset at the rest state.
 * ``B002``–``B006`` re-render every ``stride``-th frame of every labelled camera
-  (:mod:`robogs_format.rerender`): label IoU, boundary distance (px and mm), photometric match,
-  the camera's time offset and a systematic camera displacement.
+  (:mod:`robogs_format.rerender`): label IoU, boundary distance (px and mm), photometric match
+  (PSNR against a floor), the camera's time offset and a systematic camera displacement.
 * ``B007``–``B011`` report inputs the re-render cannot trust: bad splat values, unnormalised
   quaternions, degenerate cameras, label ids without a segment, targets without labels.
 
@@ -748,23 +748,32 @@ def _boundary(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 @check(
     "B004",
     group="binding",
-    severity="info",
+    severity="warning",
     title="re-rendered colour matches the video",
-    quantity="PSNR of the re-rendered foreground against the video frames",
+    quantity="mean PSNR of the re-rendered foreground (alpha >= 0.5) against the video frames, "
+    "flagged below the floor",
     unit="dB",
-    hint="low PSNR with good labels points at colour (exposure, white balance, SH) rather than geometry",
+    budget="binding.psnr_min_db",
+    hint="low PSNR with good labels points at colour rather than geometry: exposure, white balance, "
+    "SH coefficients, or splat colours stored in linear RGB instead of the images' colour space (sRGB)",
 )
 def _psnr(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    floor = ctx.budget("binding.psnr_min_db")
     for job in _camera_jobs(ctx):
         ps = _pass(ctx, job)
         ok = np.isfinite(ps.psnr)
         if ps.skipped or not ok.any():
             continue
+        mean = float(np.mean(ps.psnr[ok]))
+        if mean >= floor:
+            continue
         k = int(np.flatnonzero(ok)[np.argmin(ps.psnr[ok])])
         yield chk.finding(
-            f"re-rendered colour has PSNR {float(np.mean(ps.psnr[ok])):.2f} dB over {int(ok.sum())} frames "
-            f"(foreground only; worst frame {int(ps.frame_index[k])}: {ps.psnr[k]:.2f} dB)",
-            value=float(np.mean(ps.psnr[ok])),
+            f"re-rendered colour has PSNR {mean:.2f} dB over {int(ok.sum())} frames, below the "
+            f"{floor:g} dB floor (foreground only; worst frame {int(ps.frame_index[k])}: "
+            f"{ps.psnr[k]:.2f} dB)",
+            value=mean,
+            budget=floor,
             episode=job.ep.id,
             stream=job.stream,
             frame=int(ps.frame_index[k]),

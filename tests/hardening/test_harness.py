@@ -1,0 +1,61 @@
+"""The hardening harness sees each kind of breach (so a passing fuzz run means something)."""
+
+from __future__ import annotations
+
+import pytest
+
+from robogs_format.cli import main as cli_main
+
+from .harness import run_inprocess, run_subprocess
+from .seeds import Seeds
+
+
+@pytest.fixture
+def fake_verb(monkeypatch: pytest.MonkeyPatch) -> str:
+    monkeypatch.setitem(cli_main.VERBS, "fake", ("hardening.fake_verb", "misbehaves on purpose"))
+    return "fake"
+
+
+@pytest.mark.parametrize(
+    ("how", "problem", "rc"),
+    [
+        ("ok", None, 0),
+        ("finding", None, 1),
+        ("user_error", None, 2),
+        ("crash", "traceback", None),
+        ("exit3", "exit code", 3),
+        ("silent2", "unclear error", 2),
+    ],
+)
+def test_inprocess_verdicts(fake_verb: str, how: str, problem: str | None, rc: int | None) -> None:
+    v = run_inprocess([fake_verb, how])
+    assert (v.problem, v.rc) == (problem, rc), v.describe()
+    if how == "user_error":
+        assert v.stderr == "robogs fake: error: x.bag: byte 3: bad input (hint: fix it)\n"
+    if how == "crash":
+        assert "KeyError: 'missing'" in v.detail
+
+
+def test_inprocess_cpu_alarm_stops_a_spin(fake_verb: str) -> None:
+    v = run_inprocess([fake_verb, "spin"], cpu_limit_s=0.5)
+    assert v.problem == "hang" and 0.4 < v.cpu_s < 5, v.describe()
+
+
+def test_inprocess_check_crash_is_a_breach(seeds: Seeds, monkeypatch: pytest.MonkeyPatch) -> None:
+    from robogs_format.checks import schema
+
+    def boom(*args, **kwargs):
+        raise ZeroDivisionError("planted")
+
+    monkeypatch.setattr(schema, "check_table_schema", boom)
+    v = run_inprocess(["validate", seeds.dataset, "--json", "--select", "S003"])
+    assert v.problem == "check crash" and "planted" in v.detail, v.describe()
+
+
+def test_subprocess_limits(seeds: Seeds) -> None:
+    ok = run_subprocess(["validate", seeds.dataset, "--json", "--quick"])
+    assert ok.ok and ok.rc == 0 and 20e6 < ok.peak_rss < 2e9, ok.describe()
+    hang = run_subprocess(["validate", seeds.dataset, "--json"], cpu_limit_s=1)
+    assert hang.problem == "hang" and hang.rc is not None and hang.rc < 0, hang.describe()
+    mem = run_subprocess(["validate", seeds.dataset, "--json", "--quick"], mem_limit=30 * 2**20)
+    assert mem.problem == "memory", mem.describe()
