@@ -1,6 +1,6 @@
 """Default budgets (tolerances) of the validator, each with its reason.
 
-Budgets are in mm, ms, px or plain ratios. A dataset may override any of them
+Budgets are in mm, ms, px, dB or plain ratios. A dataset may override any of them
 in ``manifest.json`` under ``budgets``; users may override them again on the
 command line. Names are stable and listed in ``spec/FORMAT.md``.
 """
@@ -47,6 +47,7 @@ DEFAULT_BUDGETS: dict[str, Budget] = {
         Budget("binding.boundary_px", 1.5, "px", "mean label boundary distance of the re-render"),
         Budget("binding.boundary_mm", 2.0, "mm", "boundary distance converted to metric at the object depth"),
         Budget("binding.extrinsic_mm", 2.0, "mm", "systematic boundary shift expressed as camera pose error"),
+        Budget("binding.psnr_min_db", 20.0, "dB", "floor on the mean foreground PSNR of the re-rendered colour; the clean synthetic scenes give 26-28 dB (21.5 dB at --scale 0.25), splats in linear instead of image (sRGB) colour 12-14 dB"),
     ]
 }
 
