@@ -38,7 +38,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--force", action="store_true", help="replace an existing dataset at OUT")
     g = parser.add_argument_group("bags and MCAP")
-    g.add_argument("--map", type=Path, metavar="YAML", help="topic -> role mapping (YAML); for a tabular joint log, its column mapping")
+    g.add_argument(
+        "--map",
+        type=Path,
+        metavar="YAML",
+        help="topic -> role mapping (YAML); for a tabular joint log, its column mapping",
+    )
     g.add_argument(
         "--topic",
         action="append",

@@ -115,8 +115,9 @@ class Binding:
                 a for a, e in sorted(dataset.assets.items()) if "splats" in e
             ]
         self.targets: list[BoundTarget] = []
-        parts: dict[str, list[Any]] = {k: [] for k in ("means", "quats", "scales", "opac", "sh", "tid", "face",
-                                                          "uv", "off")}
+        parts: dict[str, list[Any]] = {
+            k: [] for k in ("means", "quats", "scales", "opac", "sh", "tid", "face", "uv", "off")
+        }
         self._rest_links: dict[str, np.ndarray] = {}
         self._rest_objects: dict[str, np.ndarray] = {}
         self._chain = None
@@ -132,7 +133,9 @@ class Binding:
             if bad.any():
                 raise FormatError(
                     f"{int(bad.sum())} Gaussians of {owner!r} have bind_id outside 0..{len(entry['targets']) - 1}",
-                    path=dataset.resolve(entry["path"]), where="bind_id")
+                    path=dataset.resolve(entry["path"]),
+                    where="bind_id",
+                )
             parts["means"].append(s.means)
             parts["quats"].append(s.quats)
             parts["scales"].append(s.log_scales)
@@ -143,19 +146,32 @@ class Binding:
             parts["uv"].append(s.bind_uv)
             parts["off"].append(s.bind_offset)
         if len(kinds) > 1:
-            raise FormatError("cannot mix 3DGS and 2DGS splats in one scene", path=dataset.manifest_path)
+            raise FormatError(
+                "cannot mix 3DGS and 2DGS splats in one scene", path=dataset.manifest_path
+            )
         if not owners:
-            raise FormatError("dataset has no splats", path=dataset.manifest_path,
-                              hint="run robogs reconstruct, or add splats with the writer")
+            raise FormatError(
+                "dataset has no splats",
+                path=dataset.manifest_path,
+                hint="run robogs reconstruct, or add splats with the writer",
+            )
         ks = {p.shape[1] for p in parts["sh"]}
         kmax = max(ks)
-        sh = [np.concatenate([p, np.zeros((p.shape[0], kmax - p.shape[1], 3), p.dtype)], 1) for p in parts["sh"]]
+        sh = [
+            np.concatenate([p, np.zeros((p.shape[0], kmax - p.shape[1], 3), p.dtype)], 1)
+            for p in parts["sh"]
+        ]
 
         def t(x: Any, dt: torch.dtype = dtype) -> torch.Tensor:
             return torch.as_tensor(np.concatenate(x), dtype=dt, device=self.device)
 
-        self.rest = Gaussians(t(parts["means"]), quat_normalize(t(parts["quats"])), t(parts["scales"]),
-                              t(parts["opac"]), torch.as_tensor(np.concatenate(sh), dtype=dtype, device=self.device))
+        self.rest = Gaussians(
+            t(parts["means"]),
+            quat_normalize(t(parts["quats"])),
+            t(parts["scales"]),
+            t(parts["opac"]),
+            torch.as_tensor(np.concatenate(sh), dtype=dtype, device=self.device),
+        )
         self.target_index = t(parts["tid"], torch.long)
         self.bind_face = t(parts["face"], torch.long)
         self.bind_uv = t(parts["uv"])
@@ -170,15 +186,22 @@ class Binding:
             self._rest_links[name] = np.zeros(0)
             self._rest_q = rest.get("joint_positions")
             if self._rest_q is None:
-                raise FormatError("robot splats have no rest joint_positions", path=self.dataset.manifest_path,
-                                  where="robot/splats/rest", hint="record the joint state the splats were captured at")
+                raise FormatError(
+                    "robot splats have no rest joint_positions",
+                    path=self.dataset.manifest_path,
+                    where="robot/splats/rest",
+                    hint="record the joint state the splats were captured at",
+                )
             return BoundTarget("robot_link", name, owner)
         kind = self.dataset.assets[owner]["kind"]
         if kind == "object":
             pose = (rest.get("object_poses") or {}).get(name)
             if pose is None:
-                raise FormatError(f"object {name!r} splats have no rest pose", path=self.dataset.manifest_path,
-                                  where=f"assets/{owner}/splats/rest/object_poses")
+                raise FormatError(
+                    f"object {name!r} splats have no rest pose",
+                    path=self.dataset.manifest_path,
+                    where=f"assets/{owner}/splats/rest/object_poses",
+                )
             self._rest_objects[name] = np.asarray(pose, dtype=np.float64)
             return BoundTarget("object", name, owner)
         return BoundTarget("static", name, owner)
@@ -197,10 +220,15 @@ class Binding:
             cols = [f"position.{j}" for j in self.chain.joint_names]
             missing = [c for c in cols if c not in tab.column_names]
             if missing:
-                raise FormatError(f"joint_states lacks {', '.join(missing)}", path=self.episode.table_path("joint_states"),
-                                  hint="record every actuated joint of the URDF")
+                raise FormatError(
+                    f"joint_states lacks {', '.join(missing)}",
+                    path=self.episode.table_path("joint_states"),
+                    hint="record every actuated joint of the URDF",
+                )
             t = torch.as_tensor(tab.column("t_ns").to_numpy().astype(np.int64))
-            q = torch.as_tensor(np.stack([tab.column(c).to_numpy() for c in cols], -1), dtype=torch.float64)
+            q = torch.as_tensor(
+                np.stack([tab.column(c).to_numpy() for c in cols], -1), dtype=torch.float64
+            )
             self._joint_stream = (t, q)
         return self._joint_stream
 
@@ -209,11 +237,18 @@ class Binding:
             tab = self.episode.table("object_poses")
             m = np.asarray(tab.column("object").to_pylist()) == name
             if not m.any():
-                raise FormatError(f"no poses for object {name!r}", path=self.episode.table_path("object_poses"))
-            cols = {c: tab.column(c).to_numpy()[m] for c in ("t_ns", "x", "y", "z", "qw", "qx", "qy", "qz")}
-            self._object_streams[name] = (cols["t_ns"].astype(np.int64),
-                                          np.stack([cols["x"], cols["y"], cols["z"]], -1),
-                                          np.stack([cols["qw"], cols["qx"], cols["qy"], cols["qz"]], -1))
+                raise FormatError(
+                    f"no poses for object {name!r}", path=self.episode.table_path("object_poses")
+                )
+            cols = {
+                c: tab.column(c).to_numpy()[m]
+                for c in ("t_ns", "x", "y", "z", "qw", "qx", "qy", "qz")
+            }
+            self._object_streams[name] = (
+                cols["t_ns"].astype(np.int64),
+                np.stack([cols["x"], cols["y"], cols["z"]], -1),
+                np.stack([cols["qw"], cols["qx"], cols["qy"], cols["qz"]], -1),
+            )
         return self._object_streams[name]
 
     # -- motion --------------------------------------------------------------------------
@@ -226,10 +261,15 @@ class Binding:
             t, q = self._joints()
             q_t = interp_linear(torch.tensor([int(t_ns)]), t, q, outside="clamp")[0]
             try:
-                q0 = torch.tensor([float(self._rest_q[j]) for j in chain.joint_names], dtype=torch.float64)
+                q0 = torch.tensor(
+                    [float(self._rest_q[j]) for j in chain.joint_names], dtype=torch.float64
+                )
             except KeyError as exc:
-                raise FormatError(f"rest joint_positions lacks joint {exc.args[0]!r}",
-                                  path=self.dataset.manifest_path, where="robot/splats/rest") from None
+                raise FormatError(
+                    f"rest joint_positions lacks joint {exc.args[0]!r}",
+                    path=self.dataset.manifest_path,
+                    where="robot/splats/rest",
+                ) from None
             T = chain.forward(torch.stack([q_t, q0]))  # [2, L, 4, 4]
             idx = [chain.link_index(self.targets[i].name) for i in link_ids]
             out[link_ids] = T[0, idx] @ torch.linalg.inv(T[1, idx])
@@ -276,7 +316,8 @@ def _pose_to_T(p: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
     return T
 
 
-def pose_splats(dataset: Dataset, t_ns: int, *, episode: str | None = None,
-                device: str | torch.device = "cpu") -> Gaussians:
+def pose_splats(
+    dataset: Dataset, t_ns: int, *, episode: str | None = None, device: str | torch.device = "cpu"
+) -> Gaussians:
     """All bound Gaussians of ``dataset`` posed at ``t_ns`` (see :class:`Binding`)."""
     return Binding(dataset, episode, device=device).pose(t_ns)

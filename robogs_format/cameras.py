@@ -14,7 +14,12 @@ import numpy as np
 __all__ = ["CameraModel", "DISTORTION_COEFFS"]
 
 #: number of coefficients each distortion model takes (OpenCV / ROS order)
-DISTORTION_COEFFS = {"none": (0,), "plumb_bob": (5,), "rational_polynomial": (8,), "equidistant": (4,)}
+DISTORTION_COEFFS = {
+    "none": (0,),
+    "plumb_bob": (5,),
+    "rational_polynomial": (8,),
+    "equidistant": (4,),
+}
 
 
 @dataclass(frozen=True)

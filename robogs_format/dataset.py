@@ -45,7 +45,9 @@ def read_parquet(path: Path, *, columns: list[str] | None = None) -> pa.Table:
     try:
         return pq.read_table(path, columns=columns)
     except FileNotFoundError:
-        raise FormatError("table is missing", path=path, hint="restore it or re-create the dataset") from None
+        raise FormatError(
+            "table is missing", path=path, hint="restore it or re-create the dataset"
+        ) from None
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise FormatError(
             f"unreadable parquet table ({type(exc).__name__}: {str(exc).splitlines()[0][:200]})",
@@ -117,13 +119,20 @@ class Episode:
     @property
     def camera_streams(self) -> dict[str, dict[str, Any]]:
         """Camera streams keyed by camera name."""
-        return {s["camera"]: s for s in self.streams.values() if s.get("kind") == "camera" and "camera" in s}
+        return {
+            s["camera"]: s
+            for s in self.streams.values()
+            if s.get("kind") == "camera" and "camera" in s
+        }
 
     def _camera_stream_name(self, camera: str) -> str:
         for name, s in self.streams.items():
             if s.get("kind") == "camera" and s.get("camera") == camera:
                 return name
-        raise FormatError(f"episode {self.id!r} has no stream for camera {camera!r}", path=self.dataset.manifest_path)
+        raise FormatError(
+            f"episode {self.id!r} has no stream for camera {camera!r}",
+            path=self.dataset.manifest_path,
+        )
 
     def frames(self, camera: str) -> pa.Table:
         """``t_ns, frame_index`` for every recorded frame of ``camera``."""
@@ -147,8 +156,11 @@ class Episode:
                 for i, blob in zip(idx, batch.column(1).to_pylist(), strict=True):
                     yield int(i), decode_label_png(blob, path=path, where=f"frame_index {int(i)}")
         except (pa.ArrowException, OSError) as exc:
-            raise FormatError(f"unreadable label table ({str(exc)[:200]})", path=path,
-                              hint="the file is truncated or not parquet; re-export it") from None
+            raise FormatError(
+                f"unreadable label table ({str(exc)[:200]})",
+                path=path,
+                hint="the file is truncated or not parquet; re-export it",
+            ) from None
 
     def iter_video(self, camera: str) -> Iterator[np.ndarray]:
         """Yield RGB frames [H, W, 3] uint8 in file order."""
@@ -193,7 +205,9 @@ class Dataset:
         if not isinstance(manifest, dict):
             raise FormatError("manifest must be a JSON object", path=mpath, where="/")
         if manifest.get("format") != "robogs" and check_schema:
-            raise FormatError("not a robogs manifest (format != 'robogs')", path=mpath, where="/format")
+            raise FormatError(
+                "not a robogs manifest (format != 'robogs')", path=mpath, where="/format"
+            )
         if "spec_version" in manifest or check_schema:
             manifest = migrate(manifest, path=mpath)
         if check_schema:
@@ -201,12 +215,18 @@ class Dataset:
             if problems:
                 p = problems[0]
                 more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
-                raise FormatError(p.message + more, path=mpath, where=p.pointer,
-                                  hint="run robogs-validate for the full list")
+                raise FormatError(
+                    p.message + more,
+                    path=mpath,
+                    where=p.pointer,
+                    hint="run robogs-validate for the full list",
+                )
         return cls(root, manifest)
 
     @classmethod
-    def create(cls, path: str | Path, *, name: str | None = None, overwrite: bool = False) -> DatasetWriter:
+    def create(
+        cls, path: str | Path, *, name: str | None = None, overwrite: bool = False
+    ) -> DatasetWriter:
         """Start writing a new dataset at ``path`` (atomically; see ``DatasetWriter``)."""
         from .writer import DatasetWriter
 
@@ -273,8 +293,12 @@ class Dataset:
         """Intrinsics and static extrinsics of one camera."""
         rel = self.manifest.get("cameras", {}).get(name)
         if rel is None:
-            raise FormatError(f"no camera {name!r}", path=self.manifest_path, where="cameras",
-                              hint=f"available: {', '.join(self.camera_names) or 'none'}")
+            raise FormatError(
+                f"no camera {name!r}",
+                path=self.manifest_path,
+                where="cameras",
+                hint=f"available: {', '.join(self.camera_names) or 'none'}",
+            )
         path = self.resolve(rel, where=f"cameras/{name}")
         doc = read_json(path, what="camera file")
         problems = schema_problems("camera", doc)
@@ -286,8 +310,12 @@ class Dataset:
         """The current physics parameters (``physics.json``), schema-checked."""
         rel = self.manifest.get("physics")
         if rel is None:
-            raise FormatError("dataset has no physics.json", path=self.manifest_path, where="physics",
-                              hint="add physics with DatasetWriter.set_physics")
+            raise FormatError(
+                "dataset has no physics.json",
+                path=self.manifest_path,
+                where="physics",
+                hint="add physics with DatasetWriter.set_physics",
+            )
         path = self.resolve(rel, where="physics")
         doc = read_json(path, what="physics file")
         problems = schema_problems("physics", doc)
@@ -338,27 +366,40 @@ class Dataset:
 
         entry = self.assets.get(asset)
         if not entry or "mesh" not in entry:
-            raise FormatError(f"asset {asset!r} has no mesh", path=self.manifest_path, where=f"assets/{asset}")
+            raise FormatError(
+                f"asset {asset!r} has no mesh", path=self.manifest_path, where=f"assets/{asset}"
+            )
         path = self.resolve(entry["mesh"], where=f"assets/{asset}/mesh")
         try:
             mesh = trimesh.load(path, force="mesh", process=False)
         except Exception as exc:  # trimesh raises many types on bad files
-            raise FormatError(f"unreadable mesh ({type(exc).__name__}: {str(exc)[:200]})", path=path,
-                              hint="re-export the mesh as PLY, OBJ, STL or GLB") from None
+            raise FormatError(
+                f"unreadable mesh ({type(exc).__name__}: {str(exc)[:200]})",
+                path=path,
+                hint="re-export the mesh as PLY, OBJ, STL or GLB",
+            ) from None
         if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
             raise FormatError("mesh has no triangles", path=path)
         v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
         if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
-            raise FormatError(f"mesh has vertices {v.shape} and faces {f.shape}, expected [N, 3]",
-                              path=path, hint="re-export the mesh with 3D vertices and triangles")
+            raise FormatError(
+                f"mesh has vertices {v.shape} and faces {f.shape}, expected [N, 3]",
+                path=path,
+                hint="re-export the mesh with 3D vertices and triangles",
+            )
         if not np.all(np.isfinite(v)) or f.min() < 0 or f.max() >= len(v):
-            raise FormatError("mesh has non-finite vertices or faces that index no vertex",
-                              path=path, hint="re-export the mesh")
+            raise FormatError(
+                "mesh has non-finite vertices or faces that index no vertex",
+                path=path,
+                hint="re-export the mesh",
+            )
         return mesh
 
     def splat_entry(self, owner: str) -> dict[str, Any]:
         """The manifest entry of the splats of ``owner`` ('robot' or an asset name)."""
-        entry = (self.manifest.get("robot") or {}) if owner == "robot" else self.assets.get(owner, {})
+        entry = (
+            (self.manifest.get("robot") or {}) if owner == "robot" else self.assets.get(owner, {})
+        )
         if "splats" not in entry:
             raise FormatError(f"{owner!r} has no splats", path=self.manifest_path)
         return entry["splats"]

@@ -10,7 +10,13 @@ import numpy as np
 
 from .errors import FormatError
 
-__all__ = ["encode_label_png", "decode_label_png", "iter_video_frames", "video_frame_count", "VideoWriter"]
+__all__ = [
+    "encode_label_png",
+    "decode_label_png",
+    "iter_video_frames",
+    "video_frame_count",
+    "VideoWriter",
+]
 
 MAX_PIXELS = 100_000_000
 
@@ -25,22 +31,34 @@ def encode_label_png(labels: np.ndarray) -> bytes:
     return buf.tobytes()
 
 
-def decode_label_png(blob: bytes, *, path: str | Path | None = None, where: str | None = None) -> np.ndarray:
+def decode_label_png(
+    blob: bytes, *, path: str | Path | None = None, where: str | None = None
+) -> np.ndarray:
     """Decode a label PNG into an [H, W] uint16 array."""
     if not blob:
         raise FormatError("empty label image", path=path, where=where)
     if blob[:8] == b"\x89PNG\r\n\x1a\n" and blob[12:16] == b"IHDR":
         w, h = int.from_bytes(blob[16:20], "big"), int.from_bytes(blob[20:24], "big")
         if w * h > MAX_PIXELS:
-            raise FormatError(f"label image claims {w}x{h} pixels, over the {MAX_PIXELS} limit",
-                              path=path, where=where, hint="the PNG header is corrupt")
+            raise FormatError(
+                f"label image claims {w}x{h} pixels, over the {MAX_PIXELS} limit",
+                path=path,
+                where=where,
+                hint="the PNG header is corrupt",
+            )
     arr = np.frombuffer(blob, np.uint8)
     img = cv2.imdecode(arr, cv2.IMREAD_UNCHANGED)
     if img is None:
-        raise FormatError("label image is not a decodable PNG", path=path, where=where,
-                          hint="labels are 16-bit single-channel PNGs")
+        raise FormatError(
+            "label image is not a decodable PNG",
+            path=path,
+            where=where,
+            hint="labels are 16-bit single-channel PNGs",
+        )
     if img.ndim != 2:
-        raise FormatError(f"label image must be single-channel, has shape {img.shape}", path=path, where=where)
+        raise FormatError(
+            f"label image must be single-channel, has shape {img.shape}", path=path, where=where
+        )
     return img.astype(np.uint16, copy=False)
 
 
@@ -49,8 +67,11 @@ def _open_capture(path: Path) -> cv2.VideoCapture:
         raise FormatError("video file is missing", path=path)
     cap = cv2.VideoCapture(str(path))
     if not cap.isOpened():
-        raise FormatError("video cannot be opened (unknown container or codec)", path=path,
-                          hint="re-encode as mp4 (mp4v or H.264) or mkv")
+        raise FormatError(
+            "video cannot be opened (unknown container or codec)",
+            path=path,
+            hint="re-encode as mp4 (mp4v or H.264) or mkv",
+        )
     return cap
 
 
@@ -88,7 +109,9 @@ class VideoWriter:
         if width * height > MAX_PIXELS or width <= 0 or height <= 0:
             raise FormatError(f"refusing video size {width}x{height}", path=path)
         self.path = Path(path)
-        self._w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (int(width), int(height)))
+        self._w = cv2.VideoWriter(
+            str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (int(width), int(height))
+        )
         if not self._w.isOpened():
             raise FormatError("cannot open video writer (OpenCV built without mp4v?)", path=path)
         self.count = 0

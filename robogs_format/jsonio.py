@@ -28,7 +28,9 @@ def read_json(path: Path, *, max_bytes: int = MAX_JSON_BYTES, what: str = "JSON 
     try:
         size = path.stat().st_size
     except FileNotFoundError:
-        raise FormatError(f"{what} is missing", path=path, hint="restore it or re-create the dataset") from None
+        raise FormatError(
+            f"{what} is missing", path=path, hint="restore it or re-create the dataset"
+        ) from None
     if size > max_bytes:
         raise FormatError(
             f"{what} is {size} bytes, over the {max_bytes}-byte limit",
@@ -39,7 +41,9 @@ def read_json(path: Path, *, max_bytes: int = MAX_JSON_BYTES, what: str = "JSON 
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise FormatError(f"{what} is not UTF-8 text", path=path, where=f"byte {exc.start}") from None
+        raise FormatError(
+            f"{what} is not UTF-8 text", path=path, where=f"byte {exc.start}"
+        ) from None
     try:
         return json.loads(text, parse_constant=_reject_constant)
     except json.JSONDecodeError as exc:
@@ -55,7 +59,10 @@ def read_json(path: Path, *, max_bytes: int = MAX_JSON_BYTES, what: str = "JSON 
 
 def _clean(obj: Any) -> Any:
     if isinstance(obj, float) and not math.isfinite(obj):
-        raise FormatError(f"refusing to write non-finite number {obj} to JSON", hint="check the upstream computation")
+        raise FormatError(
+            f"refusing to write non-finite number {obj} to JSON",
+            hint="check the upstream computation",
+        )
     if isinstance(obj, dict):
         return {str(k): _clean(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):

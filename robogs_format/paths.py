@@ -23,15 +23,26 @@ def check_relpath(rel: str, *, source: str | Path | None = None, where: str | No
     hint = "paths in a dataset are relative to its root, with '/' separators and no '..'"
     if not isinstance(rel, str) or not rel or "\x00" in rel:
         raise PathEscapeError(f"invalid path {rel!r}", path=source, where=where, hint=hint)
-    if "://" in rel or rel.startswith(("/", "\\")) or "\\" in rel or (len(rel) > 1 and rel[1] == ":"):
-        raise PathEscapeError(f"path {rel!r} is not relative to the dataset root", path=source, where=where, hint=hint)
+    if (
+        "://" in rel
+        or rel.startswith(("/", "\\"))
+        or "\\" in rel
+        or (len(rel) > 1 and rel[1] == ":")
+    ):
+        raise PathEscapeError(
+            f"path {rel!r} is not relative to the dataset root", path=source, where=where, hint=hint
+        )
     parts = PurePosixPath(rel).parts
     if any(p == ".." for p in parts):
-        raise PathEscapeError(f"path {rel!r} escapes the dataset root", path=source, where=where, hint=hint)
+        raise PathEscapeError(
+            f"path {rel!r} escapes the dataset root", path=source, where=where, hint=hint
+        )
     return str(PurePosixPath(*[p for p in parts if p != "."]))
 
 
-def resolve_inside(root: Path, rel: str, *, source: str | Path | None = None, where: str | None = None) -> Path:
+def resolve_inside(
+    root: Path, rel: str, *, source: str | Path | None = None, where: str | None = None
+) -> Path:
     """Resolve ``rel`` against ``root``, following symlinks, and refuse escapes."""
     clean = check_relpath(rel, source=source, where=where)
     root_r = Path(root).resolve()

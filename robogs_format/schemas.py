@@ -23,7 +23,9 @@ def schema_dir() -> Path:
     for cand in (here / "_spec" / "schemas", here.parent / "spec" / "schemas"):
         if cand.is_dir():
             return cand
-    raise FormatError("the robogs JSON Schemas are missing from this installation", hint="reinstall robogs")
+    raise FormatError(
+        "the robogs JSON Schemas are missing from this installation", hint="reinstall robogs"
+    )
 
 
 @cache

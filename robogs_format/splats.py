@@ -32,10 +32,22 @@ __all__ = ["SplatSet", "read_splat_ply", "write_splat_ply", "MAX_SPLATS"]
 MAX_SPLATS = 50_000_000
 _MAX_HEADER = 64 * 1024
 _PLY_TYPES = {
-    "float": "<f4", "float32": "<f4", "double": "<f8", "float64": "<f8",
-    "int": "<i4", "int32": "<i4", "uint": "<u4", "uint32": "<u4",
-    "short": "<i2", "int16": "<i2", "ushort": "<u2", "uint16": "<u2",
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "float": "<f4",
+    "float32": "<f4",
+    "double": "<f8",
+    "float64": "<f8",
+    "int": "<i4",
+    "int32": "<i4",
+    "uint": "<u4",
+    "uint32": "<u4",
+    "short": "<i2",
+    "int16": "<i2",
+    "ushort": "<u2",
+    "uint16": "<u2",
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
 }
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -82,8 +94,12 @@ class SplatSet:
 def _parse_header(path: Path, head: bytes) -> tuple[int, int, list[tuple[str, str]]]:
     end = head.find(b"end_header\n")
     if not head.startswith(b"ply\n") or end < 0:
-        raise FormatError("not a PLY file or header longer than 64 KiB", path=path, where="header",
-                          hint="write splats in the binary little-endian 3DGS PLY layout")
+        raise FormatError(
+            "not a PLY file or header longer than 64 KiB",
+            path=path,
+            where="header",
+            hint="write splats in the binary little-endian 3DGS PLY layout",
+        )
     lines = head[:end].decode("ascii", errors="replace").splitlines()
     body_start = end + len(b"end_header\n")
     count, props, fmt_ok, in_vertex, n_elements = -1, [], False, False, 0
@@ -98,23 +114,40 @@ def _parse_header(path: Path, head: bytes) -> tuple[int, int, list[tuple[str, st
             in_vertex = tok[1:2] == ["vertex"]
             if in_vertex:
                 if len(tok) != 3 or not tok[2].isdigit():
-                    raise FormatError("bad vertex element line", path=path, where=f"header line {no}")
+                    raise FormatError(
+                        "bad vertex element line", path=path, where=f"header line {no}"
+                    )
                 count = int(tok[2])
         elif tok[0] == "property" and in_vertex:
             if len(tok) != 3 or tok[1] not in _PLY_TYPES or not _NAME.match(tok[2]):
-                raise FormatError(f"unsupported property {line.strip()!r}", path=path, where=f"header line {no}",
-                                  hint="splat PLYs hold scalar properties only")
+                raise FormatError(
+                    f"unsupported property {line.strip()!r}",
+                    path=path,
+                    where=f"header line {no}",
+                    hint="splat PLYs hold scalar properties only",
+                )
             if any(tok[2] == name for name, _ in props):
-                raise FormatError(f"property {tok[2]!r} is declared twice", path=path,
-                                  where=f"header line {no}", hint="each splat column appears once")
+                raise FormatError(
+                    f"property {tok[2]!r} is declared twice",
+                    path=path,
+                    where=f"header line {no}",
+                    hint="each splat column appears once",
+                )
             props.append((tok[2], _PLY_TYPES[tok[1]]))
     if not fmt_ok:
-        raise FormatError("splat PLY must be binary_little_endian", path=path, where="header format line")
+        raise FormatError(
+            "splat PLY must be binary_little_endian", path=path, where="header format line"
+        )
     if count < 0 or n_elements != 1:
-        raise FormatError("splat PLY must have exactly one 'vertex' element", path=path, where="header")
+        raise FormatError(
+            "splat PLY must have exactly one 'vertex' element", path=path, where="header"
+        )
     if count > MAX_SPLATS:
-        raise FormatError(f"header claims {count} Gaussians, over the limit of {MAX_SPLATS}", path=path,
-                          where="element vertex")
+        raise FormatError(
+            f"header claims {count} Gaussians, over the limit of {MAX_SPLATS}",
+            path=path,
+            where="element vertex",
+        )
     return count, body_start, props
 
 
@@ -134,30 +167,60 @@ def read_splat_ply(path: str | Path) -> SplatSet:
     if size != need:
         raise FormatError(
             f"file has {size} bytes but its header implies {need} ({count} Gaussians x {dtype.itemsize} bytes)",
-            path=path, where="body", hint="the file is truncated or its header is wrong; re-export it")
+            path=path,
+            where="body",
+            hint="the file is truncated or its header is wrong; re-export it",
+        )
     data = np.fromfile(path, dtype=dtype, count=count, offset=body_start)
     names = set(dtype.names or ())
 
     def cols(prefix: str) -> list[str]:
-        found = sorted((n for n in names if n.startswith(prefix) and n[len(prefix):].isdigit()),
-                       key=lambda n: int(n[len(prefix):]))
+        found = sorted(
+            (n for n in names if n.startswith(prefix) and n[len(prefix) :].isdigit()),
+            key=lambda n: int(n[len(prefix) :]),
+        )
         return found
 
-    for req in ("x", "y", "z", "opacity", "f_dc_0", "f_dc_1", "f_dc_2", "rot_0", "rot_1", "rot_2", "rot_3"):
+    for req in (
+        "x",
+        "y",
+        "z",
+        "opacity",
+        "f_dc_0",
+        "f_dc_1",
+        "f_dc_2",
+        "rot_0",
+        "rot_1",
+        "rot_2",
+        "rot_3",
+    ):
         if req not in names:
-            raise FormatError(f"missing column {req!r}", path=path, where="header",
-                              hint="splat PLYs follow the 3DGS layout (x y z f_dc_* f_rest_* opacity scale_* rot_*)")
+            raise FormatError(
+                f"missing column {req!r}",
+                path=path,
+                where="header",
+                hint="splat PLYs follow the 3DGS layout (x y z f_dc_* f_rest_* opacity scale_* rot_*)",
+            )
     scale_cols = cols("scale_")
     if len(scale_cols) not in (2, 3):
-        raise FormatError(f"expected 2 (2DGS) or 3 (3DGS) scale columns, found {len(scale_cols)}", path=path,
-                          where="header")
+        raise FormatError(
+            f"expected 2 (2DGS) or 3 (3DGS) scale columns, found {len(scale_cols)}",
+            path=path,
+            where="header",
+        )
     rest = cols("f_rest_")
     if len(rest) % 3 or (len(rest) // 3 + 1) not in (1, 4, 9, 16):
-        raise FormatError(f"{len(rest)} f_rest columns do not match an SH degree of 0..3", path=path, where="header")
+        raise FormatError(
+            f"{len(rest)} f_rest columns do not match an SH degree of 0..3",
+            path=path,
+            where="header",
+        )
     k_rest = len(rest) // 3
 
     def stack(ns: list[str], dt: str = "<f4") -> np.ndarray:
-        return np.stack([data[n].astype(dt) for n in ns], axis=-1) if ns else np.zeros((count, 0), dt)
+        return (
+            np.stack([data[n].astype(dt) for n in ns], axis=-1) if ns else np.zeros((count, 0), dt)
+        )
 
     dc = stack(["f_dc_0", "f_dc_1", "f_dc_2"])[:, None, :]
     rest_arr = stack(rest).reshape(count, 3, k_rest).transpose(0, 2, 1)
@@ -169,9 +232,15 @@ def read_splat_ply(path: str | Path) -> SplatSet:
         opacity_logits=data["opacity"].astype("<f4"),
         sh=np.concatenate([dc, rest_arr], axis=1),
         bind_id=data["bind_id"].astype("<i4") if "bind_id" in names else np.full(n, -1, "<i4"),
-        bind_face=data["bind_face"].astype("<i4") if "bind_face" in names else np.full(n, -1, "<i4"),
-        bind_uv=stack(["bind_u", "bind_v"]) if {"bind_u", "bind_v"} <= names else np.zeros((n, 2), "<f4"),
-        bind_offset=data["bind_offset"].astype("<f4") if "bind_offset" in names else np.zeros(n, "<f4"),
+        bind_face=data["bind_face"].astype("<i4")
+        if "bind_face" in names
+        else np.full(n, -1, "<i4"),
+        bind_uv=stack(["bind_u", "bind_v"])
+        if {"bind_u", "bind_v"} <= names
+        else np.zeros((n, 2), "<f4"),
+        bind_offset=data["bind_offset"].astype("<f4")
+        if "bind_offset" in names
+        else np.zeros(n, "<f4"),
     )
 
 
@@ -180,13 +249,21 @@ def write_splat_ply(path: str | Path, splats: SplatSet) -> None:
     n = len(splats)
     k = splats.sh.shape[1]
     if k not in (1, 4, 9, 16) or splats.sh.shape != (n, k, 3):
-        raise FormatError(f"sh must be [N, K, 3] with K in 1, 4, 9, 16; got {splats.sh.shape}", path=path)
+        raise FormatError(
+            f"sh must be [N, K, 3] with K in 1, 4, 9, 16; got {splats.sh.shape}", path=path
+        )
     fields = [(c, "<f4") for c in ("x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2")]
     fields += [(f"f_rest_{i}", "<f4") for i in range(3 * (k - 1))]
     fields += [("opacity", "<f4")]
     fields += [(f"scale_{i}", "<f4") for i in range(splats.log_scales.shape[1])]
     fields += [(f"rot_{i}", "<f4") for i in range(4)]
-    fields += [("bind_id", "<i4"), ("bind_face", "<i4"), ("bind_u", "<f4"), ("bind_v", "<f4"), ("bind_offset", "<f4")]
+    fields += [
+        ("bind_id", "<i4"),
+        ("bind_face", "<i4"),
+        ("bind_u", "<f4"),
+        ("bind_v", "<f4"),
+        ("bind_offset", "<f4"),
+    ]
     arr = np.zeros(n, dtype=np.dtype(fields))
     for i, c in enumerate("xyz"):
         arr[c] = splats.means[:, i]
@@ -206,8 +283,12 @@ def write_splat_ply(path: str | Path, splats: SplatSet) -> None:
     arr["bind_v"] = splats.bind_uv[:, 1]
     arr["bind_offset"] = splats.bind_offset
     inv = {"<f4": "float", "<i4": "int"}
-    header = ["ply", "format binary_little_endian 1.0", "comment robogs splats; rot_* is (w,x,y,z)",
-              f"element vertex {n}"]
+    header = [
+        "ply",
+        "format binary_little_endian 1.0",
+        "comment robogs splats; rot_* is (w,x,y,z)",
+        f"element vertex {n}",
+    ]
     header += [f"property {inv[t]} {name}" for name, t in fields]
     header += ["end_header"]
     with open(path, "wb") as fh:

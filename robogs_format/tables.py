@@ -66,7 +66,12 @@ TABLES: dict[str, TableSpec] = {
             "joint_states",
             (
                 _T,
-                Column("position.", "float64", "rad|m", doc="per joint; rad for revolute, m for prismatic"),
+                Column(
+                    "position.",
+                    "float64",
+                    "rad|m",
+                    doc="per joint; rad for revolute, m for prismatic",
+                ),
                 Column("velocity.", "float64", "rad/s|m/s", required=False),
                 Column("effort.", "float64", "N·m|N", required=False),
             ),
@@ -74,10 +79,15 @@ TABLES: dict[str, TableSpec] = {
         ),
         TableSpec(
             "actions",
-            (_T, Column("command.", "float64", "rad|m|rad/s|N·m", doc="kind declared in the stream")),
+            (
+                _T,
+                Column("command.", "float64", "rad|m|rad/s|N·m", doc="kind declared in the stream"),
+            ),
             doc="commanded actions / policy output",
         ),
-        TableSpec("ee_poses", (_T, Column("link", "string"), *_POSE), doc="T_world_link of the named link"),
+        TableSpec(
+            "ee_poses", (_T, Column("link", "string"), *_POSE), doc="T_world_link of the named link"
+        ),
         TableSpec("object_poses", (_T, Column("object", "string"), *_POSE), doc="T_world_object"),
         TableSpec(
             "wrenches",
@@ -96,7 +106,10 @@ TABLES: dict[str, TableSpec] = {
                 Column("camera", "string"),
                 Column("frame_index", "int64"),
                 Column("label_id", "int32"),
-                *(Column(c, "float64", "px", "image") for c in ("x_min", "y_min", "x_max", "y_max")),
+                *(
+                    Column(c, "float64", "px", "image")
+                    for c in ("x_min", "y_min", "x_max", "y_max")
+                ),
             ),
             doc="2D boxes in pixel-edge coordinates, max exclusive",
         ),
@@ -129,7 +142,10 @@ TABLES: dict[str, TableSpec] = {
         ),
         TableSpec(
             "camera_labels",
-            (Column("frame_index", "int64"), Column("png", "binary", doc="16-bit PNG of label ids")),
+            (
+                Column("frame_index", "int64"),
+                Column("png", "binary", doc="16-bit PNG of label ids"),
+            ),
             stamped=False,
             doc="panoptic label image per frame",
         ),
@@ -174,11 +190,15 @@ def check_table_schema(kind: str, schema: pa.Schema) -> list[str]:
                 problems.append(f"missing column family '{col.name}<name>'")
             for n in members:
                 if not any(c(schema.field(n).type) for c in checks):
-                    problems.append(f"column {n!r} has type {schema.field(n).type}, expected {col.dtype}")
+                    problems.append(
+                        f"column {n!r} has type {schema.field(n).type}, expected {col.dtype}"
+                    )
             continue
         if col.name not in names:
             if col.required:
-                problems.append(f"missing column {col.name!r} ({col.dtype}{', ' + col.unit if col.unit else ''})")
+                problems.append(
+                    f"missing column {col.name!r} ({col.dtype}{', ' + col.unit if col.unit else ''})"
+                )
             continue
         typ = schema.field(col.name).type
         if not any(c(typ) for c in checks):

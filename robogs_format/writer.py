@@ -98,7 +98,13 @@ def _exchange(a: Path, b: Path) -> bool:
     if _renameat2 is None:
         try:
             fn = ctypes.CDLL(None, use_errno=True).renameat2
-            fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+            fn.argtypes = [
+                ctypes.c_int,
+                ctypes.c_char_p,
+                ctypes.c_int,
+                ctypes.c_char_p,
+                ctypes.c_uint,
+            ]
             fn.restype = ctypes.c_int
             _renameat2 = fn
         except (AttributeError, OSError):
@@ -120,19 +126,25 @@ class DatasetWriter:
     exception) discards the temp folder and leaves the target as it was.
     """
 
-    def __init__(self, target: Path, *, base: Dataset | None, overwrite: bool, name: str | None) -> None:
+    def __init__(
+        self, target: Path, *, base: Dataset | None, overwrite: bool, name: str | None
+    ) -> None:
         self.target = Path(target).absolute()
         self.base = base
         parent = self.target.parent
         if not parent.is_dir():
-            raise FormatError("parent folder of the output does not exist", path=parent,
-                              hint="create it first")
+            raise FormatError(
+                "parent folder of the output does not exist", path=parent, hint="create it first"
+            )
         self._lock_fh = self._acquire_lock()
         self._recover()
         if base is None and self.target.exists() and not overwrite:
             self._release_lock()
-            raise DatasetExistsError("output already exists", path=self.target,
-                                     hint="choose another path or pass --force to replace it")
+            raise DatasetExistsError(
+                "output already exists",
+                path=self.target,
+                hint="choose another path or pass --force to replace it",
+            )
         self.tmp = parent / f".{self.target.name}.tmp-{uuid.uuid4().hex[:8]}"
         self.tmp.mkdir()
         self.committed = False
@@ -162,10 +174,13 @@ class DatasetWriter:
         except BlockingIOError:
             fh.close()
             holder = _lock_holder(lock_path)
-            raise LockError(f"another robogs process (PID {holder}) is writing this dataset; "
-                            f"lock file {lock_path}", path=self.target,
-                            hint="wait for it to finish; the lock is released when that process exits, "
-                                 "even if it is killed") from None
+            raise LockError(
+                f"another robogs process (PID {holder}) is writing this dataset; "
+                f"lock file {lock_path}",
+                path=self.target,
+                hint="wait for it to finish; the lock is released when that process exits, "
+                "even if it is killed",
+            ) from None
         fh.seek(0)
         fh.truncate()
         fh.write(f"{os.getpid()}\n")
@@ -207,7 +222,9 @@ class DatasetWriter:
         """
         rel = check_relpath(rel, where="writer")
         if rel == "manifest.json":
-            raise FormatError("manifest.json is written by commit()", hint="set fields on writer.manifest")
+            raise FormatError(
+                "manifest.json is written by commit()", hint="set fields on writer.manifest"
+            )
         p = self.tmp / rel
         p.parent.mkdir(parents=True, exist_ok=True)
         if p.is_file() and p.stat().st_nlink > 1:
@@ -234,8 +251,11 @@ class DatasetWriter:
         if schema is not None:
             problems = schema_problems(schema, obj)
             if problems:
-                raise FormatError(f"refusing to write invalid {schema}: {problems[0].message}", path=rel,
-                                  where=problems[0].pointer)
+                raise FormatError(
+                    f"refusing to write invalid {schema}: {problems[0].message}",
+                    path=rel,
+                    where=problems[0].pointer,
+                )
         return self.write_text(rel, dumps_json(obj))
 
     def copy_file(self, rel: str, src: str | Path) -> Path:
@@ -258,7 +278,9 @@ class DatasetWriter:
         """
         problems = check_table_schema(kind, table.schema)
         if problems:
-            raise FormatError(f"table does not match kind {kind!r}: {'; '.join(problems)}", path=rel)
+            raise FormatError(
+                f"table does not match kind {kind!r}: {'; '.join(problems)}", path=rel
+            )
         if TABLES[kind].stamped and table.column("t_ns").null_count:
             raise FormatError("t_ns has nulls", path=rel, where="t_ns")
         final, part = self._part(rel)
@@ -273,8 +295,14 @@ class DatasetWriter:
         return final
 
     # -- manifest-level helpers ---------------------------------------------------
-    def set_robot(self, urdf_rel: str, *, base_link: str | None = None, ee_link: str | None = None,
-                  mdh_rel: str | None = None) -> None:
+    def set_robot(
+        self,
+        urdf_rel: str,
+        *,
+        base_link: str | None = None,
+        ee_link: str | None = None,
+        mdh_rel: str | None = None,
+    ) -> None:
         robot = dict(self.manifest.get("robot", {}))
         robot["urdf"] = urdf_rel
         for k, v in (("base_link", base_link), ("ee_link", ee_link), ("mdh", mdh_rel)):
@@ -305,7 +333,9 @@ class DatasetWriter:
             import json
 
             prev = json.loads((self.tmp / old_rel).read_text())
-            self.write_text(f"physics/history/rev-{int(prev['revision']):04d}.json", dumps_json(prev))
+            self.write_text(
+                f"physics/history/rev-{int(prev['revision']):04d}.json", dumps_json(prev)
+            )
         doc = dict(physics)
         doc["revision"] = 1 if prev is None else int(prev["revision"]) + 1
         doc["parent_revision"] = None if prev is None else int(prev["revision"])
@@ -315,11 +345,22 @@ class DatasetWriter:
         self.manifest["physics"] = "physics.json"
         return doc["revision"]
 
-    def add_episode(self, episode_id: str, *, start_ns: int, end_ns: int, streams: dict[str, dict[str, Any]],
-                    segment: str | None = None) -> None:
+    def add_episode(
+        self,
+        episode_id: str,
+        *,
+        start_ns: int,
+        end_ns: int,
+        streams: dict[str, dict[str, Any]],
+        segment: str | None = None,
+    ) -> None:
         """Declare an episode and its streams (replacing one with the same id)."""
-        entry: dict[str, Any] = {"id": episode_id, "start_ns": int(start_ns), "end_ns": int(end_ns),
-                                 "streams": streams}
+        entry: dict[str, Any] = {
+            "id": episode_id,
+            "start_ns": int(start_ns),
+            "end_ns": int(end_ns),
+            "streams": streams,
+        }
         if segment is not None:
             entry["segment"] = segment
         eps = [e for e in self.manifest.get("episodes", []) if e["id"] != episode_id]
@@ -348,15 +389,23 @@ class DatasetWriter:
 
         if self.committed:
             raise FormatError("writer already committed", path=self.target)
-        self.manifest.setdefault("created_utc", _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
-        self.manifest["generator"] = {**self.manifest.get("generator", {}), "name": "robogs",
-                                      "version": _robogs_version()}
+        self.manifest.setdefault(
+            "created_utc", _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        )
+        self.manifest["generator"] = {
+            **self.manifest.get("generator", {}),
+            "name": "robogs",
+            "version": _robogs_version(),
+        }
         self.manifest["spec_version"] = SPEC_VERSION
         self.manifest["files"] = self._file_entries()
         problems = schema_problems("manifest", self.manifest)
         if problems:
-            raise FormatError(f"refusing to commit an invalid manifest: {problems[0].message}",
-                              path=self.target, where=problems[0].pointer)
+            raise FormatError(
+                f"refusing to commit an invalid manifest: {problems[0].message}",
+                path=self.target,
+                where=problems[0].pointer,
+            )
         mpath = self.tmp / "manifest.json"
         with open(mpath, "w", encoding="utf-8") as fh:
             fh.write(dumps_json(self.manifest))

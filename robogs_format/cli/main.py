@@ -19,18 +19,33 @@ __all__ = ["main", "validate_main", "VERBS"]
 
 #: verb -> (module implementing it, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
-    "synth": ("fixtures.synth.cli", "generate a synthetic scene (optionally with a hidden physical effect)"),
+    "synth": (
+        "fixtures.synth.cli",
+        "generate a synthetic scene (optionally with a hidden physical effect)",
+    ),
     "validate": ("robogs_format.cli.validate_cmd", "check a dataset against the spec"),
-    "convert": ("converters.cli", "convert a bag, MCAP, video, capture or joint log into a dataset"),
+    "convert": (
+        "converters.cli",
+        "convert a bag, MCAP, video, capture or joint log into a dataset",
+    ),
     "export": ("converters.export_cli", "export a dataset to URDF, USD, MCAP, splat PLY or Rerun"),
     "view": ("converters.view_cli", "write a Rerun recording of a dataset and open it"),
-    "compare": ("reference_impl.physics.cli", "residuals of the physics model against the measurements"),
+    "compare": (
+        "reference_impl.physics.cli",
+        "residuals of the physics model against the measurements",
+    ),
     "diagnose": ("reference_impl.physics.cli", "rank the physical effects the model is missing"),
     "fit": ("reference_impl.physics.cli", "add effects, refit and write a new physics revision"),
     "report": ("reference_impl.physics.cli", "HTML report with residual plots before and after"),
-    "reconstruct": ("reference_impl.reconstruct.cli", "fill splats, meshes and binding from multi-view frames"),
+    "reconstruct": (
+        "reference_impl.reconstruct.cli",
+        "fill splats, meshes and binding from multi-view frames",
+    ),
     "evaluate": ("reference_impl.reconstruct.cli", "image and mesh quality metrics"),
-    "demo": ("robogs_format.cli.demo_cmd", "synthesise the default scene, validate it and write the report"),
+    "demo": (
+        "robogs_format.cli.demo_cmd",
+        "synthesise the default scene, validate it and write the report",
+    ),
 }
 
 
@@ -39,12 +54,16 @@ def _load(verb: str):
     try:
         return importlib.import_module(module_name)
     except ModuleNotFoundError as exc:
-        raise RobogsError(f"'{verb}' is not available in this installation ({exc.name} missing)",
-                          hint="reinstall robogs with its dependencies") from None
+        raise RobogsError(
+            f"'{verb}' is not available in this installation ({exc.name} missing)",
+            hint="reinstall robogs with its dependencies",
+        ) from None
 
 
 def _parser(verbs: Sequence[str]) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="robogs", description="Real2Sim digital twins of robot-arm scenes.")
+    parser = argparse.ArgumentParser(
+        prog="robogs", description="Real2Sim digital twins of robot-arm scenes."
+    )
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     for verb in verbs:
         _, help_text = VERBS[verb]
@@ -59,7 +78,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser(list(VERBS))
     if not argv or argv[0] in ("-h", "--help") or argv[0] not in VERBS:
         if argv and argv[0] not in ("-h", "--help"):
-            print(f"robogs: unknown verb {argv[0]!r}; choose from {', '.join(VERBS)}", file=sys.stderr)
+            print(
+                f"robogs: unknown verb {argv[0]!r}; choose from {', '.join(VERBS)}", file=sys.stderr
+            )
             return 2
         parser.print_help()
         return 0 if argv else 2

@@ -26,7 +26,9 @@ def _findings_section(rep: HtmlReport, findings: Sequence[dict[str, Any]]) -> No
     rep.heading("Validation findings")
     counts = {s: sum(f["severity"] == s for f in findings) for s in ("error", "warning", "info")}
     css = "error" if counts["error"] else "ok"
-    rep.paragraph(f"{counts['error']} errors, {counts['warning']} warnings, {counts['info']} notes", css=css)
+    rep.paragraph(
+        f"{counts['error']} errors, {counts['warning']} warnings, {counts['info']} notes", css=css
+    )
     if not findings:
         return
     rows, styles = [], []
@@ -34,9 +36,15 @@ def _findings_section(rep: HtmlReport, findings: Sequence[dict[str, Any]]) -> No
         loc = ", ".join(f"{k}={v}" for k, v in (f.get("location") or {}).items() if v is not None)
         val = "" if f.get("value") is None else f"{f['value']:.4g} {f.get('unit') or ''}".strip()
         bud = "" if f.get("budget") is None else f"{f['budget']:.4g} {f.get('unit') or ''}".strip()
-        rows.append([f["code"], f["severity"], loc, val, bud, f.get("message", ""), f.get("hint", "")])
+        rows.append(
+            [f["code"], f["severity"], loc, val, bud, f.get("message", ""), f.get("hint", "")]
+        )
         styles.append(f["severity"])
-    rep.table(["code", "severity", "location", "measured", "budget", "message", "hint"], rows, row_css=styles)
+    rep.table(
+        ["code", "severity", "location", "measured", "budget", "message", "hint"],
+        rows,
+        row_css=styles,
+    )
 
 
 def _stream_rows(ds: Dataset) -> list[list[Any]]:
@@ -45,8 +53,17 @@ def _stream_rows(ds: Dataset) -> list[list[Any]]:
         for name, st in sorted(ep.streams.items()):
             rel = st.get("path") or st.get("frames")
             n = ds.files.get(rel, {}).get("rows") if rel else None
-            rows.append([ep.id, name, st.get("kind"), n, st.get("nominal_rate_hz"), st.get("stamp_source"),
-                         st.get("offset_ns")])
+            rows.append(
+                [
+                    ep.id,
+                    name,
+                    st.get("kind"),
+                    n,
+                    st.get("nominal_rate_hz"),
+                    st.get("stamp_source"),
+                    st.get("offset_ns"),
+                ]
+            )
     return rows
 
 
@@ -59,7 +76,7 @@ def _plot_joints(rep: HtmlReport, ds: Dataset) -> None:
     fig, ax = new_figure(figsize=(9, 3.2))
     for name in tab.column_names:
         if name.startswith("position."):
-            ax.plot(t, tab.column(name).to_numpy(), lw=1, label=name[len("position."):])
+            ax.plot(t, tab.column(name).to_numpy(), lw=1, label=name[len("position.") :])
     ax.set_xlabel("time since episode start [s]")
     ax.set_ylabel("joint position [rad]")
     ax.legend(fontsize=7, ncol=3)
@@ -90,7 +107,9 @@ def _plot_intervals(rep: HtmlReport, ds: Dataset) -> None:
         ax.set_xlabel("time since episode start [s]")
         ax.set_ylabel("interval to previous sample [ms]")
         ax.legend(fontsize=7)
-        rep.figure(fig, "Sample intervals per stream: flat bands are healthy, spikes are gaps or jitter")
+        rep.figure(
+            fig, "Sample intervals per stream: flat bands are healthy, spikes are gaps or jitter"
+        )
 
 
 def _plot_objects(rep: HtmlReport, ds: Dataset) -> None:
@@ -139,12 +158,24 @@ def _plot_frames(rep: HtmlReport, ds: Dataset) -> None:
 def write_dataset_report(ds: Dataset, findings: Sequence[dict[str, Any]], out: str | Path) -> Path:
     """Write an HTML overview of ``ds`` with ``findings`` (validator JSON items) to ``out``."""
     rep = HtmlReport(f"robogs report — {ds.name}")
-    rep.table(["spec", "episodes", "cameras", "assets", "files"],
-              [[ds.spec_version, len(ds.episodes), ", ".join(ds.camera_names), ", ".join(sorted(ds.assets)),
-                len(ds.files)]])
+    rep.table(
+        ["spec", "episodes", "cameras", "assets", "files"],
+        [
+            [
+                ds.spec_version,
+                len(ds.episodes),
+                ", ".join(ds.camera_names),
+                ", ".join(sorted(ds.assets)),
+                len(ds.files),
+            ]
+        ],
+    )
     _findings_section(rep, findings)
     rep.heading("Streams")
-    rep.table(["episode", "stream", "kind", "rows", "nominal Hz", "stamp source", "offset ns"], _stream_rows(ds))
+    rep.table(
+        ["episode", "stream", "kind", "rows", "nominal Hz", "stamp source", "offset ns"],
+        _stream_rows(ds),
+    )
     if ds.episodes:
         rep.heading("Plots")
         for plot in (_plot_joints, _plot_intervals, _plot_objects, _plot_frames):

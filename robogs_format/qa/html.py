@@ -44,12 +44,20 @@ class HtmlReport:
         """Append trusted HTML produced by our own code."""
         self.blocks.append(fragment)
 
-    def table(self, header: Sequence[str], rows: Sequence[Sequence[Any]], *, row_css: Sequence[str] | None = None) -> None:
+    def table(
+        self,
+        header: Sequence[str],
+        rows: Sequence[Sequence[Any]],
+        *,
+        row_css: Sequence[str] | None = None,
+    ) -> None:
         head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
         body = []
         for i, row in enumerate(rows):
             cls = f' class="{row_css[i]}"' if row_css and row_css[i] else ""
-            body.append(f"<tr{cls}>" + "".join(f"<td>{html.escape(_fmt(v))}</td>" for v in row) + "</tr>")
+            body.append(
+                f"<tr{cls}>" + "".join(f"<td>{html.escape(_fmt(v))}</td>" for v in row) + "</tr>"
+            )
         self.blocks.append(f"<table><tr>{head}</tr>{''.join(body)}</table>")
 
     def figure(self, fig: Any, caption: str = "") -> None:
@@ -61,7 +69,9 @@ class HtmlReport:
         plt.close(fig)
         data = base64.b64encode(buf.getvalue()).decode("ascii")
         cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
-        self.blocks.append(f'<figure><img alt="{html.escape(caption)}" src="data:image/png;base64,{data}"/>{cap}</figure>')
+        self.blocks.append(
+            f'<figure><img alt="{html.escape(caption)}" src="data:image/png;base64,{data}"/>{cap}</figure>'
+        )
 
     def render(self) -> str:
         return (

@@ -636,7 +636,9 @@ def _finding_record(f: Any) -> tuple[str, str, int | None]:
 def _layer_findings(ctx: RerunContext) -> None:
     from .. import validate as _validate
 
-    ctx.notes.append("findings of the re-render (binding) checks are not logged; run robogs-validate for them")
+    ctx.notes.append(
+        "findings of the re-render (binding) checks are not logged; run robogs-validate for them"
+    )
     try:
         result = _validate.validate(ctx.ds.root, ignore=["binding"])
     except RobogsError as exc:

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
+from ..frames import quat_to_matrix as quat_to_rotmat
 from .camera import Camera
 from .config import RenderConfig
 from .constants import (
@@ -37,7 +38,6 @@ from .constants import (
     MAX_EXPONENT,
 )
 from .gaussians import Gaussians
-from ..frames import quat_to_matrix as quat_to_rotmat
 from .sh import eval_sh
 
 __all__ = ["Projected", "project", "lowpass_inv_sq"]

@@ -39,9 +39,17 @@ def _splats(means: np.ndarray, bind_id: np.ndarray, k: int = 1) -> SplatSet:
     n = len(means)
     rng = np.random.default_rng(1)
     q = rng.normal(size=(n, 4)).astype("f4")
-    return SplatSet(means.astype("f4"), q / np.linalg.norm(q, axis=1, keepdims=True), np.full((n, 3), -5, "f4"),
-                    np.full(n, 3, "f4"), rng.normal(size=(n, k, 3)).astype("f4"), bind_id.astype("i4"),
-                    np.full(n, -1, "i4"), np.zeros((n, 2), "f4"), np.zeros(n, "f4"))
+    return SplatSet(
+        means.astype("f4"),
+        q / np.linalg.norm(q, axis=1, keepdims=True),
+        np.full((n, 3), -5, "f4"),
+        np.full(n, 3, "f4"),
+        rng.normal(size=(n, k, 3)).astype("f4"),
+        bind_id.astype("i4"),
+        np.full(n, -1, "i4"),
+        np.zeros((n, 2), "f4"),
+        np.zeros(n, "f4"),
+    )
 
 
 @pytest.fixture()
@@ -55,22 +63,55 @@ def scene(tmp_path: Path) -> Dataset:
     with Dataset.create(tmp_path / "ds") as w:
         w.write_text("robot/robot.urdf", URDF)
         w.set_robot("robot/robot.urdf", base_link="base")
-        w.write_table("ep/js.parquet", pa.table({"t_ns": t, "position.j1": th, "position.j2": s}), kind="joint_states")
+        w.write_table(
+            "ep/js.parquet",
+            pa.table({"t_ns": t, "position.j1": th, "position.j2": s}),
+            kind="joint_states",
+        )
         yaw = 0.5 * t * 1e-9
-        w.write_table("ep/obj.parquet", pa.table({
-            "t_ns": t, "object": ["box"] * len(t), "x": 0.5 + 0.1 * t * 1e-9, "y": np.zeros(len(t)),
-            "z": np.full(len(t), 0.05), "qw": np.cos(yaw / 2), "qx": np.zeros(len(t)), "qy": np.zeros(len(t)),
-            "qz": np.sin(yaw / 2)}), kind="object_poses")
+        w.write_table(
+            "ep/obj.parquet",
+            pa.table(
+                {
+                    "t_ns": t,
+                    "object": ["box"] * len(t),
+                    "x": 0.5 + 0.1 * t * 1e-9,
+                    "y": np.zeros(len(t)),
+                    "z": np.full(len(t), 0.05),
+                    "qw": np.cos(yaw / 2),
+                    "qx": np.zeros(len(t)),
+                    "qy": np.zeros(len(t)),
+                    "qz": np.sin(yaw / 2),
+                }
+            ),
+            kind="object_poses",
+        )
         w.write_splats("robot/splats.ply", _splats(link_means, np.repeat([0, 1], 20), k=4))
         w.write_splats("assets/box/splats.ply", _splats(obj_means, np.zeros(10)))
-        w.manifest["robot"]["splats"] = {"path": "robot/splats.ply", "kind": "3dgs", "sh_degree": 1,
-                                         "targets": ["upper", "slider"],
-                                         "rest": {"t_ns": 0, "joint_positions": {"j1": 0.0, "j2": 0.0}}}
-        w.set_asset("box", kind="object", splats={"path": "assets/box/splats.ply", "kind": "3dgs",
-                                                  "targets": ["box"],
-                                                  "rest": {"object_poses": {"box": [0.5, 0, 0.05, 1, 0, 0, 0]}}})
-        streams = {n: {"kind": k, "path": p, "stamp_source": "synthetic", "offset_ns": 0} for n, k, p in
-                   [("joint_states", "joint_states", "ep/js.parquet"), ("object_poses", "object_poses", "ep/obj.parquet")]}
+        w.manifest["robot"]["splats"] = {
+            "path": "robot/splats.ply",
+            "kind": "3dgs",
+            "sh_degree": 1,
+            "targets": ["upper", "slider"],
+            "rest": {"t_ns": 0, "joint_positions": {"j1": 0.0, "j2": 0.0}},
+        }
+        w.set_asset(
+            "box",
+            kind="object",
+            splats={
+                "path": "assets/box/splats.ply",
+                "kind": "3dgs",
+                "targets": ["box"],
+                "rest": {"object_poses": {"box": [0.5, 0, 0.05, 1, 0, 0, 0]}},
+            },
+        )
+        streams = {
+            n: {"kind": k, "path": p, "stamp_source": "synthetic", "offset_ns": 0}
+            for n, k, p in [
+                ("joint_states", "joint_states", "ep/js.parquet"),
+                ("object_poses", "object_poses", "ep/obj.parquet"),
+            ]
+        }
         w.add_episode("ep0", start_ns=0, end_ns=int(t[-1]), streams=streams)
         ds = w.commit()
     ds._truth = (link_means, obj_means)  # type: ignore[attr-defined]
@@ -91,7 +132,9 @@ def test_links_and_objects_follow_closed_form(scene: Dataset, t_ns: int) -> None
     th, s = 0.8 * t_ns * 1e-9, 0.2 * t_ns * 1e-9
     pivot = np.array([0.1, 0, 0.2])
     R = _rz(th)
-    upper = (link_means[:20] - pivot) @ R.T + pivot  # rotation about the joint axis through the pivot
+    upper = (
+        link_means[:20] - pivot
+    ) @ R.T + pivot  # rotation about the joint axis through the pivot
     # slider: rotate with upper, then translate by s along upper's x axis
     slider = (link_means[20:] - pivot) @ R.T + pivot + s * R[:, 0]
     yaw = 0.5 * t_ns * 1e-9
@@ -108,7 +151,9 @@ def test_links_and_objects_follow_closed_form(scene: Dataset, t_ns: int) -> None
 
 def test_time_interpolation_between_samples(scene: Dataset) -> None:
     b = Binding(scene, dtype=torch.float64)
-    g1 = b.pose(5_000_000)  # between the 0 and 10 ms samples: linear joint motion is reproduced exactly
+    g1 = b.pose(
+        5_000_000
+    )  # between the 0 and 10 ms samples: linear joint motion is reproduced exactly
     th = 0.8 * 5e-3
     link = scene._truth[0].astype("f4").astype(np.float64)[:20]  # type: ignore[attr-defined]
     pivot = np.array([0.1, 0, 0.2])

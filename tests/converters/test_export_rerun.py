@@ -113,7 +113,9 @@ def test_streams_rows_and_stamps(tiny: Dataset, chunks: dict) -> None:
 def test_findings_logged_at_their_stamps(tiny: Dataset, chunks: dict) -> None:
     from robogs_format.validate import validate
 
-    findings = validate(tiny.root, ignore=["binding"]).findings  # the layer leaves out re-render checks
+    findings = validate(
+        tiny.root, ignore=["binding"]
+    ).findings  # the layer leaves out re-render checks
     if not findings:
         assert "/logs/findings" not in chunks
         return

@@ -377,18 +377,43 @@ def test_cli_convert_with_column_map(tmp_path, chain3, capsys):
     from robogs_format.cli.main import main
 
     t, q, _, _ = _generic_rows()
-    _write_csv(tmp_path / "log.csv", ["t", "a", "b", "c"],
-               [[float(a - t[0]) * 1e-9, *map(float, b)] for a, b in zip(t, q, strict=True)])
+    _write_csv(
+        tmp_path / "log.csv",
+        ["t", "a", "b", "c"],
+        [[float(a - t[0]) * 1e-9, *map(float, b)] for a, b in zip(t, q, strict=True)],
+    )
     mp = tmp_path / "map.yaml"
-    mp.write_text("time: {column: t, unit: s}\njoints:\n  joint1: {position: a}\n  joint2: {position: b}\n"
-                  "  joint3: {position: c}\n")
-    rc = main(["convert", str(tmp_path / "log.csv"), str(tmp_path / "out"), "--urdf", str(chain3),
-               "--map", str(mp)])
+    mp.write_text(
+        "time: {column: t, unit: s}\njoints:\n  joint1: {position: a}\n  joint2: {position: b}\n"
+        "  joint3: {position: c}\n"
+    )
+    rc = main(
+        [
+            "convert",
+            str(tmp_path / "log.csv"),
+            str(tmp_path / "out"),
+            "--urdf",
+            str(chain3),
+            "--map",
+            str(mp),
+        ]
+    )
     assert rc == 0, capsys.readouterr().err
     table = Dataset.open(tmp_path / "out").episode().table("joint_states")
     np.testing.assert_allclose(table.column("position.joint3").to_numpy(), q[:, 2], atol=1e-12)
-    mp.write_text("time: t\njoints:\n  joint1: {position: a}\n  joint2: {position: b}\n  joint3: {position: zz}\n")
-    rc = main(["convert", str(tmp_path / "log.csv"), str(tmp_path / "out2"), "--urdf", str(chain3),
-               "--map", str(mp)])
+    mp.write_text(
+        "time: t\njoints:\n  joint1: {position: a}\n  joint2: {position: b}\n  joint3: {position: zz}\n"
+    )
+    rc = main(
+        [
+            "convert",
+            str(tmp_path / "log.csv"),
+            str(tmp_path / "out2"),
+            "--urdf",
+            str(chain3),
+            "--map",
+            str(mp),
+        ]
+    )
     err = capsys.readouterr().err
     assert rc == 2 and "'zz'" in err and "Traceback" not in err and not (tmp_path / "out2").exists()

@@ -31,7 +31,9 @@ def test_malformed_manifest_names_line_and_column(tmp_path: Path) -> None:
 def test_nan_in_json_is_rejected(tmp_path: Path) -> None:
     root = _minimal(tmp_path / "ds")
     doc = json.loads((root / "manifest.json").read_text())
-    (root / "manifest.json").write_text(json.dumps(doc).replace('"episodes": []', '"episodes": [], "x": NaN'))
+    (root / "manifest.json").write_text(
+        json.dumps(doc).replace('"episodes": []', '"episodes": [], "x": NaN')
+    )
     with pytest.raises(FormatError, match="non-finite"):
         Dataset.open(root)
 
@@ -48,7 +50,9 @@ def test_migration_hook_upgrades_old_major() -> None:
     assert migrate({"spec_version": "0.9.0"})["migrated"] is True
 
 
-@pytest.mark.parametrize("rel", ["../../etc/passwd", "/etc/passwd", "file:///etc/passwd", "a/../../b", "C:\\x"])
+@pytest.mark.parametrize(
+    "rel", ["../../etc/passwd", "/etc/passwd", "file:///etc/passwd", "a/../../b", "C:\\x"]
+)
 def test_escaping_paths_refused(tmp_path: Path, rel: str) -> None:
     with pytest.raises(PathEscapeError):
         resolve_inside(tmp_path, rel)
@@ -64,11 +68,16 @@ def test_symlink_escape_refused(tmp_path: Path) -> None:
 def _splats(n: int, k: int = 4, scales: int = 3) -> SplatSet:
     rng = np.random.default_rng(0)
     return SplatSet(
-        means=rng.normal(size=(n, 3)).astype("f4"), quats=rng.normal(size=(n, 4)).astype("f4"),
-        log_scales=rng.normal(size=(n, scales)).astype("f4"), opacity_logits=rng.normal(size=n).astype("f4"),
-        sh=rng.normal(size=(n, k, 3)).astype("f4"), bind_id=rng.integers(0, 5, n).astype("i4"),
-        bind_face=rng.integers(0, 100, n).astype("i4"), bind_uv=rng.random((n, 2)).astype("f4"),
-        bind_offset=rng.normal(size=n).astype("f4"))
+        means=rng.normal(size=(n, 3)).astype("f4"),
+        quats=rng.normal(size=(n, 4)).astype("f4"),
+        log_scales=rng.normal(size=(n, scales)).astype("f4"),
+        opacity_logits=rng.normal(size=n).astype("f4"),
+        sh=rng.normal(size=(n, k, 3)).astype("f4"),
+        bind_id=rng.integers(0, 5, n).astype("i4"),
+        bind_face=rng.integers(0, 100, n).astype("i4"),
+        bind_uv=rng.random((n, 2)).astype("f4"),
+        bind_offset=rng.normal(size=n).astype("f4"),
+    )
 
 
 @pytest.mark.parametrize("k,scales", [(1, 3), (4, 3), (9, 2), (16, 3)])
@@ -76,8 +85,17 @@ def test_splat_ply_round_trip(tmp_path: Path, k: int, scales: int) -> None:
     s = _splats(57, k, scales)
     write_splat_ply(tmp_path / "s.ply", s)
     back = read_splat_ply(tmp_path / "s.ply")
-    for name in ("means", "quats", "log_scales", "opacity_logits", "sh", "bind_id", "bind_face", "bind_uv",
-                 "bind_offset"):
+    for name in (
+        "means",
+        "quats",
+        "log_scales",
+        "opacity_logits",
+        "sh",
+        "bind_id",
+        "bind_face",
+        "bind_uv",
+        "bind_offset",
+    ):
         assert np.array_equal(getattr(back, name), getattr(s, name)), name
     assert back.kind == ("2dgs" if scales == 2 else "3dgs") and back.sh_degree == int(k**0.5) - 1
 
@@ -101,8 +119,10 @@ def test_truncated_splat_ply(tmp_path: Path) -> None:
 
 
 def test_absurd_splat_header_rejected_before_allocation(tmp_path: Path) -> None:
-    (tmp_path / "s.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\n"
-                                     b"property float x\nend_header\n")
+    (tmp_path / "s.ply").write_bytes(
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\n"
+        b"property float x\nend_header\n"
+    )
     with pytest.raises(FormatError, match="over the limit"):
         read_splat_ply(tmp_path / "s.ply")
 
@@ -119,10 +139,24 @@ def test_truncated_parquet_is_a_format_error(tmp_path: Path) -> None:
     import pyarrow as pa
 
     with Dataset.create(tmp_path / "ds") as w:
-        w.write_table("e/js.parquet", pa.table({"t_ns": pa.array([1, 2], pa.int64()), "position.a": [0.0, 1.0]}),
-                      kind="joint_states")
-        w.add_episode("ep0", start_ns=1, end_ns=2, streams={"joint_states": {
-            "kind": "joint_states", "path": "e/js.parquet", "stamp_source": "synthetic", "offset_ns": 0}})
+        w.write_table(
+            "e/js.parquet",
+            pa.table({"t_ns": pa.array([1, 2], pa.int64()), "position.a": [0.0, 1.0]}),
+            kind="joint_states",
+        )
+        w.add_episode(
+            "ep0",
+            start_ns=1,
+            end_ns=2,
+            streams={
+                "joint_states": {
+                    "kind": "joint_states",
+                    "path": "e/js.parquet",
+                    "stamp_source": "synthetic",
+                    "offset_ns": 0,
+                }
+            },
+        )
         ds = w.commit()
     p = ds.root / "e/js.parquet"
     p.write_bytes(p.read_bytes()[:-20])

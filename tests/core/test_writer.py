@@ -21,26 +21,57 @@ from robogs_format.writer import sha256_file
 def _joint_table(n: int = 50, seed: int = 0) -> pa.Table:
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.integers(1_900_000, 2_100_000, n)).astype(np.int64)
-    return pa.table({"t_ns": t, "position.j1": rng.normal(size=n), "position.j2": rng.normal(size=n),
-                     "velocity.j1": rng.normal(size=n), "velocity.j2": rng.normal(size=n)})
+    return pa.table(
+        {
+            "t_ns": t,
+            "position.j1": rng.normal(size=n),
+            "position.j2": rng.normal(size=n),
+            "velocity.j1": rng.normal(size=n),
+            "velocity.j2": rng.normal(size=n),
+        }
+    )
 
 
 def _make(path: Path, table: pa.Table) -> Dataset:
     with Dataset.create(path) as w:
         w.write_table("episodes/ep0/joint_states.parquet", table, kind="joint_states")
-        labels = pa.table({"frame_index": pa.array([0, 1], pa.int64()),
-                           "png": pa.array([encode_label_png(np.full((4, 5), 7, np.uint16)),
-                                            encode_label_png(np.arange(20, dtype=np.uint16).reshape(4, 5) * 3000)],
-                                           pa.binary())})
+        labels = pa.table(
+            {
+                "frame_index": pa.array([0, 1], pa.int64()),
+                "png": pa.array(
+                    [
+                        encode_label_png(np.full((4, 5), 7, np.uint16)),
+                        encode_label_png(np.arange(20, dtype=np.uint16).reshape(4, 5) * 3000),
+                    ],
+                    pa.binary(),
+                ),
+            }
+        )
         w.write_table("episodes/ep0/cameras/cam0/labels.parquet", labels, kind="camera_labels")
         w.set_camera(CameraModel("cam0", 5, 4, 10.0, 10.0, 2.5, 2.0, T_world_cam=np.eye(4)))
         w.set_physics({"objects": {"box": {"equation": "rigid", "mass_kg": 0.5}}})
         t = table.column("t_ns").to_numpy()
-        w.add_episode("ep0", start_ns=int(t[0]), end_ns=int(t[-1]), streams={
-            "joint_states": {"kind": "joint_states", "path": "episodes/ep0/joint_states.parquet",
-                             "stamp_source": "synthetic", "offset_ns": 0, "nominal_rate_hz": 500.0},
-            "camera/cam0": {"kind": "camera", "camera": "cam0", "labels": "episodes/ep0/cameras/cam0/labels.parquet",
-                            "stamp_source": "synthetic", "offset_ns": 0}})
+        w.add_episode(
+            "ep0",
+            start_ns=int(t[0]),
+            end_ns=int(t[-1]),
+            streams={
+                "joint_states": {
+                    "kind": "joint_states",
+                    "path": "episodes/ep0/joint_states.parquet",
+                    "stamp_source": "synthetic",
+                    "offset_ns": 0,
+                    "nominal_rate_hz": 500.0,
+                },
+                "camera/cam0": {
+                    "kind": "camera",
+                    "camera": "cam0",
+                    "labels": "episodes/ep0/cameras/cam0/labels.parquet",
+                    "stamp_source": "synthetic",
+                    "offset_ns": 0,
+                },
+            },
+        )
         return w.commit()
 
 
@@ -76,7 +107,9 @@ def test_failed_write_leaves_previous_version_intact(tmp_path: Path) -> None:
     ds = _make(tmp_path / "ds", _joint_table())
     before = {p: sha256_file(p) for p in ds.root.rglob("*") if p.is_file()}
     with pytest.raises(RuntimeError), ds.edit() as w:
-        w.write_table("episodes/ep0/joint_states.parquet", _joint_table(seed=1), kind="joint_states")
+        w.write_table(
+            "episodes/ep0/joint_states.parquet", _joint_table(seed=1), kind="joint_states"
+        )
         raise RuntimeError("simulated crash")
     after = {p: sha256_file(p) for p in ds.root.rglob("*") if p.is_file()}
     assert before == after
@@ -89,7 +122,9 @@ def test_edit_never_modifies_original_files_in_place(tmp_path: Path) -> None:
     held = os.open(src, os.O_RDONLY)  # the old inode stays readable
     old_hash = sha256_file(src)
     with ds.edit() as w:
-        w.write_table("episodes/ep0/joint_states.parquet", _joint_table(seed=2), kind="joint_states")
+        w.write_table(
+            "episodes/ep0/joint_states.parquet", _joint_table(seed=2), kind="joint_states"
+        )
         new = w.commit()
     data = b""
     while chunk := os.read(held, 1 << 16):
@@ -132,7 +167,10 @@ def test_interrupted_swap_is_recovered(tmp_path: Path) -> None:
 
 
 def test_writer_refuses_wrong_table_kind(tmp_path: Path) -> None:
-    with Dataset.create(tmp_path / "ds") as w, pytest.raises(FormatError, match="missing column 't_ns'"):
+    with (
+        Dataset.create(tmp_path / "ds") as w,
+        pytest.raises(FormatError, match="missing column 't_ns'"),
+    ):
         w.write_table("x.parquet", pa.table({"position.a": [1.0]}), kind="joint_states")
 
 
@@ -140,11 +178,18 @@ def test_physics_revisions_keep_history(tmp_path: Path) -> None:
     ds = _make(tmp_path / "ds", _joint_table())
     for mass in (0.6, 0.7):
         with ds.edit() as w:
-            w.set_physics({"objects": {"box": {"equation": "rigid", "mass_kg": mass}}}, note=f"m={mass}")
+            w.set_physics(
+                {"objects": {"box": {"equation": "rigid", "mass_kg": mass}}}, note=f"m={mass}"
+            )
             ds = w.commit()
     assert ds.physics()["revision"] == 3 and ds.physics()["parent_revision"] == 2
     assert ds.physics_history() == [1, 2]
-    assert json.loads((ds.root / "physics/history/rev-0001.json").read_text())["objects"]["box"]["mass_kg"] == 0.5
+    assert (
+        json.loads((ds.root / "physics/history/rev-0001.json").read_text())["objects"]["box"][
+            "mass_kg"
+        ]
+        == 0.5
+    )
 
 
 def test_label_png_round_trip_exact() -> None:

@@ -21,8 +21,16 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
 
 
 def test_report_has_findings_table_and_four_plots(scene: Dataset, tmp_path: Path) -> None:
-    finding = {"code": "T003", "severity": "error", "location": {"stream": "joint_states", "t_ns": 5},
-               "value": 12.5, "budget": 5.0, "unit": "ms", "message": "gap <b>", "hint": "re-record"}
+    finding = {
+        "code": "T003",
+        "severity": "error",
+        "location": {"stream": "joint_states", "t_ns": 5},
+        "value": 12.5,
+        "budget": 5.0,
+        "unit": "ms",
+        "message": "gap <b>",
+        "hint": "re-record",
+    }
     path = write_dataset_report(scene, [finding], tmp_path / "r.html")
     html = path.read_text()
     assert "1 errors, 0 warnings" in html

@@ -27,12 +27,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from robogs_format.differentiate import describe_differentiator, savgol_derivative
 from reference_impl.physics.arm.effects import ArmEffect, ArmState, InertialContext
 from reference_impl.physics.arm.rnea import ArmModel, inertial_vector, regressor
 from reference_impl.physics.effects import get_effect
 from reference_impl.physics.space import ParamSpace
 from robogs_format.dataset import Dataset
+from robogs_format.differentiate import describe_differentiator, savgol_derivative
 from robogs_format.errors import InputError
 
 __all__ = [
