@@ -17,7 +17,12 @@ from typing import Any
 import numpy as np
 
 from reference_impl.physics.compare import CompareResult, compare_recording, residual_table
-from reference_impl.physics.diagnose import DiagnoseResult, ParamEstimate, diagnose_recording
+from reference_impl.physics.diagnose import (
+    DiagnoseResult,
+    ParamEstimate,
+    diagnose_recording,
+    start_points,
+)
 from reference_impl.physics.engine import Engine
 from reference_impl.physics.fit import Problem
 from reference_impl.physics.recording import Recording, as_recording, load_recording
@@ -64,7 +69,8 @@ class FitResult:
         params: fitted base and effect parameters with 95 % intervals (``owner.name``).
         rms_before / rms_after: position RMS [mm] with stored and fitted parameters.
         noise_floor: data-estimated noise floor [mm].
-        unidentifiable: parameters whose Fisher information is near-singular.
+        unidentifiable: parameters the data do not identify (insensitive, near-collinear or
+            with an interval wider than their bounds); they are not written.
         physics: the new physics.json document.
         revision: the revision written (None when nothing was written).
     """
@@ -110,7 +116,11 @@ def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
     for e in cands:
         free += [c for c in space.owner_columns(e.name) if c not in free]
     th0 = eng.start(space)
-    out = eng.fit(space, [Problem(free=free, theta0=th0)])[0]
+    starts = [th0]
+    for e in cands:  # multi-start: each effect's extra start points, the others at zero
+        starts += start_points(space, e, th0)[1:]
+    outs = eng.fit(space, [Problem(free=free, theta0=th) for th in starts])
+    out = min(outs, key=lambda o: o.cost)
     before = eng.evaluate(space, th0[None], np.zeros((1, eng.prep.n_traj, 3)))[0]
     cmp_before = residual_table(eng, eng.raw(before))
     cmp_after = residual_table(eng, eng.raw(out.resid))
@@ -133,7 +143,8 @@ def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
     obj = eng.prep.rec.object_name
     ob = doc.setdefault("objects", {}).setdefault(obj, {"equation": "rigid"})
     for c in space.owner_columns("base"):
-        ob[space.slots[c].param.name] = float(out.theta[c])
+        if np.isfinite(out.std[free.index(c)]):  # an unidentifiable value keeps the stored one
+            ob[space.slots[c].param.name] = float(out.theta[c])
     effects = [
         e for e in doc.get("effects", []) if e.get("name") not in {x.name for x in space.effects}
     ]

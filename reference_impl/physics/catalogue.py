@@ -1,9 +1,9 @@
 """Built-in effects of the rigid-object model (registered on import).
 
 Contact family: viscous damping, quadratic drag, Stribeck friction, table tilt (constant bias
-acceleration), anisotropic friction, restitution, CoM offset. Sensor family: camera-encoder time
+acceleration), anisotropic friction, restitution, CoM offset, mass. Sensor family: camera-encoder time
 offset, planar camera extrinsics error. The catalogue follows the effect table of
-``research/physics.md`` section 6.1 (E2-E6, E8, E9, E13, E14).
+``research/physics.md`` section 6.1 (E2-E6, E8, E9, E13, E14) plus the mass error of E9.
 
 Hook parameter shapes: ``body``, ``accel``, ``friction`` and ``from_sensor`` receive [M, 1]
 tensors (broadcast against [M, T]); ``sample_times`` and ``to_sensor`` receive [M, 1, 1]
@@ -27,6 +27,7 @@ __all__ = [
     "AnisotropicFriction",
     "Restitution",
     "ComOffset",
+    "Mass",
     "TimeOffset",
     "CameraExtrinsics",
 ]
@@ -81,6 +82,7 @@ class Stribeck(Effect):
     needs: tuple[str, ...] = ("object_poses", "sliding")
     separate_by: str = "slow pushes and long low-speed slides (many frames below v_s)"
     description: str = "friction rising at low sliding speed (stiction)"
+    starts: tuple[dict[str, float], ...] = ({"dmu": 0.4, "v_s": 0.15},)
 
     def friction(self, th, mu_s, mu_d, slip: Slip):
         bump = th["dmu"] * torch.exp(-((slip.speed / th["v_s"]) ** 2))
@@ -140,6 +142,7 @@ class Restitution(Effect):
     needs: tuple[str, ...] = ("object_poses", "impact")
     separate_by: str = "drops from several heights onto the table"
     description: str = "bounce (or its absence) at impacts with the table"
+    starts: tuple[dict[str, float], ...] = ({"e_delta": 0.3},)
 
     def body(self, th, body: Body) -> Body:
         return replace(body, restitution=(body.restitution + th["e_delta"]).clamp(0.0, 0.98))
@@ -163,6 +166,30 @@ class ComOffset(Effect):
     def body(self, th, body: Body) -> Body:
         off = torch.cat([th["dx"], th["dy"]], dim=-1).unsqueeze(1)
         return replace(body, com=body.com + off)
+
+
+@dataclass(frozen=True)
+class Mass(Effect):
+    """Mass error ``m = m_nominal (1 + dm)``, the yaw inertia scaled with it (uniform density).
+
+    With a kinematic pusher, Coulomb friction and gravity every force on the box scales with its
+    mass or is a velocity constraint, so object poses alone do not change with ``dm``: the fit
+    reports it unidentifiable unless the data carry forces.
+    """
+
+    name: str = "mass"
+    family: str = "contact"
+    params: tuple[Param, ...] = (Param("dm", "-", -0.5, 2.0, 0.0, 0.2),)
+    needs: tuple[str, ...] = ("object_poses", "contact")
+    separate_by: str = (
+        "forces: a force-torque sensor at the pusher or a weighed object (poses of a pushed, "
+        "sliding or dropped box do not depend on its mass)"
+    )
+    description: str = "wrong object mass (and inertia)"
+
+    def body(self, th, body: Body) -> Body:
+        s = 1.0 + th["dm"]
+        return replace(body, mass=body.mass * s, inertia_z=body.inertia_z * s)
 
 
 @dataclass(frozen=True)
@@ -214,6 +241,7 @@ for _cls in (
     AnisotropicFriction,
     Restitution,
     ComOffset,
+    Mass,
     TimeOffset,
     CameraExtrinsics,
 ):

@@ -108,6 +108,8 @@ def _compare(args: argparse.Namespace, model: str) -> int:
         print(f"joint-torque residuals ({res['n_trajectories']} trajectories, {res['n_samples']} samples)")
         for j, r in res["joints"].items():
             print(f"  {j:24s} rms {r['rms_nm']:.3f} N·m   noise {r['noise_nm']:.3f} N·m   bias {r['bias_nm']:+.3f}")
+        print("worst phases: " + ", ".join(f"{p['phase']} {p['rms_sigma']:.1f} σ (worst {p['joint']} "
+                                           f"{p['joint_rms_sigma']:.1f} σ)" for p in res["worst_phases"]))
         print("worst segments:")
         for w in res["worst_segments"][:5]:
             print(f"  {w['trajectory']} {w['joint']} {w['phase']:>10s}  {(w['t_start_ns']) / 1e9:.2f}–"
@@ -132,12 +134,34 @@ def _compare(args: argparse.Namespace, model: str) -> int:
     return 0
 
 
+def _param_rows(params: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """Arm parameters ``{name: {value, low, high, unit}}`` as the table's list of rows."""
+    return [{"name": k, **v} for k, v in params.items()]
+
+
+def _arm_table(d: dict[str, Any]) -> None:
+    rows = [{**e, "params": _param_rows(e["params"]),
+             "verdict": "missing" if e["reported"] else "; ".join(e.get("reasons", [])) or "not supported"}
+            for e in d["effects"]]
+    _effects_table(rows, f"candidate effects on the joint torques ({d['split']})")
+    print("noise floor [N·m]: " + ", ".join(f"{j} {v:.3g}" for j, v in d["noise_floor_nm"].items()))
+    for s in d.get("skipped", []):
+        print(f"  skipped {s['name']}: {s['reason']}")
+    found = [e["name"] for e in d["effects"] if e.get("reported")]
+    print("missing effect(s): " + (", ".join(found) if found else "none above the noise"))
+    if found:
+        print(f"next: robogs fit DATASET --add {found[0]}")
+
+
 def _diagnose(args: argparse.Namespace, model: str) -> int:
     effects = [e.strip() for e in args.effects.split(",")] if args.effects else None
     if model == "arm":
         from reference_impl.physics.arm.api import diagnose_arm
 
         d = diagnose_arm(args.dataset, candidates=effects)
+        if not args.json:
+            _arm_table(d)
+            return 0
     else:
         from reference_impl.physics.api import diagnose
 
@@ -179,7 +203,18 @@ def _fit(args: argparse.Namespace, model: str) -> int:
         if args.json:
             _print_json(d)
             return 0
-        print(f"joint-torque RMS: {d['rms_before_nm']:.4g} → {d['rms_after_nm']:.4g} N·m")
+        print("joint-torque RMS [N·m] before → after (noise floor):")
+        for j, before in d["rms_before_nm"].items():
+            print(f"  {j:24s} {before:.4g} → {d['rms_after_nm'][j]:.4g}  ({d['noise_floor_nm'][j]:.3g})")
+        for eff, params in d["params"].items():
+            print(f"{eff}:")
+            for p in _param_rows(params):
+                print(f"  {p['name']:32s} {_fmt(p['value'], '.5g')}  [{_fmt(p['low'])}, {_fmt(p['high'])}] "
+                      f"{p.get('unit', '')}")
+        if d["clamped"]:
+            print("written as 0 (fitted negative): " + ", ".join(d["clamped"]))
+        print("dry run: nothing written" if args.dry_run else f"wrote physics revision {d.get('revision')}")
+        return 0
     else:
         from reference_impl.physics.api import fit
 

@@ -84,6 +84,10 @@ class Effect:
         model: which model the hooks belong to (``"rigid"`` or ``"arm"``).
         separate_by: the experiment that tells this effect apart from look-alikes.
         description: one line for reports.
+        starts: extra start points of the fit besides the zero values, as ``{param: value}``
+            (the fitter keeps the best). Needed where the predictions are flat in the
+            parameter at its zero value, e.g. a bounce height grows with the square of the
+            restitution, so its gradient vanishes at zero.
     """
 
     name: str = ""
@@ -93,6 +97,7 @@ class Effect:
     model: str = "rigid"
     separate_by: str = ""
     description: str = ""
+    starts: tuple[dict[str, float], ...] = ()
 
     # --- rigid-model hooks (no-ops here; overridden by concrete effects) -----------------
     def body(self, th: dict[str, Any], body: Any) -> Any:

@@ -8,7 +8,8 @@ Dynamics (per step ``dt``, default 1 ms), for ``M`` parameter sets x ``T`` traje
   pitch are not simulated: the box stays flat on one face (documented limitation; enough for
   pushing, sliding, lifting, placing).
 * **Table contact** - a velocity-level impulse (speculative: it may close the remaining gap in
-  the step), with Newton restitution ``e`` above ``bounce_min_speed``. Friction is an impulse on
+  the step), with Newton restitution ``e`` above ``bounce_min_speed``; a rebound starts at the
+  time of impact inside the step. Friction is an impulse on
   the planar twist ``xi = (vx, vy, c_r * w)`` with the ellipsoidal limit surface of Howe &
   Cutkosky (1996): force ``-mu N xi/|xi|`` (torque limit ``mu N c_r``, ``c_r`` = mean distance
   of the footprint from its centre). The box sticks exactly when the impulse needed to stop it
@@ -497,6 +498,10 @@ def simulate(
         target = torch.where(bounce, e_rest * approach, -gap.clamp(min=0.0) / dt)
         lam_n = torch.where(contact, (target - vz).clamp(min=0.0), torch.zeros_like(vz))
         vz = vz + lam_n
+        # a bounce starts at the time of impact inside the step, not at the step's start
+        # (otherwise the box would rebound from up to approach * dt above the table)
+        rebound = contact & bounce & (lam_n > 0)
+        toi = (gap.clamp(min=0.0) / approach.clamp(min=1e-9)).clamp(max=dt)
 
         # ---- table: friction on the twist (vx, vy, c_r w) --------------------------------
         speed2 = vx * vx + vy * vy
@@ -542,6 +547,9 @@ def simulate(
 
         v_new = torch.stack([vx, vy, vz], dim=-1)
         p = p + dt * v_new
+        if bool(rebound.any()):
+            z_up = z_rest + vz * (dt - toi)
+            p = torch.cat([p[..., :2], torch.where(rebound, z_up, p[..., 2]).unsqueeze(-1)], -1)
         yaw = yaw + dt * wf
         v, w = v_new, wf
 

@@ -34,7 +34,8 @@ def test_fd_jacobian_matches_central_differences():
 
 @pytest.mark.parametrize(
     "effect,tol",
-    [("table_tilt", 0.10), ("time_offset", 0.05)],
+    # 6 pushes at 1 mm noise resolve a tilt to about +-0.01 m/s^2 (1 sigma), 7 % of g_y
+    [("table_tilt", 0.20), ("time_offset", 0.05)],
 )
 def test_parameter_recovery(effect, tol):
     rec = scenario(effect)
@@ -47,8 +48,9 @@ def test_parameter_recovery(effect, tol):
         name = space.slots[c].param.name
         j = free.index(c)
         assert out.theta[c] == pytest.approx(truth[name], rel=tol, abs=1e-3)
-        # the 95 % interval is finite and not absurdly wide
+        # the 95 % interval is finite and not absurdly wide, and the truth is within 3 sigma
         assert 0 < 1.96 * out.std[j] < 0.5 * abs(truth[name]) + 1e-3
+        assert abs(out.theta[c] - truth[name]) < 3 * out.std[j]
     assert out.identifiable
     # friction comes back too
     assert out.theta[0] == pytest.approx(rec.meta["true_friction_dynamic"], rel=0.05)

@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 from conftest import scenario
 
-from fixtures.scenarios import write_scenario
+from fixtures.scenarios import read_truth, truth_path, write_scenario
 from reference_impl.physics import api
 from reference_impl.physics.prepare import prepare
 from reference_impl.physics.recording import load_recording
 from robogs_format.dataset import Dataset
+from robogs_format.errors import InputError
 
 
 def test_noise_is_estimated_from_the_data():
@@ -21,6 +22,23 @@ def test_noise_is_estimated_from_the_data():
     assert nz.sigma_pos == pytest.approx(truth["pos"], rel=0.15)
     assert nz.sigma_yaw == pytest.approx(truth["rot"], rel=0.2)
     assert nz.sigma_t == pytest.approx(truth["jitter"], rel=0.25)
+
+
+def test_scenario_truth_is_written_beside_the_dataset_never_inside(tmp_path):
+    rec = scenario("table_tilt", seed=4)
+    ds = write_scenario(rec, tmp_path / "ds")
+    truth = read_truth(tmp_path / "ds")
+    assert truth_path(tmp_path / "ds") == tmp_path / "ds.truth.json"
+    assert truth["effect"] == "table_tilt" and truth["true_params"] == {"g_x": 0.25, "g_y": -0.15}
+    # nothing inside the dataset folder names the hidden effect or its parameters
+    inside = [f for f in (tmp_path / "ds").rglob("*") if f.is_file()]
+    assert inside and not any("scenario.json" in f.name or "truth" in f.name for f in inside)
+    for f in inside:
+        data = f.read_bytes()
+        assert b"table_tilt" not in data and b"g_x" not in data and b"true_params" not in data, f
+    assert not any("truth" in k or "scenario" in k for k in ds.files)
+    with pytest.raises(InputError, match="no scenario truth"):
+        read_truth(tmp_path / "other")
 
 
 def test_dataset_round_trip_fit_revision_and_revert(tmp_path):
