@@ -72,6 +72,12 @@ def _reader_errors() -> tuple[type[BaseException], ...]:
         errs.append(TypesysError)
     except ImportError:  # pragma: no cover - older rosbags
         pass
+    try:  # rosbags reads sqlite3 storage through apsw where it is installed
+        import apsw
+
+        errs.append(apsw.Error)
+    except ImportError:  # pragma: no cover - rosbags falls back to sqlite3
+        pass
     return tuple(errs)
 
 
