@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from .tf_tree import frame_path
 
 __all__ = ["TfBuffer", "Hop", "quats_to_matrices", "matrices_to_quats", "slerp_wxyz", "poses_of"]
 
@@ -270,27 +271,9 @@ class TfBuffer:
 
     def chain(self, target: str, source: str) -> list[Hop] | None:
         """Hops composing ``T_target_source`` (shortest path), or ``None`` when not connected."""
-        target, source = target.lstrip("/"), source.lstrip("/")
-        if target == source:
-            return []
-        if target not in self._adj or source not in self._adj:
+        path = frame_path(self._adj, target, source)
+        if path is None:
             return None
-        prev: dict[str, str | None] = {target: None}
-        queue = deque([target])
-        while queue:
-            f = queue.popleft()
-            if f == source:
-                break
-            for g in sorted(self._adj[f]):
-                if g not in prev:
-                    prev[g] = f
-                    queue.append(g)
-        if source not in prev:
-            return None
-        path = [source]
-        while prev[path[-1]] is not None:
-            path.append(prev[path[-1]])  # type: ignore[arg-type]
-        path.reverse()
         hops = []
         for a, b in zip(path[:-1], path[1:], strict=True):
             if (a, b) in self._dynamic or (a, b) in self._static:

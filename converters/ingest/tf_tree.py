@@ -14,6 +14,7 @@ import numpy as np
 
 __all__ = [
     "StaticTfTree",
+    "frame_path",
     "pose_to_matrix",
     "matrix_to_pose",
     "quat_to_matrix_np",
@@ -92,6 +93,35 @@ def _transform_of(ts: Any) -> tuple[str, str, np.ndarray]:
     )
 
 
+def frame_path(adj: dict[str, set[str]], target: str, source: str) -> list[str] | None:
+    """Frames on the shortest path ``target ... source`` through an undirected frame graph.
+
+    Leading ``/`` is ignored; ``None`` when the two frames are not connected.
+    """
+    target, source = target.lstrip("/"), source.lstrip("/")
+    if target == source:
+        return [target]
+    if target not in adj or source not in adj:
+        return None
+    prev: dict[str, str | None] = {target: None}
+    queue = deque([target])
+    while queue:
+        f = queue.popleft()
+        if f == source:
+            break
+        for g in sorted(adj[f]):
+            if g not in prev:
+                prev[g] = f
+                queue.append(g)
+    if source not in prev:
+        return None
+    path = [source]
+    while prev[path[-1]] is not None:
+        path.append(prev[path[-1]])  # type: ignore[arg-type]
+    path.reverse()
+    return path
+
+
 class StaticTfTree:
     """Frames and the static transforms between them."""
 
@@ -121,28 +151,10 @@ class StaticTfTree:
 
     def lookup(self, target: str, source: str) -> np.ndarray | None:
         """``T_target_source`` composed along the tree, or ``None`` when not connected."""
-        target, source = target.lstrip("/"), source.lstrip("/")
-        if target == source:
-            return np.eye(4)
-        if target not in self._adj or source not in self._adj:
-            return None
-        prev: dict[str, str | None] = {target: None}
-        queue = deque([target])
-        while queue:
-            f = queue.popleft()
-            if f == source:
-                break
-            for g in sorted(self._adj[f]):
-                if g not in prev:
-                    prev[g] = f
-                    queue.append(g)
-        if source not in prev:
+        path = frame_path(self._adj, target, source)
+        if path is None:
             return None
         T = np.eye(4)
-        path = [source]
-        while prev[path[-1]] is not None:
-            path.append(prev[path[-1]])  # type: ignore[arg-type]
-        path.reverse()  # target ... source
         for a, b in zip(path[:-1], path[1:], strict=True):
             if (a, b) in self._edges:
                 T = T @ self._edges[(a, b)]
