@@ -33,7 +33,7 @@ from .roles import Role, camera_name_from_topic, default_role, normalize_type, p
 from .ros_images import decode_compressed_image, decode_raw_image
 from .sinks import CameraSink, TableSink
 from .tf_buffer import Hop, poses_of
-from .tf_ingest import TfIngest, TfObject
+from .tf_ingest import TfIngest, TfObject, stamp_ns
 from .tf_tree import matrix_to_pose, pose_to_matrix
 
 __all__ = ["TopicInfo", "MessageIngest", "PRODUCTIVE_ROLES", "STATIC_ROLES"]
@@ -108,16 +108,6 @@ class _Camera:
     stamp_source: str | None = None
     frame_of: dict[int, int] | None = None
     labels_topic: str | None = None
-
-
-def _stamp_ns(stamp: Any) -> int:
-    sec = getattr(stamp, "sec", None)
-    if sec is None:
-        sec = getattr(stamp, "secs", 0)
-    nsec = getattr(stamp, "nanosec", None)
-    if nsec is None:
-        nsec = getattr(stamp, "nsecs", 0)
-    return int(sec) * 1_000_000_000 + int(nsec)
 
 
 def _floats(values: Any) -> np.ndarray:
@@ -273,7 +263,7 @@ class MessageIngest:
         header = getattr(msg, "header", None)
         src = self._stamp_src.get(topic)
         if src is None:
-            t_hdr = _stamp_ns(header.stamp) if header is not None else 0
+            t_hdr = stamp_ns(header.stamp) if header is not None else 0
             src = "sensor_header" if header is not None and self._plausible(t_hdr) else "log_time"
             if header is not None and src == "log_time":
                 self.prov.note(
@@ -284,7 +274,7 @@ class MessageIngest:
             self.prov.topic(topic).stamp_source = src
         if src == "log_time":
             return int(log_time)
-        t = _stamp_ns(header.stamp)
+        t = stamp_ns(header.stamp)
         if not self._plausible(t):
             self.prov.issue(
                 topic, "header stamp zero or outside the recording's time range (sample dropped)", t
@@ -444,7 +434,7 @@ class MessageIngest:
             return
         cam.info_topic = topic
         header = getattr(msg, "header", None)
-        t = _stamp_ns(header.stamp) if header is not None else int(log_time)
+        t = stamp_ns(header.stamp) if header is not None else int(log_time)
         K = _floats(getattr(msg, "k", getattr(msg, "K", ())))
         key = (
             int(msg.width),

@@ -37,7 +37,7 @@ from .roles import safe_name
 from .tf_buffer import Hop, TfBuffer, poses_of
 from .tf_tree import pose_to_matrix
 
-__all__ = ["TfObject", "TfIngest"]
+__all__ = ["TfObject", "TfIngest", "stamp_ns"]
 
 _CHUNK = 4096
 Edge = tuple[str, str]
@@ -54,7 +54,8 @@ class TfObject:
     source: str  # sink source id, e.g. "/tf:box"
 
 
-def _stamp_ns(stamp: Any) -> int:
+def stamp_ns(stamp: Any) -> int:
+    """A ROS 1 (``secs``/``nsecs``) or ROS 2 (``sec``/``nanosec``) stamp as int64 ns."""
     sec = getattr(stamp, "sec", None)
     if sec is None:
         sec = getattr(stamp, "secs", 0)
@@ -133,7 +134,7 @@ class TfIngest:
         edges: set[Edge] = set()
         for ts in msg.transforms:
             parts = _parts(ts)
-            t_hdr = _stamp_ns(ts.header.stamp)
+            t_hdr = stamp_ns(ts.header.stamp)
             if src is None:
                 src = "sensor_header" if self.plausible(t_hdr) else "log_time"
                 self.stamp_source[topic] = src
