@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
 import pytest
 import torch
 
+from fixtures.armlogs import ur5_urdf
 from fixtures.scenarios import make_scenario
 
 
@@ -24,3 +26,11 @@ def scenario(
 def _threads():
     torch.set_num_threads(1)
     yield
+
+
+@pytest.fixture(scope="module")
+def ur5(tmp_path_factory) -> Path:
+    """The synthetic UR5's URDF written to a temporary folder (for the arm-log tests)."""
+    p = tmp_path_factory.mktemp("robot") / "ur5.urdf"
+    p.write_text(ur5_urdf())
+    return p

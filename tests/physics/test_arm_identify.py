@@ -7,10 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 
 from converters.ingest.tabular import convert_tabular
-from fixtures.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
+from fixtures.armlogs import ArmLogSpec, generate_armlog
 from reference_impl.physics.arm import compare_arm, diagnose_arm, fit_arm
 from reference_impl.physics.effects import available_effects, get_effect
 from robogs_format.dataset import Dataset
@@ -26,21 +25,6 @@ REQUIRED = {
     "heldout_rms_after",
     "params",
 }
-
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-@pytest.fixture(scope="module")
-def ur5(tmp_path_factory) -> Path:
-    p = tmp_path_factory.mktemp("robot") / "ur5.urdf"
-    p.write_text(ur5_urdf())
-    return p
 
 
 def _dataset(root: Path, urdf: Path, effect: str, seed: int = 3) -> tuple[Path, dict]:

@@ -4,32 +4,15 @@ held-out split per trajectory, held (unlogged) joints, a log without efforts."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 
 from converters.ingest.tabular import convert_tabular
 from fixtures.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
 from reference_impl.physics.arm import compare_arm
 from robogs_format.cli.main import main
 from robogs_format.dataset import Dataset
-
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-@pytest.fixture(scope="module")
-def ur5(tmp_path_factory) -> Path:
-    p = tmp_path_factory.mktemp("robot") / "ur5.urdf"
-    p.write_text(ur5_urdf())
-    return p
 
 
 def _reversal_rows(qd: np.ndarray, t: np.ndarray, half_s: float) -> np.ndarray:

@@ -10,28 +10,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
-import torch
 
 from converters.ingest.tabular import convert_tabular
-from fixtures.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
+from fixtures.armlogs import ArmLogSpec, generate_armlog
 from reference_impl.physics.arm import diagnose_arm
 from reference_impl.physics.arm.diagnose import _held_sse
-
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-@pytest.fixture(scope="module")
-def ur5(tmp_path_factory) -> Path:
-    p = tmp_path_factory.mktemp("robot") / "ur5.urdf"
-    p.write_text(ur5_urdf())
-    return p
 
 
 def _diagnose(root: Path, urdf: Path, effect: str, seed: int) -> tuple[dict, dict]:
