@@ -21,12 +21,28 @@ Per effect it prints:
 * diagnose wall time (median), and its ratio to the baseline: one fit of the true effect(s)
   (``fit_effects`` on the same prepared data, what a user who already knows the effect runs).
 
+Kinematic suite (``ee:<effect>``: ``ee:joint_elasticity``, ``ee:backlash``,
+``ee:kinematic_offsets``, ``ee:none``): a UR5-like dataset with recorded ``tool0`` poses from
+:func:`fixtures.armlogs.generate_kinematic_dataset` (independent numpy forward kinematics on
+the perturbed link angles; 4 trajectories of 6 s, joints at 125 Hz, poses at 50 Hz = 1200
+poses, pose noise 0.2 mm and 0.05 deg per axis), each parameter of
+:data:`fixtures.armlogs.KIN_PARAMS` times a factor in [0.6, 1.4]; diagnosed with every arm
+effect as a candidate (the torque ones are skipped: no efforts). Parameter error: compliance,
+the largest relative error over the two gravity-loaded joints (shoulder_lift, elbow; the
+wrists carry under 3 N m); backlash, over all joints; offsets, over the identifiable
+parameters with a non-zero truth. "unidentifiable ok": runs where exactly the expected
+parameters were reported unidentifiable (compliance of the base and last joints; ``dd`` of
+the elbow and wrist_1, which act only with the shoulder_lift's) and none other. The single fit
+is ``fit_effects`` of the true effect (``joint_elasticity`` for the null).
+
 Threads: ``--threads`` torch threads per worker; BLAS (numpy's OpenBLAS) is held at 1 thread
 per worker through ``OPENBLAS_NUM_THREADS`` / ``OMP_NUM_THREADS`` set before numpy loads (on a
 shared 2-core machine a multi-threaded BLAS makes the fitter's small normal-equation products
 several times slower).
 
     nice -n 10 .venv/bin/python bench/armlogs.py --seeds 5 --jobs 2 --append
+    nice -n 10 .venv/bin/python bench/armlogs.py --seeds 5 --jobs 2 --append \
+        --effects ee:joint_elasticity,ee:backlash,ee:kinematic_offsets,ee:none
 """
 
 from __future__ import annotations
@@ -57,8 +73,17 @@ EFFECTS = (
     "effort_time_offset",
     "payload+joint_friction",
     "none",
+    "ee:joint_elasticity",
+    "ee:backlash",
+    "ee:kinematic_offsets",
+    "ee:none",
 )
 TARGET = 0.10
+EXPECTED_UNIDENTIFIABLE = {
+    "joint_elasticity": {"c.shoulder_pan_joint", "c.wrist_3_joint"},
+    "backlash": set(),
+    "kinematic_offsets": {"dd.elbow_joint", "dd.wrist_1_joint"},
+}
 
 
 def _draw_params(effects: list[str], rng: np.random.Generator) -> dict:
@@ -98,11 +123,86 @@ def _errors(effect: str, est: dict, truth: dict, joints: list[str]) -> float:
     return abs(p["delta"] - t["delta"]) / t["delta"]
 
 
+def _kin_error(effect: str, est: dict, truth: dict) -> float:
+    """Largest relative error of the recovered kinematic parameters (module docstring)."""
+    t, joints = truth["params"], truth["joints"]
+    if effect == "joint_elasticity":
+        return max(
+            abs(est[f"c.{j}"]["value"] - t["compliance"][joints.index(j)])
+            / t["compliance"][joints.index(j)]
+            for j in ("shoulder_lift_joint", "elbow_joint")
+        )
+    if effect == "backlash":
+        return max(
+            abs(est[f"b.{j}"]["value"] - t["backlash"][i]) / t["backlash"][i]
+            for i, j in enumerate(joints)
+        )
+    return max(
+        abs(est[f"{n}.{j}"]["value"] - t[n][i]) / abs(t[n][i])
+        for n in ("dtheta", "dd", "da")
+        for i, j in enumerate(joints)
+        if t[n][i] != 0 and est[f"{n}.{j}"].get("identifiable", True)
+    )
+
+
+def _one_kin(effect: str, seed: int) -> dict:
+    from fixtures.armlogs import KIN_PARAMS, KinLogSpec, generate_kinematic_dataset, ur5_urdf
+    from reference_impl.physics.arm.api import open_arm
+    from reference_impl.physics.arm.diagnose import diagnose_kinematic
+    from reference_impl.physics.arm.identify import fit_effects
+
+    rng = np.random.default_rng(2000 + seed)
+    params = {
+        k: [float(x) * rng.uniform(0.6, 1.4) for x in v] for k, v in KIN_PARAMS[effect].items()
+    }
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        urdf = tmp / "ur5.urdf"
+        urdf.write_text(ur5_urdf())
+        truth = generate_kinematic_dataset(
+            tmp / "ds", urdf, KinLogSpec(effect=effect, params=params, seed=seed)
+        )
+        t0 = time.perf_counter()
+        s = open_arm(tmp / "ds")
+        t_open = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        rep = diagnose_kinematic(s.kin, s.fixed)
+        t_diag = time.perf_counter() - t0 + t_open
+        t0 = time.perf_counter()
+        fit_effects(s.kin, [effect if effect != "none" else "joint_elasticity"], fixed=s.fixed)
+        t_fit = time.perf_counter() - t0 + t_open
+    rows = rep["effects"]
+    reported = [r["name"] for r in rows if r["reported"]]
+    out = {
+        "effect": f"ee:{effect}",
+        "seed": seed,
+        "reported": reported,
+        "selected": rep["selected"],
+        "top": rows[0]["name"] if rows else None,
+        "wall_diagnose_s": t_diag,
+        "wall_single_fit_s": t_fit,
+        "n_samples": rep["n_samples"],
+    }
+    if effect == "none":
+        out["rank1"] = not reported
+        out["also"] = bool(reported)
+        return out
+    row = next(r for r in rows if r["name"] == effect)
+    out["rank1"] = bool(rows) and rows[0]["name"] == effect and rows[0]["reported"]
+    out["also"] = any(n != effect for n in reported)
+    out["param_err"] = _kin_error(effect, row["params"], truth)
+    unid = {k for k, v in row["params"].items() if v.get("identifiable") is False}
+    out["unid_ok"] = unid == EXPECTED_UNIDENTIFIABLE[effect]
+    return out
+
+
 def _one(args: tuple[str, int, int]) -> dict:
     import torch
 
     effect, seed, threads = args
     torch.set_num_threads(threads)
+    if effect.startswith("ee:"):
+        return _one_kin(effect[3:], seed)
     hidden = [] if effect == "none" else effect.split("+")
     from converters.ingest.tabular import convert_tabular
     from fixtures.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
@@ -171,18 +271,21 @@ def _table(results: list[dict]) -> list[str]:
     lines = [
         "| hidden effect | runs | rank-1 | false extra | param err median (worst) | "
         "median / 10 % target | diagnose s (median) | single fit s | diagnose / fit | "
-        "others reported (runs) |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "others reported (runs) | unidentifiable ok |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for eff in EFFECTS:
         rs = [r for r in results if r["effect"] == eff]
         if not rs:
             continue
+        unid = (
+            f"{sum(r['unid_ok'] for r in rs)}/{len(rs)}" if all("unid_ok" in r for r in rs) else "—"
+        )
         rank1 = np.mean([r["rank1"] for r in rs])
         also = np.mean([r["also"] for r in rs])
         td = float(np.median([r["wall_diagnose_s"] for r in rs]))
         tf = float(np.median([r["wall_single_fit_s"] for r in rs]))
-        if eff == "none":
+        if eff in ("none", "ee:none"):
             err, ratio = "—", "—"
         else:
             e = [r["param_err"] for r in rs]
@@ -191,12 +294,12 @@ def _table(results: list[dict]) -> list[str]:
         others: dict[str, int] = {}
         for r in rs:
             for n in r["reported"]:
-                if n not in eff.split("+"):
+                if n not in eff.removeprefix("ee:").split("+"):
                     others[n] = others.get(n, 0) + 1
         other = ", ".join(f"{n} ({k})" for n, k in sorted(others.items(), key=lambda x: -x[1]))
         lines.append(
             f"| {eff} | {len(rs)} | {100 * rank1:.0f} % | {100 * also:.0f} % | {err} | {ratio} | "
-            f"{td:.1f} | {tf:.2f} | {td / tf:.1f}x | {other or '—'} |"
+            f"{td:.1f} | {tf:.2f} | {td / tf:.1f}x | {other or '—'} | {unid} |"
         )
     return lines
 
@@ -229,16 +332,28 @@ def main(argv: list[str] | None = None) -> int:
         print("miss:", m)
     if args.append:
         cmd = "nice -n 10 .venv/bin/python bench/armlogs.py " + " ".join(argv or sys.argv[1:])
+        kin = all(e.startswith("ee:") for e in effects)
+        what = (
+            "hidden kinematic effects in end-effector poses"
+            if kin
+            else "hidden effects in joint-torque logs"
+        )
+        data = (
+            "UR5-like arm, 4 trajectories x 6 s, joints at 125 Hz, tool0 poses at 50 Hz (1200 "
+            "poses, noise 0.2 mm / 0.05 deg per axis), effect sizes drawn x[0.6, 1.4]"
+            if kin
+            else "UR5-like arm, 4 trajectories x 6 s at 125 Hz (3000 samples), effect sizes "
+            "drawn x[0.6, 1.4]"
+        )
         text = [
             "",
-            f"## armlogs — hidden effects in joint-torque logs ({dt.date.today().isoformat()})",
+            f"## armlogs — {what} ({dt.date.today().isoformat()})",
             "",
             f"Command: `{cmd}`",
             "",
             "```",
             machine,
-            f"{len(cases)} runs in {total:.0f} s; UR5-like arm, 4 trajectories x 6 s at 125 Hz "
-            "(3000 samples), effect sizes drawn x[0.6, 1.4]",
+            f"{len(cases)} runs in {total:.0f} s; {data}",
             "```",
             "",
             *lines,

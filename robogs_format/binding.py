@@ -251,6 +251,27 @@ class Binding:
             )
         return self._object_streams[name]
 
+    def set_object_poses(
+        self, name: str, t_ns: np.ndarray, xyz: np.ndarray, qwxyz: np.ndarray
+    ) -> None:
+        """Make object ``name``'s Gaussians follow these poses instead of its recorded stream.
+
+        Args:
+            name: object name (a bound target of kind "object").
+            t_ns: [N] increasing stamps, int64 ns.
+            xyz: [N, 3] ``T_world_object`` translations, m.
+            qwxyz: [N, 4] rotations (w, x, y, z).
+
+        Used to render a model's predicted object poses (interpolated like the recorded ones).
+        """
+        if name not in self._rest_objects:
+            raise FormatError(f"{name!r} is not a bound object", where="set_object_poses")
+        self._object_streams[name] = (
+            np.asarray(t_ns, np.int64),
+            np.asarray(xyz, np.float64).reshape(-1, 3),
+            np.asarray(qwxyz, np.float64).reshape(-1, 4),
+        )
+
     # -- motion --------------------------------------------------------------------------
     def target_motion(self, t_ns: int) -> torch.Tensor:
         """[n_targets, 4, 4] rigid motion ``T(t) · T(t0)⁻¹`` of every target, float64."""

@@ -57,6 +57,7 @@ __all__ = [
     "VOID_BAND_PX",
     "pose_stream",
     "boundary_distance",
+    "boundary_mm",
     "recorded_soft_labels",
     "AlignmentFit",
     "fit_alignment",
@@ -440,6 +441,26 @@ def boundary_distance(a: np.ndarray, b: np.ndarray) -> tuple[float, int]:
     da = cv2.distanceTransform((~bb).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     db = cv2.distanceTransform((~ba).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     return float(da[ba].sum() + db[bb].sum()), int(ba.sum() + bb.sum())
+
+
+def boundary_mm(bsum: np.ndarray, depth: np.ndarray, fx: float) -> np.ndarray:
+    """Boundary distances [px] converted to mm at the rendered depth: ``px x depth / fx``.
+
+    Args:
+        bsum: [F, C] summed boundary distances, px (recorded resolution).
+        depth: [F, C] median rendered depth of each label, m; NaN entries use the median depth
+            of the whole array (NaN when it has none).
+        fx: focal length at the recorded resolution, px.
+
+    Returns:
+        [F, C] the same sums in mm.
+    """
+    depth = np.where(
+        np.isnan(depth),
+        np.nanmedian(depth) if np.isfinite(depth).any() else np.nan,
+        depth,
+    )
+    return bsum * depth / fx * 1000.0
 
 
 def _upsample(p: np.ndarray, width: int, height: int) -> np.ndarray:

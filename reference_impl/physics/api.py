@@ -4,13 +4,19 @@ Every function takes a robogs dataset (a ``Dataset`` or its folder) or an in-mem
 recording (anything :func:`~reference_impl.physics.recording.as_recording` accepts). Only
 :func:`fit` and :func:`revert` write, and only to datasets: physics.json gets a new revision
 through the dataset writer, which keeps the previous one in ``physics/history/``.
+
+Datasets with cameras, panoptic masks and a Gaussian binding also get the mask-boundary stream
+in :func:`compare` (:mod:`reference_impl.physics.masks`) and the ``camera_intrinsics`` sensor
+effect in :func:`diagnose` and :func:`fit` (:mod:`reference_impl.physics.intrinsics`); a fit
+of it writes the corrected ``cameras/<cam>.json`` together with a physics revision whose
+``sensors.<cam>.intrinsics`` records the old and new values, so :func:`revert` restores both.
 """
 
 from __future__ import annotations
 
 import copy
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +31,7 @@ from reference_impl.physics.diagnose import (
 )
 from reference_impl.physics.engine import Engine
 from reference_impl.physics.fit import Problem
+from reference_impl.physics.masks import MAX_FRAMES
 from reference_impl.physics.recording import Recording, as_recording, load_recording
 from reference_impl.physics.report import render_report
 from robogs_format.errors import InputError
@@ -43,10 +50,42 @@ def _open(dataset: Any) -> tuple[Recording, Any]:
     return as_recording(dataset), None
 
 
-def compare(dataset: Any, *, dt: float = 1e-3) -> CompareResult:
-    """Residuals of the stored model against the measured streams (nothing is refitted)."""
-    rec, _ = _open(dataset)
-    return compare_recording(rec, dt=dt)
+#: effects fitted from camera masks, outside the rigid-object model
+CAMERA_EFFECTS = ("camera_intrinsics",)
+
+
+def _attach_masks(res: CompareResult, ds: Any, mask_frames: int, mask_poses: str) -> None:
+    """Add the mask-boundary stream to ``res`` (objects at ``mask_poses``: model or recorded)."""
+    from reference_impl.physics.masks import safe_mask_boundary
+
+    if mask_poses not in ("model", "recorded"):
+        raise InputError(f"mask_poses must be 'model' or 'recorded', got {mask_poses!r}")
+    if mask_frames <= 0:
+        res.masks, res.masks_absent = None, "not requested (mask frames 0)"
+        return
+    poses = None
+    if mask_poses == "model" and res.predicted:
+        obj = res.streams[0].stream.split("/", 1)[1]  # "object_poses/<free object>"
+        poses = {p["trajectory"]: {obj: (p["t_ns"], p["pos"], p["quat"])} for p in res.predicted}
+    res.masks, res.masks_absent = safe_mask_boundary(ds, max_frames=mask_frames, object_poses=poses)
+    if res.masks is not None and poses is not None:
+        res.masks.object_poses = f"model ({obj}: predicted; other objects: recorded)"
+
+
+def compare(
+    dataset: Any, *, dt: float = 1e-3, mask_frames: int = MAX_FRAMES, mask_poses: str = "model"
+) -> CompareResult:
+    """Residuals of the stored model against the measured streams (nothing is refitted).
+
+    With camera masks and a binding the result carries the mask-boundary stream: links by
+    forward kinematics of the measured joints, the free object at the model's predicted poses
+    (``mask_poses="model"``) or at its recorded poses (``"recorded"``), ``mask_frames`` frames
+    per camera stream (0: none).
+    """
+    rec, ds = _open(dataset)
+    res = compare_recording(rec, dt=dt)
+    _attach_masks(res, ds, mask_frames, mask_poses)
+    return res
 
 
 def diagnose(
@@ -55,10 +94,26 @@ def diagnose(
     effects: Sequence[str] | None = None,
     progress: Callable[[int, int], None] | None = None,
     dt: float = 1e-3,
+    mask_frames: int = MAX_FRAMES,
 ) -> DiagnoseResult:
-    """Rank candidate effects (see :mod:`reference_impl.physics.diagnose`)."""
-    rec, _ = _open(dataset)
-    return diagnose_recording(rec, effects=effects, progress=progress, dt=dt)
+    """Rank candidate effects (see :mod:`reference_impl.physics.diagnose`).
+
+    ``camera_intrinsics`` is judged from the camera masks (:mod:`reference_impl.physics.
+    intrinsics`), skipped with the reason when the dataset has none.
+    """
+    rec, ds = _open(dataset)
+    names = None if effects is None else list(effects)
+    rigid = None if names is None else [n for n in names if n not in CAMERA_EFFECTS]
+    res = diagnose_recording(rec, effects=rigid, progress=progress, dt=dt)
+    if names is None or any(n in CAMERA_EFFECTS for n in names):
+        from reference_impl.physics.intrinsics import NAME, diagnose_intrinsics
+
+        fits, why = diagnose_intrinsics(ds, max_frames=mask_frames)
+        if why is not None:
+            res.skipped.append((NAME, why))
+        res.rows.extend(f.row for f in fits)
+        res.rows.sort(key=lambda r: (not r.reported, r.delta_bic))
+    return res
 
 
 @dataclass
@@ -84,6 +139,7 @@ class FitResult:
     revision: int | None = None
     compare_before: CompareResult | None = field(default=None, repr=False)
     compare_after: CompareResult | None = field(default=None, repr=False)
+    cameras: list[dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -97,11 +153,12 @@ class FitResult:
                 }
                 for p in self.params
             ],
-            "rms_before_mm": self.rms_before,
-            "rms_after_mm": self.rms_after,
-            "noise_floor_mm": self.noise_floor,
+            "rms_before_mm": _fin(self.rms_before),
+            "rms_after_mm": _fin(self.rms_after),
+            "noise_floor_mm": _fin(self.noise_floor),
             "unidentifiable": self.unidentifiable,
             "revision": self.revision,
+            "cameras": self.cameras,
         }
 
 
@@ -176,15 +233,96 @@ def fit(
     write: bool = True,
     note: str | None = None,
     dt: float = 1e-3,
+    mask_frames: int = MAX_FRAMES,
 ) -> FitResult:
     """Refit the base model (and the effects already present) plus ``add``.
 
     With a dataset and ``write=True`` the fitted values become a new physics.json revision
     (the previous one is kept in ``physics/history/``; see :func:`revert`). Parameters found
     unidentifiable are reported in ``unidentifiable`` and are not written.
+
+    ``camera_intrinsics`` is fitted from the camera masks instead (``mask_frames`` frames per
+    camera stream): the corrected ``cameras/<cam>.json`` is written in the same edit as the
+    physics revision, whose ``sensors.<cam>.intrinsics`` keeps the previous values. Asked
+    alone, it leaves the rigid-model parameters as they are.
     """
-    rec, ds = _open(dataset)
-    eng = Engine(rec, dt=dt)
+    cam_add = [a for a in add if a in CAMERA_EFFECTS]
+    rigid_add = [a for a in add if a not in CAMERA_EFFECTS]
+    if cam_add and not rigid_add:
+        ds = _dataset(dataset, cam_add[0])
+        res = FitResult(
+            [], float("nan"), float("nan"), float("nan"), [], copy.deepcopy(ds.physics())
+        )
+    else:
+        rec, ds = _open(dataset)
+        res = _fit_rigid(Engine(rec, dt=dt), rigid_add)
+    new_cams = []
+    if cam_add:
+        new_cams = _fit_cameras(
+            _dataset(ds if ds is not None else dataset, cam_add[0]), res, mask_frames
+        )
+    if ds is not None and write:
+        with ds.edit() as w:
+            for cam in new_cams:
+                w.set_camera(cam)
+            res.revision = w.set_physics(
+                res.physics, note=note or f"fit: added {', '.join(add) or 'nothing'}"
+            )
+            w.commit()
+    return res
+
+
+def _dataset(dataset: Any, effect: str) -> Any:
+    from robogs_format.dataset import Dataset
+
+    if isinstance(dataset, Dataset):
+        return dataset
+    if isinstance(dataset, (str, Path)):
+        return Dataset.open(Path(dataset))
+    raise InputError(
+        f"{effect} is fitted from camera masks; an in-memory recording has none",
+        hint="pass a dataset folder with cameras, panoptic labels and bound splats",
+    )
+
+
+def _fit_cameras(ds: Any, res: FitResult, mask_frames: int) -> list[Any]:
+    """Fit every camera's intrinsics; record them in ``res``; return the corrected cameras."""
+    from reference_impl.physics.intrinsics import NAME, corrected_camera, fit_intrinsics
+
+    out = []
+    for f in fit_intrinsics(ds, max_frames=mask_frames):
+        cam, new = f.camera, corrected_camera(f)
+        for p, ok in zip(f.row.params, f.identifiable, strict=True):
+            res.params.append(replace(p, name=f"{NAME}.{p.name}"))
+            if not ok:
+                res.unidentifiable.append(f"{NAME}.{p.name}")
+        keys = ("fx", "fy", "cx", "cy")
+        before = {k: float(getattr(cam, k)) for k in keys}
+        after = {k: float(getattr(new, k)) for k in keys}
+        res.physics.setdefault("sensors", {}).setdefault(cam.name, {})["intrinsics"] = {
+            **after,
+            "previous": before,
+            "boundary_px_before": f.boundary_px_before,
+            "boundary_px_after": f.boundary_px_after,
+        }
+        res.cameras.append(
+            {
+                "camera": cam.name,
+                "before": before,
+                "after": after,
+                "boundary_px_before": f.boundary_px_before,
+                "boundary_px_after": f.boundary_px_after,
+                "noise_px": f.sigma_px,
+                "reported": f.row.reported,
+                "verdict": f.row.verdict,
+            }
+        )
+        if f.identifiable.any():
+            out.append(new)
+    return out
+
+
+def _fit_rigid(eng: Engine, add: Sequence[str]) -> FitResult:
     res = _fit_engine(eng, add)
     if res.unidentifiable:
         bad = set(res.unidentifiable)
@@ -193,12 +331,6 @@ def fit(
             for e in res.physics["effects"]
             if not any(f"{e['name']}.{k}" in bad for k in e["params"])
         ]
-    if ds is not None and write:
-        with ds.edit() as w:
-            res.revision = w.set_physics(
-                res.physics, note=note or f"fit: added {', '.join(add) or 'nothing'}"
-            )
-            w.commit()
     return res
 
 
@@ -209,12 +341,13 @@ def report(
 
     Plots are inline SVG (matplotlib is not required).
     """
-    rec, _ = _open(dataset)
+    rec, ds = _open(dataset)
     eng = Engine(rec, dt=dt)
-    res = _fit_engine(eng, add)
+    res = _fit_engine(eng, [a for a in add if a not in CAMERA_EFFECTS])
     before, after = res.compare_before, res.compare_after
     if before is None or after is None:  # pragma: no cover - _fit_engine always fills them
         raise RuntimeError("comparison missing")
+    _attach_masks(before, ds, MAX_FRAMES, "model")
     rows = [(p.name, p.value, p.low, p.high, p.unit) for p in res.params]
     return render_report(
         before, after, out_html, title="robogs physics report", added=list(add), params=rows
@@ -236,7 +369,23 @@ def revert(dataset: Any, revision: int) -> int:
             hint=f"kept revisions: {ds.physics_history()}",
         )
     old = json.loads(ds.resolve(f"physics/history/rev-{revision:04d}.json").read_text())
+    # camera intrinsics in force at ``revision``: the "previous" values of the first later fit
+    docs = [
+        json.loads(ds.resolve(f"physics/history/rev-{r:04d}.json").read_text())
+        for r in ds.physics_history()
+        if r > revision
+    ] + [ds.physics()]
+    restore: dict[str, dict[str, float]] = {}
+    for doc in sorted(docs, key=lambda d: int(d.get("revision", 0))):
+        for cam, rec in (doc.get("sensors") or {}).items():
+            prev = (rec.get("intrinsics") or {}).get("previous")
+            if isinstance(prev, dict) and cam not in restore and cam in ds.camera_names:
+                restore[cam] = prev
     with ds.edit() as w:
+        for cam, vals in restore.items():
+            w.set_camera(
+                replace(ds.camera(cam), **{k: float(vals[k]) for k in ("fx", "fy", "cx", "cy")})
+            )
         rev = w.set_physics(old, note=f"revert to revision {revision}")
         w.commit()
     return rev

@@ -4,7 +4,10 @@ Streams of the rigid model: the tracked object position [mm] and orientation [de
 trajectory. (End-effector poses drive the model, so they have no residual here; the arm model
 in ``reference_impl.physics.arm`` compares them with forward kinematics.) Phases come from the
 measured data (:mod:`reference_impl.physics.phases`); the noise floor from the data itself
-(:mod:`reference_impl.physics.noise`).
+(:mod:`reference_impl.physics.noise`). Datasets with cameras, panoptic masks and a Gaussian
+binding also get a mask-boundary stream (:mod:`reference_impl.physics.masks`, attached by
+:func:`reference_impl.physics.api.compare`) rendered from the model's predicted object poses
+(:attr:`CompareResult.predicted`).
 """
 
 from __future__ import annotations
@@ -58,6 +61,10 @@ class CompareResult:
         noise: estimated noise (sigma_pos_mm, sigma_yaw_deg, sigma_t_ms, source).
         times: per trajectory, sample times [s] from the episode start; residual_mm: [N, 3];
             residual_deg: [N]; phase: [N] names (for plots).
+        predicted: per trajectory, the model's object poses at the valid samples: ``t_ns``,
+            ``pos`` [N, 3] m, ``quat`` [N, 4] wxyz (the measured tilt turned by the model's yaw).
+        masks: the mask-boundary stream (a :class:`reference_impl.physics.masks.MaskStream`),
+            or None with the reason in ``masks_absent``.
     """
 
     streams: list[StreamResidual]
@@ -68,10 +75,15 @@ class CompareResult:
     noise_floor_mm: float
     noise: dict[str, Any]
     series: list[dict[str, Any]] = field(default_factory=list, repr=False)
+    predicted: list[dict[str, Any]] = field(default_factory=list, repr=False)
+    masks: Any = None
+    masks_absent: str = "not computed"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (without the per-sample series)."""
         return {
+            "mask_boundary": self.masks.to_dict() if self.masks is not None else None,
+            "mask_boundary_absent": None if self.masks is not None else self.masks_absent,
             "streams": [asdict(s) for s in self.streams],
             "phases_mm": self.phases_mm,
             "worst": [asdict(s) for s in self.worst],
@@ -90,10 +102,13 @@ def residual_table(eng: Engine, raw: np.ndarray) -> CompareResult:
     streams: list[StreamResidual] = []
     segs: list[Segment] = []
     series: list[dict[str, Any]] = []
+    predicted: list[dict[str, Any]] = []
     acc: dict[str, list[np.ndarray]] = {p: [] for p in PHASES}
     for i, tr in enumerate(prep.rec.trajectories):
         m = mask[i]
         e = raw[i][m]
+        mn = m[: len(tr.t_ns)]
+        predicted.append(_predicted(tr.name, tr.t_ns[mn], tr.object_pos[mn], tr.object_quat[mn], e))
         pos_mm = np.linalg.norm(e[:, :3], axis=-1) * 1000.0
         yaw_deg = np.degrees(e[:, 3])
         ph = prep.phase[i][m]
@@ -153,7 +168,19 @@ def residual_table(eng: Engine, raw: np.ndarray) -> CompareResult:
             "source": prep.noise.source,
         },
         series=series,
+        predicted=predicted,
     )
+
+
+def _predicted(
+    name: str, t_ns: np.ndarray, pos: np.ndarray, quat: np.ndarray, e: np.ndarray
+) -> dict[str, Any]:
+    """Model poses from measured ones and residuals ``e`` [N, 4] (measured minus predicted)."""
+    half = -0.5 * e[:, 3]  # turn the measured orientation by the yaw error, about world z
+    cz, sz = np.cos(half), np.sin(half)
+    w, x, y, z = (quat[:, k] for k in range(4))
+    q = np.stack([cz * w - sz * z, cz * x - sz * y, cz * y + sz * x, cz * z + sz * w], -1)
+    return {"trajectory": name, "t_ns": t_ns, "pos": pos - e[:, :3], "quat": q}
 
 
 def compare_recording(

@@ -94,6 +94,7 @@ class EffectRow:
     rivals: list[str] = field(default_factory=list)
     separate_by: str = ""
     note: str = ""
+    unit: str = "mm"  # of the RMS fields (``px`` for effects seen in mask boundaries)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (the documented keys first)."""

@@ -124,6 +124,19 @@ def render_report(
         panels.append(
             svg_panel(sb["t"], nb, na, sb["phase"], after.noise_floor_mm, sb["trajectory"])
         )
+    if before.masks is not None:
+        m = before.masks
+        mask_rows = [
+            [r.camera, r.label, f"{r.boundary_px:.3g}", f"{r.boundary_mm:.3g}", f"{r.iou:.3f}"]
+            for r in m.labels
+        ]
+        masks = (
+            f"<p>{m.frames} frames re-rendered, objects at {html.escape(m.object_poses)} poses: "
+            f"{m.boundary_px:.3g} px, {m.boundary_mm:.3g} mm.</p>"
+            + _table(mask_rows, ["camera", "link/object", "boundary px", "boundary mm", "IoU"])
+        )
+    else:
+        masks = f"<p>No mask-boundary stream: {html.escape(before.masks_absent)}.</p>"
     legend = " ".join(
         f'<span style="background:{c};padding:1px 6px;border:1px solid #ccc">{p}</span>'
         for p, c in _PHASE_COLOURS.items()
@@ -136,6 +149,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}th{{background:#e
 Dashed red: noise floor estimated from the data ({after.noise_floor_mm:.2f} mm; source {html.escape(str(after.noise.get("source")))}).</p>
 <p>RMS position error: {before.rms_mm:.2f} mm &rarr; {after.rms_mm:.2f} mm; yaw {before.rms_deg:.2f}&deg; &rarr; {after.rms_deg:.2f}&deg;.</p>
 <h2>Per phase (RMS, mm)</h2>{_table(phase_rows, ["phase", "before", "after"])}
+<h2>Mask boundary of the stored model (mean symmetric distance)</h2>{masks}
 <h2>Worst segments before the fit</h2>{_table(worst, ["trajectory", "phase", "time", "RMS mm"])}
 <h2>Fitted parameters (95 % interval)</h2>{_table(prm, ["parameter", "value", "interval", "unit"])}
 <h2>Residuals per trajectory</h2><p>{legend}</p>

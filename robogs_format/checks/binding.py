@@ -27,7 +27,7 @@ from ..cameras import CameraModel
 from ..dataset import Episode
 from ..errors import FormatError, RobogsError
 from ..findings import Finding
-from ._common import MM, column, frame_stamps, stack_columns
+from ._common import column, frame_stamps, stack_columns
 from .context import CheckContext, InputReported
 from .registry import Check, check
 
@@ -329,12 +329,9 @@ def _run_pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
 def _boundary_mm(ps: _Pass) -> np.ndarray:
     """[F, C] summed boundary distances in mm: px x rendered depth / focal length (frames
     without a depth use the median depth of the pass)."""
-    depth = np.where(
-        np.isnan(ps.depth),
-        np.nanmedian(ps.depth) if np.isfinite(ps.depth).any() else np.nan,
-        ps.depth,
-    )
-    return ps.bsum * depth / ps.fx * MM
+    from ..rerender import boundary_mm
+
+    return boundary_mm(ps.bsum, ps.depth, ps.fx)
 
 
 def _pass(ctx: CheckContext, job: _CameraJob) -> _Pass:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 import torch
-from conftest import scenario
+from physics_scenarios import scenario
 
 from reference_impl.physics.diagnose import diagnose_recording
 from reference_impl.physics.effects import Effect, Param, register_effect, unregister_effect

@@ -9,7 +9,7 @@ model.
 from __future__ import annotations
 
 import pytest
-from conftest import scenario
+from physics_scenarios import scenario
 
 from reference_impl.physics.diagnose import diagnose_recording
 

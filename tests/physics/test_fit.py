@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import scenario
+from physics_scenarios import scenario
 
 from reference_impl.physics.engine import Engine
 from reference_impl.physics.fit import Problem, jacobian_fd

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from conftest import scenario
+from physics_scenarios import scenario
 
 from reference_impl.physics import api
 from reference_impl.physics.diagnose import diagnose_recording

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import scenario
+from physics_scenarios import scenario
 
 from fixtures.scenarios import read_truth, truth_path, write_scenario
 from reference_impl.physics import api

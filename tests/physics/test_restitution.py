@@ -4,7 +4,7 @@ start point), with a value close to the hidden truth of the independent simulato
 from __future__ import annotations
 
 import pytest
-from conftest import scenario
+from physics_scenarios import scenario
 
 from reference_impl.physics.diagnose import diagnose_recording
 

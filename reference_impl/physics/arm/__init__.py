@@ -1,13 +1,16 @@
-"""Robot-arm torque model: inverse dynamics from the URDF, joint effects, identification.
+"""Robot-arm model: inverse dynamics and forward kinematics from the URDF, joint effects,
+identification.
 
 Public entry points (imported lazily):
 
 * :class:`ArmModel`, :func:`inverse_dynamics`, :func:`regressor` - rigid-body dynamics;
 * :func:`savgol_derivative` - the documented differentiator of joint signals;
 * :func:`compare_arm`, :func:`diagnose_arm`, :func:`fit_arm`, :func:`open_arm` - the physics
-  loop on a dataset's joint logs with efforts;
-* the effects (``joint_friction``, ``armature``, ``payload``, ``mass_scale``,
-  ``effort_time_offset``) register in :mod:`reference_impl.physics.effects` on import of
+  loop on a dataset's joint logs with efforts (torque residual) and recorded end-effector
+  poses (kinematic residual, :mod:`reference_impl.physics.arm.kinematic_model`);
+* the effects (torque: ``joint_friction``, ``armature``, ``payload``, ``mass_scale``,
+  ``effort_time_offset``; kinematic: ``joint_elasticity``, ``backlash``,
+  ``kinematic_offsets``) register in :mod:`reference_impl.physics.effects` on import of
   :mod:`reference_impl.physics.arm.effects`.
 """
 

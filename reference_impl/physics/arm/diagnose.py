@@ -1,4 +1,13 @@
-"""Rank the arm effects the torque model is missing: forward selection of nested models.
+"""Rank the arm effects the model is missing: forward selection of nested models.
+
+There are two residuals, and each candidate is judged on its own (``ArmEffect.residual``):
+the joint torques (friction, armature, payload, mass scale, effort time offset; whitened by
+the effort noise floor of each joint) and the end-effector poses (elasticity, backlash,
+kinematic offsets; whitened by the pose noise floor of each channel ``x y z`` mm, ``rx ry rz``
+deg, see :mod:`reference_impl.physics.arm.kinematic_model`). A dataset with efforts and
+``ee_poses`` runs both selections independently, each against its own base model, and
+reports their rows together (``residual`` names the one a row was judged on); the procedure
+and the gate below are the same for both, with "joint" read as "channel" for the poses.
 
 Candidates are the effects registered with ``model="arm"`` whose ``needs`` the data meet. The
 selection is forward stepwise (Efroymson 1960, "Multiple regression analysis"): at each step
@@ -43,24 +52,39 @@ import numpy as np
 
 from reference_impl.physics.arm.compare import ARM_PHASES, base_prediction, label_phases
 from reference_impl.physics.arm.effects import ArmEffect, payload_com
-from reference_impl.physics.arm.identify import ArmFit, UnitLayout, fit_many, unit_layout
+from reference_impl.physics.arm.identify import (
+    ArmFit,
+    UnitLayout,
+    channels_of,
+    fit_many,
+    unit_layout,
+)
+from reference_impl.physics.arm.kinematic_compare import pose_phases
+from reference_impl.physics.arm.kinematic_model import (
+    POSITION_CHANNELS,
+    KinProblem,
+    base_residual,
+    describe,
+)
 from reference_impl.physics.arm.torque_model import ArmProblem
 from reference_impl.physics.effects import available_effects, get_effect
 
-__all__ = ["diagnose_torques", "unit_folds", "DEFAULT_GATE"]
+__all__ = [
+    "diagnose_torques",
+    "diagnose_kinematic",
+    "split_candidates",
+    "unit_folds",
+    "DEFAULT_GATE",
+    "RESIDUAL_STREAM",
+]
+
+RESIDUAL_STREAM = {"torque": "efforts", "kinematic": "ee_poses"}
+"""The stream each residual needs."""
 
 DEFAULT_GATE: dict[str, float] = {
     "delta_bic_max": -10.0,
     "effect_size_min": 0.5,
     "null_quantile": 0.95,
-}
-
-_NOT_IN_TORQUE_MODEL = {
-    "joint_elasticity": "gravity droop shows in end-effector or camera positions, not in joint torques; "
-    "needs an ee_poses stream and a kinematic residual (not implemented)",
-    "backlash": "a dead band between motor and link angle; needs link-side or end-effector measurements "
-    "(not implemented)",
-    "kinematic_offsets": "MDH offsets need end-effector or camera measurements (not implemented)",
 }
 
 
@@ -75,27 +99,32 @@ def _ms(x: np.ndarray) -> float:
     return float(np.mean(x * x)) if x.size else 0.0
 
 
-def _candidates(
-    names: Sequence[str] | None, pb: ArmProblem
-) -> tuple[list[ArmEffect], list[dict[str, str]]]:
-    given = names
+def split_candidates(
+    names: Sequence[str] | None, has: set[str]
+) -> tuple[dict[str, list[ArmEffect]], list[dict[str, str]]]:
+    """Candidate effects grouped by the residual that judges them, and the skipped ones.
+
+    Args:
+        names: effect names (default: every registered arm effect).
+        has: streams present in the data (``efforts``, ``ee_poses``).
+
+    Returns:
+        ``{"torque": [...], "kinematic": [...]}`` and ``[{name, reason}]`` for effects that are
+        not arm effects or whose ``needs`` the data lack.
+    """
     names = list(names) if names is not None else available_effects(model="arm")
-    out, skipped = [], []
+    out: dict[str, list[ArmEffect]] = {k: [] for k in RESIDUAL_STREAM}
+    skipped: list[dict[str, str]] = []
     for n in names:
         e = get_effect(n)
-        if not isinstance(e, ArmEffect):
-            skipped.append({"name": n, "reason": "not an arm torque-model effect"})
+        if not isinstance(e, ArmEffect) or e.residual not in RESIDUAL_STREAM:
+            skipped.append({"name": n, "reason": "not an arm effect"})
             continue
-        missing = [x for x in e.needs if x not in pb.data.has]
+        missing = [x for x in e.needs if x not in has]
         if missing:
             skipped.append({"name": n, "reason": f"needs {', '.join(missing)} (not in the data)"})
             continue
-        out.append(e)
-    if given is None:
-        registered = set(available_effects())
-        skipped += [
-            {"name": k, "reason": v} for k, v in _NOT_IN_TORQUE_MODEL.items() if k not in registered
-        ]
+        out[e.residual].append(e)
     return out, skipped
 
 
@@ -161,8 +190,24 @@ def _held_sse(jac: np.ndarray, noise: np.ndarray, rows_flat: list[np.ndarray]) -
     return sse
 
 
+def _phys_rms(pb: ArmProblem | KinProblem, z: np.ndarray) -> float:
+    """RMS in physical units of whitened rows [R, K]: N m over all joints (torque), or the
+    RMS length of the position error in mm (kinematic)."""
+    x = z * pb.sigma.cpu().numpy()
+    if isinstance(pb, KinProblem):
+        return float(np.sqrt(np.mean(np.sum(x[:, : len(POSITION_CHANNELS)] ** 2, axis=1))))
+    return float(np.sqrt(np.mean(x**2)))
+
+
+def _sample_phases(pb: ArmProblem | KinProblem) -> np.ndarray:
+    """Phase labels [N, K] of the residual channels (joints, or pose channels)."""
+    if not isinstance(pb, KinProblem):
+        return label_phases(pb)
+    return np.repeat(pose_phases(pb)[:, None], len(channels_of(pb)), axis=1)
+
+
 def _score(
-    pb: ArmProblem,
+    pb: ArmProblem | KinProblem,
     fixed: dict[str, dict[str, float]] | None,
     base: _Base,
     effs: list[ArmEffect],
@@ -187,7 +232,6 @@ def _score(
     per = 1 + len(sp.folds)
     total_rows = max(sum(len(r) for r in sp.rows_flat), 1)
     before = base.held
-    sig_rows = np.tile(sig, before.size // nj)
     out = []
     for c, eff in enumerate(effs):
         fit = fits[c * per]
@@ -236,8 +280,10 @@ def _score(
             "step": None,
             "given": list(base.names),
             "delta_bic": dbic,
-            "heldout_rms_before": float(np.sqrt(_ms(before.ravel() * sig_rows))),
-            "heldout_rms_after": float(np.sqrt(_ms(after.ravel() * sig_rows))),
+            "residual": eff.residual,
+            "heldout_rms_before": _phys_rms(pb, before),
+            "heldout_rms_after": _phys_rms(pb, after),
+            "heldout_unit": "mm" if isinstance(pb, KinProblem) else "N m",
             "heldout_gain_sigma2": gain,
             "null_gain_p95_sigma2": null_thr,
             "effect_size_sigma": size,
@@ -263,11 +309,12 @@ def diagnose_torques(
     seed: int = 0,
     max_effects: int | None = None,
 ) -> dict[str, Any]:
-    """Select the missing arm effects by forward selection (see the module docstring).
+    """Select the effects missing from the torque model by forward selection (module docstring).
 
     Args:
         pb: prepared data; fixed: effects held at physics.json values.
-        candidates: effect names (default: every registered arm effect).
+        candidates: effect names (default: every registered arm effect); effects judged on
+            the end-effector poses are listed under ``skipped``.
         gate: thresholds overriding :data:`DEFAULT_GATE`.
         null_draws: white-noise draws for the held-out null distribution.
         seed: random seed of the null draws.
@@ -275,17 +322,93 @@ def diagnose_torques(
             not accepted then show the last step they were judged at (``given``).
 
     Returns:
-        JSON-ready dict with ``effects`` (ranked rows: name, family, reported, step, given,
-        delta_bic, heldout_rms_before, heldout_rms_after [N m], effect_size_sigma, params
-        {value, low, high, unit}, phases, rivals, separate_by, reasons), ``selected`` (the
-        accepted effects in order), ``steps`` (per step: the effect added and its figures),
-        ``skipped``, ``noise_floor_nm``, ``split`` and ``gate``.
+        JSON-ready dict with ``effects`` (ranked rows: name, family, residual, reported, step,
+        given, delta_bic, heldout_rms_before, heldout_rms_after [N m], effect_size_sigma,
+        params {value, low, high, unit}, phases, rivals, separate_by, reasons), ``selected``
+        (the accepted effects in order), ``steps`` (per step: the effect added and its
+        figures), ``skipped``, ``noise_floor_nm``, ``split`` and ``gate``.
     """
+    groups, skipped = split_candidates(candidates, pb.data.has)
+    skipped += [
+        {"name": e.name, "reason": "judged on the end-effector poses (diagnose_kinematic)"}
+        for e in groups["kinematic"]
+    ]
+    out = _select(pb, fixed, groups["torque"], gate, null_draws, seed, max_effects)
+    sig = pb.sigma.cpu().numpy()
+    names = pb.data.joint_names
+    return {
+        "model": "arm",
+        "residual": "torque",
+        "n_samples": pb.n,
+        "n_trajectories": pb.data.num_traj,
+        "noise_floor_nm": {j: float(s) for j, s in zip(names, sig, strict=True)},
+        "baseline_rms_nm": {j: float(v) for j, v in zip(names, out.pop("baseline"), strict=True)},
+        **out,
+        "skipped": skipped,
+    }
+
+
+def diagnose_kinematic(
+    kp: KinProblem,
+    fixed: dict[str, dict[str, float]] | None = None,
+    *,
+    candidates: Sequence[str] | None = None,
+    gate: dict[str, float] | None = None,
+    null_draws: int = 40,
+    seed: int = 0,
+    max_effects: int | None = None,
+) -> dict[str, Any]:
+    """Select the effects missing from the kinematic model (end-effector poses) by forward
+    selection, with the same gate as :func:`diagnose_torques`.
+
+    Returns:
+        as :func:`diagnose_torques`, with ``noise_floor`` and ``baseline_rms`` per pose
+        channel (units in ``units``: mm, deg), ``link``, ``orientation`` (whether the
+        orientation is in the residual) and ``heldout_rms_*`` in mm (RMS length of the
+        position error); torque effects are listed under ``skipped``.
+    """
+    groups, skipped = split_candidates(candidates, {"ee_poses", "efforts"})
+    skipped += [
+        {"name": e.name, "reason": "judged on the joint torques (diagnose_torques)"}
+        for e in groups["torque"]
+    ]
+    out = _select(kp, fixed, groups["kinematic"], gate, null_draws, seed, max_effects)
+    info = describe(kp)
+    return {
+        "model": "arm",
+        "residual": "kinematic",
+        "n_samples": kp.n,
+        "n_trajectories": kp.data.num_traj,
+        "link": info["link"],
+        "orientation": kp.oriented,
+        "units": info["units"],
+        "noise_floor": info["noise_floor"],
+        "baseline_rms": {
+            c: float(v) for c, v in zip(kp.channels, out.pop("baseline"), strict=True)
+        },
+        **out,
+        "skipped": skipped,
+        "notes": list(kp.data.notes),
+    }
+
+
+def _select(
+    pb: ArmProblem | KinProblem,
+    fixed: dict[str, dict[str, float]] | None,
+    effs: list[ArmEffect],
+    gate: dict[str, float] | None,
+    null_draws: int,
+    seed: int,
+    max_effects: int | None,
+) -> dict[str, Any]:
+    """Forward selection of ``effs`` on the residual of ``pb`` (see the module docstring)."""
     g = {**DEFAULT_GATE, **(gate or {})}
-    effs, skipped = _candidates(candidates, pb)
     sig = pb.sigma.cpu().numpy()
     n, nj = pb.n, len(sig)
-    r0 = ((pb.tau - base_prediction(pb, fixed)) / pb.sigma).cpu().numpy()  # [N, J] whitened
+    if isinstance(pb, KinProblem):
+        r0 = base_residual(pb, fixed) / sig  # [N, K] whitened
+    else:
+        r0 = ((pb.tau - base_prediction(pb, fixed)) / pb.sigma).cpu().numpy()  # [N, J]
     rss0 = (r0**2).sum(axis=0) * sig**2
     layout = unit_layout(pb)
     folds = unit_folds(layout)
@@ -297,7 +420,7 @@ def diagnose_torques(
         test_rows,
         [(t[:, None] * nj + np.arange(nj)[None, :]).ravel() for t in test_rows],
         rng.standard_normal((n * nj, null_draws)),
-        label_phases(pb),
+        _sample_phases(pb),
     )
     base = _Base([], r0, np.concatenate([r0[t] for t in test_rows]), None)
     remaining = list(effs)
@@ -322,6 +445,7 @@ def diagnose_torques(
             {
                 "step": best.row["step"],
                 "added": best.row["name"],
+                "residual": best.row["residual"],
                 "given": list(base.names),
                 "delta_bic": best.row["delta_bic"],
                 "heldout_rms_before": best.row["heldout_rms_before"],
@@ -356,18 +480,11 @@ def diagnose_torques(
                 latest[name]["rivals"].append(other)
     others.sort(key=lambda r: r["delta_bic"])
     return {
-        "model": "arm",
-        "n_samples": n,
-        "n_trajectories": pb.data.num_traj,
-        "noise_floor_nm": {j: float(s) for j, s in zip(pb.data.joint_names, sig, strict=True)},
-        "baseline_rms_nm": {
-            j: float(np.sqrt(r / n)) for j, r in zip(pb.data.joint_names, rss0, strict=True)
-        },
+        "baseline": np.sqrt(rss0 / n),
         "split": layout.how + f", {len(folds)} held-out folds",
         "gate": g,
         "selection": "forward: each step refits the candidates on top of the accepted effects",
         "selected": [r["name"] for r in accepted_rows],
         "steps": steps,
         "effects": accepted_rows + others,
-        "skipped": skipped,
     }

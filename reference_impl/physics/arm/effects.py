@@ -10,6 +10,14 @@ one or more of these hooks:
 * ``joint_torque(th, st)``: extra joint torque [M, N, J] from the measured joint state;
 * ``time_shift(th)``: lag [M, 1] s of the effort stamps behind the position stamps.
 
+Effects of the *kinematic* model (``residual="kinematic"``, judged on recorded end-effector
+poses, see :mod:`reference_impl.physics.arm.kinematic_model` and
+:mod:`reference_impl.physics.arm.kinematic_effects`) override instead:
+
+* ``joint_offset(th, ks)``: link angle minus measured (motor-side) joint angle [M, N, J] rad;
+* ``frame_offset(th)``: translations ``(da, dd)`` [M, J, 2] m of each joint frame before the
+  joint's rotation (along the declared perpendicular and along the axis).
+
 Per-joint effects declare their parameters once (``fc``, ``fv``...) and are expanded for a
 robot by :meth:`ArmEffect.for_robot` into ``fc.<joint>`` etc. Parameter dictionaries ``th``
 map names to [M, 1] tensors (M parameter sets).
@@ -23,6 +31,7 @@ as entries of ``effects``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -34,6 +43,7 @@ from reference_impl.physics.effects import Effect, Param, register_effect
 __all__ = [
     "ArmEffect",
     "ArmState",
+    "KinState",
     "InertialContext",
     "JointFriction",
     "Armature",
@@ -63,6 +73,27 @@ class ArmState:
 
 
 @dataclass
+class KinState:
+    """Measured state the kinematic hooks see, at the end-effector stamps.
+
+    Attributes:
+        q, qd: [N, J] measured joint angles (rad) and rates (rad/s).
+        tau_g: [M, N, J] gravity torque acting on each joint, N m (``-ID(q, 0, 0)`` with the
+            model's inertials), or None when no active effect needs it.
+        joint_names: [J].
+        play: ``play(b [M, J]) -> [M, N, J]``: link minus motor angle of a dead band of
+            half-width ``b`` rad driven by the measured joint angles (see
+            :func:`reference_impl.physics.arm.kinematic_model.play_offset`).
+    """
+
+    q: torch.Tensor
+    qd: torch.Tensor
+    tau_g: torch.Tensor | None
+    joint_names: tuple[str, ...]
+    play: Callable[[torch.Tensor], torch.Tensor]
+
+
+@dataclass
 class InertialContext:
     """Where an added body goes: the payload link's body index and ``T_body_link`` [4, 4]."""
 
@@ -79,6 +110,9 @@ class ArmEffect(Effect):
     Attributes:
         per_joint: parameters are repeated for every joint (``<param>.<joint>``).
         joints: the joints the expanded instance covers (empty for the template).
+        residual: the residual the effect is judged on: ``"torque"`` (joint efforts) or
+            ``"kinematic"`` (end-effector poses).
+        uses_gravity: ``joint_offset`` reads ``KinState.tau_g``.
     """
 
     family: str = "joint"
@@ -86,6 +120,8 @@ class ArmEffect(Effect):
     needs: tuple[str, ...] = ("efforts",)
     per_joint: bool = False
     joints: tuple[str, ...] = field(default=(), compare=False)
+    residual: str = "torque"
+    uses_gravity: bool = False
 
     # --- expansion -------------------------------------------------------------------------
     def for_robot(self, joint_names: tuple[str, ...] | list[str]) -> ArmEffect:
@@ -116,6 +152,14 @@ class ArmEffect(Effect):
 
     def time_shift(self, th: dict[str, torch.Tensor]) -> torch.Tensor | None:
         """Lag of the effort stamps, [M, 1] s (the effort stamped t measures the model at t - lag)."""
+        return None
+
+    def joint_offset(self, th: dict[str, torch.Tensor], ks: KinState) -> torch.Tensor | None:
+        """Link angle minus measured joint angle, [M, N, J] rad (kinematic model)."""
+        return None
+
+    def frame_offset(self, th: dict[str, torch.Tensor]) -> torch.Tensor | None:
+        """Joint-frame translations ``(da, dd)`` [M, J, 2] m before the joint rotation."""
         return None
 
     # --- physics.json ----------------------------------------------------------------------
@@ -336,3 +380,6 @@ class EffortTimeOffset(ArmEffect):
 
 for _e in (JointFriction, Armature, Payload, MassScale, EffortTimeOffset):
     register_effect(_e(), replace=True)
+
+# the kinematic effects (elasticity, backlash, kinematic offsets) register with the others
+from reference_impl.physics.arm import kinematic_effects as _kinematic  # noqa: E402, F401

@@ -90,6 +90,7 @@ class ArmModel:
         link_body: link name -> (body index or -1 for the base, ``T_body_link`` [4, 4]).
         joint_lower, joint_upper: [J] limits (rad or m, +-inf when none).
         joint_dynamics: joint name -> ``{"damping": ..., "friction": ...}`` from the URDF.
+        body_joints: [B] name of the joint that moves each body (an actuated or a mimic joint).
     """
 
     joint_names: tuple[str, ...]
@@ -106,6 +107,7 @@ class ArmModel:
     joint_lower: np.ndarray
     joint_upper: np.ndarray
     joint_dynamics: dict[str, dict[str, float]]
+    body_joints: tuple[str, ...] = ()
 
     @property
     def num_joints(self) -> int:
@@ -144,6 +146,7 @@ class ArmModel:
         group = [-1] * n_links  # body index of each link (-1: base)
         t_group_link = [np.eye(4)] * n_links
         body_names: list[str] = []
+        body_joints: list[str] = []
         parent: list[int] = []
         jtype: list[str] = []
         origin: list[np.ndarray] = []
@@ -161,6 +164,7 @@ class ArmModel:
                 continue
             b = len(body_names)
             body_names.append(chain.link_names[k])
+            body_joints.append(chain.tree_joint_names[k - 1])
             parent.append(group[p])
             jtype.append("prismatic" if jt == "prismatic" else "revolute")
             origin.append(t_origin)
@@ -224,6 +228,7 @@ class ArmModel:
             joint_lower=np.asarray(chain.joint_lower, dtype=float),
             joint_upper=np.asarray(chain.joint_upper, dtype=float),
             joint_dynamics=dyn,
+            body_joints=tuple(body_joints),
         )
 
     def link_frame(self, link: str) -> tuple[int, np.ndarray]:

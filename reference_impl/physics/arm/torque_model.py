@@ -43,6 +43,8 @@ __all__ = [
     "effort_noise",
     "predict",
     "fixed_effects",
+    "active_effects",
+    "inertial_parameters",
 ]
 
 
@@ -237,6 +239,11 @@ class ArmProblem:
     def n(self) -> int:
         return int(self.tau.shape[0])
 
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """Residual channels: one per joint."""
+        return tuple(self.state.joint_names)
+
 
 _TRAJ_GAP_S = 1.0e6
 
@@ -320,6 +327,51 @@ def _shift(pb: ArmProblem, tau: torch.Tensor, delta: torch.Tensor) -> torch.Tens
     return g0 * (1 - w) + g1 * w
 
 
+def active_effects(
+    theta: torch.Tensor,
+    space: ParamSpace,
+    joint_names: tuple[str, ...],
+    fixed: dict[str, dict[str, float]] | None,
+) -> list[tuple[ArmEffect, dict[str, torch.Tensor]]]:
+    """The arm effects acting on a prediction and their parameters ``name -> [M, 1]``.
+
+    Effects of ``fixed`` (physics.json values, constant over the M sets) come first, then the
+    effects of ``space`` (values from ``theta`` [M, Q]); an effect in both is taken from
+    ``theta``.
+    """
+    m, dt, dev = theta.shape[0], theta.dtype, theta.device
+    active: list[tuple[ArmEffect, dict[str, torch.Tensor]]] = []
+    in_space = {e.name for e in space.effects}
+    for name, vals in (fixed or {}).items():
+        if name in in_space:
+            continue
+        eff = get_effect(name)
+        if not isinstance(eff, ArmEffect):
+            continue
+        eff = eff.for_robot(joint_names)
+        active.append(
+            (eff, {k: torch.full((m, 1), float(v), dtype=dt, device=dev) for k, v in vals.items()})
+        )
+    for eff in space.effects:
+        if isinstance(eff, ArmEffect) and eff.model == "arm":
+            active.append((eff, space.theta_dict(theta, eff.name)))
+    return active
+
+
+def inertial_parameters(
+    active: list[tuple[ArmEffect, dict[str, torch.Tensor]]],
+    pi_links: torch.Tensor,
+    ctx: InertialContext,
+    m: int,
+) -> torch.Tensor:
+    """Inertial parameters ``pi_links + pi_extra`` [M, B*10] after the effects' ``inertial`` hooks."""
+    links = pi_links.unsqueeze(0).expand(m, -1, -1)
+    extra = torch.zeros_like(links)
+    for eff, th in active:
+        links, extra = eff.inertial(th, links, extra, ctx)
+    return (links + extra).reshape(m, -1)
+
+
 def predict(
     theta: torch.Tensor,
     space: ParamSpace,
@@ -342,26 +394,8 @@ def predict(
     m = theta.shape[0]
     dt, dev = pb.Y.dtype, pb.Y.device
     theta = theta.to(dt)
-    active: list[tuple[ArmEffect, dict[str, torch.Tensor]]] = []
-    in_space = {e.name for e in space.effects}
-    for name, vals in (fixed or {}).items():
-        if name in in_space:
-            continue
-        eff = get_effect(name)
-        if not isinstance(eff, ArmEffect):
-            continue
-        eff = eff.for_robot(pb.state.joint_names)
-        active.append(
-            (eff, {k: torch.full((m, 1), float(v), dtype=dt, device=dev) for k, v in vals.items()})
-        )
-    for eff in space.effects:
-        if isinstance(eff, ArmEffect) and eff.model == "arm":
-            active.append((eff, space.theta_dict(theta, eff.name)))
-    links = pb.pi_links.unsqueeze(0).expand(m, -1, -1)
-    extra = torch.zeros_like(links)
-    for eff, th in active:
-        links, extra = eff.inertial(th, links, extra, pb.ctx)
-    pi = (links + extra).reshape(m, -1)  # [M, B*10]
+    active = active_effects(theta, space, pb.state.joint_names, fixed)
+    pi = inertial_parameters(active, pb.pi_links, pb.ctx, m)  # [M, B*10]
     tau = torch.einsum("njp,mp->mnj", pb.Y, pi)
     delta = torch.zeros(m, 1, dtype=dt, device=dev)
     shifted = False
