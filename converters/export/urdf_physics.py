@@ -25,8 +25,18 @@ are kept as they were):
   zero tensor is not positive definite), so that inverse dynamics of the exported URDF equals
   the fitted torque model's rigid-body part up to ``I |w_dot|`` (below 1e-3 N m).
 
-URDF has no rotor-inertia field: joint ``armature`` goes to the sidecar only (``joints``), as
-do the ``physics.json`` ``effects`` (each marked ``in_urdf``) and a summary of the payload.
+* fitted kinematic joint offsets (``physics.json`` ``joints.<j>.offsets = {dtheta_rad, dd_m,
+  da_m}``) are baked into the joint ``<origin>``: ``origin · Trans(da u + dd z) · Rot(z, dtheta)``
+  (:func:`robogs_format.kinematics.offset_origin`; a translation along the axis for ``dtheta``
+  of a prismatic joint; a mimic joint turns by ``multiplier * dtheta``), so forward kinematics
+  of the exported URDF at the *measured* joint values is the fitted kinematic model, and joint
+  limits stay in the measured (controller) values. URDF's ``<calibration rising/falling>``
+  records where a homing switch trips; no kinematics library applies it, so it is not used.
+
+URDF has no rotor-inertia, compliance or backlash field: joint ``armature``,
+``compliance_rad_per_nm`` and ``backlash_rad`` go to the sidecar only (``joints``), with the
+offsets (marked ``in_urdf``), as do the ``physics.json`` ``effects`` (each marked ``in_urdf``)
+and a summary of the payload.
 
 The sidecar schema is documented in ``docs/exports.md``.
 """
@@ -45,6 +55,7 @@ from lxml import etree
 
 from robogs_format import Dataset
 from robogs_format.errors import FormatError, InputError
+from robogs_format.kinematics import Chain, chain_with_offsets, read_joint_offsets
 
 from . import ExportReport, register_exporter
 from .arm_physics import (
@@ -75,7 +86,7 @@ def _fmt(v: float) -> str:
 
 def _rpy(R: np.ndarray) -> tuple[float, float, float]:
     """URDF roll-pitch-yaw (fixed-axis XYZ: R = Rz(y) Ry(p) Rx(r)) of a rotation matrix."""
-    pitch = float(np.arcsin(-np.clip(R[2, 0], -1.0, 1.0)))
+    pitch = float(np.arctan2(-R[2, 0], np.hypot(R[0, 0], R[1, 0])))  # exact near +-pi/2 too
     if abs(R[2, 0]) < 1.0 - 1e-12:
         roll = float(np.arctan2(R[2, 1], R[2, 2]))
         yaw = float(np.arctan2(R[1, 0], R[0, 0]))
@@ -178,6 +189,53 @@ def _add_payload(root: etree._Element, spec: PayloadSpec) -> tuple[str, str]:
     return link_name, joint_name
 
 
+def _origin_attrs(T: np.ndarray) -> dict[str, str]:
+    return {
+        "xyz": " ".join(_fmt(v) for v in T[:3, 3]),
+        "rpy": " ".join(_fmt(v) for v in _rpy(T[:3, :3])),
+    }
+
+
+def _bake_offsets(root: etree._Element, chain: Chain, offsets: dict[str, Any]) -> list[str]:
+    """Rewrite the ``<origin>`` of every joint the offsets move; returns their names."""
+    moved = chain_with_offsets(chain, offsets)
+    elements = {j.get("name"): j for j in root.findall("joint")}
+    changed = []
+    for k, name in enumerate(chain.tree_joint_names):
+        if np.array_equal(moved.origins[k], chain.origins[k]):
+            continue
+        el = elements[name]
+        origin = el.find("origin")
+        if origin is None:
+            origin = etree.Element("origin")
+            el.insert(0, origin)
+        for key, value in _origin_attrs(moved.origins[k]).items():
+            origin.set(key, value)
+        changed.append(name)
+    return changed
+
+
+def _joint_extras(physics: dict[str, Any] | None, offsets: dict[str, Any]) -> dict[str, dict]:
+    """Sidecar ``joints`` entries of the kinematic joint effects URDF cannot hold (or, for the
+    offsets, holds in the origins)."""
+    table = (physics or {}).get("joints") or {}
+    out: dict[str, dict[str, Any]] = {}
+    for j, entry in table.items():
+        if not isinstance(entry, dict):
+            continue
+        for key in ("compliance_rad_per_nm", "backlash_rad"):
+            if entry.get(key) is not None:
+                out.setdefault(j, {})[key] = float(entry[key])
+    for j, o in offsets.items():
+        out.setdefault(j, {})["offsets"] = {
+            "dtheta_rad": o.dtheta,
+            "dd_m": o.dd,
+            "da_m": o.da,
+            "in_urdf": True,
+        }
+    return out
+
+
 def _write_xml(root: etree._Element, path: Path) -> None:
     path.write_bytes(
         etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True)
@@ -251,6 +309,14 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
         el.set("friction", _fmt(dyn.friction or 0.0))
     notes: list[str] = []
     phys_path = ds.root / "physics.json"
+    chain = Chain.from_urdf(urdf, floating_as_fixed=True)
+    offsets = read_joint_offsets(physics, chain.joint_names, path=phys_path)
+    if offsets:
+        moved = _bake_offsets(root, chain, offsets)
+        notes.append(
+            f"kinematic offsets of {len(offsets)} joint(s) baked into the origins of "
+            f"{len(moved)} joint(s)"
+        )
     scale = mass_scale(physics, path=phys_path)
     if scale is not None:
         n = _scale_inertials(root, scale)
@@ -284,6 +350,9 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
             "friction_dynamic": "1 (Coulomb coefficient)",
             "restitution": "1",
             "armature": "kg·m² (revolute) | kg (prismatic)",
+            "compliance_rad_per_nm": "rad/(N·m) (revolute) | m/N (prismatic)",
+            "backlash_rad": "rad, half-width of the dead band (revolute) | m (prismatic)",
+            "offsets": "dtheta_rad rad (m if prismatic), dd_m m, da_m m; in the URDF origins",
             "gravity_mps2": "m/s², world frame, z up",
         },
         "gravity_mps2": list((physics or {}).get("gravity_mps2", [0.0, 0.0, -9.81])),
@@ -300,6 +369,9 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
     for jname, dyn in dynamics.items():
         if dyn.armature is not None:
             contact["joints"][jname] = {"armature": dyn.armature}
+    for jname, extra in _joint_extras(physics, offsets).items():
+        if jname in dynamics:
+            contact["joints"].setdefault(jname, {}).update(extra)
     if payload_entry is not None:
         contact["payload"] = payload_entry
     effects = [
@@ -337,6 +409,7 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
             "objects": len(objs),
             **({"payload": payload_entry} if payload_entry else {}),
             **({"mass_scale": scale} if scale is not None else {}),
+            **({"offset_joints": sorted(offsets)} if offsets else {}),
         },
     )
 

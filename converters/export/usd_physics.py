@@ -36,7 +36,12 @@ The arm torque model's fitted physics is carried as in the URDF export
 inertia (recorded as ``robogs:massScale`` on the robot prim), and a ``payload`` becomes its own
 rigid body (mass, CoM in the parent link frame, the inertia of a 1 cm solid sphere about the
 CoM, :func:`.arm_physics.payload_inertia`) welded by a fixed joint to the link it was fitted on
-(``robogs:payloadLink``).
+(``robogs:payloadLink``). Fitted kinematic joint offsets (``physics.json``
+``joints.<j>.offsets``) are baked into the joint origins as in the URDF export
+(:func:`robogs_format.kinematics.chain_with_offsets`): the bodies' rest poses and the joint
+frames follow the fitted model, and the values are also kept as ``robogs:offsetDthetaRad``,
+``robogs:offsetDdM``, ``robogs:offsetDaM``. Joint compliance and backlash have no UsdPhysics
+field: they are written as ``robogs:complianceRadPerNm`` and ``robogs:backlashRad``.
 """
 
 from __future__ import annotations
@@ -53,7 +58,7 @@ from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, UsdShade, UsdValidation, 
 from robogs_format import Dataset
 from robogs_format.errors import InputError
 from robogs_format.frames import matrix_to_quat, quat_to_matrix
-from robogs_format.kinematics import Chain
+from robogs_format.kinematics import Chain, chain_with_offsets, read_joint_offsets
 from robogs_format.qa.rerun_log import rest_joint_positions, robot_link_meshes
 
 from . import ExportReport, register_exporter
@@ -316,7 +321,11 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
         )
     urdf = ds.urdf(load_meshes=True)
     physics = ds.physics() if ds.manifest.get("physics") else None
+    phys_path = ds.root / "physics.json"
     chain = Chain.from_urdf(urdf, floating_as_fixed=True)
+    offsets = read_joint_offsets(physics, chain.joint_names, path=phys_path)
+    chain = chain_with_offsets(chain, offsets)
+    origin_of = dict(zip(chain.tree_joint_names, chain.origins, strict=True))
     q_rest = rest_joint_positions(ds, chain)
     T_world = chain.forward(torch.from_numpy(q_rest)).numpy()  # [L, 4, 4]
 
@@ -339,7 +348,6 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
     robot = UsdGeom.Xform.Define(stage, robot_path)
     UsdPhysics.ArticulationRootAPI.Apply(robot.GetPrim())
     inertias = link_inertias(urdf, physics)
-    phys_path = ds.root / "physics.json"
     m_scale = mass_scale(physics, path=phys_path)
     if m_scale is not None:
         inertias = {k: _scaled(v, m_scale) for k, v in inertias.items()}
@@ -348,6 +356,8 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
             f"mass_scale {m_scale:.6g} applied to the mass and inertia of {len(inertias)} link(s)"
         )
     payload = payload_spec(physics, urdf, ds.manifest, path=phys_path)
+    if offsets:
+        b.notes.append(f"kinematic offsets of {len(offsets)} joint(s) baked into the joint frames")
     visuals = robot_link_meshes(urdf)
     collisions = robot_link_meshes(urdf, collision=True)
     objects_phys = (physics or {}).get("objects", {})
@@ -363,7 +373,7 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
         if merged:
             parent = j.parent
             body_of[link] = body_of[parent]
-            origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=np.float64)
+            origin = origin_of[j.name]
             T_body_link[link] = T_body_link[parent] @ origin
             path = prim_path[parent].AppendChild(_name(link, set()))
             prim = UsdGeom.Xform.Define(stage, path).GetPrim()
@@ -400,7 +410,9 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
     for j in urdf.robot.joints:
         if body_of.get(j.child) != j.child:  # merged frame link
             continue
-        origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=np.float64)
+        origin = origin_of.get(j.name)
+        if origin is None:  # not in the chain's tree (cannot happen for a loaded URDF)
+            origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=np.float64)
         T0 = T_body_link[j.parent] @ origin
         path = joints_path.AppendChild(_name(j.name, jused))
         if j.type in ("revolute", "continuous", "prismatic"):
@@ -435,6 +447,14 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
             if j.limit is not None:
                 _custom(prim, "effortLimit", j.limit.effort)
                 _custom(prim, "velocityLimit", j.limit.velocity)
+            entry = ((physics or {}).get("joints") or {}).get(j.name) or {}
+            _custom(prim, "complianceRadPerNm", entry.get("compliance_rad_per_nm"))
+            _custom(prim, "backlashRad", entry.get("backlash_rad"))
+            if j.name in offsets:
+                o = offsets[j.name]
+                _custom(prim, "offsetDthetaRad", o.dtheta)
+                _custom(prim, "offsetDdM", o.dd)
+                _custom(prim, "offsetDaM", o.da)
         elif j.type == "fixed":
             joint = UsdPhysics.FixedJoint.Define(stage, path)
             _set_joint_frames(joint, T0, np.eye(4))
@@ -526,6 +546,7 @@ def export_usd(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport:
             "validator_issues": len(issues),
             **({"payload": payload_entry} if payload_entry else {}),
             **({"mass_scale": m_scale} if m_scale is not None else {}),
+            **({"offset_joints": sorted(offsets)} if offsets else {}),
         },
     )
 

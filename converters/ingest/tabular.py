@@ -33,6 +33,11 @@ m) with ``hold: {panda_finger_joint1: 0.0}``; a map that has only ``hold`` (and 
 keeps the automatic layouts for the other joints. Held joints get constant ``position.<j>``
 and zero ``velocity.<j>`` columns, listed in the stream's ``derived``, and no effort column.
 
+Recorded end-effector (TCP) poses, e.g. UR RTDE ``actual_TCP_pose_0..5`` or Franka
+``O_T_EE_0..15``, become an ``ee_poses`` stream of a declared link with an ``ee_pose`` section
+(:mod:`converters.ingest.tabular_pose`); a map with only ``ee_pose`` (and ``hold``, ``gap_s``)
+keeps the automatic layouts for the joints.
+
 A plain string (``position: q0``) names a column in SI units. With ``effort_kind: current``
 every effort column is a motor current in A and ``torque_constant`` (N m/A, motor side) and
 ``gear_ratio`` are required: ``tau = I * k_t * gear_ratio``.
@@ -66,6 +71,7 @@ from robogs_format.dataset import Dataset
 from robogs_format.errors import InputError, RobogsError
 from robogs_format.urdf import load_urdf
 
+from .tabular_pose import EePoseColumns, pose_samples, read_ee_pose, resolve_frame
 from .yamlio import read_yaml
 
 __all__ = [
@@ -132,6 +138,7 @@ class ColumnMap:
         effort_kind: ``torque`` or ``current``.
         gap_s: segment split threshold (None: automatic).
         hold: joints not in the log -> their constant position (rad or m).
+        ee_pose: recorded end-effector pose columns (None: none).
     """
 
     layout: str
@@ -142,12 +149,15 @@ class ColumnMap:
     effort_kind: str = "torque"
     gap_s: float | None = None
     hold: dict[str, float] = field(default_factory=dict)
+    ee_pose: EePoseColumns | None = None
 
     def columns(self) -> list[str]:
-        """Every source column used (time first)."""
+        """Every source column used (time first, end-effector pose columns last)."""
         out = [self.time_column]
         for jc in self.joints.values():
             out += [c for c in (jc.position, jc.velocity, jc.effort) if c]
+        if self.ee_pose is not None:
+            out += self.ee_pose.columns
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -173,6 +183,8 @@ class ColumnMap:
         }
         if self.hold:
             out["hold"] = dict(self.hold)
+        if self.ee_pose is not None:
+            out["ee_pose"] = self.ee_pose.to_dict()
         return out
 
 
@@ -239,9 +251,10 @@ def _parse_mapping(doc: Any, path: Path, joint_names: list[str]) -> ColumnMap:
     if not isinstance(doc, dict):
         raise InputError("mapping must be a YAML mapping with 'time' and 'joints'", path=path)
     hold = _read_hold(doc.get("hold"), path, joint_names)
-    if doc.get("joints") is None and doc.get("time") is None and hold:
-        gap = _gap_s(doc.get("gap_s"), path)  # only joints held: automatic layouts for the rest
-        return ColumnMap("auto", "", "s", {}, gap_s=gap, hold=hold)
+    ee_pose = read_ee_pose(doc.get("ee_pose"), path)
+    if doc.get("joints") is None and doc.get("time") is None and (hold or ee_pose):
+        gap = _gap_s(doc.get("gap_s"), path)  # no joint columns: automatic layouts for them
+        return ColumnMap("auto", "", "s", {}, gap_s=gap, hold=hold, ee_pose=ee_pose)
     t = doc.get("time")
     tcol, tspec = _col_spec(t, path, "time")
     if tcol is None:
@@ -346,7 +359,8 @@ def _parse_mapping(doc: Any, path: Path, joint_names: list[str]) -> ColumnMap:
             where="time/epoch_ns",
             hint="epoch_ns is the dataset-clock stamp (ns) of the log's time zero",
         )
-    return ColumnMap("map", tcol, tunit, joints, epoch, kind, _gap_s(doc.get("gap_s"), path), hold)
+    gap = _gap_s(doc.get("gap_s"), path)
+    return ColumnMap("map", tcol, tunit, joints, epoch, kind, gap, hold, ee_pose)
 
 
 def _gap_s(value: Any, path: Path) -> float | None:
@@ -716,6 +730,8 @@ class LogSegment:
         derived_velocity: velocities were differentiated from positions.
         lines: [N] source line numbers.
         effort_joints: the joints ``tau`` covers (the logged ones, not the held ones).
+        ee_t_ns, ee: [M] stamps and [M, 7] end-effector poses (``x y z qw qx qy qz``, world)
+            of the rows with a usable pose; None without ``ee_pose`` columns.
     """
 
     source: str
@@ -727,6 +743,8 @@ class LogSegment:
     derived_velocity: bool
     lines: np.ndarray
     effort_joints: list[str] = field(default_factory=list)
+    ee_t_ns: np.ndarray | None = None
+    ee: np.ndarray | None = None
 
 
 @dataclass
@@ -735,6 +753,9 @@ class _FileReport:
     written: int = 0
     dropped: dict[str, list[int]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    ee_rows: int = 0
+    ee_written: int = 0
+    ee_dropped: list[int] = field(default_factory=list)
 
     def drop(self, reason: str, lines: np.ndarray | list[int]) -> None:
         lst = self.dropped.setdefault(reason, [])
@@ -852,6 +873,10 @@ def _clean_file(
         if has_e
         else None
     )
+    ee = ee_ok = None
+    if cmap.ee_pose is not None:  # a bad pose cell drops the pose only, not the joint row
+        vals = np.stack([_to_float(raw.data[c])[0] for c in cmap.ee_pose.columns], axis=1)
+        ee, ee_ok = pose_samples(vals, cmap.ee_pose, lines, path)
     idx = np.flatnonzero(keep)
     if len(idx) == 0:
         raise InputError(
@@ -897,6 +922,12 @@ def _clean_file(
             continue
         qs = q[sel]
         qds = qd[sel] if qd is not None else savgol_derivative(t_ns[sel], qs, order=1)
+        ee_sel = None
+        if ee is not None and ee_ok is not None:
+            ee_sel = sel[ee_ok[sel]]
+            report.ee_rows += len(sel)
+            report.ee_written += len(ee_sel)
+            report.ee_dropped.extend(int(x) for x in lines[sel][~ee_ok[sel]])
         segments.append(
             LogSegment(
                 path.name,
@@ -908,6 +939,8 @@ def _clean_file(
                 qd is None,
                 lines[sel],
                 logged if tau is not None else [],
+                t_ns[ee_sel] if ee_sel is not None else None,
+                ee[ee_sel] if ee_sel is not None and ee is not None else None,
             )
         )
         report.written += len(sel)
@@ -971,6 +1004,17 @@ def _joint_table(seg: LogSegment, joint_names: list[str]) -> pa.Table:
     if seg.tau is not None:
         for k, j in enumerate(seg.effort_joints):
             cols[f"effort.{j}"] = pa.array(seg.tau[:, k], type=pa.float64())
+    return pa.table(cols)
+
+
+def _ee_table(seg: LogSegment, link: str) -> pa.Table:
+    assert seg.ee is not None and seg.ee_t_ns is not None
+    cols: dict[str, Any] = {
+        "t_ns": pa.array(seg.ee_t_ns, type=pa.int64()),
+        "link": pa.array([link] * len(seg.ee_t_ns), type=pa.string()),
+    }
+    for k, c in enumerate(("x", "y", "z", "qw", "qx", "qy", "qz")):
+        cols[c] = pa.array(seg.ee[:, k], type=pa.float64())
     return pa.table(cols)
 
 
@@ -1071,6 +1115,9 @@ def write_tabular(
     logged = [j for j in joint_names if j not in hold]
     if not logged:
         raise InputError("every joint is held; the log maps none", path=mapping, where="hold")
+    ee_spec = fixed_map.ee_pose if fixed_map is not None else None
+    if ee_spec is not None:
+        resolve_frame(ee_spec, chain, mapping)
     files = _log_files(Path(log_path))
     used: set[str] = set()
     written: list[str] = []
@@ -1083,6 +1130,7 @@ def write_tabular(
             cmap = auto_mapping(raw.columns, logged, f)
             if fixed_map is not None:
                 cmap.hold, cmap.gap_s = dict(hold), fixed_map.gap_s
+                cmap.ee_pose = ee_spec
         maps[f.name] = cmap.to_dict()
         segs, rep = _clean_file(
             f, raw, cmap, joint_names, lower, upper, gap_s if gap_s is not None else cmap.gap_s
@@ -1106,6 +1154,25 @@ def write_tabular(
             )
         if all(jc.effort is None for jc in cmap.joints.values()):
             prov.note(f"{f.name}: no effort columns")
+        if ee_spec is not None:
+            ee_rec = prov.topic(f"{f.name}#ee_pose", f.suffix.lstrip(".").lower(), "ee_poses")
+            ee_rec.messages += rep.ee_rows
+            ee_rec.written += rep.ee_written
+            ee_rec.stamp_source = "log_time"
+            if rep.ee_dropped:
+                reason = "empty, NaN or unparseable pose value"
+                prov.drop(f"{f.name}#ee_pose", reason, len(rep.ee_dropped))
+                first = ", ".join(str(x) for x in rep.ee_dropped[:_EXAMPLES])
+                prov.note(
+                    f"{f.name}: {len(rep.ee_dropped)} end-effector pose(s) dropped: {reason} "
+                    f"(line {first}{', ...' if len(rep.ee_dropped) > _EXAMPLES else ''}; "
+                    "the joint rows are kept)"
+                )
+        elif any(c.startswith("actual_TCP_pose_") for c in raw.columns):
+            prov.note(
+                f"{f.name}: actual_TCP_pose_* ignored (declare its link in the map to import it: "
+                "'ee_pose: {link: tool0, format: axis_angle}')"
+            )
         if hold:
             prov.note(
                 f"{f.name}: joints not in the log, held at a constant position (rad or m): "
@@ -1115,6 +1182,19 @@ def write_tabular(
             eid = _episode_id(f.stem, seg.index, len(segs), used)
             rel = f"episodes/{eid}/joint_states.parquet"
             writer.write_table(rel, _joint_table(seg, joint_names), kind="joint_states")
+            ee_streams: dict[str, Any] = {}
+            if ee_spec is not None and seg.ee is not None and len(seg.ee):
+                ee_rel = f"episodes/{eid}/ee_poses.parquet"
+                writer.write_table(ee_rel, _ee_table(seg, ee_spec.link), kind="ee_poses")
+                ee_steps = np.diff(seg.ee_t_ns)
+                ee_streams["ee_poses"] = {
+                    "kind": "ee_poses",
+                    "path": ee_rel,
+                    "stamp_source": "log_time",
+                    "offset_ns": int(cmap.epoch_ns),
+                    "source": f.name,
+                    "nominal_rate_hz": float(1e9 / np.median(ee_steps)) if len(ee_steps) else None,
+                }
             stream: dict[str, Any] = {
                 "kind": "joint_states",
                 "path": rel,
@@ -1136,7 +1216,7 @@ def write_tabular(
                 eid,
                 start_ns=int(seg.t_ns[0]),
                 end_ns=int(seg.t_ns[-1]),
-                streams={"joint_states": stream},
+                streams={"joint_states": stream, **ee_streams},
                 segment=f"{f.name}#{seg.index}",
             )
             written.append(eid)
@@ -1144,6 +1224,8 @@ def write_tabular(
         raise InputError("nothing was converted (every row was dropped)", path=log_path)
     prov.extra["mapping"] = maps
     prov.extra["files"] = [f.name for f in files]
+    if ee_spec is not None:  # the link the kinematic model explains (set_robot keeps it)
+        writer.manifest["robot"] = {**(writer.manifest.get("robot") or {}), "ee_link": ee_spec.link}
     writer.set_physics(_physics_from_urdf(urdf), note="joint dynamics from the URDF")
     return written
 

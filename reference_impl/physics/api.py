@@ -369,23 +369,32 @@ def revert(dataset: Any, revision: int) -> int:
             hint=f"kept revisions: {ds.physics_history()}",
         )
     old = json.loads(ds.resolve(f"physics/history/rev-{revision:04d}.json").read_text())
-    # camera intrinsics in force at ``revision``: the "previous" values of the first later fit
+    keys = ("fx", "fy", "cx", "cy")
+
+    def record(doc: dict[str, Any], cam: str) -> dict[str, Any] | None:
+        rec = (((doc.get("sensors") or {}).get(cam) or {}).get("intrinsics")) or None
+        return rec if isinstance(rec, dict) else None
+
+    # camera intrinsics in force at ``revision``: its own record of the last intrinsics fit
+    # (later revisions carry records over), else the "previous" values of the first later fit
+    restore: dict[str, dict[str, float]] = {}
+    for cam in ds.camera_names:
+        rec = record(old, cam)
+        if rec is not None and all(k in rec for k in keys):
+            restore[cam] = {k: rec[k] for k in keys}
     docs = [
         json.loads(ds.resolve(f"physics/history/rev-{r:04d}.json").read_text())
         for r in ds.physics_history()
         if r > revision
     ] + [ds.physics()]
-    restore: dict[str, dict[str, float]] = {}
     for doc in sorted(docs, key=lambda d: int(d.get("revision", 0))):
-        for cam, rec in (doc.get("sensors") or {}).items():
-            prev = (rec.get("intrinsics") or {}).get("previous")
-            if isinstance(prev, dict) and cam not in restore and cam in ds.camera_names:
+        for cam in ds.camera_names:
+            prev = (record(doc, cam) or {}).get("previous")
+            if isinstance(prev, dict) and cam not in restore:
                 restore[cam] = prev
     with ds.edit() as w:
         for cam, vals in restore.items():
-            w.set_camera(
-                replace(ds.camera(cam), **{k: float(vals[k]) for k in ("fx", "fy", "cx", "cy")})
-            )
+            w.set_camera(replace(ds.camera(cam), **{k: float(vals[k]) for k in keys}))
         rev = w.set_physics(old, note=f"revert to revision {revision}")
         w.commit()
     return rev

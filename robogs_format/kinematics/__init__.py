@@ -1,4 +1,5 @@
-"""Forward kinematics: URDF trees (:class:`Chain`) and modified-DH tables (:class:`MDHTable`).
+"""Forward kinematics: URDF trees (:class:`Chain`), modified-DH tables (:class:`MDHTable`) and
+the fitted joint offsets of ``physics.json`` (:func:`chain_with_offsets`).
 
 Conventions are in ``design.md`` next to this file.
 """
@@ -10,6 +11,14 @@ from robogs_format.kinematics.mdh import (
     load_mdh_json,
     mdh_transform,
     save_mdh_json,
+)
+from robogs_format.kinematics.offsets import (
+    OFFSET_KEYS,
+    JointOffsets,
+    chain_with_offsets,
+    offset_origin,
+    perpendicular,
+    read_joint_offsets,
 )
 from robogs_format.kinematics.presets import UR5_JOINT_NAMES, ur5_mdh
 
@@ -23,4 +32,10 @@ __all__ = [
     "save_mdh_json",
     "ur5_mdh",
     "UR5_JOINT_NAMES",
+    "OFFSET_KEYS",
+    "JointOffsets",
+    "chain_with_offsets",
+    "offset_origin",
+    "perpendicular",
+    "read_joint_offsets",
 ]

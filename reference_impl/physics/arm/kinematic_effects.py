@@ -55,14 +55,12 @@ import torch
 
 from reference_impl.physics.arm.effects import ArmEffect, KinState
 from reference_impl.physics.effects import Param, register_effect
+from robogs_format.kinematics.offsets import OFFSET_KEYS  # parameter -> joints.<j>.offsets key
 
 __all__ = ["JointElasticity", "Backlash", "KinematicOffsets", "REST_SPEED", "OFFSET_KEYS"]
 
 REST_SPEED = 0.01
 """rad/s; a joint slower than this at the start of a log has no direction of motion yet."""
-
-OFFSET_KEYS = {"dtheta": "dtheta_rad", "dd": "dd_m", "da": "da_m"}
-"""Parameter -> key in ``joints.<j>.offsets`` of physics.json."""
 
 
 def _read_scalar(eff: ArmEffect, doc: dict[str, Any], pname: str, key: str) -> dict | None:

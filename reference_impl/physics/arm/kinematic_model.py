@@ -15,6 +15,8 @@ its parent by
     T_parent_body = origin_b · Trans(da_j u_b + dd_j z_b) · Rot(z_b, theta_b)
 
 (the effects' ``frame_offset``; only for the body moved directly by actuated joint ``j``).
+This is the convention of :mod:`robogs_format.kinematics.offsets` (which check G008 and the
+URDF export use; ``u`` is its :func:`~robogs_format.kinematics.offsets.perpendicular`).
 ``u_b`` is the joint frame's x axis made perpendicular to the axis ``z_b`` (its y axis when the
 axis lies along x). On a URDF written on modified-DH frames (origin ``RotX(alpha_{i-1})
 TransX(a_{i-1}) TransZ(d_i)``, axis +z, e.g. :mod:`fixtures.armlogs.ur5`) that x axis is
@@ -47,6 +49,7 @@ from reference_impl.physics.space import ParamSpace
 from robogs_format.dataset import Dataset
 from robogs_format.errors import InputError
 from robogs_format.interp import interp_linear
+from robogs_format.kinematics.offsets import perpendicular
 
 __all__ = [
     "KinData",
@@ -308,17 +311,6 @@ class _Frames:
     u_p: torch.Tensor  # [B, 3] perpendicular in the parent frame (da)
     primary: list[int]  # [B] actuated joint index moving the body directly, -1 for mimics
     T_bl: torch.Tensor  # [4, 4] end-effector link in its body frame
-
-
-def perpendicular(axis: np.ndarray) -> np.ndarray:
-    """The declared perpendicular ``u`` of a joint frame: its x axis made perpendicular to the
-    unit ``axis`` (Gram-Schmidt), or its y axis when the axis lies along x."""
-    for e in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
-        u = e - (e @ axis) * axis
-        n = float(np.linalg.norm(u))
-        if n > 1e-6:
-            return u / n
-    raise AssertionError("unreachable: x and y cannot both be parallel to a unit axis")
 
 
 def _frames(model: ArmModel, link: str, dt: torch.dtype, dev) -> _Frames:
