@@ -8,9 +8,11 @@ meshes with the true intrinsics), then
   perturb_intrinsics``), the fit must find ``dfx = 0.03``, ``dcx = 4 px``;
 * small: ``fx * 1.01`` and ``cx + 1 px``, to show the detection limit.
 
-Prints per scene the held-out gain, effect size [sigma], ΔBIC and the fitted values, then the
-largest null gain and effect size (the gate's thresholds must sit above them), and the wall
-time of the mask stream of ``compare`` (30 frames) on the scene.
+Prints per scene the held-out gain, effect size [sigma], ΔBIC (with the effective number of
+independent boundary pixels it uses) and the fitted values with their 95 % half-widths, then per
+case the median and largest relative error of dfx and dcx, how often each interval holds the
+truth, the ΔBIC range, the largest null gain and effect size (the gate's thresholds must sit
+above them), and the wall time of the mask stream of ``compare`` (30 frames) on the scene.
 
 Run: ``.venv/bin/python bench/mask_intrinsics.py [--seeds 0-7] [--size small]``
 """
@@ -55,7 +57,9 @@ def main() -> None:
         f"machine: {platform.machine()} {platform.processor() or ''} cpus={os.cpu_count()} "
         f"torch threads={torch.get_num_threads()} size={args.size}"
     )
-    null_gain, null_size, stream_s = [], [], []
+    cases = {"null": None, "3%/4px": (0.03, 4.0), "1%/1px": (0.01, 1.0)}
+    res: dict[str, list[tuple[np.ndarray, np.ndarray, object]]] = {c: [] for c in cases}
+    stream_s = []
     tmp = Path(tempfile.mkdtemp(prefix="robogs-intr-"))
     try:
         for seed in _seeds(args.seeds):
@@ -64,7 +68,7 @@ def main() -> None:
             t0 = time.perf_counter()
             ms = mask_boundary(Dataset.open(root))
             stream_s.append(time.perf_counter() - t0)
-            for case, kw in (("null", None), ("3%/4px", (0.03, 4.0)), ("1%/1px", (0.01, 1.0))):
+            for case, kw in cases.items():
                 ds_root = root
                 if kw is not None:
                     ds_root = tmp / f"s{seed}_{case.replace('/', '_').replace('%', '')}"
@@ -73,25 +77,53 @@ def main() -> None:
                 f = fit_intrinsics(Dataset.open(ds_root))[0]
                 r = f.row
                 v = f.values
+                half = np.array([(p.high - p.low) / 2 for p in r.params])
+                res[case].append((v, half, f))
                 print(
                     f"seed {seed} {case:7s} gain {r.heldout_gain:6.3f} size {r.effect_size:5.2f} "
-                    f"dBIC {r.delta_bic:9.0f} dfx {v[0]:+.4f} dfy {v[1]:+.4f} dcx {v[2]:+.2f} "
-                    f"dcy {v[3]:+.2f} reported {r.reported} rivals {r.rivals} "
+                    f"dBIC {r.delta_bic:7.0f} (n_eff {f.extra['n_effective']:5.0f} of "
+                    f"{f.extra['n_points']}) dfx {v[0]:+.4f}±{half[0]:.4f} dfy {v[1]:+.4f}±"
+                    f"{half[1]:.4f} dcx {v[2]:+.2f}±{half[2]:.2f} dcy {v[3]:+.2f}±{half[3]:.2f} "
+                    f"reported {r.reported} rivals {r.rivals} "
                     f"boundary {f.boundary_px_before:.3f}->{f.boundary_px_after:.3f} px"
                 )
-                if kw is None:
-                    null_gain.append(r.heldout_gain)
-                    null_size.append(r.effect_size)
             print(
                 f"seed {seed} mask stream: {ms.frames} frames {ms.boundary_px:.3f} px, "
                 f"{stream_s[-1]:.2f} s"
             )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    for case, kw in cases.items():
+        v = np.array([x[0] for x in res[case]])
+        half = np.array([x[1] for x in res[case]])
+        truth = np.array([kw[0], 0.0, kw[1], 0.0]) if kw else np.zeros(4)
+        cover = (np.abs(v - truth) <= half).mean(0)
+        rows = [x[2].row for x in res[case]]
+        dbic = [r.delta_bic for r in rows]
+        line = (
+            f"{case:7s} reported {sum(r.reported for r in rows)}/{len(rows)}; interval holds the "
+            f"truth (dfx dfy dcx dcy) {' '.join(f'{c:.2f}' for c in cover)}; median half-width "
+            f"{' '.join(f'{h:.4g}' for h in np.median(half, 0))}; dBIC {min(dbic):.0f} .. "
+            f"{max(dbic):.0f}; max |dfy| {np.abs(v[:, 1]).max():.4f}, max |dcy| "
+            f"{np.abs(v[:, 3]).max():.2f} px"
+        )
+        if kw:
+            e_f = np.abs(v[:, 0] / kw[0] - 1) * 100
+            e_c = np.abs(v[:, 2] / kw[1] - 1) * 100
+            line += (
+                f"; relative error dfx median {np.median(e_f):.1f} % (max {e_f.max():.1f} %), "
+                f"dcx median {np.median(e_c):.1f} % (max {e_c.max():.1f} %)"
+            )
+        else:
+            line += f"; dfx {v[:, 0].min():+.4f} .. {v[:, 0].max():+.4f}"
+        print(line)
+    null_gain = [x[2].row.heldout_gain for x in res["null"]]
+    null_size = [x[2].row.effect_size for x in res["null"]]
     print(
         f"null max gain {max(null_gain):.3f} (gate {HELDOUT_MIN_GAIN}, ratio "
-        f"{HELDOUT_MIN_GAIN / max(null_gain):.1f}), max effect size {max(null_size):.2f} (gate "
-        f"{EFFECT_SIZE_MIN}, ratio {EFFECT_SIZE_MIN / max(null_size):.1f}); "
+        f"{HELDOUT_MIN_GAIN / max(max(null_gain), 1e-9):.1f}), max effect size "
+        f"{max(null_size):.2f} (gate {EFFECT_SIZE_MIN}, ratio "
+        f"{EFFECT_SIZE_MIN / max(max(null_size), 1e-9):.1f}); "
         f"mask stream median {np.median(stream_s):.2f} s for 30 frames"
     )
 

@@ -3,8 +3,9 @@
 The perturbed scene is made by the fixture generator and a mutation, never by the code under
 test: frames and labels are rasterised with the true intrinsics (``fixtures.synth``) and the
 dataset then declares ``fx * 1.03`` and ``cx + 4 px`` (``fixtures.mutations.perturb_intrinsics``).
-Tolerances: at 160x120 px the splat-vs-mesh silhouettes leave a systematic floor of about
-0.8 % in the focal lengths and 0.3 px in the principal point on null data (bench/mask_intrinsics.py).
+Tolerances: at 160x120 px over seeds 0-7 (bench/mask_intrinsics.py, 30 frames) dfx came out
+0.0286-0.0317 for 0.03, dcx 3.96-4.05 px for 4 px, and null scenes kept |dfx| <= 0.0013,
+|dcx| <= 0.04 px, |dfy| <= 0.0044 (splat growth that varies along the table's far edge).
 """
 
 from __future__ import annotations
@@ -58,10 +59,10 @@ def perturbed_fit(perturbed: Path):
 def test_fit_recovers_the_declared_focal_and_principal_point_errors(perturbed_fit) -> None:
     f = perturbed_fit
     dfx, dfy, dcx, dcy = f.values
-    assert dfx == pytest.approx(DFX, abs=0.01)
-    assert dcx == pytest.approx(DCX, abs=0.3)
-    assert dfy == pytest.approx(0.0, abs=0.01)
-    assert dcy == pytest.approx(0.0, abs=0.5)
+    assert dfx == pytest.approx(DFX, abs=0.003)
+    assert dcx == pytest.approx(DCX, abs=0.15)
+    assert dfy == pytest.approx(0.0, abs=0.008)
+    assert dcy == pytest.approx(0.0, abs=0.3)
     assert f.identifiable.all()
     row = f.row.to_dict()
     assert row["name"] == "camera_intrinsics" and row["family"] == "sensor"
@@ -74,6 +75,9 @@ def test_fit_recovers_the_declared_focal_and_principal_point_errors(perturbed_fi
     assert set(p) == {"cam0.dfx", "cam0.dfy", "cam0.dcx", "cam0.dcy"}
     for q in p.values():
         assert q["low"] < q["value"] < q["high"]
+    # the intervals hold the truth (the generator's errors)
+    for name, truth in (("dfx", DFX), ("dfy", 0.0), ("dcx", DCX), ("dcy", 0.0)):
+        assert p[f"cam0.{name}"]["low"] <= truth <= p[f"cam0.{name}"]["high"], name
     # the warp model explains the boundary error: it falls to the clean level
     assert f.boundary_px_after < 0.5 * f.boundary_px_before
 
@@ -84,7 +88,14 @@ def test_null_scene_reports_nothing(scene: Path) -> None:
     (f,) = fits
     assert not f.row.reported and f.row.verdict != "add"
     assert f.row.effect_size < EFFECT_SIZE_MIN
-    assert abs(f.values[0]) < 0.01 and abs(f.values[2]) < 0.3
+    assert f.row.heldout_gain < HELDOUT_MIN_GAIN
+    # ΔBIC counts effectively independent boundary pixels: no false evidence on null data
+    # (with the raw pixel count it was about -2000 here)
+    assert f.row.delta_bic > DBIC_MAX
+    assert f.extra["n_effective"] < 0.1 * f.extra["n_points"]
+    assert abs(f.values[0]) < 0.003 and abs(f.values[2]) < 0.15
+    for q in f.row.params:  # the 95 % intervals hold the truth (no error)
+        assert q.low <= 0.0 <= q.high, q
 
 
 def test_fit_writes_the_intrinsics_and_the_boundary_residual_falls(
