@@ -80,7 +80,11 @@ class Stribeck(Effect):
         Param("v_s", "m/s", 0.01, 1.0, 0.1, 0.15),
     )
     needs: tuple[str, ...] = ("object_poses", "sliding")
-    separate_by: str = "slow pushes and long low-speed slides (many frames below v_s)"
+    separate_by: str = (
+        "pushes and slides released at several speeds between v_s and about 3 v_s (a free slide "
+        "spends under v_s / (mu_d g) s below v_s, so the curve shows through how far each release "
+        "speed slides; well above v_s only the product v_s^2 ln(1 + dmu) is seen)"
+    )
     description: str = "friction rising at low sliding speed (stiction)"
     starts: tuple[dict[str, float], ...] = ({"dmu": 0.4, "v_s": 0.15},)
 

@@ -101,10 +101,18 @@ class Engine:
         progress: Callable[[int, int], None] | None = None,
         max_iter: int = 20,
     ) -> list[FitOutcome]:
-        """Fit problems over ``space`` (all at once)."""
+        """Fit problems over ``space`` (all at once); intervals include the leave-one-trajectory-
+        out jackknife (``fit_problems(cluster_jackknife=True)``): a release speed off by encoder
+        noise shifts a whole slide, and a few fast slides carry most of the drag information."""
         fn = residual_fn(self.prep, space)
         return fit_problems(
-            fn, space, problems, n_traj=self.prep.n_traj, progress=progress, max_iter=max_iter
+            fn,
+            space,
+            problems,
+            n_traj=self.prep.n_traj,
+            progress=progress,
+            max_iter=max_iter,
+            cluster_jackknife=True,
         )
 
     def evaluate(self, space: ParamSpace, thetas: np.ndarray, locals_: np.ndarray) -> np.ndarray:

@@ -12,7 +12,9 @@ Steps are Levenberg-Marquardt with Marquardt's diagonal scaling (More 1978), pro
 bounds; the Jacobian at an accepted trial point is already computed ("speculative" FD). The
 covariance is ``s^2 (J^T J)^-1`` with ``s^2 = chi2 / (n - p)``, each variance raised to the
 cluster-robust sandwich's (trajectories as clusters) where that is larger, marginalised over the
-local parameters; a parameter the data do not pin down is flagged unidentifiable.
+local parameters; with ``cluster_jackknife`` also to the leave-one-trajectory-out jackknife's
+(CR3), which stays honest when a few trajectories carry most of the information. A parameter the
+data do not pin down is flagged unidentifiable.
 """
 
 from __future__ import annotations
@@ -232,6 +234,45 @@ def _score_outer(st: _State, mask_t: np.ndarray, n_local: int) -> np.ndarray:
     return b
 
 
+def _jackknife_cov(st: _State, mask_t: np.ndarray) -> np.ndarray | None:
+    """Leave-one-trajectory-out (delete-one-cluster) jackknife covariance of the globals [P, P].
+
+    One Gauss-Newton step per left-out trajectory from the optimum: ``d_t = (A - A_t)^+ g_t``
+    with ``A_t``, ``g_t`` the trajectory's information and score after profiling out its own
+    local parameters (they leave with it), and ``V = (G-1)/G sum (d_t - mean d)(d_t - mean d)^T``.
+    This is the CR3 cluster-robust covariance (for a linear model it equals it exactly;
+    MacKinnon & White 1985, Bell & McCaffrey 2002). The plain sandwich (CR1) is biased low when
+    a few clusters carry most of the information (here: one fast slide pins quadratic drag, so
+    its 95 % intervals held the truth in 2 of 5 cases). Directions that a single trajectory
+    alone informs get no jackknife spread (pseudo-inverse); the other estimates cover them.
+    None with fewer than three trajectories.
+    """
+    p = len(st.prob.free)
+    tsel = np.flatnonzero(mask_t)
+    if len(tsel) < 3 or p == 0:
+        return None
+    infos, scores = [], []
+    for t in tsel:
+        jg, r = st.jac[t], st.resid[t]
+        if st.prob.fit_local:
+            jl = st.jac_local[t]
+            gram = jl.T @ jl
+            if np.any(gram):
+                jg = jg - jl @ (np.linalg.pinv(gram, hermitian=True) @ (jl.T @ jg))
+        infos.append(jg.T @ jg)
+        scores.append(jg.T @ r)
+    total = np.sum(infos, axis=0)
+    d = np.stack(
+        [
+            np.linalg.pinv(total - a_t, rcond=1e-10, hermitian=True) @ g_t
+            for a_t, g_t in zip(infos, scores, strict=True)
+        ]
+    )
+    dc = d - d.mean(axis=0)
+    n_cl = len(tsel)
+    return (n_cl - 1) / n_cl * (dc.T @ dc)
+
+
 def _step(
     st: _State, space: ParamSpace, mask_t: np.ndarray, n_local: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -285,6 +326,7 @@ def fit_problems(
     ftol: float = 1e-5,
     atol: float = 0.05,
     progress: Callable[[int, int], None] | None = None,
+    cluster_jackknife: bool = False,
 ) -> list[FitOutcome]:
     """Solve all ``problems`` together (see module docstring).
 
@@ -305,6 +347,8 @@ def fit_problems(
             accepted one that gained less than 1 (contact kinks make the finite-difference
             model inexact near the optimum; more damping only shortens the step).
         progress: called with (iteration, unfinished problems).
+        cluster_jackknife: also raise each variance to the leave-one-trajectory-out jackknife's
+            (:func:`_jackknife_cov`, CR3) where that is larger.
     """
     lh = np.asarray(local_h, dtype=float)
     states: list[_State] = []
@@ -364,10 +408,12 @@ def fit_problems(
         it += 1
         if progress is not None:
             progress(it, len(pending))
-    return [_finish(st, masks[i], n_local, space) for i, st in enumerate(states)]
+    return [_finish(st, masks[i], n_local, space, cluster_jackknife) for i, st in enumerate(states)]
 
 
-def _finish(st: _State, mask_t: np.ndarray, n_local: int, space: ParamSpace) -> FitOutcome:
+def _finish(
+    st: _State, mask_t: np.ndarray, n_local: int, space: ParamSpace, jackknife: bool = False
+) -> FitOutcome:
     n = int(np.count_nonzero(st.resid[mask_t]))
     p = len(st.prob.free)
     out = FitOutcome(
@@ -401,7 +447,11 @@ def _finish(st: _State, mask_t: np.ndarray, n_local: int, space: ParamSpace) -> 
         n_cl = int(np.count_nonzero(mask_t))
         robust = robust[:p, :p] * (n_cl / max(n_cl - 1, 1))
         d_mod = np.sqrt(np.maximum(np.diag(cov), 1e-300))
-        d_fin = np.sqrt(np.maximum(np.diag(cov), np.diag(robust)))
+        var = np.maximum(np.diag(cov), np.diag(robust))
+        jack = _jackknife_cov(st, mask_t) if jackknife else None
+        if jack is not None:
+            var = np.maximum(var, np.diag(jack))
+        d_fin = np.sqrt(var)
         cov = cov / np.outer(d_mod, d_mod) * np.outer(d_fin, d_fin)  # model correlations
         # marginal information of the sensitive globals, correlation-scaled: its condition
         # number tells near-collinear parameters (insensitive ones are flagged on their own)

@@ -48,8 +48,11 @@ def test_parameter_recovery(effect, tol):
         name = space.slots[c].param.name
         j = free.index(c)
         assert out.theta[c] == pytest.approx(truth[name], rel=tol, abs=1e-3)
-        # the 95 % interval is finite and not absurdly wide, and the truth is within 3 sigma
-        assert 0 < 1.96 * out.std[j] < 0.5 * abs(truth[name]) + 1e-3
+        # the 95 % interval is finite and excludes zero (the effect is resolved), and the truth is
+        # within 3 sigma. With 6 trajectories the leave-one-out jackknife widens the tilt
+        # interval to about +-0.08 m/s^2 (one push per direction and speed carries much of it;
+        # on seed 1 the plain sandwich's +-0.04 missed g_x = 0.25 by 2.6 sigma)
+        assert 0 < 1.96 * out.std[j] < abs(out.theta[c])
         assert abs(out.theta[c] - truth[name]) < 3 * out.std[j]
     assert out.identifiable
     # friction comes back too
