@@ -145,6 +145,29 @@ def _kin_error(effect: str, est: dict, truth: dict) -> float:
     )
 
 
+def _summary(
+    rep: dict, label: str, seed: int, t_diag: float, t_fit: float
+) -> tuple[dict, list[dict], list[str]]:
+    """The record of one diagnosed case, its effect rows and the reported names; ``rank1`` and
+    ``also`` are filled here for null cases (label ``none`` or ``ee:none``)."""
+    rows = rep["effects"]
+    reported = [r["name"] for r in rows if r["reported"]]
+    out = {
+        "effect": label,
+        "seed": seed,
+        "reported": reported,
+        "selected": rep["selected"],
+        "top": rows[0]["name"] if rows else None,
+        "wall_diagnose_s": t_diag,
+        "wall_single_fit_s": t_fit,
+        "n_samples": rep["n_samples"],
+    }
+    if label.removeprefix("ee:") == "none":
+        out["rank1"] = not reported
+        out["also"] = bool(reported)
+    return out, rows, reported
+
+
 def _one_kin(effect: str, seed: int) -> dict:
     from fixtures.armlogs import KIN_PARAMS, KinLogSpec, generate_kinematic_dataset, ur5_urdf
     from reference_impl.physics.arm.api import open_arm
@@ -171,21 +194,8 @@ def _one_kin(effect: str, seed: int) -> dict:
         t0 = time.perf_counter()
         fit_effects(s.kin, [effect if effect != "none" else "joint_elasticity"], fixed=s.fixed)
         t_fit = time.perf_counter() - t0 + t_open
-    rows = rep["effects"]
-    reported = [r["name"] for r in rows if r["reported"]]
-    out = {
-        "effect": f"ee:{effect}",
-        "seed": seed,
-        "reported": reported,
-        "selected": rep["selected"],
-        "top": rows[0]["name"] if rows else None,
-        "wall_diagnose_s": t_diag,
-        "wall_single_fit_s": t_fit,
-        "n_samples": rep["n_samples"],
-    }
+    out, rows, reported = _summary(rep, f"ee:{effect}", seed, t_diag, t_fit)
     if effect == "none":
-        out["rank1"] = not reported
-        out["also"] = bool(reported)
         return out
     row = next(r for r in rows if r["name"] == effect)
     out["rank1"] = bool(rows) and rows[0]["name"] == effect and rows[0]["reported"]
@@ -228,21 +238,8 @@ def _one(args: tuple[str, int, int]) -> dict:
         t0 = time.perf_counter()
         fit_effects(s.problem, hidden or ["joint_friction"], fixed=s.fixed)
         t_fit = time.perf_counter() - t0 + t_open
-    rows = rep["effects"]
-    reported = [r["name"] for r in rows if r["reported"]]
-    out = {
-        "effect": effect,
-        "seed": seed,
-        "reported": reported,
-        "selected": rep["selected"],
-        "top": rows[0]["name"] if rows else None,
-        "wall_diagnose_s": t_diag,
-        "wall_single_fit_s": t_fit,
-        "n_samples": rep["n_samples"],
-    }
+    out, rows, reported = _summary(rep, effect, seed, t_diag, t_fit)
     if effect == "none":
-        out["rank1"] = not reported
-        out["also"] = bool(reported)
         return out
     if len(hidden) == 1:
         out["rank1"] = bool(rows) and rows[0]["name"] == effect and rows[0]["reported"]
