@@ -11,13 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.signal import savgol_filter
 
 from reference_impl.physics.model import BoxScene, Drive
 from reference_impl.physics.noise import NoiseModel, estimate_noise
 from reference_impl.physics.phases import PHASES, PhaseLabels, runs, segment_phases
 from reference_impl.physics.recording import Recording, as_recording, yaw_of
 from reference_impl.physics.scene import scene_from_physics
+from reference_impl.physics.smoothing import local_polynomial
 
 __all__ = ["Prepared", "prepare", "build_drive", "excitations"]
 
@@ -70,45 +70,22 @@ def _initial_pose(pos: np.ndarray, yaw: np.ndarray, lab: PhaseLabels) -> tuple[n
     return pos[0].copy(), float(yaw[0])
 
 
-def _smooth(t: np.ndarray, x: np.ndarray, window: float) -> np.ndarray:
-    """Savitzky-Golay smoothing (quadratic over ``window`` seconds) of EE samples [E, D]."""
-    period = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
-    n = int(round(window / period)) | 1
-    if window <= 0 or len(t) < 5 or n < 5:
-        return x
-    n = min(n, len(t) if len(t) % 2 else len(t) - 1)
-    return savgol_filter(x, n, 2, axis=0, mode="interp")
-
-
-def _smooth_velocity(t: np.ndarray, x: np.ndarray, window: float) -> np.ndarray:
-    """Savitzky-Golay velocity (quadratic fit over ``window`` seconds) of EE samples [E, D]."""
-    period = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
-    n = int(round(window / period)) | 1
-    if window <= 0 or len(t) < 5 or n < 3:
-        return np.gradient(x, t, axis=0)
-    n = min(n, len(t) if len(t) % 2 else len(t) - 1)
-    return savgol_filter(x, n, 2, deriv=1, delta=period, axis=0, mode="interp")
-
-
 def build_drive(
     rec: Recording,
     scene: BoxScene,
     labels: list[PhaseLabels],
     dt: float,
     z_snap: float = 0.003,
-    ee_window: float = 0.024,
-    pos_window: float = 0.04,
+    ee_window: float = 0.06,
+    pos_window: float = 0.08,
 ) -> tuple[Drive, np.ndarray]:
     """Resample the EE onto a grid of step ``dt`` from each trajectory's first stamp.
 
-    Contacts use the EE positions smoothed by a quadratic Savitzky-Golay filter over
-    ``pos_window`` s. The pusher contact is one-sided, so encoder noise left in the pusher
-    motion is rectified: the box leaves with the fastest noisy pusher velocity and slides too
-    far (with 1e-4 rad encoders and a 16 ms window the fitted friction came out 3-4 % high on
-    the scenarios; 40 ms removes the bias). A quadratic fit follows constant accelerations
-    exactly, so only jerks shorter than the window are rounded. The velocity an object inherits when
-    the grasp opens is a Savitzky & Golay (1964) derivative over ``ee_window`` s, so that
-    encoder noise does not turn into spurious release velocities.
+    Contacts use the EE positions smoothed by a degree-4 tricube-weighted local polynomial over
+    ``pos_window`` s, and the velocity an object inherits when the grasp opens is that fit's
+    derivative over ``ee_window`` s (:func:`~reference_impl.physics.smoothing.local_polynomial`
+    says why: the one-sided pusher contact rectifies the noise a smoother lets through, and a
+    rounded braking onset releases the box too slowly).
 
     The initial object pose is the median of the first static samples; a start height within
     ``z_snap`` of the resting height is snapped onto the table.
@@ -136,8 +113,8 @@ def build_drive(
     for i, (tr, lab) in enumerate(zip(trs, labels, strict=True)):
         te = (tr.ee_t_ns - t0[i]) * 1e-9
         ee_yaw = np.unwrap(yaw_of(tr.ee_quat))
-        ee_v = _smooth_velocity(te, tr.ee_pos, ee_window)
-        ee_p = _smooth(te, tr.ee_pos, pos_window)
+        ee_v = local_polynomial(te, tr.ee_pos, ee_window, deriv=1)
+        ee_p = local_polynomial(te, tr.ee_pos, pos_window)
         for a in range(3):
             pusher[i, :, a] = np.interp(grid, te, ee_p[:, a])
             carry[i, :, a] = np.interp(grid, te, ee_v[:, a])
@@ -200,7 +177,7 @@ def prepare(
     *,
     dt: float = 1e-3,
     noise: NoiseModel | None = None,
-    ee_window: float = 0.024,
+    ee_window: float = 0.06,
 ) -> Prepared:
     """Prepare a recording (or recording-like object) for rollouts and residuals."""
     rec = as_recording(recording)
