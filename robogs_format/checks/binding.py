@@ -479,7 +479,7 @@ def _link_triangles(ctx: CheckContext, entry: dict[str, Any]) -> dict[str, np.nd
     import trimesh
 
     urdf = ctx.urdf()
-    chain = ctx.chain()
+    chain = ctx.fitted_chain()[0]
     T = chain.forward(_rest_q(ctx, entry))  # [L, 4, 4] root frame
     base = (ctx.manifest.get("robot") or {}).get("base_link")
     if isinstance(base, str) and base in chain.link_names and base != chain.link_names[0]:

@@ -529,6 +529,22 @@ class CheckContext:
             ("chain",), lambda: Chain.from_urdf(self.urdf(), floating_as_fixed=True)
         )
 
+    def fitted_chain(self) -> tuple[Chain, str]:
+        """The robot chain with the joint offsets of the current physics revision, and a note
+        on what was applied (:func:`robogs_format.kinematics.fitted_chain`); the nominal chain
+        when there is no (valid) ``physics.json``."""
+        from ..kinematics import fitted_chain
+
+        def build() -> tuple[Chain, str]:
+            chain = self.chain()
+            try:
+                physics = self.physics()
+            except InputReported:
+                return chain, ""  # no physics.json, or reported by S00x
+            return fitted_chain(chain, physics, path=self.manifest.get("physics"))
+
+        return self._cached(("fitted_chain",), build)
+
     def has_robot(self) -> bool:
         robot = self.manifest.get("robot")
         return isinstance(robot, dict) and isinstance(robot.get("urdf"), str)

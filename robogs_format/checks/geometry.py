@@ -500,45 +500,6 @@ class _FkError:
     median: MedianSketch = field(default_factory=MedianSketch)
 
 
-def _fk_chain(ctx: CheckContext) -> tuple[Any, str]:
-    """The robot chain with the current physics revision's joint offsets, and a note on them.
-
-    ``physics.json`` ``joints.<j>.offsets`` (fitted by ``robogs fit --add kinematic_offsets``)
-    are baked into the joint origins (:func:`robogs_format.kinematics.chain_with_offsets`).
-    Joint compliance (it needs the gravity torques of the arm's inertials, an inverse-dynamics
-    model the core library does not have) and backlash (it needs the motion history) are not
-    applied; the note says so when ``physics.json`` holds them.
-    """
-    from ..kinematics import chain_with_offsets, read_joint_offsets
-
-    chain = ctx.chain()
-    try:
-        physics = ctx.physics()
-    except InputReported:
-        return chain, ""  # no physics.json, or reported by S00x
-    rel = ctx.manifest.get("physics")
-    notes = []
-    try:
-        offsets = read_joint_offsets(physics, chain.joint_names, path=rel)
-    except FormatError as exc:
-        offsets = {}
-        notes.append(f"joint offsets not applied ({exc.message})")
-    rev = physics.get("revision")
-    if offsets:
-        chain = chain_with_offsets(chain, offsets)
-        notes.append(f"FK with the joint offsets of physics revision {rev}")
-    joints = physics.get("joints") or {}
-    unmodelled = {
-        k
-        for j in chain.joint_names
-        for k in ("compliance_rad_per_nm", "backlash_rad")
-        if isinstance(joints.get(j), dict) and joints[j].get(k)
-    }
-    if unmodelled:
-        notes.append(f"{', '.join(sorted(unmodelled))} of physics revision {rev} not applied")
-    return chain, "; ".join(notes)
-
-
 @check(
     "G008",
     group="geometry",
@@ -557,7 +518,7 @@ def _fk_ee(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 
     _robot_or_skip(ctx)
     budget = ctx.budget("geometry.fk_ee_mm")
-    chain, fk_note = _fk_chain(ctx)
+    chain, fk_note = ctx.fitted_chain()
     qcols = tuple(f"position.{j}" for j in chain.joint_names)
     for ep, name, st in ctx.streams(("ee_poses",)):
         js = ctx.find_stream(ep, "joint_states")

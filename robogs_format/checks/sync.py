@@ -63,7 +63,7 @@ class _Model:
         if self.cam.T_world_cam is None or self.cam.extrinsics != "static":
             raise InputReported("camera extrinsics")
         self.T_cam_world = np.linalg.inv(self.cam.T_world_cam)
-        self.chain = ctx.chain()
+        self.chain = ctx.fitted_chain()[0]
         self.ctx = ctx
         js = ctx.find_stream(ep, "joint_states")
         if js is None:

@@ -43,6 +43,7 @@ __all__ = [
     "read_joint_offsets",
     "offset_origin",
     "chain_with_offsets",
+    "fitted_chain",
 ]
 
 OFFSET_KEYS: dict[str, str] = {"dtheta": "dtheta_rad", "dd": "dd_m", "da": "da_m"}
@@ -194,3 +195,37 @@ def chain_with_offsets(chain: Chain, offsets: Mapping[str, JointOffsets]) -> Cha
             d = float(chain.multiplier[k]) * off.dtheta
             origins[k] = offset_origin(origins[k], chain.axes[k], jt, dtheta=d)
     return replace(chain, origins=origins, _cache={})
+
+
+def fitted_chain(
+    chain: Chain, physics: Mapping[str, Any], *, path: Path | str | None = None
+) -> tuple[Chain, str]:
+    """``chain`` with the joint offsets of a ``physics.json`` revision, and a note on them.
+
+    The one place every consumer of forward kinematics (the geometry, timing and binding checks,
+    the binding re-render) gets the fitted robot from. Offsets that cannot be read are skipped
+    and the note says why; so it does for compliance and backlash, which are not offsets.
+
+    Returns:
+        the chain (``chain`` itself without offsets) and a note ("" when there is nothing to say).
+    """
+    notes = []
+    try:
+        offsets = read_joint_offsets(physics, chain.joint_names, path=path)
+    except FormatError as exc:
+        offsets = {}
+        notes.append(f"joint offsets not applied ({exc.message})")
+    rev = physics.get("revision")
+    if offsets:
+        chain = chain_with_offsets(chain, offsets)
+        notes.append(f"FK with the joint offsets of physics revision {rev}")
+    joints = physics.get("joints") or {}
+    unmodelled = {
+        k
+        for j in chain.joint_names
+        for k in ("compliance_rad_per_nm", "backlash_rad")
+        if isinstance(joints, Mapping) and isinstance(joints.get(j), Mapping) and joints[j].get(k)
+    }
+    if unmodelled:
+        notes.append(f"{', '.join(sorted(unmodelled))} of physics revision {rev} not applied")
+    return chain, "; ".join(notes)

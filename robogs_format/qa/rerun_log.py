@@ -237,9 +237,21 @@ class RerunContext:
 
     @cached_property
     def chain(self) -> Chain:
-        from ..kinematics import Chain
+        """The robot chain with the current physics revision's fitted joint offsets."""
+        from ..errors import RobogsError
+        from ..kinematics import Chain, fitted_chain
 
-        return Chain.from_urdf(self.urdf, floating_as_fixed=True)
+        chain = Chain.from_urdf(self.urdf, floating_as_fixed=True)
+        rel = self.ds.manifest.get("physics")
+        if not isinstance(rel, str):
+            return chain
+        try:
+            chain, note = fitted_chain(chain, self.ds.physics(), path=rel)
+        except RobogsError as exc:
+            note = f"joint offsets not applied ({exc})"
+        if note:
+            self.notes.append(note)
+        return chain
 
     @cached_property
     def q_rest(self) -> np.ndarray:

@@ -178,3 +178,35 @@ def test_rotate_sh_about_z_by_2pi_is_identity() -> None:
     sh = torch.randn(3, 16, 3, dtype=torch.float64)
     R = torch.as_tensor(_rz(2 * math.pi)).expand(3, 3, 3)
     assert (rotate_sh(sh, R) - sh).abs().max() < 1e-10
+
+
+def test_fitted_joint_offsets_move_the_bound_gaussians(scene: Dataset) -> None:
+    """physics.json joint offsets (robogs fit --add kinematic_offsets) reach the binding.
+
+    Closed form: a zero offset dtheta on j1 cancels in the motion of ``upper`` (T(t) T(0)^-1),
+    but the slider then translates along the x axis of Rz(th + dtheta), not of Rz(th).
+    """
+    d = 0.1
+    with scene.edit() as w:
+        w.set_physics(
+            {
+                "revision": 1,
+                "objects": {},
+                "joints": {"j1": {"offsets": {"dtheta_rad": d, "dd_m": 0.0, "da_m": 0.0}}},
+            },
+            note="fitted offsets",
+        )
+        ds = w.commit()
+    t_ns = 750_000_000
+    b = Binding(ds, dtype=torch.float64, owners=["robot"])
+    g = b.pose(t_ns).means.numpy()
+    assert "joint offsets of physics revision" in b.chain_note
+    link_means = scene._truth[0].astype("f4").astype(np.float64)  # type: ignore[attr-defined]
+    th, s = 0.8 * t_ns * 1e-9, 0.2 * t_ns * 1e-9
+    pivot = np.array([0.1, 0, 0.2])
+    upper = (link_means[:20] - pivot) @ _rz(th).T + pivot
+    slider = (link_means[20:] - pivot) @ _rz(th).T + pivot + s * _rz(th + d)[:, 0]
+    np.testing.assert_allclose(g[:20], upper, atol=1e-9)
+    np.testing.assert_allclose(g[20:], slider, atol=1e-9)
+    nominal = (link_means[20:] - pivot) @ _rz(th).T + pivot + s * _rz(th)[:, 0]
+    assert np.min(np.linalg.norm(g[20:] - nominal, axis=1)) > 0.01  # 15 cm * 0.1 rad
