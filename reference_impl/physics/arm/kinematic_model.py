@@ -60,6 +60,7 @@ __all__ = [
     "forward_ee",
     "perpendicular",
     "play_offset",
+    "play_scan",
     "base_residual",
     "describe",
     "kinematic_residual",
@@ -530,23 +531,65 @@ def predict_ee(
     return forward_ee(kp.frames, theta_link, offsets)
 
 
+def play_scan(x0: torch.Tensor, q: torch.Tensor, half_width: torch.Tensor) -> torch.Tensor:
+    """The play operator ``x_k = clip(x_{k-1}, q_k - w, q_k + w)`` for every k, in blocks.
+
+    A clip followed by a clip is a clip: ``clip(clip(x, l1, h1), l2, h2) = clip(x, clip(l1,
+    l2, h2), clip(h1, l2, h2))``. The samples are cut into about sqrt(N) blocks of about
+    sqrt(N); one loop over the position inside a block composes the clips of all blocks at once
+    (each block's prefix ``L_k, H_k``), a short loop over blocks carries the state from block
+    to block, and ``x_k = clip(x_block_start, L_k, H_k)``: 2 sqrt(N) vectorised steps instead
+    of N.
+
+    Args:
+        x0: [..., J] state before the first sample.
+        q: [..., N, J] input (motor angles).
+        half_width: [..., 1, J] dead-band half-width (>= 0), broadcast against ``q``.
+
+    Returns:
+        [..., N, J] the state after each sample.
+    """
+    n = q.shape[-2]
+    lead = torch.broadcast_shapes(q.shape[:-2], half_width.shape[:-2], x0.shape[:-1])
+    j = q.shape[-1]
+    size = max(1, int(np.ceil(np.sqrt(n))))
+    n_blk = -(-n // size)
+    pad = n_blk * size - n
+    qp = q.expand(*lead, n, j)
+    if pad:
+        qp = torch.cat([qp, qp[..., -1:, :].expand(*lead, pad, j)], dim=-2)
+    # [size, ..., n_blk, J]: the position inside the block first, so each step is contiguous
+    qb = qp.reshape(*lead, n_blk, size, j).movedim(-2, 0).contiguous()
+    w = half_width.expand(*lead, 1, j)  # [..., 1, J] against [..., n_blk, J]
+    lo, hi = [qb[0] - w], [qb[0] + w]
+    for k in range(1, size):
+        lk, hk = qb[k] - w, qb[k] + w
+        lo.append(torch.minimum(torch.maximum(lo[-1], lk), hk))
+        hi.append(torch.minimum(torch.maximum(hi[-1], lk), hk))
+    starts = [x0.expand(*lead, j)]
+    for blk in range(n_blk - 1):
+        starts.append(
+            torch.minimum(torch.maximum(starts[-1], lo[-1][..., blk, :]), hi[-1][..., blk, :])
+        )
+    start = torch.stack(starts, dim=-2)  # [..., n_blk, J]
+    x = torch.stack(
+        [torch.minimum(torch.maximum(start, a), b) for a, b in zip(lo, hi, strict=True)], dim=-2
+    )
+    return x.reshape(*lead, n_blk * size, j)[..., :n, :]
+
+
 def play_offset(kp: KinProblem, b: torch.Tensor) -> torch.Tensor:
     """Link minus motor angle [M, N, J] of dead bands of half-width ``b`` [M, J] rad.
 
-    The play operator ``x_k = clip(x_{k-1}, q_k - |b|, q_k + |b|)``, ``x_0 = q_0 - |b| s_0``,
-    runs along the measured joint clock of every trajectory at once; ``x - q`` is
-    interpolated to the pose stamps and multiplied by ``sign(b)``.
+    The play operator ``x_k = clip(x_{k-1}, q_k - |b|, q_k + |b|)``, ``x_0 = q_0 - |b| s_0``
+    (:func:`play_scan`), runs along the measured joint clock of every trajectory at once;
+    ``x - q`` is interpolated to the pose stamps and multiplied by ``sign(b)``.
     """
     q = kp.q_clock  # [T, L, J]
     bb = b.abs().unsqueeze(1)  # [M, 1, J]
-    x = q[:, 0].unsqueeze(0) - bb * kp.dir0.unsqueeze(0)  # [M, T, J]
-    d = torch.empty(b.shape[0], *q.shape, dtype=q.dtype, device=q.device)
-    d[:, :, 0] = x - q[:, 0]
-    for k in range(1, q.shape[1]):
-        qk = q[:, k].unsqueeze(0)
-        x = torch.minimum(torch.maximum(x, qk - bb), qk + bb)
-        d[:, :, k] = x - qk
-    d = d.reshape(b.shape[0], -1, q.shape[-1])
+    x0 = q[:, 0].unsqueeze(0) - bb * kp.dir0.unsqueeze(0)  # [M, T, J]
+    x = play_scan(x0, q.unsqueeze(0).expand(b.shape[0], -1, -1, -1), bb.unsqueeze(1))
+    d = (x - q.unsqueeze(0)).reshape(b.shape[0], -1, q.shape[-1])
     i0, i1, w = kp.at
     return torch.sign(b).unsqueeze(1) * (d[:, i0] * (1.0 - w) + d[:, i1] * w)
 
