@@ -142,6 +142,67 @@ def _pose_columns(table: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return t, pos, quat
 
 
+def _robot_chain(ds: Any, physics: dict[str, Any], ee_link: Any, episode: str) -> Any:
+    """The robot's forward kinematics with the fitted joint offsets, to drive the end effector
+    from ``joint_states`` when an episode has no ``ee_poses``."""
+    from robogs_format.kinematics import Chain, fitted_chain
+
+    robot = ds.manifest.get("robot") or {}
+    if not isinstance(robot.get("urdf"), str) or not isinstance(ee_link, str):
+        raise FormatError(
+            f"episode {episode!r} has no ee_poses stream, and no robot URDF with an end-effector "
+            "link to compute it from joint_states",
+            path=ds.manifest_path,
+            where=f"episodes/{episode}",
+            hint="record ee_poses, or declare robot.urdf and robot.ee_link (or objects.pusher.link)",
+        )
+    chain = Chain.from_urdf(ds.urdf(load_meshes=False), floating_as_fixed=True)
+    if ee_link not in chain.link_names:
+        raise FormatError(
+            f"end-effector link {ee_link!r} is not a link of the robot URDF",
+            path=ds.manifest_path,
+            where="robot/ee_link",
+            hint=f"links: {', '.join(chain.link_names[:12])}",
+        )
+    return fitted_chain(chain, physics, path=ds.manifest.get("physics"))[0]
+
+
+def _ee_from_joints(ds: Any, ep: Any, chain: Any, link: str) -> tuple[np.ndarray, ...]:
+    """End-effector poses (world = robot base frame) by forward kinematics of the measured
+    joints, at the ``joint_states`` stamps: (t_ns [N], position [N, 3] m, quaternion [N, 4] wxyz).
+    """
+    import torch
+
+    from robogs_format.frames import matrix_to_quat
+
+    if not ep.has("joint_states"):
+        raise FormatError(
+            f"episode {ep.id!r} has neither ee_poses nor joint_states",
+            path=ds.manifest_path,
+            where=f"episodes/{ep.id}",
+            hint="the rigid model is driven by the end effector: record one of them",
+        )
+    js = ep.table("joint_states")
+    missing = [j for j in chain.joint_names if f"position.{j}" not in js.column_names]
+    if missing:
+        raise FormatError(
+            f"joint_states lacks joints {', '.join(missing[:6])} needed for the end-effector pose",
+            path=ep.table_path("joint_states"),
+            where="columns",
+            hint="record every actuated joint of the URDF, or record ee_poses",
+        )
+    t = js.column("t_ns").to_numpy().astype(np.int64)
+    q = np.stack(
+        [js.column(f"position.{j}").to_numpy().astype(float) for j in chain.joint_names], 1
+    )
+    T = chain.forward(torch.as_tensor(q, dtype=torch.float64))  # [N, L, 4, 4] root frame
+    base = (ds.manifest.get("robot") or {}).get("base_link")
+    if isinstance(base, str) and base in chain.link_names and base != chain.link_names[0]:
+        T = torch.linalg.inv(T[:, chain.link_index(base)]).unsqueeze(1) @ T
+    Te = T[:, chain.link_index(link)]
+    return t, Te[:, :3, 3].numpy().copy(), matrix_to_quat(Te[:, :3, :3]).numpy().copy()
+
+
 def load_recording(dataset: Any, *, object_name: str | None = None) -> Recording:
     """Read a robogs dataset into a :class:`Recording` (one trajectory per episode).
 
@@ -150,7 +211,9 @@ def load_recording(dataset: Any, *, object_name: str | None = None) -> Recording
         object_name: the free object; default the only ``rigid`` object in physics.json.
 
     The end effector is ``objects.pusher.link`` of physics.json (default: the manifest's
-    ``robot.ee_link``). Grasp flags come from the joint named ``objects.pusher.grasp_joint``
+    ``robot.ee_link``), read from ``ee_poses``; an episode without ``ee_poses`` is driven by
+    forward kinematics of its ``joint_states`` (with the physics revision's fitted joint
+    offsets). Grasp flags come from the joint named ``objects.pusher.grasp_joint``
     in ``joint_states`` (grasping while its position exceeds ``grasp_threshold``); without it
     the object is never attached.
     """
@@ -176,27 +239,32 @@ def load_recording(dataset: Any, *, object_name: str | None = None) -> Recording
     grasp_joint = pusher.get("grasp_joint")
     thr = float(pusher.get("grasp_threshold", 0.5))
     trajs: list[Trajectory] = []
+    chain = None
     for ep in ds.episodes:
-        for stream in ("object_poses", "ee_poses"):
-            if not ep.has(stream):
-                raise FormatError(
-                    f"episode {ep.id!r} has no {stream} stream",
-                    path=ds.manifest_path,
-                    where=f"episodes/{ep.id}",
-                    hint="the rigid model needs tracked object poses and end-effector poses",
-                )
+        if not ep.has("object_poses"):
+            raise FormatError(
+                f"episode {ep.id!r} has no object_poses stream",
+                path=ds.manifest_path,
+                where=f"episodes/{ep.id}",
+                hint="the rigid model needs tracked object poses",
+            )
         ot = ep.table("object_poses")
         ot = ot.filter(pc.equal(ot.column("object"), object_name))
-        et = ep.table("ee_poses")
-        if ee_link is not None:
-            et = et.filter(pc.equal(et.column("link"), ee_link))
-        if ot.num_rows < 2 or et.num_rows < 2:
+        if ep.has("ee_poses"):
+            et = ep.table("ee_poses")
+            if ee_link is not None:
+                et = et.filter(pc.equal(et.column("link"), ee_link))
+            et_ns, epos, equat = _pose_columns(et)
+        else:
+            if chain is None:
+                chain = _robot_chain(ds, physics, ee_link, ep.id)
+            et_ns, epos, equat = _ee_from_joints(ds, ep, chain, str(ee_link))
+        if ot.num_rows < 2 or len(et_ns) < 2:
             raise FormatError(
                 f"episode {ep.id!r}: too few rows for object {object_name!r} or link {ee_link!r}",
                 path=ep.table_path("object_poses"),
             )
         t, pos, quat = _pose_columns(ot)
-        et_ns, epos, equat = _pose_columns(et)
         grasp = np.zeros(len(et_ns), dtype=bool)
         if grasp_joint is not None and ep.has("joint_states"):
             js = ep.table("joint_states")
