@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from .dataset import Dataset, Episode
-from .errors import FormatError, RobogsError
+from .errors import FormatError
 from .frames import matrix_to_quat, quat_multiply, quat_normalize, quat_to_matrix
 from .interp import interp_linear, interp_pose
 from .render.gaussians import Gaussians
@@ -213,20 +213,10 @@ class Binding:
         offsets (:func:`robogs_format.kinematics.fitted_chain`); ``chain_note`` says what was
         applied. A missing or unreadable ``physics.json`` leaves the URDF's nominal chain."""
         if self._chain is None:
-            from .kinematics import Chain, fitted_chain
+            from .kinematics import Chain, dataset_fitted_chain
 
-            chain = Chain.from_urdf(self.dataset.urdf(load_meshes=False))
-            self.chain_note = ""
-            if isinstance(self.dataset.manifest.get("physics"), str):
-                try:
-                    physics = self.dataset.physics()
-                except RobogsError as exc:
-                    self.chain_note = f"joint offsets not applied ({exc})"
-                else:
-                    chain, self.chain_note = fitted_chain(
-                        chain, physics, path=self.dataset.manifest["physics"]
-                    )
-            self._chain = chain
+            nominal = Chain.from_urdf(self.dataset.urdf(load_meshes=False))
+            self._chain, self.chain_note = dataset_fitted_chain(self.dataset, nominal)
         return self._chain
 
     def _joints(self) -> tuple[torch.Tensor, torch.Tensor]:

@@ -142,6 +142,17 @@ def _pose_columns(table: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return t, pos, quat
 
 
+def _require_stream(ds: Any, ep: Any, stream: str, problem: str, hint: str) -> None:
+    """FormatError ``episode <id> <problem>`` when episode ``ep`` lacks ``stream``."""
+    if not ep.has(stream):
+        raise FormatError(
+            f"episode {ep.id!r} {problem}",
+            path=ds.manifest_path,
+            where=f"episodes/{ep.id}",
+            hint=hint,
+        )
+
+
 def _robot_chain(ds: Any, physics: dict[str, Any], ee_link: Any, episode: str) -> Any:
     """The robot's forward kinematics with the fitted joint offsets, to drive the end effector
     from ``joint_states`` when an episode has no ``ee_poses``."""
@@ -175,13 +186,13 @@ def _ee_from_joints(ds: Any, ep: Any, chain: Any, link: str) -> tuple[np.ndarray
 
     from robogs_format.frames import matrix_to_quat
 
-    if not ep.has("joint_states"):
-        raise FormatError(
-            f"episode {ep.id!r} has neither ee_poses nor joint_states",
-            path=ds.manifest_path,
-            where=f"episodes/{ep.id}",
-            hint="the rigid model is driven by the end effector: record one of them",
-        )
+    _require_stream(
+        ds,
+        ep,
+        "joint_states",
+        "has neither ee_poses nor joint_states",
+        "the rigid model is driven by the end effector: record one of them",
+    )
     js = ep.table("joint_states")
     missing = [j for j in chain.joint_names if f"position.{j}" not in js.column_names]
     if missing:
@@ -241,13 +252,13 @@ def load_recording(dataset: Any, *, object_name: str | None = None) -> Recording
     trajs: list[Trajectory] = []
     chain = None
     for ep in ds.episodes:
-        if not ep.has("object_poses"):
-            raise FormatError(
-                f"episode {ep.id!r} has no object_poses stream",
-                path=ds.manifest_path,
-                where=f"episodes/{ep.id}",
-                hint="the rigid model needs tracked object poses",
-            )
+        _require_stream(
+            ds,
+            ep,
+            "object_poses",
+            "has no object_poses stream",
+            "the rigid model needs tracked object poses",
+        )
         ot = ep.table("object_poses")
         ot = ot.filter(pc.equal(ot.column("object"), object_name))
         if ep.has("ee_poses"):

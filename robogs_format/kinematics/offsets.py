@@ -44,6 +44,7 @@ __all__ = [
     "offset_origin",
     "chain_with_offsets",
     "fitted_chain",
+    "dataset_fitted_chain",
 ]
 
 OFFSET_KEYS: dict[str, str] = {"dtheta": "dtheta_rad", "dd": "dd_m", "da": "da_m"}
@@ -229,3 +230,21 @@ def fitted_chain(
     if unmodelled:
         notes.append(f"{', '.join(sorted(unmodelled))} of physics revision {rev} not applied")
     return chain, "; ".join(notes)
+
+
+def dataset_fitted_chain(dataset: Any, chain: Chain) -> tuple[Chain, str]:
+    """:func:`fitted_chain` with the ``physics.json`` a dataset declares (``manifest.physics``).
+
+    No declared physics gives ``chain`` unchanged; one that cannot be read gives ``chain`` and a
+    note saying why, so that viewers and renderers still work on the nominal robot.
+    """
+    from robogs_format.errors import RobogsError
+
+    rel = dataset.manifest.get("physics")
+    if not isinstance(rel, str):
+        return chain, ""
+    try:
+        physics = dataset.physics()
+    except RobogsError as exc:
+        return chain, f"joint offsets not applied ({exc})"
+    return fitted_chain(chain, physics, path=rel)

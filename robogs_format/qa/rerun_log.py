@@ -238,17 +238,11 @@ class RerunContext:
     @cached_property
     def chain(self) -> Chain:
         """The robot chain with the current physics revision's fitted joint offsets."""
-        from ..errors import RobogsError
-        from ..kinematics import Chain, fitted_chain
+        from ..kinematics import Chain, dataset_fitted_chain
 
-        chain = Chain.from_urdf(self.urdf, floating_as_fixed=True)
-        rel = self.ds.manifest.get("physics")
-        if not isinstance(rel, str):
-            return chain
-        try:
-            chain, note = fitted_chain(chain, self.ds.physics(), path=rel)
-        except RobogsError as exc:
-            note = f"joint offsets not applied ({exc})"
+        chain, note = dataset_fitted_chain(
+            self.ds, Chain.from_urdf(self.urdf, floating_as_fixed=True)
+        )
         if note:
             self.notes.append(note)
         return chain
