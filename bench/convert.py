@@ -118,8 +118,8 @@ def _child(mode: str, src: str, out: str) -> None:
     # imports first (the registry loads every converter module): timed separately
     t_imp = time.perf_counter()
     if mode != "bare":
-        import converters.ingest.mcap_source  # noqa: F401
-        from converters.registry import available_converters
+        import robogs.convert.ingest.mcap_source  # noqa: F401
+        from robogs.convert.registry import available_converters
 
         available_converters()
     t_imp = time.perf_counter() - t_imp
@@ -132,7 +132,7 @@ def _child(mode: str, src: str, out: str) -> None:
             for _ in make_reader(fh).iter_messages():
                 n += 1
     else:
-        from converters.ingest import ConvertOptions, convert_path
+        from robogs.convert.ingest import ConvertOptions, convert_path
 
         convert_path(src, out, options=ConvertOptions(video=(mode == "video")), force=True)
         n = 0

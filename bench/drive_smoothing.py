@@ -35,10 +35,10 @@ def _savgol(t: np.ndarray, x: np.ndarray, window: float, *, deriv: int = 0, **_:
 
 
 def _fit(effect: str, seed: int, level: str) -> dict[str, float]:
-    from fixtures.scenarios import make_scenario
-    from reference_impl.physics.effects import get_effect
-    from reference_impl.physics.engine import Engine
-    from reference_impl.physics.fit import Problem
+    from robogs.physics.effects import get_effect
+    from robogs.physics.engine import Engine
+    from robogs.physics.fit import Problem
+    from robogs.synth.scenarios import make_scenario
 
     rec = make_scenario(effect, seed=seed, noise=level, check=False)
     eng = Engine(rec)
@@ -54,8 +54,8 @@ def _fit(effect: str, seed: int, level: str) -> dict[str, float]:
 def main() -> None:
     import torch
 
-    import fixtures.scenarios.generate as gen
-    import reference_impl.physics.prepare as prep
+    import robogs.physics.prepare as prep
+    import robogs.synth.scenarios.generate as gen
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=3)

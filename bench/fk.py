@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from robogs_format.kinematics import Chain, ur5_mdh
-from robogs_format.urdf import load_urdf
+from robogs.format.kinematics import Chain, ur5_mdh
+from robogs.format.urdf import load_urdf
 
 REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "fixtures" / "real"
 UR5 = REAL / "ur5" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"

@@ -157,9 +157,9 @@ def _atheris_worker(name: str, libfuzzer_args: list[str]) -> None:  # pragma: no
     import atheris
 
     with atheris.instrument_imports():
-        import converters.ingest  # noqa: F401
-        import robogs_format.cli.main  # noqa: F401
-        import robogs_format.validate  # noqa: F401
+        import robogs.cli.main  # noqa: F401
+        import robogs.convert.ingest  # noqa: F401
+        import robogs.format.validate  # noqa: F401
     from hardening.seeds import build_seeds
     from hardening.targets import Case, run_case, target
 

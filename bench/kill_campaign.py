@@ -35,7 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from fixtures.killrun import (  # noqa: E402
+from robogs.synth.killrun import (  # noqa: E402
     after_start,
     is_complete_version,
     leftovers,
@@ -51,8 +51,8 @@ COMMANDS = ("convert", "fit", "reconstruct")
 
 def _inputs(root: Path, command: str) -> tuple[Path, list[str]]:
     """Build the input of ``command`` under ``root``; returns (dataset to write, robogs argv)."""
-    from fixtures.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
-    from robogs_format.cli.main import main
+    from robogs.cli.main import main
+    from robogs.synth.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
 
     if command == "convert":
         urdf = root / "ur5.urdf"
@@ -63,8 +63,8 @@ def _inputs(root: Path, command: str) -> tuple[Path, list[str]]:
         assert main(["convert", str(root / "logA"), str(target), "--urdf", str(urdf)]) == 0
         return target, ["convert", str(root / "logB"), str(target), "--urdf", str(urdf), "--force"]
     if command == "fit":
-        from fixtures.scenarios import make_scenario
-        from fixtures.scenarios.write import write_scenario
+        from robogs.synth.scenarios import make_scenario
+        from robogs.synth.scenarios.write import write_scenario
 
         rec = make_scenario(
             "table_tilt", seed=0, kinds=("push",), n_speeds=2, n_dirs=3, check=False
@@ -72,7 +72,7 @@ def _inputs(root: Path, command: str) -> tuple[Path, list[str]]:
         target = root / "tilt"
         write_scenario(rec, target)
         return target, ["fit", str(target), "--add", "table_tilt"]
-    from fixtures.multiview import synthesize_multiview
+    from robogs.synth.multiview import synthesize_multiview
 
     target = root / "mv"
     synthesize_multiview(target, n_views=8, width=48, height=36, supersample=2)

@@ -1,6 +1,6 @@
 """Validation under load: 1,000 small episodes, and one long episode validated by streaming.
 
-Datasets are written by ``fixtures.bulk`` (pyarrow and hashlib directly, independent of the
+Datasets are written by ``robogs.synth.bulk`` (pyarrow and hashlib directly, independent of the
 writer under test) into a temp folder outside the repository: a planar 3R arm whose
 ``joint_states`` and ``ee_poses`` are sampled at 500 Hz with a closed-form end-effector pose,
 so a correct validation reports no errors. Each validation runs in a fresh interpreter
@@ -40,12 +40,12 @@ import pyarrow.parquet as pq
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from fixtures.bulk import JOINTS, LINKS_M, write_bulk_dataset  # noqa: E402
+from robogs.synth.bulk import JOINTS, LINKS_M, write_bulk_dataset  # noqa: E402
 
 _CHILD = """
 import json, sys, time, torch
 torch.set_num_threads(int(sys.argv[2]))
-from robogs_format.validate import validate
+from robogs.format.validate import validate
 t = time.perf_counter()
 r = validate(sys.argv[1])
 print(json.dumps({"seconds": time.perf_counter() - t, "counts": r.counts(),

@@ -1,10 +1,10 @@
 """Camera-intrinsics diagnosis from mask boundaries: null calibration, recovery, mask-stream cost.
 
-For each seed a synthetic scene is generated (``fixtures.synth``: labels rasterised from the
+For each seed a synthetic scene is generated (``robogs.synth.scene``: labels rasterised from the
 meshes with the true intrinsics), then
 
 * null: the intrinsics fit on the scene as generated (nothing may be reported);
-* perturbed: the dataset declares ``fx * 1.03`` and ``cx + 4 px`` (``fixtures.mutations.
+* perturbed: the dataset declares ``fx * 1.03`` and ``cx + 4 px`` (``robogs.synth.mutations.
   perturb_intrinsics``), the fit must find ``dfx = 0.03``, ``dcx = 4 px``;
 * small: ``fx * 1.01`` and ``cx + 1 px``, to show the detection limit.
 
@@ -43,15 +43,15 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    from fixtures.mutations import perturb_intrinsics
-    from fixtures.synth import synthesize
-    from reference_impl.physics.intrinsics import (
+    from robogs.format.dataset import Dataset
+    from robogs.physics.intrinsics import (
         EFFECT_SIZE_MIN,
         HELDOUT_MIN_GAIN,
         fit_intrinsics,
     )
-    from reference_impl.physics.masks import mask_boundary
-    from robogs_format.dataset import Dataset
+    from robogs.physics.masks import mask_boundary
+    from robogs.synth.mutations import perturb_intrinsics
+    from robogs.synth.scene import synthesize
 
     print(
         f"machine: {platform.machine()} {platform.processor() or ''} cpus={os.cpu_count()} "

@@ -32,7 +32,7 @@ def _loop(x0: torch.Tensor, q: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
 
 def main() -> None:
     torch.set_num_threads(1)
-    from reference_impl.physics.arm.kinematic_model import play_scan
+    from robogs.physics.arm.kinematic_model import play_scan
 
     gen = torch.Generator().manual_seed(0)
     m, n, j = 13, 600_000, 6

@@ -1,7 +1,7 @@
 """Reference reconstructor figures: TSDF fusion speed and accuracy, and a full reconstruction.
 
-Scene: the generated UR5 of ``fixtures.synth`` over a table with a box, captured by
-``fixtures.multiview`` from ``--views`` viewpoints on the upper hemisphere at ``--width`` x
+Scene: the generated UR5 of ``robogs.synth.scene`` over a table with a box, captured by
+``robogs.synth.multiview`` from ``--views`` viewpoints on the upper hemisphere at ``--width`` x
 ``--height`` (static, lossless video, panoptic labels, URDF, object poses).
 
 1. TSDF fusion of the *true* depth maps (the fixture's z-buffer) on a ``--tsdf-res``^3 grid over
@@ -29,7 +29,7 @@ import trimesh
 
 
 def _fscore(mesh: trimesh.Trimesh, ref: np.ndarray, ref_n: np.ndarray, taus_mm: tuple[float, ...]):
-    from reference_impl.reconstruct.mesh_metrics import point_metrics, sample_mesh
+    from robogs.reconstruct.mesh_metrics import point_metrics, sample_mesh
 
     p, pn = sample_mesh(mesh, len(ref), 0)
     return point_metrics(p, ref, pred_normals=pn, ref_normals=ref_n, taus_mm=taus_mm, workers=1)
@@ -92,10 +92,10 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
 
-    from fixtures.multiview import synthesize_multiview
-    from reference_impl.reconstruct.mesh_clean import clean_mesh
-    from reference_impl.reconstruct.tsdf import extract_mesh, fuse_tsdf
-    from robogs_format.render import Camera
+    from robogs.format.render import Camera
+    from robogs.reconstruct.mesh_clean import clean_mesh
+    from robogs.reconstruct.tsdf import extract_mesh, fuse_tsdf
+    from robogs.synth.multiview import synthesize_multiview
 
     print(
         f"machine: {platform.machine()} {platform.processor() or '?'}, cpu_count={os.cpu_count()}, "
@@ -190,9 +190,9 @@ def main() -> None:
     # -- 2. full reconstruction ---------------------------------------------------------------------
     import shutil
 
-    from reference_impl.reconstruct.evaluate import evaluate
-    from reference_impl.reconstruct.pipeline import ReconstructOptions, reconstruct
-    from reference_impl.reconstruct.train import TrainConfig
+    from robogs.reconstruct.evaluate import evaluate
+    from robogs.reconstruct.pipeline import ReconstructOptions, reconstruct
+    from robogs.reconstruct.train import TrainConfig
 
     gt = tmp / "truth.ply"
     scene.export(gt)

@@ -1,4 +1,4 @@
-"""Speed and memory of the splat rasterizer (robogs_format.render).
+"""Speed and memory of the splat rasterizer (robogs.format.render).
 
 Figures (targets from the renderer's design):
 - forward render, 100k 3DGS Gaussians at 640x480, 2 threads: target <= 0.6 s;
@@ -34,9 +34,9 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from robogs_format.render import Camera, Gaussians, RenderConfig, available_backends, render  # noqa: E402
-from robogs_format.render.binning import bin_tiles  # noqa: E402
-from robogs_format.render.projection import project  # noqa: E402
+from robogs.format.render import Camera, Gaussians, RenderConfig, available_backends, render  # noqa: E402
+from robogs.format.render.binning import bin_tiles  # noqa: E402
+from robogs.format.render.projection import project  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
 

@@ -28,15 +28,15 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from robogs_format.checks import CheckContext, InputReported, get_check  # noqa: E402
-from robogs_format.checks.binding import alignment_fit, label_summary  # noqa: E402
+from robogs.format.checks import CheckContext, InputReported, get_check  # noqa: E402
+from robogs.format.checks.binding import alignment_fit, label_summary  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
 CODES = ("B002", "B003", "B004", "B005", "B006")
 
 
 def _scene(out: Path, duration_s: float) -> Path:
-    from fixtures.synth import scene, synthesize
+    from robogs.synth.scene import scene, synthesize
 
     name = f"bench{duration_s:g}s"
     scene.SIZES.setdefault(name, scene.SizePreset(float(duration_s), 320, 240, 0.010))
@@ -46,7 +46,7 @@ def _scene(out: Path, duration_s: float) -> Path:
 
 def _dense_frame_seconds(ctx: CheckContext, episode: str, stream: str, frames: int) -> float:
     """Seconds per frame of the dense oracle backend on the first strided frames."""
-    from robogs_format.checks.binding import _camera_jobs, _frames, _rerenderer
+    from robogs.format.checks.binding import _camera_jobs, _frames, _rerenderer
 
     job = next(j for j in _camera_jobs(ctx) if j.ep.id == episode and j.stream == stream)
     rr, _lut = _rerenderer(ctx, job)

@@ -1,7 +1,7 @@
 """Rollout throughput: a batch of 64 parameter sets in one rollout vs 64 single rollouts.
 
 The fitter's finite-difference Jacobians and the diagnosis run many parameter sets at once;
-this measures what the leading batch dimension buys. Scenario: 9 pushes (fixtures.scenarios),
+this measures what the leading batch dimension buys. Scenario: 9 pushes (robogs.synth.scenarios),
 dt = 1 ms, full effect catalogue in the parameter space.
 
     .venv/bin/python bench/simulate.py
@@ -24,9 +24,9 @@ sys.path.insert(0, str(ROOT))
 
 def main() -> None:
     torch.set_num_threads(1)  # small tensors: one thread is fastest (and fair on a shared machine)
-    from fixtures.scenarios import make_scenario
-    from reference_impl.physics.effects import available_effects, get_effect
-    from reference_impl.physics.engine import Engine
+    from robogs.physics.effects import available_effects, get_effect
+    from robogs.physics.engine import Engine
+    from robogs.synth.scenarios import make_scenario
 
     eng = Engine(make_scenario("none", seed=0, kinds=("push",)))
     space = eng.space([get_effect(n) for n in available_effects(model="rigid")])

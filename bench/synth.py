@@ -1,6 +1,6 @@
 """Synthetic scene generation speed, and the scanline rasteriser against a bounding-box baseline.
 
-Prints, for each requested size, the wall time of ``fixtures.synth.synthesize`` (targets: small
+Prints, for each requested size, the wall time of ``robogs.synth.scene.synthesize`` (targets: small
 < 10 s on 2 cores) and its frame rate; then, for one frame of the scene at the medium resolution
 (robot + box over the table, the table drawn too), the time of the generator's scanline
 rasteriser and of a bounding-box edge-function rasteriser written here as the baseline (the
@@ -26,11 +26,11 @@ import trimesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from fixtures.synth import scene, synthesize  # noqa: E402
-from fixtures.synth.generate import _camera  # noqa: E402
-from fixtures.synth.raster import FrameBuffers, PinholeView, project, rasterize  # noqa: E402
-from fixtures.synth.rigid import invert_T, make_T  # noqa: E402
-from fixtures.synth.robot_source import generated_ur5  # noqa: E402
+from robogs.synth.scene import scene, synthesize  # noqa: E402
+from robogs.synth.scene.generate import _camera  # noqa: E402
+from robogs.synth.scene.raster import FrameBuffers, PinholeView, project, rasterize  # noqa: E402
+from robogs.synth.scene.rigid import invert_T, make_T  # noqa: E402
+from robogs.synth.scene.robot_source import generated_ur5  # noqa: E402
 
 
 def _frame_geometry(

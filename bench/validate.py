@@ -58,7 +58,7 @@ def _urdf() -> str:
 
 def _label_pool(n: int) -> tuple[list[bytes], list[list[tuple[int, int, int, int, int]]]]:
     """``n`` label images (PNG) of rectangles and their exact boxes (label, x0, y0, x1, y1)."""
-    from robogs_format.images import encode_label_png
+    from robogs.format.images import encode_label_png
 
     blobs, boxes = [], []
     for i in range(n):
@@ -85,7 +85,7 @@ def build(root: Path, minutes: float) -> Path:
     """Write the benchmark dataset to ``root``."""
     import pyarrow as pa
 
-    from robogs_format import Dataset
+    from robogs.format import Dataset
 
     dur_ns = int(minutes * 60e9)
     rng = np.random.default_rng(0)
@@ -158,7 +158,7 @@ def build(root: Path, minutes: float) -> Path:
             ),
             kind="segments",
         )
-        from robogs_format.cameras import CameraModel
+        from robogs.format.cameras import CameraModel
 
         w.set_camera(CameraModel("cam0", W, H, 500.0, 500.0, W / 2, H / 2, T_world_cam=np.eye(4)))
         w.set_asset("box", kind="object")
@@ -247,8 +247,8 @@ def main(argv: list[str] | None = None) -> int:
     t = time.perf_counter()
     import torch
 
-    from robogs_format.checks import available_checks
-    from robogs_format.validate import validate
+    from robogs.format.checks import available_checks
+    from robogs.format.validate import validate
 
     available_checks()
     import_s = time.perf_counter() - t
@@ -271,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
             "-W",
             "ignore",
             "-c",
-            "import sys; from robogs_format.cli.main import validate_main; "
+            "import sys; from robogs.cli.main import validate_main; "
             "sys.exit(validate_main(sys.argv[1:]))",
             str(root),
             "--quick",

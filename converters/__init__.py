@@ -1,22 +1,7 @@
-"""robogs converters: ingest of bags, MCAP, videos and captures; exports to other formats.
+"""Deprecated alias of ``robogs.convert`` (removed in robogs 0.3)."""
 
-Ingest converters are kept in a registry keyed by source format; see
-:mod:`converters.registry` (``register_converter``, ``available_converters``, entry-point group
-``robogs.converters``) and :func:`converters.ingest.convert_path`.
-"""
+import sys
 
-from .registry import (
-    Converter,
-    available_converters,
-    detect_format,
-    get_converter,
-    register_converter,
-)
+from robogs._compat import install
 
-__all__ = [
-    "Converter",
-    "available_converters",
-    "detect_format",
-    "get_converter",
-    "register_converter",
-]
+sys.modules[__name__] = install(__name__)

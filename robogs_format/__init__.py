@@ -1,28 +1,7 @@
-"""robogs_format: the robogs dataset format — IO, conventions, kinematics, rendering and validation."""
+"""Deprecated alias of ``robogs.format`` (removed in robogs 0.3)."""
 
-from .dataset import Dataset, Episode
-from .errors import (
-    DatasetExistsError,
-    FormatError,
-    InputError,
-    LockError,
-    PathEscapeError,
-    RobogsError,
-    VersionError,
-)
-from .spec_version import SPEC_VERSION
-from .writer import DatasetWriter
+import sys
 
-__all__ = [
-    "Dataset",
-    "DatasetWriter",
-    "Episode",
-    "SPEC_VERSION",
-    "RobogsError",
-    "FormatError",
-    "VersionError",
-    "PathEscapeError",
-    "DatasetExistsError",
-    "LockError",
-    "InputError",
-]
+from robogs._compat import install
+
+sys.modules[__name__] = install(__name__)

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from fixtures import mutations as mut
-from robogs_format.checks import available_checks
-from robogs_format.cli.main import main, validate_main
+from robogs.cli.main import main, validate_main
+from robogs.format.checks import available_checks
+from robogs.synth import mutations as mut
 
 _spec = importlib.util.spec_from_file_location(
     "robogs_tests_tiny_scene", Path(__file__).resolve().parent / "checks" / "tiny_scene.py"

@@ -11,10 +11,10 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from robogs_format import Dataset
-from robogs_format.binding import Binding, rotate_sh
-from robogs_format.render.sh import eval_sh
-from robogs_format.splats import SplatSet
+from robogs.format import Dataset
+from robogs.format.binding import Binding, rotate_sh
+from robogs.format.render.sh import eval_sh
+from robogs.format.splats import SplatSet
 
 URDF = """<?xml version="1.0"?>
 <robot name="arm">

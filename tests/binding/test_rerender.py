@@ -19,12 +19,12 @@ import pyarrow.parquet as pq
 import pytest
 from scipy.spatial.distance import cdist
 
-from robogs_format.checks import CheckContext, InputReported, get_check
-from robogs_format.checks.binding import alignment_fit, label_summary
-from robogs_format.findings import Finding
-from robogs_format.images import decode_label_png, encode_label_png
-from robogs_format.rerender import boundary_distance, compare_frame, void_band
-from robogs_format.splats import read_splat_ply, write_splat_ply
+from robogs.format.checks import CheckContext, InputReported, get_check
+from robogs.format.checks.binding import alignment_fit, label_summary
+from robogs.format.findings import Finding
+from robogs.format.images import decode_label_png, encode_label_png
+from robogs.format.rerender import boundary_distance, compare_frame, void_band
+from robogs.format.splats import read_splat_ply, write_splat_ply
 
 B_CODES = [f"B{i:03d}" for i in range(1, 12)]
 #: speed options of these tests: every 8th frame for the label pass, 8 frames for the fit
@@ -33,7 +33,7 @@ FAST = {"stride": 8, "fit_frames": 8}
 
 @pytest.fixture(scope="module")
 def synth_scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from fixtures.synth import synthesize
+    from robogs.synth.scene import synthesize
 
     root = tmp_path_factory.mktemp("synth") / "small"
     synthesize(root, seed=0, size="small", progress=False)
@@ -156,7 +156,7 @@ def test_clean_scene_has_no_binding_finding(synth_scene: Path) -> None:
 
 
 def test_camera_stamps_20ms_late_are_measured(scene_copy) -> None:
-    from fixtures.mutations import MUTATIONS
+    from robogs.synth.mutations import MUTATIONS
 
     root = scene_copy("late")
     MUTATIONS["shift_camera_stamps"](root, 20.0)
@@ -209,7 +209,7 @@ def test_relabelled_link_is_named(scene_copy) -> None:
 def test_wrong_splat_colours_fall_below_the_psnr_floor(
     scene_copy, mutation: str, kwargs: dict, at_most_db: float
 ) -> None:
-    from fixtures.mutations import MUTATIONS
+    from robogs.synth.mutations import MUTATIONS
 
     root = scene_copy(mutation)
     MUTATIONS[mutation](root, **kwargs)
@@ -297,9 +297,9 @@ def test_bad_splats_do_not_stop_the_rerender(scene_copy) -> None:
 
 
 def test_scaled_render_camera_keeps_pixel_edges() -> None:
-    from robogs_format.cameras import CameraModel
-    from robogs_format.errors import InputError
-    from robogs_format.rerender import RerenderOptions, _render_camera
+    from robogs.format.cameras import CameraModel
+    from robogs.format.errors import InputError
+    from robogs.format.rerender import RerenderOptions, _render_camera
 
     model = CameraModel("c", 640, 480, 500.0, 510.0, 320.5, 240.25, T_world_cam=np.eye(4))
     cam = _render_camera(model, np.eye(4), 0.5)

@@ -1,6 +1,6 @@
 """Fixtures for the validator tests: a clean dataset built once per session, copied per test.
 
-``clean_root`` is the synthetic scene of ``fixtures.synth`` (small size, seed 0)
+``clean_root`` is the synthetic scene of ``robogs.synth.scene`` (small size, seed 0)
 when that generator is installed, and otherwise the tiny scene of
 :mod:`tiny_scene` (also available on its own as ``tiny_root``).
 """
@@ -17,9 +17,9 @@ from .tiny_scene import build_tiny_scene
 
 
 def _synthesize():
-    if importlib.util.find_spec("fixtures.synth") is None:
+    if importlib.util.find_spec("robogs.synth.scene") is None:
         return None
-    import fixtures.synth as synth
+    import robogs.synth.scene as synth
 
     return getattr(synth, "synthesize", None)
 

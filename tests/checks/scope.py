@@ -10,8 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from robogs_format.validate import Report
-from robogs_format.validate import validate as _validate
+from robogs.format.validate import Report
+from robogs.format.validate import validate as _validate
 
 __all__ = ["validate", "SKIPPED_GROUPS"]
 
@@ -19,6 +19,6 @@ SKIPPED_GROUPS: tuple[str, ...] = ("binding",)
 
 
 def validate(path: str | Path, **kwargs: Any) -> Report:
-    """:func:`robogs_format.validate.validate` with the binding group left out."""
+    """:func:`robogs.format.validate.validate` with the binding group left out."""
     kwargs["ignore"] = [*(kwargs.get("ignore") or []), *SKIPPED_GROUPS]
     return _validate(path, **kwargs)

@@ -9,15 +9,15 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from robogs_format.checks._common import (
+from robogs.format.checks._common import (
     com_outside_mm,
     hull_distance_outside,
     inertia_problem,
     quat_to_matrix_np,
 )
-from robogs_format.checks.label_boxes import boxes_of_label_image, scan_label_boxes
-from robogs_format.frames import quat_to_matrix
-from robogs_format.images import encode_label_png
+from robogs.format.checks.label_boxes import boxes_of_label_image, scan_label_boxes
+from robogs.format.frames import quat_to_matrix
+from robogs.format.images import encode_label_png
 
 
 def _brute_boxes(img: np.ndarray) -> dict[int, tuple[int, ...]]:
@@ -115,7 +115,7 @@ def test_quaternion_matrix_matches_frames_module() -> None:
 def test_png_fast_path_matches_full_decode(seed: int) -> None:
     import cv2
 
-    from robogs_format.checks.label_boxes import _png_sub_runs
+    from robogs.format.checks.label_boxes import _png_sub_runs
 
     rng = np.random.default_rng(seed)
     img = np.zeros((37, 53), np.uint16)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from fixtures import mutations as mut
+from robogs.synth import mutations as mut
 
 from .scope import validate
 

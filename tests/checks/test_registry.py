@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from robogs_format.budgets import DEFAULT_BUDGETS
-from robogs_format.checks import (
+from robogs.format.budgets import DEFAULT_BUDGETS
+from robogs.format.checks import (
     GROUPS,
     RETIRED_CODES,
     Check,
@@ -18,8 +18,8 @@ from robogs_format.checks import (
     register_check,
     unregister_check,
 )
-from robogs_format.checks import registry as reg
-from robogs_format.validate import RUNNER_CODES
+from robogs.format.checks import registry as reg
+from robogs.format.validate import RUNNER_CODES
 
 CHECKS_MD = Path(__file__).resolve().parents[2] / "spec" / "CHECKS.md"
 

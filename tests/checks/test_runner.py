@@ -10,9 +10,9 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from fixtures import mutations as mut
-from robogs_format.checks import Check, available_checks, register_check, unregister_check
-from robogs_format.errors import FormatError
+from robogs.format.checks import Check, available_checks, register_check, unregister_check
+from robogs.format.errors import FormatError
+from robogs.synth import mutations as mut
 
 from .scope import SKIPPED_GROUPS, validate
 

@@ -14,8 +14,8 @@ import pyarrow.parquet as pq
 import pytest
 import torch
 
-from robogs_format import rerender
-from robogs_format.cli.main import validate_main
+from robogs.cli.main import validate_main
+from robogs.format import rerender
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -26,8 +26,8 @@ def test_quick_validation_does_not_import_torch(clean_root: Path) -> None:
     code = textwrap.dedent(
         f"""
         import contextlib, io, json, sys
-        from robogs_format.checks import available_checks
-        from robogs_format.cli.main import validate_main
+        from robogs.format.checks import available_checks
+        from robogs.cli.main import validate_main
         root = {str(clean_root)!r}
         with contextlib.redirect_stdout(io.StringIO()) as report:
             rc = validate_main([root, "--quick", "--no-progress", "--json"])

@@ -14,9 +14,9 @@ import numpy as np
 import pyarrow as pa
 import trimesh
 
-from robogs_format import Dataset
-from robogs_format.cameras import CameraModel
-from robogs_format.images import VideoWriter, encode_label_png
+from robogs.format import Dataset
+from robogs.format.cameras import CameraModel
+from robogs.format.images import VideoWriter, encode_label_png
 
 T0 = 1_000_000_000
 DURATION_S = 4.0

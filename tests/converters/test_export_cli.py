@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-import converters.export as export_pkg
-from converters.export import ExportReport, available_exporters, export, register_exporter
-from robogs_format import Dataset, DatasetExistsError
-from robogs_format.cli.main import main
+import robogs.convert.export as export_pkg
+from robogs.cli.main import main
+from robogs.convert.export import ExportReport, available_exporters, export, register_exporter
+from robogs.format import Dataset, DatasetExistsError
 
 try:
     from .test_export_data import build_tiny_dataset
@@ -107,7 +107,9 @@ def test_failing_exporter_leaves_nothing_behind(tiny: Dataset, tmp_path: Path) -
 
 
 def test_entry_point_exporters_are_listed(monkeypatch: pytest.MonkeyPatch) -> None:
-    ep = EntryPoint("test_plugin_ply", "converters.export.splat_ply:export_ply", "robogs.exporters")
+    ep = EntryPoint(
+        "test_plugin_ply", "robogs.convert.export.splat_ply:export_ply", "robogs.exporters"
+    )
     monkeypatch.setattr(
         export_pkg, "entry_points", lambda group: [ep] if group == "robogs.exporters" else []
     )

@@ -16,10 +16,10 @@ import numpy as np
 import pyarrow as pa
 import trimesh
 
-from robogs_format import Dataset
-from robogs_format.cameras import CameraModel
-from robogs_format.images import VideoWriter, encode_label_png
-from robogs_format.splats import SplatSet
+from robogs.format import Dataset
+from robogs.format.cameras import CameraModel
+from robogs.format.images import VideoWriter, encode_label_png
+from robogs.format.splats import SplatSet
 
 T0_NS = 1_700_000_000_123_456_789
 
@@ -392,8 +392,8 @@ def same_table(a: pa.Table, b: pa.Table, what: str) -> None:
 
 def mcap_round_trip(src: Dataset, tmp: Path) -> Dataset:
     """Export ``src`` to MCAP and read it back with robogs' MCAP ingest."""
-    from converters.export import export
-    from converters.ingest.convert import convert_path
+    from robogs.convert.export import export
+    from robogs.convert.ingest.convert import convert_path
 
     export("mcap", src, tmp / "x.mcap")
     return convert_path(tmp / "x.mcap", tmp / "back")

@@ -10,9 +10,9 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from converters.export import export
-from converters.export.ros2_mcap import stamp
-from robogs_format import Dataset
+from robogs.convert.export import export
+from robogs.convert.export.ros2_mcap import stamp
+from robogs.format import Dataset
 
 try:
     from .test_export_data import build_tiny_dataset, check_round_trip, mcap_round_trip

@@ -16,15 +16,15 @@ import pytest
 from lxml import etree
 from pxr import Usd, UsdGeom, UsdPhysics
 
-from converters.export import export
-from converters.export.arm_physics import PAYLOAD_RADIUS_M
-from converters.ingest.tabular import convert_tabular
-from fixtures.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
-from robogs_format import Dataset
-from robogs_format.cli.main import validate_main
-from robogs_format.frames import quat_to_matrix
-from robogs_format.kinematics import Chain
-from robogs_format.qa.rerun_log import rest_joint_positions
+from robogs.cli.main import validate_main
+from robogs.convert.export import export
+from robogs.convert.export.arm_physics import PAYLOAD_RADIUS_M
+from robogs.convert.ingest.tabular import convert_tabular
+from robogs.format import Dataset
+from robogs.format.frames import quat_to_matrix
+from robogs.format.kinematics import Chain
+from robogs.format.qa.rerun_log import rest_joint_positions
+from robogs.synth.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
 
 F32 = 1e-6  # UsdPhysics attributes are float32
 MASS, COM, SCALE = 0.8, [0.03, -0.02, 0.05], 1.2

@@ -11,8 +11,8 @@ import numpy as np
 import plyfile
 import pytest
 
-from converters.export import export
-from robogs_format import Dataset, InputError
+from robogs.convert.export import export
+from robogs.format import Dataset, InputError
 
 try:
     from .test_export_data import build_tiny_dataset

@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 import yourdfpy
 
-from converters.export import export
-from converters.export.usd_physics import validate_usd
-from robogs_format import Dataset
+from robogs.convert.export import export
+from robogs.convert.export.usd_physics import validate_usd
+from robogs.format import Dataset
 
 REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "fixtures" / "real"
 

@@ -2,7 +2,7 @@
 
 The small synthetic scene's labels are rasterised from the meshes by the generator's own
 renderer, so the re-rendered labels must mostly agree with them; the logged re-render must be
-exactly what :class:`robogs_format.rerender.SceneRerenderer` gives for that frame, and the
+exactly what :class:`robogs.format.rerender.SceneRerenderer` gives for that frame, and the
 difference image must follow its colour code pixel for pixel.
 """
 
@@ -15,10 +15,10 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 
-from converters.export import export
-from robogs_format import Dataset
-from robogs_format.cli.main import main
-from robogs_format.images import decode_label_png
+from robogs.cli.main import main
+from robogs.convert.export import export
+from robogs.format import Dataset
+from robogs.format.images import decode_label_png
 
 STRIDE = 60
 SCALE = 0.5
@@ -26,7 +26,7 @@ SCALE = 0.5
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
-    from fixtures.synth import synthesize
+    from robogs.synth.scene import synthesize
 
     root = tmp_path_factory.mktemp("rerender") / "small"
     synthesize(root, seed=0, size="small", progress=False)
@@ -48,8 +48,8 @@ def test_rerender_layer_logs_labels_recorded_and_difference(scene: Dataset, tmp_
     import cv2
     import pyarrow.parquet as pq
 
-    from robogs_format.binding import Binding
-    from robogs_format.rerender import SceneRerenderer, label_channels
+    from robogs.format.binding import Binding
+    from robogs.format.rerender import SceneRerenderer, label_channels
 
     out = tmp_path / "r.rrd"
     report = export(

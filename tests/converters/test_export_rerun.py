@@ -10,10 +10,10 @@ import pytest
 import rerun as rr
 from rerun.chunk import RrdReader
 
-from converters.export import export
-from robogs_format import Dataset
-from robogs_format.qa import rerun_log
-from robogs_format.qa.rerun_log import downsample_indices
+from robogs.convert.export import export
+from robogs.format import Dataset
+from robogs.format.qa import rerun_log
+from robogs.format.qa.rerun_log import downsample_indices
 
 try:
     from .test_export_data import N_FRAMES, N_JS, N_POSE, build_tiny_dataset
@@ -111,7 +111,7 @@ def test_streams_rows_and_stamps(tiny: Dataset, chunks: dict) -> None:
 
 
 def test_findings_logged_at_their_stamps(tiny: Dataset, chunks: dict) -> None:
-    from robogs_format.validate import validate
+    from robogs.format.validate import validate
 
     findings = validate(
         tiny.root, ignore=["binding"]

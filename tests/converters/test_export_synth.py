@@ -1,4 +1,4 @@
-"""Every exporter on the synthetic push scene (fixtures.synth): a UR5-like arm, a box, a table."""
+"""Every exporter on the synthetic push scene (robogs.synth.scene): a UR5-like arm, a box, a table."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import pytest
 import yourdfpy
 from rerun.chunk import RrdReader
 
-from converters.export import export
-from converters.export.splat_ply import ply_property_names
-from converters.export.usd_physics import validate_usd
-from robogs_format import Dataset
+from robogs.convert.export import export
+from robogs.convert.export.splat_ply import ply_property_names
+from robogs.convert.export.usd_physics import validate_usd
+from robogs.format import Dataset
 
 try:
     from .test_export_data import check_round_trip, mcap_round_trip
@@ -23,7 +23,7 @@ except ImportError:
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
-    from fixtures.synth import synthesize
+    from robogs.synth.scene import synthesize
 
     root = tmp_path_factory.mktemp("synth") / "scene"
     synthesize(root, seed=0, size="small")

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import yourdfpy
 
-from converters.export import export
-from robogs_format import Dataset
+from robogs.convert.export import export
+from robogs.format import Dataset
 
 try:
     from .test_export_data import PHYSICS, build_tiny_dataset

@@ -15,17 +15,17 @@ import pytest
 import torch
 import yourdfpy
 
-from converters.export import export
-from converters.export.arm_physics import PAYLOAD_RADIUS_M, deepest_moving_link, payload_spec
-from fixtures.armlogs import UR5_JOINTS, ArmLogSpec, generate_armlog, ur5_urdf
-from reference_impl.physics.arm.api import open_arm
-from reference_impl.physics.arm.compare import base_prediction
-from reference_impl.physics.arm.effects import SMOOTHING_VELOCITY
-from reference_impl.physics.arm.rnea import ArmModel, inverse_dynamics
-from robogs_format.cli.main import main
-from robogs_format.dataset import Dataset
-from robogs_format.errors import FormatError
-from robogs_format.kinematics import Chain
+from robogs.cli.main import main
+from robogs.convert.export import export
+from robogs.convert.export.arm_physics import PAYLOAD_RADIUS_M, deepest_moving_link, payload_spec
+from robogs.format.dataset import Dataset
+from robogs.format.errors import FormatError
+from robogs.format.kinematics import Chain
+from robogs.physics.arm.api import open_arm
+from robogs.physics.arm.compare import base_prediction
+from robogs.physics.arm.effects import SMOOTHING_VELOCITY
+from robogs.physics.arm.rnea import ArmModel, inverse_dynamics
+from robogs.synth.armlogs import UR5_JOINTS, ArmLogSpec, generate_armlog, ur5_urdf
 
 
 @pytest.fixture(autouse=True)

@@ -16,12 +16,12 @@ import torch
 import yourdfpy
 from pxr import Usd, UsdGeom
 
-from converters.export import export
-from fixtures.armlogs import KinLogSpec, generate_kinematic_dataset, ur5_urdf
-from reference_impl.physics.arm.api import fit_arm, open_arm
-from reference_impl.physics.arm.kinematic_model import predict_ee
-from reference_impl.physics.space import ParamSpace
-from robogs_format.dataset import Dataset
+from robogs.convert.export import export
+from robogs.format.dataset import Dataset
+from robogs.physics.arm.api import fit_arm, open_arm
+from robogs.physics.arm.kinematic_model import predict_ee
+from robogs.physics.space import ParamSpace
+from robogs.synth.armlogs import KinLogSpec, generate_kinematic_dataset, ur5_urdf
 
 SMALL = {"segments": 3, "duration_s": 4.0, "ee_rate_hz": 40.0}
 COMPLIANCE = {"shoulder_lift_joint": 1e-4, "elbow_joint": 2e-4}

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from pxr import Usd, UsdGeom, UsdPhysics
 
-from converters.export import export
-from converters.export.usd_physics import validate_usd
-from robogs_format import Dataset
-from robogs_format.frames import quat_to_matrix
+from robogs.convert.export import export
+from robogs.convert.export.usd_physics import validate_usd
+from robogs.format import Dataset
+from robogs.format.frames import quat_to_matrix
 
 try:
     from .test_export_data import PHYSICS, build_tiny_dataset

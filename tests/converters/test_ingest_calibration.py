@@ -8,20 +8,20 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from converters.ingest.calibration import camera_from_info_msg, read_calibration
-from converters.ingest.roles import (
+from robogs.convert.ingest.calibration import camera_from_info_msg, read_calibration
+from robogs.convert.ingest.roles import (
     camera_name_from_topic,
     default_role,
     load_role_map,
     parse_topic_flags,
 )
-from converters.ingest.tf_tree import (
+from robogs.convert.ingest.tf_tree import (
     StaticTfTree,
     matrix_to_quat_np,
     pose_to_matrix,
     quat_to_matrix_np,
 )
-from robogs_format.errors import InputError
+from robogs.format.errors import InputError
 
 CAL = "camera_info"
 
@@ -169,7 +169,7 @@ def test_camera_info_errors_name_topic_and_stamp() -> None:
 
 
 def test_numpy_quaternions_match_robogs_frames() -> None:
-    from robogs_format.frames import matrix_to_quat, quat_to_matrix
+    from robogs.format.frames import matrix_to_quat, quat_to_matrix
 
     rng = np.random.default_rng(3)
     for _ in range(50):

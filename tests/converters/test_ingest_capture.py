@@ -17,10 +17,10 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from converters.ingest import ConvertOptions, convert_path
-from converters.registry import detect_format
-from robogs_format.errors import InputError
-from robogs_format.validate import validate
+from robogs.convert.ingest import ConvertOptions, convert_path
+from robogs.convert.registry import detect_format
+from robogs.format.errors import InputError
+from robogs.format.validate import validate
 
 X = np.array([0.3, -0.2, 0.5])
 W, H = 80, 60
@@ -130,7 +130,7 @@ def _projections(ds, world: np.ndarray) -> dict[str, tuple[float, float]]:
         frames = ep.frames(cam_name).to_pydict()
         assert frames["t_ns"] == ext["t_ns"]
         for k, t in enumerate(ext["t_ns"]):
-            from converters.ingest.tf_tree import pose_to_matrix
+            from robogs.convert.ingest.tf_tree import pose_to_matrix
 
             T = pose_to_matrix(
                 np.array([ext[c][k] for c in "xyz"]),

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from converters.ingest import ConvertOptions, convert_path
-from robogs_format.errors import InputError
-from robogs_format.validate import validate
+from robogs.convert.ingest import ConvertOptions, convert_path
+from robogs.format.errors import InputError
+from robogs.format.validate import validate
 
 
 def _errors(path: Path) -> list[str]:
@@ -190,7 +190,7 @@ def test_fast_cdr_decoders_agree_with_mcap_ros2(synth) -> None:
     from mcap_ros2.decoder import DecoderFactory
     from mcap_ros2.writer import Writer
 
-    from converters.ingest.cdr_fast import fast_decoder
+    from robogs.convert.ingest.cdr_fast import fast_decoder
 
     rng = np.random.default_rng(7)
     buf = io.BytesIO()

@@ -16,9 +16,9 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from converters.ingest import convert_path
-from converters.ingest.context import ConvertOptions
-from converters.ingest.protobuf_schema import protobuf_decoder
+from robogs.convert.ingest import convert_path
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.protobuf_schema import protobuf_decoder
 
 T0 = 1_700_000_000_000_000_000
 

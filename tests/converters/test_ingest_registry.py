@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from converters import registry
-from converters.ingest import ConvertOptions, convert_path
-from robogs_format.cli.main import main
-from robogs_format.errors import InputError
-from robogs_format.validate import validate
+from robogs.cli.main import main
+from robogs.convert import registry
+from robogs.convert.ingest import ConvertOptions, convert_path
+from robogs.format.errors import InputError
+from robogs.format.validate import validate
 
 CR3 = "dobot_cr3/dobot_description/urdf/cr3_robot.urdf"
 CR3_JOINTS = ["joint1", "joint2", "joint3"]

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from converters.ingest import convert_path
-from converters.ingest.context import ConvertOptions
-from converters.registry import detect_format
-from robogs_format.errors import InputError
-from robogs_format.validate import validate
+from robogs.convert.ingest import convert_path
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.registry import detect_format
+from robogs.format.errors import InputError
+from robogs.format.validate import validate
 
 
 @pytest.mark.parametrize("compression", [None, "bz2", "lz4"])
@@ -137,7 +137,7 @@ def test_real_ros2_talker_is_read_despite_metadata_qos(real: Path, storage: str)
     """The talker's metadata.yaml QoS differs from its storage; reading the folder yields nothing."""
     from rosbags.highlevel import AnyReader
 
-    from converters.ingest.rosbag_source import open_bag, ros2_storage_paths
+    from robogs.convert.ingest.rosbag_source import open_bag, ros2_storage_paths
 
     folder = _ros2_bag(real, f"rosbag2_py/test/resources/{storage}/talker")
     with AnyReader([folder]) as r:  # the trap: 20 messages listed, none delivered

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from converters.ingest import ConvertOptions, convert_path
-from robogs_format.errors import DatasetExistsError, InputError, RobogsError
+from robogs.convert.ingest import ConvertOptions, convert_path
+from robogs.format.errors import DatasetExistsError, InputError, RobogsError
 
 
 def _leftovers(parent: Path, name: str = "out") -> list[str]:
@@ -71,7 +71,7 @@ def test_existing_dataset_survives_a_failed_forced_conversion(
     )
     with pytest.raises(InputError):
         convert_path(tmp_path / "bad.mcap", out, force=True)
-    from robogs_format.dataset import Dataset
+    from robogs.format.dataset import Dataset
 
     assert Dataset.open(out).manifest["files"] == before
     assert _leftovers(tmp_path) == ["out"]
@@ -133,7 +133,7 @@ def test_truncated_ros1_bag(tmp_path: Path, synth) -> None:
 
 
 def test_interrupt_leaves_nothing(small: Path, tmp_path: Path, monkeypatch) -> None:
-    from converters.ingest import messages
+    from robogs.convert.ingest import messages
 
     calls = {"n": 0}
     real = messages.MessageIngest.handle

@@ -12,11 +12,11 @@ from urllib.parse import unquote
 
 import pytest
 
-from converters.ingest import convert_path
-from converters.ingest.context import ConvertOptions
-from converters.ingest.dae_textures import dae_texture_refs, texture_uri
-from robogs_format.errors import PathEscapeError
-from robogs_format.validate import validate
+from robogs.convert.ingest import convert_path
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.dae_textures import dae_texture_refs, texture_uri
+from robogs.format.errors import PathEscapeError
+from robogs.format.validate import validate
 
 _DAE = """<?xml version="1.0" encoding="utf-8"?>
 <COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">

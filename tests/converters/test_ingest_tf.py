@@ -17,11 +17,11 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from converters.ingest import convert_path
-from converters.ingest.context import ConvertOptions
-from converters.ingest.tf_buffer import TfBuffer
-from robogs_format.errors import InputError
-from robogs_format.validate import validate
+from robogs.convert.ingest import convert_path
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.tf_buffer import TfBuffer
+from robogs.format.errors import InputError
+from robogs.format.validate import validate
 
 T0 = 1_700_000_000_000_000_000
 W_ARM, W_BOX, W_RIG = 1.3, 0.7, -0.5  # rad/s about z
@@ -358,7 +358,7 @@ def test_real_turtlesim_tf_matches_its_pose_topics(tmp_path: Path, real: Path) -
 def test_cli_frame_flags_and_map_file(tmp_path: Path, bags: dict[str, Path], capsys) -> None:
     import json
 
-    from robogs_format.cli.main import main
+    from robogs.cli.main import main
 
     roles = tmp_path / "roles.yaml"
     roles.write_text("/mocap/cup/pose: ignore\ntf_objects:\n  turntable: /arm\n", encoding="utf-8")
@@ -369,7 +369,7 @@ def test_cli_frame_flags_and_map_file(tmp_path: Path, bags: dict[str, Path], cap
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     assert out["episodes"][0]["streams"] == ["camera/cam", "object_poses"]
-    from robogs_format import Dataset
+    from robogs.format import Dataset
 
     poses = Dataset.open(tmp_path / "a").episode().table("object_poses")
     assert sorted(set(poses.column("object").to_pylist())) == ["box", "turntable"]
@@ -384,7 +384,7 @@ def test_time_varying_camera_round_trips_through_mcap(
     tmp_path: Path, bags: dict[str, Path]
 ) -> None:
     """Dataset -> MCAP export (/tf for the moving camera) -> dataset: same extrinsics and poses."""
-    from converters.export import export
+    from robogs.convert.export import export
 
     ds = convert_path(bags["ros1"], tmp_path / "a")
     export("mcap", ds, tmp_path / "a.mcap")

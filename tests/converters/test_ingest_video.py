@@ -8,9 +8,9 @@ import cv2
 import numpy as np
 import pytest
 
-from converters.ingest import ConvertOptions, convert_path
-from robogs_format.errors import InputError
-from robogs_format.validate import validate
+from robogs.convert.ingest import ConvertOptions, convert_path
+from robogs.format.errors import InputError
+from robogs.format.validate import validate
 
 CALIB = "camera_info/image_common/camera_info_manager/tests/test_calibration.yaml"  # 640x480
 

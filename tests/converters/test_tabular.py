@@ -11,10 +11,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from converters.ingest.tabular import auto_mapping, convert_tabular, detect_tabular
-from fixtures.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
-from robogs_format.dataset import Dataset
-from robogs_format.errors import InputError
+from robogs.convert.ingest.tabular import auto_mapping, convert_tabular, detect_tabular
+from robogs.format.dataset import Dataset
+from robogs.format.errors import InputError
+from robogs.synth.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
 
 REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "fixtures" / "real"
 UR5_REAL = REAL / "ur5" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"
@@ -374,7 +374,7 @@ def test_real_ur5_urdf_with_and_without_meshes(tmp_path):
 
 def test_cli_convert_with_column_map(tmp_path, chain3, capsys):
     """``robogs convert LOG OUT --urdf U --map M`` routes --map to the tabular column mapping."""
-    from robogs_format.cli.main import main
+    from robogs.cli.main import main
 
     t, q, _, _ = _generic_rows()
     _write_csv(

@@ -4,7 +4,7 @@ stream; the kinematic model diagnoses hidden joint offsets from the plain CSV; m
 values give clear errors.
 
 Oracles: the CSVs are written here from the independent numpy forward kinematics of
-:func:`fixtures.armlogs.kinematic.urdf_fk`, rotations converted by ``scipy.spatial.transform``.
+:func:`robogs.synth.armlogs.kinematic.urdf_fk`, rotations converted by ``scipy.spatial.transform``.
 """
 
 from __future__ import annotations
@@ -16,14 +16,14 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from converters.ingest.tabular import convert_tabular
-from fixtures.armlogs import UR5_JOINTS, ur5_urdf
-from fixtures.armlogs.dynamics import parse_arm
-from fixtures.armlogs.generate import excitation
-from fixtures.armlogs.kinematic import urdf_fk
-from robogs_format.dataset import Dataset
-from robogs_format.errors import InputError
-from robogs_format.validate import validate
+from robogs.convert.ingest.tabular import convert_tabular
+from robogs.format.dataset import Dataset
+from robogs.format.errors import InputError
+from robogs.format.validate import validate
+from robogs.synth.armlogs import UR5_JOINTS, ur5_urdf
+from robogs.synth.armlogs.dynamics import parse_arm
+from robogs.synth.armlogs.generate import excitation
+from robogs.synth.armlogs.kinematic import urdf_fk
 
 RZ_PI = 3.141592653589793
 BASE = (
@@ -149,7 +149,7 @@ def test_franka_column_major_matrix_and_a_bad_cell(tmp_path, ur5):
 
 
 def test_hidden_offsets_are_diagnosed_from_a_plain_csv(tmp_path, ur5):
-    from reference_impl.physics.arm import diagnose_arm
+    from robogs.physics.arm import diagnose_arm
 
     logs = tmp_path / "logs"
     logs.mkdir()

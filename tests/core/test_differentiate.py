@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robogs_format.differentiate import savgol_derivative
-from robogs_format.errors import InputError
+from robogs.format.differentiate import savgol_derivative
+from robogs.format.errors import InputError
 
 
 def _cubic(t):

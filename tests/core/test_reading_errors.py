@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robogs_format import Dataset, FormatError, PathEscapeError, VersionError
-from robogs_format.paths import resolve_inside
-from robogs_format.spec_version import SPEC_VERSION, check_readable, migrate, register_migration
-from robogs_format.splats import SplatSet, read_splat_ply, write_splat_ply
+from robogs.format import Dataset, FormatError, PathEscapeError, VersionError
+from robogs.format.paths import resolve_inside
+from robogs.format.spec_version import SPEC_VERSION, check_readable, migrate, register_migration
+from robogs.format.splats import SplatSet, read_splat_ply, write_splat_ply
 
 
 def _minimal(path: Path) -> Path:

@@ -8,10 +8,10 @@ from pathlib import Path
 
 from jsonschema import Draft202012Validator
 
-from robogs_format.budgets import DEFAULT_BUDGETS
-from robogs_format.schemas import SCHEMA_NAMES, load_schema, schema_dir
-from robogs_format.spec_version import SPEC_VERSION
-from robogs_format.tables import TABLES
+from robogs.format.budgets import DEFAULT_BUDGETS
+from robogs.format.schemas import SCHEMA_NAMES, load_schema, schema_dir
+from robogs.format.spec_version import SPEC_VERSION
+from robogs.format.tables import TABLES
 
 SPEC = Path(__file__).resolve().parents[2] / "spec"
 

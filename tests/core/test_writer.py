@@ -12,10 +12,10 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from robogs_format import Dataset, DatasetExistsError, FormatError, LockError
-from robogs_format.cameras import CameraModel
-from robogs_format.images import decode_label_png, encode_label_png
-from robogs_format.writer import sha256_file
+from robogs.format import Dataset, DatasetExistsError, FormatError, LockError
+from robogs.format.cameras import CameraModel
+from robogs.format.images import decode_label_png, encode_label_png
+from robogs.format.writer import sha256_file
 
 
 def _joint_table(n: int = 50, seed: int = 0) -> pa.Table:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from robogs_format.errors import InputError
+from robogs.format.errors import InputError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -7,7 +7,7 @@ exception into a finding, but it is still a bug in a reader or a check.
 
 Two ways to run:
 
-* :func:`run_inprocess` calls :func:`robogs_format.cli.main.main` in this process with
+* :func:`run_inprocess` calls :func:`robogs.cli.main.main` in this process with
   stdout/stderr captured (fast; what the Hypothesis tests use). A CPU-time alarm
   (``ITIMER_PROF``, so a loaded machine does not trip it) turns a hang into a verdict, and the
   process's peak RSS is read after the call.
@@ -143,7 +143,7 @@ def run_inprocess(
     mem_limit: int = MEM_LIMIT_BYTES,
 ) -> Verdict:
     """Run ``robogs ARGV`` in this process and judge it (see the module docstring)."""
-    from robogs_format.cli.main import main
+    from robogs.cli.main import main
 
     argv = [str(a) for a in argv]
     out, err = io.StringIO(), io.StringIO()
@@ -196,7 +196,7 @@ _BOOT = """
 import resource, sys
 cpu = int(sys.argv[1])
 resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 2))
-from robogs_format.cli.main import main
+from robogs.cli.main import main
 sys.exit(main(sys.argv[2:]))
 """
 

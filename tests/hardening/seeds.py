@@ -2,7 +2,7 @@
 
 Each seed is written by a third-party writer (``mcap_ros2.writer``, ``rosbags``, OpenCV,
 trimesh, PyYAML, pyarrow) or by hand, never by the robogs reader it feeds; the dataset seed
-is the synthetic scene of :mod:`fixtures.synth`. Seeds are built once per session
+is the synthetic scene of :mod:`robogs.synth.scene`. Seeds are built once per session
 (:func:`build_seeds`) and never modified: a fuzz case copies what it mutates.
 """
 
@@ -368,7 +368,7 @@ def _write_meshes(root: Path) -> tuple[Path, ...]:
 
 def build_seeds(root: Path) -> Seeds:
     """Write every seed under ``root`` (an empty folder) and return their paths."""
-    from fixtures.synth import synthesize
+    from robogs.synth.scene import synthesize
 
     root.mkdir(parents=True, exist_ok=True)
     dataset = root / "ds"

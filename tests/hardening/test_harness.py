@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from robogs_format.cli import main as cli_main
+from robogs.cli import main as cli_main
 
 from .harness import run_inprocess, run_subprocess
 from .seeds import Seeds
@@ -42,7 +42,7 @@ def test_inprocess_cpu_alarm_stops_a_spin(fake_verb: str) -> None:
 
 
 def test_inprocess_check_crash_is_a_breach(seeds: Seeds, monkeypatch: pytest.MonkeyPatch) -> None:
-    from robogs_format.checks import schema
+    from robogs.format.checks import schema
 
     def boom(*args, **kwargs):
         raise ZeroDivisionError("planted")

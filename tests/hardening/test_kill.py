@@ -6,7 +6,7 @@ phase), and a random moment after the manifest lands in the temp folder (commit 
 After every kill the dataset path must hold either the previous version byte for byte (every
 file hashed, manifest included) or a complete new version; afterwards one uninterrupted run
 must succeed and clean up what the killed runs left. The verdict uses hashlib and json only
-(``fixtures.killrun``). The longer campaign is ``bench/kill_campaign.py``.
+(``robogs.synth.killrun``). The longer campaign is ``bench/kill_campaign.py``.
 """
 
 from __future__ import annotations
@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fixtures.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
-from fixtures.killrun import (
+from robogs.cli.main import main
+from robogs.synth.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
+from robogs.synth.killrun import (
     after_start,
     is_complete_version,
     leftovers,
@@ -30,8 +31,7 @@ from fixtures.killrun import (
     tree_digest,
     when_exists,
 )
-from fixtures.multiview import synthesize_multiview
-from robogs_format.cli.main import main
+from robogs.synth.multiview import synthesize_multiview
 
 SEED = 7
 

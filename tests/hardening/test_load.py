@@ -2,7 +2,7 @@
 
 Oracles: numpy over the whole array (order statistics), interpolation over the whole table
 (``SampleWindow``), defects planted at known rows of a long episode written by
-``fixtures.bulk`` (independent of the writer), and a peak RSS measured by ``os.wait4`` for a
+``robogs.synth.bulk`` (independent of the writer), and a peak RSS measured by ``os.wait4`` for a
 100-episode validation in its own interpreter. The full-size figures (1,000 episodes, a
 30-minute episode) are ``bench/load.py``.
 """
@@ -21,17 +21,17 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from fixtures.bulk import JOINTS, LINKS_M, write_bulk_dataset
-from robogs_format.checks.context import CheckContext
-from robogs_format.checks.streaming import (
+from robogs.format.checks.context import CheckContext
+from robogs.format.checks.streaming import (
     MedianSketch,
     SampleWindow,
     kth_smallest,
     median,
     percentile,
 )
-from robogs_format.interp import interp_linear
-from robogs_format.validate import validate
+from robogs.format.interp import interp_linear
+from robogs.format.validate import validate
+from robogs.synth.bulk import JOINTS, LINKS_M, write_bulk_dataset
 
 
 def _chunked(x: np.ndarray, size: int = 4096):
@@ -165,7 +165,7 @@ def test_defects_at_the_end_of_a_long_episode_are_found_at_their_rows(tmp_path: 
 _CHILD = """
 import json, sys, torch
 torch.set_num_threads(1)
-from robogs_format.validate import validate
+from robogs.format.validate import validate
 r = validate(sys.argv[1])
 hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM:")]
 print(json.dumps(r.counts()))

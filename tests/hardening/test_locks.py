@@ -13,15 +13,15 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from fixtures.killrun import is_complete_version, leftovers, tree_digest
-from robogs_format import Dataset, LockError
-from robogs_format import writer as writer_mod
+from robogs.format import Dataset, LockError
+from robogs.format import writer as writer_mod
+from robogs.synth.killrun import is_complete_version, leftovers, tree_digest
 
 # A second process: opens the writer, says so on stdout, waits for "go" on stdin, then writes.
 _HOLDER = """
 import sys
 import numpy as np, pyarrow as pa
-from robogs_format import Dataset
+from robogs.format import Dataset
 w = Dataset.create(sys.argv[1], overwrite=True)
 print("locked", flush=True)
 if sys.stdin.readline().strip() != "go":
@@ -93,7 +93,7 @@ def test_the_cli_reports_a_held_lock_in_one_line(tmp_path: Path) -> None:
     proc = _holder(target)
     try:
         res = subprocess.run(
-            [sys.executable, "-c", "import sys; from robogs_format.cli.main import main; "
+            [sys.executable, "-c", "import sys; from robogs.cli.main import main; "
              "sys.exit(main(sys.argv[1:]))", "convert", str(log), str(target), "--urdf", str(urdf),
              "--force"],
             capture_output=True, text=True, timeout=120,

@@ -11,14 +11,14 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from converters.ingest.calibration import read_calibration
-from converters.ingest.roles import load_role_map
-from converters.ingest.rosbag_source import ros2_storage_paths
-from converters.ingest.tabular import _to_ns, read_mapping
-from converters.ingest.video import read_stamps_csv
-from robogs_format import Dataset
-from robogs_format.errors import FormatError, InputError
-from robogs_format.splats import read_splat_ply
+from robogs.convert.ingest.calibration import read_calibration
+from robogs.convert.ingest.roles import load_role_map
+from robogs.convert.ingest.rosbag_source import ros2_storage_paths
+from robogs.convert.ingest.tabular import _to_ns, read_mapping
+from robogs.convert.ingest.video import read_stamps_csv
+from robogs.format import Dataset
+from robogs.format.errors import FormatError, InputError
+from robogs.format.splats import read_splat_ply
 
 from .craft import craft_mcap, one_message_records
 from .harness import run_inprocess

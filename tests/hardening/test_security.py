@@ -20,16 +20,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from converters.ingest.decompress import (
+from robogs.convert.ingest.decompress import (
     MAX_CHUNK_BYTES,
     DecompressionLimitError,
     bounded_decompress,
     capped_decompression,
 )
-from robogs_format import Dataset
-from robogs_format.errors import FormatError, InputError, PathEscapeError
-from robogs_format.splats import read_splat_ply
-from robogs_format.urdf import load_urdf, parse_urdf_robot
+from robogs.format import Dataset
+from robogs.format.errors import FormatError, InputError, PathEscapeError
+from robogs.format.splats import read_splat_ply
+from robogs.format.urdf import load_urdf, parse_urdf_robot
 
 from .craft import craft_mcap, one_message_records
 from .harness import run_inprocess, run_subprocess
@@ -280,7 +280,7 @@ def test_collada_mesh_with_xxe_refused(tmp_path: Path, outside: Path, seeds: See
     ids=["alias_bomb", "python_tag", "deep_nesting"],
 )
 def test_hostile_calibration_yaml_refused(tmp_path: Path, text: str) -> None:
-    from converters.ingest.calibration import read_calibration
+    from robogs.convert.ingest.calibration import read_calibration
 
     marker = tmp_path / "pwned"
     path = tmp_path / "cam.yaml"
@@ -340,7 +340,7 @@ def test_mesh_ply_header_claiming_absurd_count_refused(seeds: Seeds, tmp_path: P
 def test_label_png_claiming_huge_size_refused_before_decode() -> None:
     import zlib
 
-    from robogs_format.images import decode_label_png
+    from robogs.format.images import decode_label_png
 
     ihdr = (60000).to_bytes(4, "big") * 2 + bytes([16, 0, 0, 0, 0])
     chunk = lambda t, b: len(b).to_bytes(4, "big") + t + b + zlib.crc32(t + b).to_bytes(4, "big")  # noqa: E731
@@ -485,7 +485,7 @@ class _Plant:
 def test_pickled_checkpoint_is_refused_not_run(tmp_path: Path) -> None:
     import torch
 
-    from reference_impl.reconstruct.checkpoint import load_checkpoint
+    from robogs.reconstruct.checkpoint import load_checkpoint
 
     marker = tmp_path / "pwned"
     ckpt = tmp_path / "ckpt.pt"
@@ -585,7 +585,7 @@ def _violations(path: Path) -> list[str]:
 
 
 def test_no_code_path_unpickles_or_evaluates() -> None:
-    files = [p for pkg in ("robogs_format", "converters", "reference_impl", "fixtures")
+    files = [p for pkg in ("robogs.format", "converters", "reference_impl", "fixtures")
              for p in sorted((REPO / pkg).rglob("*.py"))]  # fmt: skip
     assert len(files) > 50
     bad = [v for p in files for v in _violations(p)]

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from robogs_format.errors import FormatError, InputError
-from robogs_format.kinematics import Chain
-from robogs_format.urdf import load_urdf
+from robogs.format.errors import FormatError, InputError
+from robogs.format.kinematics import Chain
+from robogs.format.urdf import load_urdf
 
 from .conftest import REAL_URDFS, real_urdf_args
 

@@ -9,7 +9,7 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation, Slerp
 
-from robogs_format import frames as F
+from robogs.format import frames as F
 
 
 def wxyz(r: Rotation) -> np.ndarray:

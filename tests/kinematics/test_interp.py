@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import torch
 
-from robogs_format import frames as F
-from robogs_format.errors import InputError
-from robogs_format.interp import bracket, interp_linear, interp_pose
+from robogs.format import frames as F
+from robogs.format.errors import InputError
+from robogs.format.interp import bracket, interp_linear, interp_pose
 
 EPOCH = 1_763_800_000_123_456_789  # ns since 1970, late 2025: beyond float64's integer precision
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import torch
 
-from robogs_format import frames as F
-from robogs_format.errors import FormatError, InputError
-from robogs_format.kinematics import (
+from robogs.format import frames as F
+from robogs.format.errors import FormatError, InputError
+from robogs.format.kinematics import (
     Chain,
     MDHTable,
     load_mdh_json,
@@ -20,7 +20,7 @@ from robogs_format.kinematics import (
     save_mdh_json,
     ur5_mdh,
 )
-from robogs_format.urdf import load_urdf
+from robogs.format.urdf import load_urdf
 
 from .conftest import real_urdf_args
 

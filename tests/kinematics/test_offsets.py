@@ -1,5 +1,5 @@
 """Fitted joint offsets baked into a Chain, against the independent numpy forward kinematics of
-:mod:`fixtures.armlogs.kinematic` (its own URDF parser and perpendicular), and mimics against
+:mod:`robogs.synth.armlogs.kinematic` (its own URDF parser and perpendicular), and mimics against
 the nominal chain fed shifted joint values."""
 
 from __future__ import annotations
@@ -10,18 +10,18 @@ import numpy as np
 import pytest
 import torch
 
-from fixtures.armlogs import ur5_urdf
-from fixtures.armlogs.dynamics import parse_arm
-from fixtures.armlogs.kinematic import urdf_fk
-from robogs_format.errors import FormatError
-from robogs_format.kinematics import (
+from robogs.format.errors import FormatError
+from robogs.format.kinematics import (
     Chain,
     JointOffsets,
     chain_with_offsets,
     offset_origin,
     read_joint_offsets,
 )
-from robogs_format.urdf import load_urdf
+from robogs.format.urdf import load_urdf
+from robogs.synth.armlogs import ur5_urdf
+from robogs.synth.armlogs.dynamics import parse_arm
+from robogs.synth.armlogs.kinematic import urdf_fk
 
 _LINK = '<link name="{}"><inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>'
 

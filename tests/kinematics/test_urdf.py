@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from robogs_format.errors import FormatError, InputError, PathEscapeError
-from robogs_format.urdf import default_allowed_root, load_urdf, mesh_refs, resolve_mesh_uri
+from robogs.format.errors import FormatError, InputError, PathEscapeError
+from robogs.format.urdf import default_allowed_root, load_urdf, mesh_refs, resolve_mesh_uri
 
 from .conftest import REAL_URDFS, real_urdf_args
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from fixtures.armlogs import ur5_urdf
+from robogs.synth.armlogs import ur5_urdf
 
 
 @pytest.fixture(autouse=True)

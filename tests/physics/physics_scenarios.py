@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import functools
 
-from fixtures.scenarios import make_scenario
+from robogs.synth.scenarios import make_scenario
 
 
 @functools.lru_cache(maxsize=16)

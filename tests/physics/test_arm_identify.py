@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from converters.ingest.tabular import convert_tabular
-from fixtures.armlogs import ArmLogSpec, generate_armlog
-from reference_impl.physics.arm import compare_arm, diagnose_arm, fit_arm
-from reference_impl.physics.effects import available_effects, get_effect
-from robogs_format.dataset import Dataset
+from robogs.convert.ingest.tabular import convert_tabular
+from robogs.format.dataset import Dataset
+from robogs.physics.arm import compare_arm, diagnose_arm, fit_arm
+from robogs.physics.effects import available_effects, get_effect
+from robogs.synth.armlogs import ArmLogSpec, generate_armlog
 
 REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "fixtures" / "real"
 UR5_REAL = REAL / "ur5" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"

@@ -2,7 +2,7 @@
 kinematic offsets found first and recovered, null poses report nothing, unidentifiable
 offsets are said to be so.
 
-Oracles: the generator of :mod:`fixtures.armlogs.kinematic` (its own URDF parser, numpy forward
+Oracles: the generator of :mod:`robogs.synth.armlogs.kinematic` (its own URDF parser, numpy forward
 kinematics, world-frame gravity torques and a 1 kHz play operator) and its truth; brute-force
 loops for the play operator and the identifiability screen.
 """
@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 import torch
 
-from fixtures.armlogs import KinLogSpec, generate_kinematic_dataset, kin_truth_path
-from fixtures.armlogs.dynamics import parse_arm
-from fixtures.armlogs.kinematic import urdf_fk
-from reference_impl.physics.arm import diagnose_arm
-from reference_impl.physics.arm.api import open_arm
-from reference_impl.physics.arm.identify import identifiable_columns
-from reference_impl.physics.arm.kinematic_model import forward_ee, play_offset
-from robogs_format.kinematics import Chain
-from robogs_format.urdf import load_urdf
+from robogs.format.kinematics import Chain
+from robogs.format.urdf import load_urdf
+from robogs.physics.arm import diagnose_arm
+from robogs.physics.arm.api import open_arm
+from robogs.physics.arm.identify import identifiable_columns
+from robogs.physics.arm.kinematic_model import forward_ee, play_offset
+from robogs.synth.armlogs import KinLogSpec, generate_kinematic_dataset, kin_truth_path
+from robogs.synth.armlogs.dynamics import parse_arm
+from robogs.synth.armlogs.kinematic import urdf_fk
 
 SMALL = {"segments": 3, "duration_s": 4.0, "ee_rate_hz": 40.0}
 """Three trajectories of 4 s, poses at 40 Hz (480 poses): small enough for a fast test."""

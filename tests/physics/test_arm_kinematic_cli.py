@@ -8,12 +8,12 @@ import json
 
 import numpy as np
 
-from converters.ingest.tabular import convert_tabular
-from fixtures.armlogs import ArmLogSpec, KinLogSpec, generate_armlog, generate_kinematic_dataset
-from reference_impl.physics.arm import compare_arm, diagnose_arm
-from robogs_format.cli.main import main
-from robogs_format.dataset import Dataset
-from robogs_format.validate import validate
+from robogs.cli.main import main
+from robogs.convert.ingest.tabular import convert_tabular
+from robogs.format.dataset import Dataset
+from robogs.format.validate import validate
+from robogs.physics.arm import compare_arm, diagnose_arm
+from robogs.synth.armlogs import ArmLogSpec, KinLogSpec, generate_armlog, generate_kinematic_dataset
 
 SMALL = {"segments": 3, "duration_s": 4.0, "ee_rate_hz": 40.0}
 NOISE_LEN_MM = np.sqrt(3) * 0.2

@@ -3,7 +3,7 @@ library's offset chain agree; a dataset recorded on a robot with hidden joint of
 G008, passes after ``robogs fit --add kinematic_offsets``, and fails again when the offsets in
 physics.json are wrong.
 
-Oracles: the hidden offsets and noise of :mod:`fixtures.armlogs.kinematic` (its own numpy
+Oracles: the hidden offsets and noise of :mod:`robogs.synth.armlogs.kinematic` (its own numpy
 forward kinematics); with the true offsets the G008 error is the pose noise alone (0.2 mm per
 axis: the length of a 3-D normal vector, median 0.2 * 1.538 mm).
 """
@@ -15,15 +15,15 @@ import json
 import numpy as np
 import torch
 
-from fixtures.armlogs import KinLogSpec, generate_kinematic_dataset
-from reference_impl.physics.arm.api import open_arm
-from reference_impl.physics.arm.kinematic_model import predict_ee
-from reference_impl.physics.space import ParamSpace
-from robogs_format.cli.main import main
-from robogs_format.dataset import Dataset
-from robogs_format.kinematics import Chain, chain_with_offsets, read_joint_offsets
-from robogs_format.urdf import load_urdf
-from robogs_format.validate import validate
+from robogs.cli.main import main
+from robogs.format.dataset import Dataset
+from robogs.format.kinematics import Chain, chain_with_offsets, read_joint_offsets
+from robogs.format.urdf import load_urdf
+from robogs.format.validate import validate
+from robogs.physics.arm.api import open_arm
+from robogs.physics.arm.kinematic_model import predict_ee
+from robogs.physics.space import ParamSpace
+from robogs.synth.armlogs import KinLogSpec, generate_kinematic_dataset
 
 SMALL = {"segments": 3, "duration_s": 4.0, "ee_rate_hz": 40.0}
 MEDIAN_NOISE_MM = 0.2 * 1.5382

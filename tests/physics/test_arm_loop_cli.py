@@ -8,11 +8,11 @@ import json
 import numpy as np
 import pytest
 
-from converters.ingest.tabular import convert_tabular
-from fixtures.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
-from reference_impl.physics.arm import compare_arm
-from robogs_format.cli.main import main
-from robogs_format.dataset import Dataset
+from robogs.cli.main import main
+from robogs.convert.ingest.tabular import convert_tabular
+from robogs.format.dataset import Dataset
+from robogs.physics.arm import compare_arm
+from robogs.synth.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
 
 
 def _reversal_rows(qd: np.ndarray, t: np.ndarray, half_s: float) -> np.ndarray:

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from fixtures.armlogs.dynamics import parse_arm, world_inverse_dynamics
-from reference_impl.physics.arm.rnea import ArmModel, inertial_vector, inverse_dynamics, regressor
-from robogs_format.errors import InputError
-from robogs_format.kinematics import Chain
-from robogs_format.urdf import load_urdf
+from robogs.format.errors import InputError
+from robogs.format.kinematics import Chain
+from robogs.format.urdf import load_urdf
+from robogs.physics.arm.rnea import ArmModel, inertial_vector, inverse_dynamics, regressor
+from robogs.synth.armlogs.dynamics import parse_arm, world_inverse_dynamics
 
 REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "fixtures" / "real"
 UR5_REAL = REAL / "ur5" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"

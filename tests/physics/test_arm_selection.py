@@ -1,7 +1,7 @@
 """Forward selection of the arm effects: look-alikes of an accepted effect are not reported.
 
 Oracles: the hidden effects (and their parameters) the synthetic logs were generated with by
-the independent inverse dynamics of :mod:`fixtures.armlogs`; for the null of the nested
+the independent inverse dynamics of :mod:`robogs.synth.armlogs`; for the null of the nested
 held-out test, brute-force least squares per fold.
 """
 
@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from converters.ingest.tabular import convert_tabular
-from fixtures.armlogs import ArmLogSpec, generate_armlog
-from reference_impl.physics.arm import diagnose_arm
-from reference_impl.physics.arm.diagnose import _held_sse
+from robogs.convert.ingest.tabular import convert_tabular
+from robogs.physics.arm import diagnose_arm
+from robogs.physics.arm.diagnose import _held_sse
+from robogs.synth.armlogs import ArmLogSpec, generate_armlog
 
 
 def _diagnose(root: Path, urdf: Path, effect: str, seed: int) -> tuple[dict, dict]:

@@ -9,10 +9,10 @@ import pytest
 import torch
 from physics_scenarios import scenario
 
-from reference_impl.physics.diagnose import diagnose_recording
-from reference_impl.physics.effects import Effect, Param, register_effect, unregister_effect
-from reference_impl.physics.recording import as_recording
-from robogs_format.errors import InputError, RobogsError
+from robogs.format.errors import InputError, RobogsError
+from robogs.physics.diagnose import diagnose_recording
+from robogs.physics.effects import Effect, Param, register_effect, unregister_effect
+from robogs.physics.recording import as_recording
 
 CANDIDATES = ["viscous_damping", "table_tilt", "time_offset", "camera_extrinsics"]
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from physics_scenarios import scenario
 
-from reference_impl.physics.engine import Engine
-from reference_impl.physics.fit import Problem, jacobian_fd
-from reference_impl.physics.residuals import residual_fn
+from robogs.physics.engine import Engine
+from robogs.physics.fit import Problem, jacobian_fd
+from robogs.physics.residuals import residual_fn
 
 
 def test_fd_jacobian_matches_central_differences():

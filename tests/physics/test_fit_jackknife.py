@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from reference_impl.physics.effects import Param
-from reference_impl.physics.fit import Problem, fit_problems
-from reference_impl.physics.space import ParamSpace
+from robogs.physics.effects import Param
+from robogs.physics.fit import Problem, fit_problems
+from robogs.physics.space import ParamSpace
 
 
 def _clustered_line(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:

@@ -1,8 +1,8 @@
 """``camera_intrinsics`` from mask boundaries: recovery, null data, fit writes, revert.
 
 The perturbed scene is made by the fixture generator and a mutation, never by the code under
-test: frames and labels are rasterised with the true intrinsics (``fixtures.synth``) and the
-dataset then declares ``fx * 1.03`` and ``cx + 4 px`` (``fixtures.mutations.perturb_intrinsics``).
+test: frames and labels are rasterised with the true intrinsics (``robogs.synth.scene``) and the
+dataset then declares ``fx * 1.03`` and ``cx + 4 px`` (``robogs.synth.mutations.perturb_intrinsics``).
 Tolerances: at 160x120 px over seeds 0-7 (bench/mask_intrinsics.py, 30 frames) dfx came out
 0.0286-0.0317 for 0.03, dcx 3.96-4.05 px for 4 px, and null scenes kept |dfx| <= 0.0013,
 |dcx| <= 0.04 px, |dfy| <= 0.0044 (splat growth that varies along the table's far edge).
@@ -17,17 +17,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fixtures.mutations import perturb_intrinsics
-from reference_impl.physics.api import compare, fit, revert
-from reference_impl.physics.diagnose import DBIC_MAX
-from reference_impl.physics.intrinsics import (
+from robogs.format.dataset import Dataset
+from robogs.physics.api import compare, fit, revert
+from robogs.physics.diagnose import DBIC_MAX
+from robogs.physics.intrinsics import (
     EFFECT_SIZE_MIN,
     HELDOUT_MIN_GAIN,
     corrected_camera,
     diagnose_intrinsics,
     fit_intrinsics,
 )
-from robogs_format.dataset import Dataset
+from robogs.synth.mutations import perturb_intrinsics
 
 FRAMES = 10
 DFX, DCX = 0.03, 4.0
@@ -35,7 +35,7 @@ DFX, DCX = 0.03, 4.0
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from fixtures.synth import synthesize
+    from robogs.synth.scene import synthesize
 
     root = tmp_path_factory.mktemp("intr") / "clean"
     synthesize(root, seed=1, size="small", progress=False)
@@ -128,8 +128,8 @@ def test_fit_writes_the_intrinsics_and_the_boundary_residual_falls(
 def _stripe_frames(shift_px: int, n: int = 6):
     """Frames of a full-width horizontal band (rows 40-79 rendered, moved by ``shift_px`` in the
     recorded labels): its edges are all horizontal, so nothing constrains dfx or dcx."""
-    from reference_impl.physics.masks import RenderedFrame
-    from robogs_format.cameras import CameraModel
+    from robogs.format.cameras import CameraModel
+    from robogs.physics.masks import RenderedFrame
 
     cam = CameraModel("cam", 160, 120, 130.0, 130.0, 80.0, 60.0, T_world_cam=np.eye(4))
     ren = np.zeros((120, 160), np.int64)
@@ -159,7 +159,7 @@ def _stripe_frames(shift_px: int, n: int = 6):
 
 
 def test_parameters_the_edges_cannot_see_are_unidentifiable() -> None:
-    from reference_impl.physics.intrinsics import analyse_contours, contours_of
+    from robogs.physics.intrinsics import analyse_contours, contours_of
 
     f = analyse_contours(contours_of(_stripe_frames(2)))
     assert f.identifiable.tolist() == [False, True, False, True]  # dfx dfy dcx dcy

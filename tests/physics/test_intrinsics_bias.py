@@ -14,9 +14,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reference_impl.physics.intrinsics import analyse_contours, contours_of
-from reference_impl.physics.masks import RenderedFrame
-from robogs_format.cameras import CameraModel
+from robogs.format.cameras import CameraModel
+from robogs.physics.intrinsics import analyse_contours, contours_of
+from robogs.physics.masks import RenderedFrame
 
 W, H, F = 160, 120, 133.0
 

@@ -10,15 +10,15 @@ from pathlib import Path
 import pytest
 from physics_scenarios import scenario
 
-from fixtures.mutations import perturb_intrinsics
-from reference_impl.physics.api import diagnose
-from reference_impl.physics.cli import _effects_table
-from robogs_format.cli.main import main
+from robogs.cli.main import main
+from robogs.physics.api import diagnose
+from robogs.physics.cli import _effects_table
+from robogs.synth.mutations import perturb_intrinsics
 
 
 @pytest.fixture(scope="module")
 def perturbed(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from fixtures.synth import synthesize
+    from robogs.synth.scene import synthesize
 
     root = tmp_path_factory.mktemp("intr_cli") / "scene"
     synthesize(root, seed=2, size="small", progress=False)
@@ -48,7 +48,7 @@ def test_diagnose_json_and_table_carry_the_camera_row(perturbed: Path, capsys) -
 
 
 def test_dataset_without_masks_skips_the_effect_with_the_reason(tmp_path: Path) -> None:
-    from fixtures.scenarios import write_scenario
+    from robogs.synth.scenarios import write_scenario
 
     root = tmp_path / "scn"
     write_scenario(scenario("none"), root)

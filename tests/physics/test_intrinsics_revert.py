@@ -13,10 +13,10 @@ from dataclasses import replace
 
 import pytest
 
-from reference_impl.physics.api import revert
-from robogs_format.cameras import CameraModel
-from robogs_format.dataset import Dataset
-from robogs_format.schemas import schema_problems
+from robogs.format.cameras import CameraModel
+from robogs.format.dataset import Dataset
+from robogs.format.schemas import schema_problems
+from robogs.physics.api import revert
 
 KEYS = ("fx", "fy", "cx", "cy")
 

@@ -1,7 +1,7 @@
 """Mask-boundary stream of ``compare``: small on a clean synthetic scene, the size of the projected
 shift when the recorded object poses are moved, absent (with the reason) without masks.
 
-The scene's label images are rasterised from the meshes by the generator (``fixtures.synth``),
+The scene's label images are rasterised from the meshes by the generator (``robogs.synth.scene``),
 independently of the splat renderer; the oracle of a moved object is the boundary distance of
 its recorded mask against the same mask translated by the pinhole projection of the shift.
 """
@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 from physics_scenarios import scenario
 
-from fixtures.mutations import shift_object_poses
-from reference_impl.physics.api import compare
-from reference_impl.physics.masks import mask_boundary, rendered_frames
-from robogs_format.dataset import Dataset
-from robogs_format.rerender import boundary_distance
+from robogs.format.dataset import Dataset
+from robogs.format.rerender import boundary_distance
+from robogs.physics.api import compare
+from robogs.physics.masks import mask_boundary, rendered_frames
+from robogs.synth.mutations import shift_object_poses
 
 FRAMES = 6
 SHIFT_MM = -30.0  # along world x: about 3 px at the 160x120 camera, 1 m from the box
@@ -29,7 +29,7 @@ SHIFT_MM = -30.0  # along world x: about 3 px at the 160x120 camera, 1 m from th
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from fixtures.synth import synthesize
+    from robogs.synth.scene import synthesize
 
     root = tmp_path_factory.mktemp("masks") / "clean"
     synthesize(root, seed=0, size="small", progress=False)
@@ -130,7 +130,7 @@ def test_compare_renders_the_model_poses_and_reports_the_stream(scene: Path, shi
 
 
 def test_dataset_without_masks_says_why(tmp_path: Path) -> None:
-    from fixtures.scenarios import write_scenario
+    from robogs.synth.scenarios import write_scenario
 
     root = tmp_path / "scn"
     write_scenario(scenario("none"), root)

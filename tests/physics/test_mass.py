@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from physics_scenarios import scenario
 
-from reference_impl.physics import api
-from reference_impl.physics.diagnose import diagnose_recording
+from robogs.physics import api
+from robogs.physics.diagnose import diagnose_recording
 
 
 def test_mass_is_unidentifiable_from_poses_and_never_written(tmp_path):

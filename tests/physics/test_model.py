@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from reference_impl.physics.effects import Param, get_effect
-from reference_impl.physics.model import BoxScene, Drive, simulate
-from reference_impl.physics.space import ParamSpace
+from robogs.physics.effects import Param, get_effect
+from robogs.physics.model import BoxScene, Drive, simulate
+from robogs.physics.space import ParamSpace
 
 F = torch.float64
 SCENE = BoxScene(

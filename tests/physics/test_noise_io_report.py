@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from physics_scenarios import scenario
 
-from fixtures.scenarios import read_truth, truth_path, write_scenario
-from reference_impl.physics import api
-from reference_impl.physics.prepare import prepare
-from reference_impl.physics.recording import load_recording
-from robogs_format.dataset import Dataset
-from robogs_format.errors import InputError
+from robogs.format.dataset import Dataset
+from robogs.format.errors import InputError
+from robogs.physics import api
+from robogs.physics.prepare import prepare
+from robogs.physics.recording import load_recording
+from robogs.synth.scenarios import read_truth, truth_path, write_scenario
 
 
 def test_noise_is_estimated_from_the_data():

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from reference_impl.physics.arm.kinematic_model import play_scan
+from robogs.physics.arm.kinematic_model import play_scan
 
 
 def _loop(x0: np.ndarray, q: np.ndarray, w: np.ndarray) -> np.ndarray:

@@ -14,13 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reference_impl.physics.recording import load_recording
-from robogs_format.errors import FormatError
+from robogs.format.errors import FormatError
+from robogs.physics.recording import load_recording
 
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from fixtures.synth import synthesize
+    from robogs.synth.scene import synthesize
 
     root = tmp_path_factory.mktemp("fk") / "scene"
     synthesize(root, seed=0, size="small", progress=False)

@@ -6,15 +6,15 @@ from dataclasses import dataclass
 
 import pytest
 
-from reference_impl.physics import effects as fx
-from reference_impl.physics.effects import (
+from robogs.format.errors import InputError
+from robogs.physics import effects as fx
+from robogs.physics.effects import (
     Effect,
     Param,
     available_effects,
     get_effect,
     register_effect,
 )
-from robogs_format.errors import InputError
 
 
 def test_builtin_catalogue():

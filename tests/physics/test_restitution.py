@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 from physics_scenarios import scenario
 
-from reference_impl.physics.diagnose import diagnose_recording
+from robogs.physics.diagnose import diagnose_recording
 
 
 def test_restitution_is_found_from_drops():

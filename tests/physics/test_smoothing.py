@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import savgol_filter
 
-from reference_impl.physics.smoothing import local_polynomial
+from robogs.physics.smoothing import local_polynomial
 
 
 def _stamps(n: int = 400, rate: float = 500.0, seed: int = 0) -> np.ndarray:

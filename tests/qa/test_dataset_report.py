@@ -7,13 +7,13 @@ from pathlib import Path
 
 import pytest
 
-from robogs_format import Dataset
-from robogs_format.qa.dataset_report import write_dataset_report
+from robogs.format import Dataset
+from robogs.format.qa.dataset_report import write_dataset_report
 
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
-    from fixtures.synth import synthesize
+    from robogs.synth.scene import synthesize
 
     out = tmp_path_factory.mktemp("qa") / "scene"
     synthesize(out, seed=1, size="small", progress=False)

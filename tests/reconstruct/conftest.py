@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from fixtures.multiview import MultiviewTruth, synthesize_multiview
+from robogs.synth.multiview import MultiviewTruth, synthesize_multiview
 
 
 @pytest.fixture(autouse=True)

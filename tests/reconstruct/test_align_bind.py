@@ -7,9 +7,9 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from reference_impl.reconstruct.align import Similarity, align_to_meshes, umeyama
-from reference_impl.reconstruct.bind import bind_to_mesh, bound_positions
-from robogs_format.errors import InputError
+from robogs.format.errors import InputError
+from robogs.reconstruct.align import Similarity, align_to_meshes, umeyama
+from robogs.reconstruct.bind import bind_to_mesh, bound_positions
 
 
 def _sim(seed: int, scale: float, deg: float, t_mm: float) -> Similarity:

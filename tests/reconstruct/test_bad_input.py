@@ -9,11 +9,11 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from reference_impl.reconstruct.views import load_capture
-from robogs_format.cli.main import main
-from robogs_format.dataset import Dataset
-from robogs_format.errors import InputError, RobogsError
-from robogs_format.images import encode_label_png
+from robogs.cli.main import main
+from robogs.format.dataset import Dataset
+from robogs.format.errors import InputError, RobogsError
+from robogs.format.images import encode_label_png
+from robogs.reconstruct.views import load_capture
 
 EP = "static"
 CAM = "orbit"
@@ -32,7 +32,7 @@ def test_the_clean_capture_loads(capture_copy: Path):
 
 
 def test_views_without_poses(capture_copy: Path):
-    from robogs_format.dataset import read_parquet
+    from robogs.format.dataset import read_parquet
 
     ds = Dataset.open(capture_copy)
     ext = read_parquet(ds.resolve(f"{BASE}/extrinsics.parquet"))
@@ -91,7 +91,7 @@ def test_empty_masks(capture_copy: Path):
 def test_one_empty_mask_is_named(capture_copy: Path):
     # an empty mask would carve the whole visual hull in its view: it is refused, not ignored
     ds = Dataset.open(capture_copy)
-    from robogs_format.dataset import read_parquet
+    from robogs.format.dataset import read_parquet
 
     tab = read_parquet(ds.resolve(f"{BASE}/labels.parquet"))
     png = tab.column("png").to_pylist()
@@ -142,7 +142,7 @@ def test_cli_reports_bad_input_in_one_line(capture_copy: Path, capsys: pytest.Ca
 
 
 def test_evaluate_without_splats_is_refused(capture_copy: Path):
-    from reference_impl.reconstruct.evaluate import evaluate
+    from robogs.reconstruct.evaluate import evaluate
 
     with pytest.raises(RobogsError, match="no splats"):
         evaluate(capture_copy, heldout_every=4)

@@ -12,9 +12,9 @@ import math
 import numpy as np
 import torch
 
-from reference_impl.reconstruct.carve import carve_photo_hull
-from reference_impl.reconstruct.views import View
-from robogs_format.render import Camera
+from robogs.format.render import Camera
+from robogs.reconstruct.carve import carve_photo_hull
+from robogs.reconstruct.views import View
 
 W, H, F = 96, 72, 90.0
 HALF, TILE = 0.3, 0.1

@@ -10,11 +10,11 @@ import pyarrow as pa
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fixtures.multiview import synthesize_multiview
-from reference_impl.reconstruct.align import Similarity
-from robogs_format.cli.main import main
-from robogs_format.dataset import Dataset, read_parquet
-from robogs_format.frames import matrix_to_quat, quat_to_matrix
+from robogs.cli.main import main
+from robogs.format.dataset import Dataset, read_parquet
+from robogs.format.frames import matrix_to_quat, quat_to_matrix
+from robogs.reconstruct.align import Similarity
+from robogs.synth.multiview import synthesize_multiview
 
 EXT = "episodes/static/cameras/orbit/extrinsics.parquet"
 

@@ -1,6 +1,6 @@
 """Reconstruct the procedural two-link scene and measure it against its ground truth.
 
-Scene: ``fixtures.multiview`` (two-link arm on a base and a box; 40 views of 128x96 px on a
+Scene: ``robogs.synth.multiview`` (two-link arm on a base and a box; 40 views of 128x96 px on a
 sphere around it, every 8th held out; rasterised by the fixture's own triangle rasteriser).
 Targets (the reconstructor's acceptance thresholds): held-out PSNR >= 28 dB, F-score at 1 % of
 the bounding-box diagonal >= 0.9 against the visible true surface, link/object label mIoU >= 0.9
@@ -15,14 +15,14 @@ import json
 import numpy as np
 import pytest
 
-from fixtures.multiview import synthesize_multiview
-from reference_impl.reconstruct.evaluate import evaluate
-from reference_impl.reconstruct.mesh_metrics import point_metrics, sample_mesh
-from reference_impl.reconstruct.pipeline import ReconstructOptions, reconstruct
-from reference_impl.reconstruct.train import TrainConfig
-from robogs_format.cli.main import main
-from robogs_format.dataset import Dataset
-from robogs_format.validate import validate
+from robogs.cli.main import main
+from robogs.format.dataset import Dataset
+from robogs.format.validate import validate
+from robogs.reconstruct.evaluate import evaluate
+from robogs.reconstruct.mesh_metrics import point_metrics, sample_mesh
+from robogs.reconstruct.pipeline import ReconstructOptions, reconstruct
+from robogs.reconstruct.train import TrainConfig
+from robogs.synth.multiview import synthesize_multiview
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +95,7 @@ def test_binding_and_written_dataset(scene):
     prov = ds.manifest["provenance"]["reconstruction"]
     assert prov["heldout"] == report.views_heldout and prov["report"]["iterations"] == 200
     # the box mesh is stored in its own frame: posed at its rest pose it lies on the true box
-    from robogs_format.frames import quat_to_matrix
+    from robogs.format.frames import quat_to_matrix
 
     pose = np.asarray(robot["rest"]["object_poses"]["box"])
     T = np.eye(4)
@@ -128,7 +128,7 @@ def test_link_parts_are_segmented_and_stored_in_their_link_frames(scene):
     # identity visual origins)
     import trimesh
 
-    from fixtures.multiview.two_link import two_link_robot
+    from robogs.synth.multiview.two_link import two_link_robot
 
     root, _, report, _ = scene
     meshes = two_link_robot().meshes

@@ -9,7 +9,7 @@ import pytest
 import torch
 from skimage.metrics import structural_similarity
 
-from reference_impl.reconstruct.image_metrics import gaussian_window, label_iou, psnr, ssim
+from robogs.reconstruct.image_metrics import gaussian_window, label_iou, psnr, ssim
 
 
 def test_ssim_matches_skimage_gaussian_window():

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from reference_impl.reconstruct.init import InitConfig, initial_points, initial_tensors
-from reference_impl.reconstruct.views import load_capture
-from robogs_format.dataset import Dataset
+from robogs.format.dataset import Dataset
+from robogs.reconstruct.init import InitConfig, initial_points, initial_tensors
+from robogs.reconstruct.views import load_capture
 
 LINKS = ("base_link", "link1", "link2")
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from reference_impl.reconstruct.mesh_metrics import (
+from robogs.reconstruct.mesh_metrics import (
     COMPAT_TAU_M,
     mesh_metrics,
     point_metrics,

@@ -9,11 +9,11 @@ from shutil import copytree
 import pytest
 import torch
 
-from reference_impl.reconstruct.densify import DensifyConfig
-from reference_impl.reconstruct.pipeline import ReconstructOptions, reconstruct
-from reference_impl.reconstruct.train import TrainConfig
-from robogs_format.dataset import Dataset
-from robogs_format.errors import InputError
+from robogs.format.dataset import Dataset
+from robogs.format.errors import InputError
+from robogs.reconstruct.densify import DensifyConfig
+from robogs.reconstruct.pipeline import ReconstructOptions, reconstruct
+from robogs.reconstruct.train import TrainConfig
 
 
 def _options(work: Path) -> ReconstructOptions:
@@ -75,7 +75,7 @@ def test_interrupt_keeps_the_dataset_and_resume_matches_an_uninterrupted_run(
     assert resumed.refinements == fresh.refinements  # the refinement counts are checkpointed
 
     # Ctrl-C after training (here: in the TSDF fusion) resumes without training again
-    import reference_impl.reconstruct.pipeline as pipeline
+    import robogs.reconstruct.pipeline as pipeline
 
     fuse = pipeline.fuse_tsdf
 

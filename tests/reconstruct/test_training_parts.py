@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from reference_impl.reconstruct.densify import DensifyConfig, GradientStats, refine
-from reference_impl.reconstruct.losses import depth_distortion, depth_normals
-from reference_impl.reconstruct.model import PARAM_NAMES, GaussianModel, LearningRates
-from robogs_format.frames import quat_to_matrix
-from robogs_format.render import Camera
+from robogs.format.frames import quat_to_matrix
+from robogs.format.render import Camera
+from robogs.reconstruct.densify import DensifyConfig, GradientStats, refine
+from robogs.reconstruct.losses import depth_distortion, depth_normals
+from robogs.reconstruct.model import PARAM_NAMES, GaussianModel, LearningRates
 
 
 def test_distortion_equals_the_pairwise_sum():
@@ -136,8 +136,8 @@ def test_progress_bar_shows_the_running_psnr():
 
     from rich.console import Console
 
-    from reference_impl.reconstruct.train import TrainConfig, train
-    from reference_impl.reconstruct.views import View
+    from robogs.reconstruct.train import TrainConfig, train
+    from robogs.reconstruct.views import View
 
     cam = Camera(
         width=16,

@@ -9,10 +9,10 @@ import pytest
 import torch
 import trimesh
 
-from reference_impl.reconstruct.mesh_clean import clean_mesh
-from reference_impl.reconstruct.mesh_metrics import point_metrics
-from reference_impl.reconstruct.tsdf import extract_mesh, fuse_tsdf
-from robogs_format.render import Camera
+from robogs.format.render import Camera
+from robogs.reconstruct.mesh_clean import clean_mesh
+from robogs.reconstruct.mesh_metrics import point_metrics
+from robogs.reconstruct.tsdf import extract_mesh, fuse_tsdf
 
 W, H, F = 64, 48, 60.0
 
@@ -134,7 +134,7 @@ def test_inner_shell_appears_without_erosion_and_cleaning_removes_it(sphere_volu
 
 
 def test_empty_depths_are_refused():
-    from robogs_format.errors import InputError
+    from robogs.format.errors import InputError
 
     cams = _cameras(3)
     with pytest.raises(InputError, match="no depth map has a valid pixel"):

@@ -8,7 +8,7 @@ from collections.abc import Callable
 import pytest
 import torch
 
-from robogs_format.render import Camera, Gaussians
+from robogs.format.render import Camera, Gaussians
 
 
 def random_gaussians(

@@ -8,8 +8,8 @@ from importlib import metadata
 import pytest
 import torch
 
-from robogs_format.errors import RobogsError
-from robogs_format.render import available_backends, backends, pipeline, register_backend, render
+from robogs.format.errors import RobogsError
+from robogs.format.render import available_backends, backends, pipeline, register_backend, render
 
 
 def test_builtin_backends_are_listed():
@@ -45,7 +45,7 @@ def test_unknown_backend_raises(make_gaussians, make_camera):
 
 def test_entry_points_are_loaded(monkeypatch, make_gaussians, make_camera):
     good = metadata.EntryPoint(
-        "ep-dense", "robogs_format.render.dense:render_dense", backends.ENTRY_POINT_GROUP
+        "ep-dense", "robogs.format.render.dense:render_dense", backends.ENTRY_POINT_GROUP
     )
     broken = metadata.EntryPoint("ep-broken", "no_such_module_xyz:fn", backends.ENTRY_POINT_GROUP)
     monkeypatch.setattr(

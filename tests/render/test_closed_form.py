@@ -9,9 +9,9 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from robogs_format.frames import quat_to_matrix as quat_to_rotmat
-from robogs_format.render import Camera, Gaussians, RenderConfig, eval_sh, render
-from robogs_format.render.sh import SH_C0, sh_basis
+from robogs.format.frames import quat_to_matrix as quat_to_rotmat
+from robogs.format.render import Camera, Gaussians, RenderConfig, eval_sh, render
+from robogs.format.render.sh import SH_C0, sh_basis
 
 F64 = torch.float64
 

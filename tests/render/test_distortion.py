@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import torch
 
-from robogs_format.render import RenderConfig, render
-from robogs_format.render.dense import render_dense
-from robogs_format.render.distortion import distort_points, pinhole_render_camera, undistort_points
+from robogs.format.render import RenderConfig, render
+from robogs.format.render.dense import render_dense
+from robogs.format.render.distortion import distort_points, pinhole_render_camera, undistort_points
 
 PLUMB_BOB = (-0.28, 0.09, 0.0012, -0.0008, -0.012)
 FISHEYE = (0.05, -0.012, 0.003, -0.0005)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from robogs_format.render import RenderConfig, available_backends, render
+from robogs.format.render import RenderConfig, available_backends, render
 
 FAST = ["torch"] + [b for b in ("numba",) if available_backends().get(b) == "ok"]
 FIELDS = ("rgb", "alpha", "depth_expected", "depth_median", "normals", "extra")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from robogs_format.render import Gaussians, RenderConfig, render
+from robogs.format.render import Gaussians, RenderConfig, render
 
 
 @pytest.mark.parametrize("kind", ["3dgs", "2dgs"])

@@ -14,7 +14,7 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from robogs_format.render import Camera, Gaussians, RenderConfig, render
+from robogs.format.render import Camera, Gaussians, RenderConfig, render
 
 FX, FY, CX, CY, W, H = 40.0, 42.0, 12.3, 9.8, 24, 20
 

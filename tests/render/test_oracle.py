@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from robogs_format.render import RenderConfig, render
+from robogs.format.render import RenderConfig, render
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 FIELDS = ("rgb", "alpha", "depth_expected", "depth_median", "normals", "extra")

@@ -9,7 +9,7 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from robogs_format.render import Camera, Gaussians, RenderConfig, render
+from robogs.format.render import Camera, Gaussians, RenderConfig, render
 
 F64 = torch.float64
 

@@ -8,8 +8,8 @@ from dataclasses import replace
 import pytest
 import torch
 
-from robogs_format.errors import InputError, RobogsError
-from robogs_format.render import (
+from robogs.format.errors import InputError, RobogsError
+from robogs.format.render import (
     RenderConfig,
     RenderInputError,
     render,

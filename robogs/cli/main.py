@@ -1,0 +1,119 @@
+"""``robogs <verb>`` entry point.
+
+Each verb lives in its own module, imported only when used, exposing
+``add_arguments(parser)`` and ``run(args) -> int``. Exit codes: 0 clean,
+1 findings at or above ``--fail-on`` (or a failed comparison), 2 usage error or
+unreadable input. A ``RobogsError`` is printed as one line, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from robogs.format.errors import RobogsError
+
+__all__ = ["main", "validate_main", "VERBS"]
+
+#: verb -> (module implementing it, one-line help)
+VERBS: dict[str, tuple[str, str]] = {
+    "synth": (
+        "robogs.synth.scene.cli",
+        "generate a synthetic scene (optionally with a hidden physical effect)",
+    ),
+    "validate": ("robogs.cli.validate_cmd", "check a dataset against the spec"),
+    "convert": (
+        "robogs.convert.cli",
+        "convert a bag, MCAP, video, capture or joint log into a dataset",
+    ),
+    "export": (
+        "robogs.convert.export_cli",
+        "export a dataset to URDF, USD, MCAP, splat PLY or Rerun",
+    ),
+    "view": ("robogs.convert.view_cli", "write a Rerun recording of a dataset and open it"),
+    "compare": (
+        "robogs.physics.cli",
+        "residuals of the physics model against the measurements",
+    ),
+    "diagnose": ("robogs.physics.cli", "rank the physical effects the model is missing"),
+    "fit": ("robogs.physics.cli", "add effects, refit and write a new physics revision"),
+    "report": ("robogs.physics.cli", "HTML report with residual plots before and after"),
+    "reconstruct": (
+        "robogs.reconstruct.cli",
+        "fill splats, meshes and binding from multi-view frames",
+    ),
+    "evaluate": ("robogs.reconstruct.cli", "image and mesh quality metrics"),
+    "demo": (
+        "robogs.cli.demo_cmd",
+        "synthesise the default scene, validate it and write the report",
+    ),
+}
+
+
+def _load(verb: str):
+    module_name, _ = VERBS[verb]
+    try:
+        return importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        raise RobogsError(
+            f"'{verb}' is not available in this installation ({exc.name} missing)",
+            hint="reinstall robogs with its dependencies",
+        ) from None
+
+
+def _parser(verbs: Sequence[str]) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="robogs", description="Real2Sim digital twins of robot-arm scenes."
+    )
+    sub = parser.add_subparsers(dest="verb", metavar="VERB")
+    for verb in verbs:
+        _, help_text = VERBS[verb]
+        p = sub.add_parser(verb, help=help_text, description=help_text)
+        p.set_defaults(_verb=verb)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``robogs VERB ...``; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = _parser(list(VERBS))
+    if not argv or argv[0] in ("-h", "--help") or argv[0] not in VERBS:
+        if argv and argv[0] not in ("-h", "--help"):
+            print(
+                f"robogs: unknown verb {argv[0]!r}; choose from {', '.join(VERBS)}", file=sys.stderr
+            )
+            return 2
+        parser.print_help()
+        return 0 if argv else 2
+    verb = argv[0]
+    try:
+        module = _load(verb)
+        p = argparse.ArgumentParser(prog=f"robogs {verb}", description=VERBS[verb][1])
+        if hasattr(module, "add_arguments_for"):
+            module.add_arguments_for(verb, p)
+        else:
+            module.add_arguments(p)
+        try:
+            args = p.parse_args(argv[1:])
+        except SystemExit as exc:  # argparse prints its own usage message
+            return 0 if exc.code == 0 else 2
+        args.verb = verb
+        return int(module.run(args) or 0)
+    except RobogsError as exc:
+        print(f"robogs {verb}: error: {exc.one_line()}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"robogs {verb}: interrupted; nothing was changed", file=sys.stderr)
+        return 130
+
+
+def validate_main(argv: Sequence[str] | None = None) -> int:
+    """``robogs-validate DATASET`` — the short form of ``robogs validate``."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    return main(["validate", *argv])
+
+
+def _entry() -> None:  # pragma: no cover - console script shim
+    sys.exit(main())

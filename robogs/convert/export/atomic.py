@@ -1,0 +1,76 @@
+"""Atomic output: write a hidden temporary sibling, then rename it into place.
+
+The temporary path sits in the same folder as the output (same filesystem, so the final
+``os.rename`` is atomic) and keeps the output's suffix, so libraries that choose an encoding
+from the file name (USD's ``.usda``/``.usdc``, Rerun's ``.rrd``) behave as for the final path.
+If the block raises, the temporary path is removed and the output is untouched. An existing
+output is replaced only with ``force``; it is moved aside first and deleted after the swap.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from robogs.format.errors import DatasetExistsError, InputError
+
+__all__ = ["atomic_output"]
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    elif path.exists() or path.is_symlink():
+        path.unlink(missing_ok=True)
+
+
+@contextmanager
+def atomic_output(out: str | Path, *, folder: bool, force: bool = False) -> Iterator[Path]:
+    """Yield a temporary path to write; rename it to ``out`` when the block succeeds.
+
+    Args:
+        out: the final file or folder.
+        folder: create the temporary path as an (empty) folder; otherwise it is a file path
+            that does not exist yet.
+        force: replace an existing ``out``.
+
+    Raises:
+        DatasetExistsError: ``out`` exists and ``force`` is False (checked before any work).
+        InputError: the parent folder of ``out`` does not exist.
+    """
+    out = Path(out).absolute()
+    parent = out.parent
+    if not parent.is_dir():
+        raise InputError(
+            "parent folder of the output does not exist", path=parent, hint="create it first"
+        )
+    if (out.exists() or out.is_symlink()) and not force:
+        raise DatasetExistsError(
+            "output already exists", path=out, hint="choose another path or pass --force"
+        )
+    tag = uuid.uuid4().hex[:8]
+    tmp = parent / f".{out.stem}.tmp-{tag}{out.suffix}"
+    if folder:
+        tmp.mkdir()
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise InputError("the exporter wrote nothing", path=out)
+        old = None
+        if out.exists() or out.is_symlink():
+            old = parent / f".{out.stem}.old-{tag}{out.suffix}"
+            os.rename(out, old)
+        try:
+            os.rename(tmp, out)
+        except OSError:
+            if old is not None:
+                os.rename(old, out)
+            raise
+        if old is not None:
+            _remove(old)
+    finally:
+        _remove(tmp)

@@ -1,0 +1,183 @@
+"""Export all splats of a dataset, posed at one time, as one PLY in the plain 3DGS layout.
+
+The file is what the reference 3DGS code (graphdeco-inria/gaussian-splatting,
+``GaussianModel.save_ply``) writes and what standard viewers read: binary little-endian,
+one ``vertex`` element, float32 properties in the order
+
+    x y z nx ny nz f_dc_0 f_dc_1 f_dc_2 f_rest_0 .. f_rest_{3(K-1)-1} opacity
+    scale_0 scale_1 scale_2 rot_0 rot_1 rot_2 rot_3
+
+(``f_rest`` channel-major, opacity a logit, log-scales, ``rot`` = (w, x, y, z); normals 0).
+
+* The robot's and every asset's Gaussians are merged; SH of lower degree is zero-padded to
+  the highest degree present.
+* 2DGS surfels get a third log-scale of ``FLAT_LOG_SCALE`` = log(1e-7 m): a flat Gaussian
+  whose thin axis is the surfel normal (the rotation's third column), as 3DGS viewers need.
+* ``t_ns=None`` writes the stored rest state unchanged; a stamp poses every bound Gaussian
+  with :class:`robogs.format.binding.Binding` (links by forward kinematics of the
+  interpolated joint states, objects by their interpolated pose, SH rotated with them).
+* ``with_binding=True`` appends ``bind_id bind_face bind_u bind_v bind_offset`` (int32,
+  int32, float32 x3; names that cannot collide with the ``scale_``/``rot`` prefixes) and a
+  header comment ``robogs_targets [...]`` (JSON list) giving the merged ``bind_id`` targets.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from robogs.format import Dataset
+from robogs.format.errors import InputError
+
+from . import ExportReport, register_exporter
+
+__all__ = ["FLAT_LOG_SCALE", "export_ply", "ply_property_names"]
+
+FLAT_LOG_SCALE = math.log(1e-7)
+_BINDING = [
+    ("bind_id", "<i4"),
+    ("bind_face", "<i4"),
+    ("bind_u", "<f4"),
+    ("bind_v", "<f4"),
+    ("bind_offset", "<f4"),
+]
+
+
+def ply_property_names(sh_coeffs: int, *, with_binding: bool = False) -> list[str]:
+    """The property names, in file order, for ``sh_coeffs`` SH coefficients per channel."""
+    names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+    names += [f"f_rest_{i}" for i in range(3 * (sh_coeffs - 1))]
+    names += ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    if with_binding:
+        names += [n for n, _ in _BINDING]
+    return names
+
+
+def _owners(ds: Dataset) -> list[str]:
+    owners = ["robot"] if "splats" in (ds.manifest.get("robot") or {}) else []
+    return owners + [name for name, entry in sorted(ds.assets.items()) if "splats" in entry]
+
+
+def _posed(ds: Dataset, owner: str, t_ns: int | None, episode: str | None) -> dict[str, np.ndarray]:
+    s = ds.splats(owner)
+    part = {
+        "means": s.means,
+        "quats": s.quats,
+        "log_scales": s.log_scales,
+        "opacity": s.opacity_logits,
+        "sh": s.sh,
+    }
+    if t_ns is not None:
+        import torch
+
+        from robogs.format.binding import Binding
+
+        g = Binding(ds, episode, owners=[owner], dtype=torch.float64).pose(int(t_ns))
+        part.update(means=g.means.numpy(), quats=g.quats.numpy(), sh=g.sh.numpy())
+    return part
+
+
+def export_ply(
+    ds: Dataset,
+    out: Path,
+    *,
+    t_ns: int | None = None,
+    episode: str | None = None,
+    with_binding: bool = False,
+) -> ExportReport:
+    """Write the merged splats of ``ds`` as one 3DGS PLY.
+
+    Args:
+        ds: the dataset (must hold splats).
+        out: output ``.ply`` file.
+        t_ns: dataset time to pose the Gaussians at; None = their stored rest state.
+        episode: episode whose streams pose them (default: the only one).
+        with_binding: append the binding columns.
+
+    Returns:
+        The report; ``facts`` has ``gaussians``, ``sh_degree`` and per-owner counts.
+    """
+    owners = _owners(ds)
+    if not owners:
+        raise InputError(
+            "dataset has no splats (no robot.splats or assets.*.splats in the manifest)",
+            path=ds.manifest_path,
+            hint="the ply export needs reconstructed splats",
+        )
+    parts, targets, counts = [], [], {}
+    for owner in owners:
+        entry = ds.splat_entry(owner)
+        part = _posed(ds, owner, t_ns, episode)
+        s = ds.splats(owner)
+        part["bind_id"] = np.where(s.bind_id >= 0, s.bind_id + len(targets), -1).astype(np.int32)
+        part.update(bind_face=s.bind_face, bind_uv=s.bind_uv, bind_offset=s.bind_offset)
+        targets += list(entry.get("targets", []))
+        counts[owner] = len(s)
+        parts.append(part)
+    k = max(p["sh"].shape[1] for p in parts)
+    n = sum(len(p["means"]) for p in parts)
+
+    def cat(key: str) -> np.ndarray:
+        return np.concatenate([p[key] for p in parts])
+
+    sh = np.concatenate(
+        [np.pad(p["sh"], ((0, 0), (0, k - p["sh"].shape[1]), (0, 0))) for p in parts]
+    )
+    scales = np.concatenate(
+        [p["log_scales"] if p["log_scales"].shape[1] == 3
+         else np.concatenate([p["log_scales"], np.full((len(p["log_scales"]), 1), FLAT_LOG_SCALE)], 1)
+         for p in parts]
+    )  # fmt: skip
+    names = ply_property_names(k, with_binding=with_binding)
+    dtype = np.dtype([(nm, dict(_BINDING).get(nm, "<f4")) for nm in names])
+    arr = np.zeros(n, dtype=dtype)
+    means, quats = cat("means"), cat("quats")
+    for i, c in enumerate("xyz"):
+        arr[c] = means[:, i]
+    for i in range(3):
+        arr[f"f_dc_{i}"] = sh[:, 0, i]
+    rest = sh[:, 1:, :].transpose(0, 2, 1).reshape(n, -1)  # channel-major
+    for i in range(rest.shape[1]):
+        arr[f"f_rest_{i}"] = rest[:, i]
+    arr["opacity"] = cat("opacity")
+    for i in range(3):
+        arr[f"scale_{i}"] = scales[:, i]
+    for i in range(4):
+        arr[f"rot_{i}"] = quats[:, i]
+    if with_binding:
+        arr["bind_id"] = cat("bind_id")
+        arr["bind_face"] = cat("bind_face")
+        uv = cat("bind_uv")
+        arr["bind_u"], arr["bind_v"] = uv[:, 0], uv[:, 1]
+        arr["bind_offset"] = cat("bind_offset")
+    header = [
+        "ply",
+        "format binary_little_endian 1.0",
+        f"comment robogs export of {ds.name}; rot_* is (w,x,y,z); "
+        + ("rest state" if t_ns is None else f"posed at t_ns {int(t_ns)}"),
+    ]
+    if with_binding:
+        header.append("comment robogs_targets " + json.dumps(targets, ensure_ascii=True))
+    header += [f"element vertex {n}"]
+    header += [f"property {'int' if t == '<i4' else 'float'} {nm}" for nm, t in dtype.descr]
+    header += ["end_header"]
+    with open(out, "wb") as fh:
+        fh.write(("\n".join(header) + "\n").encode("ascii"))
+        fh.write(arr.tobytes())
+    return ExportReport(
+        out=out,
+        files=[out.name],
+        facts={"gaussians": n, "sh_degree": int(round(math.sqrt(k))) - 1, "owners": counts},
+    )
+
+
+register_exporter(
+    "ply",
+    export_ply,
+    output="file",
+    suffix=".ply",
+    help="all splats posed at one time, merged into one standard 3DGS PLY",
+)

@@ -1,0 +1,115 @@
+"""``convert_path``: detect the source format, run its converter, commit the dataset atomically.
+
+The dataset is built in the writer's temp folder; if anything fails (a corrupt file, a bad
+calibration, Ctrl-C) the temp folder is discarded and ``out`` is left as it was. An existing
+``out`` is replaced only with ``force=True``, and never when it is not a robogs dataset or
+when the source lies inside it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from robogs.format.dataset import MANIFEST_NAME, Dataset
+from robogs.format.errors import DatasetExistsError, InputError
+
+from ..registry import Converter, detect_format, get_converter
+from .context import ConvertOptions, IngestContext
+from .progress import ProgressReporter
+from .provenance import Provenance
+from .robot import attach_robot, attach_robot_description, urdf_root_link
+
+__all__ = ["convert_path"]
+
+
+def _check_target(src: Path, out: Path, force: bool) -> None:
+    out_r, src_r = out.resolve(), src.resolve()
+    if out_r == src_r or out_r in src_r.parents:
+        raise InputError(
+            "the output folder would contain or replace the source",
+            path=out,
+            hint="choose an output outside the source",
+        )
+    if not out.exists() and not out.is_symlink():
+        return
+    if not force:
+        raise DatasetExistsError(
+            "output already exists",
+            path=out,
+            hint="choose another path or pass --force to replace it",
+        )
+    if out.is_symlink() or not out.is_dir():
+        raise InputError("output exists and is not a folder; refusing to replace it", path=out)
+    if any(out.iterdir()) and not (out / MANIFEST_NAME).is_file():
+        raise InputError(
+            "output folder exists and is not a robogs dataset; refusing to replace it",
+            path=out,
+            hint="remove it yourself or choose another path",
+        )
+
+
+def convert_path(
+    src: str | Path,
+    out: str | Path,
+    *,
+    fmt: str | None = None,
+    options: ConvertOptions | None = None,
+    force: bool = False,
+) -> Dataset:
+    """Convert ``src`` into a new dataset at ``out``.
+
+    Args:
+        src: bag, MCAP, video, image folder, nerfstudio or COLMAP capture.
+        out: dataset folder to create.
+        fmt: source format name (default: detected from ``src``).
+        options: conversion options.
+        force: replace an existing dataset at ``out``.
+
+    Returns:
+        The committed dataset, opened for reading.
+
+    Raises:
+        RobogsError: unusable input (naming file, topic and stamp where known), an existing
+            output without ``force``; nothing is written in that case.
+    """
+    src, out = Path(src), Path(out)
+    opts = options or ConvertOptions()
+    conv: Converter = get_converter(fmt) if fmt else detect_format(src)
+    if not src.exists():
+        raise InputError("source does not exist", path=src)
+    _check_target(src, out, force)
+    prov = Provenance(conv.name, src.name)
+    writer = Dataset.create(out, overwrite=force)
+    ctx = IngestContext(writer, opts, prov, ProgressReporter(opts.progress))
+    with writer:
+        if opts.urdf is not None:
+            ctx.robot_root_link = urdf_root_link(opts.urdf)
+        conv.convert(src, ctx)
+        if opts.urdf is not None:
+            attach_robot(ctx, opts.urdf, package_roots=opts.package_roots)
+        elif ctx.robot_description:
+            attach_robot_description(ctx, ctx.robot_description, package_roots=opts.package_roots)
+        else:
+            prov.note("no robot: pass --urdf to add one (the source has no robot_description)")
+        if ctx.streams:
+            assert ctx.start_ns is not None and ctx.end_ns is not None
+            writer.add_episode(
+                opts.episode,
+                start_ns=ctx.start_ns,
+                end_ns=ctx.end_ns,
+                streams=ctx.streams,
+                segment=src.name,
+            )
+        elif not writer.manifest.get("cameras") and not writer.manifest.get("episodes"):
+            raise InputError(
+                "nothing was converted (every message was dropped)",
+                path=src,
+                where="; ".join(f"{i['topic']}: {i['problem']}" for i in prov.issues[:3]) or None,
+                hint="see the roles with --topic/--map",
+            )
+        if ctx.clock:
+            writer.manifest["conventions"]["clock"] = ctx.clock
+        writer.manifest["provenance"] = prov.to_dict()
+        if opts.command:
+            writer.manifest["generator"] = {"command": opts.command[:2000]}
+        return writer.commit()

@@ -1,0 +1,150 @@
+"""Copy a robot URDF and its meshes into ``robot/`` of the dataset being written.
+
+Mesh URIs (``package://NAME/...`` or relative) are resolved with
+:func:`robogs.format.urdf.resolve_mesh_uri`, which refuses anything outside the allowed roots.
+Each mesh is copied under ``robot/meshes/`` keeping its path relative to the deepest folder
+common to all meshes, and the copied URDF refers to it by that relative path, so the dataset
+is self-contained. Image textures of COLLADA meshes are copied along, at the same place relative
+to their mesh (:mod:`robogs.convert.ingest.dae_textures`); a texture that is missing or would come
+from outside the mesh's package is left out and named in the provenance.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+from lxml import etree
+
+from robogs.format.errors import InputError, RobogsError
+from robogs.format.urdf import mesh_refs, parse_urdf_robot, resolve_mesh_uri
+
+from .context import IngestContext
+from .dae_textures import dae_texture_refs, texture_uri
+
+__all__ = ["attach_robot", "attach_robot_description", "urdf_root_link"]
+
+URDF_REL = "robot/robot.urdf"
+
+
+def urdf_root_link(urdf_path: Path) -> str:
+    """Name of the URDF's root link (the one link that is no joint's child)."""
+    robot = parse_urdf_robot(urdf_path)
+    children = {j.child for j in robot.joints}
+    roots = [link.name for link in robot.links if link.name not in children]
+    return roots[0] if roots else robot.links[0].name
+
+
+def _safe_parse(path: Path) -> etree._ElementTree:
+    parser = etree.XMLParser(
+        resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False
+    )
+    return etree.parse(str(path), parser)
+
+
+def attach_robot(
+    ctx: IngestContext, urdf_path: Path, *, package_roots: dict[str, Path] | None = None
+) -> None:
+    """Copy ``urdf_path`` and every mesh it uses into the dataset; declare the robot.
+
+    Raises:
+        RobogsError: malformed URDF, mesh URI escaping its root, missing mesh file.
+    """
+    urdf_path = Path(urdf_path)
+    if not urdf_path.is_file():
+        raise InputError("URDF file not found", path=urdf_path)
+    robot = parse_urdf_robot(urdf_path)
+    roots = {k: str(v) for k, v in (package_roots or {}).items()}
+    resolved: dict[str, Path] = {}
+    for ref in mesh_refs(robot):
+        if ref.uri in resolved:
+            continue
+        try:
+            p = resolve_mesh_uri(ref.uri, urdf_path, None, roots or None)
+        except RobogsError as exc:
+            raise type(exc)(
+                exc.message,
+                path=urdf_path,
+                where=f"link {ref.link} mesh {ref.uri}",
+                hint=exc.hint or "pass --package NAME=FOLDER for package:// URIs",
+            ) from None
+        if not p.is_file():
+            raise InputError(
+                f"mesh file not found (resolved to {p})",
+                path=urdf_path,
+                where=f"link {ref.link} mesh {ref.uri}",
+                hint="pass --package NAME=FOLDER for package:// URIs",
+            )
+        resolved[ref.uri] = p
+    textures = _textures(ctx, urdf_path, resolved, roots)
+    files = list(resolved.values()) + list(textures)
+    common = Path(os.path.commonpath([str(p.parent) for p in files])) if files else None
+    new_rel: dict[str, str] = {}
+    for uri, p in sorted(resolved.items()):
+        assert common is not None
+        rel = "meshes/" + p.relative_to(common).as_posix()
+        ctx.writer.copy_file(f"robot/{rel}", p)
+        new_rel[uri] = rel
+    for p in sorted(textures):
+        assert common is not None
+        ctx.writer.copy_file(f"robot/meshes/{p.relative_to(common).as_posix()}", p)
+    tree = _safe_parse(urdf_path)
+    for mesh in tree.getroot().iter("mesh"):
+        fn = mesh.get("filename")
+        if fn in new_rel:
+            mesh.set("filename", new_rel[fn])
+    ctx.writer.write_bytes(URDF_REL, etree.tostring(tree, xml_declaration=True, encoding="utf-8"))
+    root = urdf_root_link(urdf_path)
+    ctx.writer.set_robot(URDF_REL, base_link=root)
+    ctx.provenance.extra["robot"] = {
+        "urdf": urdf_path.name,
+        "meshes": len(resolved),
+        "textures": len(textures),
+        "root_link": root,
+    }
+
+
+def _textures(
+    ctx: IngestContext, urdf_path: Path, meshes: dict[str, Path], roots: dict[str, str]
+) -> set[Path]:
+    """Image files referenced by the COLLADA meshes, resolved like mesh URIs (see module doc)."""
+    out: set[Path] = set()
+    for uri, mesh in sorted(meshes.items()):
+        if mesh.suffix.lower() != ".dae":
+            continue
+        for ref in dae_texture_refs(mesh):
+            try:
+                p = resolve_mesh_uri(texture_uri(uri, ref), urdf_path, None, roots or None)
+            except RobogsError as exc:
+                ctx.provenance.note(
+                    f"texture {ref!r} of mesh {uri} not copied: {exc.message}"
+                    + (f" ({exc.hint})" if exc.hint else "")
+                )
+                continue
+            if not p.is_file():
+                ctx.provenance.note(f"texture {ref!r} of mesh {uri} not copied: file not found")
+                continue
+            out.add(p)
+    return out
+
+
+def attach_robot_description(
+    ctx: IngestContext, text: str, *, package_roots: dict[str, Path] | None = None
+) -> bool:
+    """Use a ``/robot_description`` URDF string; returns False (with a note) when unusable."""
+    with tempfile.TemporaryDirectory(prefix="robogs-urdf-") as tmp:
+        path = Path(tmp) / "robot_description.urdf"
+        path.write_text(text, encoding="utf-8")
+        try:
+            attach_robot(ctx, path, package_roots=package_roots)
+        except RobogsError as exc:
+            ctx.writer.remove("robot")
+            ctx.provenance.note(
+                f"robot_description from the source not used: {exc.message}"
+                + (f" ({exc.where})" if exc.where else "")
+                + "; pass --urdf (and --package NAME=FOLDER) to add the robot"
+            )
+            return False
+    ctx.provenance.extra["robot"]["urdf"] = "robot_description topic"
+    return True

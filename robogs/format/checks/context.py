@@ -1,0 +1,625 @@
+"""``CheckContext``: the dataset as the checks see it, opened lazily, with caches.
+
+The context reads ``manifest.json`` once (without raising on schema problems,
+which become findings), knows which paths are unsafe (those are reported by
+the integrity checks and never opened by anyone), and caches what several
+checks read: parquet footers, tables, the URDF and its kinematic chain, asset
+meshes, camera models and label boxes. Nothing here writes to the dataset.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from ..budgets import DEFAULT_BUDGETS
+from ..cameras import CameraModel
+from ..dataset import MANIFEST_NAME, Dataset, Episode, parquet_metadata, read_parquet
+from ..errors import FormatError, PathEscapeError, RobogsError, VersionError
+from ..jsonio import read_json
+from ..paths import resolve_inside
+from ..schemas import schema_problems
+from ..spec_version import SPEC_VERSION, parse_version
+from ..tables import check_table_schema, null_problems
+
+if TYPE_CHECKING:
+    import trimesh
+    import yourdfpy
+
+    from ..kinematics import Chain
+    from .label_boxes import LabelBoxes
+
+__all__ = [
+    "CheckContext",
+    "InputReported",
+    "PathRef",
+    "STREAM_FILE_FIELDS",
+    "table_kind",
+    "MM_SUSPECT_EXTENT_M",
+    "PERIODIC_KINDS",
+    "ENTITY_COLUMNS",
+]
+
+#: stream kinds sampled at a (nominal) rate; camera means its frame table
+PERIODIC_KINDS: tuple[str, ...] = (
+    "joint_states",
+    "actions",
+    "ee_poses",
+    "object_poses",
+    "wrenches",
+    "camera",
+)
+
+#: column naming the entity of each row, for tables that interleave several series
+ENTITY_COLUMNS: dict[str, str] = {
+    "ee_poses": "link",
+    "object_poses": "object",
+    "wrenches": "frame",
+    "boxes2d": "camera",
+    "boxes3d": "object",
+}
+
+#: stream fields that name a file, and the table kind of each (None: not a table)
+STREAM_FILE_FIELDS: dict[str, str | None] = {
+    "path": "",
+    "frames": "camera_frames",
+    "labels": "camera_labels",
+    "extrinsics": "camera_extrinsics",
+    "video": None,
+}
+
+#: an object or table mesh larger than this (m) was almost surely exported in mm
+MM_SUSPECT_EXTENT_M = 10.0
+
+
+def table_kind(stream: dict[str, Any], field: str) -> str | None:
+    """Table kind (``robogs.format.tables``) of a stream's file field, None for non-tables."""
+    kind = STREAM_FILE_FIELDS.get(field)
+    if kind == "":
+        return str(stream.get("kind", ""))
+    return kind
+
+
+class InputReported(Exception):
+    """Raised by the context when a check's input is unusable and already reported.
+
+    The runner skips the rest of that check quietly: the problem (an unsafe path,
+    a missing or unreadable file, an invalid sidecar) has its own finding.
+    """
+
+
+@dataclass(frozen=True)
+class PathRef:
+    """A path named by the manifest (or a URDF): where it is named and what it is."""
+
+    rel: str
+    where: str
+    role: str
+
+
+class CheckContext:
+    """Lazy view of one dataset for the checks.
+
+    Args:
+        root: dataset folder.
+        quick: only the manifest and parquet footers may be read.
+        budgets: budget overrides on top of the dataset's (e.g. from ``--budget``).
+        label_threads: decoder threads for label images.
+        progress: called with a short note when a long step starts.
+        options: free-form settings for checks that take them (e.g. the binding
+            re-render's ``stride``); unknown keys are ignored.
+
+    Raises:
+        FormatError: the folder or its manifest cannot be read at all (the caller
+            reports this as unreadable input).
+    """
+
+    def __init__(
+        self,
+        root: str | Path,
+        *,
+        quick: bool = False,
+        budgets: dict[str, float] | None = None,
+        label_threads: int = 2,
+        progress: Callable[[str], None] | None = None,
+        options: dict[str, Any] | None = None,
+    ) -> None:
+        self.root = Path(root)
+        self.options: dict[str, Any] = dict(options or {})
+        self.quick = quick
+        self.label_threads = label_threads
+        self.progress = progress or (lambda _msg: None)
+        self.version_error: VersionError | None = None
+        self.dataset = self._open()
+        self.manifest: dict[str, Any] = self.dataset.manifest
+        self.manifest_problems = schema_problems("manifest", self.manifest)
+        self.budget_problems: list[str] = []
+        self.budgets = self._budgets(budgets or {})
+        self._cache: dict[Any, Any] = {}
+        self._unsafe: dict[str, PathEscapeError] | None = None
+
+    # -- opening ----------------------------------------------------------------
+    def _open(self) -> Dataset:
+        try:
+            return Dataset.open(self.root, check_schema=False)
+        except VersionError as exc:
+            # newer major (or unparseable) version: keep the raw manifest, report it as a finding
+            self.version_error = exc
+            raw = read_json(self.root / MANIFEST_NAME, what="manifest")
+            return Dataset(self.root, raw)
+
+    def _budgets(self, overrides: dict[str, float]) -> dict[str, float]:
+        values = {name: b.value for name, b in DEFAULT_BUDGETS.items()}
+        declared = self.manifest.get("budgets")
+        if isinstance(declared, dict):
+            for name, value in declared.items():
+                if name not in values:
+                    self.budget_problems.append(f"unknown budget {name!r}")
+                elif (
+                    isinstance(value, int | float)
+                    and not isinstance(value, bool)
+                    and math.isfinite(value)
+                    and value >= 0
+                ):
+                    values[name] = float(value)
+                else:
+                    self.budget_problems.append(
+                        f"budget {name!r} must be a non-negative number, got {value!r}"
+                    )
+        for name, value in overrides.items():
+            if name not in values:
+                raise FormatError(
+                    f"unknown budget {name!r}",
+                    where="--budget",
+                    hint=f"known budgets: {', '.join(sorted(values))}",
+                )
+            values[name] = float(value)
+        return values
+
+    # -- manifest facts ---------------------------------------------------------------
+    @property
+    def manifest_valid(self) -> bool:
+        """True when the manifest follows its JSON Schema (and its version is readable).
+
+        Fields unknown to this reader do not count when the dataset declares a newer
+        minor spec version (they are reported as warnings and ignored).
+        """
+        if self.version_error is not None:
+            return False
+        problems = self.manifest_problems
+        if self.newer_minor:
+            problems = [p for p in problems if not p.message.startswith("Additional properties")]
+        return not problems
+
+    @property
+    def newer_minor(self) -> bool:
+        """True when the manifest's spec version is a newer minor of this reader's major."""
+        try:
+            theirs = parse_version(str(self.manifest.get("spec_version", "")))
+        except VersionError:
+            return False
+        ours = parse_version(SPEC_VERSION)
+        return theirs[0] == ours[0] and theirs[1] > ours[1]
+
+    @property
+    def files(self) -> dict[str, dict[str, Any]]:
+        """The manifest's ``files`` section (empty when malformed)."""
+        files = self.manifest.get("files")
+        return files if isinstance(files, dict) else {}
+
+    @property
+    def episodes(self) -> list[Episode]:
+        """Episodes of the manifest (only well-formed entries)."""
+        out = []
+        for e in (
+            self.manifest.get("episodes", [])
+            if isinstance(self.manifest.get("episodes"), list)
+            else []
+        ):
+            if isinstance(e, dict) and {"id", "start_ns", "end_ns", "streams"} <= set(e):
+                out.append(Episode(self.dataset, e))
+        return out
+
+    def streams(
+        self, kinds: tuple[str, ...] | None = None
+    ) -> Iterator[tuple[Episode, str, dict[str, Any]]]:
+        """``(episode, stream name, stream entry)`` for every stream (of the given kinds)."""
+        for ep in self.episodes:
+            for name, st in ep.streams.items():
+                if isinstance(st, dict) and (kinds is None or st.get("kind") in kinds):
+                    yield ep, name, st
+
+    def budget(self, name: str) -> float:
+        """A resolved budget value (defaults, then dataset, then caller overrides)."""
+        return self.budgets[name]
+
+    def rel(self, path: str | Path | None) -> str | None:
+        """Dataset-relative spelling of a path when it lies inside the root."""
+        if path is None:
+            return None
+        p = Path(path)
+        try:
+            return p.resolve().relative_to(self.root.resolve()).as_posix()
+        except (ValueError, OSError):
+            return str(path)
+
+    # -- paths --------------------------------------------------------------------------
+    def path_refs(self) -> list[PathRef]:
+        """Every path the manifest names (files, streams, robot, assets, cameras, physics)."""
+        m = self.manifest
+        refs: list[PathRef] = [PathRef(rel, f"/files/{rel}", "file") for rel in self.files]
+
+        def add(value: Any, where: str, role: str) -> None:
+            if isinstance(value, str):
+                refs.append(PathRef(value, where, role))
+
+        robot = m.get("robot")
+        if isinstance(robot, dict):
+            add(robot.get("urdf"), "/robot/urdf", "urdf")
+            add(robot.get("mdh"), "/robot/mdh", "mdh")
+            if isinstance(robot.get("splats"), dict):
+                add(robot["splats"].get("path"), "/robot/splats/path", "splats")
+        assets = m.get("assets")
+        if isinstance(assets, dict):
+            for name, a in assets.items():
+                if isinstance(a, dict):
+                    add(a.get("mesh"), f"/assets/{name}/mesh", "mesh")
+                    if isinstance(a.get("splats"), dict):
+                        add(a["splats"].get("path"), f"/assets/{name}/splats/path", "splats")
+        add(m.get("physics"), "/physics", "physics")
+        cams = m.get("cameras")
+        if isinstance(cams, dict):
+            for name, rel in cams.items():
+                add(rel, f"/cameras/{name}", "camera")
+        eps = m.get("episodes")
+        for i, e in enumerate(eps if isinstance(eps, list) else []):
+            streams = e.get("streams") if isinstance(e, dict) else None
+            if not isinstance(streams, dict):
+                continue
+            for sname, st in streams.items():
+                if isinstance(st, dict):
+                    for fld in STREAM_FILE_FIELDS:
+                        add(st.get(fld), f"/episodes/{i}/streams/{sname}/{fld}", fld)
+        return refs
+
+    @property
+    def unsafe_paths(self) -> dict[str, PathEscapeError]:
+        """Manifest paths that leave the root (``..``, absolute, URI, symlink), keyed by spelling."""
+        if self._unsafe is None:
+            self._unsafe = {}
+            for ref in self.path_refs():
+                if ref.rel in self._unsafe:
+                    continue
+                try:
+                    resolve_inside(self.root, ref.rel, source=MANIFEST_NAME, where=ref.where)
+                except PathEscapeError as exc:
+                    self._unsafe[ref.rel] = exc
+        return self._unsafe
+
+    def path(self, rel: str, *, where: str | None = None) -> Path:
+        """Absolute path of a manifest path; unsafe ones raise :class:`InputReported`."""
+        if not isinstance(rel, str) or rel in self.unsafe_paths:
+            raise InputReported(rel)
+        try:
+            return resolve_inside(self.root, rel, source=MANIFEST_NAME, where=where)
+        except PathEscapeError:
+            raise InputReported(rel) from None
+
+    def existing(self, rel: str, *, where: str | None = None) -> Path:
+        """Like :meth:`path`, and the file must exist (a missing one is reported elsewhere)."""
+        p = self.path(rel, where=where)
+        if not p.is_file():
+            raise InputReported(rel)
+        return p
+
+    # -- tables ----------------------------------------------------------------------------
+    def footer(self, rel: str) -> pq.FileMetaData:
+        """Parquet footer of a manifest path (cached); broken files raise :class:`InputReported`."""
+        key = ("footer", rel)
+        if key not in self._cache:
+            try:
+                self._cache[key] = parquet_metadata(self.existing(rel))
+            except FormatError as exc:
+                self._cache[key] = exc
+        value = self._cache[key]
+        if isinstance(value, FormatError):
+            raise InputReported(rel) from value
+        return value
+
+    def t_range(self, rel: str) -> tuple[int, int] | None:
+        """(min, max) ``t_ns`` of a table from its footer statistics; None if absent or empty.
+
+        Full mode falls back to reading the column when the footer has no statistics.
+        """
+        md = self.footer(rel)
+        schema = md.schema.to_arrow_schema()
+        names = schema.names
+        if "t_ns" not in names or md.num_rows == 0:
+            return None
+        if names.count("t_ns") != 1 or not pa.types.is_int64(schema.field("t_ns").type):
+            raise InputReported(rel)  # S003 reports the column
+        j = names.index("t_ns")
+        lo: list[int] = []
+        hi: list[int] = []
+        for g in range(md.num_row_groups):
+            rg = md.row_group(g)
+            if rg.num_rows == 0:
+                continue
+            stats = rg.column(j).statistics
+            if stats is None or not stats.has_min_max:
+                lo = []
+                break
+            lo.append(int(stats.min))
+            hi.append(int(stats.max))
+        if lo:
+            return min(lo), max(hi)
+        if self.quick:
+            return None
+        t = self.table(rel, columns=("t_ns",)).column("t_ns").to_numpy(zero_copy_only=False)
+        return (int(t.min()), int(t.max())) if t.size else None
+
+    def table_kinds(self) -> dict[str, str]:
+        """Table kind of every table a stream names, keyed by relative path."""
+        key = ("table-kinds",)
+        if key not in self._cache:
+            kinds: dict[str, str] = {}
+            for _ep, _name, st in self.streams():
+                for fld in STREAM_FILE_FIELDS:
+                    kind = table_kind(st, fld)
+                    if kind and isinstance(st.get(fld), str):
+                        kinds.setdefault(st[fld], kind)
+            self._cache[key] = kinds
+        return self._cache[key]
+
+    def table(self, rel: str, *, columns: tuple[str, ...] | None = None) -> pa.Table:
+        """A whole parquet table (or some of its columns), cached per file and column set.
+
+        Tables that are unreadable or do not match their kind's columns and types raise
+        :class:`InputReported` (the integrity and schema checks report them).
+        """
+        if self.quick:
+            raise RuntimeError("a quick check tried to read a table body")
+        kind = self._require_schema(rel)
+        key = ("table", rel, columns)
+        if key not in self._cache:
+            full = self._cache.get(("table", rel, None))
+            if full is not None and columns is not None:
+                self._cache[key] = full.select(list(columns))
+            else:
+                tab = read_parquet(self.existing(rel), columns=list(columns) if columns else None)
+                if kind is not None and null_problems(kind, tab):
+                    self._cache[("table-ok", rel)] = False
+                    raise InputReported(rel)  # S003 reports the nulls
+                self._cache[key] = tab
+        return self._cache[key]
+
+    def _require_schema(self, rel: str) -> str | None:
+        """The table kind of ``rel``; :class:`InputReported` when its footer is unreadable or off
+        the kind's columns and types (the integrity and schema checks report those)."""
+        md = self.footer(rel)
+        kind = self.table_kinds().get(rel)
+        if kind is not None:
+            ok_key = ("table-ok", rel)
+            if ok_key not in self._cache:
+                self._cache[ok_key] = not check_table_schema(kind, md.schema.to_arrow_schema())
+            if not self._cache[ok_key]:
+                raise InputReported(rel)
+        return kind
+
+    def stream_table(
+        self,
+        ep: Episode,
+        stream: str,
+        *,
+        field: str = "path",
+        columns: tuple[str, ...] | None = None,
+    ) -> pa.Table:
+        """The table a stream names in ``field`` (``path``, ``frames``, ``labels``...)."""
+        st = ep.streams.get(stream, {})
+        rel = st.get(field)
+        if not isinstance(rel, str):
+            raise InputReported(f"{stream}/{field}")
+        return self.table(rel, columns=columns)
+
+    def stamps(self, ep: Episode, stream: str, *, field: str = "path") -> np.ndarray:
+        """[N] int64 ``t_ns`` of a stream's table."""
+        col = self.stream_table(ep, stream, field=field, columns=("t_ns",)).column("t_ns")
+        return col.to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
+
+    def find_stream(self, ep: Episode, kind: str) -> str | None:
+        """Name of the first stream of ``kind`` in an episode that names a table."""
+        for name, st in ep.streams.items():
+            if isinstance(st, dict) and st.get("kind") == kind and isinstance(st.get("path"), str):
+                return name
+        return None
+
+    # -- sidecars -------------------------------------------------------------------------
+    def sidecar(self, rel: str, schema: str) -> dict[str, Any]:
+        """A JSON sidecar that follows its schema; otherwise :class:`InputReported`."""
+        key = ("sidecar", rel, schema)
+        if key not in self._cache:
+            try:
+                doc = read_json(self.existing(rel), what=f"{schema} file")
+                self._cache[key] = (
+                    doc if isinstance(doc, dict) and not schema_problems(schema, doc) else None
+                )
+            except FormatError:
+                self._cache[key] = None
+        doc = self._cache[key]
+        if doc is None:
+            raise InputReported(rel)
+        return doc
+
+    def physics(self) -> dict[str, Any]:
+        """``physics.json`` (schema-valid), or :class:`InputReported`."""
+        rel = self.manifest.get("physics")
+        if not isinstance(rel, str):
+            raise InputReported("physics")
+        return self.sidecar(rel, "physics")
+
+    def camera(self, name: str) -> CameraModel:
+        """A camera model (schema-valid), or :class:`InputReported`."""
+        rel = (self.manifest.get("cameras") or {}).get(name)
+        if not isinstance(rel, str):
+            raise InputReported(f"cameras/{name}")
+        return CameraModel.from_dict(self.sidecar(rel, "camera"))
+
+    # -- robot and meshes ----------------------------------------------------------------
+    def _cached(self, key: Any, build: Callable[[], Any]) -> Any:
+        if key not in self._cache:
+            try:
+                self._cache[key] = build()
+            except RobogsError as exc:
+                self._cache[key] = exc
+        value = self._cache[key]
+        if isinstance(value, RobogsError):
+            raise value
+        return value
+
+    def urdf(self) -> yourdfpy.URDF:
+        """The robot URDF, kinematics only (cached); errors are raised as ``RobogsError``.
+
+        Link meshes are loaded by the geometry checks themselves (faster than building
+        yourdfpy's scene graph).
+        """
+        robot = self.manifest.get("robot") or {}
+        rel = robot.get("urdf") if isinstance(robot, dict) else None
+        if not isinstance(rel, str):
+            raise InputReported("robot/urdf")
+        path = self.existing(rel)
+        return self._cached(("urdf",), lambda: self._load_urdf(path))
+
+    def _load_urdf(self, path: Path) -> yourdfpy.URDF:
+        """Kinematic model plus ``robogs_mesh_refs`` (resolved mesh paths), without loading meshes."""
+        from ..urdf import MeshRef, load_urdf, mesh_refs, resolve_mesh_uri
+
+        urdf = load_urdf(path, root=self.root, load_meshes=False)
+        refs: list[MeshRef] = []
+        cache: dict[str, Path] = {}
+        for ref in mesh_refs(urdf):
+            try:
+                resolved = resolve_mesh_uri(ref.uri, path, self.root, _cache=cache)
+            except RobogsError:
+                continue  # reported by I007 (escapes) or G001 (unresolvable)
+            if resolved.is_file():
+                refs.append(MeshRef(ref.link, ref.kind, ref.uri, resolved))
+        urdf.robogs_mesh_refs = refs
+        return urdf
+
+    def urdf_path(self) -> Path:
+        """Absolute path of the robot URDF (unsafe or missing: :class:`InputReported`)."""
+        robot = self.manifest.get("robot") or {}
+        rel = robot.get("urdf") if isinstance(robot, dict) else None
+        if not isinstance(rel, str):
+            raise InputReported("robot/urdf")
+        return self.existing(rel)
+
+    def chain(self) -> Chain:
+        """Forward kinematics of the robot (cached)."""
+        from ..kinematics import Chain
+
+        return self._cached(
+            ("chain",), lambda: Chain.from_urdf(self.urdf(), floating_as_fixed=True)
+        )
+
+    def fitted_chain(self) -> tuple[Chain, str]:
+        """The robot chain with the joint offsets of the current physics revision, and a note
+        on what was applied (:func:`robogs.format.kinematics.fitted_chain`); the nominal chain
+        when there is no (valid) ``physics.json``."""
+        from ..kinematics import fitted_chain
+
+        def build() -> tuple[Chain, str]:
+            chain = self.chain()
+            try:
+                physics = self.physics()
+            except InputReported:
+                return chain, ""  # no physics.json, or reported by S00x
+            return fitted_chain(chain, physics, path=self.manifest.get("physics"))
+
+        return self._cached(("fitted_chain",), build)
+
+    def has_robot(self) -> bool:
+        robot = self.manifest.get("robot")
+        return isinstance(robot, dict) and isinstance(robot.get("urdf"), str)
+
+    def asset_names(self, kinds: tuple[str, ...] = ("object", "table", "background")) -> list[str]:
+        assets = self.manifest.get("assets")
+        if not isinstance(assets, dict):
+            return []
+        return sorted(
+            n for n, a in assets.items() if isinstance(a, dict) and a.get("kind") in kinds
+        )
+
+    def asset_kind(self, name: str) -> str | None:
+        a = (self.manifest.get("assets") or {}).get(name)
+        return a.get("kind") if isinstance(a, dict) else None
+
+    def asset_mesh(self, name: str) -> trimesh.Trimesh:
+        """An asset's mesh (metres, asset frame; cached); no mesh: :class:`InputReported`."""
+        a = (self.manifest.get("assets") or {}).get(name)
+        rel = a.get("mesh") if isinstance(a, dict) else None
+        if not isinstance(rel, str):
+            raise InputReported(f"assets/{name}/mesh")
+        self.existing(rel)
+        return self._cached(("mesh", name), lambda: self.dataset.mesh(name))
+
+    def asset_hull_vertices(self, name: str) -> np.ndarray:
+        """[V, 3] convex-hull vertices of an asset mesh (asset frame, m); bounds the mesh."""
+
+        def build() -> np.ndarray:
+            mesh = self.asset_mesh(name)
+            try:
+                return np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
+            except Exception:  # degenerate (flat) meshes have no 3D hull
+                return np.asarray(mesh.vertices, dtype=np.float64)
+
+        return self._cached(("hull", name), build)
+
+    def mesh_unit_problem(self, name: str) -> str | None:
+        """Why an asset mesh looks like millimetres (None if it looks like metres).
+
+        Two signs: an object/table mesh larger than :data:`MM_SUSPECT_EXTENT_M`, or
+        a mesh 100-10000x larger than the ``size_m`` physics.json gives it.
+        """
+        key = ("mm", name)
+        if key not in self._cache:
+            self._cache[key] = self._mesh_unit_problem(name)
+        return self._cache[key]
+
+    def _mesh_unit_problem(self, name: str) -> str | None:
+        extent = float(np.max(np.ptp(self.asset_hull_vertices(name), axis=0)))
+        if self.asset_kind(name) in ("object", "table") and extent > MM_SUSPECT_EXTENT_M:
+            return f"mesh extent {extent:.4g} m exceeds {MM_SUSPECT_EXTENT_M:g} m"
+        try:
+            size = (self.physics().get("objects") or {}).get(name, {}).get("size_m")
+        except InputReported:
+            size = None
+        if size:
+            ratio = extent / max(float(max(size)), 1e-12)
+            if 100.0 <= ratio <= 10000.0:
+                return (
+                    f"mesh extent {extent:.4g} m is {ratio:.0f}x the physics size {max(size):.4g} m"
+                )
+        return None
+
+    # -- label images -------------------------------------------------------------------
+    def label_boxes(self, ep: Episode, stream: str) -> LabelBoxes:
+        """Per-frame, per-label boxes of a camera stream's label table (one pass, cached)."""
+        from .label_boxes import scan_label_boxes
+
+        rel = ep.streams.get(stream, {}).get("labels")
+        if not isinstance(rel, str):
+            raise InputReported(f"{stream}/labels")
+        path = self.existing(rel)
+        self._require_schema(rel)
+        self.progress(f"label boxes {ep.id}/{stream}")
+        return self._cached(
+            ("labels", rel), lambda: scan_label_boxes(path, threads=self.label_threads)
+        )

@@ -1,0 +1,454 @@
+"""``DatasetWriter``: the one atomic way to create or change a dataset.
+
+The writer builds the new version in a hidden sibling folder
+(``.<name>.tmp-<id>``), writes ``manifest.json`` last with the sha256, size and
+row count of every file, then swaps it into place with renames. If anything
+fails or the process dies before the swap, the previous dataset is untouched;
+a stale temp folder is removed by the next writer. A lock file refuses a
+second concurrent writer.
+
+The swap exchanges the two folders in one ``renameat2(RENAME_EXCHANGE)`` call
+where the kernel and file system allow it, so the dataset path always holds a
+complete version; elsewhere it falls back to two renames, and a crash between
+them is undone by the next writer. The lock is an advisory ``flock`` on
+``.<name>.lock`` holding the writer's PID: the kernel releases it when the
+process dies (even by ``kill -9``), so a stale lock file never blocks anyone.
+
+Editing an existing dataset starts from hard links to its files (copies where
+links are impossible); every write replaces a file by rename, so the original
+files are never modified in place.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import datetime as _dt
+import errno
+import fcntl
+import hashlib
+import os
+import shutil
+import uuid
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from .cameras import CameraModel
+from .errors import DatasetExistsError, FormatError, LockError
+from .jsonio import dumps_json
+from .paths import check_relpath
+from .schemas import schema_problems
+from .spec_version import SPEC_VERSION
+from .splats import SplatSet, write_splat_ply
+from .tables import TABLES, check_table_schema
+
+if TYPE_CHECKING:
+    from .dataset import Dataset
+
+__all__ = ["DatasetWriter", "CONVENTIONS", "sha256_file"]
+
+CONVENTIONS: dict[str, Any] = {
+    "units": "SI",
+    "world_frame": {"name": "world", "up": "+z", "handedness": "right", "origin": "robot_base"},
+    "quaternion_order": "wxyz",
+    "camera_axes": "opencv",
+    "time_unit": "ns",
+}
+
+_CHUNK = 1 << 20
+
+
+def sha256_file(path: Path) -> str:
+    """Hex sha256 of a file, read in 1 MiB chunks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while chunk := fh.read(_CHUNK):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _robogs_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("robogs")
+    except Exception:  # not installed as a distribution (e.g. source tree)
+        return "0+unknown"
+
+
+def _lock_holder(lock_path: Path) -> str:
+    """PID written in a lock file by its holder ('unknown' if not yet written)."""
+    try:
+        text = lock_path.read_text(encoding="ascii", errors="replace").strip()
+    except OSError:
+        return "unknown"
+    return text if text.isdigit() else "unknown"
+
+
+_AT_FDCWD = -100
+_RENAME_EXCHANGE = 2
+_renameat2: Any = None
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two existing paths atomically (Linux ``renameat2``); False where unsupported."""
+    global _renameat2
+    if _renameat2 is None:
+        try:
+            fn = ctypes.CDLL(None, use_errno=True).renameat2
+            fn.argtypes = [
+                ctypes.c_int,
+                ctypes.c_char_p,
+                ctypes.c_int,
+                ctypes.c_char_p,
+                ctypes.c_uint,
+            ]
+            fn.restype = ctypes.c_int
+            _renameat2 = fn
+        except (AttributeError, OSError):
+            _renameat2 = False
+    if _renameat2 is False:
+        return False
+    if _renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.ENOTSUP):
+        return False
+    raise OSError(err, f"cannot swap {a} and {b}: {os.strerror(err)}")
+
+
+class DatasetWriter:
+    """Builds a dataset version in a temp folder and swaps it in on ``commit``.
+
+    Use as a context manager: leaving the block without ``commit()`` (or with an
+    exception) discards the temp folder and leaves the target as it was.
+    """
+
+    def __init__(
+        self, target: Path, *, base: Dataset | None, overwrite: bool, name: str | None
+    ) -> None:
+        self.target = Path(target).absolute()
+        self.base = base
+        parent = self.target.parent
+        if not parent.is_dir():
+            raise FormatError(
+                "parent folder of the output does not exist", path=parent, hint="create it first"
+            )
+        self._lock_fh = self._acquire_lock()
+        self._recover()
+        if base is None and self.target.exists() and not overwrite:
+            self._release_lock()
+            raise DatasetExistsError(
+                "output already exists",
+                path=self.target,
+                hint="choose another path or pass --force to replace it",
+            )
+        self.tmp = parent / f".{self.target.name}.tmp-{uuid.uuid4().hex[:8]}"
+        self.tmp.mkdir()
+        self.committed = False
+        if base is not None:
+            self.manifest: dict[str, Any] = {k: v for k, v in base.manifest.items() if k != "files"}
+            self._link_base(base)
+        else:
+            self.manifest = {
+                "format": "robogs",
+                "spec_version": SPEC_VERSION,
+                "name": name or self.target.name,
+                "conventions": dict(CONVENTIONS),
+                "episodes": [],
+            }
+
+    # -- locking and recovery ----------------------------------------------------
+    @property
+    def lock_path(self) -> Path:
+        """The lock file beside the dataset, ``.<name>.lock``."""
+        return self.target.parent / f".{self.target.name}.lock"
+
+    def _acquire_lock(self):
+        lock_path = self.lock_path
+        fh = open(lock_path, "a+")
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.close()
+            holder = _lock_holder(lock_path)
+            raise LockError(
+                f"another robogs process (PID {holder}) is writing this dataset; "
+                f"lock file {lock_path}",
+                path=self.target,
+                hint="wait for it to finish; the lock is released when that process exits, "
+                "even if it is killed",
+            ) from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(f"{os.getpid()}\n")
+        fh.flush()
+        return fh
+
+    def _release_lock(self) -> None:
+        if self._lock_fh is not None:
+            fcntl.flock(self._lock_fh.fileno(), fcntl.LOCK_UN)
+            self._lock_fh.close()
+            self._lock_fh = None
+
+    def _recover(self) -> None:
+        """Finish or undo a swap interrupted by a crash, and remove stale temp folders."""
+        parent, stem = self.target.parent, self.target.name
+        olds = sorted(parent.glob(f".{stem}.old-*"))
+        if olds and not self.target.exists():
+            os.rename(olds[-1], self.target)
+            olds = olds[:-1]
+        for p in [*olds, *parent.glob(f".{stem}.tmp-*")]:
+            shutil.rmtree(p, ignore_errors=True)
+
+    def _link_base(self, base: Dataset) -> None:
+        for rel in base.files:
+            src = base.resolve(rel)
+            dst = self.tmp / rel
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.link(src, dst)
+            except OSError:
+                shutil.copy2(src, dst)
+
+    # -- low-level file operations -----------------------------------------------
+    def path(self, rel: str) -> Path:
+        """Absolute path inside the temp folder for ``rel`` (parents created).
+
+        A file still hard-linked to the previous version is first replaced by a private
+        copy, so writing through this path can never change the previous version.
+        """
+        rel = check_relpath(rel, where="writer")
+        if rel == "manifest.json":
+            raise FormatError(
+                "manifest.json is written by commit()", hint="set fields on writer.manifest"
+            )
+        p = self.tmp / rel
+        p.parent.mkdir(parents=True, exist_ok=True)
+        if p.is_file() and p.stat().st_nlink > 1:
+            part = p.with_name(p.name + ".part")
+            shutil.copy2(p, part)
+            os.replace(part, p)
+        return p
+
+    def _part(self, rel: str) -> tuple[Path, Path]:
+        final = self.path(rel)
+        return final, final.with_name(final.name + ".part")
+
+    def write_bytes(self, rel: str, data: bytes) -> Path:
+        final, part = self._part(rel)
+        part.write_bytes(data)
+        os.replace(part, final)
+        return final
+
+    def write_text(self, rel: str, text: str) -> Path:
+        return self.write_bytes(rel, text.encode("utf-8"))
+
+    def write_json(self, rel: str, obj: Any, *, schema: str | None = None) -> Path:
+        """Write a JSON sidecar, checking it against ``spec/schemas/<schema>`` first."""
+        if schema is not None:
+            problems = schema_problems(schema, obj)
+            if problems:
+                raise FormatError(
+                    f"refusing to write invalid {schema}: {problems[0].message}",
+                    path=rel,
+                    where=problems[0].pointer,
+                )
+        return self.write_text(rel, dumps_json(obj))
+
+    def copy_file(self, rel: str, src: str | Path) -> Path:
+        final, part = self._part(rel)
+        shutil.copyfile(src, part)
+        os.replace(part, final)
+        return final
+
+    def remove(self, rel: str) -> None:
+        p = self.tmp / check_relpath(rel)
+        if p.is_dir():
+            shutil.rmtree(p)
+        elif p.exists():
+            p.unlink()
+
+    def write_table(self, rel: str, table: pa.Table, *, kind: str) -> Path:
+        """Write a parquet table of a kind from ``robogs.format.tables``, checking its columns.
+
+        Stamped tables must have non-null int64 ``t_ns``.
+        """
+        problems = check_table_schema(kind, table.schema)
+        if problems:
+            raise FormatError(
+                f"table does not match kind {kind!r}: {'; '.join(problems)}", path=rel
+            )
+        if TABLES[kind].stamped and table.column("t_ns").null_count:
+            raise FormatError("t_ns has nulls", path=rel, where="t_ns")
+        final, part = self._part(rel)
+        pq.write_table(table, part, compression="zstd", row_group_size=1 << 16)
+        os.replace(part, final)
+        return final
+
+    def write_splats(self, rel: str, splats: SplatSet) -> Path:
+        final, part = self._part(rel)
+        write_splat_ply(part, splats)
+        os.replace(part, final)
+        return final
+
+    # -- manifest-level helpers ---------------------------------------------------
+    def set_robot(
+        self,
+        urdf_rel: str,
+        *,
+        base_link: str | None = None,
+        ee_link: str | None = None,
+        mdh_rel: str | None = None,
+    ) -> None:
+        robot = dict(self.manifest.get("robot", {}))
+        robot["urdf"] = urdf_rel
+        for k, v in (("base_link", base_link), ("ee_link", ee_link), ("mdh", mdh_rel)):
+            if v is not None:
+                robot[k] = v
+        self.manifest["robot"] = robot
+
+    def set_asset(self, name: str, **entry: Any) -> None:
+        """Declare an asset: ``kind`` ('object'|'table'|'background'), ``mesh``, ``splats``."""
+        assets = dict(self.manifest.get("assets", {}))
+        assets[name] = {**assets.get(name, {}), **entry}
+        self.manifest["assets"] = assets
+
+    def set_camera(self, camera: CameraModel) -> None:
+        rel = f"cameras/{camera.name}.json"
+        self.write_json(rel, camera.to_dict(), schema="camera")
+        self.manifest.setdefault("cameras", {})[camera.name] = rel
+
+    def set_physics(self, physics: dict[str, Any], *, note: str | None = None) -> int:
+        """Write ``physics.json`` as a new revision; the previous one goes to ``physics/history``.
+
+        Returns:
+            the new revision number.
+        """
+        old_rel = self.manifest.get("physics")
+        prev = None
+        if old_rel is not None and (self.tmp / old_rel).exists():
+            import json
+
+            prev = json.loads((self.tmp / old_rel).read_text())
+            self.write_text(
+                f"physics/history/rev-{int(prev['revision']):04d}.json", dumps_json(prev)
+            )
+        doc = dict(physics)
+        doc["revision"] = 1 if prev is None else int(prev["revision"]) + 1
+        doc["parent_revision"] = None if prev is None else int(prev["revision"])
+        if note is not None:
+            doc["note"] = note
+        self.write_json("physics.json", doc, schema="physics")
+        self.manifest["physics"] = "physics.json"
+        return doc["revision"]
+
+    def add_episode(
+        self,
+        episode_id: str,
+        *,
+        start_ns: int,
+        end_ns: int,
+        streams: dict[str, dict[str, Any]],
+        segment: str | None = None,
+    ) -> None:
+        """Declare an episode and its streams (replacing one with the same id)."""
+        entry: dict[str, Any] = {
+            "id": episode_id,
+            "start_ns": int(start_ns),
+            "end_ns": int(end_ns),
+            "streams": streams,
+        }
+        if segment is not None:
+            entry["segment"] = segment
+        eps = [e for e in self.manifest.get("episodes", []) if e["id"] != episode_id]
+        eps.append(entry)
+        self.manifest["episodes"] = sorted(eps, key=lambda e: e["id"])
+
+    # -- commit ---------------------------------------------------------------------
+    def _file_entries(self) -> dict[str, dict[str, Any]]:
+        files: dict[str, dict[str, Any]] = {}
+        for p in sorted(self.tmp.rglob("*")):
+            if not p.is_file() or p.name == "manifest.json" and p.parent == self.tmp:
+                continue
+            if p.name.endswith(".part"):
+                p.unlink()
+                continue
+            rel = p.relative_to(self.tmp).as_posix()
+            entry: dict[str, Any] = {"sha256": sha256_file(p), "size": p.stat().st_size}
+            if p.suffix == ".parquet":
+                entry["rows"] = pq.ParquetFile(p).metadata.num_rows
+            files[rel] = entry
+        return files
+
+    def commit(self) -> Dataset:
+        """Write the manifest last, swap the new version into place, release the lock."""
+        from .dataset import Dataset
+
+        if self.committed:
+            raise FormatError("writer already committed", path=self.target)
+        self.manifest.setdefault(
+            "created_utc", _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        )
+        self.manifest["generator"] = {
+            **self.manifest.get("generator", {}),
+            "name": "robogs",
+            "version": _robogs_version(),
+        }
+        self.manifest["spec_version"] = SPEC_VERSION
+        self.manifest["files"] = self._file_entries()
+        problems = schema_problems("manifest", self.manifest)
+        if problems:
+            raise FormatError(
+                f"refusing to commit an invalid manifest: {problems[0].message}",
+                path=self.target,
+                where=problems[0].pointer,
+            )
+        mpath = self.tmp / "manifest.json"
+        with open(mpath, "w", encoding="utf-8") as fh:
+            fh.write(dumps_json(self.manifest))
+            fh.flush()
+            os.fsync(fh.fileno())
+        self._swap()
+        self.committed = True
+        self._release_lock()
+        return Dataset.open(self.target)
+
+    def _swap(self) -> None:
+        parent = self.target.parent
+        old = None
+        if self.target.exists():
+            if _exchange(self.tmp, self.target):
+                old = self.tmp  # now holds the previous version
+            else:
+                old = parent / f".{self.target.name}.old-{uuid.uuid4().hex[:8]}"
+                os.rename(self.target, old)
+                os.rename(self.tmp, self.target)
+        else:
+            os.rename(self.tmp, self.target)
+        dir_fd = os.open(parent, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+
+    def abort(self) -> None:
+        """Discard the temp folder; the target is left as it was."""
+        if not self.committed:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+        self._release_lock()
+
+    def __enter__(self) -> DatasetWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if not self.committed:
+            self.abort()
+
+    def __del__(self) -> None:
+        if getattr(self, "_lock_fh", None) is not None and not getattr(self, "committed", True):
+            self.abort()

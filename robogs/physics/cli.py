@@ -1,0 +1,520 @@
+"""``robogs compare | diagnose | fit | report`` — the physics loop on the command line.
+
+A dataset with ``object_poses`` is checked against the rigid-object model
+(pushes, slides, grasps); a dataset whose ``joint_states`` carry efforts, or
+that records end-effector poses (``ee_poses``) beside its joint states, is
+checked against the arm model (joint torques, and end-effector poses against
+forward kinematics). ``--model`` picks one when both apply.
+Exit codes: 0 done, 2 usage error or unreadable input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from robogs.format.errors import InputError
+
+__all__ = ["add_arguments_for", "run"]
+
+
+def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
+    p.add_argument("dataset", type=Path, help="robogs dataset folder")
+    p.add_argument(
+        "--model",
+        choices=("auto", "object", "arm"),
+        default="auto",
+        help="object: rigid objects vs object_poses; arm: joint torques vs efforts and "
+        "end-effector poses vs forward kinematics (default auto)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object for machines")
+    if verb in ("compare", "diagnose", "fit"):
+        p.add_argument(
+            "--mask-frames",
+            type=int,
+            default=30,
+            metavar="N",
+            help="camera frames per stream re-rendered for the mask-boundary stream and "
+            "camera_intrinsics (default 30; 0: none)",
+        )
+    if verb == "compare":
+        p.add_argument(
+            "--mask-poses",
+            choices=("model", "recorded"),
+            default="model",
+            help="render the object at the model's predicted poses (default) or its recorded ones",
+        )
+    if verb == "diagnose":
+        p.add_argument(
+            "--effects", default=None, help="comma-separated candidate effects (default: all)"
+        )
+        p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    if verb == "fit":
+        p.add_argument(
+            "--add",
+            action="append",
+            default=[],
+            metavar="EFFECT",
+            help="effect to add (repeatable)",
+        )
+        p.add_argument("--dry-run", action="store_true", help="fit and print, write nothing")
+        p.add_argument(
+            "--revert",
+            type=int,
+            default=None,
+            metavar="REV",
+            help="make physics revision REV current again (kept history)",
+        )
+        p.add_argument("--note", default=None, help="note stored with the new physics revision")
+    if verb == "report":
+        p.add_argument(
+            "--add",
+            action="append",
+            default=[],
+            metavar="EFFECT",
+            help="effect(s) whose refit is shown as 'after' (default: those diagnose reports)",
+        )
+        p.add_argument(
+            "--out", type=Path, default=None, help="HTML file (default: <dataset>.physics.html)"
+        )
+        p.add_argument(
+            "--rrd", type=Path, default=None, help="also log the residuals into this Rerun file"
+        )
+
+
+def _model(ds_path: Path, choice: str) -> str:
+    from robogs.format import Dataset
+
+    if choice != "auto":
+        return choice
+    ds = Dataset.open(ds_path)
+    has_obj = any(e.has("object_poses") for e in ds.episodes)
+    has_eff = has_ee = False
+    for e in ds.episodes:
+        if e.has("joint_states"):
+            has_eff = has_eff or any(n.startswith("effort.") for n in _columns(e))
+            has_ee = has_ee or e.has("ee_poses")
+    if has_obj:
+        return "object"
+    if has_eff or has_ee:
+        return "arm"
+    raise InputError(
+        "nothing to compare: the dataset has neither object_poses nor joint efforts "
+        "nor end-effector poses",
+        path=ds_path,
+        hint="record object poses (mocap), joint torques/currents or end-effector poses",
+    )
+
+
+def _columns(ep: Any) -> list[str]:
+    import pyarrow.parquet as pq
+
+    return pq.ParquetFile(ep.table_path("joint_states")).schema_arrow.names
+
+
+def _print_json(obj: Any) -> None:
+    print(json.dumps(obj, indent=2, default=float))
+
+
+def _fmt(x: Any, spec: str = ".3g") -> str:
+    return "—" if x is None else format(float(x), spec)
+
+
+def _effects_table(effects: list[dict[str, Any]], title: str) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=title)
+    for col in (
+        "rank",
+        "effect",
+        "family",
+        "ΔBIC",
+        "held-out before → after",
+        "explained",
+        "parameters",
+        "phases",
+        "rivals",
+        "verdict",
+    ):
+        t.add_column(col)
+    for i, e in enumerate(effects, 1):
+        params = ", ".join(
+            f"{p['name'].split('.')[-1]}={_fmt(p['value'])} [{_fmt(p['low'])}, {_fmt(p['high'])}]"
+            f"{' ' + p['unit'] if p.get('unit') else ''}"
+            for p in e.get("params", [])[:4]
+        )
+        if len(e.get("params", [])) > 4:
+            params += f" (+{len(e['params']) - 4})"
+        verdict = e.get("verdict") or ("missing" if e.get("reported") else "not supported")
+        style = "bold green" if e.get("reported") else None
+        t.add_row(
+            str(i),
+            e["name"],
+            e.get("family", ""),
+            _fmt(e.get("delta_bic"), ".1f"),
+            f"{_fmt(e.get('heldout_rms_before'))} → {_fmt(e.get('heldout_rms_after'))}"
+            + (f" {e['unit']}" if e.get("unit", "mm") != "mm" else ""),
+            _fmt(e.get("explained"), ".0%") if e.get("explained") is not None else "—",
+            params,
+            ", ".join(e.get("phases", [])),
+            ", ".join(e.get("rivals", [])),
+            verdict,
+            style=style,
+        )
+    console = Console()
+    if not console.is_terminal:
+        console = Console(width=200)  # logs and pipes: keep rows on one line
+    console.print(t)
+
+
+def _compare(args: argparse.Namespace, model: str) -> int:
+    if model == "arm":
+        from robogs.physics.arm.api import compare_arm
+
+        res = compare_arm(args.dataset)
+        if args.json:
+            _print_json(res)
+            return 0
+        if "joints" in res:
+            _print_torque_compare(res)
+        if "kinematic" in res:
+            _print_pose_compare(res["kinematic"])
+        for n in res.get("notes", []):
+            print(f"  note: {n}")
+        return 0
+    from robogs.physics.api import compare
+
+    res = compare(args.dataset, mask_frames=args.mask_frames, mask_poses=args.mask_poses)
+    d = res.to_dict()
+    if args.json:
+        _print_json(d)
+        return 0
+    print(
+        f"object position residual: rms {d['rms_mm']:.2f} mm, orientation {d['rms_deg']:.2f} deg; "
+        f"noise floor {d['noise_floor_mm']:.2f} mm (estimated from the data)"
+    )
+    print(
+        "per phase [mm]: " + ", ".join(f"{k} {v:.2f}" for k, v in d["phases_mm"].items() if v == v)
+    )
+    for s in d["streams"]:
+        print(
+            f"  {s['trajectory']:>10s} {s['stream']}: rms {s['rms_mm']:.2f} mm, max {s['max_mm']:.2f} mm"
+        )
+    print("worst segments:")
+    for w in d["worst"][:5]:
+        print(
+            f"  {w['trajectory']:>10s} {w['phase']:>8s} {w['t_start']:.2f}–{w['t_end']:.2f} s: "
+            f"{w['rms_mm']:.2f} mm, {w['rms_deg']:.2f} deg"
+        )
+    _print_masks(d)
+    return 0
+
+
+def _print_masks(d: dict[str, Any]) -> None:
+    """The mask-boundary stream of ``compare`` (or why it is absent), per camera and label."""
+    m = d.get("mask_boundary")
+    if m is None:
+        print(f"mask boundary: absent ({d.get('mask_boundary_absent')})")
+        return
+    print(
+        f"mask boundary ({m['frames']} frames, objects at {m['object_poses']} poses, "
+        f"{m['seconds']:.1f} s): {_fmt(m['boundary_px'])} px, {_fmt(m['boundary_mm'])} mm"
+    )
+    for r in m["labels"]:
+        print(
+            f"  {r['camera']:>8s} {r['label']:18s} {_fmt(r['boundary_px']):>6s} px "
+            f"{_fmt(r['boundary_mm']):>6s} mm  IoU {_fmt(r['iou'], '.3f')}"
+        )
+    for n in m["notes"][:5]:
+        print(f"  note: {n}")
+
+
+def _print_torque_compare(res: dict[str, Any]) -> None:
+    print(
+        f"joint-torque residuals ({res['n_trajectories']} trajectories, {res['n_samples']} samples)"
+    )
+    for j, r in res["joints"].items():
+        print(
+            f"  {j:24s} rms {r['rms_nm']:.3f} N·m   noise {r['noise_nm']:.3f} N·m   bias {r['bias_nm']:+.3f}"
+        )
+    print(
+        "worst phases: "
+        + ", ".join(
+            f"{p['phase']} {p['rms_sigma']:.1f} σ (worst {p['joint']} {p['joint_rms_sigma']:.1f} σ)"
+            for p in res["worst_phases"]
+        )
+    )
+    print("worst segments:")
+    for w in res["worst_segments"][:5]:
+        print(
+            f"  {w['trajectory']} {w['joint']} {w['phase']:>10s}  {(w['t_start_ns']) / 1e9:.2f}–"
+            f"{w['t_end_ns'] / 1e9:.2f} s  rms {w['rms_nm']:.3f} N·m ({w['rms_sigma']:.1f} σ)"
+        )
+
+
+def _print_pose_compare(k: dict[str, Any]) -> None:
+    rot = f", orientation rms {k['rms_deg']:.3f} deg" if k.get("rms_deg") is not None else ""
+    print(
+        f"end-effector residuals of {k['link']} ({k['n_trajectories']} trajectories, {k['n_samples']} "
+        f"poses): position rms {k['rms_mm']:.3f} mm (max {k['max_mm']:.3f}){rot}"
+    )
+    for c, r in k["channels"].items():
+        print(
+            f"  {c:3s} rms {r['rms']:.4f} {r['unit']}   noise {r['noise']:.4f} {r['unit']}   "
+            f"bias {r['bias']:+.4f}"
+        )
+    print(
+        "worst phases: "
+        + ", ".join(
+            f"{p['phase']} {p['rms_sigma']:.1f} σ ({p['rms_mm']:.3f} mm)" for p in k["worst_phases"]
+        )
+    )
+    print("worst segments:")
+    for w in k["worst_segments"][:5]:
+        print(
+            f"  {w['trajectory']} {w['phase']:>10s}  {w['t_start_ns'] / 1e9:.2f}–{w['t_end_ns'] / 1e9:.2f} s  "
+            f"rms {w['rms_mm']:.3f} mm ({w['rms_sigma']:.1f} σ, worst channel {w['channel']})"
+        )
+
+
+def _param_rows(params: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """Arm parameters ``{name: {value, low, high, unit}}`` as the table's list of rows."""
+    return [{"name": k, **v} for k, v in params.items()]
+
+
+def _arm_table(d: dict[str, Any]) -> None:
+    titles = {"torque": "the joint torques", "kinematic": "the end-effector poses"}
+    for kind, rep in d.get("residuals", {}).items():
+        rows = [
+            {
+                **e,
+                "params": _param_rows(e["params"]),
+                "verdict": "missing"
+                if e["reported"]
+                else "; ".join(e.get("reasons", [])) or "not supported",
+            }
+            for e in d["effects"]
+            if e.get("residual", "torque") == kind
+        ]
+        _effects_table(rows, f"candidate effects on {titles[kind]} ({rep['split']})")
+        if kind == "torque":
+            print(
+                "noise floor [N·m]: "
+                + ", ".join(f"{j} {v:.3g}" for j, v in rep["noise_floor_nm"].items())
+            )
+        else:
+            print(
+                f"noise floor of {rep['link']}: "
+                + ", ".join(f"{c} {v:.3g} {rep['units'][c]}" for c, v in rep["noise_floor"].items())
+            )
+        for e in d["effects"]:
+            bad = {k: p["why"] for k, p in e["params"].items() if p.get("identifiable") is False}
+            if e.get("residual") == kind and e.get("reported") and bad:
+                print(
+                    f"  {e['name']}: unidentifiable "
+                    + "; ".join(f"{k} ({w})" for k, w in bad.items())
+                )
+    for s in d.get("skipped", []):
+        print(f"  skipped {s['name']}: {s['reason']}")
+    found = [e["name"] for e in d["effects"] if e.get("reported")]
+    print("missing effect(s): " + (", ".join(found) if found else "none above the noise"))
+    if found:
+        print(f"next: robogs fit DATASET --add {found[0]}")
+
+
+def _diagnose(args: argparse.Namespace, model: str) -> int:
+    effects = [e.strip() for e in args.effects.split(",")] if args.effects else None
+    if model == "arm":
+        from robogs.physics.arm.api import diagnose_arm
+
+        d = diagnose_arm(args.dataset, candidates=effects)
+        if not args.json:
+            _arm_table(d)
+            return 0
+    else:
+        from robogs.physics.api import diagnose
+
+        if args.no_progress or args.json:
+            d = diagnose(args.dataset, effects=effects, mask_frames=args.mask_frames).to_dict()
+        else:
+            from rich.progress import Progress
+
+            with Progress(transient=True) as bar:
+                task = bar.add_task("fitting candidate effects", total=None)
+                d = diagnose(
+                    args.dataset,
+                    effects=effects,
+                    progress=lambda i, n: bar.update(task, completed=i, total=n),
+                    mask_frames=args.mask_frames,
+                ).to_dict()
+    if args.json:
+        _print_json(d)
+        return 0
+    _effects_table(d["effects"], f"candidate effects for {args.dataset}")
+    for s in d.get("skipped", []):
+        print(f"  skipped {s['name']}: {s['reason']}")
+    found = [e["name"] for e in d["effects"] if e.get("reported")]
+    print("missing effect(s): " + (", ".join(found) if found else "none above the noise"))
+    if found:
+        print(f"next: robogs fit {args.dataset} --add {found[0]}")
+    return 0
+
+
+def _fit(args: argparse.Namespace, model: str) -> int:
+    if args.revert is not None:
+        from robogs.physics.api import revert
+
+        rev = revert(args.dataset, args.revert)
+        print(f"physics revision {args.revert} restored as revision {rev}")
+        return 0
+    if not args.add:
+        raise InputError(
+            "nothing to fit", hint="name the effect(s) with --add EFFECT (see robogs diagnose)"
+        )
+    if model == "arm":
+        from robogs.physics.arm.api import fit_arm
+
+        d = fit_arm(args.dataset, args.add, write=not args.dry_run, note=args.note)
+        if args.json:
+            _print_json(d)
+            return 0
+        if "rms_before_nm" in d:
+            print("joint-torque RMS [N·m] before → after (noise floor):")
+            for j, before in d["rms_before_nm"].items():
+                print(
+                    f"  {j:24s} {before:.4g} → {d['rms_after_nm'][j]:.4g}  ({d['noise_floor_nm'][j]:.3g})"
+                )
+        if "ee" in d:
+            ee = d["ee"]
+            print(
+                f"end-effector ({ee['link']}) position RMS: {ee['rms_before_mm']:.3f} → {ee['rms_after_mm']:.3f} mm"
+                + (
+                    f", orientation RMS: {ee['rms_before_deg']:.3f} → {ee['rms_after_deg']:.3f} deg"
+                    if ee.get("rms_before_deg") is not None
+                    else ""
+                )
+            )
+        for eff, params in d["params"].items():
+            print(f"{eff}:")
+            for p in _param_rows(params):
+                print(
+                    f"  {p['name']:32s} {_fmt(p['value'], '.5g')}  [{_fmt(p['low'])}, {_fmt(p['high'])}] "
+                    f"{p.get('unit', '')}"
+                )
+        if d["clamped"]:
+            print("written as 0 (fitted negative): " + ", ".join(d["clamped"]))
+        for eff, bad in d.get("unidentifiable", {}).items():
+            print(
+                f"unidentifiable (not written) in {eff}: "
+                + "; ".join(f"{k} ({w})" for k, w in bad.items())
+            )
+        print(
+            "dry run: nothing written"
+            if args.dry_run
+            else f"wrote physics revision {d.get('revision')}"
+        )
+        return 0
+    else:
+        from robogs.physics.api import fit
+
+        res = fit(
+            args.dataset,
+            args.add,
+            write=not args.dry_run,
+            note=args.note,
+            mask_frames=args.mask_frames,
+        )
+        d = res.to_dict()
+        if args.json:
+            _print_json(d)
+            return 0
+        if d["rms_before_mm"] is not None:
+            print(
+                f"object position RMS: {d['rms_before_mm']:.3f} → {d['rms_after_mm']:.3f} mm "
+                f"(noise floor {d['noise_floor_mm']:.3f} mm)"
+            )
+        for c in d["cameras"]:
+            b, a = c["before"], c["after"]
+            print(
+                f"camera {c['camera']}: fx {b['fx']:.3f} → {a['fx']:.3f}, fy {b['fy']:.3f} → "
+                f"{a['fy']:.3f}, cx {b['cx']:.3f} → {a['cx']:.3f}, cy {b['cy']:.3f} → {a['cy']:.3f} px; "
+                f"mask boundary {c['boundary_px_before']:.3f} → {c['boundary_px_after']:.3f} px "
+                f"(noise {c['noise_px']:.3f} px; diagnosis: {c['verdict']})"
+            )
+        if d["unidentifiable"]:
+            print("unidentifiable (not written): " + ", ".join(d["unidentifiable"]))
+    for p in d["params"]:
+        print(
+            f"  {p['name']:32s} {_fmt(p['value'], '.5g')}  [{_fmt(p['low'])}, {_fmt(p['high'])}] {p.get('unit', '')}"
+        )
+    print(
+        "dry run: nothing written"
+        if args.dry_run
+        else f"wrote physics revision {d.get('revision')}"
+    )
+    return 0
+
+
+def _report(args: argparse.Namespace, model: str) -> int:
+    if model == "arm":
+        raise InputError(
+            "the HTML report covers the object model", hint="use robogs compare --model arm"
+        )
+    from robogs.physics.api import diagnose, report
+
+    add = list(args.add)
+    if not add:
+        add = [r.name for r in diagnose(args.dataset).reported][:1]
+    out = args.out or args.dataset.with_name(args.dataset.name + ".physics.html")
+    path = report(args.dataset, out, add=add)
+    print(
+        f"wrote {path}"
+        + (f" (after = refit with {', '.join(add)})" if add else " (no effect reported)")
+    )
+    if args.rrd is not None:
+        from robogs.physics.api import compare
+
+        _residuals_rrd(compare(args.dataset).series, args.rrd)
+        print(f"wrote {args.rrd}")
+    return 0
+
+
+def _residuals_rrd(series: list[dict[str, Any]], path: Path) -> None:
+    """Log position and orientation residuals per trajectory on a 'since_start' timeline."""
+    import os
+
+    import numpy as np
+    import rerun as rr
+
+    rec = rr.RecordingStream("robogs", recording_id="robogs-residuals", send_properties=False)
+    rec.set_log_time_enabled(False)
+    rec.set_log_tick_enabled(False)
+    tmp = path.with_name(f".{path.name}.part")
+    rec.save(str(tmp))
+    for s in series:
+        t = rr.TimeColumn("since_start", duration=np.asarray(s["t"], np.float64))
+        err_mm = np.linalg.norm(np.asarray(s["residual_mm"]), axis=-1)
+        base = f"residuals/{s['trajectory']}"
+        rec.send_columns(
+            f"{base}/position_mm", indexes=[t], columns=rr.Scalars.columns(scalars=err_mm)
+        )
+        rec.send_columns(
+            f"{base}/orientation_deg",
+            indexes=[t],
+            columns=rr.Scalars.columns(scalars=np.asarray(s["residual_deg"], np.float64)),
+        )
+    rec.flush()
+    rec.disconnect()
+    os.replace(tmp, path)
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.dataset.exists():
+        raise InputError("dataset folder does not exist", path=args.dataset)
+    model = _model(args.dataset, args.model)
+    return {"compare": _compare, "diagnose": _diagnose, "fit": _fit, "report": _report}[args.verb](
+        args, model
+    )

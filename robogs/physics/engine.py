@@ -1,0 +1,147 @@
+"""Glue between a prepared recording, the parameter space and the fitter.
+
+:class:`Engine` holds a :class:`~robogs.physics.prepare.Prepared` recording and the
+effects already present in its physics.json (they belong to the base model and are refitted
+with it). It builds parameter spaces, fits problems, and turns weighted residuals back into
+millimetres and degrees.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from robogs.format.errors import InputError
+from robogs.physics.effects import Effect, get_effect
+from robogs.physics.fit import FitOutcome, Problem, fit_problems
+from robogs.physics.prepare import Prepared, prepare
+from robogs.physics.residuals import residual_fn
+from robogs.physics.scene import base_params
+from robogs.physics.space import ParamSpace
+
+__all__ = ["Engine", "FitSummary", "rms_mm"]
+
+
+def rms_mm(raw: np.ndarray, mask: np.ndarray) -> float:
+    """RMS of the 3-D position error [mm] over valid samples; ``raw`` [T, N, 4] m / rad."""
+    sel = raw[mask][:, :3]
+    if sel.size == 0:
+        return 0.0
+    return float(np.sqrt(np.mean(np.sum(sel**2, axis=-1))) * 1000.0)
+
+
+@dataclass
+class FitSummary:
+    """A fitted model: its outcome, space columns and errors in measurement units."""
+
+    outcome: FitOutcome
+    free: list[int]
+    rms_mm: float
+    rms_deg: float
+
+
+class Engine:
+    """Fit models of one recording.
+
+    Args:
+        recording: a Recording or any recording-like object.
+        dt: simulation step [s].
+    """
+
+    def __init__(self, recording: object, *, dt: float = 1e-3) -> None:
+        self.prep: Prepared = prepare(recording, dt=dt)
+        self.present: list[tuple[Effect, dict[str, float]]] = []
+        for entry in self.prep.rec.physics.get("effects", []) or []:
+            eff = get_effect(str(entry["name"]))
+            self.present.append((eff, {k: float(v) for k, v in entry.get("params", {}).items()}))
+        mask = self.prep.mask.numpy()
+        self.mask = mask
+        sig = torch.cat([self.prep.sig_pos, self.prep.sig_yaw.unsqueeze(-1)], dim=-1)
+        self.sig = sig.numpy().reshape(self.prep.n_traj, -1)  # [T, N*4]
+
+    # ---- spaces ---------------------------------------------------------------------------
+    def space(self, candidates: Sequence[Effect]) -> ParamSpace:
+        """Base parameters + present effects + ``candidates`` (each once)."""
+        effs = [e for e, _ in self.present]
+        names = {e.name for e in effs}
+        for c in candidates:
+            if c.name not in names:
+                effs.append(c)
+                names.add(c.name)
+        return ParamSpace(base_params(self.prep.scene), effs)
+
+    def base_columns(self, space: ParamSpace) -> list[int]:
+        """Columns always refitted: base parameters and the effects already in physics.json."""
+        cols = space.owner_columns("base")
+        for e, _ in self.present:
+            cols += space.owner_columns(e.name)
+        return cols
+
+    def start(self, space: ParamSpace) -> np.ndarray:
+        """Start vector: zero values, with present effects at their stored values."""
+        th = space.zero.copy()
+        for e, vals in self.present:
+            for k, v in vals.items():
+                th[space.index(e.name, k)] = v
+        return th
+
+    def needs_missing(self, effect: Effect) -> list[str]:
+        """The ``needs`` of ``effect`` that the data does not meet."""
+        return [n for n in effect.needs if n not in self.prep.excitation]
+
+    # ---- fitting --------------------------------------------------------------------------
+    def fit(
+        self,
+        space: ParamSpace,
+        problems: Sequence[Problem],
+        *,
+        progress: Callable[[int, int], None] | None = None,
+        max_iter: int = 20,
+    ) -> list[FitOutcome]:
+        """Fit problems over ``space`` (all at once); intervals include the leave-one-trajectory-
+        out jackknife (``fit_problems(cluster_jackknife=True)``): a release speed off by encoder
+        noise shifts a whole slide, and a few fast slides carry most of the drag information."""
+        fn = residual_fn(self.prep, space)
+        return fit_problems(
+            fn,
+            space,
+            problems,
+            n_traj=self.prep.n_traj,
+            progress=progress,
+            max_iter=max_iter,
+            cluster_jackknife=True,
+        )
+
+    def evaluate(self, space: ParamSpace, thetas: np.ndarray, locals_: np.ndarray) -> np.ndarray:
+        """Weighted residuals [M, T, N*4] of parameter sets ``thetas`` [M, Q]."""
+        fn = residual_fn(self.prep, space)
+        with torch.no_grad():
+            return fn(torch.as_tensor(thetas), torch.as_tensor(locals_)).numpy()
+
+    def raw(self, weighted: np.ndarray) -> np.ndarray:
+        """Weighted residuals [..., T, N*4] -> raw [..., T, N, 4] (m, rad)."""
+        r = weighted * self.sig
+        return r.reshape(*r.shape[:-1], -1, 4)
+
+    def summarise(self, out: FitOutcome, free: list[int]) -> FitSummary:
+        raw = self.raw(out.resid)
+        yaw = raw[self.mask][:, 3]
+        return FitSummary(
+            out, free, rms_mm(raw, self.mask), float(np.degrees(np.sqrt(np.mean(yaw**2))))
+        )
+
+    def check_effects(self, names: Sequence[str]) -> list[Effect]:
+        """Registered rigid-model effects by name (InputError for unknown or foreign ones)."""
+        out = []
+        for n in names:
+            e = get_effect(n)
+            if e.model != "rigid":
+                raise InputError(
+                    f"effect {n!r} belongs to the {e.model!r} model, not to the rigid-object model",
+                    where="effects",
+                )
+            out.append(e)
+        return out

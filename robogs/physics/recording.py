@@ -1,0 +1,290 @@
+"""Measured data of a rigid-object scene, in memory: one :class:`Recording` of trajectories.
+
+A recording is what the physics engine compares the model with. It can come from a robogs
+dataset (:func:`load_recording`: one trajectory per episode) or from any object with the same
+attribute names (:func:`as_recording`), e.g. the hidden-effect scenario generator in
+``robogs.synth.scenarios`` which builds its own, independent, dataclasses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robogs.format.errors import FormatError, InputError
+
+__all__ = ["Trajectory", "Recording", "as_recording", "load_recording", "check_finite", "yaw_of"]
+
+
+@dataclass
+class Trajectory:
+    """One trajectory (episode) of one object pushed or carried by the end effector.
+
+    Attributes:
+        name: episode id.
+        t_ns: object-pose stamps [N] int64 ns (camera / tracker clock as recorded).
+        object_pos: T_world_object translation [N, 3] m.
+        object_quat: T_world_object rotation [N, 4] (w, x, y, z).
+        ee_t_ns: end-effector stamps [E] int64 ns (encoder clock).
+        ee_pos: T_world_ee translation [E, 3] m (centre of the pusher sphere).
+        ee_quat: T_world_ee rotation [E, 4] (w, x, y, z).
+        grasp: grasp flag at ``ee_t_ns`` [E] bool (object attached to the EE while True).
+        kind: free text describing the motion (``push``, ``release_slide``, ``grasp_place``).
+    """
+
+    name: str
+    t_ns: np.ndarray
+    object_pos: np.ndarray
+    object_quat: np.ndarray
+    ee_t_ns: np.ndarray
+    ee_pos: np.ndarray
+    ee_quat: np.ndarray
+    grasp: np.ndarray
+    kind: str = ""
+
+
+@dataclass
+class Recording:
+    """Trajectories plus the nominal physics (a physics.json document) they were taken with.
+
+    Attributes:
+        trajectories: the measured trajectories.
+        physics: physics.json content; ``objects[object_name]`` is the box, ``objects["table"]``
+            has ``plane_z_m``, ``objects["pusher"]`` has ``radius_m`` and ``link``.
+        object_name: the free object.
+        meta: free-form information (e.g. the scenario's hidden effect, for benches only).
+    """
+
+    trajectories: list[Trajectory]
+    physics: dict[str, Any]
+    object_name: str = "box"
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+_TRAJ_FIELDS = ("t_ns", "object_pos", "object_quat", "ee_t_ns", "ee_pos", "ee_quat", "grasp")
+
+
+def yaw_of(quat: np.ndarray) -> np.ndarray:
+    """Yaw [rad] of (w, x, y, z) quaternions [..., 4]: heading of the rotated x axis."""
+    w, x, y, z = (quat[..., i] for i in range(4))
+    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def check_finite(rec: Recording) -> None:
+    """Raise :class:`InputError` naming the stream and the stamp of the first NaN or inf."""
+    for tr in rec.trajectories:
+        for stream, stamps, arrays in (
+            ("object_poses", tr.t_ns, (tr.object_pos, tr.object_quat)),
+            ("ee_poses", tr.ee_t_ns, (tr.ee_pos, tr.ee_quat)),
+        ):
+            for arr in arrays:
+                bad = ~np.isfinite(np.asarray(arr, dtype=float)).all(axis=-1)
+                if bad.any():
+                    i = int(np.argmax(bad))
+                    t = int(stamps[i])
+                    raise InputError(
+                        f"non-finite value in {stream} at t_ns={t} "
+                        f"(t={1e-9 * (t - int(stamps[0])):.3f} s into the episode)",
+                        where=f"episodes/{tr.name}/{stream}",
+                        hint="drop or repair the sample before comparing with the model",
+                    )
+        for stream, stamps in (("object_poses", tr.t_ns), ("ee_poses", tr.ee_t_ns)):
+            if len(stamps) < 2:
+                raise InputError(
+                    f"{stream} has fewer than 2 samples", where=f"episodes/{tr.name}/{stream}"
+                )
+            if np.any(np.diff(stamps) <= 0):
+                i = int(np.argmax(np.diff(stamps) <= 0))
+                raise InputError(
+                    f"{stream} stamps are not increasing at t_ns={int(stamps[i + 1])}",
+                    where=f"episodes/{tr.name}/{stream}",
+                    hint="sort the table by t_ns and drop duplicates",
+                )
+
+
+def as_recording(obj: Any) -> Recording:
+    """Copy any recording-like object (same attribute names) into a :class:`Recording`."""
+    if isinstance(obj, Recording):
+        rec = obj
+    else:
+        trajs = []
+        for t in obj.trajectories:
+            trajs.append(
+                Trajectory(
+                    name=str(t.name),
+                    **{f: np.asarray(getattr(t, f)) for f in _TRAJ_FIELDS},
+                    kind=str(getattr(t, "kind", "")),
+                )
+            )
+        rec = Recording(
+            trajectories=trajs,
+            physics=dict(obj.physics),
+            object_name=str(getattr(obj, "object_name", "box")),
+            meta=dict(getattr(obj, "meta", {}) or {}),
+        )
+    for t in rec.trajectories:
+        t.t_ns = np.asarray(t.t_ns, dtype=np.int64)
+        t.ee_t_ns = np.asarray(t.ee_t_ns, dtype=np.int64)
+        t.grasp = np.asarray(t.grasp, dtype=bool)
+    check_finite(rec)
+    return rec
+
+
+def _pose_columns(table: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
+    pos = np.stack([table.column(c).to_numpy().astype(float) for c in ("x", "y", "z")], axis=-1)
+    quat = np.stack(
+        [table.column(c).to_numpy().astype(float) for c in ("qw", "qx", "qy", "qz")], axis=-1
+    )
+    return t, pos, quat
+
+
+def _require_stream(ds: Any, ep: Any, stream: str, problem: str, hint: str) -> None:
+    """FormatError ``episode <id> <problem>`` when episode ``ep`` lacks ``stream``."""
+    if not ep.has(stream):
+        raise FormatError(
+            f"episode {ep.id!r} {problem}",
+            path=ds.manifest_path,
+            where=f"episodes/{ep.id}",
+            hint=hint,
+        )
+
+
+def _robot_chain(ds: Any, physics: dict[str, Any], ee_link: Any, episode: str) -> Any:
+    """The robot's forward kinematics with the fitted joint offsets, to drive the end effector
+    from ``joint_states`` when an episode has no ``ee_poses``."""
+    from robogs.format.kinematics import Chain, fitted_chain
+
+    robot = ds.manifest.get("robot") or {}
+    if not isinstance(robot.get("urdf"), str) or not isinstance(ee_link, str):
+        raise FormatError(
+            f"episode {episode!r} has no ee_poses stream, and no robot URDF with an end-effector "
+            "link to compute it from joint_states",
+            path=ds.manifest_path,
+            where=f"episodes/{episode}",
+            hint="record ee_poses, or declare robot.urdf and robot.ee_link (or objects.pusher.link)",
+        )
+    chain = Chain.from_urdf(ds.urdf(load_meshes=False), floating_as_fixed=True)
+    if ee_link not in chain.link_names:
+        raise FormatError(
+            f"end-effector link {ee_link!r} is not a link of the robot URDF",
+            path=ds.manifest_path,
+            where="robot/ee_link",
+            hint=f"links: {', '.join(chain.link_names[:12])}",
+        )
+    return fitted_chain(chain, physics, path=ds.manifest.get("physics"))[0]
+
+
+def _ee_from_joints(ds: Any, ep: Any, chain: Any, link: str) -> tuple[np.ndarray, ...]:
+    """End-effector poses (world = robot base frame) by forward kinematics of the measured
+    joints, at the ``joint_states`` stamps: (t_ns [N], position [N, 3] m, quaternion [N, 4] wxyz).
+    """
+    import torch
+
+    from robogs.format.frames import matrix_to_quat
+
+    _require_stream(
+        ds,
+        ep,
+        "joint_states",
+        "has neither ee_poses nor joint_states",
+        "the rigid model is driven by the end effector: record one of them",
+    )
+    js = ep.table("joint_states")
+    missing = [j for j in chain.joint_names if f"position.{j}" not in js.column_names]
+    if missing:
+        raise FormatError(
+            f"joint_states lacks joints {', '.join(missing[:6])} needed for the end-effector pose",
+            path=ep.table_path("joint_states"),
+            where="columns",
+            hint="record every actuated joint of the URDF, or record ee_poses",
+        )
+    t = js.column("t_ns").to_numpy().astype(np.int64)
+    q = np.stack(
+        [js.column(f"position.{j}").to_numpy().astype(float) for j in chain.joint_names], 1
+    )
+    T = chain.forward(torch.as_tensor(q, dtype=torch.float64))  # [N, L, 4, 4] root frame
+    base = (ds.manifest.get("robot") or {}).get("base_link")
+    if isinstance(base, str) and base in chain.link_names and base != chain.link_names[0]:
+        T = torch.linalg.inv(T[:, chain.link_index(base)]).unsqueeze(1) @ T
+    Te = T[:, chain.link_index(link)]
+    return t, Te[:, :3, 3].numpy().copy(), matrix_to_quat(Te[:, :3, :3]).numpy().copy()
+
+
+def load_recording(dataset: Any, *, object_name: str | None = None) -> Recording:
+    """Read a robogs dataset into a :class:`Recording` (one trajectory per episode).
+
+    Args:
+        dataset: a ``robogs.format.dataset.Dataset`` or a dataset folder.
+        object_name: the free object; default the only ``rigid`` object in physics.json.
+
+    The end effector is ``objects.pusher.link`` of physics.json (default: the manifest's
+    ``robot.ee_link``), read from ``ee_poses``; an episode without ``ee_poses`` is driven by
+    forward kinematics of its ``joint_states`` (with the physics revision's fitted joint
+    offsets). Grasp flags come from the joint named ``objects.pusher.grasp_joint``
+    in ``joint_states`` (grasping while its position exceeds ``grasp_threshold``); without it
+    the object is never attached.
+    """
+    import pyarrow.compute as pc
+
+    from robogs.format.dataset import Dataset
+
+    ds = dataset if isinstance(dataset, Dataset) else Dataset.open(Path(dataset))
+    physics = ds.physics()
+    objects = physics.get("objects", {})
+    if object_name is None:
+        rigid = [k for k, v in objects.items() if v.get("equation") == "rigid"]
+        if len(rigid) != 1:
+            raise FormatError(
+                f"physics.json has {len(rigid)} rigid objects; the rigid model needs exactly one",
+                path=ds.resolve("physics.json"),
+                where="objects",
+                hint="pass object_name=...",
+            )
+        object_name = rigid[0]
+    pusher = objects.get("pusher", {})
+    ee_link = pusher.get("link") or ds.manifest.get("robot", {}).get("ee_link")
+    grasp_joint = pusher.get("grasp_joint")
+    thr = float(pusher.get("grasp_threshold", 0.5))
+    trajs: list[Trajectory] = []
+    chain = None
+    for ep in ds.episodes:
+        _require_stream(
+            ds,
+            ep,
+            "object_poses",
+            "has no object_poses stream",
+            "the rigid model needs tracked object poses",
+        )
+        ot = ep.table("object_poses")
+        ot = ot.filter(pc.equal(ot.column("object"), object_name))
+        if ep.has("ee_poses"):
+            et = ep.table("ee_poses")
+            if ee_link is not None:
+                et = et.filter(pc.equal(et.column("link"), ee_link))
+            et_ns, epos, equat = _pose_columns(et)
+        else:
+            if chain is None:
+                chain = _robot_chain(ds, physics, ee_link, ep.id)
+            et_ns, epos, equat = _ee_from_joints(ds, ep, chain, str(ee_link))
+        if ot.num_rows < 2 or len(et_ns) < 2:
+            raise FormatError(
+                f"episode {ep.id!r}: too few rows for object {object_name!r} or link {ee_link!r}",
+                path=ep.table_path("object_poses"),
+            )
+        t, pos, quat = _pose_columns(ot)
+        grasp = np.zeros(len(et_ns), dtype=bool)
+        if grasp_joint is not None and ep.has("joint_states"):
+            js = ep.table("joint_states")
+            col = f"position.{grasp_joint}"
+            if col in js.column_names:
+                jt = js.column("t_ns").to_numpy().astype(np.int64)
+                jv = js.column(col).to_numpy().astype(float)
+                idx = np.clip(np.searchsorted(jt, et_ns, side="right") - 1, 0, len(jt) - 1)
+                grasp = jv[idx] > thr
+        trajs.append(Trajectory(ep.id, t, pos, quat, et_ns, epos, equat, grasp, kind=ep.segment))
+    rec = Recording(trajectories=trajs, physics=physics, object_name=object_name)
+    return as_recording(rec)

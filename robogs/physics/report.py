@@ -1,0 +1,161 @@
+"""HTML report: residual-versus-time plots before and after a fit, phase by phase.
+
+matplotlib is not a dependency of robogs, so the plots are inline SVG written here: one panel
+per trajectory with the position-error norm [mm] of the model before (grey) and after (blue),
+phases shaded behind, and the data-estimated noise floor as a dashed line.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import numpy as np
+
+from robogs.physics.compare import CompareResult
+
+__all__ = ["render_report", "svg_panel"]
+
+_PHASE_COLOURS = {
+    "rest": "#f3f3f3",
+    "contact": "#fde2c8",
+    "sliding": "#d8ecd8",
+    "free": "#dde6f7",
+    "impact": "#f7d4d4",
+    "grasp": "#ece0f5",
+}
+
+
+def svg_panel(
+    t: np.ndarray,
+    before: np.ndarray,
+    after: np.ndarray,
+    phases: list[str],
+    floor: float,
+    title: str,
+    *,
+    width: int = 640,
+    height: int = 170,
+) -> str:
+    """One residual panel as an SVG string (time [s] on x, error [mm] on y)."""
+    pad_l, pad_r, pad_t, pad_b = 46, 10, 22, 26
+    w, h = width - pad_l - pad_r, height - pad_t - pad_b
+    t0, t1 = float(t.min()), float(max(t.max(), t.min() + 1e-9))
+    ymax = float(max(np.max(before), np.max(after), floor, 1e-3)) * 1.1
+
+    def x(v: np.ndarray | float) -> np.ndarray | float:
+        return pad_l + (np.asarray(v) - t0) / (t1 - t0) * w
+
+    def y(v: np.ndarray | float) -> np.ndarray | float:
+        return pad_t + h - np.asarray(v) / ymax * h
+
+    parts = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" font-size="11">'
+    ]
+    parts.append(f'<text x="{pad_l}" y="14" font-weight="bold">{html.escape(title)}</text>')
+    # phase bands
+    edges = np.concatenate([[t0], 0.5 * (t[1:] + t[:-1]), [t1]])
+    start = 0
+    for i in range(1, len(phases) + 1):
+        if i == len(phases) or phases[i] != phases[start]:
+            xa, xb = x(edges[start]), x(edges[i])
+            col = _PHASE_COLOURS.get(phases[start], "#ffffff")
+            parts.append(
+                f'<rect x="{xa:.1f}" y="{pad_t}" width="{max(xb - xa, 0.5):.1f}" height="{h}" fill="{col}">'
+                f"<title>{phases[start]}</title></rect>"
+            )
+            start = i
+    parts.append(
+        f'<rect x="{pad_l}" y="{pad_t}" width="{w}" height="{h}" fill="none" stroke="#888"/>'
+    )
+    for series, colour in ((before, "#888888"), (after, "#1f5fbf")):
+        pts = " ".join(f"{a:.1f},{b:.1f}" for a, b in zip(x(t), y(series), strict=True))
+        parts.append(f'<polyline points="{pts}" fill="none" stroke="{colour}" stroke-width="1.4"/>')
+    yf = y(floor)
+    parts.append(
+        f'<line x1="{pad_l}" x2="{pad_l + w}" y1="{yf:.1f}" y2="{yf:.1f}" stroke="#c00" stroke-dasharray="4 3"/>'
+    )
+    for frac in (0.0, 0.5, 1.0):
+        val = frac * ymax
+        parts.append(f'<text x="4" y="{y(val) + 4:.1f}">{val:.1f} mm</text>')
+    parts.append(f'<text x="{pad_l}" y="{height - 6}">{t0:.2f} s</text>')
+    parts.append(f'<text x="{pad_l + w - 40}" y="{height - 6}">{t1:.2f} s</text>')
+    parts.append("</svg>")
+    return "".join(parts)
+
+
+def _table(rows: list[list[str]], header: list[str]) -> str:
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in header)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows
+    )
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def render_report(
+    before: CompareResult,
+    after: CompareResult,
+    out_html: str | Path,
+    *,
+    title: str,
+    added: list[str],
+    params: list[tuple[str, float, float, float, str]],
+) -> Path:
+    """Write the report; ``params`` rows are (name, value, low, high, unit)."""
+    out = Path(out_html)
+    phase_rows = [
+        [
+            p,
+            f"{before.phases_mm.get(p, float('nan')):.2f}",
+            f"{after.phases_mm.get(p, float('nan')):.2f}",
+        ]
+        for p in _PHASE_COLOURS
+        if p in before.phases_mm
+    ]
+    worst = [
+        [s.trajectory, s.phase, f"{s.t_start:.2f}-{s.t_end:.2f} s", f"{s.rms_mm:.2f}"]
+        for s in before.worst
+    ]
+    prm = [[n, f"{v:.5g}", f"[{lo:.4g}, {hi:.4g}]", u] for n, v, lo, hi, u in params]
+    panels = []
+    for sb, sa in zip(before.series, after.series, strict=True):
+        nb = np.linalg.norm(sb["residual_mm"], axis=-1)
+        na = np.linalg.norm(sa["residual_mm"], axis=-1)
+        panels.append(
+            svg_panel(sb["t"], nb, na, sb["phase"], after.noise_floor_mm, sb["trajectory"])
+        )
+    if before.masks is not None:
+        m = before.masks
+        mask_rows = [
+            [r.camera, r.label, f"{r.boundary_px:.3g}", f"{r.boundary_mm:.3g}", f"{r.iou:.3f}"]
+            for r in m.labels
+        ]
+        masks = (
+            f"<p>{m.frames} frames re-rendered, objects at {html.escape(m.object_poses)} poses: "
+            f"{m.boundary_px:.3g} px, {m.boundary_mm:.3g} mm.</p>"
+            + _table(mask_rows, ["camera", "link/object", "boundary px", "boundary mm", "IoU"])
+        )
+    else:
+        masks = f"<p>No mask-boundary stream: {html.escape(before.masks_absent)}.</p>"
+    legend = " ".join(
+        f'<span style="background:{c};padding:1px 6px;border:1px solid #ccc">{p}</span>'
+        for p, c in _PHASE_COLOURS.items()
+    )
+    doc = f"""<!DOCTYPE html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
+<style>body{{font-family:sans-serif;margin:24px;max-width:1000px}}table{{border-collapse:collapse;margin:8px 0}}
+td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}th{{background:#eee}}</style></head><body>
+<h1>{html.escape(title)}</h1>
+<p>Position error before (grey: stored physics) and after (blue: refitted{", with " + html.escape(", ".join(added)) if added else ""}).
+Dashed red: noise floor estimated from the data ({after.noise_floor_mm:.2f} mm; source {html.escape(str(after.noise.get("source")))}).</p>
+<p>RMS position error: {before.rms_mm:.2f} mm &rarr; {after.rms_mm:.2f} mm; yaw {before.rms_deg:.2f}&deg; &rarr; {after.rms_deg:.2f}&deg;.</p>
+<h2>Per phase (RMS, mm)</h2>{_table(phase_rows, ["phase", "before", "after"])}
+<h2>Mask boundary of the stored model (mean symmetric distance)</h2>{masks}
+<h2>Worst segments before the fit</h2>{_table(worst, ["trajectory", "phase", "time", "RMS mm"])}
+<h2>Fitted parameters (95 % interval)</h2>{_table(prm, ["parameter", "value", "interval", "unit"])}
+<h2>Residuals per trajectory</h2><p>{legend}</p>
+{"".join(f"<div>{p}</div>" for p in panels)}
+<p>Plots: inline SVG generated by robogs (matplotlib is not used).</p>
+</body></html>"""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(doc, encoding="utf-8")
+    return out
