@@ -47,6 +47,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="ply: append the binding columns",
     )
     parser.add_argument(
+        "--sh-degree",
+        type=int,
+        dest="sh_degree",
+        metavar="D",
+        help="ply: write SH of degree D, higher bands zero-padded (3 for the reference 3DGS "
+        "loader; default: the data's degree)",
+    )
+    parser.add_argument(
         "--no-objects",
         action="store_false",
         default=None,
@@ -86,6 +94,7 @@ _OPTION_FLAGS = {
     "episode": "--episode",
     "t_ns": "--t-ns",
     "with_binding": "--with-binding",
+    "sh_degree": "--sh-degree",
     "objects": "--no-objects",
     "image_format": "--image-format",
     "max_hz": "--max-hz",

@@ -11,6 +11,7 @@ import numpy as np
 import plyfile
 import pytest
 
+from robogs.cli.main import main
 from robogs.convert.export import export
 from robogs.format import Dataset, InputError
 
@@ -144,3 +145,37 @@ def test_no_splats_is_a_clear_error(tiny: Dataset, tmp_path: Path) -> None:
     with pytest.raises(InputError, match="no splats"):
         export("ply", bare, out / "n.ply")
     assert list(out.iterdir()) == []  # neither the output nor a temporary file is left
+
+
+def _reference_3dgs_load_ply(path: Path, max_sh_degree: int) -> dict[str, np.ndarray]:
+    """An oracle written after graphdeco-inria/gaussian-splatting ``GaussianModel.load_ply``:
+    it sorts the ``f_rest_*`` properties by index, asserts their count is
+    ``3 (max_sh_degree + 1)^2 - 3`` and reshapes them channel-major to [N, 3, K - 1]."""
+    el = plyfile.PlyData.read(str(path)).elements[0]
+    names = sorted(
+        (p.name for p in el.properties if p.name.startswith("f_rest_")),
+        key=lambda n: int(n.split("_")[-1]),
+    )
+    assert len(names) == 3 * (max_sh_degree + 1) ** 2 - 3
+    n = len(el.data)
+    rest = np.stack([np.asarray(el[nm]) for nm in names], 1).reshape(n, 3, -1)
+    dc = np.stack([np.asarray(el[f"f_dc_{i}"]) for i in range(3)], 1)
+    return {"dc": dc, "rest": rest}
+
+
+def test_sh_degree_3_pads_f_rest_for_the_reference_loader(tiny: Dataset, tmp_path: Path) -> None:
+    export("ply", tiny, tmp_path / "d1.ply")
+    with pytest.raises(AssertionError):  # degree 1 data, the loader's default degree is 3
+        _reference_3dgs_load_ply(tmp_path / "d1.ply", 3)
+    assert (
+        main(["export", "ply", str(tiny.root), str(tmp_path / "d3.ply"), "--sh-degree", "3"]) == 0
+    )
+    got = _reference_3dgs_load_ply(tmp_path / "d3.ply", 3)
+    assert got["rest"].shape == (380, 3, 15)
+    robot = tiny.splats("robot")
+    np.testing.assert_array_equal(got["dc"][:300], robot.sh[:, 0, :])
+    # bands 1 are the data (channel-major), bands 2 and 3 are zero; the 2DGS box is all zero
+    np.testing.assert_array_equal(got["rest"][:300, :, :3], robot.sh[:, 1:4, :].transpose(0, 2, 1))
+    assert not got["rest"][:300, :, 3:].any() and not got["rest"][300:].any()
+    with pytest.raises(InputError, match="below the splats' SH degree 1"):
+        export("ply", tiny, tmp_path / "d0.ply", sh_degree=0)

@@ -16,6 +16,11 @@ one ``vertex`` element, float32 properties in the order
 * ``t_ns=None`` writes the stored rest state unchanged; a stamp poses every bound Gaussian
   with :class:`robogs.format.binding.Binding` (links by forward kinematics of the
   interpolated joint states, objects by their interpolated pose, SH rotated with them).
+* ``sh_degree=D`` writes SH of degree ``D`` (``3 (D+1)^2 - 3`` ``f_rest`` properties), padding
+  the higher bands with zeros. Loaders that size their SH from a fixed degree (the reference
+  3DGS ``load_ply`` asserts ``len(f_rest) == 3 (max_sh_degree + 1)^2 - 3``, degree 3 by
+  default) need the file written at their degree. Zero bands add no colour, so the rendered
+  result is unchanged. A degree below the data's is refused (it would drop colour).
 * ``with_binding=True`` appends ``bind_id bind_face bind_u bind_v bind_offset`` (int32,
   int32, float32 x3; names that cannot collide with the ``scale_``/``rot`` prefixes) and a
   header comment ``robogs_targets [...]`` (JSON list) giving the merged ``bind_id`` targets.
@@ -56,6 +61,24 @@ def ply_property_names(sh_coeffs: int, *, with_binding: bool = False) -> list[st
     return names
 
 
+def _sh_coeffs(k_data: int, sh_degree: int | None) -> int:
+    """Coefficients per channel of the file: ``(sh_degree + 1)^2``, or ``k_data`` if None."""
+    if sh_degree is None:
+        return k_data
+    data_degree = round(math.sqrt(k_data)) - 1
+    if not isinstance(sh_degree, int) or not 0 <= sh_degree <= 4:
+        raise InputError(
+            f"sh_degree must be an integer in 0..4, not {sh_degree!r}", where="--sh-degree"
+        )
+    if sh_degree < data_degree:
+        raise InputError(
+            f"--sh-degree {sh_degree} is below the splats' SH degree {data_degree}",
+            where="--sh-degree",
+            hint=f"pass --sh-degree {data_degree} or more (higher bands are zero-padded)",
+        )
+    return (sh_degree + 1) ** 2
+
+
 def _owners(ds: Dataset) -> list[str]:
     owners = ["robot"] if "splats" in (ds.manifest.get("robot") or {}) else []
     return owners + [name for name, entry in sorted(ds.assets.items()) if "splats" in entry]
@@ -87,6 +110,7 @@ def export_ply(
     t_ns: int | None = None,
     episode: str | None = None,
     with_binding: bool = False,
+    sh_degree: int | None = None,
 ) -> ExportReport:
     """Write the merged splats of ``ds`` as one 3DGS PLY.
 
@@ -96,6 +120,8 @@ def export_ply(
         t_ns: dataset time to pose the Gaussians at; None = their stored rest state.
         episode: episode whose streams pose them (default: the only one).
         with_binding: append the binding columns.
+        sh_degree: SH degree of the file (0..4), higher bands zero-padded; None = the highest
+            degree in the data.
 
     Returns:
         The report; ``facts`` has ``gaussians``, ``sh_degree`` and per-owner counts.
@@ -118,6 +144,7 @@ def export_ply(
         counts[owner] = len(s)
         parts.append(part)
     k = max(p["sh"].shape[1] for p in parts)
+    k = _sh_coeffs(k, sh_degree)
     n = sum(len(p["means"]) for p in parts)
 
     def cat(key: str) -> np.ndarray:
@@ -170,7 +197,12 @@ def export_ply(
     return ExportReport(
         out=out,
         files=[out.name],
-        facts={"gaussians": n, "sh_degree": int(round(math.sqrt(k))) - 1, "owners": counts},
+        facts={
+            "gaussians": n,
+            "sh_degree": int(round(math.sqrt(k))) - 1,
+            "f_rest": 3 * (k - 1),
+            "owners": counts,
+        },
     )
 
 
