@@ -16,6 +16,7 @@ import torch
 import yourdfpy
 
 from robogs.format.errors import FormatError, InputError
+from robogs.format.kinematics.joint_values import as_joint_tensor
 
 __all__ = ["Chain", "JOINT_TYPES"]
 
@@ -269,16 +270,7 @@ class Chain:
         return src * c["mul_rev"] + c["off_rev"], src * c["mul_pri"] + c["off_pri"]
 
     def _check_q(self, q: torch.Tensor) -> torch.Tensor:
-        if not isinstance(q, torch.Tensor):
-            q = torch.as_tensor(np.asarray(q), dtype=torch.float64)
-        if not q.is_floating_point():
-            q = q.to(torch.float64)
-        if q.ndim == 0 or q.shape[-1] != self.num_joints:
-            raise InputError(
-                f"q has shape {tuple(q.shape)}, expected [..., {self.num_joints}]",
-                hint=f"joint order: {self.joint_names}",
-            )
-        return q
+        return as_joint_tensor(q, self.joint_names)
 
     # ------------------------------------------------------------------ kinematics
 

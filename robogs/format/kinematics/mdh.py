@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from robogs.format.errors import FormatError, InputError
+from robogs.format.kinematics.joint_values import as_joint_tensor
 
 __all__ = ["MDHTable", "MDH_CONVENTION", "load_mdh_json", "save_mdh_json", "mdh_transform"]
 
@@ -178,16 +179,7 @@ class MDHTable:
     # ------------------------------------------------------------------ kinematics
 
     def _check_q(self, q: torch.Tensor) -> torch.Tensor:
-        if not isinstance(q, torch.Tensor):
-            q = torch.as_tensor(np.asarray(q), dtype=torch.float64)
-        if not q.is_floating_point():
-            q = q.to(torch.float64)
-        if q.ndim == 0 or q.shape[-1] != self.num_joints:
-            raise InputError(
-                f"q has shape {tuple(q.shape)}, expected [..., {self.num_joints}]",
-                hint=f"joint order: {self.joint_names}",
-            )
-        return q
+        return as_joint_tensor(q, self.joint_names)
 
     def joint_transforms(self, q: torch.Tensor) -> torch.Tensor:
         """Per-joint transforms ``^{i-1}T_i``.
