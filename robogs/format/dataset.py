@@ -191,7 +191,9 @@ class Dataset:
         """
         root = Path(path)
         if not root.is_dir():
-            olds = sorted(root.parent.glob(f".{root.name}.old-*")) if not root.exists() else []
+            from .writer import sibling_versions  # the name is literal, never a glob
+
+            olds = sibling_versions(root, "old") if not root.exists() else []
             raise FormatError(
                 "not a dataset folder" if root.exists() else "dataset folder does not exist",
                 path=root,

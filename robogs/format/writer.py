@@ -11,8 +11,11 @@ The swap exchanges the two folders in one ``renameat2(RENAME_EXCHANGE)`` call
 where the kernel and file system allow it, so the dataset path always holds a
 complete version; elsewhere it falls back to two renames, and a crash between
 them is undone by the next writer. The lock is an advisory ``flock`` on
-``.<name>.lock`` holding the writer's PID: the kernel releases it when the
-process dies (even by ``kill -9``), so a stale lock file never blocks anyone.
+``.<name>.lock`` holding the writer's PID, opened with ``O_NOFOLLOW``; the file is
+removed when the writer commits, aborts or the process exits. The kernel releases the
+lock when the process dies (even by ``kill -9``), so a stale lock file never blocks
+anyone: the next writer takes it over with a note naming the dead PID. Dataset names
+are matched literally, never as glob patterns.
 
 Editing an existing dataset starts from hard links to its files (copies where
 links are impossible); every write replaces a file by rename, so the original
@@ -26,9 +29,13 @@ import datetime as _dt
 import errno
 import fcntl
 import hashlib
+import logging
 import os
+import re
 import shutil
+import stat
 import uuid
+import weakref
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -47,7 +54,7 @@ from .tables import TABLES, check_table_schema
 if TYPE_CHECKING:
     from .dataset import Dataset
 
-__all__ = ["DatasetWriter", "CONVENTIONS", "sha256_file"]
+__all__ = ["DatasetWriter", "CONVENTIONS", "sha256_file", "sibling_versions"]
 
 CONVENTIONS: dict[str, Any] = {
     "units": "SI",
@@ -78,13 +85,143 @@ def _robogs_version() -> str:
         return "0+unknown"
 
 
-def _lock_holder(lock_path: Path) -> str:
-    """PID written in a lock file by its holder ('unknown' if not yet written)."""
+_LOG = logging.getLogger(__name__)
+_ID = re.compile(r"[0-9a-f]{8}")
+_LOCK_FLAGS = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+
+
+def sibling_versions(target: Path, kind: str) -> list[Path]:
+    """Writer folders beside ``target``: ``.<name>.<kind>-<8 hex>``, kind ``tmp`` or ``old``.
+
+    The dataset name is matched literally (never as a glob pattern, so ``run[1]`` or ``*``
+    never select another dataset's folders). Sorted by name.
+    """
+    target = Path(target)
+    prefix = f".{target.name}.{kind}-"
     try:
-        text = lock_path.read_text(encoding="ascii", errors="replace").strip()
+        names = [e.name for e in os.scandir(target.parent)]
     except OSError:
-        return "unknown"
-    return text if text.isdigit() else "unknown"
+        return []
+    return sorted(
+        target.parent / n for n in names if n.startswith(prefix) and _ID.fullmatch(n[len(prefix) :])
+    )
+
+
+def _pid_alive(pid: int) -> bool:
+    """Whether a process with this PID exists (it may belong to another user)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class _DatasetLock:
+    """Exclusive advisory ``flock`` on ``.<name>.lock`` beside a dataset, holding the PID.
+
+    The file is opened with ``O_NOFOLLOW|O_CREAT`` and must be a regular file with one link,
+    so a planted symlink or hard link is refused and never written. The holder unlinks the file
+    before unlocking it; an acquirer re-checks after locking that the path still names the
+    file it locked (else it retries), so two writers never hold two different files. A file
+    left by a killed holder is taken over with a note naming its PID.
+    """
+
+    def __init__(self, path: Path, target: Path) -> None:
+        self.path = path
+        self.pid = os.getpid()
+        self.fd: int | None = None
+        for _ in range(50):
+            fd = self._open(target)
+            st = os.fstat(fd)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = _pid_in(os.pread(fd, 32, 0))
+                os.close(fd)
+                raise LockError(
+                    f"another robogs process (PID {holder or 'unknown'}) is writing this "
+                    f"dataset; lock file {path}",
+                    path=target,
+                    hint="wait for it to finish; the lock is released when that process exits, "
+                    "even if it is killed",
+                ) from None
+            try:
+                now = os.lstat(path)
+            except FileNotFoundError:
+                now = None
+            if now is not None and (now.st_dev, now.st_ino) == (st.st_dev, st.st_ino):
+                break
+            os.close(fd)  # the previous holder unlinked it in between: lock the new file
+        else:  # pragma: no cover - 50 lost races in a row
+            raise LockError(f"could not take the lock file {path}", path=target)
+        self.fd = fd
+        dead = _pid_in(os.pread(fd, 32, 0))
+        if dead is not None and dead != self.pid:
+            state = "no longer running" if not _pid_alive(dead) else "no longer holding it"
+            _LOG.warning(
+                "robogs: note: took over the stale lock %s left by PID %d (%s)", path, dead, state
+            )
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{self.pid}\n".encode("ascii"), 0)
+
+    def _open(self, target: Path) -> int:
+        try:
+            fd = os.open(self.path, _LOCK_FLAGS, 0o644)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                raise FormatError(
+                    f"the lock file {self.path} is a symbolic link; refusing to follow it",
+                    path=target,
+                    hint="remove the link (robogs creates its own lock file)",
+                ) from None
+            if exc.errno == errno.EISDIR:
+                hint = "it is a folder; remove it (robogs creates its own lock file)"
+            else:
+                hint = "the folder that holds the dataset must be writable"
+            raise FormatError(
+                f"cannot create the lock file {self.path}: {exc.strerror}", path=target, hint=hint
+            ) from None
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode) or st.st_nlink != 1:
+            os.close(fd)
+            raise FormatError(
+                f"the lock file {self.path} is not a plain file of its own "
+                f"({'hard-linked' if stat.S_ISREG(st.st_mode) else 'not a regular file'}); "
+                "refusing to use it",
+                path=target,
+                hint="remove it (robogs creates its own lock file)",
+            )
+        return fd
+
+    def release(self) -> None:
+        """Unlink the lock file (if it is still ours), then unlock; idempotent, owner only."""
+        fd, self.fd = self.fd, None
+        if fd is None or os.getpid() != self.pid:
+            return
+        try:
+            now, st = os.lstat(self.path), os.fstat(fd)
+            if (now.st_dev, now.st_ino) == (st.st_dev, st.st_ino):
+                os.unlink(self.path)
+        except OSError:
+            pass
+        finally:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+
+
+def _pid_in(data: bytes) -> int | None:
+    """The PID a lock file holds, or None if empty or not a number."""
+    text = data.decode("ascii", errors="replace").strip()
+    return int(text) if text.isdigit() else None
+
+
+def _abandon(lock: _DatasetLock, tmp: Path) -> None:
+    """Discard an uncommitted temp folder and release the lock (GC, exit or abort)."""
+    if os.getpid() == lock.pid:
+        shutil.rmtree(tmp, ignore_errors=True)
+    lock.release()
 
 
 _AT_FDCWD = -100
@@ -136,18 +273,23 @@ class DatasetWriter:
             raise FormatError(
                 "parent folder of the output does not exist", path=parent, hint="create it first"
             )
-        self._lock_fh = self._acquire_lock()
-        self._recover()
-        if base is None and self.target.exists() and not overwrite:
-            self._release_lock()
-            raise DatasetExistsError(
-                "output already exists",
-                path=self.target,
-                hint="choose another path or pass --force to replace it",
-            )
-        self.tmp = parent / f".{self.target.name}.tmp-{uuid.uuid4().hex[:8]}"
-        self.tmp.mkdir()
         self.committed = False
+        self._lock: _DatasetLock | None = self._acquire_lock()
+        try:
+            self._recover()
+            if base is None and self.target.exists() and not overwrite:
+                raise DatasetExistsError(
+                    "output already exists",
+                    path=self.target,
+                    hint="choose another path or pass --force to replace it",
+                )
+            self.tmp = parent / f".{self.target.name}.tmp-{uuid.uuid4().hex[:8]}"
+            self.tmp.mkdir()
+        except BaseException:
+            self._release_lock()
+            raise
+        # on abort, garbage collection or interpreter exit: temp folder and lock file go
+        self._finalizer = weakref.finalize(self, _abandon, self._lock, self.tmp)
         if base is not None:
             self.manifest: dict[str, Any] = {k: v for k, v in base.manifest.items() if k != "files"}
             self._link_base(base)
@@ -166,41 +308,21 @@ class DatasetWriter:
         """The lock file beside the dataset, ``.<name>.lock``."""
         return self.target.parent / f".{self.target.name}.lock"
 
-    def _acquire_lock(self):
-        lock_path = self.lock_path
-        fh = open(lock_path, "a+")
-        try:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            fh.close()
-            holder = _lock_holder(lock_path)
-            raise LockError(
-                f"another robogs process (PID {holder}) is writing this dataset; "
-                f"lock file {lock_path}",
-                path=self.target,
-                hint="wait for it to finish; the lock is released when that process exits, "
-                "even if it is killed",
-            ) from None
-        fh.seek(0)
-        fh.truncate()
-        fh.write(f"{os.getpid()}\n")
-        fh.flush()
-        return fh
+    def _acquire_lock(self) -> _DatasetLock:
+        return _DatasetLock(self.lock_path, self.target)
 
     def _release_lock(self) -> None:
-        if self._lock_fh is not None:
-            fcntl.flock(self._lock_fh.fileno(), fcntl.LOCK_UN)
-            self._lock_fh.close()
-            self._lock_fh = None
+        lock, self._lock = getattr(self, "_lock", None), None
+        if lock is not None:
+            lock.release()
 
     def _recover(self) -> None:
         """Finish or undo a swap interrupted by a crash, and remove stale temp folders."""
-        parent, stem = self.target.parent, self.target.name
-        olds = sorted(parent.glob(f".{stem}.old-*"))
+        olds = sibling_versions(self.target, "old")
         if olds and not self.target.exists():
             os.rename(olds[-1], self.target)
             olds = olds[:-1]
-        for p in [*olds, *parent.glob(f".{stem}.tmp-*")]:
+        for p in [*olds, *sibling_versions(self.target, "tmp")]:
             shutil.rmtree(p, ignore_errors=True)
 
     def _link_base(self, base: Dataset) -> None:
@@ -413,6 +535,7 @@ class DatasetWriter:
             os.fsync(fh.fileno())
         self._swap()
         self.committed = True
+        self._finalizer.detach()
         self._release_lock()
         return Dataset.open(self.target)
 
@@ -437,9 +560,10 @@ class DatasetWriter:
             shutil.rmtree(old, ignore_errors=True)
 
     def abort(self) -> None:
-        """Discard the temp folder; the target is left as it was."""
-        if not self.committed:
-            shutil.rmtree(self.tmp, ignore_errors=True)
+        """Discard the temp folder and remove the lock file; the target is left as it was."""
+        finalizer = getattr(self, "_finalizer", None)
+        if finalizer is not None and not self.committed:
+            finalizer()
         self._release_lock()
 
     def __enter__(self) -> DatasetWriter:
@@ -447,8 +571,4 @@ class DatasetWriter:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         if not self.committed:
-            self.abort()
-
-    def __del__(self) -> None:
-        if getattr(self, "_lock_fh", None) is not None and not getattr(self, "committed", True):
             self.abort()

@@ -25,6 +25,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from robogs.format.writer import sibling_versions
+
 __all__ = [
     "tree_digest",
     "is_complete_version",
@@ -90,11 +92,7 @@ def is_complete_version(root: Path) -> bool:
 def leftovers(target: Path) -> list[str]:
     """Temp and old-version folders beside ``target`` that a writer left behind."""
     target = Path(target)
-    return sorted(
-        p.name
-        for pat in (f".{target.name}.tmp-*", f".{target.name}.old-*")
-        for p in target.parent.glob(pat)
-    )
+    return sorted(p.name for kind in ("tmp", "old") for p in sibling_versions(target, kind))
 
 
 @dataclass
@@ -146,7 +144,7 @@ def when_exists(label: str, probe: Callable[[], bool], delay_s: float = 0.0) -> 
 def tmp_appeared(target: Path, delay_s: float = 0.0) -> tuple[str, Trigger]:
     """Kill once the writer's temp folder exists (the write phase), after ``delay_s``."""
     target = Path(target)
-    return when_exists("tmp", lambda: any(target.parent.glob(f".{target.name}.tmp-*")), delay_s)
+    return when_exists("tmp", lambda: bool(sibling_versions(target, "tmp")), delay_s)
 
 
 def manifest_in_tmp(target: Path, delay_s: float = 0.0) -> tuple[str, Trigger]:
@@ -154,7 +152,7 @@ def manifest_in_tmp(target: Path, delay_s: float = 0.0) -> tuple[str, Trigger]:
     target = Path(target)
     return when_exists(
         "manifest",
-        lambda: any(target.parent.glob(f".{target.name}.tmp-*/manifest.json")),
+        lambda: any((p / "manifest.json").exists() for p in sibling_versions(target, "tmp")),
         delay_s,
     )
 
