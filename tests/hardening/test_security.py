@@ -585,9 +585,8 @@ def _violations(path: Path) -> list[str]:
 
 
 def test_no_code_path_unpickles_or_evaluates() -> None:
-    files = [p for pkg in ("robogs.format", "converters", "reference_impl", "fixtures")
-             for p in sorted((REPO / pkg).rglob("*.py"))]  # fmt: skip
-    assert len(files) > 50
+    files = sorted((REPO / "robogs").rglob("*.py"))
+    assert len(files) > 150
     bad = [v for p in files for v in _violations(p)]
     assert not bad, bad
 
