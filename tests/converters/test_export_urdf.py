@@ -8,9 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 import yourdfpy
 
 from robogs.convert.export import export
+from robogs.convert.export.urdf_physics import FRAME_MASS_KG
 from robogs.format import Dataset
 
 try:
@@ -43,8 +45,9 @@ def test_urdf_export_matches_dataset(tiny: Dataset, tmp_path: Path) -> None:
     ref = tiny.urdf()
     for link in ref.robot.links:
         g = got.link_map[link.name]
-        if link.inertial is None:
-            assert g.inertial is None
+        if link.inertial is None:  # a frame link: the declared tiny inertial (see the sidecar)
+            assert (g.inertial.mass, link.name) == (FRAME_MASS_KG, "tool")
+            np.testing.assert_allclose(g.inertial.inertia, np.eye(3) * 0.4e-6 * 1e-3**2, rtol=1e-15)
             continue
         m0, c0, I0 = _inertia_in_link(link)
         m1, c1, I1 = _inertia_in_link(g)
@@ -70,10 +73,15 @@ def test_urdf_export_matches_dataset(tiny: Dataset, tmp_path: Path) -> None:
     # link1 had no collision: its visual mesh is now its collision too, loaded from the copy
     assert len(got.link_map["link1"].collisions) == 1
     assert len(got.collision_scene.geometry) == 3
-    assert got.link_map["link1"].collisions[0].geometry.mesh.filename == "meshes/link1.ply"
-    assert (out / "meshes" / "link1.ply").read_bytes() == (
-        tiny.root / "robot/meshes/link1.ply"
-    ).read_bytes()
+    # the PLY mesh is written as STL (MuJoCo and pybullet load no PLY), same triangles
+    assert got.link_map["link1"].collisions[0].geometry.mesh.filename == "meshes/link1.stl"
+    stl = trimesh.load(out / "meshes" / "link1.stl", process=False)
+    ply = trimesh.load(tiny.root / "robot/meshes/link1.ply", process=False)
+    np.testing.assert_allclose(stl.triangles, ply.triangles, atol=1e-6)  # float32 STL
+    assert (out / "meshes" / "base.stl").read_bytes() == (
+        tiny.root / "robot/meshes/base.stl"
+    ).read_bytes()  # STL is copied as is
+    assert sorted(p.suffix for p in out.rglob("*") if p.suffix in (".ply", ".stl")) == [".stl"] * 4
 
     contact = json.loads((out / "tiny_arm.contact.json").read_text())
     assert contact["links"]["link1"] == {

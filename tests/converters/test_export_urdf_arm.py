@@ -18,6 +18,7 @@ import yourdfpy
 from robogs.cli.main import main
 from robogs.convert.export import export
 from robogs.convert.export.arm_physics import PAYLOAD_RADIUS_M, deepest_moving_link, payload_spec
+from robogs.convert.export.urdf_physics import FRAME_MASS_KG
 from robogs.format.dataset import Dataset
 from robogs.format.errors import FormatError
 from robogs.format.kinematics import Chain
@@ -45,6 +46,10 @@ def _exported_torques(urdf_path: Path, ds_path: Path) -> tuple[np.ndarray, np.nd
     s = open_arm(ds_path)
     st = s.problem.state
     got = _load(urdf_path)
+    # the tiny inertials the export gives massless frame links (declared in the sidecar) are
+    # not part of the fitted model: their torques are bounded in _frame_torques_are_negligible
+    for name in _frame_links(urdf_path):
+        got.link_map[name].inertial = None
     model = ArmModel.from_urdf(got)
     tau = inverse_dynamics(model, st.q, st.qd, st.qdd).numpy()
     for k, j in enumerate(st.joint_names):
@@ -54,6 +59,26 @@ def _exported_torques(urdf_path: Path, ds_path: Path) -> tuple[np.ndarray, np.nd
         qd = st.qd[:, k].numpy()
         tau[:, k] += fc * np.tanh(qd / SMOOTHING_VELOCITY) + fv * qd
     return tau, base_prediction(s.problem, s.fixed).numpy()
+
+
+def _frame_links(urdf_path: Path) -> list[str]:
+    contact = json.loads(urdf_path.with_name(f"{urdf_path.stem}.contact.json").read_text())
+    return contact.get("frame_inertials", {}).get("links", [])
+
+
+def _frame_torques_are_negligible(urdf_path: Path, ds_path: Path) -> None:
+    """The declared frame inertials (1e-6 kg) move the exported URDF's torques by < 1e-4 N m."""
+    st = open_arm(ds_path).problem.state
+    links = _frame_links(urdf_path)
+    assert links and all(
+        float(_load(urdf_path).link_map[n].inertial.mass) == FRAME_MASS_KG for n in links
+    )
+    full = inverse_dynamics(ArmModel.from_urdf(_load(urdf_path)), st.q, st.qd, st.qdd).numpy()
+    bare = _load(urdf_path)
+    for name in links:
+        bare.link_map[name].inertial = None
+    without = inverse_dynamics(ArmModel.from_urdf(bare), st.q, st.qd, st.qdd).numpy()
+    assert 0 < np.max(np.abs(full - without)) < 1e-4
 
 
 def _sphere_torques(urdf_path: Path, ds_path: Path, parent: str, inertia: float) -> np.ndarray:
@@ -119,6 +144,7 @@ def test_cli_convert_fit_export_carries_payload_and_friction(tmp_path, capsys):
     exported, fitted = _exported_torques(out / "ur5_arm.urdf", ds)
     sphere = _sphere_torques(out / "ur5_arm.urdf", ds, pay["link"], i_sphere)
     np.testing.assert_allclose(exported - fitted, sphere, rtol=0, atol=1e-9)
+    _frame_torques_are_negligible(out / "ur5_arm.urdf", ds)
     # the sphere's inertia is invisible in the torques: well under the effort noise floor
     noise = np.array(list(open_arm(ds).problem.sigma.numpy()))
     assert 0 < np.max(np.abs(sphere)) < 0.02 * noise.min()

@@ -73,8 +73,17 @@ from .physics_model import (
     link_inertias,
     scene_objects,
 )
+from .urdf_scene import pose_matrix, scene_state
 
-__all__ = ["CONTACT_FORMAT", "export_urdf"]
+__all__ = [
+    "CONTACT_FORMAT",
+    "FRAME_MASS_KG",
+    "FRAME_RADIUS_M",
+    "MESH_SUFFIXES",
+    "export_urdf",
+    "frame_inertia",
+    "write_mesh",
+]
 
 CONTACT_FORMAT = "robogs.contact"
 _SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
@@ -111,12 +120,63 @@ def _inertial_element(inertia: BodyInertia) -> etree._Element:
     return el
 
 
+MESH_SUFFIXES = (".stl", ".obj")
+"""Mesh formats the export writes: the ones yourdfpy, MuJoCo and pybullet all load."""
+
+FRAME_MASS_KG = 1e-6
+"""kg; mass given to a non-root link that has no ``<inertial>`` (a flange or tool frame)."""
+
+FRAME_RADIUS_M = 1e-3
+"""m; such a link's inertia is a solid sphere of this radius about its origin."""
+
+
+def frame_inertia() -> BodyInertia:
+    """The explicit inertial of a massless frame link: ``FRAME_MASS_KG`` at its origin, the
+    inertia of a solid sphere of radius ``FRAME_RADIUS_M`` (``2/5 m r^2`` = 4e-13 kg·m²)."""
+    inertia = np.eye(3) * 0.4 * FRAME_MASS_KG * FRAME_RADIUS_M**2
+    return BodyInertia(FRAME_MASS_KG, np.zeros(3), inertia, np.eye(4), inertia)
+
+
+def write_mesh(src: Path, dst_stem: Path) -> Path:
+    """Copy an STL or OBJ mesh, or convert any other mesh (PLY, DAE, ...) to binary STL.
+
+    Args:
+        src: the source mesh file.
+        dst_stem: destination path without suffix.
+
+    Returns:
+        The written file (``dst_stem`` + ``.stl`` or ``.obj``).
+
+    Raises:
+        FormatError: the mesh cannot be read or has no triangles.
+    """
+    suffix = src.suffix.lower()
+    if suffix in MESH_SUFFIXES:
+        dst = dst_stem.with_suffix(suffix)
+        shutil.copyfile(src, dst)
+        return dst
+    import trimesh
+
+    try:
+        mesh = trimesh.load(str(src), force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for unreadable files
+        raise FormatError(
+            f"mesh cannot be read for conversion to STL ({type(exc).__name__}: {exc})", path=src
+        ) from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise FormatError("mesh has no triangles to write as STL", path=src)
+    dst = dst_stem.with_suffix(".stl")
+    mesh.export(str(dst), file_type="stl")
+    return dst
+
+
 class _MeshCopier:
-    """Copies mesh files under ``OUT/meshes`` with unique, safe names."""
+    """Writes mesh files under ``OUT/meshes`` with unique, safe names, as STL or OBJ."""
 
     def __init__(self, out: Path) -> None:
         self.out = out
         self.by_source: dict[Path, str] = {}
+        self.converted: dict[str, str] = {}  # written file -> source suffix, for non-STL/OBJ
         self.used: set[str] = set()
 
     def add(self, src: Path) -> str:
@@ -124,15 +184,28 @@ class _MeshCopier:
         if src in self.by_source:
             return self.by_source[src]
         stem = _SAFE.sub("_", src.stem) or "mesh"
-        name, k = f"{stem}{src.suffix.lower()}", 1
-        while name in self.used:
-            name, k = f"{stem}_{k}{src.suffix.lower()}", k + 1
-        self.used.add(name)
-        rel = f"meshes/{name}"
+        suffix = src.suffix.lower() if src.suffix.lower() in MESH_SUFFIXES else ".stl"
+        name, k = stem, 1
+        while f"{name}{suffix}" in self.used:
+            name, k = f"{stem}_{k}", k + 1
+        self.used.add(f"{name}{suffix}")
         (self.out / "meshes").mkdir(exist_ok=True)
-        shutil.copyfile(src, self.out / rel)
+        dst = write_mesh(src, self.out / "meshes" / name)
+        rel = f"meshes/{dst.name}"
+        if src.suffix.lower() not in MESH_SUFFIXES:
+            self.converted[rel] = src.suffix.lower()
         self.by_source[src] = rel
         return rel
+
+
+def _mujoco_element() -> etree._Element:
+    """MuJoCo's URDF extension: keep mesh paths relative to the URDF (its URDF default strips
+    folders), keep visual geometry, and do not rebalance inertias."""
+    el = etree.Element("mujoco")
+    etree.SubElement(
+        el, "compiler", strippath="false", discardvisual="false", balanceinertia="false"
+    )
+    return el
 
 
 def _parse(path: Path) -> etree._Element:
@@ -147,14 +220,82 @@ def _parse(path: Path) -> etree._Element:
 
 def _object_urdf(name: str, inertia: BodyInertia | None, mesh_rel: str | None) -> etree._Element:
     robot = etree.Element("robot", name=name)
-    link = etree.SubElement(robot, "link", name=name)
+    robot.append(_mujoco_element())
+    robot.append(_object_link(name, inertia, mesh_rel))
+    return robot
+
+
+def _object_link(name: str, inertia: BodyInertia | None, mesh_rel: str | None) -> etree._Element:
+    link = etree.Element("link", name=name)
     if inertia is not None:
         link.append(_inertial_element(inertia))
     if mesh_rel is not None:
         for tag in ("visual", "collision"):
             g = etree.SubElement(etree.SubElement(link, tag), "geometry")
             etree.SubElement(g, "mesh", filename=mesh_rel)
-    return robot
+    return link
+
+
+def _add_frame_inertials(root: etree._Element) -> list[str]:
+    """Give every non-root link without ``<inertial>`` the explicit :func:`frame_inertia`;
+    returns their names. (pybullet gives such a link 1 kg; MuJoCo refuses a massless moving
+    body.)"""
+    children = {
+        j.find("child").get("link") for j in root.findall("joint") if j.find("child") is not None
+    }
+    filled = []
+    for link in root.findall("link"):
+        if link.get("name") in children and link.find("inertial") is None:
+            link.insert(0, _inertial_element(frame_inertia()))
+            filled.append(link.get("name"))
+    return filled
+
+
+def _scene_urdf(
+    robot: etree._Element,
+    name: str,
+    objects: list[tuple[str, etree._Element, str, np.ndarray]],
+) -> tuple[etree._Element, str]:
+    """A URDF of the whole scene: a root link ``world`` (the robot's root link frame), the robot
+    welded to it at the identity, and each object link joined to it at its pose.
+
+    Args:
+        robot: the exported robot URDF (copied, not changed).
+        name: the scene's robot name.
+        objects: ``(name, link element, joint type, T_world_object)`` per object.
+
+    Returns:
+        The scene element and the name of its root link.
+    """
+    scene = etree.Element("robot", name=name)
+    scene.append(_mujoco_element())
+    names = {lk.get("name") for lk in robot.findall("link")} | {o[0] for o in objects}
+    children = {j.find("child").get("link") for j in robot.findall("joint")}
+    root_link = next(
+        lk.get("name") for lk in robot.findall("link") if lk.get("name") not in children
+    )
+    world = "world" if root_link == "world" else unique_name("world", names)
+    joints = {j.get("name") for j in robot.findall("joint")}
+    if world != root_link:
+        etree.SubElement(scene, "link", name=world)
+        j = etree.SubElement(
+            scene, "joint", name=unique_name(f"{world}_to_{root_link}", joints), type="fixed"
+        )
+        etree.SubElement(j, "parent", link=world)
+        etree.SubElement(j, "child", link=root_link)
+        etree.SubElement(j, "origin", xyz="0 0 0", rpy="0 0 0")
+    for el in robot:
+        if el.tag != "mujoco":
+            scene.append(deepcopy(el))
+    for obj, link, jtype, T in objects:
+        scene.append(link)
+        j = etree.SubElement(
+            scene, "joint", name=unique_name(f"{world}_to_{obj}", joints), type=jtype
+        )
+        etree.SubElement(j, "parent", link=world)
+        etree.SubElement(j, "child", link=obj)
+        etree.SubElement(j, "origin", **_origin_attrs(T))
+    return scene, world
 
 
 def _scale_inertials(root: etree._Element, s: float) -> int:
@@ -337,6 +478,13 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
         notes.append(
             f"payload {payload.mass:.4g} kg written as link {link_name!r} fixed to {payload.parent!r}"
         )
+    filled = _add_frame_inertials(root)
+    if filled:
+        notes.append(
+            f"{len(filled)} link(s) without <inertial> given {FRAME_MASS_KG:g} kg: "
+            + ", ".join(filled)
+        )
+    root.insert(0, _mujoco_element())
     _write_xml(root, out / f"{robot_name}.urdf")
 
     objs = scene_objects(ds, physics, {lk.name for lk in urdf.robot.links})
@@ -380,21 +528,66 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
     ]
     if effects:
         contact["effects"] = effects
+    if filled:
+        contact["frame_inertials"] = {
+            "links": filled,
+            "mass_kg": FRAME_MASS_KG,
+            "inertia_kgm2": float(frame_inertia().inertia[0, 0]),
+            "why": "links without <inertial> (frames such as tool0) get this explicit tiny "
+            f"inertial (solid sphere of radius {FRAME_RADIUS_M} m at the link origin): pybullet "
+            "gives a link without one 1 kg, MuJoCo refuses a massless moving body",
+        }
     files = [f"{robot_name}.urdf", f"{robot_name}.contact.json"]
+    state = scene_state(ds, [o.name for o in objs])
+    scene_entry: dict[str, Any] = {
+        "episode": state.episode,
+        "t_ns": state.t_ns,
+        "time": "start of the first episode; each object's pose is its first sample there",
+        "world": "the robot's root link frame; the robot is at the identity",
+        "pose_order": "[x, y, z, qw, qx, qy, qz], m and a unit quaternion, T_world_object",
+        "joint_positions": state.joint_positions,
+        "joint_positions_t_ns": state.joint_positions_t_ns,
+        "objects": {},
+    }
+    scene_objs: list[tuple[str, etree._Element, str, np.ndarray]] = []
     for obj in objs:
         entry: dict[str, Any] = {"equation": obj.equation, **obj.material.as_dict()}
+        pose = state.objects[obj.name]
+        jtype = "floating" if obj.equation == "rigid" and obj.inertia is not None else "fixed"
+        scene_entry["objects"][obj.name] = {**pose.as_dict(), "joint": jtype}
         if objects:
             folder = out / "objects" / _SAFE.sub("_", obj.name)
             folder.mkdir(parents=True)
             mesh_rel = None
             if obj.mesh_path is not None:
-                mesh_rel = f"mesh{obj.mesh_path.suffix.lower()}"
-                shutil.copyfile(obj.mesh_path, folder / mesh_rel)
+                mesh_rel = write_mesh(obj.mesh_path, folder / "mesh").name
+                if obj.mesh_path.suffix.lower() not in MESH_SUFFIXES:
+                    meshes.converted[f"objects/{folder.name}/{mesh_rel}"] = (
+                        obj.mesh_path.suffix.lower()
+                    )
+                files.append(f"objects/{folder.name}/{mesh_rel}")
             rel = f"objects/{folder.name}/{folder.name}.urdf"
             _write_xml(_object_urdf(obj.name, obj.inertia, mesh_rel), out / rel)
             entry["urdf"] = rel
             files.append(rel)
+            scene_mesh = None if mesh_rel is None else f"objects/{folder.name}/{mesh_rel}"
+            link = _object_link(obj.name, obj.inertia, scene_mesh)
+            scene_objs.append((obj.name, link, jtype, pose_matrix(pose.pose)))
+            if obj.equation == "rigid" and obj.inertia is None:
+                notes.append(f"rigid object {obj.name!r} has no mass_kg: fixed in scene.urdf")
         contact["objects"][obj.name] = entry
+    if objects:
+        scene, world = _scene_urdf(root, f"{robot_name}_scene", scene_objs)
+        _write_xml(scene, out / "scene.urdf")
+        files.insert(2, "scene.urdf")
+        scene_entry["urdf"] = "scene.urdf"
+        scene_entry["root_link"] = world
+    contact["scene"] = scene_entry
+    if meshes.converted:
+        contact["converted_meshes"] = {
+            rel: f"converted from {suffix} to binary STL (geometry only)"
+            for rel, suffix in sorted(meshes.converted.items())
+        }
     (out / f"{robot_name}.contact.json").write_text(
         json.dumps(contact, indent=2, ensure_ascii=False) + "\n"
     )
@@ -407,6 +600,8 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
             "links": len(urdf.robot.links) + (payload is not None),
             "joints": len(urdf.robot.joints) + (payload is not None),
             "objects": len(objs),
+            "frame_inertials": filled,
+            "converted_meshes": sorted(meshes.converted),
             **({"payload": payload_entry} if payload_entry else {}),
             **({"mass_scale": scale} if scale is not None else {}),
             **({"offset_joints": sorted(offsets)} if offsets else {}),
