@@ -11,7 +11,9 @@ from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from ..dataset import MANIFEST_NAME
@@ -304,3 +306,97 @@ def _unlisted(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         yield chk.finding(
             f"{ref.rel!r} {state} in the manifest's files", file=MANIFEST_NAME, where=ref.where
         )
+
+
+def _nonfinite_rows(col: pa.Array | pa.ChunkedArray) -> np.ndarray:
+    """Row indices (within the batch) holding a NaN or ±inf, nulls excluded.
+
+    A list column (e.g. a 4x4 transform) counts a row once if any element is non-finite.
+    """
+    if isinstance(col, pa.ChunkedArray):
+        col = col.combine_chunks()
+    if pa.types.is_floating(col.type):
+        vals = col.to_numpy(zero_copy_only=False)
+        valid = ~np.asarray(col.is_null(), dtype=bool)
+        return np.flatnonzero(~np.isfinite(vals) & valid)
+    if (
+        pa.types.is_list(col.type)
+        or pa.types.is_large_list(col.type)
+        or pa.types.is_fixed_size_list(col.type)
+    ) and pa.types.is_floating(col.type.value_type):
+        flat = pc.list_flatten(col)
+        parents = np.asarray(pc.list_parent_indices(col))
+        vals = flat.to_numpy(zero_copy_only=False)
+        valid = ~np.asarray(flat.is_null(), dtype=bool)
+        return np.unique(parents[~np.isfinite(vals) & valid])
+    return np.empty(0, dtype=np.int64)
+
+
+def _float_columns(schema: pa.Schema) -> list[str]:
+    out = []
+    for f in schema:
+        t = f.type
+        if pa.types.is_floating(t) or (
+            (pa.types.is_list(t) or pa.types.is_large_list(t) or pa.types.is_fixed_size_list(t))
+            and pa.types.is_floating(t.value_type)
+        ):
+            out.append(f.name)
+    return out
+
+
+@check(
+    "I009",
+    group="integrity",
+    severity="error",
+    title="numeric samples are finite",
+    quantity="non-finite values",
+    unit="rows",
+    hint="the source holds NaN or inf samples; drop or repair those rows before using the data "
+    "(a NaN joint angle or pose makes forward kinematics, rendering and fitting meaningless)",
+)
+def _finite(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    """Every floating column of every stream table, streamed one row group at a time."""
+    from .streaming import batches  # streaming imports context, as this module does
+
+    for ep, name, st in ctx.streams():
+        rel = st.get("path")
+        if not isinstance(rel, str) or not rel.endswith(".parquet"):
+            continue
+        try:
+            schema = ctx.footer(rel).schema.to_arrow_schema()
+        except InputReported:
+            continue
+        cols = _float_columns(schema)
+        if not cols:
+            continue
+        read = cols + (["t_ns"] if "t_ns" in schema.names and "t_ns" not in cols else [])
+        count = dict.fromkeys(cols, 0)
+        first: dict[str, tuple[int, int | None]] = {}
+        offset = 0
+        try:
+            for batch in batches(ctx, rel, read):
+                t_ns = batch.column("t_ns").to_numpy() if "t_ns" in read else None
+                for c in cols:
+                    rows = _nonfinite_rows(batch.column(c))
+                    if rows.size:
+                        count[c] += int(rows.size)
+                        if c not in first:
+                            r = int(rows[0])
+                            first[c] = (offset + r, int(t_ns[r]) if t_ns is not None else None)
+                offset += batch.num_rows
+        except InputReported:
+            continue
+        for c in cols:
+            if not count[c]:
+                continue
+            row, t = first[c]
+            yield chk.finding(
+                f"{count[c]} of {offset} rows of column {c!r} hold NaN or inf (first at row {row})",
+                value=float(count[c]),
+                budget=0.0,
+                file=rel,
+                where=f"column {c}, row {row}",
+                episode=ep.id,
+                stream=name,
+                t_ns=t,
+            )
