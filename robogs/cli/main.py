@@ -45,6 +45,10 @@ VERBS: dict[str, tuple[str, str]] = {
         "fill splats, meshes and binding from multi-view frames",
     ),
     "evaluate": ("robogs.reconstruct.cli", "image and mesh quality metrics"),
+    "plugins": (
+        "robogs.cli.plugins_cmd",
+        "list the checks, converters, exporters, effects, backends and layers, with status",
+    ),
     "demo": (
         "robogs.cli.demo_cmd",
         "synthesise the default scene, validate it and write the report",

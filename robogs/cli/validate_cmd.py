@@ -138,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
     from robogs.format.validate import validate
 
     if args.list_checks:
-        checks = available_checks()
+        checks = list(available_checks().values())
         if args.json:
             import json
 

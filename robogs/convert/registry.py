@@ -5,8 +5,9 @@ A converter is a name, a ``detect(path) -> bool`` predicate, and a
 (a dataset writer plus the provenance record). The built-in converters register
 themselves when this registry is first used; third-party packages add theirs
 through the entry-point group ``robogs.converters``: an entry point may load to a
-:class:`Converter` (registered as is) or to a callable taking no argument that
-calls :func:`register_converter` itself.
+:class:`Converter` (registered as is), a module, or a callable taking no argument that
+calls :func:`register_converter` itself. A plug-in that fails to load is listed as
+unavailable (see :mod:`robogs.format.plugins`).
 
 Example:
     >>> from robogs.convert.registry import available_converters
@@ -16,15 +17,14 @@ Example:
 
 from __future__ import annotations
 
-import importlib
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
-from importlib.metadata import entry_points
 from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 from robogs.format.errors import InputError
+from robogs.format.plugins import ENTRY_POINT_GROUPS, Entry, RegistrationError, Registry
 
 if TYPE_CHECKING:
     from .ingest.context import IngestContext
@@ -34,11 +34,13 @@ __all__ = [
     "ENTRY_POINT_GROUP",
     "register_converter",
     "available_converters",
+    "converter_entries",
+    "REGISTRY",
     "get_converter",
     "detect_format",
 ]
 
-ENTRY_POINT_GROUP = "robogs.converters"
+ENTRY_POINT_GROUP = ENTRY_POINT_GROUPS["converters"]
 
 #: modules under ``robogs.convert.ingest`` that register the built-in converters on import
 _BUILTIN_MODULES = (
@@ -74,8 +76,29 @@ class Converter:
     priority: int = 0
 
 
-_REGISTRY: dict[str, Converter] = {}
-_LOADED = False
+def _adopt(reg: Registry[Converter], name: str, obj: object) -> None:
+    """A ``robogs.converters`` entry point: a :class:`Converter`, a module that registers
+    converters on import, or a callable taking no argument that registers them."""
+    if isinstance(obj, Converter):
+        reg.register(obj.name, obj)
+    elif isinstance(obj, ModuleType):
+        return
+    elif callable(obj):
+        obj()
+    else:
+        raise TypeError(f"entry point {name!r} is a {type(obj).__name__}, not a Converter")
+
+
+#: the converter registry (keys: format names)
+REGISTRY: Registry[Converter] = Registry(
+    "converters",
+    ENTRY_POINT_GROUP,
+    noun="source format",
+    builtins=_BUILTIN_MODULES,
+    adopt=_adopt,
+    module_of=lambda c: c.convert.__module__,
+    unknown_where="--from",
+)
 
 
 def register_converter(
@@ -101,44 +124,25 @@ def register_converter(
         The registered :class:`Converter`.
 
     Raises:
-        ValueError: a converter of that name exists and ``replace`` is False.
+        RegistrationError: a malformed name, or a converter of that name exists and
+            ``replace`` is False (also a ``ValueError``).
     """
     if not name or not all(c.isalnum() or c in "_-" for c in name):
-        raise ValueError(f"invalid converter name {name!r}")
-    if name in _REGISTRY and not replace:
-        raise ValueError(f"converter {name!r} is already registered (pass replace=True)")
-    conv = Converter(name, detect, convert, description, priority)
-    _REGISTRY[name] = conv
-    return conv
+        raise RegistrationError(f"invalid converter name {name!r}")
+    return REGISTRY.register(
+        name, Converter(name, detect, convert, description, priority), replace=replace
+    )
 
 
-def _load() -> None:
-    global _LOADED
-    if _LOADED:
-        return
-    _LOADED = True
-    for mod in _BUILTIN_MODULES:
-        try:
-            importlib.import_module(mod)
-        except ModuleNotFoundError as exc:
-            if exc.name != mod:  # a real missing dependency, not an absent optional module
-                warnings.warn(f"converter module {mod} unavailable: {exc}", stacklevel=2)
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            obj = ep.load()
-            if isinstance(obj, Converter):
-                if obj.name not in _REGISTRY:
-                    _REGISTRY[obj.name] = obj
-            elif callable(obj):
-                obj()
-        except Exception as exc:  # a broken plugin must not break the built-ins
-            warnings.warn(f"converter entry point {ep.name!r} failed to load: {exc}", stacklevel=2)
+def available_converters() -> dict[str, Converter]:
+    """``name -> Converter`` of every usable converter (built-in and entry points), by name;
+    :func:`converter_entries` also lists the unavailable ones with the reason."""
+    return REGISTRY.available()
 
 
-def available_converters() -> list[str]:
-    """Names of all registered converters (built-in and entry points), sorted."""
-    _load()
-    return sorted(_REGISTRY)
+def converter_entries() -> list[Entry[Converter]]:
+    """Every entry of the converter registry, usable or not, with status, reason and source."""
+    return REGISTRY.entries()
 
 
 def get_converter(name: str) -> Converter:
@@ -146,16 +150,9 @@ def get_converter(name: str) -> Converter:
 
     Raises:
         InputError: no such converter.
+        PluginError: its plug-in or an optional dependency failed to load.
     """
-    _load()
-    try:
-        return _REGISTRY[name]
-    except KeyError:
-        raise InputError(
-            f"unknown source format {name!r}",
-            where="--from",
-            hint=f"choose from {', '.join(sorted(_REGISTRY))}",
-        ) from None
+    return REGISTRY.get(name)
 
 
 def detect_format(path: str | Path) -> Converter:
@@ -164,11 +161,11 @@ def detect_format(path: str | Path) -> Converter:
     Raises:
         InputError: the path does not exist or no converter recognises it.
     """
-    _load()
     p = Path(path)
     if not p.exists():
         raise InputError("source does not exist", path=p)
-    for conv in sorted(_REGISTRY.values(), key=lambda c: (-c.priority, c.name)):
+    convs = available_converters()
+    for conv in sorted(convs.values(), key=lambda c: (-c.priority, c.name)):
         try:
             if conv.detect(p):
                 return conv
@@ -177,5 +174,5 @@ def detect_format(path: str | Path) -> Converter:
     raise InputError(
         "cannot tell the source format",
         path=p,
-        hint=f"pass --from with one of {', '.join(sorted(_REGISTRY))}",
+        hint=f"pass --from with one of {', '.join(convs)}",
     )

@@ -227,7 +227,9 @@ def validate(
     t0 = time.perf_counter()
     select_l = list(select or [])
     ignore_l = list(ignore or [])
-    checks = select_checks(available_checks(), select=select_l, ignore=ignore_l, quick=quick)
+    checks = select_checks(
+        list(available_checks().values()), select=select_l, ignore=ignore_l, quick=quick
+    )
     ctx = CheckContext(
         path, quick=quick, budgets=budgets, label_threads=label_threads, options=options
     )

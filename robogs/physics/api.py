@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 
 from robogs.format.errors import InputError
-from robogs.physics.compare import CompareResult, compare_recording, residual_table
+from robogs.physics.baseline import Baseline, baseline
+from robogs.physics.compare import CompareResult
 from robogs.physics.diagnose import (
     DiagnoseResult,
     ParamEstimate,
@@ -36,7 +37,7 @@ from robogs.physics.masks import MAX_FRAMES
 from robogs.physics.recording import Recording, as_recording, load_recording
 from robogs.physics.report import render_report
 
-__all__ = ["compare", "diagnose", "fit", "FitResult", "report", "revert"]
+__all__ = ["compare", "diagnose", "fit", "FitResult", "report", "report_baselines", "revert"]
 
 
 def _open(dataset: Any) -> tuple[Recording, Any]:
@@ -50,8 +51,11 @@ def _open(dataset: Any) -> tuple[Recording, Any]:
     return as_recording(dataset), None
 
 
-#: effects fitted from camera masks, outside the rigid-object model
-CAMERA_EFFECTS = ("camera_intrinsics",)
+def _camera_effects() -> set[str]:
+    """Effects fitted from camera masks, outside the rigid-object model (``model="camera"``)."""
+    from robogs.physics.effects import available_effects
+
+    return set(available_effects(model="camera"))
 
 
 def _attach_masks(res: CompareResult, ds: Any, mask_frames: int, mask_poses: str) -> None:
@@ -75,15 +79,17 @@ def _attach_masks(res: CompareResult, ds: Any, mask_frames: int, mask_poses: str
 def compare(
     dataset: Any, *, dt: float = 1e-3, mask_frames: int = MAX_FRAMES, mask_poses: str = "model"
 ) -> CompareResult:
-    """Residuals of the stored model against the measured streams (nothing is refitted).
+    """Residuals of the current physics revision, refitted, against the measured streams.
 
-    With camera masks and a binding the result carries the mask-boundary stream: links by
+    The model is the one every command calls "before" (:func:`robogs.physics.baseline.
+    baseline`): base parameters, present effects and each trajectory's initial pose refitted
+    from the stored values; nothing is written. With camera masks and a binding the result carries the mask-boundary stream: links by
     forward kinematics of the measured joints, the free object at the model's predicted poses
     (``mask_poses="model"``) or at its recorded poses (``"recorded"``), ``mask_frames`` frames
     per camera stream (0: none).
     """
     rec, ds = _open(dataset)
-    res = compare_recording(rec, dt=dt)
+    res = copy.copy(baseline(rec, dt=dt).result)  # the memoised table stays without masks
     _attach_masks(res, ds, mask_frames, mask_poses)
     return res
 
@@ -103,9 +109,12 @@ def diagnose(
     """
     rec, ds = _open(dataset)
     names = None if effects is None else list(effects)
-    rigid = None if names is None else [n for n in names if n not in CAMERA_EFFECTS]
-    res = diagnose_recording(rec, effects=rigid, progress=progress, dt=dt)
-    if names is None or any(n in CAMERA_EFFECTS for n in names):
+    camera = _camera_effects()
+    rigid = None if names is None else [n for n in names if n not in camera]
+    eng = Engine(rec, dt=dt)
+    res = diagnose_recording(rec, effects=rigid, progress=progress, dt=dt, engine=eng)
+    res.rms_base = baseline(rec, dt=dt, engine=eng).rms_mm  # the shared "before"
+    if names is None or any(n in camera for n in names):
         from robogs.physics.intrinsics import NAME, diagnose_intrinsics
 
         fits, why = diagnose_intrinsics(ds, max_frames=mask_frames)
@@ -122,12 +131,14 @@ class FitResult:
 
     Attributes:
         params: fitted base and effect parameters with 95 % intervals (``owner.name``).
-        rms_before / rms_after: position RMS [mm] with stored and fitted parameters.
+        rms_before / rms_after: position RMS [mm] of the baseline (:func:`robogs.physics.
+            baseline.baseline`) of the revision fitted from and of the document written.
         noise_floor: data-estimated noise floor [mm].
         unidentifiable: parameters the data do not identify (insensitive, near-collinear or
             with an interval wider than their bounds); they are not written.
         physics: the new physics.json document.
         revision: the revision written (None when nothing was written).
+        from_revision: the revision fitted from (None for an unwritten document).
     """
 
     params: list[ParamEstimate]
@@ -140,6 +151,7 @@ class FitResult:
     compare_before: CompareResult | None = field(default=None, repr=False)
     compare_after: CompareResult | None = field(default=None, repr=False)
     cameras: list[dict[str, Any]] = field(default_factory=list)
+    from_revision: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -158,6 +170,7 @@ class FitResult:
             "noise_floor_mm": _fin(self.noise_floor),
             "unidentifiable": self.unidentifiable,
             "revision": self.revision,
+            "from_revision": self.from_revision,
             "cameras": self.cameras,
         }
 
@@ -167,20 +180,29 @@ def _fin(x: float) -> float | None:
 
 
 def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
+    """Refit the engine's revision plus ``add``; before and after are baselines (:func:`baseline`).
+
+    "Before" is the baseline of the engine's revision, "after" the baseline of the document
+    this fit writes (effects with an unidentifiable parameter left out, unidentifiable base
+    values kept at their stored ones), so ``compare`` and ``report`` of the written revision
+    print the same "after". With nothing to add the fit is the baseline fit itself.
+    """
+    rec = eng.prep.rec
     cands = eng.check_effects(add)
-    space = eng.space(cands)
-    free = eng.base_columns(space)
-    for e in cands:
-        free += [c for c in space.owner_columns(e.name) if c not in free]
-    th0 = eng.start(space)
-    starts = [th0]
-    for e in cands:  # multi-start: each effect's extra start points, the others at zero
-        starts += start_points(space, e, th0)[1:]
-    outs = eng.fit(space, [Problem(free=free, theta0=th) for th in starts])
-    out = min(outs, key=lambda o: o.cost)
-    before = eng.evaluate(space, th0[None], np.zeros((1, eng.prep.n_traj, 3)))[0]
-    cmp_before = residual_table(eng, eng.raw(before))
-    cmp_after = residual_table(eng, eng.raw(out.resid))
+    before = baseline(rec, dt=eng.prep.drive.dt, engine=eng)
+    if cands:
+        space = eng.space(cands)
+        free = eng.base_columns(space)
+        for e in cands:
+            free += [c for c in space.owner_columns(e.name) if c not in free]
+        th0 = eng.start(space)
+        starts = [th0]
+        for e in cands:  # multi-start: each effect's extra start points, the others at zero
+            starts += start_points(space, e, th0)[1:]
+        outs = eng.fit(space, [Problem(free=free, theta0=th) for th in starts])
+        out = min(outs, key=lambda o: o.cost)
+    else:
+        space, free, out = before.space, before.free, before.outcome
     params, unident = [], []
     for j, c in enumerate(free):
         s = space.slots[c]
@@ -196,16 +218,19 @@ def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
         )
         if not np.isfinite(sd):
             unident.append(s.key)
-    doc = copy.deepcopy(eng.prep.rec.physics)
-    obj = eng.prep.rec.object_name
+    doc = copy.deepcopy(rec.physics)
+    obj = rec.object_name
     ob = doc.setdefault("objects", {}).setdefault(obj, {"equation": "rigid"})
     for c in space.owner_columns("base"):
         if np.isfinite(out.std[free.index(c)]):  # an unidentifiable value keeps the stored one
             ob[space.slots[c].param.name] = float(out.theta[c])
+    bad = set(unident)
     effects = [
         e for e in doc.get("effects", []) if e.get("name") not in {x.name for x in space.effects}
     ]
     for e in space.effects:
+        if any(f"{e.name}.{p.name}" in bad for p in e.params):
+            continue  # an effect with an unidentifiable parameter is not written
         effects.append(
             {
                 "name": e.name,
@@ -214,15 +239,19 @@ def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
             }
         )
     doc["effects"] = effects
+    rev = rec.physics.get("revision")
+    doc["fit"] = {"from_revision": rev if isinstance(rev, int) else None, "added": list(add)}
+    after = baseline(rec, doc, dt=eng.prep.drive.dt)
     return FitResult(
         params=params,
-        rms_before=cmp_before.rms_mm,
-        rms_after=cmp_after.rms_mm,
-        noise_floor=cmp_after.noise_floor_mm,
+        rms_before=before.rms_mm,
+        rms_after=after.rms_mm,
+        noise_floor=after.result.noise_floor_mm,
         unidentifiable=unident,
         physics=doc,
-        compare_before=cmp_before,
-        compare_after=cmp_after,
+        compare_before=before.result,
+        compare_after=after.result,
+        from_revision=before.revision,
     )
 
 
@@ -246,8 +275,9 @@ def fit(
     physics revision, whose ``sensors.<cam>.intrinsics`` keeps the previous values. Asked
     alone, it leaves the rigid-model parameters as they are.
     """
-    cam_add = [a for a in add if a in CAMERA_EFFECTS]
-    rigid_add = [a for a in add if a not in CAMERA_EFFECTS]
+    camera = _camera_effects()
+    cam_add = [a for a in add if a in camera]
+    rigid_add = [a for a in add if a not in camera]
     if cam_add and not rigid_add:
         ds = _dataset(dataset, cam_add[0])
         res = FitResult(
@@ -255,7 +285,7 @@ def fit(
         )
     else:
         rec, ds = _open(dataset)
-        res = _fit_rigid(Engine(rec, dt=dt), rigid_add)
+        res = _fit_engine(Engine(rec, dt=dt), rigid_add)
     new_cams = []
     if cam_add:
         new_cams = _fit_cameras(
@@ -322,35 +352,125 @@ def _fit_cameras(ds: Any, res: FitResult, mask_frames: int) -> list[Any]:
     return out
 
 
-def _fit_rigid(eng: Engine, add: Sequence[str]) -> FitResult:
-    res = _fit_engine(eng, add)
-    if res.unidentifiable:
-        bad = set(res.unidentifiable)
-        res.physics["effects"] = [
-            e
-            for e in res.physics["effects"]
-            if not any(f"{e['name']}.{k}" in bad for k in e["params"])
-        ]
-    return res
+@dataclass
+class ReportPair:
+    """The "before" and "after" a physics report shows, with what each one is.
+
+    Attributes:
+        before / after: residual tables of the two baselines.
+        before_label / after_label: which revision each is (for people).
+        params: the "after" model's fitted parameters with 95 % intervals.
+        added: the effects the "after" model adds.
+        before_revision / after_revision: revision numbers (None: not written).
+    """
+
+    before: CompareResult
+    after: CompareResult
+    before_label: str
+    after_label: str
+    params: list[ParamEstimate]
+    added: list[str]
+    before_revision: int | None = None
+    after_revision: int | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "before": {"label": self.before_label, "revision": self.before_revision},
+            "after": {"label": self.after_label, "revision": self.after_revision},
+            "rms_before_mm": self.before.rms_mm,
+            "rms_after_mm": self.after.rms_mm,
+            "added": self.added,
+        }
+
+
+def _fitted_from(rec: Recording, ds: Any) -> dict[str, Any] | None:
+    """The physics document the current revision was fitted from (None if not a fit's)."""
+    import json
+
+    rev = (rec.physics.get("fit") or {}).get("from_revision")
+    if ds is None or not isinstance(rev, int) or rev not in ds.physics_history():
+        return None
+    return json.loads(ds.resolve(f"physics/history/rev-{rev:04d}.json").read_text())
+
+
+def _label(bl: Baseline) -> str:
+    rev = "unwritten revision" if bl.revision is None else f"revision {bl.revision}"
+    return f"{rev}, refitted"
+
+
+def report_baselines(dataset: Any, *, add: Sequence[str] = (), dt: float = 1e-3) -> ReportPair:
+    """What :func:`report` compares; every value comes from :func:`baseline`.
+
+    * ``add`` given: before = the current revision, after = the document ``fit --add`` would
+      write (a dry run);
+    * else, when the current revision was written by :func:`fit`: before = the revision it was
+      fitted from (``physics/history``), after = the current revision;
+    * else before = after = the current revision.
+    """
+    rec, ds = _open(dataset)
+    return _report_pair(rec, ds, add, dt)
+
+
+def _report_pair(rec: Recording, ds: Any, add: Sequence[str], dt: float) -> ReportPair:
+    rigid = [a for a in add if a not in _camera_effects()]
+    if rigid:
+        res = _fit_engine(Engine(rec, dt=dt), rigid)
+        if res.compare_before is None or res.compare_after is None:  # pragma: no cover
+            raise RuntimeError("comparison missing")
+        rev = "unwritten revision" if res.from_revision is None else f"revision {res.from_revision}"
+        return ReportPair(
+            res.compare_before,
+            res.compare_after,
+            f"{rev}, refitted",
+            f"{rev} + {', '.join(rigid)}, refitted (not written)",
+            res.params,
+            rigid,
+            res.from_revision,
+            None,
+        )
+    after = baseline(rec, dt=dt)
+    parent = _fitted_from(rec, ds)
+    before = after if parent is None else baseline(rec, parent, dt=dt)
+    added = list((rec.physics.get("fit") or {}).get("added") or []) if parent is not None else []
+    return ReportPair(
+        before.result,
+        after.result,
+        _label(before),
+        _label(after) if parent is None else f"{_label(after)} (fitted from {before.revision})",
+        after.params(),
+        added,
+        before.revision,
+        after.revision,
+    )
 
 
 def report(
-    dataset: Any, out_html: str | Path, *, add: Sequence[str] = (), dt: float = 1e-3
+    dataset: Any,
+    out_html: str | Path,
+    *,
+    add: Sequence[str] = (),
+    dt: float = 1e-3,
+    pair: ReportPair | None = None,
 ) -> Path:
-    """Write an HTML report of residuals before (stored physics) and after refitting with ``add``.
+    """Write an HTML report of residuals before and after (see :func:`report_baselines`;
+    ``pair``: one it already returned for this dataset, instead of ``add`` and ``dt``).
 
     Plots are inline SVG (matplotlib is not required).
     """
     rec, ds = _open(dataset)
-    eng = Engine(rec, dt=dt)
-    res = _fit_engine(eng, [a for a in add if a not in CAMERA_EFFECTS])
-    before, after = res.compare_before, res.compare_after
-    if before is None or after is None:  # pragma: no cover - _fit_engine always fills them
-        raise RuntimeError("comparison missing")
+    if pair is None:
+        pair = _report_pair(rec, ds, add, dt)
+    before = copy.copy(pair.before)  # the memoised table stays without masks
     _attach_masks(before, ds, MAX_FRAMES, "model")
-    rows = [(p.name, p.value, p.low, p.high, p.unit) for p in res.params]
+    rows = [(p.name, p.value, p.low, p.high, p.unit) for p in pair.params]
     return render_report(
-        before, after, out_html, title="robogs physics report", added=list(add), params=rows
+        before,
+        pair.after,
+        out_html,
+        title="robogs physics report",
+        added=pair.added,
+        params=rows,
+        labels=(pair.before_label, pair.after_label),
     )
 
 

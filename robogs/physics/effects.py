@@ -15,19 +15,22 @@ Other models (the robot-arm model in ``robogs.physics.arm``) declare their own h
 and select effects with ``model="arm"``; the registry, the fitter and the diagnosis do not
 care which model an effect belongs to.
 
-Effects are collected in a registry: built-in ones register on import of
-:mod:`robogs.physics.catalogue`, user ones with :func:`register_effect` or through the
-``robogs.effects`` entry-point group (the entry point names an ``Effect`` instance, an
-``Effect`` subclass, or a callable returning either).
+Effects are collected in a :class:`~robogs.format.plugins.Registry`: the built-in ones of
+every model (:data:`BUILTIN_MODULES`) register on the first listing or look-up, user ones
+with :func:`register_effect` or through the ``robogs.effects`` entry-point group (the entry
+point names an ``Effect`` instance, an ``Effect`` subclass, a module registering effects, or
+a callable returning an instance or subclass). A plug-in that fails to load is listed as
+unavailable with the reason (:func:`effect_entries`).
 """
 
 from __future__ import annotations
 
-import importlib.metadata
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from types import ModuleType
 from typing import Any
 
 from robogs.format.errors import InputError
+from robogs.format.plugins import ENTRY_POINT_GROUPS, Entry, Registry
 
 __all__ = [
     "Param",
@@ -36,12 +39,22 @@ __all__ = [
     "register_effect",
     "unregister_effect",
     "available_effects",
+    "effect_entries",
+    "BUILTIN_MODULES",
+    "REGISTRY",
     "get_effect",
     "overrides",
 ]
 
 FAMILIES = ("contact", "joint", "sensor")
-_ENTRY_POINT_GROUP = "robogs.effects"
+
+#: modules of the built-in effects: the rigid-object catalogue, the arm's torque and kinematic
+#: effects, and the camera-mask effect (each registers its effects on import)
+BUILTIN_MODULES: tuple[str, ...] = (
+    "robogs.physics.catalogue",
+    "robogs.physics.arm.effects",
+    "robogs.physics.intrinsics",
+)
 
 
 @dataclass(frozen=True)
@@ -139,15 +152,6 @@ def overrides(effect: Effect, hook: str) -> bool:
     return getattr(type(effect), hook) is not getattr(Effect, hook)
 
 
-@dataclass
-class _Registry:
-    effects: dict[str, Effect] = field(default_factory=dict)
-    entry_points_loaded: bool = False
-
-
-_REGISTRY = _Registry()
-
-
 def _validate(effect: Effect) -> None:
     if not effect.name or not effect.name.replace("_", "").isalnum():
         raise InputError(
@@ -168,12 +172,39 @@ def _validate(effect: Effect) -> None:
         )
 
 
+def _adopt(reg: Registry[Effect], name: str, obj: Any) -> None:
+    """A ``robogs.effects`` entry point: an ``Effect`` instance or subclass, a module that
+    registers effects on import, or a callable returning an instance or subclass."""
+    if isinstance(obj, ModuleType):
+        return
+    if callable(obj) and not isinstance(obj, (Effect, type)):
+        obj = obj()
+    register_effect(obj)
+
+
+#: the effect registry (keys: effect names); the built-in catalogue of every model registers
+#: on the first listing or look-up
+REGISTRY: Registry[Effect] = Registry(
+    "effects",
+    ENTRY_POINT_GROUPS["effects"],
+    noun="effect",
+    builtins=BUILTIN_MODULES,
+    adopt=_adopt,
+    module_of=lambda e: type(e).__module__,
+    unknown_where="effects",
+)
+
+
 def register_effect(effect: Effect | type[Effect], *, replace: bool = False) -> Effect:
     """Add an effect to the registry and return the registered instance.
 
     Args:
         effect: an ``Effect`` instance, or a subclass whose defaults describe it.
         replace: allow replacing an effect of the same name.
+
+    Raises:
+        InputError: not an effect, or a malformed one.
+        RegistrationError: another effect of that name exists and ``replace`` is False.
     """
     inst = effect() if isinstance(effect, type) else effect
     if not isinstance(inst, Effect):
@@ -183,63 +214,39 @@ def register_effect(effect: Effect | type[Effect], *, replace: bool = False) -> 
             hint="subclass robogs.physics.effects.Effect",
         )
     _validate(inst)
-    if inst.name in _REGISTRY.effects and not replace:
-        if _REGISTRY.effects[inst.name] == inst:
-            return inst
-        raise InputError(
-            f"an effect named {inst.name!r} is already registered",
-            where="register_effect",
-            hint="pick another name or pass replace=True",
-        )
-    _REGISTRY.effects[inst.name] = inst
-    return inst
+    return REGISTRY.register(inst.name, inst, replace=replace)
 
 
 def unregister_effect(name: str) -> None:
     """Remove an effect from the registry (no error if absent)."""
-    _REGISTRY.effects.pop(name, None)
+    REGISTRY.unregister(name)
 
 
-def _load_entry_points() -> None:
-    if _REGISTRY.entry_points_loaded:
-        return
-    _REGISTRY.entry_points_loaded = True
-    for ep in importlib.metadata.entry_points(group=_ENTRY_POINT_GROUP):
-        obj = ep.load()
-        if callable(obj) and not isinstance(obj, Effect) and not isinstance(obj, type):
-            obj = obj()
-        register_effect(obj, replace=True)
-
-
-def _load_builtins() -> None:
-    importlib.import_module("robogs.physics.catalogue")
-
-
-def available_effects(*, model: str | None = None, family: str | None = None) -> list[str]:
-    """Names of registered effects (built-ins, entry points, user registrations), sorted.
+def available_effects(*, model: str | None = None, family: str | None = None) -> dict[str, Effect]:
+    """``name -> Effect`` of every usable effect (built-in catalogues of all models, entry
+    points, user registrations), by name; :func:`effect_entries` also lists unavailable ones.
 
     Args:
-        model: keep effects of this model only (``"rigid"``, ``"arm"``).
+        model: keep effects of this model only (``"rigid"``, ``"arm"``, ``"camera"``).
         family: keep effects of this family only.
     """
-    _load_builtins()
-    _load_entry_points()
-    return sorted(
-        n
-        for n, e in _REGISTRY.effects.items()
+    return {
+        n: e
+        for n, e in REGISTRY.available().items()
         if (model is None or e.model == model) and (family is None or e.family == family)
-    )
+    }
+
+
+def effect_entries() -> list[Entry[Effect]]:
+    """Every entry of the effect registry, usable or not, with status, reason and source."""
+    return REGISTRY.entries()
 
 
 def get_effect(name: str) -> Effect:
-    """The registered effect called ``name``."""
-    _load_builtins()
-    _load_entry_points()
-    try:
-        return _REGISTRY.effects[name]
-    except KeyError:
-        raise InputError(
-            f"unknown effect {name!r}",
-            where="effects",
-            hint=f"available: {', '.join(sorted(_REGISTRY.effects))}",
-        ) from None
+    """The registered effect called ``name``.
+
+    Raises:
+        InputError: no such effect.
+        PluginError: its plug-in failed to load.
+    """
+    return REGISTRY.get(name)

@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import pytest
+from plugin_dist import write_dist
 
 from robogs.format.budgets import DEFAULT_BUDGETS
 from robogs.format.checks import (
@@ -19,6 +20,7 @@ from robogs.format.checks import (
     unregister_check,
 )
 from robogs.format.checks import registry as reg
+from robogs.format.plugins import PluginError, PluginWarning
 from robogs.format.validate import RUNNER_CODES
 
 CHECKS_MD = Path(__file__).resolve().parents[2] / "spec" / "CHECKS.md"
@@ -36,7 +38,7 @@ def _catalogue() -> dict[str, list[str]]:
 
 def test_catalogue_and_registry_agree() -> None:
     rows = _catalogue()
-    checks = {c.code: c for c in available_checks()}
+    checks = available_checks()
     assert set(rows) == set(checks) | set(RUNNER_CODES)
     for code, c in checks.items():
         group, severity, quick, title, _measures, budget, hint = rows[code]
@@ -57,7 +59,7 @@ def test_codes_are_well_formed_and_budgets_exist() -> None:
         "binding": "B",
         "physics": "P",
     }
-    for c in available_checks():
+    for c in available_checks().values():
         assert re.fullmatch(r"[A-Z][0-9]{3}", c.code)
         assert c.group in GROUPS and c.code[0] == letters[c.group], c.code
         assert c.code not in RETIRED_CODES
@@ -66,7 +68,7 @@ def test_codes_are_well_formed_and_budgets_exist() -> None:
 
 
 def test_available_checks_run_in_group_order() -> None:
-    ranks = [GROUPS.index(c.group) for c in available_checks()]
+    ranks = [GROUPS.index(c.group) for c in available_checks().values()]
     assert ranks == sorted(ranks)
 
 
@@ -77,7 +79,7 @@ def _noop(chk: Check, ctx: object):
 def test_register_rejects_duplicates_bad_codes_and_retired_codes(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    existing = available_checks()[0]
+    existing = next(iter(available_checks().values()))
     with pytest.raises(ValueError, match="already registered"):
         register_check(Check(existing.code, "schema", "error", "imposter", _noop))
     with pytest.raises(ValueError, match="capital letter"):
@@ -113,38 +115,46 @@ def test_decorator_registers_and_finding_defaults() -> None:
         unregister_check("Z901")
 
 
-class _FakeEntryPoint:
-    def __init__(self, name: str, obj: object) -> None:
-        self.name, self.value, self._obj = name, f"plugin:{name}", obj
+PLUGIN = """
+    from robogs.format.checks import Check
 
-    def load(self) -> object:
-        if isinstance(self._obj, Exception):
-            raise self._obj
-        return self._obj
+    def _noop(chk, ctx):
+        return iter(())
+
+    CHECK = Check("Z950", "physics", "info", "plug-in check", _noop)
+
+    def more():
+        return [Check("Z951", "time", "info", "p2", _noop)]
+"""
 
 
 def test_entry_point_plugins_are_loaded_and_failures_reported(
-    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    plugin = Check("Z950", "physics", "info", "plug-in check", _noop)
-    eps = [
-        _FakeEntryPoint("good", plugin),
-        _FakeEntryPoint("list", lambda: [Check("Z951", "time", "info", "p2", _noop)]),
-        _FakeEntryPoint("broken", ImportError("no module named labstuff")),
-    ]
-    monkeypatch.setattr(
-        reg, "entry_points", lambda group: eps if group == reg.ENTRY_POINT_GROUP else []
+    write_dist(
+        tmp_path,
+        "robogs-labchecks",
+        "labchecks",
+        PLUGIN,
+        """
+        [robogs.checks]
+        good = labchecks:CHECK
+        list = labchecks:more
+        broken = labchecks_absent_xyz
+        """,
     )
-    monkeypatch.setattr(reg, "_LOADED", False)
-    monkeypatch.setattr(reg, "_PLUGIN_ERRORS", [])
-    try:
-        codes = {c.code for c in available_checks()}
-        assert {"Z950", "Z951"} <= codes
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with reg.REGISTRY.sandbox(), pytest.warns(PluginWarning, match="labchecks_absent_xyz"):
+        codes = available_checks()
+        assert {"Z950", "Z951"} <= set(codes)
+        assert list(codes)[-1] == "Z950"  # run order: the physics group comes last
+        entries = {e.name: e for e in reg.check_entries()}
+        assert entries["Z951"].source == entries["broken"].source == "robogs-labchecks"
         (err,) = reg.plugin_errors()
-        assert "broken" in err and "labstuff" in err
-    finally:
-        unregister_check("Z950")
-        unregister_check("Z951")
+        assert "'broken'" in err and "labchecks_absent_xyz" in err
+        with pytest.raises(PluginError, match="robogs-labchecks"):
+            get_check("broken")
+    assert "Z950" not in available_checks()
 
 
 def test_binding_group_is_picked_up_from_its_module() -> None:

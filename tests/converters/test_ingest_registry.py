@@ -6,11 +6,13 @@ import json
 from pathlib import Path
 
 import pytest
+from plugin_dist import write_dist
 
 from robogs.cli.main import main
 from robogs.convert import registry
 from robogs.convert.ingest import ConvertOptions, convert_path
 from robogs.format.errors import InputError
+from robogs.format.plugins import PluginError, PluginWarning
 from robogs.format.validate import validate
 
 CR3 = "dobot_cr3/dobot_description/urdf/cr3_robot.urdf"
@@ -32,7 +34,7 @@ def test_builtin_converters_and_detection(tmp_path: Path, synth) -> None:
         registry.get_converter("nope")
 
 
-def test_register_and_entry_points(tmp_path: Path, monkeypatch) -> None:
+def test_register_and_detect(tmp_path: Path) -> None:
     seen = []
 
     def convert(src, ctx):
@@ -40,28 +42,58 @@ def test_register_and_entry_points(tmp_path: Path, monkeypatch) -> None:
         ctx.writer.set_asset("thing", kind="object")
         raise InputError("stop here")
 
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
-    registry.register_converter("weird", lambda p: p.suffix == ".weird", convert, priority=1000)
-    with pytest.raises(ValueError, match="already registered"):
-        registry.register_converter("weird", lambda p: False, convert)
-    (tmp_path / "a.weird").write_text("x")
-    assert registry.detect_format(tmp_path / "a.weird").name == "weird"
-    with pytest.raises(InputError, match="stop here"):
-        convert_path(tmp_path / "a.weird", tmp_path / "out")
-    assert seen == [tmp_path / "a.weird"] and not (tmp_path / "out").exists()
+    with registry.REGISTRY.sandbox():
+        registry.register_converter("weird", lambda p: p.suffix == ".weird", convert, priority=1000)
+        with pytest.raises(ValueError, match="already registered"):
+            registry.register_converter("weird", lambda p: False, convert)
+        (tmp_path / "a.weird").write_text("x")
+        assert registry.detect_format(tmp_path / "a.weird").name == "weird"
+        with pytest.raises(InputError, match="stop here"):
+            convert_path(tmp_path / "a.weird", tmp_path / "out")
+        assert seen == [tmp_path / "a.weird"] and not (tmp_path / "out").exists()
+    assert "weird" not in registry.available_converters()
 
-    class _EP:
-        name = "plugin"
 
-        @staticmethod
-        def load():
-            return registry.Converter("plugfmt", lambda p: False, convert, "from a plug-in")
+def test_entry_points_of_an_installed_distribution(tmp_path: Path, monkeypatch) -> None:
+    write_dist(
+        tmp_path,
+        "robogs-labconv",
+        "labconv",
+        """
+        from robogs.convert.registry import Converter, register_converter
 
-    monkeypatch.setattr(registry, "_LOADED", False)
-    monkeypatch.setattr(
-        registry, "entry_points", lambda group: [_EP()] if group == "robogs.converters" else []
+        def _no(path):
+            return False
+
+        def _convert(src, ctx):
+            raise NotImplementedError
+
+        PLUG = Converter("plugfmt", _no, _convert, "from a plug-in")
+        OTHER = Converter("plugfmt", _no, _convert, "another one, same name")
+
+        def setup():
+            register_converter("plugfmt2", _no, _convert, description="registered by a call")
+        """,
+        """
+        [robogs.converters]
+        plugfmt = labconv:PLUG
+        plugfmt2 = labconv:setup
+        again = labconv:PLUG
+        clash = labconv:OTHER
+        """,
     )
-    assert "plugfmt" in registry.available_converters()
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with registry.REGISTRY.sandbox():
+        with pytest.warns(PluginWarning, match="'clash'.*already registered") as caught:
+            convs = registry.available_converters()
+        assert len(caught) == 1  # the same Converter under a second name is no clash
+        assert convs["plugfmt"].description == "from a plug-in" and "plugfmt2" in convs
+        entries = {e.name: e for e in registry.converter_entries()}
+        assert entries["plugfmt2"].source == entries["clash"].source == "robogs-labconv"
+        assert entries["clash"].status == "unavailable"
+        with pytest.raises(PluginError, match="'clash' from distribution 'robogs-labconv'"):
+            registry.get_converter("clash")
+    assert "plugfmt" not in registry.available_converters()
 
 
 def test_cli_convert_json_and_errors(tmp_path: Path, synth, capsys) -> None:

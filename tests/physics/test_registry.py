@@ -5,12 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import pytest
+from plugin_dist import write_dist
 
 from robogs.format.errors import InputError
+from robogs.format.plugins import PluginError, PluginWarning, RegistrationError
 from robogs.physics import effects as fx
 from robogs.physics.effects import (
     Effect,
-    Param,
     available_effects,
     get_effect,
     register_effect,
@@ -44,32 +45,54 @@ class _Bad(Effect):
 def test_invalid_and_duplicate_registrations_are_refused():
     with pytest.raises(InputError):
         register_effect(_Bad())
-    with pytest.raises(InputError):
+    with pytest.raises(RegistrationError, match="'viscous_damping' is already registered"):
         register_effect(Effect(name="viscous_damping", family="contact"))
     with pytest.raises(InputError):
         get_effect("no_such_effect")
 
 
-def test_entry_point_effects_are_loaded(monkeypatch):
-    @dataclass(frozen=True)
-    class Plug(Effect):
-        name: str = "plugged_in"
-        params: tuple[Param, ...] = (Param("a", "-", 0.0, 1.0),)
+def test_every_model_is_listed_without_imports_by_hand():
+    """Arm and camera effects are in the catalogue from the first listing (the module's
+    registry loads every built-in catalogue lazily)."""
+    assert {"joint_friction", "backlash"} <= set(available_effects(model="arm"))
+    assert list(available_effects(model="camera")) == ["camera_intrinsics"]
+    assert all(e.source == "builtin" and e.ok for e in fx.effect_entries())
 
-    class _EP:
-        name = "plugged_in"
 
-        def load(self):
-            return Plug
+def test_entry_point_effects_are_loaded(tmp_path, monkeypatch):
+    write_dist(
+        tmp_path,
+        "robogs-labfx",
+        "labfx",
+        """
+        from dataclasses import dataclass
 
-    monkeypatch.setattr(
-        fx.importlib.metadata,
-        "entry_points",
-        lambda group: [_EP()] if group == "robogs.effects" else [],
+        from robogs.physics.effects import Effect, Param
+
+        @dataclass(frozen=True)
+        class Plug(Effect):
+            name: str = "plugged_in"
+            params: tuple = (Param("a", "-", 0.0, 1.0),)
+
+        def make():
+            return Plug(name="plugged_too")
+
+        BAD = Plug(name="plugged_bad", family="magic")
+        """,
+        """
+        [robogs.effects]
+        plugged_in = labfx:Plug
+        plugged_too = labfx:make
+        plugged_bad = labfx:BAD
+        """,
     )
-    monkeypatch.setattr(fx._REGISTRY, "entry_points_loaded", False)
-    try:
-        assert "plugged_in" in available_effects()
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with fx.REGISTRY.sandbox():
+        with pytest.warns(PluginWarning, match="'plugged_bad'.*family 'magic'"):
+            names = available_effects()
+        assert {"plugged_in", "plugged_too"} <= set(names) and "plugged_bad" not in names
         assert get_effect("plugged_in").params[0].name == "a"
-    finally:
-        fx.unregister_effect("plugged_in")
+        assert {e.name: e.source for e in fx.effect_entries()}["plugged_too"] == "robogs-labfx"
+        with pytest.raises(PluginError, match="family 'magic'"):
+            get_effect("plugged_bad")
+    assert "plugged_in" not in available_effects()

@@ -3,20 +3,23 @@
 from __future__ import annotations
 
 import doctest
-from importlib import metadata
 
 import pytest
 import torch
+from plugin_dist import write_dist
 
 from robogs.format.errors import RobogsError
+from robogs.format.plugins import PluginWarning
 from robogs.format.render import available_backends, backends, pipeline, register_backend, render
 
 
 def test_builtin_backends_are_listed():
-    found = available_backends()
-    assert found["torch"] == "ok" and found["dense"] == "ok"
+    found = {e.name: e for e in backends.backend_entries()}
+    assert found["torch"].ok and found["dense"].ok
+    assert {"torch", "dense"} <= set(available_backends())
     # the optional fused CPU backend is either usable or says why not
-    assert "numba" in found and (found["numba"] == "ok" or "numba" in found["numba"])
+    numba = found["numba"]
+    assert numba.ok or ("numba" in numba.reason and "numba" not in available_backends())
 
 
 def test_registered_backend_is_used(make_gaussians, make_camera):
@@ -26,16 +29,15 @@ def test_registered_backend_is_used(make_gaussians, make_camera):
         calls.append(len(g))
         return backends.get_backend("dense")(g, cam, cfg)
 
-    register_backend("test-shifted", shifted)
-    try:
-        assert available_backends()["test-shifted"] == "ok"
+    with backends.REGISTRY.sandbox():
+        register_backend("test-shifted", shifted)
+        assert available_backends()["test-shifted"] is shifted
         g = make_gaussians(5, "3dgs")
         out = render(g, make_camera(), backend="test-shifted")
         assert calls == [5]
         ref = render(g, make_camera(), backend="torch")
         assert float((out.rgb - ref.rgb).abs().max()) < 1e-10
-    finally:
-        backends._REGISTRY.pop("test-shifted")
+    assert "test-shifted" not in available_backends()
 
 
 def test_unknown_backend_raises(make_gaussians, make_camera):
@@ -43,26 +45,31 @@ def test_unknown_backend_raises(make_gaussians, make_camera):
         render(make_gaussians(2, "3dgs"), make_camera(), backend="nope")
 
 
-def test_entry_points_are_loaded(monkeypatch, make_gaussians, make_camera):
-    good = metadata.EntryPoint(
-        "ep-dense", "robogs.format.render.dense:render_dense", backends.ENTRY_POINT_GROUP
+def test_entry_points_are_loaded(tmp_path, monkeypatch, make_gaussians, make_camera):
+    write_dist(
+        tmp_path,
+        "robogs-labrender",
+        "labrender",
+        "from robogs.format.render.dense import render_dense\nNOT_A_FUNCTION = 3\n",
+        """
+        [robogs.backends]
+        ep-dense = labrender:render_dense
+        ep-broken = no_such_module_xyz:fn
+        ep-bad = labrender:NOT_A_FUNCTION
+        """,
     )
-    broken = metadata.EntryPoint("ep-broken", "no_such_module_xyz:fn", backends.ENTRY_POINT_GROUP)
-    monkeypatch.setattr(
-        backends.metadata,
-        "entry_points",
-        lambda group: [good, broken] if group == backends.ENTRY_POINT_GROUP else [],
-    )
-    monkeypatch.setattr(backends, "_entry_points_loaded", False)
-    monkeypatch.setattr(backends, "_REGISTRY", dict(backends._REGISTRY))
-    monkeypatch.setattr(backends, "_UNAVAILABLE", dict(backends._UNAVAILABLE))
-    found = available_backends()
-    assert found["ep-dense"] == "ok"
-    assert "failed to load" in found["ep-broken"] and "no_such_module_xyz" in found["ep-broken"]
-    out = render(make_gaussians(3, "3dgs"), make_camera(), backend="ep-dense")
-    assert out.rgb.shape == (29, 37, 3)
-    with pytest.raises(RobogsError, match="'ep-broken' is unavailable"):
-        render(make_gaussians(3, "3dgs"), make_camera(), backend="ep-broken")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with backends.REGISTRY.sandbox():
+        with pytest.warns(PluginWarning) as caught:
+            found = {e.name: e for e in backends.backend_entries()}
+        assert len(caught) == 2  # one per broken plug-in
+        assert found["ep-dense"].ok and found["ep-dense"].source == "robogs-labrender"
+        assert "no_such_module_xyz" in found["ep-broken"].reason
+        assert "int is not callable" in found["ep-bad"].reason
+        out = render(make_gaussians(3, "3dgs"), make_camera(), backend="ep-dense")
+        assert out.rgb.shape == (29, 37, 3)
+        with pytest.raises(RobogsError, match="'ep-broken' from distribution 'robogs-labrender'"):
+            render(make_gaussians(3, "3dgs"), make_camera(), backend="ep-broken")
 
 
 def test_render_docstring_example_runs():

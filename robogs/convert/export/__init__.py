@@ -19,13 +19,13 @@ from __future__ import annotations
 import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from importlib import import_module
-from importlib.metadata import entry_points
 from pathlib import Path
+from types import ModuleType
 from typing import Any, Literal
 
 from robogs.format import Dataset
-from robogs.format.errors import InputError, RobogsError
+from robogs.format.errors import InputError
+from robogs.format.plugins import ENTRY_POINT_GROUPS, Entry, Registry
 
 from .atomic import atomic_output
 
@@ -34,12 +34,14 @@ __all__ = [
     "Exporter",
     "ExportReport",
     "available_exporters",
+    "exporter_entries",
+    "REGISTRY",
     "export",
     "get_exporter",
     "register_exporter",
 ]
 
-ENTRY_POINT_GROUP = "robogs.exporters"
+ENTRY_POINT_GROUP = ENTRY_POINT_GROUPS["exporters"]
 
 
 @dataclass
@@ -84,7 +86,6 @@ class Exporter:
         return {p.name for p in params if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
 
 
-_REGISTRY: dict[str, Exporter] = {}
 _BUILTIN = {
     "urdf": "robogs.convert.export.urdf_physics",
     "usd": "robogs.convert.export.usd_physics",
@@ -92,7 +93,28 @@ _BUILTIN = {
     "ply": "robogs.convert.export.splat_ply",
     "rerun": "robogs.convert.export.rerun_rrd",
 }
-_loaded_entry_points = False
+
+
+def _adopt(reg: Registry[Exporter], name: str, obj: object) -> None:
+    """A ``robogs.exporters`` entry point: an :class:`Exporter`, a module that registers
+    exporters on import, or a function (registered as a file exporter under the entry name)."""
+    if isinstance(obj, ModuleType):
+        return
+    if not isinstance(obj, Exporter) and not callable(obj):
+        raise TypeError(f"entry point {name!r} is a {type(obj).__name__}, not an Exporter")
+    register_exporter(name, obj)  # type: ignore[arg-type]
+
+
+#: the exporter registry (keys: format names; a built-in module is imported when its name is asked)
+REGISTRY: Registry[Exporter] = Registry(
+    "exporters",
+    ENTRY_POINT_GROUP,
+    noun="export format",
+    builtins=_BUILTIN,
+    adopt=_adopt,
+    module_of=lambda e: e.fn.__module__,
+    unknown_where="FORMAT",
+)
 
 
 def register_exporter(
@@ -116,62 +138,33 @@ def register_exporter(
 
     Returns:
         The registered :class:`Exporter`.
+
+    Raises:
+        RegistrationError: the name is taken by another exporter and ``replace`` is False.
     """
     exp = fn if isinstance(fn, Exporter) else Exporter(name, fn, output, suffix, help)
-    if name in _REGISTRY and not replace and _REGISTRY[name].fn is not exp.fn:
-        raise InputError(
-            f"an exporter named {name!r} is already registered", hint="pass replace=True"
-        )
-    _REGISTRY[name] = exp
-    return exp
-
-
-def _load_builtin(name: str) -> None:
-    if name in _BUILTIN and name not in _REGISTRY:
-        import_module(_BUILTIN[name])  # registers itself on import
-
-
-def _load_entry_points() -> None:
-    global _loaded_entry_points
-    if _loaded_entry_points:
-        return
-    _loaded_entry_points = True
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        if ep.name in _REGISTRY:
-            continue
-        try:
-            obj = ep.load()
-        except Exception as exc:  # a broken plugin must not break the built-in formats
-            raise RobogsError(
-                f"exporter plugin {ep.name!r} ({ep.value}) failed to load: {type(exc).__name__}: {exc}",
-                hint="fix or uninstall the package that declares it",
-            ) from None
-        register_exporter(ep.name, obj)
+    return REGISTRY.register(name, exp, replace=replace)
 
 
 def available_exporters() -> dict[str, Exporter]:
-    """All export formats: built-in ones and those declared in ``robogs.exporters``."""
-    for name in _BUILTIN:
-        _load_builtin(name)
-    _load_entry_points()
-    return dict(sorted(_REGISTRY.items()))
+    """``name -> Exporter`` of every usable export format (built-in and ``robogs.exporters``
+    entry points), by name; :func:`exporter_entries` also lists the unavailable ones."""
+    return REGISTRY.available()
+
+
+def exporter_entries() -> list[Entry[Exporter]]:
+    """Every entry of the exporter registry, usable or not, with status, reason and source."""
+    return REGISTRY.entries()
 
 
 def get_exporter(name: str) -> Exporter:
-    """The exporter registered as ``name``.
+    """The exporter registered as ``name`` (imports only that built-in's module).
 
     Raises:
         InputError: no such format.
+        PluginError: its plug-in or an optional dependency failed to load.
     """
-    _load_builtin(name)
-    if name not in _REGISTRY:
-        _load_entry_points()
-    if name not in _REGISTRY:
-        raise InputError(
-            f"unknown export format {name!r}",
-            hint=f"choose from {', '.join(available_exporters())}",
-        )
-    return _REGISTRY[name]
+    return REGISTRY.get(name)
 
 
 def export(

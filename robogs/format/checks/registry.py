@@ -17,15 +17,14 @@ Example:
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import re
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from importlib.metadata import entry_points
+from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 from ..findings import Finding, Location, Severity, severity_rank
+from ..plugins import ENTRY_POINT_GROUPS, Entry, RegistrationError, Registry
 
 if TYPE_CHECKING:
     from .context import CheckContext
@@ -41,7 +40,9 @@ __all__ = [
     "register_check",
     "unregister_check",
     "available_checks",
+    "check_entries",
     "get_check",
+    "REGISTRY",
     "plugin_errors",
 ]
 
@@ -51,7 +52,7 @@ GROUPS: tuple[str, ...] = ("schema", "integrity", "time", "geometry", "binding",
 #: codes that were used once and must never be given to another check
 RETIRED_CODES: frozenset[str] = frozenset()
 
-ENTRY_POINT_GROUP = "robogs.checks"
+ENTRY_POINT_GROUP = ENTRY_POINT_GROUPS["checks"]
 
 #: modules of this package that define built-in checks (a missing one is skipped,
 #: so a new group such as ``binding`` is added by creating its module)
@@ -138,35 +139,67 @@ class Check:
         )
 
 
-_REGISTRY: dict[str, Check] = {}
-_LOADED = False
-_PLUGIN_ERRORS: list[str] = []
+def _adopt(reg: Registry[Check], name: str, obj: Any) -> None:
+    """Register what a ``robogs.checks`` entry point loaded (see the module docstring)."""
+    if isinstance(obj, Check):
+        register_check(obj)
+    elif isinstance(obj, ModuleType):
+        return  # importing it registered its checks
+    elif callable(obj):
+        _adopt(reg, name, obj())
+    elif isinstance(obj, Iterable):
+        for item in obj:
+            if not isinstance(item, Check):
+                raise TypeError(f"entry point {name!r} yielded {type(item).__name__}, not Check")
+            register_check(item)
+    else:
+        raise TypeError(f"entry point {name!r} is a {type(obj).__name__}, not a module or Check")
+
+
+def _order(entry: Entry[Check]) -> tuple[int, str]:
+    group = entry.obj.group if entry.obj is not None else ""
+    rank = GROUPS.index(group) if group in GROUPS else len(GROUPS) + (entry.obj is None)
+    return rank, entry.name
+
+
+#: the check registry (keys: check codes; a broken plug-in is listed under its entry-point name)
+REGISTRY: Registry[Check] = Registry(
+    "checks",
+    ENTRY_POINT_GROUP,
+    noun="check",
+    builtins=tuple(f"{__package__}.{m}" for m in BUILTIN_MODULES),
+    adopt=_adopt,
+    order=_order,
+    module_of=lambda c: c.fn.__module__,
+    unknown_where="--select",
+)
 
 
 def register_check(chk: Check, *, replace: bool = False) -> Check:
     """Add a check to the registry.
 
     Raises:
-        ValueError: malformed or retired code, unknown severity, or a code already
-            registered by another check (unless ``replace``).
+        RegistrationError: malformed or retired code, unknown severity, or a code already
+            registered by another check (unless ``replace``); also a ``ValueError``.
     """
     if not _CODE.match(chk.code):
-        raise ValueError(f"check code {chk.code!r} must be a capital letter and three digits")
+        raise RegistrationError(
+            f"check code {chk.code!r} must be a capital letter and three digits"
+        )
     if chk.code in RETIRED_CODES:
-        raise ValueError(f"check code {chk.code} is retired and cannot be reused")
-    severity_rank(chk.severity)
+        raise RegistrationError(f"check code {chk.code} is retired and cannot be reused")
+    try:
+        severity_rank(chk.severity)
+    except ValueError as exc:
+        raise RegistrationError(f"check {chk.code}: {exc}") from None
     if not chk.title:
-        raise ValueError(f"check {chk.code} needs a title")
-    old = _REGISTRY.get(chk.code)
-    if old is not None and not replace and old.fn is not chk.fn:
-        raise ValueError(f"check code {chk.code} is already registered ({old.title!r})")
-    _REGISTRY[chk.code] = chk
-    return chk
+        raise RegistrationError(f"check {chk.code} needs a title")
+    return REGISTRY.register(chk.code, chk, replace=replace)
 
 
 def unregister_check(code: str) -> None:
     """Remove a check (tests and plug-ins that replace a built-in)."""
-    _REGISTRY.pop(code, None)
+    REGISTRY.unregister(code)
 
 
 def check(
@@ -205,67 +238,31 @@ def check(
     return deco
 
 
-def _register_loaded(obj: Any, name: str) -> None:
-    if isinstance(obj, Check):
-        register_check(obj)
-    elif isinstance(obj, type(importlib)):
-        return  # a module: importing it registered its checks
-    elif callable(obj):
-        _register_loaded(obj(), name)
-    elif isinstance(obj, Iterable):
-        for item in obj:
-            if not isinstance(item, Check):
-                raise TypeError(f"entry point {name!r} yielded {type(item).__name__}, not Check")
-            register_check(item)
-    else:
-        raise TypeError(f"entry point {name!r} is a {type(obj).__name__}, not a module or Check")
+def available_checks() -> dict[str, Check]:
+    """``code -> Check`` of every usable check (built-in and plug-in), in run order
+    (group, then code); :func:`check_entries` also lists the unavailable plug-ins."""
+    return REGISTRY.available()
 
 
-def _load_all() -> None:
-    global _LOADED
-    if _LOADED:
-        return
-    _LOADED = True
-    for mod in BUILTIN_MODULES:
-        full = f"{__package__}.{mod}"
-        if importlib.util.find_spec(full) is not None:
-            importlib.import_module(full)
-    try:
-        eps = entry_points(group=ENTRY_POINT_GROUP)
-    except Exception as exc:  # broken distribution metadata must not stop validation
-        _PLUGIN_ERRORS.append(f"listing entry points failed: {exc}")
-        return
-    for ep in eps:
-        try:
-            _register_loaded(ep.load(), ep.name)
-        except Exception as exc:  # a broken plug-in is reported, never fatal
-            _PLUGIN_ERRORS.append(
-                f"check plug-in {ep.name!r} ({ep.value}) failed to load: {type(exc).__name__}: {exc}"
-            )
-
-
-def _order(chk: Check) -> tuple[int, str]:
-    rank = GROUPS.index(chk.group) if chk.group in GROUPS else len(GROUPS)
-    return rank, chk.code
-
-
-def available_checks() -> list[Check]:
-    """Every registered check (built-in and plug-in), in run order (group, then code)."""
-    _load_all()
-    return sorted(_REGISTRY.values(), key=_order)
+def check_entries() -> list[Entry[Check]]:
+    """Every entry of the check registry, usable or not, with status, reason and source."""
+    return REGISTRY.entries()
 
 
 def get_check(code: str) -> Check:
     """The check registered under ``code``.
 
     Raises:
-        KeyError: no such code.
+        InputError: no such code.
+        PluginError: the plug-in of that name failed to load.
     """
-    _load_all()
-    return _REGISTRY[code]
+    return REGISTRY.get(code)
 
 
 def plugin_errors() -> list[str]:
-    """Messages of check plug-ins that failed to load (reported as findings by the runner)."""
-    _load_all()
-    return list(_PLUGIN_ERRORS)
+    """One message per check plug-in that failed to load (reported as ``X004`` findings)."""
+    return [
+        f"check plug-in {e.name!r} from {e.source} is unavailable: {e.reason}"
+        for e in REGISTRY.entries()
+        if not e.ok
+    ]

@@ -17,7 +17,9 @@ plots      joint positions, velocities, efforts and wrenches (``Scalars``)
 findings   validator findings at their stamps (``TextLog`` with level)
 ========== ===================================================================================
 
-More layers (e.g. labels re-rendered from the splats) plug in with :func:`register_layer`.
+More layers (e.g. ``rerender``, labels re-rendered from the splats) plug in with
+:func:`register_layer` or through the entry-point group ``robogs.layers``; they are kept in a
+:class:`~robogs.format.plugins.Registry` (:func:`layer_entries` lists them with their status).
 
 Entity tree: ``world/robot/<link>``, ``world/objects/<name>``, ``world/cameras/<cam>`` with
 ``.../image`` (pinhole) holding ``rgb``, ``segmentation`` and ``boxes``, ``world/boxes3d``,
@@ -37,6 +39,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -47,6 +50,7 @@ import rerun.blueprint as rrb
 
 from ..dataset import Dataset, Episode
 from ..errors import FormatError, RobogsError
+from ..plugins import ENTRY_POINT_GROUPS, Entry, Registry
 
 if TYPE_CHECKING:
     import trimesh
@@ -59,6 +63,8 @@ __all__ = [
     "RerunContext",
     "TimeAxis",
     "available_layers",
+    "layer_entries",
+    "REGISTRY",
     "default_blueprint",
     "downsample_indices",
     "entity",
@@ -665,7 +671,7 @@ def _layer_findings(ctx: RerunContext) -> None:
 Layer = Callable[[RerunContext], None]
 LayerViews = Callable[[Dataset], list[Any]]
 _LAYER_VIEWS: dict[str, LayerViews] = {}
-_LAYERS: dict[str, Layer] = {
+_BUILTIN_LAYERS: dict[str, Layer] = {
     "robot": _layer_robot,
     "objects": _layer_objects,
     "splats": _layer_splats,
@@ -675,13 +681,41 @@ _LAYERS: dict[str, Layer] = {
     "plots": _layer_plots,
     "findings": _layer_findings,
 }
-DEFAULT_LAYERS: tuple[str, ...] = tuple(_LAYERS)
+DEFAULT_LAYERS: tuple[str, ...] = tuple(_BUILTIN_LAYERS)
+
+
+def _adopt(reg: Registry[Layer], name: str, obj: object) -> None:
+    """A ``robogs.layers`` entry point: a layer function (registered under the entry's name)
+    or a module that calls :func:`register_layer` on import."""
+    if isinstance(obj, ModuleType):
+        return
+    if not callable(obj):
+        raise TypeError(f"{type(obj).__name__} is not callable")
+    register_layer(name, obj)  # type: ignore[arg-type]
+
+
+#: the layer registry (the built-in layers, in logging order, then ``rerender`` and plug-ins)
+REGISTRY: Registry[Layer] = Registry(
+    "layers",
+    ENTRY_POINT_GROUPS["layers"],
+    noun="Rerun layer",
+    adopt=_adopt,
+    order=lambda e: (list(_BUILTIN_LAYERS).index(e.name) if e.name in _BUILTIN_LAYERS else 99,),
+    unknown_where="layers",
+)
+for _name, _fn in _BUILTIN_LAYERS.items():
+    REGISTRY.register(_name, _fn)
 
 
 def register_layer(
-    name: str, fn: Layer, *, default: bool = False, views: LayerViews | None = None
-) -> None:
-    """Add a layer (``fn(ctx)``) that :func:`log_dataset` can run by name.
+    name: str,
+    fn: Layer,
+    *,
+    default: bool = False,
+    views: LayerViews | None = None,
+    replace: bool = False,
+) -> Layer:
+    """Add a layer (``fn(ctx)``) that :func:`log_dataset` can run by name; returns ``fn``.
 
     Args:
         name: layer name.
@@ -689,18 +723,29 @@ def register_layer(
         default: also run it when no layer list is given.
         views: ``views(dataset) -> [rerun.blueprint views]`` added to the default blueprint's
             right column when the layer runs.
+        replace: allow replacing another layer of that name.
+
+    Raises:
+        RegistrationError: the name is taken and ``replace`` is False.
     """
     global DEFAULT_LAYERS
-    _LAYERS[name] = fn
+    REGISTRY.register(name, fn, replace=replace)
     if views is not None:
         _LAYER_VIEWS[name] = views
     if default and name not in DEFAULT_LAYERS:
         DEFAULT_LAYERS = (*DEFAULT_LAYERS, name)
+    return fn
 
 
-def available_layers() -> list[str]:
-    """Names of all registered layers."""
-    return list(_LAYERS)
+def available_layers() -> dict[str, Layer]:
+    """``name -> layer function`` of every usable layer (built-in, ``rerender``, plug-ins), in
+    logging order; :func:`layer_entries` also lists the unavailable ones with the reason."""
+    return REGISTRY.available()
+
+
+def layer_entries() -> list[Entry[Layer]]:
+    """Every entry of the layer registry, usable or not, with status, reason and source."""
+    return REGISTRY.entries()
 
 
 # ----------------------------------------------------------------------------- recording
@@ -764,14 +809,9 @@ def log_dataset(
     ep = ds.episode(episode) if episode is not None else (eps[0] if eps else None)
     ctx = RerunContext(rec, ds, ep, time_axis(ds), max_hz, options=dict(layer_options or {}))
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    names = list(DEFAULT_LAYERS if layers is None else layers)
-    unknown = [n for n in names if n not in _LAYERS]
-    if unknown:
-        raise RobogsError(
-            f"unknown Rerun layer(s) {', '.join(unknown)}", hint=f"choose from {', '.join(_LAYERS)}"
-        )
-    for name in names:
-        _LAYERS[name](ctx)
+    fns = [REGISTRY.get(n) for n in (DEFAULT_LAYERS if layers is None else layers)]
+    for fn in fns:
+        fn(ctx)
     return ctx
 
 
