@@ -11,14 +11,22 @@ from pathlib import Path, PurePosixPath
 
 from .errors import PathEscapeError
 
-__all__ = ["resolve_inside", "check_relpath"]
+__all__ = ["resolve_inside", "check_relpath", "NAME_MAX_BYTES", "PATH_MAX_BYTES"]
+
+#: longest file or folder name (bytes, UTF-8) a dataset may use: Linux NAME_MAX, the smallest
+#: common limit (ext4, XFS, APFS, NTFS all allow 255)
+NAME_MAX_BYTES = 255
+#: longest dataset-relative path (bytes): leaves room for the root under Linux PATH_MAX (4096)
+PATH_MAX_BYTES = 1024
 
 
 def check_relpath(rel: str, *, source: str | Path | None = None, where: str | None = None) -> str:
     """Check the spelling of a dataset-relative path and return it normalised.
 
     Raises:
-        PathEscapeError: absolute paths, URI schemes, backslashes, ``..`` parts, NUL bytes.
+        PathEscapeError: absolute paths, URI schemes, backslashes, ``..`` parts, NUL bytes,
+            names longer than :data:`NAME_MAX_BYTES` or paths longer than :data:`PATH_MAX_BYTES`
+            (the file system would refuse them with ENAMETOOLONG).
     """
     hint = "paths in a dataset are relative to its root, with '/' separators and no '..'"
     if not isinstance(rel, str) or not rel or "\x00" in rel:
@@ -33,6 +41,20 @@ def check_relpath(rel: str, *, source: str | Path | None = None, where: str | No
             f"path {rel!r} is not relative to the dataset root", path=source, where=where, hint=hint
         )
     parts = PurePosixPath(rel).parts
+    long = [p for p in parts if len(p.encode("utf-8", "surrogatepass")) > NAME_MAX_BYTES]
+    if long or len(rel.encode("utf-8", "surrogatepass")) > PATH_MAX_BYTES:
+        what = (
+            f"a name of {len(long[0].encode('utf-8', 'surrogatepass'))} bytes"
+            if long
+            else (f"{len(rel.encode('utf-8', 'surrogatepass'))} bytes")
+        )
+        raise PathEscapeError(
+            f"path {rel[:60]!r}... is too long ({what}; at most {NAME_MAX_BYTES} bytes a name, "
+            f"{PATH_MAX_BYTES} in all)",
+            path=source,
+            where=where,
+            hint="shorten the file name",
+        )
     if any(p == ".." for p in parts):
         raise PathEscapeError(
             f"path {rel!r} escapes the dataset root", path=source, where=where, hint=hint

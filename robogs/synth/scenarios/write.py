@@ -67,6 +67,7 @@ def write_scenario(recording: ScenarioRecording, out_path: str | Path, *, overwr
     link = recording.physics["objects"]["pusher"].get("link", "ee")
     grasp_joint = recording.physics["objects"]["pusher"].get("grasp_joint", "grasp")
     w = Dataset.create(out_path, name="scenario", overwrite=overwrite)  # no hint of the truth
+    w.set_asset(recording.object_name, kind="object")  # object_poses name a declared asset (S007)
     for tr in recording.trajectories:
         ep = tr.name
         w.write_table(
