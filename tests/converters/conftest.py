@@ -16,17 +16,8 @@ import cv2
 import numpy as np
 import pytest
 
-REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "fixtures" / "real"
-
 T0 = 1_700_000_000_000_000_000  # ns, a Unix-epoch-like start
 LATENCY = 2_000_000  # header stamp = log time - 2 ms
-
-
-def real_fixtures() -> Path:
-    """The shared real-data folder; fails plainly when it is missing."""
-    if not REAL.is_dir():
-        pytest.fail(f"real-data fixtures folder is missing: {REAL.resolve()}")
-    return REAL
 
 
 def msgdef(msgtype: str, ros_version: int = 2) -> str:
@@ -400,6 +391,6 @@ def synth() -> SimpleNamespace:
 
 
 @pytest.fixture(scope="session")
-def real() -> Path:
-    """The shared real-data folder (fails plainly when missing)."""
-    return real_fixtures()
+def real(real_data: Path) -> Path:
+    """The shared real-data folder (``real_data`` of tests/conftest.py; mark tests realdata)."""
+    return real_data

@@ -11,14 +11,10 @@ from robogs.convert.export import export
 from robogs.convert.export.usd_physics import validate_usd
 from robogs.format import Dataset
 
-REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "fixtures" / "real"
-
 
 @pytest.fixture(scope="module")
-def cr5(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
-    if not REAL.is_dir():
-        pytest.fail(f"real-data fixtures folder is missing: {REAL.resolve()}")
-    src = REAL / "dobot_cr5" / "dobot_description"
+def cr5(tmp_path_factory: pytest.TempPathFactory, real_data: Path) -> Dataset:
+    src = real_data / "dobot_cr5" / "dobot_description"
     w = Dataset.create(tmp_path_factory.mktemp("real") / "cr5")
     for p in sorted(src.rglob("*")):
         if p.is_file():

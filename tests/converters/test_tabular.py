@@ -16,8 +16,7 @@ from robogs.format.dataset import Dataset
 from robogs.format.errors import InputError
 from robogs.synth.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
 
-REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "fixtures" / "real"
-UR5_REAL = REAL / "ur5" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"
+UR5_REL = "ur5/robots/ur_description/urdf/ur5_robot.urdf"  # inside the real-data folder
 J6 = (
     "shoulder_pan_joint",
     "shoulder_lift_joint",
@@ -349,9 +348,8 @@ def test_missing_log_and_wrong_suffix(tmp_path, chain3):
 
 
 @pytest.mark.realdata
-def test_real_ur5_urdf_with_and_without_meshes(tmp_path):
-    if not REAL.is_dir():
-        pytest.fail(f"real fixtures folder is missing: {REAL}")
+def test_real_ur5_urdf_with_and_without_meshes(tmp_path, real_data: Path):
+    REAL, UR5_REAL = real_data, real_data / UR5_REL
     generate_armlog(tmp_path / "logs", UR5_REAL, ArmLogSpec(segments=1, duration_s=1.0))
     ds = Dataset.open(
         convert_tabular(

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
-REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "fixtures" / "real"
-
-# name -> (URDF path, allowed root, package roots), relative to REAL (see SOURCES.md there).
+# name -> (URDF path, allowed root, package roots), relative to the real-data folder
+# (fixture real_data of tests/conftest.py; see SOURCES.md there).
 REAL_URDFS: dict[str, tuple[str, str, dict[str, str]]] = {
     "ur5": (
         "ur5/robots/ur_description/urdf/ur5_robot.urdf",
@@ -25,15 +25,12 @@ REAL_URDFS: dict[str, tuple[str, str, dict[str, str]]] = {
 }
 
 
-def real_dir() -> Path:
-    """The real-data folder; fails (never skips) when it is missing."""
-    if not REAL.is_dir():
-        pytest.fail(f"real-data fixture folder is missing: {REAL}")
-    return REAL
+@pytest.fixture
+def real_urdf_args(real_data: Path) -> Callable[[str], tuple[Path, Path, dict[str, Path]]]:
+    """``(name) -> (urdf path, root, package_roots)`` for one of :data:`REAL_URDFS`."""
 
+    def args(name: str) -> tuple[Path, Path, dict[str, Path]]:
+        rel, root, pkgs = REAL_URDFS[name]
+        return real_data / rel, real_data / root, {k: real_data / v for k, v in pkgs.items()}
 
-def real_urdf_args(name: str) -> tuple[Path, Path, dict[str, Path]]:
-    """(urdf path, root, package_roots) for one of :data:`REAL_URDFS`."""
-    base = real_dir()
-    rel, root, pkgs = REAL_URDFS[name]
-    return base / rel, base / root, {k: base / v for k, v in pkgs.items()}
+    return args

@@ -13,7 +13,7 @@ from robogs.format.errors import FormatError, InputError
 from robogs.format.kinematics import Chain
 from robogs.format.urdf import load_urdf
 
-from .conftest import REAL_URDFS, real_urdf_args
+from .conftest import REAL_URDFS
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 
@@ -42,7 +42,7 @@ def links(*names: str) -> str:
 
 @pytest.mark.realdata
 @pytest.mark.parametrize("name", sorted(REAL_URDFS))
-def test_forward_matches_yourdfpy_scene_graph(name: str) -> None:
+def test_forward_matches_yourdfpy_scene_graph(name: str, real_urdf_args) -> None:
     path, root, pkgs = real_urdf_args(name)
     urdf = load_urdf(path, root=root, package_roots=pkgs, load_meshes=False)
     chain = Chain.from_urdf(urdf)

@@ -22,8 +22,6 @@ from robogs.format.kinematics import (
 )
 from robogs.format.urdf import load_urdf
 
-from .conftest import real_urdf_args
-
 HALF_PI = repr(math.pi / 2)
 
 
@@ -166,7 +164,7 @@ def test_ur5_table_matches_inline_urdf(tmp_path: Path) -> None:
 
 
 @pytest.mark.realdata
-def test_ur5_table_matches_real_urdf() -> None:
+def test_ur5_table_matches_real_urdf(real_urdf_args) -> None:
     path, root, pkgs = real_urdf_args("ur5")
     _check_ur5_agreement(
         Chain.from_urdf(load_urdf(path, root=root, package_roots=pkgs, load_meshes=False)), 200, 6

@@ -13,7 +13,7 @@ import trimesh
 from robogs.format.errors import FormatError, InputError, PathEscapeError
 from robogs.format.urdf import default_allowed_root, load_urdf, mesh_refs, resolve_mesh_uri
 
-from .conftest import REAL_URDFS, real_urdf_args
+from .conftest import REAL_URDFS
 
 # --------------------------------------------------------------------------- helpers
 
@@ -60,7 +60,7 @@ def link_extents(urdf) -> dict[str, np.ndarray]:
 
 @pytest.mark.realdata
 @pytest.mark.parametrize("name", sorted(REAL_URDFS))
-def test_real_urdf_loads_with_meshes(name: str) -> None:
+def test_real_urdf_loads_with_meshes(name: str, real_urdf_args) -> None:
     path, root, pkgs = real_urdf_args(name)
     urdf = load_urdf(path, root=root, package_roots=pkgs)
     text = path.read_text()
@@ -86,7 +86,7 @@ def test_real_urdf_loads_with_meshes(name: str) -> None:
 
 
 @pytest.mark.realdata
-def test_real_dobot_resolves_package_by_search_with_default_root() -> None:
+def test_real_dobot_resolves_package_by_search_with_default_root(real_urdf_args) -> None:
     path, _, _ = real_urdf_args("dobot_cr5")
     # default root = .../dobot_description (the URDF sits in urdf/), found via package.xml
     assert default_allowed_root(path) == path.resolve().parents[1]
@@ -96,7 +96,7 @@ def test_real_dobot_resolves_package_by_search_with_default_root() -> None:
 
 
 @pytest.mark.realdata
-def test_real_ur5_unknown_package_has_hint() -> None:
+def test_real_ur5_unknown_package_has_hint(real_urdf_args) -> None:
     path, root, _ = real_urdf_args("ur5")
     with pytest.raises(FormatError) as ei:
         load_urdf(path, root=root)

@@ -14,8 +14,7 @@ from robogs.physics.arm import compare_arm, diagnose_arm, fit_arm
 from robogs.physics.effects import available_effects, get_effect
 from robogs.synth.armlogs import ArmLogSpec, generate_armlog
 
-REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "fixtures" / "real"
-UR5_REAL = REAL / "ur5" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"
+UR5_REL = "ur5/robots/ur_description/urdf/ur5_robot.urdf"  # inside the real-data folder
 REQUIRED = {
     "name",
     "family",
@@ -147,10 +146,8 @@ def test_fit_add_payload_writes_link_mass_and_com(tmp_path, ur5):
 
 
 @pytest.mark.realdata
-def test_real_ur5_urdf_hidden_payload(tmp_path):
-    if not REAL.is_dir():
-        pytest.fail(f"real fixtures folder is missing: {REAL}")
-    ds, truth = _dataset(tmp_path, UR5_REAL, "payload", seed=5)
+def test_real_ur5_urdf_hidden_payload(tmp_path, real_data: Path):
+    ds, truth = _dataset(tmp_path, real_data / UR5_REL, "payload", seed=5)
     report = diagnose_arm(ds)
     top = report["effects"][0]
     assert top["name"] == "payload" and top["reported"]

@@ -14,8 +14,7 @@ from robogs.format.urdf import load_urdf
 from robogs.physics.arm.rnea import ArmModel, inertial_vector, inverse_dynamics, regressor
 from robogs.synth.armlogs.dynamics import parse_arm, world_inverse_dynamics
 
-REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "fixtures" / "real"
-UR5_REAL = REAL / "ur5" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"
+UR5_REL = "ur5/robots/ur_description/urdf/ur5_robot.urdf"  # inside the real-data folder
 
 # two links in the x-z plane, joints about -y (positive angles lift the links), no base inertia
 L1, LC1, LC2, M1, M2, I1, I2 = 0.7, 0.3, 0.25, 2.0, 1.5, 0.05, 0.03
@@ -179,9 +178,8 @@ def test_independent_world_frame_implementation_agrees(tmp_path):
 
 
 @pytest.mark.realdata
-def test_real_ur5_regressor_and_independent_oracle():
-    if not REAL.is_dir():
-        pytest.fail(f"real fixtures folder is missing: {REAL}")
+def test_real_ur5_regressor_and_independent_oracle(real_data: Path):
+    UR5_REAL = real_data / UR5_REL
     model = ArmModel.from_urdf(load_urdf(UR5_REAL, load_meshes=False))
     assert model.last_link == "wrist_3_link"
     q, qd, qdd = _states(np.random.default_rng(4), 40, 6)
