@@ -68,6 +68,20 @@ DEFAULT_BUDGETS: dict[str, Budget] = {
             "time.offset_ms", 1.0, "ms", "re-render time offset against the declared one (binding)"
         ),
         Budget(
+            "time.lag_ms",
+            2.0,
+            "ms",
+            "lag between two streams of the same motion (T013); at 0.5 m/s, a brisk tool speed, "
+            "2 ms moves a pose by 1 mm, half of geometry.fk_ee_mm",
+        ),
+        Budget(
+            "time.held_share",
+            0.01,
+            "ratio",
+            "share of samples that repeat a held value while the signal moves (T014); a healthy "
+            "driver publishes fresh values, so more than 1 % means a resampled or stalling source",
+        ),
+        Budget(
             "geometry.fk_ee_mm",
             2.0,
             "mm",
