@@ -222,7 +222,8 @@ def load_recording(dataset: Any, *, object_name: str | None = None) -> Recording
         object_name: the free object; default the only ``rigid`` object in physics.json.
 
     The end effector is ``objects.pusher.link`` of physics.json (default: the manifest's
-    ``robot.ee_link``), read from ``ee_poses``; an episode without ``ee_poses`` is driven by
+    ``robot.ee_link``), read from ``ee_poses`` and moved by ``objects.pusher.offset_m`` (the
+    pusher's centre in the link frame, default none); an episode without ``ee_poses`` is driven by
     forward kinematics of its ``joint_states`` (with the physics revision's fitted joint
     offsets). Grasp flags come from the joint named ``objects.pusher.grasp_joint``
     in ``joint_states`` (grasping while its position exceeds ``grasp_threshold``); without it
@@ -249,6 +250,7 @@ def load_recording(dataset: Any, *, object_name: str | None = None) -> Recording
     ee_link = pusher.get("link") or ds.manifest.get("robot", {}).get("ee_link")
     grasp_joint = pusher.get("grasp_joint")
     thr = float(pusher.get("grasp_threshold", 0.5))
+    offset = pusher.get("offset_m")  # the pusher shape's centre in the link frame [m]
     trajs: list[Trajectory] = []
     chain = None
     for ep in ds.episodes:
@@ -270,6 +272,10 @@ def load_recording(dataset: Any, *, object_name: str | None = None) -> Recording
             if chain is None:
                 chain = _robot_chain(ds, physics, ee_link, ep.id)
             et_ns, epos, equat = _ee_from_joints(ds, ep, chain, str(ee_link))
+        if offset is not None:
+            from robogs.format.frames import quat_to_matrix
+
+            epos = epos + np.einsum("nij,j->ni", quat_to_matrix(equat), np.asarray(offset, float))
         if ot.num_rows < 2 or len(et_ns) < 2:
             raise FormatError(
                 f"episode {ep.id!r}: too few rows for object {object_name!r} or link {ee_link!r}",
