@@ -33,6 +33,7 @@ def test_cli_writes_then_refuses_then_forces(
 ) -> None:
     out = tmp_path / "robot"
     assert main(["export", "urdf", str(tiny.root), str(out)]) == 0
+    capsys.readouterr()  # the first export's notes
     first = (out / "tiny_arm.urdf").read_bytes()
     (out / "marker").write_text("kept unless --force")
     assert main(["export", "urdf", str(tiny.root), str(out)]) == 2

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import cv2
@@ -9,10 +10,14 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
+from rosbags.interfaces import QosDurability, QosReliability
+from scipy.spatial.transform import Rotation
 
 from robogs.convert.export import export
 from robogs.convert.export.ros2_mcap import stamp
-from robogs.format import Dataset
+from robogs.convert.ingest.convert import convert_path
+from robogs.format import Dataset, InputError
 
 try:
     from .test_export_data import build_tiny_dataset, check_round_trip, mcap_round_trip
@@ -90,12 +95,17 @@ def test_messages_equal_the_dataset(tiny: Dataset, tmp_path: Path) -> None:
     assert list(info.d) == list(cam.distortion)
 
     ((lt, _, tf),) = msgs["/tf_static"]
-    (tr,) = tf.transforms
-    assert (tr.header.frame_id, tr.child_frame_id, lt) == (
-        "world",
-        "cam0_optical_frame",
-        ep.start_ns,
-    )
+    assert lt == ep.start_ns
+    edges = {(t.header.frame_id, t.child_frame_id): t for t in tf.transforms}
+    # world -> root link, the fixed joint, the camera
+    assert sorted(edges) == [
+        ("link2", "tool"),
+        ("world", "base_link"),
+        ("world", "cam0_optical_frame"),
+    ]
+    v = edges[("link2", "tool")].transform.translation
+    assert [v.x, v.y, v.z] == [0.1, 0.0, 0.0]  # tool_joint origin
+    tr = edges[("world", "cam0_optical_frame")]
     q = tr.transform.rotation
     x, y, z, w = q.x, q.y, q.z, q.w
     R = np.array(
@@ -152,8 +162,107 @@ def test_messages_equal_the_dataset(tiny: Dataset, tmp_path: Path) -> None:
     assert np.array_equal(
         arr, np.stack([wr.column(c).to_numpy() for c in ("fx", "fy", "fz", "tx", "ty", "tz")], -1)
     )
-    assert msgs["/robot_description"][0][2].data == tiny.urdf_path.read_text()
+    description = msgs["/robot_description"][0][2].data
+    assert description == (tmp_path / "t_description/urdf/tiny_arm.urdf").read_text()
 
 
 def test_round_trip_through_ingest_tiny(tiny: Dataset, tmp_path: Path) -> None:
     check_round_trip(tiny, mcap_round_trip(tiny, tmp_path))
+
+
+def _xyzw_matrix(t: object) -> np.ndarray:
+    """4x4 of a geometry_msgs Transform (quaternion x, y, z, w)."""
+    q, v = t.rotation, t.translation
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+    T[:3, 3] = [v.x, v.y, v.z]
+    return T
+
+
+def test_rosbags_reads_every_message_with_ros2_types_and_qos(tiny: Dataset, tmp_path: Path) -> None:
+    report = export("mcap", tiny, tmp_path / "t.mcap")
+    counts: dict[str, int] = {}
+    with AnyReader([tmp_path / "t.mcap"]) as reader:
+        for c in reader.connections:
+            assert re.fullmatch(r"[a-z0-9_]+/msg/[A-Za-z0-9]+", c.msgtype), c.msgtype
+            (qos,) = c.ext.offered_qos_profiles
+            latched = c.topic in ("/tf_static", "/robot_description")
+            assert qos.reliability == QosReliability.RELIABLE
+            assert qos.durability == (
+                QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE
+            )
+        for c, t, raw in reader.messages():
+            msg = reader.deserialize(raw, c.msgtype)  # every message of every topic
+            counts[c.topic] = counts.get(c.topic, 0) + 1
+            for stamped in [msg, *getattr(msg, "transforms", [])]:
+                if hasattr(stamped, "header") and c.topic not in ("/tf_static",):
+                    s = stamped.header.stamp
+                    assert s.sec * 1_000_000_000 + s.nanosec == t
+    assert counts == report.facts["messages"]
+    assert {"/tf", "/tf_static", "/robot_description", "/joint_states"} <= set(counts)
+
+
+def test_tf_is_the_datasets_kinematics_and_poses(tiny: Dataset, tmp_path: Path) -> None:
+    export("mcap", tiny, tmp_path / "t.mcap")
+    msgs = _read(tmp_path / "t.mcap")
+    static = {
+        (t.header.frame_id, t.child_frame_id): _xyzw_matrix(t.transform)
+        for _, _, m in msgs["/tf_static"]
+        for t in m.transforms
+    }
+    dynamic: dict[int, dict[tuple[str, str], np.ndarray]] = {}
+    for _, _, m in msgs["/tf"]:
+        for t in m.transforms:
+            dynamic.setdefault(_ns(t), {})[(t.header.frame_id, t.child_frame_id)] = _xyzw_matrix(
+                t.transform
+            )
+    urdf = tiny.urdf(load_meshes=False)  # yourdfpy's forward kinematics is the oracle
+    js = tiny.episode().table("joint_states")
+    for i, t in enumerate(js.column("t_ns").to_pylist()):
+        edges = {**static, **dynamic[t]}
+        assert set(dynamic[t]) == {("base_link", "link1"), ("link1", "link2")}
+        urdf.update_cfg({j: js.column(f"position.{j}")[i].as_py() for j in ("j1", "j2")})
+        T = edges[("world", "base_link")]
+        for parent, child in (("base_link", "link1"), ("link1", "link2"), ("link2", "tool")):
+            T = T @ edges[(parent, child)]
+            np.testing.assert_allclose(T, urdf.get_transform(child, "base_link"), atol=1e-12)
+    poses = tiny.episode().table("object_poses")
+    for k, t in enumerate(poses.column("t_ns").to_pylist()):
+        T = dynamic[t][("world", "box")]
+        row = [poses.column(c)[k].as_py() for c in ("x", "y", "z", "qx", "qy", "qz", "qw")]
+        np.testing.assert_allclose(T[:3, 3], row[:3], atol=0)
+        np.testing.assert_allclose(T[:3, :3], Rotation.from_quat(row[3:]).as_matrix(), atol=1e-12)
+
+
+def test_robot_package_resolves_and_round_trips(tiny: Dataset, tmp_path: Path) -> None:
+    report = export("mcap", tiny, tmp_path / "x.mcap")
+    pkg = tmp_path / "x_description"
+    assert report.facts["package"] == str(pkg)
+    text = _read(tmp_path / "x.mcap")["/robot_description"][0][2].data
+    uris = re.findall(r'filename="([^"]+)"', text)
+    assert uris and all(u.startswith("package://x_description/meshes/") for u in uris)
+    src = {r.uri: r.path for r in tiny.urdf(load_meshes=True).robogs_mesh_refs}
+    originals = re.findall(r'filename="([^"]+)"', tiny.urdf_path.read_text())
+    for uri, original in zip(uris, originals, strict=True):
+        shipped = pkg / uri[len("package://x_description/") :]
+        assert shipped.read_bytes() == Path(src[original]).read_bytes()
+    # robogs convert finds the package beside the MCAP: the robot comes back
+    back = convert_path(tmp_path / "x.mcap", tmp_path / "back")
+    check_round_trip(tiny, back)
+    a, b = tiny.urdf(load_meshes=True), back.urdf(load_meshes=True)
+    assert [j.name for j in b.robot.joints] == [j.name for j in a.robot.joints]
+    assert len(b.robot.links) == len(a.robot.links)
+    assert len(b.robogs_mesh_refs) == len(a.robogs_mesh_refs)
+    for ra, rb in zip(a.robogs_mesh_refs, b.robogs_mesh_refs, strict=True):
+        assert Path(ra.path).read_bytes() == Path(rb.path).read_bytes()
+    # a second export with --force replaces the package it wrote; a foreign folder is kept
+    export("mcap", tiny, tmp_path / "x.mcap", force=True)
+    assert (pkg / "package.xml").is_file()
+    (tmp_path / "y_description").mkdir()
+    (tmp_path / "y_description" / "package.xml").write_text("<package><name>mine</name></package>")
+    with pytest.raises(InputError, match="not written by robogs"):
+        export("mcap", tiny, tmp_path / "y.mcap")
+    assert not (tmp_path / "y.mcap").exists()
+    assert (
+        sorted(p.name for p in tmp_path.iterdir() if ".tmp-" in p.name or ".old-" in p.name) == []
+    )

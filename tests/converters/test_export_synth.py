@@ -31,7 +31,14 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
 
 
 def test_mcap_round_trip_through_ingest(scene: Dataset, tmp_path: Path) -> None:
-    check_round_trip(scene, mcap_round_trip(scene, tmp_path))
+    back = mcap_round_trip(scene, tmp_path)
+    check_round_trip(scene, back)
+    a, b = scene.urdf(load_meshes=True), back.urdf(load_meshes=True)  # the robot comes back
+    assert [j.name for j in b.robot.joints] == [j.name for j in a.robot.joints]
+    assert (len(b.robot.links), len(b.robogs_mesh_refs)) == (
+        len(a.robot.links),
+        len(a.robogs_mesh_refs),
+    )
 
 
 def test_urdf_and_usd(scene: Dataset, tmp_path: Path) -> None:

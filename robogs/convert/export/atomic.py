@@ -10,6 +10,7 @@ output is replaced only with ``force``; it is moved aside first and deleted afte
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import uuid
 from collections.abc import Iterator
@@ -18,7 +19,7 @@ from pathlib import Path
 
 from robogs.format.errors import DatasetExistsError, InputError
 
-__all__ = ["atomic_output"]
+__all__ = ["atomic_output", "final_path"]
 
 
 def _remove(path: Path) -> None:
@@ -26,6 +27,17 @@ def _remove(path: Path) -> None:
         shutil.rmtree(path, ignore_errors=True)
     elif path.exists() or path.is_symlink():
         path.unlink(missing_ok=True)
+
+
+_TMP = re.compile(r"^\.(?P<stem>.+)\.tmp-[0-9a-f]{8}(?P<suffix>.*)$")
+
+
+def final_path(tmp: str | Path) -> Path:
+    """The output path a temporary path of :func:`atomic_output` will be renamed to (``tmp``
+    itself when it is not one), for exporters that name things after the final output."""
+    tmp = Path(tmp)
+    m = _TMP.match(tmp.name)
+    return tmp.with_name(m.group("stem") + m.group("suffix")) if m else tmp
 
 
 @contextmanager

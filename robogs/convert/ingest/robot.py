@@ -12,6 +12,7 @@ from outside the mesh's package is left out and named in the provenance.
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from pathlib import Path
 
@@ -23,7 +24,7 @@ from robogs.format.urdf import mesh_refs, parse_urdf_robot, resolve_mesh_uri
 from .context import IngestContext
 from .dae_textures import dae_texture_refs, texture_uri
 
-__all__ = ["attach_robot", "attach_robot_description", "urdf_root_link"]
+__all__ = ["attach_robot", "attach_robot_description", "sibling_packages", "urdf_root_link"]
 
 URDF_REL = "robot/robot.urdf"
 
@@ -126,6 +127,21 @@ def _textures(
                 ctx.provenance.note(f"texture {ref!r} of mesh {uri} not copied: file not found")
                 continue
             out.add(p)
+    return out
+
+
+def sibling_packages(source: Path, text: str) -> dict[str, Path]:
+    """``package://NAME`` roots found beside ``source``: a folder ``NAME`` next to it whose
+    ``package.xml`` names ``NAME`` (how ``robogs export mcap`` ships the robot package)."""
+    out: dict[str, Path] = {}
+    for name in sorted(set(re.findall(r"package://([A-Za-z0-9_]+)/", text))):
+        folder = Path(source).parent / name
+        try:
+            found = _safe_parse(folder / "package.xml").getroot().findtext("name")
+        except (OSError, etree.XMLSyntaxError):
+            continue
+        if (found or "").strip() == name:
+            out[name] = folder
     return out
 
 
