@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import shutil
-from importlib.metadata import EntryPoint
 from pathlib import Path
 
 import pytest
+from plugin_dist import write_dist
 
 import robogs.convert.export as export_pkg
 from robogs.cli.main import main
@@ -33,7 +33,6 @@ def test_cli_writes_then_refuses_then_forces(
 ) -> None:
     out = tmp_path / "robot"
     assert main(["export", "urdf", str(tiny.root), str(out)]) == 0
-    capsys.readouterr()  # the first export's notes
     first = (out / "tiny_arm.urdf").read_bytes()
     (out / "marker").write_text("kept unless --force")
     assert main(["export", "urdf", str(tiny.root), str(out)]) == 2
@@ -107,14 +106,18 @@ def test_failing_exporter_leaves_nothing_behind(tiny: Dataset, tmp_path: Path) -
         export("test_broken", tiny, tmp_path / "out")
 
 
-def test_entry_point_exporters_are_listed(monkeypatch: pytest.MonkeyPatch) -> None:
-    ep = EntryPoint(
-        "test_plugin_ply", "robogs.convert.export.splat_ply:export_ply", "robogs.exporters"
+def test_entry_point_exporters_are_listed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    write_dist(
+        tmp_path,
+        "robogs-labexport",
+        "labexport",
+        "from robogs.convert.export.splat_ply import export_ply\n",
+        "[robogs.exporters]\ntest_plugin_ply = labexport:export_ply\n",
     )
-    monkeypatch.setattr(
-        export_pkg, "entry_points", lambda group: [ep] if group == "robogs.exporters" else []
-    )
-    monkeypatch.setattr(export_pkg, "_loaded_entry_points", False)
-    names = available_exporters()
-    assert {"urdf", "usd", "mcap", "ply", "rerun", "test_plugin_ply"} <= set(names)
-    assert names["test_plugin_ply"].fn is names["ply"].fn
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with export_pkg.REGISTRY.sandbox():
+        names = available_exporters()
+        assert {"urdf", "usd", "mcap", "ply", "rerun", "test_plugin_ply"} <= set(names)
+        assert names["test_plugin_ply"].fn is names["ply"].fn
+        sources = {e.name: e.source for e in export_pkg.exporter_entries()}
+        assert (sources["test_plugin_ply"], sources["ply"]) == ("robogs-labexport", "builtin")

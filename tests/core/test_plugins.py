@@ -260,3 +260,43 @@ def test_cli_backend_renders_and_is_checked_against_the_oracle(site: Path) -> No
     assert r.returncode == 2 and "Traceback" not in r.stderr
     (line,) = [ln for ln in r.stderr.splitlines() if "error:" in ln]
     assert "'broken-backend'" in line and "robogs-brokenplug" in line and "labstuff" in line
+
+
+# --------------------------------------------------------------------------- the docs
+
+DOCS = ROOT / "docs" / "plugins.md"
+
+
+def test_groups_are_declared_and_documented() -> None:
+    import tomllib
+
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"]
+    groups = set(ENTRY_POINT_GROUPS.values())
+    assert {g for g in declared if g.startswith("robogs.")} == groups
+    table = DOCS.read_text(encoding="utf-8").split("## A broken plug-in")[0]
+    assert {g for g in groups if f"`{g}`" in table} == groups
+
+
+def test_docs_examples_run(tmp_path: Path) -> None:
+    blocks = re.findall(r"```python\n(.*?)```", DOCS.read_text(encoding="utf-8"), re.S)
+    assert len(blocks) == 8
+    driver = tmp_path / "run_docs.py"
+    driver.write_text(
+        "import json, sys\n"
+        "ns = {'__name__': '__docs__'}\n"
+        "for i, code in enumerate(json.loads(open(sys.argv[1]).read())):\n"
+        "    exec(compile(code, f'docs/plugins.md python block {i + 1}', 'exec'), ns)\n"
+        "print('ran', i + 1)\n"
+    )
+    (tmp_path / "blocks.json").write_text(json.dumps(blocks))
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    r = subprocess.run(
+        [sys.executable, str(driver), str(tmp_path / "blocks.json")],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        timeout=300,
+    )
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert r.stdout.split()[-2:] == ["ran", str(len(blocks))]
