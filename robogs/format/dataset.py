@@ -203,7 +203,7 @@ class Dataset:
                 else "pass the folder that holds manifest.json",
             )
         mpath = root / MANIFEST_NAME
-        manifest = read_json(mpath, what="manifest")
+        manifest = read_json(mpath, what="manifest", root=root)
         if not isinstance(manifest, dict):
             raise FormatError("manifest must be a JSON object", path=mpath, where="/")
         if manifest.get("format") != "robogs" and check_schema:

@@ -152,7 +152,7 @@ class CheckContext:
         except VersionError as exc:
             # newer major (or unparseable) version: keep the raw manifest, report it as a finding
             self.version_error = exc
-            raw = read_json(self.root / MANIFEST_NAME, what="manifest")
+            raw = read_json(self.root / MANIFEST_NAME, what="manifest", root=self.root)
             return Dataset(self.root, raw)
 
     def _budgets(self, overrides: dict[str, float]) -> dict[str, float]:
