@@ -463,7 +463,8 @@ def _support(
             "neither the support plane nor any object's height is known, and poses alone cannot "
             "give both",
             path=ds.root,
-            hint="give one: --object table=plane:Z, --object NAME=box:LxWxH, or a table mesh asset",
+            hint=f"give one: --object table=plane:Z, --object {tracks[0].name}=box:LxWxH, "
+            "or a table mesh asset",
         )
     hint = np.concatenate(ups).mean(axis=0)
     plane = fit_plane(np.concatenate(pts), normal_hint=hint)
