@@ -13,12 +13,18 @@ from .errors import FormatError
 __all__ = [
     "encode_label_png",
     "decode_label_png",
+    "MAX_LABEL_PIXELS",
     "iter_video_frames",
     "video_frame_count",
     "VideoWriter",
 ]
 
 MAX_PIXELS = 100_000_000
+
+#: largest label image decoded (pixels): 4096 x 4096. A 16-bit label image that size is 32 MiB
+#: decoded; the box scan's working arrays stay a few times that. A PNG header claiming more is
+#: refused before any inflation (a 50 kB PNG can claim 10,000 x 10,000 pixels).
+MAX_LABEL_PIXELS = 4096 * 4096
 
 
 def encode_label_png(labels: np.ndarray) -> bytes:
@@ -39,12 +45,14 @@ def decode_label_png(
         raise FormatError("empty label image", path=path, where=where)
     if blob[:8] == b"\x89PNG\r\n\x1a\n" and blob[12:16] == b"IHDR":
         w, h = int.from_bytes(blob[16:20], "big"), int.from_bytes(blob[20:24], "big")
-        if w * h > MAX_PIXELS:
+        if w * h > MAX_LABEL_PIXELS:
             raise FormatError(
-                f"label image claims {w}x{h} pixels, over the {MAX_PIXELS} limit",
+                f"label image claims {w}x{h} pixels, over the {MAX_LABEL_PIXELS}-pixel budget "
+                f"({blob.__len__()} bytes compressed)",
                 path=path,
                 where=where,
-                hint="the PNG header is corrupt",
+                hint="label images have the camera's resolution; the PNG header is corrupt or "
+                "the image is not a label image",
             )
     arr = np.frombuffer(blob, np.uint8)
     img = cv2.imdecode(arr, cv2.IMREAD_UNCHANGED)

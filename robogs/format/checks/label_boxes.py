@@ -24,7 +24,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ..errors import FormatError
-from ..images import MAX_PIXELS, decode_label_png
+from ..images import MAX_LABEL_PIXELS, decode_label_png
 
 __all__ = ["LabelBoxes", "boxes_of_label_image", "scan_label_boxes"]
 
@@ -137,7 +137,7 @@ def _png_sub_runs(blob: bytes) -> tuple[tuple[int, int], tuple[np.ndarray, ...]]
     if header is None or not idat:
         return None
     W, H = int.from_bytes(header[0:4], "big"), int.from_bytes(header[4:8], "big")
-    if header[8:13] != bytes([16, 0, 0, 0, 0]) or W * H == 0 or W * H > MAX_PIXELS:
+    if header[8:13] != bytes([16, 0, 0, 0, 0]) or W * H == 0 or W * H > MAX_LABEL_PIXELS:
         return None  # not 16-bit grey, or interlaced
     want = H * (1 + 2 * W)
     try:  # never inflate more than the header implies (a zlib bomb stops here)
