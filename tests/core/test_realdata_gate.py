@@ -147,3 +147,14 @@ def test_no_test_file_builds_the_real_folder_path_itself() -> None:
             ):
                 offenders.append(f"{path.relative_to(TESTS)}:{node.lineno}")
     assert offenders == [], offenders
+
+
+def test_ci_runs_the_readme_test_command_and_requires_the_real_data() -> None:
+    readme = (TESTS.parent / "README.md").read_text()
+    blocks = readme.split("```bash\n")[1:]
+    cmds = [b.split("\n```", 1)[0].strip() for b in blocks]
+    test_cmd = next(c for c in cmds if "pytest" in c and "pip install" in c)
+    ci = [ln.strip() for ln in (TESTS.parent / ".ci" / "run").read_text().splitlines()]
+    assert test_cmd in ci
+    assert "export ROBOGS_REQUIRE_REALDATA=1" in ci[: ci.index(test_cmd)]
+    assert "source .venv/bin/activate" in cmds
