@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import mujoco
 import pytest
 import yourdfpy
 
@@ -25,11 +26,17 @@ def cr5(tmp_path_factory: pytest.TempPathFactory, real_data: Path) -> Dataset:
 
 @pytest.mark.realdata
 def test_real_robot_urdf_and_usd(cr5: Dataset, tmp_path: Path) -> None:
-    export("urdf", cr5, tmp_path / "urdf")
+    report = export("urdf", cr5, tmp_path / "urdf")
     got = yourdfpy.URDF.load(str(tmp_path / "urdf/cr5_robot.urdf"), mesh_dir=str(tmp_path / "urdf"))
     ref = cr5.urdf(load_meshes=False)
     assert set(got.joint_map) == set(ref.joint_map)
-    assert len(got.scene.geometry) == len(cr5.urdf().scene.geometry)  # every COLLADA mesh found
+    # every COLLADA mesh found and written as STL with all its triangles
+    assert report.facts["converted_meshes"] and not list((tmp_path / "urdf").rglob("*.dae"))
+    faces = [sum(len(g.faces) for g in u.scene.geometry.values()) for u in (got, cr5.urdf())]
+    assert faces[0] == faces[1] > 0
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "urdf/cr5_robot.urdf"))
+    assert model.nbody == 1 + sum(j.type != "fixed" for j in ref.robot.joints)
+    assert model.nmesh == len(list((tmp_path / "urdf/meshes").iterdir()))
     for name, j in ref.joint_map.items():
         if j.limit is not None:
             assert (got.joint_map[name].limit.lower, got.joint_map[name].limit.upper) == (
