@@ -18,11 +18,12 @@ and the reason.
 
 Example:
     >>> reg = Registry("doubler", "robogs.doublers", noun="doubler")
-    >>> _ = reg.register("twice", lambda x: 2 * x)
+    >>> _ = reg.register("twice", lambda x: 2 * x, source="my-lab")
     >>> reg.get("twice")(21)
     42
+    >>> reg.mark_unavailable("fast", "needs the optional package fastthing")
     >>> [(e.name, e.status, e.source) for e in reg.entries()]
-    [('twice', 'ok', 'user')]
+    [('fast', 'unavailable', 'builtin'), ('twice', 'ok', 'my-lab')]
 """
 
 from __future__ import annotations

@@ -65,6 +65,15 @@ def test_register_get_entries_and_sources() -> None:
         reg.register("", len)
 
 
+def test_docstring_examples_run() -> None:
+    import doctest
+
+    from robogs.format import plugins
+
+    result = doctest.testmod(plugins)
+    assert result.attempted >= 8 and result.failed == 0
+
+
 def test_builtins_load_lazily_and_per_name(tmp_path: Path, monkeypatch) -> None:
     log = tmp_path / "imported.txt"
     for name in ("lazy_a", "lazy_b"):
