@@ -38,7 +38,8 @@ DEFAULT_BUDGETS: dict[str, Budget] = {
             "time.jitter_p99_ms",
             5.0,
             "ms",
-            "p99 deviation from the median period; consumer cameras and ROS stamping stay below it",
+            "p99 stamp error against the stream's fitted clock; consumer cameras and ROS stamping "
+            "stay below it",
         ),
         Budget(
             "time.jitter_max_ms",

@@ -78,12 +78,15 @@ def held_blocks(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     first = np.flatnonzero(edges == 1)  # fresh sample of each block
     last = np.flatnonzero(edges == -1)  # last repeat of each block
     held = np.zeros(first.size, bool)
+    # the value before a block was measured at the fresh sample of its own block
+    prev_last = np.concatenate([[-2], last[:-1]])
+    prev = np.where(prev_last == first - 1, np.concatenate([[0], first[:-1]]), first - 1)
     inner = (first >= 1) & (last <= n - 2)
     if inner.any():
-        f, e = first[inner], last[inner]
+        f, e, b = first[inner], last[inner], prev[inner]
         before = v[f] - v[f - 1]  # [b, C]
         after = v[e + 1] - v[e]
-        dt_in = (t[f] - t[f - 1]).astype(np.float64)[:, None]
+        dt_in = (t[f] - t[b]).astype(np.float64)[:, None]
         dt_out = (t[e + 1] - t[f]).astype(np.float64)[:, None]
         same_way = before * after > 0
         fast = np.abs(after) / dt_out >= CATCH_UP * np.abs(before) / dt_in
@@ -139,13 +142,17 @@ class HeldScan:
         sel = held & closed
         for f, e, k in zip(first[sel], last[sel], extra[sel], strict=True):
             self._count(int(e - f + k), int(t[e] - t[f]), int(t[f]), int(rows[f]))
-        if first.size and not closed[-1]:  # carry (before, fresh, last repeat) of the open block
-            f = int(first[-1])
+        open_block = bool(first.size) and not closed[-1]
+        f = int(first[-1]) if open_block else t.size - 1
+        # carry: the fresh sample of the block before f, the sample before f, f, the last row
+        before = f - 1
+        k = np.searchsorted(last, before)
+        fresh_before = int(first[k]) if k < last.size and last[k] == before else before
+        keep = np.unique([i for i in (fresh_before, before, f, t.size - 1) if i >= 0])
+        if open_block:
+            self._fresh = int(np.searchsorted(keep, f))
             self._skipped = int(extra[-1]) + (t.size - 1 - f) - 1
-            keep = np.array([f - 1, f, t.size - 1]) if f >= 1 else np.array([f, t.size - 1])
-            self._fresh = 1 if f >= 1 else 0
         else:
-            keep = np.arange(max(t.size - 2, 0), t.size)
             self._fresh, self._skipped = -1, 0
         self._t, self._v, self._rows = t[keep], v[keep], rows[keep]
 
