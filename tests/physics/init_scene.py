@@ -76,11 +76,16 @@ def urdf_text(pusher: str, radius: float, tool_xyz=(0.02, 0.0, 0.0), shape_z=-0.
             f'<joint name="{name}" type="prismatic"><parent link="{parent}"/>'
             f'<child link="{child}"/><axis xyz="{axis}"/>{lim}</joint>\n'
         )
+    inert = (
+        '<inertial><mass value="1"/>'
+        '<inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>'
+    )
     return f"""<robot name="gantry">
-<link name="base_link"/><link name="carriage_x"/><link name="carriage_y"/>
-<link name="column"><collision><origin xyz="0 0 0.35"/>
+<link name="base_link"/><link name="carriage_x">{inert}</link>
+<link name="carriage_y">{inert}</link>
+<link name="column">{inert.replace("<mass", '<origin xyz="0 0 0.35"/><mass')}<collision><origin xyz="0 0 0.35"/>
 <geometry><cylinder radius="0.03" length="0.5"/></geometry></collision></link>
-<link name="wrist"/>
+<link name="wrist">{inert}</link>
 <link name="tool"><collision><origin xyz="0 0 {shape_z}"/><geometry>{geo}</geometry></collision></link>
 {j}<joint name="jyaw" type="revolute"><parent link="column"/><child link="wrist"/>
 <axis xyz="0 0 1"/>{lim}</joint>
@@ -123,6 +128,7 @@ def write_scene(
     box_mesh: bool = False,
     robot: bool = True,
     objects: bool = True,
+    ee_tip: bool = False,
     noise_m: float = 0.0005,
 ) -> Truth:
     """Write the dataset at ``root`` and return the truth."""
@@ -152,6 +158,7 @@ def write_scene(
             mesh="assets/table/mesh.ply",
             pose=[*centre.tolist(), *_quat(R_plane).tolist()],
         )
+    w.set_asset("box", kind="object")
     if box_mesh:
         w.write_bytes(
             "assets/box/mesh.ply", trimesh.creation.box(extents=size).export(file_type="ply")
@@ -212,6 +219,11 @@ def write_scene(
             streams["object_poses"] = _stream(
                 "object_poses", f"episodes/{ep}/object_poses.parquet", 60.0
             )
+        if ee_tip:  # a recorded pose of a frame at the pusher-sphere centre
+            q_tool = np.tile(_quat(_rz(tool_yaw)), (len(t_js), 1))
+            tip = _pose_table(js.column("t_ns").to_numpy(), "link", "tip", P, q_tool)
+            w.write_table(f"episodes/{ep}/ee_poses.parquet", tip, kind="ee_poses")
+            streams["ee_poses"] = _stream("ee_poses", f"episodes/{ep}/ee_poses.parquet", 200.0)
         w.write_table(f"episodes/{ep}/joint_states.parquet", js, kind="joint_states")
         streams["joint_states"] = _stream(
             "joint_states", f"episodes/{ep}/joint_states.parquet", 200.0

@@ -51,6 +51,12 @@ def test_size_estimated_from_rest_height_and_pushes(estimated) -> None:
     assert np.all(err_mm < 5 * sigma + 0.5)  # the stated uncertainty is honest
 
 
+def test_initialised_dataset_validates(estimated, capsys) -> None:
+    root, _, _ = estimated
+    rc, out, _ = _cli(["validate", str(root)], capsys)
+    assert rc == 0 and "0 errors" in out
+
+
 def test_plane_from_the_table_mesh(estimated) -> None:
     _, truth, res = estimated
     assert _plane_err_mm(res.physics, truth).max() < 2.0
@@ -118,6 +124,16 @@ def test_vertical_cylinder_pusher(tmp_path: Path) -> None:
     err_mm = np.abs(np.asarray(res.physics["objects"]["box"]["size_m"]) - truth.size) * 1000.0
     assert err_mm.max() < 5.0
     assert res.physics["sources"]["objects.box.mass_kg"]["source"] == "prior(plastic, default)"
+
+
+def test_no_robot_but_ee_poses_and_a_user_pusher(tmp_path: Path) -> None:
+    truth = write_scene(tmp_path / "ee", seed=11, robot=False, ee_tip=True)
+    res = init_physics(tmp_path / "ee", objects=["pusher=sphere:0.012"])
+    p = res.physics["objects"]["pusher"]
+    assert p["link"] == "tip" and p["radius_m"] == 0.012 and "offset_m" not in p
+    assert res.physics["sources"]["objects.pusher.radius_m"]["source"] == "user"
+    err_mm = np.abs(np.asarray(res.physics["objects"]["box"]["size_m"]) - truth.size) * 1000.0
+    assert err_mm.max() < 5.0
 
 
 def test_unknown_material_lists_the_known_ones() -> None:

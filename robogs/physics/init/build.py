@@ -222,12 +222,9 @@ def _choose_pusher(
     if user:
         r, length = (spec.sphere, 0.0) if spec.sphere is not None else spec.capsule  # type: ignore[misc]
         half = 0.5 * float(length)
-        cands = {
-            lk: [Shape(lk, "user", np.array([0, -half, 0.0]), np.array([0, half, 0.0]), float(r))]
-            for lk in ({link} if link else (ee_links | {s.link for s in shapes} or set()))
-        }
-        if chain is not None and not cands:
-            cands = {lk: cands.get(lk, []) for lk in chain.link_names}
+        links = {link} if link else ee_links | set(chain.link_names if chain is not None else [])
+        a, b = np.array([0.0, -half, 0.0]), np.array([0.0, half, 0.0])
+        cands = {lk: [Shape(lk, "user", a, b, float(r))] for lk in links}
     else:
         cands = {}
         for s in shapes:
