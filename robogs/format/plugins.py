@@ -254,7 +254,8 @@ class Registry(Generic[T]):
     @contextmanager
     def sandbox(self) -> Iterator[Registry[T]]:
         """Within the block, entry points are read afresh (e.g. after installing a
-        distribution in a test); on exit, every registration and load made inside is undone.
+        distribution in a test); on exit, every registration and load made inside is undone
+        (entry points are read again on the next use if they had not been read before).
 
         Example:
             >>> from robogs.format.render.backends import REGISTRY
@@ -263,6 +264,7 @@ class Registry(Generic[T]):
             >>> "mine" in REGISTRY
             False
         """
+        self._load_builtins(None)  # built-ins register once per process: keep them outside
         saved = (dict(self._entries), set(self._loaded_builtins), set(self._warned))
         loaded = self._entry_points_loaded
         self._entry_points_loaded = False

@@ -143,8 +143,12 @@ def test_entry_point_plugins_are_loaded_and_failures_reported(
         broken = labchecks_absent_xyz
         """,
     )
-    monkeypatch.syspath_prepend(str(tmp_path))
-    with reg.REGISTRY.sandbox(), pytest.warns(PluginWarning, match="labchecks_absent_xyz"):
+    with (
+        monkeypatch.context() as mp,
+        reg.REGISTRY.sandbox(),
+        pytest.warns(PluginWarning, match="labchecks_absent_xyz"),
+    ):
+        mp.syspath_prepend(str(tmp_path))
         codes = available_checks()
         assert {"Z950", "Z951"} <= set(codes)
         assert list(codes)[-1] == "Z950"  # run order: the physics group comes last

@@ -114,10 +114,11 @@ def test_entry_point_exporters_are_listed(tmp_path: Path, monkeypatch: pytest.Mo
         "from robogs.convert.export.splat_ply import export_ply\n",
         "[robogs.exporters]\ntest_plugin_ply = labexport:export_ply\n",
     )
-    monkeypatch.syspath_prepend(str(tmp_path))
-    with export_pkg.REGISTRY.sandbox():
+    with monkeypatch.context() as mp, export_pkg.REGISTRY.sandbox():
+        mp.syspath_prepend(str(tmp_path))
         names = available_exporters()
         assert {"urdf", "usd", "mcap", "ply", "rerun", "test_plugin_ply"} <= set(names)
         assert names["test_plugin_ply"].fn is names["ply"].fn
         sources = {e.name: e.source for e in export_pkg.exporter_entries()}
         assert (sources["test_plugin_ply"], sources["ply"]) == ("robogs-labexport", "builtin")
+    assert "test_plugin_ply" not in available_exporters()

@@ -82,8 +82,8 @@ def test_entry_points_of_an_installed_distribution(tmp_path: Path, monkeypatch) 
         clash = labconv:OTHER
         """,
     )
-    monkeypatch.syspath_prepend(str(tmp_path))
-    with registry.REGISTRY.sandbox():
+    with monkeypatch.context() as mp, registry.REGISTRY.sandbox():
+        mp.syspath_prepend(str(tmp_path))
         with pytest.warns(PluginWarning, match="'clash'.*already registered") as caught:
             convs = registry.available_converters()
         assert len(caught) == 1  # the same Converter under a second name is no clash

@@ -309,3 +309,26 @@ def test_docs_examples_run(tmp_path: Path) -> None:
     )
     assert r.returncode == 0, r.stderr[-3000:]
     assert r.stdout.split()[-2:] == ["ran", str(len(blocks))]
+
+
+def test_layer_entry_points(tmp_path: Path, monkeypatch) -> None:
+    from robogs.format.qa import rerun_log
+
+    write_dist(
+        tmp_path,
+        "robogs-lablayer",
+        "lablayer",
+        "def note(ctx):\n    ctx.notes.append('lab layer ran')\n",
+        "[robogs.layers]\nlab_note = lablayer:note\nbad = lablayer:missing_name\n",
+    )
+    with monkeypatch.context() as mp, rerun_log.REGISTRY.sandbox():
+        mp.syspath_prepend(str(tmp_path))
+        with pytest.warns(PluginWarning, match="'bad' from distribution 'robogs-lablayer'"):
+            names = list(rerun_log.available_layers())
+        assert names[: len(rerun_log.DEFAULT_LAYERS)] == list(rerun_log.DEFAULT_LAYERS)
+        assert names[len(rerun_log.DEFAULT_LAYERS) :] == ["rerender", "lab_note"]
+        entry = {e.name: e for e in rerun_log.layer_entries()}["lab_note"]
+        assert (entry.status, entry.source) == ("ok", "robogs-lablayer")
+        with pytest.raises(PluginError, match="missing_name"):
+            rerun_log.REGISTRY.get("bad")
+    assert "lab_note" not in rerun_log.available_layers()

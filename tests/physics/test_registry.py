@@ -86,8 +86,8 @@ def test_entry_point_effects_are_loaded(tmp_path, monkeypatch):
         plugged_bad = labfx:BAD
         """,
     )
-    monkeypatch.syspath_prepend(str(tmp_path))
-    with fx.REGISTRY.sandbox():
+    with monkeypatch.context() as mp, fx.REGISTRY.sandbox():
+        mp.syspath_prepend(str(tmp_path))
         with pytest.warns(PluginWarning, match="'plugged_bad'.*family 'magic'"):
             names = available_effects()
         assert {"plugged_in", "plugged_too"} <= set(names) and "plugged_bad" not in names

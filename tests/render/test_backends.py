@@ -58,8 +58,8 @@ def test_entry_points_are_loaded(tmp_path, monkeypatch, make_gaussians, make_cam
         ep-bad = labrender:NOT_A_FUNCTION
         """,
     )
-    monkeypatch.syspath_prepend(str(tmp_path))
-    with backends.REGISTRY.sandbox():
+    with monkeypatch.context() as mp, backends.REGISTRY.sandbox():
+        mp.syspath_prepend(str(tmp_path))
         with pytest.warns(PluginWarning) as caught:
             found = {e.name: e for e in backends.backend_entries()}
         assert len(caught) == 2  # one per broken plug-in
