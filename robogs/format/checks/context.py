@@ -87,6 +87,11 @@ def table_kind(stream: dict[str, Any], field: str) -> str | None:
     return kind
 
 
+#: largest decompressed size (bytes) of a table that a check may read whole into memory; a larger
+#: one is reported by I010 and skipped by those checks (the streaming checks still read it)
+MAX_TABLE_BYTES = 256 * 1024 * 1024
+
+
 class InputReported(Exception):
     """Raised by the context when a check's input is unusable and already reported.
 
@@ -387,6 +392,8 @@ class CheckContext:
         if self.quick:
             raise RuntimeError("a quick check tried to read a table body")
         kind = self._require_schema(rel)
+        if self.table_bytes(rel) > MAX_TABLE_BYTES:
+            raise InputReported(rel)  # I010 reports it
         key = ("table", rel, columns)
         if key not in self._cache:
             full = self._cache.get(("table", rel, None))
@@ -399,6 +406,22 @@ class CheckContext:
                     raise InputReported(rel)  # S003 reports the nulls
                 self._cache[key] = tab
         return self._cache[key]
+
+    def table_bytes(self, rel: str) -> int:
+        """Size of a parquet table once read into memory, bytes, from its footer alone.
+
+        The larger of the encoded row-group totals and rows x the widths of its fixed-width
+        columns (dictionary and run-length encoding make the first far smaller than the arrays).
+        """
+        md = self.footer(rel)
+        encoded = sum(md.row_group(i).total_byte_size for i in range(md.num_row_groups))
+        width = 0
+        for field in md.schema.to_arrow_schema():
+            try:
+                width += max(field.type.bit_width // 8, 0)
+            except ValueError:  # variable width: counted by the encoded total
+                pass
+        return int(max(encoded, md.num_rows * width))
 
     def _require_schema(self, rel: str) -> str | None:
         """The table kind of ``rel``; :class:`InputReported` when its footer is unreadable or off

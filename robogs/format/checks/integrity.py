@@ -21,6 +21,7 @@ from ..errors import FormatError, PathEscapeError, RobogsError
 from ..findings import Finding
 from ..paths import resolve_inside
 from ..writer import sha256_file
+from . import context as _context
 from .context import CheckContext, InputReported
 from .registry import Check, check
 
@@ -400,3 +401,34 @@ def _finite(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 stream=name,
                 t_ns=t,
             )
+
+
+@check(
+    "I010",
+    group="integrity",
+    severity="warning",
+    title="tables fit the in-memory budget of the checks",
+    needs_full=False,
+    quantity="decompressed size",
+    unit="MiB",
+    hint="a table far larger than its file is a decompression bomb or a corrupt footer; a "
+    "genuine one should be split into shorter episodes",
+)
+def _table_budget(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    """Footer totals only: nothing is decompressed to find out."""
+    for rel in _parquet_rels(ctx):
+        try:
+            size = ctx.table_bytes(rel)
+            disk = ctx.existing(rel).stat().st_size
+        except (InputReported, OSError):
+            continue
+        if size <= _context.MAX_TABLE_BYTES:
+            continue
+        rows = ctx.footer(rel).num_rows
+        yield chk.finding(
+            f"table takes {size / 2**20:.0f} MiB in memory ({rows} rows, {size / max(disk, 1):.0f}x "
+            f"its {disk} bytes on disk); checks that read whole tables skip it",
+            value=round(size / 2**20, 1),
+            budget=_context.MAX_TABLE_BYTES / 2**20,
+            file=rel,
+        )
