@@ -575,6 +575,7 @@ def build_physics(
         }
         sigma = None if g.sigma is None else [float(s) for s in g.sigma]
         entries += [
+            Entry(f"{key}.equation", "rigid", "default", None, "a tracked object"),
             Entry(f"{key}.size_m", size, g.source, sigma, g.detail),
             Entry(
                 f"{key}.mass_kg",
@@ -626,6 +627,7 @@ def build_physics(
     }
     psig = plane.sigma if plane_src == "estimated" else None
     entries += [
+        Entry("objects.table.equation", "static", "default", None, "the support"),
         Entry(
             "objects.table.plane_z_m",
             z0,
@@ -661,6 +663,7 @@ def build_physics(
         "length_m": float(pusher.length),
     }
     entries += [
+        Entry("objects.pusher.equation", "kinematic", "default", None, "moves as measured"),
         Entry(
             "objects.pusher.link",
             pusher.link,
