@@ -246,3 +246,22 @@ def test_cli_no_size_and_no_plane_names_the_options(tmp_path: Path, capsys) -> N
     assert rc == 2 and "table=plane:Z" in err and "box=box:LxWxH" in err
     rc, out, _ = _cli(["physics", "init", str(root), "--object", "table=plane:0.12"], capsys)
     assert rc == 0 and "user" in out
+
+
+def test_synth_scene_pusher_and_box_recovered(tmp_path: Path) -> None:
+    """The synthetic scene (an independent generator) states its pusher link and radius and its
+    box in ``physics.json``; init from its data alone (``--force``) must find the same."""
+    from robogs.synth.scene import synthesize
+
+    root = tmp_path / "scene"
+    synthesize(root, seed=0, size="small", progress=False)
+    truth = Dataset.open(root).physics()
+    res = init_physics(root, force=True)
+    p, tool = res.physics["objects"]["pusher"], truth["contacts"]["tool"]
+    assert p["link"] == tool["link"] and p["radius_m"] == pytest.approx(tool["radius_m"], abs=1e-6)
+    assert res.physics["objects"]["box"]["size_m"] == pytest.approx(
+        truth["objects"]["box"]["size_m"], abs=1e-6
+    )
+    top = truth["objects"]["table"]["top_z_m"]
+    assert abs(res.physics["objects"]["table"]["plane_z_m"] - top) < 1e-4
+    assert Dataset.open(root).physics()["joints"] == truth["joints"]  # kept on --force

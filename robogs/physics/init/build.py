@@ -212,7 +212,7 @@ def _choose_pusher(
         raise InputError(
             "no tracked object ever moves: there is no contact phase to find the pusher from",
             path=ds.root,
-            hint="record pushes, or give the pusher: --pusher LINK --object pusher=sphere:R",
+            hint="physics init needs episodes where the pusher moves the object",
         )
     ee_links: set[str] = set()
     for ep in ds.episodes:
