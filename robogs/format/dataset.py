@@ -11,6 +11,7 @@ Example:
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from functools import cached_property
 from pathlib import Path
@@ -169,12 +170,28 @@ class Episode:
         yield from iter_video_frames(self.video_path(camera))
 
 
+def manifest_stamp(path: Path) -> tuple[int, int, int, int] | None:
+    """(device, inode, size, mtime ns) of a manifest file; None when it cannot be stat'ed.
+
+    Every commit writes the manifest into a new folder that is swapped into place, so a new
+    version always has a new inode; an edit in place changes size or mtime.
+    """
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
 class Dataset:
     """A robogs dataset folder, opened for reading."""
 
     def __init__(self, root: Path, manifest: dict[str, Any]) -> None:
         self.root = root
         self.manifest = manifest
+        #: identity of the manifest file as read (device, inode, size, mtime ns); an edit
+        #: refuses to commit over a dataset whose manifest is no longer this one
+        self.manifest_stamp: tuple[int, int, int, int] | None = None
 
     # -- opening and creating -------------------------------------------------
     @classmethod
@@ -203,7 +220,12 @@ class Dataset:
                 else "pass the folder that holds manifest.json",
             )
         mpath = root / MANIFEST_NAME
-        manifest = read_json(mpath, what="manifest", root=root)
+        for _ in range(3):  # a commit may swap the folder while we read: read until stable
+            before = manifest_stamp(mpath)
+            manifest = read_json(mpath, what="manifest", root=root)
+            stamp = manifest_stamp(mpath)
+            if stamp == before:
+                break
         if not isinstance(manifest, dict):
             raise FormatError("manifest must be a JSON object", path=mpath, where="/")
         if manifest.get("format") != "robogs" and check_schema:
@@ -223,7 +245,9 @@ class Dataset:
                     where=p.pointer,
                     hint="run robogs-validate for the full list",
                 )
-        return cls(root, manifest)
+        ds = cls(root, manifest)
+        ds.manifest_stamp = stamp
+        return ds
 
     @classmethod
     def create(

@@ -16,6 +16,7 @@ __all__ = [
     "PathEscapeError",
     "DatasetExistsError",
     "LockError",
+    "ConcurrentEditError",
     "InputError",
 ]
 
@@ -76,6 +77,10 @@ class DatasetExistsError(RobogsError):
 
 class LockError(RobogsError):
     """Another writer holds the dataset."""
+
+
+class ConcurrentEditError(LockError):
+    """The dataset changed on disk between the moment it was read and the commit of an edit."""
 
 
 class InputError(RobogsError):

@@ -43,7 +43,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .cameras import CameraModel
-from .errors import DatasetExistsError, FormatError, LockError
+from .errors import ConcurrentEditError, DatasetExistsError, FormatError, LockError
 from .jsonio import dumps_json
 from .paths import check_relpath
 from .schemas import schema_problems
@@ -277,6 +277,7 @@ class DatasetWriter:
         self._lock: _DatasetLock | None = self._acquire_lock()
         try:
             self._recover()
+            self._check_unchanged(base)
             if base is None and self.target.exists() and not overwrite:
                 raise DatasetExistsError(
                     "output already exists",
@@ -324,6 +325,25 @@ class DatasetWriter:
             olds = olds[:-1]
         for p in [*olds, *sibling_versions(self.target, "tmp")]:
             shutil.rmtree(p, ignore_errors=True)
+
+    def _check_unchanged(self, base: Dataset | None) -> None:
+        """Optimistic concurrency: under the lock, the dataset must still be the version read.
+
+        Two commands that read the same revision and both commit would otherwise lose the
+        first one's work (e.g. two ``robogs fit`` runs writing the same physics revision).
+        """
+        if base is None or base.manifest_stamp is None:
+            return
+        from .dataset import MANIFEST_NAME, manifest_stamp
+
+        now = manifest_stamp(self.target / MANIFEST_NAME)
+        if now != base.manifest_stamp:
+            raise ConcurrentEditError(
+                "dataset changed on disk since this command read it; nothing was written",
+                path=self.target,
+                hint="another robogs command committed a new version meanwhile; run this one "
+                "again on the new version",
+            )
 
     def _link_base(self, base: Dataset) -> None:
         for rel in base.files:
