@@ -188,10 +188,15 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_entry_points_of_a_real_distribution(site: Path, monkeypatch) -> None:
+    from robogs.format.checks import registry as checks
+
     monkeypatch.syspath_prepend(str(site))
     importlib.invalidate_caches()
+    for module in ("labplug", "brokenplug"):  # imported afresh here, forgotten afterwards
+        monkeypatch.delitem(sys.modules, module, raising=False)
     reg: Registry[object] = Registry("backends", ENTRY_POINT_GROUPS["backends"], noun="backend")
-    with warnings.catch_warnings(record=True) as caught:
+    # importing labplug registers its check in the global registry: undo that afterwards
+    with checks.REGISTRY.sandbox(), warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         first = {e.name: e for e in reg.entries()}
         again = {e.name: e for e in reg.entries()}
