@@ -4,6 +4,11 @@ Each verb lives in its own module, imported only when used, exposing
 ``add_arguments(parser)`` and ``run(args) -> int``. Exit codes: 0 clean,
 1 findings at or above ``--fail-on`` (or a failed comparison), 2 usage error or
 unreadable input. A ``RobogsError`` is printed as one line, never a traceback.
+
+``--threads N`` (anywhere on the line, every verb, ``robogs-validate`` too) sizes the
+torch, OpenMP and BLAS pools; default: the cores this process may use. It is applied before
+the verb module, and so numpy and torch, is imported (:mod:`robogs.cli.threads`), which is
+why this module imports nothing heavy at its top.
 """
 
 from __future__ import annotations
@@ -13,7 +18,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-from robogs.format.errors import RobogsError
+from robogs.cli import threads
 
 __all__ = ["main", "validate_main", "VERBS"]
 
@@ -40,6 +45,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "diagnose": ("robogs.physics.cli", "rank the physical effects the model is missing"),
     "fit": ("robogs.physics.cli", "add effects, refit and write a new physics revision"),
     "report": ("robogs.physics.cli", "HTML report with residual plots before and after"),
+    "physics": ("robogs.physics.init.cli", "physics.json from the data: init, show, set KEY=VALUE"),
     "reconstruct": (
         "robogs.reconstruct.cli",
         "fill splats, meshes and binding from multi-view frames",
@@ -57,6 +63,8 @@ VERBS: dict[str, tuple[str, str]] = {
 
 
 def _load(verb: str):
+    from robogs.format.errors import RobogsError
+
     module_name, _ = VERBS[verb]
     try:
         return importlib.import_module(module_name)
@@ -71,6 +79,7 @@ def _parser(verbs: Sequence[str]) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="robogs", description="Real2Sim digital twins of robot-arm scenes."
     )
+    _threads_option(parser)
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     for verb in verbs:
         _, help_text = VERBS[verb]
@@ -79,9 +88,41 @@ def _parser(verbs: Sequence[str]) -> argparse.ArgumentParser:
     return parser
 
 
+def _threads_option(p: argparse.ArgumentParser) -> None:
+    if any("--threads" in a.option_strings for a in p._actions):
+        return  # the verb has its own, with the same meaning
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        metavar="N",
+        help="torch, OpenMP and BLAS threads (default: the cores this process may use, "
+        f"here {threads.available_cores()}; OMP_NUM_THREADS if exported)",
+    )
+
+
+def _strip_global_threads(argv: list[str]) -> list[str]:
+    """``robogs --threads N VERB ...`` -> ``VERB ...`` (the value was already applied)."""
+    while argv and (argv[0] == "--threads" or argv[0].startswith("--threads=")):
+        argv = argv[2:] if argv[0] == "--threads" else argv[1:]
+    return argv
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``robogs VERB ...``; returns the exit code."""
+    """Run ``robogs [--threads N] VERB ...``; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        n = threads.resolve_threads(threads.parse_threads(argv))
+    except ValueError as exc:
+        print(f"robogs: error: {exc}", file=sys.stderr)
+        return 2
+    with threads.applied(n):
+        return _main(_strip_global_threads(argv))
+
+
+def _main(argv: list[str]) -> int:
+    from robogs.format.errors import RobogsError
+
     parser = _parser(list(VERBS))
     if not argv or argv[0] in ("-h", "--help") or argv[0] not in VERBS:
         if argv and argv[0] not in ("-h", "--help"):
@@ -99,6 +140,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             module.add_arguments_for(verb, p)
         else:
             module.add_arguments(p)
+        _threads_option(p)
         try:
             args = p.parse_args(argv[1:])
         except SystemExit as exc:  # argparse prints its own usage message

@@ -219,6 +219,8 @@ def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
         if not np.isfinite(sd):
             unident.append(s.key)
     doc = copy.deepcopy(rec.physics)
+    for k in ("revision", "parent_revision", "note"):  # the writer sets them
+        doc.pop(k, None)
     obj = rec.object_name
     ob = doc.setdefault("objects", {}).setdefault(obj, {"equation": "rigid"})
     for c in space.owner_columns("base"):
@@ -296,10 +298,21 @@ def fit(
             for cam in new_cams:
                 w.set_camera(cam)
             res.revision = w.set_physics(
-                res.physics, note=note or f"fit: added {', '.join(add) or 'nothing'}"
+                res.physics,
+                note=note
+                or (f"fit: added {', '.join(add)}" if add else "fit: refitted the base model"),
             )
             w.commit()
     return res
+
+
+def _as_dataset(dataset: Any) -> Any:
+    """The ``Dataset`` of a dataset or folder; None for an in-memory recording."""
+    from robogs.format.dataset import Dataset
+
+    if isinstance(dataset, (str, Path)):
+        return Dataset.open(Path(dataset))
+    return dataset if isinstance(dataset, Dataset) else None
 
 
 def _dataset(dataset: Any, effect: str) -> Any:
@@ -457,9 +470,11 @@ def report(
 
     Plots are inline SVG (matplotlib is not required).
     """
-    rec, ds = _open(dataset)
     if pair is None:
+        rec, ds = _open(dataset)
         pair = _report_pair(rec, ds, add, dt)
+    else:
+        ds = _as_dataset(dataset)
     before = copy.copy(pair.before)  # the memoised table stays without masks
     _attach_masks(before, ds, MAX_FRAMES, "model")
     rows = [(p.name, p.value, p.low, p.high, p.unit) for p in pair.params]

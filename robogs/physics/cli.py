@@ -5,6 +5,10 @@ A dataset with ``object_poses`` is checked against the rigid-object model
 that records end-effector poses (``ee_poses``) beside its joint states, is
 checked against the arm model (joint torques, and end-effector poses against
 forward kinematics). ``--model`` picks one when both apply.
+
+Every "before" and "after" of the object model is a baseline
+(:mod:`robogs.physics.baseline`): a physics revision with its base parameters, present effects
+and per-trajectory initial poses refitted, so compare, diagnose, fit and report agree.
 Exit codes: 0 done, 2 usage error or unreadable input.
 """
 
@@ -57,7 +61,7 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
             action="append",
             default=[],
             metavar="EFFECT",
-            help="effect to add (repeatable)",
+            help="effect to add (repeatable; none: refit the base model and present effects)",
         )
         p.add_argument("--dry-run", action="store_true", help="fit and print, write nothing")
         p.add_argument(
@@ -74,7 +78,8 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
             action="append",
             default=[],
             metavar="EFFECT",
-            help="effect(s) whose refit is shown as 'after' (default: those diagnose reports)",
+            help="effect(s) whose refit is shown as 'after' (default: when the current revision "
+            "was written by fit, that fit; otherwise the first effect diagnose reports)",
         )
         p.add_argument(
             "--out", type=Path, default=None, help="HTML file (default: <dataset>.physics.html)"
@@ -189,9 +194,12 @@ def _compare(args: argparse.Namespace, model: str) -> int:
 
     res = compare(args.dataset, mask_frames=args.mask_frames, mask_poses=args.mask_poses)
     d = res.to_dict()
+    rev = _revision(args.dataset)
+    d["baseline"] = {"revision": rev, "refitted": _REFITTED}
     if args.json:
         _print_json(d)
         return 0
+    print(f"model: physics revision {rev}, refitted ({_REFITTED})")
     print(
         f"object position residual: rms {d['rms_mm']:.2f} mm, orientation {d['rms_deg']:.2f} deg; "
         f"noise floor {d['noise_floor_mm']:.2f} mm (estimated from the data)"
@@ -206,7 +214,7 @@ def _compare(args: argparse.Namespace, model: str) -> int:
     print("worst segments:")
     for w in d["worst"][:5]:
         print(
-            f"  {w['trajectory']:>10s} {w['phase']:>8s} {w['t_start']:.2f}–{w['t_end']:.2f} s: "
+            f"  {w['trajectory']:>10s} {w['phase']:>8s} {format_span(w['t_start'], w['t_end'])}: "
             f"{w['rms_mm']:.2f} mm, {w['rms_deg']:.2f} deg"
         )
     _print_masks(d)
@@ -249,9 +257,10 @@ def _print_torque_compare(res: dict[str, Any]) -> None:
     )
     print("worst segments:")
     for w in res["worst_segments"][:5]:
+        span = format_span(w["t_start_ns"] / 1e9, w["t_end_ns"] / 1e9)
         print(
-            f"  {w['trajectory']} {w['joint']} {w['phase']:>10s}  {(w['t_start_ns']) / 1e9:.2f}–"
-            f"{w['t_end_ns'] / 1e9:.2f} s  rms {w['rms_nm']:.3f} N·m ({w['rms_sigma']:.1f} σ)"
+            f"  {w['trajectory']} {w['joint']} {w['phase']:>10s}  {span}  "
+            f"rms {w['rms_nm']:.3f} N·m ({w['rms_sigma']:.1f} σ)"
         )
 
 
@@ -274,8 +283,9 @@ def _print_pose_compare(k: dict[str, Any]) -> None:
     )
     print("worst segments:")
     for w in k["worst_segments"][:5]:
+        span = format_span(w["t_start_ns"] / 1e9, w["t_end_ns"] / 1e9)
         print(
-            f"  {w['trajectory']} {w['phase']:>10s}  {w['t_start_ns'] / 1e9:.2f}–{w['t_end_ns'] / 1e9:.2f} s  "
+            f"  {w['trajectory']} {w['phase']:>10s}  {span}  "
             f"rms {w['rms_mm']:.3f} mm ({w['rms_sigma']:.1f} σ, worst channel {w['channel']})"
         )
 
@@ -370,11 +380,11 @@ def _fit(args: argparse.Namespace, model: str) -> int:
         rev = revert(args.dataset, args.revert)
         print(f"physics revision {args.revert} restored as revision {rev}")
         return 0
-    if not args.add:
-        raise InputError(
-            "nothing to fit", hint="name the effect(s) with --add EFFECT (see robogs diagnose)"
-        )
     if model == "arm":
+        if not args.add:
+            raise InputError(
+                "nothing to fit", hint="name the effect(s) with --add EFFECT (see robogs diagnose)"
+            )
         from robogs.physics.arm.api import fit_arm
 
         d = fit_arm(args.dataset, args.add, write=not args.dry_run, note=args.note)
@@ -432,9 +442,11 @@ def _fit(args: argparse.Namespace, model: str) -> int:
             _print_json(d)
             return 0
         if d["rms_before_mm"] is not None:
+            after = f"revision {d['from_revision']}" + "".join(f" + {a}" for a in args.add)
             print(
                 f"object position RMS: {d['rms_before_mm']:.3f} → {d['rms_after_mm']:.3f} mm "
-                f"(noise floor {d['noise_floor_mm']:.3f} mm)"
+                f"(noise floor {d['noise_floor_mm']:.3f} mm; before: revision "
+                f"{d['from_revision']}, after: {after}, each refitted)"
             )
         for c in d["cameras"]:
             b, a = c["before"], c["after"]
@@ -463,23 +475,51 @@ def _report(args: argparse.Namespace, model: str) -> int:
         raise InputError(
             "the HTML report covers the object model", hint="use robogs compare --model arm"
         )
-    from robogs.physics.api import diagnose, report
+    from robogs.physics.api import diagnose, report, report_baselines
 
     add = list(args.add)
-    if not add:
+    if not add and not _written_by_fit(args.dataset):
         add = [r.name for r in diagnose(args.dataset).reported][:1]
     out = args.out or args.dataset.with_name(args.dataset.name + ".physics.html")
-    path = report(args.dataset, out, add=add)
+    pair = report_baselines(args.dataset, add=add)
+    path = report(args.dataset, out, pair=pair)
+    if args.json:
+        _print_json({"html": str(path), **pair.to_dict()})
+        return 0
     print(
-        f"wrote {path}"
-        + (f" (after = refit with {', '.join(add)})" if add else " (no effect reported)")
+        f"object position RMS: {pair.before.rms_mm:.2f} → {pair.after.rms_mm:.2f} mm "
+        f"(before: {pair.before_label}; after: {pair.after_label})"
     )
+    print(f"wrote {path}")
     if args.rrd is not None:
         from robogs.physics.api import compare
 
         _residuals_rrd(compare(args.dataset).series, args.rrd)
         print(f"wrote {args.rrd}")
     return 0
+
+
+_REFITTED = "base parameters, present effects and each trajectory's initial pose"
+
+
+def _revision(ds_path: Path) -> int | None:
+    from robogs.format import Dataset
+
+    rev = Dataset.open(ds_path).physics().get("revision")
+    return rev if isinstance(rev, int) else None
+
+
+def format_span(t0: float, t1: float) -> str:
+    from robogs.physics.report import format_span as fmt
+
+    return fmt(t0, t1)
+
+
+def _written_by_fit(ds_path: Path) -> bool:
+    """Whether the current physics revision records the revision it was fitted from."""
+    from robogs.format import Dataset
+
+    return isinstance((Dataset.open(ds_path).physics().get("fit") or {}).get("from_revision"), int)
 
 
 def _residuals_rrd(series: list[dict[str, Any]], path: Path) -> None:

@@ -104,6 +104,8 @@ def residual_table(eng: Engine, raw: np.ndarray) -> CompareResult:
     series: list[dict[str, Any]] = []
     predicted: list[dict[str, Any]] = []
     acc: dict[str, list[np.ndarray]] = {p: [] for p in PHASES}
+    steps = [np.diff(tr.t_ns) for tr in prep.rec.trajectories]
+    period = float(np.median(np.concatenate(steps))) * 1e-9 if sum(map(len, steps)) else 1e-3
     for i, tr in enumerate(prep.rec.trajectories):
         m = mask[i]
         e = raw[i][m]
@@ -112,7 +114,10 @@ def residual_table(eng: Engine, raw: np.ndarray) -> CompareResult:
         pos_mm = np.linalg.norm(e[:, :3], axis=-1) * 1000.0
         yaw_deg = np.degrees(e[:, 3])
         ph = prep.phase[i][m]
-        t = (tr.t_ns - tr.t_ns[0]) * 1e-9
+        t = (tr.t_ns[mn] - tr.t_ns[0]) * 1e-9
+        # a segment of samples a..b-1 spans [t[a], t[b]): it ends where the next one starts;
+        # the last one (and a single-sample one) ends one median sample period after its sample
+        t_next = np.append(t[1:], t[-1] + period)
         per = {}
         for j, name in enumerate(PHASES):
             sel = ph == j
@@ -125,7 +130,7 @@ def residual_table(eng: Engine, raw: np.ndarray) -> CompareResult:
                         tr.name,
                         name,
                         float(t[a]),
-                        float(t[b - 1]),
+                        float(t_next[b - 1]),
                         float(np.sqrt(np.mean(pos_mm[a:b] ** 2))),
                         float(np.sqrt(np.mean(yaw_deg[a:b] ** 2))),
                         int(b - a),
