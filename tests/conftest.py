@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # robogs --threads too
     os.environ.setdefault(_var, "1")
 
 REALDATA_DIR_ENV = "ROBOGS_REALDATA_DIR"
