@@ -2,11 +2,19 @@
 
 Exit codes: 0 no finding at or above ``--fail-on``; 1 some; 2 usage error or
 unreadable input (no manifest, malformed manifest JSON, unknown budget name).
+
+The binding checks re-render camera frames. By default they compare as many frames as a
+time budget allows (``--rerender-budget``, default 4 s for all camera streams together, at
+the per-frame cost measured on the dataset) and say so in a note under the report; ``--full``
+compares every frame. ``--json-out FILE`` writes the JSON report beside the text output of
+the same run. Threads (torch, OpenMP, BLAS and the label decoder) follow ``--threads``
+(handled by :mod:`robogs.cli.main`; default: the cores this process may use).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -42,6 +50,16 @@ def _stride(text: str) -> int:
     return k
 
 
+def _seconds(text: str) -> float:
+    try:
+        f = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds > 0, got {text!r}") from None
+    if not f > 0.0 or f == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text}")
+    return f
+
+
 def _scale(text: str) -> float:
     try:
         f = float(text)
@@ -58,6 +76,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "dataset", nargs="?", type=Path, help="dataset folder (holding manifest.json)"
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object to stdout")
+    parser.add_argument(
+        "--json-out",
+        type=Path,
+        metavar="FILE",
+        help="also write the JSON report to FILE (atomically), beside the text output",
+    )
     parser.add_argument("--junit", type=Path, metavar="FILE", help="also write JUnit XML to FILE")
     parser.add_argument(
         "--markdown", type=Path, metavar="FILE", help="also write a Markdown report to FILE"
@@ -101,7 +125,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--stride",
         type=_stride,
         metavar="N",
-        help="binding checks: re-render and compare every N-th camera frame (default 1: all)",
+        help="binding checks: candidate frames are every N-th camera frame (default 1)",
+    )
+    parser.add_argument(
+        "--full",
+        action="store_true",
+        help="binding checks: re-render every candidate frame and fit on 8 frames, "
+        "whatever it costs (default: stay within --rerender-budget)",
+    )
+    parser.add_argument(
+        "--rerender-budget",
+        type=_seconds,
+        metavar="S",
+        help="binding checks: wall seconds the re-rendering of all camera streams should take; "
+        "frame counts follow from the per-frame cost measured on the dataset (default 4)",
     )
     parser.add_argument(
         "--scale",
@@ -134,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
         to_json,
         to_junit,
         to_markdown,
+        write_atomic,
     )
     from robogs.format.validate import validate
 
@@ -166,12 +204,21 @@ def run(args: argparse.Namespace) -> int:
         if args.markdown is not None:
             from robogs.format.validate import RUNNER_CODES
 
-            args.markdown.write_text(catalogue_markdown(checks, RUNNER_CODES), encoding="utf-8")
+            write_atomic(args.markdown, catalogue_markdown(checks, RUNNER_CODES))
         return 0
     if args.dataset is None:
         return _err("the DATASET folder is required (or --list-checks)")
+    if args.full and args.rerender_budget is not None:
+        return _err("--full compares every frame; leave out --rerender-budget")
+    for out in (args.json_out, args.junit, args.markdown):
+        if out is not None and not out.parent.is_dir():
+            return _err(f"cannot write report {out}: folder {out.parent} does not exist")
     progress = not args.no_progress and not args.json and sys.stderr.isatty()
     options = {k: getattr(args, k) for k in ("stride", "scale") if getattr(args, k) is not None}
+    if args.full:
+        options["full"] = True
+    if args.rerender_budget is not None:
+        options["budget_s"] = args.rerender_budget
     try:
         report = validate(
             args.dataset,
@@ -181,18 +228,36 @@ def run(args: argparse.Namespace) -> int:
             budgets=dict(args.budget),
             progress=progress,
             options=options,
+            label_threads=_threads(args),
         )
     except RobogsError as exc:
         return _err(exc.one_line())
+    text = to_json(report) + "\n"
     if args.json:
-        sys.stdout.write(to_json(report) + "\n")
+        sys.stdout.write(text)
     else:
         render_text(report, Console(highlight=False))
     try:
+        if args.json_out is not None:
+            write_atomic(args.json_out, text)
         if args.junit is not None:
-            args.junit.write_text(to_junit(report, fail_on=args.fail_on), encoding="utf-8")
+            write_atomic(args.junit, to_junit(report, fail_on=args.fail_on))
         if args.markdown is not None:
-            args.markdown.write_text(to_markdown(report), encoding="utf-8")
+            write_atomic(args.markdown, to_markdown(report))
     except OSError as exc:
         return _err(f"cannot write report: {exc}")
     return 1 if report.failed(args.fail_on) else 0
+
+
+def _threads(args: argparse.Namespace) -> int:
+    """Label-decoder threads: ``--threads`` (added by ``robogs.cli.main``) or the usable cores.
+
+    torch, OpenMP and BLAS are sized by ``robogs.cli.main`` before this verb is imported.
+    """
+    n = getattr(args, "threads", None)
+    if isinstance(n, int) and n >= 1:
+        return n
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - macOS, Windows
+        return max(1, os.cpu_count() or 1)

@@ -1,7 +1,9 @@
 """Validation reports for people (rich text, Markdown) and machines (JSON, JUnit XML).
 
 * JSON: one object ``{"findings": [...], "summary": {...}}``; each finding has
-  ``code, severity, location, value, budget, unit, message, hint``.
+  ``code, severity, location, value, budget, unit, message, hint``; ``summary.notes`` says
+  what the run left out (e.g. frames a re-render skipped to keep its time budget).
+* Text and Markdown end with the same notes.
 * JUnit XML: one ``<testsuite>`` per check group, one ``<testcase>`` per check;
   findings at or above ``fail_on`` are ``<failure>`` elements, others go to
   ``<system-out>``; checks not run are ``<skipped/>``.
@@ -9,8 +11,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import tempfile
 import xml.etree.ElementTree as ET
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .findings import Finding, severity_rank
@@ -28,9 +34,32 @@ __all__ = [
     "render_text",
     "render_check_list",
     "catalogue_markdown",
+    "write_atomic",
 ]
 
 _STYLE = {"error": "bold red", "warning": "yellow", "info": "cyan"}
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` through a temporary file in the same folder.
+
+    Readers see the old file or the whole new one, never a part.
+
+    Raises:
+        OSError: the folder is missing or not writable (the temporary file is removed).
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
 
 
 def to_json(report: Report) -> str:
@@ -158,6 +187,8 @@ def to_markdown(report: Report) -> str:
             "Not listed (per-code cap): "
             + ", ".join(f"{k}: {v}" for k, v in sorted(report.dropped.items())),
         ]
+    if report.notes:
+        out += ["", "Notes on this run:", ""] + [f"- {_md_cell(n)}" for n in report.notes]
     return "\n".join(out) + "\n"
 
 
@@ -218,6 +249,8 @@ def render_text(report: Report, console: Console) -> None:
             style=style,
         )
     )
+    for note in report.notes:
+        console.print(Text(f"note: {note}", style="dim"))
 
 
 def render_check_list(checks: list[Check], console: Console) -> None:

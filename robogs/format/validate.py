@@ -11,10 +11,17 @@ inside a check becomes an ``X001`` finding naming the check; a ``RobogsError``
 becomes an ``X002`` finding with its file, place and hint (unless that file
 already has a finding of its own). Checks that need a schema-valid manifest are
 skipped, with one ``X003`` note, when the manifest is not.
+
+Check modules may offer two hooks, found by name on the module of a check's function:
+``expected_seconds(code, ctx) -> float | None`` (a check's rough cost, which weights the
+progress bar and its ETA; default :data:`DEFAULT_CHECK_SECONDS`) and ``run_notes(ctx) ->
+list[str]`` (what a check left out of this run, e.g. frames a re-render skipped to keep its
+time budget; shown with the report as ``Report.notes``).
 """
 
 from __future__ import annotations
 
+import sys
 import time
 import traceback
 from collections import Counter
@@ -36,6 +43,8 @@ __all__ = [
     "RUNNER_CODES",
     "select_checks",
     "DEFAULT_MAX_PER_CODE",
+    "DEFAULT_CHECK_SECONDS",
+    "Progress",
 ]
 
 #: codes the runner itself emits (not checks): code -> (severity, title)
@@ -48,6 +57,8 @@ RUNNER_CODES: dict[str, tuple[str, str]] = {
 
 #: findings kept per code (the rest are counted in the summary)
 DEFAULT_MAX_PER_CODE = 50
+#: expected wall time of a check without an ``expected_seconds`` hook, s (progress weights only)
+DEFAULT_CHECK_SECONDS = 0.1
 
 
 @dataclass
@@ -74,6 +85,8 @@ class Report:
         budgets: the budget values used.
         dropped: per code, findings not kept (over the per-code cap).
         seconds: wall time of the run.
+        notes: what checks left out of this run and why (e.g. re-rendered frames skipped to
+            stay within the time budget), one sentence each.
     """
 
     dataset: str
@@ -83,6 +96,7 @@ class Report:
     budgets: dict[str, float]
     dropped: dict[str, int] = field(default_factory=dict)
     seconds: float = 0.0
+    notes: list[str] = field(default_factory=list)
 
     def counts(self) -> dict[str, int]:
         """Number of findings per severity (including dropped ones)."""
@@ -135,6 +149,7 @@ class Report:
             "dropped": dict(self.dropped),
             "budgets": dict(self.budgets),
             "seconds": round(self.seconds, 3),
+            "notes": list(self.notes),
         }
 
     def to_dict(self) -> dict[str, Any]:
@@ -198,7 +213,7 @@ def validate(
     ignore: Iterable[str] | None = None,
     quick: bool = False,
     budgets: dict[str, float] | None = None,
-    progress: bool | Callable[[str, int, int], None] = False,
+    progress: bool | Callable[[str, float, float], None] = False,
     max_per_code: int = DEFAULT_MAX_PER_CODE,
     label_threads: int = 2,
     options: dict[str, Any] | None = None,
@@ -211,11 +226,13 @@ def validate(
         ignore: check codes, code prefixes or group names to leave out.
         quick: read only the manifest and parquet footers (no hashing, no table bodies).
         budgets: budget overrides, e.g. ``{"geometry.fk_ee_mm": 1.0}``.
-        progress: True for a progress bar on stderr, or a callback ``(title, done, total)``.
+        progress: True for a progress bar on stderr (with an ETA), or a callback
+            ``(title, done, total)`` where done and total are expected seconds of work.
         max_per_code: findings kept per code; the rest are counted in ``Report.dropped``.
         label_threads: threads decoding label images.
         options: settings for checks that take them (``CheckContext.options``), e.g.
-            ``{"stride": 4}`` for the binding re-render.
+            ``{"stride": 4}``, ``{"full": True}`` or ``{"budget_s": 10.0}`` for the binding
+            re-render (which by default subsamples frames to a time budget).
 
     Returns:
         The :class:`Report`.
@@ -236,16 +253,16 @@ def validate(
     runner = _Runner(ctx, max_per_code)
     for msg in plugin_errors():
         runner.add(Finding("X004", "warning", msg, Location(), hint="fix or uninstall the plug-in"))
-    callback = _progress_callback(progress, len(checks))
+    bar = Progress(progress, [_expected_seconds(c, ctx) for c in checks])
+    ctx.progress = bar
     try:
         for i, chk in enumerate(checks):
-            callback(f"{chk.code} {chk.title}", i, len(checks))
+            bar.start(i, f"{chk.code} {chk.title}")
             runner.run(chk)
-        callback("done", len(checks), len(checks))
+        bar.start(len(checks), "done")
     finally:
-        close = getattr(callback, "close", None)
-        if close is not None:
-            close()
+        bar.close()
+    notes = _run_notes(checks, ctx)
     if runner.skipped_invalid:
         runner.add(
             Finding(
@@ -268,7 +285,33 @@ def validate(
         budgets=dict(ctx.budgets),
         dropped={k: v for k, v in runner.dropped.items() if v},
         seconds=time.perf_counter() - t0,
+        notes=notes,
     )
+
+
+def _hook(chk: Check, name: str) -> Callable[..., Any] | None:
+    module = sys.modules.get(getattr(chk.fn, "__module__", "") or "")
+    fn = getattr(module, name, None)
+    return fn if callable(fn) else None
+
+
+def _expected_seconds(chk: Check, ctx: CheckContext) -> float:
+    hook = _hook(chk, "expected_seconds")
+    try:
+        value = hook(chk.code, ctx) if hook is not None else None
+    except Exception:  # a hint for the progress bar must never stop a validation
+        value = None
+    return float(value) if isinstance(value, int | float) and value > 0 else DEFAULT_CHECK_SECONDS
+
+
+def _run_notes(checks: Sequence[Check], ctx: CheckContext) -> list[str]:
+    notes: list[str] = []
+    for hook in dict.fromkeys(h for c in checks if (h := _hook(c, "run_notes")) is not None):
+        try:
+            notes += [str(n) for n in hook(ctx)]
+        except Exception as exc:  # a note must never stop a validation
+            notes.append(f"notes of {getattr(hook, '__module__', '?')} unavailable: {exc}")
+    return notes
 
 
 class _Runner:
@@ -348,29 +391,86 @@ class _Runner:
         )
 
 
-def _progress_callback(
-    progress: bool | Callable[[str, int, int], None], total: int
-) -> Callable[[str, int, int], None]:
-    if callable(progress):
-        return progress
-    if not progress:
-        return lambda _title, _done, _total: None
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+class Progress:
+    """Progress of a validation, weighted by each check's expected seconds.
 
-    bar = Progress(
-        TextColumn("{task.description:<48}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=Console(stderr=True),
-        transient=True,
-    )
-    bar.start()
-    task = bar.add_task("validating", total=total)
+    Called with a note (``progress("re-rendering ...")``) it shows the note; ``fraction(f)``
+    moves the bar within the running check (a long re-render reports its frames). The bar's
+    ETA is the remaining expected seconds over the measured rate.
 
-    def update(title: str, done: int, _total: int) -> None:
-        bar.update(task, completed=done, description=title[:48])
+    Args:
+        sink: True for a rich bar on stderr, False for nothing, or a callback
+            ``(title, done, total)`` (done and total in expected seconds).
+        weights: expected seconds of each check, in run order.
+    """
 
-    update.close = bar.stop  # type: ignore[attr-defined]
-    return update
+    def __init__(
+        self, sink: bool | Callable[[str, float, float], None], weights: Sequence[float]
+    ) -> None:
+        self.weights = [float(w) for w in weights]
+        self.before = [sum(self.weights[:i]) for i in range(len(self.weights) + 1)]
+        self.total = self.before[-1]
+        self.index = 0
+        self.title = ""
+        self._bar: Any = None
+        self._task: Any = None
+        self._call: Callable[[str, float, float], None] | None = None
+        if callable(sink):
+            self._call = sink
+        elif sink:
+            self._open_bar()
+
+    def _open_bar(self) -> None:
+        from rich.console import Console
+        from rich.progress import BarColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+        from rich.progress import Progress as RichProgress
+
+        self._bar = RichProgress(
+            TextColumn("{task.description:<48}"),
+            BarColumn(),
+            TextColumn("{task.fields[checks]}"),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            console=Console(stderr=True),
+            transient=True,
+        )
+        self._bar.start()
+        self._task = self._bar.add_task(
+            "validating", total=max(self.total, 1e-9), checks=f"0/{len(self.weights)}"
+        )
+
+    def start(self, index: int, title: str) -> None:
+        """Check ``index`` (0-based; ``len(weights)`` when all are done) starts."""
+        self.index = min(index, len(self.weights))
+        self.title = title
+        self._show(title, self.before[self.index])
+
+    def fraction(self, f: float) -> None:
+        """The running check is this fraction (0..1) done."""
+        if self.index >= len(self.weights):
+            return
+        f = min(max(float(f), 0.0), 1.0)
+        self._show(self.title, self.before[self.index] + f * self.weights[self.index])
+
+    def __call__(self, note: str) -> None:
+        """A long step of the running check starts (shown as the description)."""
+        self._show(f"{self.title.split(' ', 1)[0]} {note}", None)
+
+    def _show(self, title: str, done: float | None) -> None:
+        if self._call is not None:
+            self._call(title, self.before[self.index] if done is None else done, self.total)
+        if self._bar is not None:
+            fields: dict[str, Any] = {
+                "description": title[:48],
+                "checks": f"{self.index}/{len(self.weights)}",
+            }
+            if done is not None:
+                fields["completed"] = done
+            self._bar.update(self._task, **fields)
+
+    def close(self) -> None:
+        """Remove the bar."""
+        if self._bar is not None:
+            self._bar.stop()
+            self._bar = None

@@ -1,23 +1,33 @@
 """Binding checks (B0xx): bound Gaussians sit on their faces and re-render onto the recorded labels.
 
 * ``B001`` measures each bound Gaussian's distance to its face plus offset at the rest state.
-* ``B002``–``B006`` re-render every ``stride``-th frame of every labelled camera
-  (:mod:`robogs.format.rerender`): label IoU, boundary distance (px and mm), photometric match
-  (PSNR against a floor), the camera's time offset and a systematic camera displacement.
+* ``B002``–``B006`` re-render frames of every labelled camera (:mod:`robogs.format.rerender`):
+  label IoU, boundary distance (px and mm), photometric match (PSNR against a floor), the
+  camera's time offset and a systematic camera displacement.
 * ``B007``–``B011`` report inputs the re-render cannot trust: bad splat values, unnormalised
   quaternions, degenerate cameras, label ids without a segment, targets without labels.
 
 Work is shared through a per-context cache: one :class:`~robogs.format.binding.Binding` per
 episode, one re-render pass and one alignment fit per camera stream. Speed options come from
-``ctx.options`` (``stride``, ``scale``, ``backend``, ``fit_frames``, ``device``) when the caller
-sets them.
+``ctx.options`` (``stride``, ``scale``, ``backend``, ``fit_frames``, ``device``, ``full``,
+``budget_s``, ``frame_cost_s``) when the caller sets them.
+
+**Time budget.** Unless ``full`` is set, the re-rendering of all camera streams together should
+take about ``budget_s`` seconds of wall time (default
+:data:`~robogs.format.rerender.DEFAULT_BUDGET_S`). Each stream gets an equal share; the label pass
+(B002–B004) gets :data:`PASS_SHARE` of it, the alignment fit (B005, B006) the rest. The pass times
+its first two frames and compares as many as the rest of its share allows (an even grid plus the
+frames of fastest and slowest image motion, :func:`~robogs.format.rerender.plan_frames`); the
+fit uses as many of its fastest frames as its share allows at the measured render cost. Each
+subsampled stream leaves a note (:func:`run_notes`) naming the counts, the budget and ``--full``.
 """
 
 from __future__ import annotations
 
 import math
+import time
 import weakref
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -37,10 +47,20 @@ if TYPE_CHECKING:
     import torch
 
     from ..binding import Binding
-    from ..rerender import AlignmentFit, LabelChannels, RerenderOptions, SceneRerenderer
+    from ..rerender import (
+        AlignmentFit,
+        FrameMetrics,
+        FramePlan,
+        LabelChannels,
+        RerenderOptions,
+        SceneRerenderer,
+    )
 
 __all__ = [
     "rerender_options",
+    "run_notes",
+    "expected_seconds",
+    "PASS_SHARE",
     "alignment_fit",
     "label_summary",
     "LabelSummary",
@@ -56,6 +76,10 @@ IOU_MIN_PIXELS = 200
 MIN_MOTION_PX = 0.05
 #: quaternion norms further than this from 1 are flagged (spec §4)
 QUAT_NORM_TOL = 1e-3
+#: share of a camera stream's time budget given to the label pass (B002-B004); the fit gets the rest
+PASS_SHARE = 0.4
+#: fit candidates: at most this many frames spread over the episode (``full``: 600)
+FIT_CANDIDATES = 60
 
 _STATE: weakref.WeakKeyDictionary[CheckContext, dict[Any, Any]] = weakref.WeakKeyDictionary()
 
@@ -63,13 +87,72 @@ _STATE: weakref.WeakKeyDictionary[CheckContext, dict[Any, Any]] = weakref.WeakKe
 def rerender_options(ctx: CheckContext) -> RerenderOptions:
     """Re-render options of a validation run, from ``ctx.options`` (defaults otherwise).
 
-    Recognised keys: ``stride`` (int), ``scale`` (float), ``backend``, ``fit_frames``, ``device``.
+    Recognised keys: ``stride`` (int), ``scale`` (float), ``backend``, ``fit_frames``, ``device``,
+    ``max_offset_ms``, ``full`` (bool), ``budget_s`` (float), ``frame_cost_s`` (float).
     """
     from ..rerender import RerenderOptions
 
     raw = getattr(ctx, "options", None) or {}
-    keys = ("stride", "scale", "backend", "fit_frames", "device", "max_offset_ms")
+    keys = (
+        "stride",
+        "scale",
+        "backend",
+        "fit_frames",
+        "device",
+        "max_offset_ms",
+        "full",
+        "budget_s",
+        "frame_cost_s",
+    )
     return RerenderOptions(**{k: raw[k] for k in keys if raw.get(k) is not None})
+
+
+def expected_seconds(code: str, ctx: CheckContext) -> float | None:
+    """Rough wall time of a binding check, s, for the validator's progress bar (None: default).
+
+    B002 carries the label pass and B005 the alignment fit (the checks after them reuse those
+    results); with ``full`` the counts are not known before the run, so 10x the budget shares.
+    """
+    if code not in ("B001", "B002", "B005"):
+        return None
+    raw = getattr(ctx, "options", None) or {}
+    if code == "B001":
+        return 1.0  # the binding itself and the link triangles
+    budget = raw.get("budget_s")
+    if budget is None:
+        from ..rerender import DEFAULT_BUDGET_S
+
+        budget = DEFAULT_BUDGET_S
+    share = PASS_SHARE if code == "B002" else 1.0 - PASS_SHARE
+    return float(budget) * share * (10.0 if raw.get("full") else 1.0) + 0.5
+
+
+def run_notes(ctx: CheckContext) -> list[str]:
+    """Notes on what the re-render left out of this run (one per subsampled camera stream).
+
+    Example: ``ep0/camera/cam0: labels compared on 9 of 120 frames and the time offset and camera
+    fitted on 2 of 8 frames, to stay within the 4 s re-render budget (0.17 s per frame); --full
+    for all``.
+    """
+    notes: dict[tuple[str, str], dict[str, str]] = _state(ctx).get("notes", {})
+    out = []
+    for (ep, stream), parts in notes.items():
+        said = " and ".join(parts[k] for k in ("pass", "fit") if k in parts)
+        out.append(
+            f"binding re-render {ep}/{stream}: {said}, to stay within the "
+            f"{rerender_options(ctx).budget_s:g} s re-render budget; --full for all"
+        )
+    return out
+
+
+def _note(ctx: CheckContext, job: _CameraJob, part: str, text: str) -> None:
+    _state(ctx).setdefault("notes", {}).setdefault((job.ep.id, job.stream), {})[part] = text
+
+
+def _fraction(ctx: CheckContext) -> Callable[[float], None]:
+    """The progress hook for the fraction of a long check done (a no-op outside the validator)."""
+    hook = getattr(getattr(ctx, "progress", None), "fraction", None)
+    return hook if callable(hook) else (lambda _f: None)
 
 
 def _state(ctx: CheckContext) -> dict[Any, Any]:
@@ -226,6 +309,7 @@ class _Pass:
     lut: np.ndarray
     skipped: str | None = None
     notes: list[str] = field(default_factory=list)
+    plan: FramePlan | None = None  # which candidate frames were compared
 
 
 def _rerenderer(ctx: CheckContext, job: _CameraJob) -> tuple[SceneRerenderer, np.ndarray]:
@@ -259,49 +343,191 @@ def _rerenderer(ctx: CheckContext, job: _CameraJob) -> tuple[SceneRerenderer, np
 
 
 def _frames(ctx: CheckContext, job: _CameraJob) -> tuple[np.ndarray, np.ndarray]:
-    """Stamps and frame indices of every ``stride``-th frame."""
+    """Stamps and frame indices of every ``stride``-th frame (the label pass's candidates)."""
     t, fi = frame_stamps(ctx.table(job.entry["frames"], columns=("t_ns", "frame_index")))
     k = rerender_options(ctx).stride
     return t[::k], fi[::k]
 
 
+def _job_budget_s(ctx: CheckContext) -> float:
+    """Wall time one camera stream's re-render may take, s (``inf`` with ``full``)."""
+    opts = rerender_options(ctx)
+    if opts.full:
+        return math.inf
+    n = _cached(ctx, ("n_jobs",), lambda: sum(1 for _ in _camera_jobs(ctx)))
+    return float(opts.budget_s) / max(int(n), 1)
+
+
+def _candidates(ctx: CheckContext, job: _CameraJob) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stamps, frame indices and image motion (px per 20 ms) of frames spread over the stream.
+
+    Every frame of short streams, about :data:`FIT_CANDIDATES` (``full``: 600) of long ones;
+    the alignment fit picks its frames here and the label pass its fastest and slowest.
+    """
+
+    def build() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        rr, _lut = _rerenderer(ctx, job)
+        t, fi = frame_stamps(ctx.table(job.entry["frames"], columns=("t_ns", "frame_index")))
+        step = max(1, len(t) // (600 if rerender_options(ctx).full else FIT_CANDIDATES))
+        t, fi = t[::step], fi[::step]
+        return t, fi, rr.image_motion_px(t)
+
+    return _cached(ctx, ("candidates", job.ep.id, job.stream), build)
+
+
+def _render_cost(ctx: CheckContext, job: _CameraJob, t_ns: np.ndarray) -> float:
+    """Wall seconds of one plain render of this stream: given, timed by the pass, or probed."""
+    given = rerender_options(ctx).frame_cost_s
+    if given is not None:
+        return float(given)
+    st = _state(ctx)
+    key = ("render_s", job.ep.id, job.stream)
+    if key not in st:
+        rr, _lut = _rerenderer(ctx, job)
+        rr.render(int(t_ns[0]))  # warm-up: first-call costs are not per-frame costs
+        t0 = time.perf_counter()
+        rr.render(int(t_ns[len(t_ns) // 2]))
+        st[key] = time.perf_counter() - t0
+    return float(st[key])
+
+
+def _pass_must(ctx: CheckContext, job: _CameraJob, t_ns: np.ndarray) -> list[int]:
+    """Pass candidates that matter: nearest to the fastest and the slowest image motion."""
+    tc, _fi, motion = _candidates(ctx, job)
+    if len(tc) == 0 or not np.isfinite(motion).all() or motion.max(initial=0.0) <= 0.0:
+        return []
+    out = []
+    for k in (int(np.argmax(motion)), int(np.argmin(motion))):
+        j = int(np.clip(np.searchsorted(t_ns, tc[k]), 0, len(t_ns) - 1))
+        if j > 0 and abs(int(t_ns[j - 1]) - int(tc[k])) <= abs(int(t_ns[j]) - int(tc[k])):
+            j -= 1
+        out.append(j)
+    return out
+
+
 def _run_pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
-    from ..rerender import compare_frame, foreground_psnr, read_label_frames, read_video_frames
+    from ..rerender import (
+        MIN_PASS_FRAMES,
+        FramePlan,
+        compare_frame,
+        foreground_psnr,
+        plan_frames,
+        read_label_frames,
+        read_video_frames,
+    )
 
     rr, lut = _rerenderer(ctx, job)
     ch = rr.channels
     t, fi = _frames(ctx, job)
-    C, F = ch.count, len(fi)
+    C, n = ch.count, len(fi)
+    sx = job.model.width / rr.width
+    if C == 0:
+        every = FramePlan(np.arange(n), n, math.inf, math.nan)
+        result = _assemble(ch, fi, t, every, {}, rr, lut, rr.fx * sx)
+        result.skipped = "no bound target has a segment (label id) to compare with"
+        return result
+    ctx.progress(f"re-rendering {job.ep.id}/{job.stream}")
+    opts = rerender_options(ctx)
+    labels_path = ctx.existing(job.entry["labels"])
+    video = job.entry.get("video")
+    metrics: dict[int, FrameMetrics] = {}
+    rgbs: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    seen: set[int] = set()
+    notes: list[str] = []
+    render_s: list[float] = []
+    fraction = _fraction(ctx)
+    planned = [min(n, MIN_PASS_FRAMES)]
+
+    def compare(keys: list[int]) -> None:
+        want = {int(fi[k]): k for k in keys if k not in seen}
+        for i, lab in read_label_frames(labels_path, list(want)):
+            k = want[i]
+            if k in seen:
+                continue
+            seen.add(k)
+            if lab.shape != (job.model.height, job.model.width):
+                notes.append(
+                    f"frame {i}: label image is {lab.shape[1]}x{lab.shape[0]}, "
+                    f"camera says {job.model.width}x{job.model.height}"
+                )
+                continue
+            t0 = time.perf_counter()
+            out = rr.render(int(t[k]))
+            render_s.append(time.perf_counter() - t0)
+            p = rr.probabilities(out)
+            metrics[k] = compare_frame(p, out.depth_median.detach().cpu().numpy(), lut[lab], C)
+            if isinstance(video, str):
+                rgbs[k] = (out.rgb.detach().cpu().numpy(), out.alpha.detach().cpu().numpy())
+            fraction(min(1.0, len(seen) / max(planned[0], 1)))
+
+    budget = _job_budget_s(ctx) * PASS_SHARE
+    if math.isinf(budget) or n <= MIN_PASS_FRAMES:
+        plan = FramePlan(np.arange(n), n, budget, math.nan)
+    else:
+        # time the two ends (always in the plan): the first absorbs the warm-up, the second is
+        # the per-frame cost (render, label decode and comparison)
+        t0 = time.perf_counter()
+        compare([0])
+        t1 = time.perf_counter()
+        compare([n - 1])
+        t2 = time.perf_counter()
+        key = ("render_s", job.ep.id, job.stream)
+        if render_s:
+            _state(ctx).setdefault(key, render_s[-1])
+        if opts.frame_cost_s is not None:
+            cost, allowed = float(opts.frame_cost_s), budget
+        else:
+            cost = (t2 - t1) if len(seen) == 2 and (n - 1) in metrics else _render_cost(ctx, job, t)
+            allowed = budget - (t2 - t0) + 2.0 * cost  # what is left, plus the two frames done
+        plan = plan_frames(
+            n, cost, allowed, min_frames=MIN_PASS_FRAMES, must=_pass_must(ctx, job, t)
+        )
+        if plan.subsampled:
+            _note(
+                ctx,
+                job,
+                "pass",
+                f"labels compared on {plan.count} of {n} frames ({cost:.2g} s per frame"
+                f"{'; the minimum count' if plan.floor else ''})",
+            )
+    planned[0] = plan.count
+    compare([int(k) for k in plan.chosen])
+    result = _assemble(ch, fi, t, plan, metrics, rr, lut, rr.fx * sx)
+    result.notes.extend(notes)
+    pos = {int(fi[k]): j for j, k in enumerate(plan.chosen)}
+    if isinstance(video, str) and rgbs:
+        try:
+            for i, img in read_video_frames(ctx.existing(video), sorted(int(fi[k]) for k in rgbs)):
+                rgb, alpha = rgbs.pop(int(plan.chosen[pos[i]]))
+                result.psnr[pos[i]] = foreground_psnr(rgb, alpha, img)
+        except (RobogsError, InputReported) as exc:
+            result.notes.append(f"video not compared: {getattr(exc, 'message', exc)}")
+    missing = plan.count - sum(1 for k in plan.chosen if int(k) in seen)
+    if missing:
+        result.notes.append(f"{missing} of {plan.count} frames have no label image")
+    return result
+
+
+def _assemble(
+    ch: LabelChannels,
+    fi: np.ndarray,
+    t: np.ndarray,
+    plan: FramePlan,
+    metrics: dict[int, FrameMetrics],
+    rr: SceneRerenderer,
+    lut: np.ndarray,
+    fx: float,
+) -> _Pass:
+    """The pass arrays [F, C] of the planned frames (zeros / NaN where a frame was not compared)."""
+    F, C = plan.count, ch.count
     arrays = {
         k: np.zeros((F, C)) for k in ("inter", "union", "recorded", "rendered", "bsum", "bcnt")
     }
     depth = np.full((F, C), np.nan)
-    psnr = np.full(F, np.nan)
-    pos = {int(i): k for k, i in enumerate(fi)}
-    sx = job.model.width / rr.width
-    result = _Pass(ch, fi, t, *arrays.values(), depth, psnr, rr.fx * sx, rr, lut)
-    if C == 0:
-        result.skipped = "no bound target has a segment (label id) to compare with"
-        return result
-    ctx.progress(f"re-rendering {job.ep.id}/{job.stream}")
-    labels_path = ctx.existing(job.entry["labels"])
-    seen = np.zeros(F, bool)
-    rgbs: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    video = job.entry.get("video")
-    for i, lab in read_label_frames(labels_path, fi):
-        k = pos[i]
-        if seen[k]:
+    for j, k in enumerate(plan.chosen):
+        m = metrics.get(int(k))
+        if m is None:
             continue
-        seen[k] = True
-        if lab.shape != (job.model.height, job.model.width):
-            result.notes.append(
-                f"frame {i}: label image is {lab.shape[1]}x{lab.shape[0]}, "
-                f"camera says {job.model.width}x{job.model.height}"
-            )
-            continue
-        out = rr.render(int(t[k]))
-        p = rr.probabilities(out)
-        m = compare_frame(p, out.depth_median.detach().cpu().numpy(), lut[lab], C)
         for name, value in (
             ("inter", m.inter),
             ("union", m.union),
@@ -310,20 +536,21 @@ def _run_pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
             ("bsum", m.boundary_sum),
             ("bcnt", m.boundary_count),
         ):
-            getattr(result, name)[k] = value
-        result.depth[k] = m.depth_m
-        if isinstance(video, str):
-            rgbs[i] = (out.rgb.detach().cpu().numpy(), out.alpha.detach().cpu().numpy())
-    if isinstance(video, str) and rgbs:
-        try:
-            for i, img in read_video_frames(ctx.existing(video), sorted(rgbs)):
-                rgb, alpha = rgbs.pop(i)
-                result.psnr[pos[i]] = foreground_psnr(rgb, alpha, img)
-        except (RobogsError, InputReported) as exc:
-            result.notes.append(f"video not compared: {getattr(exc, 'message', exc)}")
-    if not seen.all():
-        result.notes.append(f"{int((~seen).sum())} of {F} frames have no label image")
-    return result
+            arrays[name][j] = value
+        depth[j] = m.depth_m
+    chosen = plan.chosen
+    return _Pass(
+        ch,
+        fi[chosen],
+        t[chosen],
+        *arrays.values(),
+        depth,
+        np.full(F, np.nan),
+        fx,
+        rr,
+        lut,
+        plan=plan,
+    )
 
 
 def _boundary_mm(ps: _Pass) -> np.ndarray:
@@ -342,6 +569,7 @@ def _fit(ctx: CheckContext, job: _CameraJob) -> AlignmentFit | None:
     def build() -> AlignmentFit | None:
         from ..rerender import (
             fit_alignment,
+            fit_frame_count,
             read_label_frames,
             recorded_soft_labels,
             select_fit_frames,
@@ -350,13 +578,24 @@ def _fit(ctx: CheckContext, job: _CameraJob) -> AlignmentFit | None:
         rr, lut = _rerenderer(ctx, job)
         if rr.channels.count == 0:
             return None
-        t, fi = frame_stamps(ctx.table(job.entry["frames"], columns=("t_ns", "frame_index")))
-        # candidates: every frame of short episodes, about 600 spread frames of long ones
-        step = max(1, len(t) // 600)
-        t, fi = t[::step], fi[::step]
+        t, fi, motion = _candidates(ctx, job)
+        if len(t) == 0:
+            return None
         opts = rerender_options(ctx)
-        motion = rr.image_motion_px(t)
-        sel = select_fit_frames(t, motion, opts.fit_frames)
+        budget = _job_budget_s(ctx) * (1.0 - PASS_SHARE)
+        k = opts.fit_frames
+        if not math.isinf(budget) and len(t) > 1:
+            render_s = _render_cost(ctx, job, t)
+            k = fit_frame_count(render_s, budget, opts.fit_frames)
+            if k < min(opts.fit_frames, len(t)):
+                _note(
+                    ctx,
+                    job,
+                    "fit",
+                    f"the time offset and camera fitted on {k} of {min(opts.fit_frames, len(t))} "
+                    f"fast-moving frames ({render_s:.2g} s per render)",
+                )
+        sel = select_fit_frames(t, motion, k)
         ys = {
             i: recorded_soft_labels(lut[lab], rr.channels.count, rr.width, rr.height)
             for i, lab in read_label_frames(ctx.existing(job.entry["labels"]), fi[sel])
@@ -374,6 +613,7 @@ def _fit(ctx: CheckContext, job: _CameraJob) -> AlignmentFit | None:
             motion_px=moving,
             fit_offset=bool(moving.max() >= MIN_MOTION_PX),
             max_offset_ms=opts.max_offset_ms,
+            progress=_fraction(ctx),
         )
 
     return _cached(ctx, ("fit", job.ep.id, job.stream), build)
