@@ -9,11 +9,13 @@ intervals exceed ``1.5 P``. A drop, though, shifts the phase ``rho_j = t_j - j P
 later sample* by ``P``, while jitter moves one stamp. So each candidate interval (longer than
 ``1.5 P``; candidates closer than ``h`` samples form one cluster) counts
 ``round((median(rho after) - median(rho before)) / P)`` lost samples, the medians taken over
-the ``h`` samples on each side. This is the step detection of a running median, which keeps
+the ``h`` samples on each side. A cluster whose longest interval exceeds ``gap_factor``
+periods and that lost more than ``gap_factor - 1`` samples is a gap; one that lost none is a
+late stamp, whatever its length. This is the step detection of a running median, which keeps
 edges and ignores outliers (Tukey 1977; Pratt, *Digital Image Processing*, median filters).
 
 The nominal period is then the total time over the total slots, ``P = sum(d) / (intervals +
-lost)`` over the intervals that are not gaps, which telescopes the jitter away. The stamp error
+lost)`` over the intervals that are not gaps (gaps split the series into segments), which telescopes the jitter away. The stamp error
 of a sample is its phase minus the median phase of the ``2h + 1`` samples around it (same
 segment between gaps), so slow clock drift is not counted as jitter.
 
@@ -78,49 +80,39 @@ def chunks_with_context(
         yield start, buf, done - start, buf[0].size
 
 
-def _segments(d: np.ndarray, gap_ns: float) -> np.ndarray:
-    """[n] segment id of each sample of a chunk (a new one after every gap interval)."""
-    return np.concatenate([[0], np.cumsum(d > gap_ns)])
-
-
 def find_drops(
     t: np.ndarray, start: int, hi: int, p0: float, gap_factor: float, h: int = HALF_WINDOW
-) -> tuple[list[tuple[int, int, int]], int]:
-    """Dropped samples whose cluster starts in ``t[start:hi]`` (the rest of a chunk's core).
+) -> tuple[list[tuple[int, int, bool]], int]:
+    """Lost samples at the long intervals whose cluster starts in ``t[start:hi]``.
 
     Args:
         t: [n] int64 stamps of a chunk (strictly increasing), with context around the core.
         start, hi: where clusters may start (the core, less what earlier chunks took).
         p0: a first estimate of the period (ns), e.g. the median interval.
-        gap_factor: intervals longer than ``gap_factor * p0`` are gaps, not drops.
+        gap_factor: a cluster whose longest interval exceeds ``gap_factor * p0`` and that lost
+            more than ``gap_factor - 1`` samples is a gap; one that lost none is jitter.
         h: samples on each side of a cluster whose median phases are compared.
 
     Returns:
-        ``([(i, lost, last)], end)``: per cluster with lost samples, the chunk index of the
-        sample after its longest interval, the samples lost and the chunk index of its last
-        sample; ``end`` is the chunk index after the last cluster examined (clusters that
-        start in the core may reach into the context after it).
+        ``([(i, lost, gap)], end)``: per cluster that lost samples, the chunk index of the
+        sample after its longest interval, the samples lost and whether it is a gap; ``end``
+        is the chunk index after the last cluster examined (a cluster that starts in the core
+        may reach into the context after it).
     """
     d = np.diff(t).astype(np.float64)  # d[k-1]: interval before sample k
-    gap_ns = gap_factor * p0
-    seg = _segments(d, gap_ns)
-    cand = np.flatnonzero((d > DROP_FACTOR * p0) & (d <= gap_ns)) + 1  # sample after
+    cand = np.flatnonzero(d > DROP_FACTOR * p0) + 1  # sample after each long interval
     cand = cand[cand >= max(start, 1)]
-    out: list[tuple[int, int, int]] = []
+    out: list[tuple[int, int, bool]] = []
     end = start
     i = 0
     while i < cand.size and cand[i] < hi:
         a = b = int(cand[i])
         j = i + 1
-        while (
-            j < cand.size and cand[j] - b <= h and cand[j] - a <= 2 * h and seg[cand[j]] == seg[a]
-        ):
+        while j < cand.size and cand[j] - b <= h and cand[j] - a <= 2 * h:
             b = int(cand[j])
             j += 1
         before = np.arange(max(a - h, 0), a)
-        before = before[seg[before] == seg[a]]
         after = np.arange(b, min(b + h, t.size))
-        after = after[seg[after] == seg[a]]
         if before.size and after.size:
             ref = t[a - 1]
             rho_b = (t[before] - ref).astype(np.float64) - (before - (a - 1)) * p0
@@ -129,8 +121,9 @@ def find_drops(
         else:  # no samples on one side: fall back to the interval lengths
             lost = int(np.sum(np.rint(d[cand[i:j] - 1] / p0) - 1))
         if lost > 0:
-            k = cand[i:j][int(np.argmax(d[cand[i:j] - 1]))]
-            out.append((int(k), lost, b))
+            k = int(cand[i:j][int(np.argmax(d[cand[i:j] - 1]))])
+            gap = lost + 1 > gap_factor and d[k - 1] > gap_factor * p0
+            out.append((k, lost, bool(gap)))
         end = b + 1
         i = j
     return out, end
@@ -142,7 +135,7 @@ def stamp_errors(
     lo: int,
     hi: int,
     period: float,
-    gap_factor: float,
+    breaks: np.ndarray,
     h: int = HALF_WINDOW,
 ) -> np.ndarray:
     """[hi - lo] stamp errors (ns) of the core samples: phase minus the local median phase.
@@ -152,11 +145,11 @@ def stamp_errors(
         slots: [n] int64 slot of each sample (its index plus the samples lost before it).
         lo, hi: the core.
         period: the nominal period, ns.
-        gap_factor: intervals longer than ``gap_factor * period`` split the segments.
+        breaks: [n] bool, True where a sample starts a new segment (after a gap).
         h: half window, samples.
     """
     rho = (t - t[lo]).astype(np.float64) - (slots - slots[lo]).astype(np.float64) * period
-    seg = _segments(np.diff(t).astype(np.float64), gap_factor * period)
+    seg = np.cumsum(breaks)
     pad = np.full(h, np.nan)
     rp = np.concatenate([pad, rho, pad])
     sp = np.concatenate([np.full(h, -1), seg, np.full(h, -1)])

@@ -4,11 +4,13 @@ Periodic-stream statistics follow one definition (per stream; per link for ``ee_
 object for ``object_poses``, per frame for ``wrenches``), robust to jitter that is a sizeable
 fraction of the period (see :mod:`.clock`). With ``p0`` the median interval of a series:
 
-* a *gap* is an interval longer than ``time.gap_factor * p0`` (T003); gaps split the series
-  into segments;
-* *dropped samples* are counted from phase steps: an interval longer than ``1.5 p0`` loses
+* *lost samples* are counted from phase steps: an interval longer than ``1.5 p0`` loses
   ``round(step / p0)`` samples, ``step`` being the change of the median phase ``t_j - j p0``
-  of the 10 samples before and after it (T004); long intervals from jitter alone lose none;
+  of the 10 samples before and after it; long intervals from jitter alone lose none (a single
+  late stamp is jitter, T006, however long the interval before it);
+* a *gap* is an interval longer than ``time.gap_factor * p0`` that also spans more than
+  ``time.gap_factor`` slots (lost samples plus one, T003); gaps split the series into segments; *dropped samples* are those lost at shorter
+  intervals (T004);
 * the *nominal period* ``p`` is the time spanned by the segments over the slots they hold
   (samples plus dropped samples), which cancels the jitter (T002);
 * *jitter* is a stamp's error against the stream's clock: its phase ``t_j - n_j p`` (``n_j``
@@ -280,39 +282,44 @@ def _periods(ctx: CheckContext, s: _Series, gap_factor: float) -> _Periods | Non
         return None
     gaps: list[tuple[float, int, int]] = []
     drops: list[tuple[int, int]] = []
+    gap_at: list[int] = []
     n_gaps = long_intervals = intervals = 0
     span = 0.0
     first_drop = None
-    taken = 0  # global index up to which drop clusters were examined
+    taken = 0  # global index up to which clusters of long intervals were examined
     for g0, (t, rows), lo, hi in chunks_with_context(_stamps(ctx, s)):
         k = np.arange(max(lo, 1), hi)
         d = (t[k] - t[k - 1]).astype(np.float64)
-        gap = d > gap_factor * p0
-        span += float(d[~gap].sum())
-        intervals += int((~gap).sum())
-        long_intervals += int(np.sum((d > 1.5 * p0) & ~gap))
-        for i in k[gap]:
-            n_gaps += 1
-            if len(gaps) < _MAX_GAPS_PER_SERIES:
-                gaps.append((float(t[i] - t[i - 1]), int(t[i - 1]), int(rows[i - 1])))
+        span += float(d.sum())
+        intervals += int(d.size)
+        long_intervals += int(np.sum(d > 1.5 * p0))
         found, end = find_drops(t, max(lo, taken - g0), hi, p0, gap_factor)
         taken = max(taken, g0 + end)
-        for i, lost, _last in found:
+        for i, lost, is_gap in found:
+            where = (float(t[i] - t[i - 1]), int(t[i - 1]), int(rows[i - 1]))
+            if is_gap:
+                n_gaps += 1
+                gap_at.append(g0 + i)
+                span -= where[0]  # a gap's interval holds no known number of slots
+                intervals -= 1
+                if len(gaps) < _MAX_GAPS_PER_SERIES:
+                    gaps.append(where)
+                continue
             drops.append((g0 + i, lost))
-            if first_drop is None:
-                first_drop = (float(t[i] - t[i - 1]), int(t[i - 1]), int(rows[i - 1]))
+            first_drop = first_drop or where
     slots = intervals + sum(n for _, n in drops)
     period = span / slots if slots and span > 0 else p0
     at = np.array([g for g, _ in drops], np.int64)
     cum = np.concatenate([[0], np.cumsum([n for _, n in drops])]).astype(np.int64)
+    gap_idx = np.array(sorted(gap_at), np.int64)
 
     def errors() -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """(|stamp error| ms, t, row) of the core samples, chunk by chunk."""
         for g0, (t, rows), lo, hi in chunks_with_context(_stamps(ctx, s)):
             g = np.arange(g0, g0 + t.size)
-            j = np.searchsorted(at, g, side="right")
-            slot = g + cum[j]  # index plus the samples lost before it
-            e = np.abs(stamp_errors(t, slot, lo, hi, period, gap_factor)) * MS
+            slot = g + cum[np.searchsorted(at, g, side="right")]  # index plus samples lost
+            breaks = np.isin(g, gap_idx)
+            e = np.abs(stamp_errors(t, slot, lo, hi, period, breaks)) * MS
             yield e, t[lo:hi], rows[lo:hi]
 
     jmax, jitter_at = -1.0, None
