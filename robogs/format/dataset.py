@@ -12,7 +12,7 @@ Example:
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -251,12 +251,22 @@ class Dataset:
 
     @classmethod
     def create(
-        cls, path: str | Path, *, name: str | None = None, overwrite: bool = False
+        cls,
+        path: str | Path,
+        *,
+        name: str | None = None,
+        overwrite: bool = False,
+        protect: Sequence[str | Path] = (),
     ) -> DatasetWriter:
-        """Start writing a new dataset at ``path`` (atomically; see ``DatasetWriter``)."""
+        """Start writing a new dataset at ``path`` (atomically; see ``DatasetWriter``).
+
+        With ``overwrite`` an existing *robogs dataset* at ``path`` is replaced on commit; any
+        other folder, or one that is, holds or lies inside a path of ``protect`` (the command's
+        inputs), is refused before any work (:func:`robogs.format.replace.check_replaceable`).
+        """
         from .writer import DatasetWriter
 
-        return DatasetWriter(Path(path), base=None, overwrite=overwrite, name=name)
+        return DatasetWriter(Path(path), base=None, overwrite=overwrite, name=name, protect=protect)
 
     def edit(self) -> DatasetWriter:
         """Start an atomic edit of this dataset: a new version replaces it on commit."""

@@ -24,18 +24,17 @@ files are never modified in place.
 
 from __future__ import annotations
 
-import ctypes
 import datetime as _dt
 import errno
 import fcntl
 import hashlib
 import logging
 import os
-import re
 import shutil
 import stat
 import uuid
 import weakref
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -46,6 +45,7 @@ from .cameras import CameraModel
 from .errors import ConcurrentEditError, DatasetExistsError, FormatError, LockError
 from .jsonio import dumps_json
 from .paths import check_relpath
+from .replace import check_replaceable, exchange, sibling_versions
 from .schemas import schema_problems
 from .spec_version import SPEC_VERSION
 from .splats import SplatSet, write_splat_ply
@@ -86,25 +86,7 @@ def _robogs_version() -> str:
 
 
 _LOG = logging.getLogger(__name__)
-_ID = re.compile(r"[0-9a-f]{8}")
 _LOCK_FLAGS = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
-
-
-def sibling_versions(target: Path, kind: str) -> list[Path]:
-    """Writer folders beside ``target``: ``.<name>.<kind>-<8 hex>``, kind ``tmp`` or ``old``.
-
-    The dataset name is matched literally (never as a glob pattern, so ``run[1]`` or ``*``
-    never select another dataset's folders). Sorted by name.
-    """
-    target = Path(target)
-    prefix = f".{target.name}.{kind}-"
-    try:
-        names = [e.name for e in os.scandir(target.parent)]
-    except OSError:
-        return []
-    return sorted(
-        target.parent / n for n in names if n.startswith(prefix) and _ID.fullmatch(n[len(prefix) :])
-    )
 
 
 def _pid_alive(pid: int) -> bool:
@@ -224,38 +206,6 @@ def _abandon(lock: _DatasetLock, tmp: Path) -> None:
     lock.release()
 
 
-_AT_FDCWD = -100
-_RENAME_EXCHANGE = 2
-_renameat2: Any = None
-
-
-def _exchange(a: Path, b: Path) -> bool:
-    """Swap two existing paths atomically (Linux ``renameat2``); False where unsupported."""
-    global _renameat2
-    if _renameat2 is None:
-        try:
-            fn = ctypes.CDLL(None, use_errno=True).renameat2
-            fn.argtypes = [
-                ctypes.c_int,
-                ctypes.c_char_p,
-                ctypes.c_int,
-                ctypes.c_char_p,
-                ctypes.c_uint,
-            ]
-            fn.restype = ctypes.c_int
-            _renameat2 = fn
-        except (AttributeError, OSError):
-            _renameat2 = False
-    if _renameat2 is False:
-        return False
-    if _renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
-        return True
-    err = ctypes.get_errno()
-    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.ENOTSUP):
-        return False
-    raise OSError(err, f"cannot swap {a} and {b}: {os.strerror(err)}")
-
-
 class DatasetWriter:
     """Builds a dataset version in a temp folder and swaps it in on ``commit``.
 
@@ -264,7 +214,13 @@ class DatasetWriter:
     """
 
     def __init__(
-        self, target: Path, *, base: Dataset | None, overwrite: bool, name: str | None
+        self,
+        target: Path,
+        *,
+        base: Dataset | None,
+        overwrite: bool,
+        name: str | None,
+        protect: Sequence[str | Path] = (),
     ) -> None:
         self.target = Path(target).absolute()
         self.base = base
@@ -284,6 +240,8 @@ class DatasetWriter:
                     path=self.target,
                     hint="choose another path or pass --force to replace it",
                 )
+            if base is None:  # --force replaces only a robogs dataset that is not an input
+                check_replaceable(self.target, folder=True, sources=protect, what="output")
             self.tmp = parent / f".{self.target.name}.tmp-{uuid.uuid4().hex[:8]}"
             self.tmp.mkdir()
         except BaseException:
@@ -563,7 +521,7 @@ class DatasetWriter:
         parent = self.target.parent
         old = None
         if self.target.exists():
-            if _exchange(self.tmp, self.target):
+            if exchange(self.tmp, self.target):
                 old = self.tmp  # now holds the previous version
             else:
                 old = parent / f".{self.target.name}.old-{uuid.uuid4().hex[:8]}"

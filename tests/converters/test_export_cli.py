@@ -12,6 +12,7 @@ import robogs.convert.export as export_pkg
 from robogs.cli.main import main
 from robogs.convert.export import ExportReport, available_exporters, export, register_exporter
 from robogs.format import Dataset, DatasetExistsError
+from robogs.format.replace import EXPORT_MARKER
 
 try:
     from .test_export_data import build_tiny_dataset
@@ -33,6 +34,7 @@ def test_cli_writes_then_refuses_then_forces(
 ) -> None:
     out = tmp_path / "robot"
     assert main(["export", "urdf", str(tiny.root), str(out)]) == 0
+    capsys.readouterr()  # the first export's notes
     first = (out / "tiny_arm.urdf").read_bytes()
     (out / "marker").write_text("kept unless --force")
     assert main(["export", "urdf", str(tiny.root), str(out)]) == 2
@@ -98,9 +100,10 @@ def test_failing_exporter_leaves_nothing_behind(tiny: Dataset, tmp_path: Path) -
     register_exporter("test_broken", broken, output="folder", replace=True)
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "old.txt").write_text("previous export")
+    (tmp_path / "out" / EXPORT_MARKER).write_text("{}")  # written by robogs: --force may replace
     with pytest.raises(RuntimeError):
         export("test_broken", tiny, tmp_path / "out", force=True)
-    assert [p.name for p in (tmp_path / "out").iterdir()] == ["old.txt"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [EXPORT_MARKER, "old.txt"]
     assert _leftovers(tmp_path) == []
     with pytest.raises(DatasetExistsError):
         export("test_broken", tiny, tmp_path / "out")

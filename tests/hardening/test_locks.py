@@ -127,7 +127,7 @@ def test_a_killed_holder_never_blocks_the_next_writer(tmp_path: Path) -> None:
 def test_swap_without_rename_exchange_keeps_the_dataset(tmp_path: Path, monkeypatch) -> None:
     target = tmp_path / "ds"
     _small(target, 1.0)
-    monkeypatch.setattr(writer_mod, "_exchange", lambda a, b: False)
+    monkeypatch.setattr(writer_mod, "exchange", lambda a, b: False)
     ds = _small(target, 3.0)
     assert ds.episode("e").table("joint_states").column("position.j").to_pylist() == [3.0] * 5
     assert leftovers(target) == [] and is_complete_version(target)

@@ -200,7 +200,9 @@ def export(
         )
     ds = dataset if isinstance(dataset, Dataset) else Dataset.open(dataset)
     out = Path(out)
-    with atomic_output(out, folder=exp.output == "folder", force=force) as tmp:
+    with atomic_output(
+        out, folder=exp.output == "folder", force=force, sources=[ds.root], fmt=fmt
+    ) as tmp:
         report = exp.fn(ds, tmp, **options)
     report.out = out
     return report

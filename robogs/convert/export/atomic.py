@@ -4,7 +4,9 @@ The temporary path sits in the same folder as the output (same filesystem, so th
 ``os.rename`` is atomic) and keeps the output's suffix, so libraries that choose an encoding
 from the file name (USD's ``.usda``/``.usdc``, Rerun's ``.rrd``) behave as for the final path.
 If the block raises, the temporary path is removed and the output is untouched. An existing
-output is replaced only with ``force``; it is moved aside first and deleted after the swap.
+output is replaced only with ``force``, and only when robogs wrote it
+(:func:`robogs.format.replace.check_replaceable`); the swap is one ``renameat2`` exchange where
+available, else two renames that :func:`robogs.format.replace.recover` completes after a crash.
 """
 
 from __future__ import annotations
@@ -13,11 +15,12 @@ import os
 import re
 import shutil
 import uuid
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
 from robogs.format.errors import DatasetExistsError, InputError
+from robogs.format.replace import check_replaceable, exchange, recover, write_export_marker
 
 __all__ = ["atomic_output", "final_path"]
 
@@ -41,17 +44,28 @@ def final_path(tmp: str | Path) -> Path:
 
 
 @contextmanager
-def atomic_output(out: str | Path, *, folder: bool, force: bool = False) -> Iterator[Path]:
-    """Yield a temporary path to write; rename it to ``out`` when the block succeeds.
+def atomic_output(
+    out: str | Path,
+    *,
+    folder: bool,
+    force: bool = False,
+    sources: Sequence[str | Path] = (),
+    fmt: str = "export",
+) -> Iterator[Path]:
+    """Yield a temporary path to write; swap it into ``out`` when the block succeeds.
 
     Args:
         out: the final file or folder.
         folder: create the temporary path as an (empty) folder; otherwise it is a file path
-            that does not exist yet.
-        force: replace an existing ``out``.
+            that does not exist yet. A folder export gets
+            :data:`~robogs.format.replace.EXPORT_MARKER`, so a later ``--force`` may replace it.
+        force: replace an existing ``out`` — only a robogs export or dataset, or a plain file,
+            and never one of ``sources`` or a path holding or inside one.
+        sources: the command's inputs (the dataset being exported).
+        fmt: the export format, recorded in the folder marker.
 
     Raises:
-        DatasetExistsError: ``out`` exists and ``force`` is False (checked before any work).
+        DatasetExistsError: ``out`` exists and may not be replaced (checked before any work).
         InputError: the parent folder of ``out`` does not exist.
     """
     out = Path(out).absolute()
@@ -60,10 +74,23 @@ def atomic_output(out: str | Path, *, folder: bool, force: bool = False) -> Iter
         raise InputError(
             "parent folder of the output does not exist", path=parent, hint="create it first"
         )
-    if (out.exists() or out.is_symlink()) and not force:
-        raise DatasetExistsError(
-            "output already exists", path=out, hint="choose another path or pass --force"
-        )
+    recover(out, suffix=out.suffix)  # a swap a crash interrupted: restore or clean, with a note
+    if out.exists() or out.is_symlink():
+        if not force:
+            raise DatasetExistsError(
+                "output already exists", path=out, hint="choose another path or pass --force"
+            )
+        check_replaceable(out, folder=folder, sources=sources)
+    else:
+        check_replaceable(out, folder=folder, sources=sources)  # never inside a source
+        for src in sources:
+            s = Path(src).absolute().resolve()
+            if s == out.resolve() or s in out.resolve().parents:
+                raise InputError(
+                    "the output lies inside the dataset being exported",
+                    path=out,
+                    hint="write exports outside the dataset folder",
+                )
     tag = uuid.uuid4().hex[:8]
     tmp = parent / f".{out.stem}.tmp-{tag}{out.suffix}"
     if folder:
@@ -72,17 +99,22 @@ def atomic_output(out: str | Path, *, folder: bool, force: bool = False) -> Iter
         yield tmp
         if not tmp.exists():
             raise InputError("the exporter wrote nothing", path=out)
-        old = None
-        if out.exists() or out.is_symlink():
-            old = parent / f".{out.stem}.old-{tag}{out.suffix}"
-            os.rename(out, old)
-        try:
-            os.rename(tmp, out)
-        except OSError:
+        if folder:
+            write_export_marker(tmp, fmt=fmt, source=next(iter(sources), ""))
+        if out.exists() and exchange(tmp, out):
+            _remove(tmp)  # tmp now holds the previous version
+        else:
+            old = None
+            if out.exists() or out.is_symlink():
+                old = parent / f".{out.stem}.old-{tag}{out.suffix}"
+                os.rename(out, old)  # a crash here leaves `old`: the next run restores it
+            try:
+                os.rename(tmp, out)
+            except OSError:
+                if old is not None:
+                    os.rename(old, out)
+                raise
             if old is not None:
-                os.rename(old, out)
-            raise
-        if old is not None:
-            _remove(old)
+                _remove(old)
     finally:
         _remove(tmp)
