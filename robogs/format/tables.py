@@ -154,6 +154,11 @@ TABLES: dict[str, TableSpec] = {
             (_T, *_POSE),
             doc="time-varying T_world_cam",
         ),
+        TableSpec(
+            "generic",
+            (_T,),
+            doc="decoded messages of one source topic: t_ns and one column per leaf field",
+        ),
     ]
 }
 

@@ -214,7 +214,7 @@ def test_roles_from_types_topics_and_overrides(tmp_path: Path) -> None:
     assert str(default_role("/wrench/ft", "geometry_msgs/msg/WrenchStamped")[0]) == "wrench:ft"
     assert str(default_role("/tf_static", "tf2_msgs/msg/TFMessage")[0]) == "tf_static"
     role, why = default_role("/cam/depth/image_raw", "sensor_msgs/msg/Image")
-    assert role.kind == "ignore" and "depth" in why
+    assert role.kind == "generic" and "depth" in why
     assert camera_name_from_topic("/camera/cam0/image_raw/compressed") == "cam0"
     assert camera_name_from_topic("/kinect_head/rgb/camera_info") == "kinect_head_rgb"
     m = tmp_path / "roles.yaml"

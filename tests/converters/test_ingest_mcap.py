@@ -93,14 +93,13 @@ def test_provenance_lists_everything(converted) -> None:
     ds, sc, _ = converted
     prov = ds.manifest["provenance"]
     assert prov["converter"] == "mcap"
-    assert prov["dropped"] == [
-        {
-            "topic": "/rosout_like",
-            "type": "std_msgs/msg/String",
-            "messages": 1,
-            "reasons": {"no role for message type std_msgs/msg/String": 1},
-        }
-    ]
+    assert "dropped" not in prov  # a type with no role is decoded into a generic table
+    rec = prov["topics"]["/rosout_like"]
+    assert (rec["role"], rec["written"]) == ("generic", 1)
+    assert rec["reason"].startswith("no role for message type std_msgs/msg/String")
+    st = ds.episode().streams["streams/rosout_like"]
+    assert st["kind"] == "generic" and st["source"] == "/rosout_like"
+    assert prov["decoded"]["undecodable"] == 0
     for topic, rec in prov["topics"].items():
         assert rec["messages"] == rec["written"] + sum(rec.get("dropped", {}).values()), topic
     assert ds.manifest["conventions"]["clock"] == "ros_time"

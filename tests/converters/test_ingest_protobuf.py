@@ -245,7 +245,7 @@ def test_foxglove_protobuf_channels_become_streams(tmp_path: Path) -> None:
     stamps = sc["stamps"]
     ds = convert_path(src, tmp_path / "out", options=ConvertOptions())
     ep = ds.episode()
-    assert sorted(ep.streams) == ["camera/cam0", "camera/cam1", "object_poses"]
+    assert sorted(ep.streams) == ["camera/cam0", "camera/cam1", "object_poses", "streams/log"]
     # CompressedImage + CameraCalibration
     assert ep.frames("cam0").column("t_ns").to_pylist() == stamps
     frames = list(ep.iter_video("cam0"))
@@ -282,8 +282,10 @@ def test_foxglove_protobuf_channels_become_streams(tmp_path: Path) -> None:
             np.testing.assert_allclose(p, want_p, atol=1e-12)
             assert yaw == pytest.approx(want_yaw, abs=1e-12)
     prov = ds.manifest["provenance"]
-    assert prov["topics"]["/log"]["role"] == "ignore"
-    assert prov["topics"]["/log"]["dropped"] == {"no role for message type foxglove.Log": 6}
+    assert prov["topics"]["/log"]["role"] == "generic"  # no role: decoded into a generic table
+    assert prov["topics"]["/log"]["written"] == 6 and "dropped" not in prov["topics"]["/log"]
+    log = pq.read_table(ds.resolve(ep.streams["streams/log"]["path"]))
+    assert log.column("message").to_pylist() == [f"step {k}" for k in range(6)]
     assert prov["topics"]["/cam0/image"]["stamp_source"] == "sensor_header"
     assert "undecodable" not in prov
 

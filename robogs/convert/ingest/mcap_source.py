@@ -311,7 +311,12 @@ def _convert_mcap(src: Path, ctx: IngestContext) -> None:
         where = "before the first message"
         size_mb = src.stat().st_size / 1e6
         try:
-            for group, label in ((static, "static topics"), (main, src.name)):
+            passes = (
+                (static, "static topics", False),
+                (ingest.probe_topics, "pose topics against the robot", True),
+                (main, src.name, False),
+            )
+            for group, label, probing in passes:
                 if not group:
                     continue
                 total = sum(ingest.counts[t] for t in group)
@@ -327,14 +332,20 @@ def _convert_mcap(src: Path, ctx: IngestContext) -> None:
                         if schema is not None and foxglove.ros_type_of(schema.name):
                             msg = foxglove.adapt(schema.name, msg)
                     except Exception as exc:  # noqa: BLE001 - any decoder failure is one bad message
-                        ingest.note_undecodable(
-                            channel.topic, message.log_time, f"{type(exc).__name__}: {exc}"
-                        )
+                        if not probing:  # counted once, in the main pass
+                            ingest.note_undecodable(
+                                channel.topic, message.log_time, f"{type(exc).__name__}: {exc}"
+                            )
                         ctx.progress.advance()
                         continue
                     try:
-                        ingest.handle(channel.topic, message.log_time, msg)
+                        if probing:
+                            ingest.probe(channel.topic, message.log_time, msg)
+                        else:
+                            ingest.handle(channel.topic, message.log_time, msg)
                     except (AttributeError, TypeError) as exc:
+                        if probing:  # the main pass reports it
+                            continue
                         raise _misfit(src, channel.topic, message.log_time, exc) from None
                     ctx.progress.advance()
                 ctx.progress.stop()

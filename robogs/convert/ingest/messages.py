@@ -16,7 +16,7 @@ recorded with topic and stamp. The chosen source is recorded per stream (``stamp
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -29,9 +29,10 @@ from robogs.format.images import encode_label_png
 
 from .calibration import camera_from_info_msg
 from .context import IngestContext
+from .generic import GenericTable
 from .roles import Role, camera_name_from_topic, default_role, normalize_type, parse_role, safe_name
 from .ros_images import decode_compressed_image, decode_raw_image
-from .sinks import CameraSink, TableSink
+from .sinks import CameraSink, TableSink, median_rate_hz
 from .tf_buffer import Hop, poses_of
 from .tf_ingest import TfIngest, TfObject, stamp_ns
 from .tf_tree import matrix_to_pose, pose_to_matrix
@@ -77,6 +78,38 @@ _WORLD_CANDIDATES = ("world", "base_link", "base", "map", "odom")
 _POSE_COLS = ["x", "y", "z", "qw", "qx", "qy", "qz"]
 _WRENCH_COLS = ["fx", "fy", "fz", "tx", "ty", "tz"]
 _MAX_PENDING_LABELS = 256
+_PROBE_SAMPLES = 3000
+_MAX_EE_OFFSET_M = 0.01
+
+
+@dataclass
+class _Probe:
+    """Samples of a pose topic kept to compare it with forward kinematics."""
+
+    stride: int
+    seen: int = 0
+    frame: str | None = None
+    t: list[int] = field(default_factory=list)
+    xyz: list[tuple[float, float, float]] = field(default_factory=list)
+
+
+def _wrench_streams(topics: list[str]) -> dict[str, tuple[str, str]]:
+    """Stream name and file stem of each wrench topic: ``wrenches`` for one topic, else one
+    stream per topic named after it (``wrenches/netft_data``)."""
+    if len(topics) == 1:
+        return {topics[0]: ("wrenches", "wrenches")}
+    out: dict[str, tuple[str, str]] = {}
+    used: set[str] = set()
+    for t in sorted(topics):
+        base = safe_name(t)
+        name = base
+        k = 1
+        while name in used:
+            k += 1
+            name = f"{base}_{k}"
+        used.add(name)
+        out[t] = (f"wrenches/{name}", f"wrenches_{name}")
+    return out
 
 
 @dataclass(frozen=True)
@@ -145,7 +178,15 @@ class MessageIngest:
         self._joint_layout: _JointLayout | None = None
         self._joint_sink: TableSink | None = None
         self._pose_sinks: dict[str, TableSink] = {}
-        self._wrench_sink: TableSink | None = None
+        self._wrench_sinks: dict[str, TableSink] = {}
+        self._generic: dict[str, GenericTable] = {}
+        self.reasons: dict[str, str] = {}
+        self.probe_topics: list[str] = []
+        self._wrench_streams: dict[str, tuple[str, str]] = {}
+        self._probe: dict[str, _Probe] = {}
+        self._probe_joints: dict[int, tuple[list[str], np.ndarray]] = {}
+        self._probe_last: tuple[int, list[str], np.ndarray] | None = None
+        self._probe_want_next = False
         self._cameras: dict[str, _Camera] = {}
         self._pose_frames: dict[str, np.ndarray | list[Hop] | None] = {}
         self._pending_labels: dict[str, list[tuple[int, np.ndarray]]] = {}
@@ -176,30 +217,32 @@ class MessageIngest:
                 where="--topic/--map",
                 hint=f"topics: {', '.join(sorted(known)) or 'none'}",
             )
-        reasons: dict[str, str] = {}
+        reasons = self.reasons
         for info in topics:
             t = normalize_type(info.msgtype)
             self.types[info.topic] = t
             self.counts[info.topic] = info.count
             if info.topic in overrides:
                 role = overrides[info.topic]
-                if role.kind != "ignore" and t not in _ROLE_TYPES.get(role.kind, set()):
+                if role.kind not in ("ignore", "generic") and t not in _ROLE_TYPES.get(
+                    role.kind, set()
+                ):
                     raise InputError(
                         f"topic {info.topic} has type {t}, which cannot be {role}",
                         where="--topic/--map",
                         hint=f"{role.kind} takes {', '.join(sorted(_ROLE_TYPES[role.kind]))}",
                     )
-                reason = "mapped to ignore" if role.kind == "ignore" else None
+                reason = "mapped to ignore" if role.kind == "ignore" else "given by --topic/--map"
             else:
                 role, reason = default_role(info.topic, t)
             self.roles[info.topic] = role
-            if reason:
-                reasons[info.topic] = reason
+            reasons[info.topic] = reason
         self._choose_joint_topic(overrides, reasons)
         for info in topics:
             role = self.roles[info.topic]
             rec = self.prov.topic(info.topic, self.types[info.topic], str(role))
             rec.messages = info.count
+            rec.reason = reasons.get(info.topic)
             if role.kind == "ignore" and info.count:
                 self.prov.drop(info.topic, reasons.get(info.topic, "ignored"), info.count)
         productive = [
@@ -221,7 +264,28 @@ class MessageIngest:
             static += [t for t in productive if self.roles[t].kind == "camera_info"]
             productive = [t for t in productive if self.roles[t].kind != "camera_info"]
         self._static_topics = set(static)
-        return sorted(static), sorted(productive)
+        generic = [t for t, r in self.roles.items() if r.kind == "generic" and self.counts[t] > 0]
+        self._plan_probe(overrides)
+        wrench = [t for t in productive if self.roles[t].kind == "wrench"]
+        self._wrench_streams = _wrench_streams(wrench)
+        return sorted(static), sorted(productive + generic)
+
+    def _plan_probe(self, overrides: dict[str, Role]) -> None:
+        """Pose topics whose role is a guess from the type alone are probed against FK."""
+        robot = self.opts.urdf is not None or any(
+            r.kind == "robot_description" and self.counts[t] for t, r in self.roles.items()
+        )
+        cands = [
+            t
+            for t, r in self.roles.items()
+            if r.kind == "object_pose"
+            and t not in overrides
+            and self.counts[t] > 0
+            and [p for p in t.split("/") if p][:1] != ["objects"]
+        ]
+        if cands and robot and self._joint_topic is not None:
+            self._probe = {t: _Probe(max(1, self.counts[t] // _PROBE_SAMPLES)) for t in cands}
+            self.probe_topics = sorted([*cands, self._joint_topic])
 
     def _choose_joint_topic(self, overrides: dict[str, Role], reasons: dict[str, str]) -> None:
         cands = [t for t, r in self.roles.items() if r.kind == "joint_states"]
@@ -246,8 +310,10 @@ class MessageIngest:
         )
         for t in cands:
             if t != chosen:
-                self.roles[t] = Role("ignore")
-                reasons[t] = f"another topic provides joint_states ({chosen})"
+                self.roles[t] = Role("generic")
+                reasons[t] = (
+                    f"another topic provides joint_states ({chosen}); decoded into a generic table"
+                )
         self._joint_topic = chosen
 
     # ------------------------------------------------------------------ stamps
@@ -282,12 +348,146 @@ class MessageIngest:
             return None
         return t
 
+    def _log_stamp(self, topic: str, log_time: int) -> int:
+        """Log time as the stamp of a topic whose messages have no header stamp."""
+        if topic not in self._stamp_src:
+            self._stamp_src[topic] = "log_time"
+            self.prov.topic(topic).stamp_source = "log_time"
+        return int(log_time)
+
     def _sink_kwargs(self) -> dict[str, Any]:
         return {
             "provenance": self.prov,
             "jump_back_ns": self.opts.jump_back_ns,
             "jump_forward_ns": self.opts.jump_forward_ns,
         }
+
+    # ------------------------------------------------------------------ probing
+    def probe(self, topic: str, log_time: int, msg: Any) -> None:
+        """Keep a subsample of a probed pose topic, and the joint states around each sample
+        (read the probe topics after the static ones and before the main pass)."""
+        header = getattr(msg, "header", None)
+        t = stamp_ns(header.stamp) if header is not None else 0
+        t = t if self._plausible(t) else int(log_time)
+        if topic == self._joint_topic:
+            names, pos = list(msg.name), _floats(msg.position)
+            if pos.size != len(names):
+                return
+            self._probe_last = (t, names, pos)
+            if self._probe_want_next:
+                self._probe_joints[t] = (names, pos)
+                self._probe_want_next = False
+            return
+        pr = self._probe.get(topic)
+        if pr is None:
+            return
+        pr.seen += 1
+        if (pr.seen - 1) % pr.stride:
+            return
+        if hasattr(msg, "transform"):
+            p = msg.transform.translation
+        else:
+            pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
+            p = pose.position
+        xyz = (float(p.x), float(p.y), float(p.z))
+        if not all(math.isfinite(v) for v in xyz):
+            return
+        if pr.frame is None:
+            pr.frame = str(msg.header.frame_id).lstrip("/")
+        pr.t.append(t)
+        pr.xyz.append(xyz)
+        if self._probe_last is not None:  # the joint states on both sides of the pose
+            self._probe_joints[self._probe_last[0]] = self._probe_last[1:]
+        self._probe_want_next = True
+
+    def _decide_probed(self) -> None:
+        """Pose topics that track a robot link become ``ee_pose:<link>`` (see ``ee_track``)."""
+        if not self._probe:
+            return
+        from .ee_track import link_fits, tracked_link
+
+        chain = self._robot_chain()
+        joints = self._probe_joint_arrays(chain)
+        for topic, pr in sorted(self._probe.items()):
+            if chain is None or joints is None or pr.frame not in chain.link_names:
+                if chain is not None and pr.frame is not None and joints is not None:
+                    self.reasons[topic] += f"; frame {pr.frame!r} is not a robot link"
+                continue
+            fits = link_fits(chain, pr.frame, *joints, np.array(pr.t), np.array(pr.xyz))
+            hit = tracked_link(fits)
+            if hit is None:
+                if fits:
+                    best = min(fits, key=lambda f: f.rms_m)
+                    self.reasons[topic] += (
+                        f"; tracks no robot link (best {best.link}: rms "
+                        f"{best.rms_m * 1e3:.1f} mm over {best.spread_m * 1e3:.0f} mm of motion)"
+                    )
+                continue
+            fit = (
+                f"path tracks link {hit.link} (rms {hit.rms_m * 1e3:.2f} mm, offset "
+                f"{hit.offset_m * 1e3:.1f} mm, {hit.samples} samples)"
+            )
+            if hit.offset_m <= _MAX_EE_OFFSET_M:
+                role, why = Role("ee_pose", hit.link), f"{fit}: end-effector, not an object"
+            else:
+                role, why = (
+                    Role("generic"),
+                    (
+                        f"{fit}: no URDF link sits at the tracked point, so it is neither an object "
+                        "nor a link's pose; decoded into a generic table (add a TCP link to the URDF "
+                        f"and map it with --topic ee_pose:LINK={topic})"
+                    ),
+                )
+            self.roles[topic] = role
+            self.reasons[topic] = why
+            rec = self.prov.topic(topic)
+            rec.role, rec.reason = str(role), why
+
+    def _robot_chain(self) -> Any:
+        """The robot's :class:`~robogs.format.kinematics.Chain`, or None (with a note)."""
+        import tempfile
+        from pathlib import Path
+
+        from robogs.format.errors import RobogsError
+        from robogs.format.kinematics import Chain
+        from robogs.format.urdf import load_urdf
+
+        try:
+            if self.opts.urdf is not None:
+                return Chain.from_urdf(load_urdf(self.opts.urdf, load_meshes=False))
+            if self.ctx.robot_description:
+                with tempfile.TemporaryDirectory(prefix="robogs-urdf-") as tmp:
+                    path = Path(tmp) / "robot_description.urdf"
+                    path.write_text(self.ctx.robot_description, encoding="utf-8")
+                    return Chain.from_urdf(load_urdf(path, load_meshes=False))
+        except RobogsError as exc:
+            self.prov.note(f"pose roles not compared with the robot ({exc.message})")
+        return None
+
+    def _probe_joint_arrays(self, chain: Any) -> tuple[np.ndarray, np.ndarray] | None:
+        """Kept joint samples as sorted ``([M] t_ns, [M, J] q)`` in the chain's joint order."""
+        if chain is None:
+            return None
+        rows = [(t, n, p) for t, (n, p) in self._probe_joints.items()]
+        out_t, out_q = [], []
+        for t, names, pos in rows:
+            idx = {n: i for i, n in enumerate(names)}
+            if any(j not in idx for j in chain.joint_names):
+                continue
+            out_t.append(t)
+            out_q.append([pos[idx[j]] for j in chain.joint_names])
+        if len(out_t) < 2:
+            missing = sorted(set(chain.joint_names) - set(rows[0][1])) if rows else []
+            self.prov.note(
+                "pose roles not compared with the robot: "
+                + (f"joint states lack {missing[:5]}" if missing else "too few joint states")
+            )
+            return None
+        t = np.asarray(out_t, np.int64)
+        order = np.argsort(t, kind="stable")
+        t, q = t[order], np.asarray(out_q, np.float64)[order]
+        keep = np.concatenate([[True], np.diff(t) > 0])
+        return t[keep], q[keep]
 
     # ------------------------------------------------------------------ dispatch
     def handle(self, topic: str, log_time: int, msg: Any) -> None:
@@ -317,7 +517,10 @@ class MessageIngest:
         if kind == "camera_info":
             self._camera_info(topic, role, log_time, msg)
             return
-        t = self._stamp(topic, msg, log_time)
+        if kind == "generic" and not hasattr(getattr(msg, "header", None), "stamp"):
+            t: int | None = self._log_stamp(topic, log_time)
+        else:
+            t = self._stamp(topic, msg, log_time)
         if t is None:
             return
         if kind == "joint_states":
@@ -330,6 +533,8 @@ class MessageIngest:
             self._pose(topic, role, t, msg)
         elif kind == "wrench":
             self._wrench(topic, role, t, msg)
+        elif kind == "generic":
+            self._generic_row(topic, t, msg)
 
     def note_undecodable(self, topic: str, log_time: int, error: str) -> None:
         """Record a message that the reader could not decode."""
@@ -668,6 +873,7 @@ class MessageIngest:
         if self._main_started:
             return
         self._main_started = True
+        self._decide_probed()
         if not self.tf.buf.dynamic_edges:
             self.tf.finalize()
             return
@@ -740,17 +946,26 @@ class MessageIngest:
         if not all(math.isfinite(v) for v in vals):
             self.prov.issue(topic, "non-finite wrench (dropped)", t)
             return
-        if self._wrench_sink is None:
-            self._wrench_sink = TableSink(
-                self.ctx.writer.path(f"{self.ctx.episode_dir()}/wrenches.parquet"),
+        sink = self._wrench_sinks.get(topic)
+        if sink is None:
+            _, stem = self._wrench_streams.get(topic, ("wrenches", "wrenches"))
+            sink = self._wrench_sinks[topic] = TableSink(
+                self.ctx.writer.path(f"{self.ctx.episode_dir()}/{stem}.parquet"),
                 "wrenches",
                 _WRENCH_COLS,
                 label_column="frame",
                 **self._sink_kwargs(),
             )
         frame = role.name or str(msg.header.frame_id).lstrip("/") or safe_name(topic)
-        if self._wrench_sink.add(topic, t, vals, frame):
+        if sink.add(topic, t, vals, frame):
             self.prov.topic(topic).written += 1
+
+    def _generic_row(self, topic: str, t: int, msg: Any) -> None:
+        table = self._generic.get(topic)
+        if table is None:
+            table = self._generic[topic] = GenericTable(topic, self.prov)
+        table.add(t, msg)
+        self.prov.topic(topic).written += 1
 
     # ------------------------------------------------------------------ finishing
     def _stream_stamp_source(self, topics: list[str]) -> str:
@@ -805,23 +1020,24 @@ class MessageIngest:
                     for label in sink._labels:
                         if label:
                             ctx.writer.set_asset(label, kind="object")
-        if self._wrench_sink is not None:
-            st = self._wrench_sink.close()
+        for topic, sink in sorted(self._wrench_sinks.items()):
+            st = sink.close()
             if st.rows:
-                topics = sorted(self._wrench_sink.written)
+                name, stem = self._wrench_streams.get(topic, ("wrenches", "wrenches"))
                 ctx.add_stream(
-                    "wrenches",
+                    name,
                     {
                         "kind": "wrenches",
-                        "path": f"{ep}/wrenches.parquet",
-                        "stamp_source": self._stream_stamp_source(topics),
+                        "path": f"{ep}/{stem}.parquet",
+                        "stamp_source": self._stream_stamp_source([topic]),
                         "offset_ns": 0,
                         "nominal_rate_hz": st.rate_hz,
-                        "source": ", ".join(topics),
+                        "source": topic,
                     },
                     start_ns=st.start_ns,
                     end_ns=st.end_ns,
                 )
+        self._finish_generic()
         for writer, _ in self._labels_writers.values():
             writer.close()
         self._finish_cameras()
@@ -848,6 +1064,69 @@ class MessageIngest:
                     "label image without a colour frame of the same stamp (dropped)",
                     t,
                 )
+
+    def _finish_generic(self) -> None:
+        """Write each generic table and declare its ``generic`` stream."""
+        ctx, ep = self.ctx, self.ctx.episode_dir()
+        used: set[str] = set()
+        widen = ctx.start_ns is None  # the role streams set the episode's span when there are any
+        for topic, table in sorted(self._generic.items()):
+            if not table.rows:
+                continue
+            base = safe_name(topic)
+            name, k = base, 1
+            while name in used:
+                k += 1
+                name = f"{base}_{k}"
+            used.add(name)
+            tab = table.table()
+            rel = f"{ep}/streams/{name}.parquet"
+            ctx.writer.write_table(rel, tab, kind="generic")
+            t = tab.column("t_ns").to_numpy()
+            ctx.add_stream(
+                f"streams/{name}",
+                {
+                    "kind": "generic",
+                    "path": rel,
+                    "stamp_source": self._stamp_src.get(topic, "log_time"),
+                    "offset_ns": 0,
+                    "nominal_rate_hz": median_rate_hz(t[:2001]),
+                    "source": topic,
+                },
+                start_ns=int(t[0]) if widen else None,
+                end_ns=int(t[-1]) if widen else None,
+            )
+            if table.lengths_only:
+                self.prov.note(
+                    f"{topic}: {', '.join(sorted(table.lengths_only)[:4])} kept as lengths only "
+                    "(arrays over 256 elements and bytes are not copied into generic tables)"
+                )
+        self.prov.extra["decoded"] = self._decode_summary()
+
+    def _decode_summary(self) -> dict[str, Any]:
+        """Messages decoded and not decoded over every topic not mapped to ``ignore``, and the
+        message types outside the standard ROS type stores (custom types)."""
+        from rosbags.typesys import Stores, get_typestore
+
+        std = set(get_typestore(Stores.ROS2_HUMBLE).types) | set(
+            get_typestore(Stores.ROS1_NOETIC).types
+        )
+        undecodable = 0
+        for i in self.prov.issues:
+            if i["problem"].startswith("message could not be decoded"):
+                undecodable += int(i["count"])
+        undecodable += sum(int(u.get("messages") or 0) for u in self.prov.undecodable)
+        listed = [t for t, r in self.roles.items() if r.kind != "ignore"]
+        custom = sorted(
+            {self.types[t] for t in listed if self.types[t] not in std and "/msg/" in self.types[t]}
+        )
+        return {
+            "topics": len(listed) + len(self.prov.undecodable),
+            "messages": sum(self.read.get(t, 0) for t in listed) - undecodable,
+            "undecodable": undecodable,
+            "ignored_topics": sorted(t for t, r in self.roles.items() if r.kind == "ignore"),
+            "custom_types": custom,
+        }
 
     def _camera_extrinsics(
         self, name: str, cam: _Camera, frame: str
@@ -954,7 +1233,7 @@ class MessageIngest:
 
     def abort(self) -> None:
         """Close open files after a failure (the writer discards them)."""
-        for sink in [self._joint_sink, self._wrench_sink, *self._pose_sinks.values()]:
+        for sink in [self._joint_sink, *self._wrench_sinks.values(), *self._pose_sinks.values()]:
             if sink is not None:
                 sink.abort()
         for cam in self._cameras.values():

@@ -27,6 +27,7 @@ class TopicRecord:
         written: samples written to the dataset.
         stamp_source: ``sensor_header`` | ``log_time`` | ... once decided.
         dropped: reason -> count of messages not written.
+        reason: why the topic got its role (the guess, or the user's override).
     """
 
     type: str
@@ -35,6 +36,7 @@ class TopicRecord:
     written: int = 0
     stamp_source: str | None = None
     dropped: dict[str, int] = field(default_factory=dict)
+    reason: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -45,6 +47,8 @@ class TopicRecord:
         }
         if self.stamp_source is not None:
             out["stamp_source"] = self.stamp_source
+        if self.reason:
+            out["reason"] = self.reason
         if self.dropped:
             out["dropped"] = dict(sorted(self.dropped.items()))
         return out

@@ -5,7 +5,8 @@ with a YAML mapping (``--map roles.yaml``: ``topic: role``) or ``--topic ROLE=TO
 
 Roles: ``joint_states``, ``camera_image``, ``camera_info``, ``camera_labels``,
 ``object_pose:<name>``, ``ee_pose:<link>``, ``wrench:<frame>``, ``tf_static``, ``tf``,
-``robot_description``, ``ignore``. ``camera_image`` / ``camera_info`` may name the camera
+``robot_description``, ``generic`` (every field decoded into ``streams/<topic>.parquet``; the
+default for types without a role of their own), ``ignore``. ``camera_image`` / ``camera_info`` may name the camera
 (``camera_image:cam0``); by default the camera name comes from the topic namespace
 (``/camera/cam0/image_raw/compressed`` -> ``cam0``; ``/kinect_head/rgb/camera_info`` ->
 ``kinect_head_rgb``).
@@ -46,6 +47,7 @@ ROLE_KINDS = (
     "tf_static",
     "tf",
     "robot_description",
+    "generic",
     "ignore",
 )
 _NAMED = {"object_pose", "ee_pose", "wrench", "camera_image", "camera_info", "camera_labels"}
@@ -244,37 +246,45 @@ def _object_name(topic: str) -> str:
     return safe_name(parts[-1]) if parts else "object"
 
 
-def default_role(topic: str, msgtype: str) -> tuple[Role, str | None]:
-    """The role detected for ``topic`` of type ``msgtype``.
+def default_role(topic: str, msgtype: str) -> tuple[Role, str]:
+    """The role detected for ``topic`` of type ``msgtype``, and why.
+
+    A type with no role of its own is decoded into a generic table (role ``generic``).
 
     Returns:
-        ``(role, reason)``: ``reason`` says why a topic is ignored (``None`` otherwise).
+        ``(role, reason)``: ``reason`` is a short phrase saying why this role was guessed.
     """
     t = normalize_type(msgtype)
+    short = t.rsplit("/", 1)[-1]
     low = topic.lower()
     if t == "sensor_msgs/msg/JointState":
-        return Role("joint_states"), None
+        return Role("joint_states"), "JointState"
     if t in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"):
         if "depth" in low:
-            return Role("ignore"), "depth images are not part of the format"
+            return Role("generic"), "depth images are not part of the format (decoded, data kept "
+            "as its length)"
         if any(k in low for k in ("label", "panoptic", "segment")):
-            return Role("camera_labels"), None
-        return Role("camera_image"), None
+            return Role("camera_labels"), f"{short} on a label/panoptic/segment topic"
+        return Role("camera_image"), short
     if t == "sensor_msgs/msg/CameraInfo":
-        return Role("camera_info"), None
+        return Role("camera_info"), "CameraInfo"
     if t in _TF_TYPES:
         if low.rstrip("/").endswith("tf_static"):
-            return Role("tf_static"), None
-        return Role("tf"), None
+            return Role("tf_static"), "TFMessage on a tf_static topic"
+        return Role("tf"), "TFMessage"
     if t in _POSE_TYPES:
         ee = _pose_name(topic, "ee")
         if ee:
-            return Role("ee_pose", ee), None
+            return Role("ee_pose", ee), f"{short} under /ee/"
         obj = _pose_name(topic, "objects")
-        return Role("object_pose", obj or _object_name(topic)), None
+        if obj:
+            return Role("object_pose", obj), f"{short} under /objects/"
+        return Role("object_pose", _object_name(topic)), (
+            f"{short}, named after its topic (an end-effector if its path tracks a robot link)"
+        )
     if t == "geometry_msgs/msg/WrenchStamped":
         frame = _pose_name(topic, "wrench")
-        return Role("wrench", frame), None
+        return Role("wrench", frame), "WrenchStamped, one stream per topic"
     if t == "std_msgs/msg/String" and low.rstrip("/").endswith("robot_description"):
-        return Role("robot_description"), None
-    return Role("ignore"), f"no role for message type {t}"
+        return Role("robot_description"), "String on a robot_description topic"
+    return Role("generic"), f"no role for message type {t}; decoded into a generic table"

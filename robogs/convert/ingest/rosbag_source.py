@@ -181,7 +181,12 @@ def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
         static, main = ingest.plan(topics)
         where = "before the first message"
         try:
-            for group, label in ((static, "static topics"), (main, src.name)):
+            passes = (
+                (static, "static topics", False),
+                (ingest.probe_topics, "pose topics against the robot", True),
+                (main, src.name, False),
+            )
+            for group, label, probing in passes:
                 if not group:
                     continue
                 conns = [c for c in reader.connections if c.topic in set(group)]
@@ -194,14 +199,20 @@ def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
                     except RobogsError:
                         raise
                     except errors + (TypeError, UnicodeDecodeError) as exc:
-                        ingest.note_undecodable(
-                            conn.topic, log_time, f"{type(exc).__name__}: {exc}"
-                        )
+                        if not probing:  # counted once, in the main pass
+                            ingest.note_undecodable(
+                                conn.topic, log_time, f"{type(exc).__name__}: {exc}"
+                            )
                         ctx.progress.advance()
                         continue
                     try:
-                        ingest.handle(conn.topic, log_time, msg)
+                        if probing:
+                            ingest.probe(conn.topic, log_time, msg)
+                        else:
+                            ingest.handle(conn.topic, log_time, msg)
                     except (AttributeError, TypeError) as exc:
+                        if probing:  # the main pass reports it
+                            continue
                         raise InputError(
                             f"message does not fit its type ({type(exc).__name__}: "
                             f"{str(exc)[:160]})",

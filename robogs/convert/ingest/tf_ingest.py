@@ -220,7 +220,17 @@ class TfIngest:
         elif auto:
             skip = self._hang_frames(world, camera_frames) | robot_links | {world}
             children = sorted({c for _, c in self.buf.dynamic_edges})
-            wanted = [(safe_name(c), c) for c in children if c not in skip]
+            wanted = []
+            for c in children:
+                if c in skip:
+                    continue
+                last = safe_name(c.rsplit("/", 1)[-1])
+                if last in taken and last != safe_name(c):  # vicon/box/box and a /box pose topic
+                    self.prov.note(
+                        f"tf frame {c!r}: object {last!r} already has a pose topic; frame not used"
+                    )
+                    continue
+                wanted.append((safe_name(c), c))
             left = sorted(c for c in children if c in robot_links)
             if left:
                 self.prov.note(
@@ -249,6 +259,13 @@ class TfIngest:
                     f"tf frame {frame!r} is static in {world!r}; no object pose stream written"
                 )
                 continue
+            if not explicit and self._never_moves(hops):
+                self.prov.note(
+                    f"tf frame {frame!r} never moves relative to {world!r} (a fixed frame such as "
+                    "a mocap world, published on /tf); not an object (--tf-object NAME=FRAME "
+                    "makes it one)"
+                )
+                continue
             topic = self._edge_topic.get(driver.edge, "/tf")
             objects.append(TfObject(name, frame, hops, driver, f"{topic}:{frame}"))
             taken.add(name)
@@ -265,6 +282,25 @@ class TfIngest:
             if self._refill(c):
                 heapq.heappush(self._heap, (int(c.t[0]), i))
         return objects
+
+    def _never_moves(self, hops: list[Hop], tol: float = 1e-9) -> bool:
+        """Whether the chain's transform is the same (within ``tol`` m and ``tol`` in each
+        rotation-matrix entry) at every sample of every dynamic edge on it."""
+        T0: np.ndarray | None = None
+        for h in hops:
+            if not h.dynamic:
+                continue
+            times = self.buf.times(*h.edge)
+            for k in range(0, times.size, _CHUNK):
+                T, ok = self.buf.compose(hops, np.asarray(times[k : k + _CHUNK], np.int64))
+                T = T[ok]
+                if T.shape[0] == 0:
+                    continue
+                if T0 is None:
+                    T0 = T[0]
+                if np.abs(T[:, :3, :] - T0[:3, :]).max() > tol:
+                    return False
+        return T0 is not None
 
     def use(self, hops: list[Hop]) -> None:
         """Mark a chain's dynamic edges as used (for the provenance counts)."""

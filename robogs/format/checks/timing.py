@@ -160,7 +160,7 @@ def _build_series(ctx: CheckContext) -> Iterator[_Series]:
                 stream=name,
                 kind=str(kind),
                 rel=rel,
-                strict=kind not in ("boxes2d",),
+                strict=kind not in ("boxes2d", "generic"),
                 periodic=periodic,
                 nominal_hz=nominal_hz,
             )
@@ -501,7 +501,7 @@ def _ranges(ctx: CheckContext) -> Iterator[tuple[object, str, dict, str, tuple[i
     for ep, name, st in ctx.streams():
         kind = st.get("kind")
         rel = st.get("frames") if kind == "camera" else st.get("path")
-        if kind == "segments" or not isinstance(rel, str):
+        if kind in ("segments", "generic") or not isinstance(rel, str):
             continue
         try:
             rng = ctx.t_range(rel)
