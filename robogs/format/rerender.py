@@ -231,7 +231,8 @@ def plan_frames(
     """
     if total <= 0:
         return FramePlan(np.zeros(0, np.int64), 0, budget_s, cost_s)
-    fit = total if math.isinf(budget_s) else int(budget_s / max(cost_s, 1e-9))
+    # (+1e-9: a budget of exactly k frames is k frames despite rounding, e.g. 2.4 / 0.4)
+    fit = total if math.isinf(budget_s) else int(budget_s / max(cost_s, 1e-9) + 1e-9)
     k = min(total, max(fit, min_frames))
     return FramePlan(spread_frames(total, k, must), total, budget_s, cost_s, floor=fit < k)
 
@@ -243,7 +244,7 @@ def fit_frame_count(render_s: float, budget_s: float, most: int) -> int:
     """
     if math.isinf(budget_s):
         return most
-    fit = int(budget_s / max(FIT_FRAME_RENDERS * render_s, 1e-9))
+    fit = int(budget_s / max(FIT_FRAME_RENDERS * render_s, 1e-9) + 1e-9)
     return max(min(MIN_FIT_FRAMES, most), min(fit, most))
 
 

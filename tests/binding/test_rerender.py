@@ -3,6 +3,11 @@
 The scene's labels are rasterised from the meshes by the generator's own renderer, so they are
 an independent oracle for the splat re-render. Offsets and displacements are injected exactly
 (camera stamps +20 ms, camera moved 3 mm along its x axis) and must be recovered to 1 ms / 1 mm.
+
+Each mutation runs twice: with ``full`` (every ``stride``-th frame, 8 fit frames: the behaviour
+before the time budget) and in the default budgeted mode with a fixed per-frame cost (so the
+frame choice is the same on every machine): 0.2 s per frame in the default 4 s budget compares
+8 of the 120 frames and fits on 2; the mutations must still be caught.
 """
 
 from __future__ import annotations
@@ -27,8 +32,11 @@ from robogs.format.rerender import boundary_distance, compare_frame, void_band
 from robogs.format.splats import read_splat_ply, write_splat_ply
 
 B_CODES = [f"B{i:03d}" for i in range(1, 12)]
-#: speed options of these tests: every 8th frame for the label pass, 8 frames for the fit
-FAST = {"stride": 8, "fit_frames": 8}
+#: speed options of these tests: every 8th frame for the label pass, 8 frames for the fit, no budget
+FAST = {"stride": 8, "fit_frames": 8, "full": True}
+#: the default budgeted mode, with a fixed per-frame cost instead of a measured one
+BUDGETED = {"frame_cost_s": 0.2}
+MODES = {"full": FAST, "budget": BUDGETED}
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +76,8 @@ def _run(
 ) -> tuple[list[Finding], CheckContext]:
     """Run checks like the validator does (inputs reported elsewhere end a check quietly)."""
     ctx = CheckContext(root, budgets=budgets)
-    ctx.options = {**FAST, **options}  # type: ignore[attr-defined]
+    base = MODES[str(options.pop("mode", "full"))]
+    ctx.options = {**base, **options}  # type: ignore[attr-defined]
     out: list[Finding] = []
     for code in codes:
         try:
@@ -155,20 +164,24 @@ def test_clean_scene_has_no_binding_finding(synth_scene: Path) -> None:
     assert fit.cost_after <= fit.cost_before
 
 
-def test_camera_stamps_20ms_late_are_measured(scene_copy) -> None:
+@pytest.mark.parametrize(("mode", "tol_ms"), [("full", 1.0), ("budget", 3.5)])
+def test_camera_stamps_20ms_late_are_measured(scene_copy, mode: str, tol_ms: float) -> None:
+    """8 fit frames recover the offset to 1 ms; the 2 frames of the budgeted mode to 2.5 ms."""
     from robogs.synth.mutations import MUTATIONS
 
     root = scene_copy("late")
     MUTATIONS["shift_camera_stamps"](root, 20.0)
-    findings, _ctx = _run(root, ["B005", "B006"])
+    findings, _ctx = _run(root, ["B005", "B006"], mode=mode)
     off = [f for f in findings if f.code == "B005"]
     assert len(off) == 1, findings
-    assert abs(off[0].value - 20.0) < 1.0
+    assert abs(off[0].value - 20.0) < tol_ms
+    assert f"from {8 if mode == 'full' else 2} moving frames" in off[0].message
     assert off[0].severity == "error" and "late" in off[0].message
     assert not [f for f in findings if f.code == "B006"]
 
 
-def test_camera_moved_3mm_is_measured(scene_copy) -> None:
+@pytest.mark.parametrize("mode", ["full", "budget"])
+def test_camera_moved_3mm_is_measured(scene_copy, mode: str) -> None:
     root = scene_copy("moved")
     rel = json.loads((root / "manifest.json").read_text())["cameras"]["cam0"]
     cam = json.loads((root / rel).read_text())
@@ -177,7 +190,7 @@ def test_camera_moved_3mm_is_measured(scene_copy) -> None:
     cam["T_world_cam"] = T.tolist()
     (root / rel).write_text(json.dumps(cam, indent=2))
     _rehash(root, rel)
-    findings, _ctx = _run(root, ["B005", "B006"])
+    findings, _ctx = _run(root, ["B005", "B006"], mode=mode)
     ext = [f for f in findings if f.code == "B006"]
     assert len(ext) == 1, findings
     assert abs(ext[0].value - 3.0) < 1.0
@@ -185,7 +198,8 @@ def test_camera_moved_3mm_is_measured(scene_copy) -> None:
     assert not [f for f in findings if f.code == "B005"]
 
 
-def test_relabelled_link_is_named(scene_copy) -> None:
+@pytest.mark.parametrize(("mode", "stride"), [("full", 16), ("budget", 1)])
+def test_relabelled_link_is_named(scene_copy, mode: str, stride: int) -> None:
     root = scene_copy("relabel")
     m = json.loads((root / "manifest.json").read_text())
     entry = m["robot"]["splats"]
@@ -194,7 +208,7 @@ def test_relabelled_link_is_named(scene_copy) -> None:
     s.bind_id[s.bind_id == src] = dst
     write_splat_ply(root / entry["path"], s)
     _rehash(root, entry["path"])
-    findings, _ctx = _run(root, ["B001", "B002"], stride=16)
+    findings, _ctx = _run(root, ["B001", "B002"], stride=stride, mode=mode)
     face = [f for f in findings if f.code == "B001"]
     assert face and face[0].location.link == "upper_arm_link" and "forearm_link" in face[0].message
     assert face[0].value > 50.0  # mm: the forearm is far from the upper arm's faces
@@ -203,11 +217,15 @@ def test_relabelled_link_is_named(scene_copy) -> None:
 
 
 @pytest.mark.parametrize(
-    ("mutation", "kwargs", "at_most_db"),
-    [("splats_in_linear_rgb", {}, 16.0), ("swap_splat_channels", {"target": "table"}, 18.0)],
+    ("mutation", "kwargs", "at_most_db", "mode"),
+    [
+        ("splats_in_linear_rgb", {}, 16.0, "full"),
+        ("swap_splat_channels", {"target": "table"}, 18.0, "full"),
+        ("splats_in_linear_rgb", {}, 16.0, "budget"),
+    ],
 )
 def test_wrong_splat_colours_fall_below_the_psnr_floor(
-    scene_copy, mutation: str, kwargs: dict, at_most_db: float
+    scene_copy, mutation: str, kwargs: dict, at_most_db: float, mode: str
 ) -> None:
     from robogs.synth.mutations import MUTATIONS
 
@@ -215,7 +233,8 @@ def test_wrong_splat_colours_fall_below_the_psnr_floor(
     MUTATIONS[mutation](root, **kwargs)
     # every binding check but the label-only alignment fit (B005, B006), which colour cannot move
     codes = [c for c in B_CODES if c not in ("B005", "B006")]
-    findings, ctx = _run(root, codes, stride=16)
+    stride = 16 if mode == "full" else 1
+    findings, ctx = _run(root, codes, stride=stride, mode=mode)
     assert [(f.code, f.severity) for f in findings] == [("B004", "warning")], findings
     (f,) = findings
     floor = ctx.budget("binding.psnr_min_db")
@@ -224,7 +243,9 @@ def test_wrong_splat_colours_fall_below_the_psnr_floor(
     assert f"PSNR {f.value:.2f} dB" in f.message and "below the 20 dB floor" in f.message
     assert f.location.stream == _stream(root)[1] and f.location.frame is not None
     # the floor is a budget: lowering it below the measured value silences the check
-    quiet, _ = _run(root, ["B004"], budgets={"binding.psnr_min_db": f.value - 0.5}, stride=16)
+    quiet, _ = _run(
+        root, ["B004"], budgets={"binding.psnr_min_db": f.value - 0.5}, stride=stride, mode=mode
+    )
     assert not quiet
 
 
