@@ -1,0 +1,498 @@
+"""MJCF (MuJoCo's XML) of a robogs scene: physics.json + object meshes -> one XML document.
+
+This is a serialisation of the format's physics model into another format, so it lives in
+``robogs.format``: the MuJoCo engine (``robogs.physics.engines``) compiles it in memory, the
+``mjcf`` exporter (``robogs.convert.export.mjcf``) writes it to disk. It needs no MuJoCo itself
+(the XML is built with :mod:`xml.etree.ElementTree`; meshes are hulled with trimesh).
+
+What the document holds (world frame = the dataset world, z up, metres):
+
+* ``table`` - a plane through ``objects.table.point_m`` (default ``(0, 0, plane_z_m)``) with
+  normal ``objects.table.normal`` (default +z), so a fitted tilted plane stays tilted;
+* one free body per ``rigid`` object (``mass_kg``, ``com_m``, ``inertia_kgm2`` as an explicit
+  ``<inertial>``; the geometry is never used for mass): a box of ``size_m``, or the convex hull
+  of the object's mesh when one is given (:func:`collision_hull`; MuJoCo collides a mesh
+  through its convex hull anyway, so a non-convex, open or too-detailed mesh is replaced by its
+  hull, decimated to :data:`MAX_HULL_VERTICES`, and the substitution is reported);
+* ``static`` objects other than the table with a box size or mesh: fixed geometry;
+* ``pusher`` - the pusher shape (``shape`` sphere | capsule | box, ``radius_m``, ``length_m``
+  along the pusher frame's y axis, ``size_m`` for a box) on a body with four joints (slide x,
+  y, z and a hinge about z: the planar pusher's degrees of freedom) driven by servos (see
+  :data:`PUSHER_ACTUATORS`). It is not a mocap body: MuJoCo gives a mocap body zero velocity
+  in the contact solver, so pusher friction would oppose the object's motion instead of the
+  relative sliding, and the normal contact would only see the penetration, never the rate;
+* contacts as explicit ``<pair>`` elements (every geom has ``contype = conaffinity = 0``), so
+  each pair carries its own friction: object-table ``objects.<obj>.friction_dynamic``,
+  object-pusher ``objects.pusher.friction_dynamic`` (default 0: the planar model's
+  frictionless pusher), object-object the larger of the two objects' coefficients (MuJoCo's own
+  rule for geoms without a pair);
+* ``gravity_mps2`` as the gravity vector.
+
+MuJoCo has one Coulomb coefficient per contact: ``friction_dynamic`` is used, also for
+sticking (the planar model's ``friction_static`` has no counterpart). Restitution, damping and
+effects are not mapped here; :attr:`MjcfScene.unmapped` lists the keys that were present.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from robogs.format.errors import FormatError
+
+__all__ = [
+    "MAX_HULL_VERTICES",
+    "PUSHER_ACTUATORS",
+    "ContactSettings",
+    "MjcfScene",
+    "collision_hull",
+    "scene_mjcf",
+]
+
+MAX_HULL_VERTICES = 256
+"""A collision hull with more vertices is decimated to this many (MuJoCo's convex collision
+cost grows with the vertex count; a scanned mesh has 10^4-10^6)."""
+
+PUSHER_ACTUATORS = ("x", "y", "z", "yaw")
+"""Pusher joints, in qpos order; each has a position servo ``pusher_<j>`` (ctrl: target
+position, m or rad) followed, after all four, by a velocity servo ``pusher_v<j>`` (ctrl: target
+velocity, m/s or rad/s)."""
+
+_NAME = re.compile(r"[^A-Za-z0-9_.-]+")
+
+
+@dataclass(frozen=True)
+class ContactSettings:
+    """Solver and contact settings of the scene; the reasons are in the module docstring of
+    ``robogs.physics.engines.mujoco_engine``.
+
+    Attributes:
+        timestep: s.
+        cone: ``"elliptic"`` or ``"pyramidal"``.
+        impratio: frictional-to-normal impedance ratio (elliptic cones).
+        solref: (time constant s, damping ratio) of every contact pair.
+        solimp: (d0, dwidth, width m, midpoint, power) of every contact pair.
+        noslip_iterations: post-solve iterations removing residual slip (0: off).
+        iterations, tolerance: main solver (Newton) limits.
+        pusher_mass: kg of the pusher body (and kg m^2 x 0.01 of its yaw inertia).
+        servo_velocity_gain, servo_position_gain: the pusher servos' gains in units of the
+            pusher's mass and the timestep: ``kv = gain_v * m / dt``, ``kp = gain_p * m / dt^2``.
+    """
+
+    timestep: float = 1e-3
+    cone: str = "elliptic"
+    impratio: float = 10.0
+    solref: tuple[float, float] = (0.004, 1.0)
+    solimp: tuple[float, float, float, float, float] = (0.95, 0.99, 0.001, 0.5, 2.0)
+    noslip_iterations: int = 0
+    iterations: int = 50
+    tolerance: float = 1e-10
+    pusher_mass: float = 1.0
+    servo_velocity_gain: float = 100.0
+    servo_position_gain: float = 10.0
+
+
+@dataclass
+class MjcfScene:
+    """An MJCF document and what a caller needs to drive it.
+
+    Attributes:
+        xml: the document (UTF-8 text).
+        assets: mesh file name (as referenced in ``xml``) -> binary STL bytes.
+        objects: free bodies (= their free joints and geoms), in qpos order.
+        pusher: the pusher body name, None without a pusher.
+        pairs: ``(geom1, geom2)`` of every contact pair, in ``<contact>`` order.
+        notes: substitutions made (hulled or decimated meshes), one line each.
+        unmapped: physics.json keys present but not represented in MuJoCo.
+    """
+
+    xml: str
+    assets: dict[str, bytes] = field(default_factory=dict)
+    objects: list[str] = field(default_factory=list)
+    pusher: str | None = None
+    pairs: list[tuple[str, str]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    unmapped: list[str] = field(default_factory=list)
+
+
+def _f(v: float) -> str:
+    return repr(float(v))
+
+
+def _vec(vs: Sequence[float]) -> str:
+    return " ".join(_f(v) for v in vs)
+
+
+def _floats(entry: Mapping[str, Any], key: str, n: int, where: str) -> list[float]:
+    val = entry.get(key)
+    try:
+        out = [float(v) for v in val]  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        out = []
+    if len(out) != n or not all(math.isfinite(v) for v in out):
+        raise FormatError(
+            f"{key} must be {n} finite numbers, got {val!r}",
+            path="physics.json",
+            where=f"{where}/{key}",
+        )
+    return out
+
+
+def _number(entry: Mapping[str, Any], key: str, default: float, where: str) -> float:
+    val = entry.get(key, default)
+    try:
+        out = float(val)
+    except (TypeError, ValueError):
+        out = math.nan
+    if not math.isfinite(out) or out < 0:
+        raise FormatError(
+            f"{key} must be a finite number >= 0, got {val!r}",
+            path="physics.json",
+            where=f"{where}/{key}",
+        )
+    return out
+
+
+def collision_hull(mesh: Any, name: str) -> tuple[Any, str | None]:
+    """The convex collision hull MuJoCo gets for an object mesh, and a note if it differs.
+
+    The hull (qhull, via trimesh) is what MuJoCo collides anyway. A hull with more than
+    :data:`MAX_HULL_VERTICES` vertices is decimated by farthest-point sampling of its vertices
+    (greedy k-centre, Gonzalez 1985) and hulled again.
+
+    Args:
+        mesh: a ``trimesh.Trimesh`` (object frame, metres).
+        name: the object, for messages.
+
+    Returns:
+        ``(hull, note)``: the hull mesh and one line saying what was substituted (None when the
+        mesh was already a closed convex mesh within the vertex budget).
+
+    Raises:
+        FormatError: the mesh has no volume (fewer than 4 non-coplanar vertices).
+    """
+    import trimesh
+
+    verts = np.asarray(mesh.vertices, dtype=np.float64)
+    try:
+        hull = trimesh.convex.convex_hull(verts)
+    except Exception as exc:  # qhull raises its own types on flat or tiny inputs
+        raise FormatError(
+            f"mesh of {name!r} has no convex hull ({type(exc).__name__})",
+            where=f"assets/{name}/mesh",
+            hint="give the object a box size (size_m) or a closed mesh",
+        ) from None
+    if hull.volume <= 0 or len(hull.vertices) < 4:
+        raise FormatError(
+            f"mesh of {name!r} is flat (hull volume {hull.volume:.3g} m^3)",
+            where=f"assets/{name}/mesh",
+            hint="give the object a box size (size_m) or a closed mesh",
+        )
+    reasons = []
+    watertight = bool(getattr(mesh, "is_watertight", False))
+    if not watertight:
+        reasons.append("not watertight")
+    elif abs(float(mesh.volume)) < 0.99 * hull.volume:
+        reasons.append(f"non-convex ({abs(float(mesh.volume)) / hull.volume:.0%} of its hull)")
+    n_hull = len(hull.vertices)
+    if n_hull > MAX_HULL_VERTICES:
+        hv = np.asarray(hull.vertices)
+        pick = [int(np.argmax(np.linalg.norm(hv - hv.mean(0), axis=1)))]
+        dist = np.linalg.norm(hv - hv[pick[0]], axis=1)
+        while len(pick) < MAX_HULL_VERTICES:
+            i = int(np.argmax(dist))
+            pick.append(i)
+            dist = np.minimum(dist, np.linalg.norm(hv - hv[i], axis=1))
+        hull = trimesh.convex.convex_hull(hv[pick])
+        reasons.append(f"hull of {n_hull} vertices decimated to {len(hull.vertices)}")
+    if not reasons and len(verts) <= MAX_HULL_VERTICES:
+        return hull, None
+    note = (
+        f"mesh of {name!r} ({len(verts)} vertices, {', '.join(reasons) or 'detailed'}) replaced "
+        f"by its convex hull ({len(hull.vertices)} vertices, {hull.volume * 1e6:.1f} cm^3) for "
+        "collision; mass and inertia stay those of physics.json"
+    )
+    return hull, note
+
+
+def _quat_from_z(normal: np.ndarray) -> np.ndarray:
+    """A (w, x, y, z) rotation taking +z to the unit vector ``normal``."""
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(np.dot(z, normal))
+    if c < -1.0 + 1e-12:
+        return np.array([0.0, 1.0, 0.0, 0.0])
+    axis = np.cross(z, normal)
+    q = np.array([1.0 + c, *axis])
+    return q / np.linalg.norm(q)
+
+
+def _inertial(body: ET.Element, entry: Mapping[str, Any], where: str) -> float:
+    mass = _number(entry, "mass_kg", 0.0, where)
+    if mass <= 0:
+        raise FormatError(
+            "a rigid object needs mass_kg > 0", path="physics.json", where=f"{where}/mass_kg"
+        )
+    com = _floats(entry, "com_m", 3, where) if "com_m" in entry else [0.0, 0.0, 0.0]
+    if "inertia_kgm2" in entry:
+        rows = entry["inertia_kgm2"]
+        J = np.array([_floats({"r": r}, "r", 3, f"{where}/inertia_kgm2") for r in rows])
+        if J.shape != (3, 3) or not np.allclose(J, J.T, atol=1e-12, rtol=1e-9):
+            raise FormatError(
+                "inertia_kgm2 must be a symmetric 3x3 matrix",
+                path="physics.json",
+                where=f"{where}/inertia_kgm2",
+            )
+    elif "size_m" in entry:
+        sx, sy, sz = _floats(entry, "size_m", 3, where)
+        J = np.diag([sy**2 + sz**2, sx**2 + sz**2, sx**2 + sy**2]) * mass / 12.0
+    else:
+        raise FormatError(
+            "a rigid object needs inertia_kgm2 (or size_m for the box formula)",
+            path="physics.json",
+            where=where,
+        )
+    full = [J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2]]
+    ET.SubElement(body, "inertial", pos=_vec(com), mass=_f(mass), fullinertia=_vec(full))
+    return mass
+
+
+def _shape_geom(
+    parent: ET.Element,
+    name: str,
+    entry: Mapping[str, Any],
+    where: str,
+    mesh: Any | None,
+    scene: MjcfScene,
+    asset: ET.Element,
+    meshdir: str,
+) -> None:
+    """A box of ``size_m`` or the collision hull of ``mesh`` (object frame)."""
+    attrs = {"name": name, "contype": "0", "conaffinity": "0", "group": "1"}
+    if mesh is not None:
+        hull, note = collision_hull(mesh, name)
+        if note:
+            scene.notes.append(note)
+        fname = f"{_NAME.sub('_', name)}_hull.stl"
+        buf = io.BytesIO()
+        hull.export(buf, file_type="stl")
+        scene.assets[fname] = buf.getvalue()
+        ET.SubElement(
+            asset, "mesh", name=f"{name}_hull", file=f"{meshdir}{fname}", inertia="convex"
+        )
+        ET.SubElement(parent, "geom", type="mesh", mesh=f"{name}_hull", **attrs)
+    elif "size_m" in entry:
+        half = [0.5 * s for s in _floats(entry, "size_m", 3, where)]
+        ET.SubElement(parent, "geom", type="box", size=_vec(half), **attrs)
+    else:
+        raise FormatError(
+            f"object {name!r} has neither size_m nor a mesh",
+            path="physics.json",
+            where=where,
+            hint="give size_m (box edges, m) or an asset mesh",
+        )
+
+
+def _pusher(
+    world: ET.Element, entry: Mapping[str, Any], settings: ContactSettings, actuator: ET.Element
+) -> None:
+    where = "objects/pusher"
+    shape = str(entry.get("shape") or ("capsule" if entry.get("length_m") else "sphere"))
+    r = _number(entry, "radius_m", 0.01, where)
+    length = _number(entry, "length_m", 0.0, where)
+    body = ET.SubElement(world, "body", name="pusher", gravcomp="1")
+    m = settings.pusher_mass
+    ET.SubElement(body, "inertial", pos="0 0 0", mass=_f(m), diaginertia=_vec([0.01 * m] * 3))
+    axes = {"x": "1 0 0", "y": "0 1 0", "z": "0 0 1"}
+    for j in PUSHER_ACTUATORS:
+        kind = "hinge" if j == "yaw" else "slide"
+        ET.SubElement(body, "joint", name=f"pusher_{j}", type=kind, axis=axes.get(j, "0 0 1"))
+    attrs = {"name": "pusher", "contype": "0", "conaffinity": "0", "group": "1"}
+    if shape == "sphere" or (shape == "capsule" and length <= 0):
+        ET.SubElement(body, "geom", type="sphere", size=_f(r), **attrs)
+    elif shape == "capsule":
+        h = 0.5 * length
+        ET.SubElement(
+            body, "geom", type="capsule", size=_f(r), fromto=_vec([0, -h, 0, 0, h, 0]), **attrs
+        )
+    elif shape == "box":
+        half = [0.5 * s for s in _floats(entry, "size_m", 3, where)]
+        ET.SubElement(body, "geom", type="box", size=_vec(half), **attrs)
+    else:
+        raise FormatError(
+            f"pusher shape {shape!r} is not sphere, capsule or box",
+            path="physics.json",
+            where=f"{where}/shape",
+        )
+    dt = settings.timestep
+    for j in PUSHER_ACTUATORS:
+        mu = m if j != "yaw" else 0.01 * m
+        ET.SubElement(
+            actuator,
+            "position",
+            name=f"pusher_{j}",
+            joint=f"pusher_{j}",
+            kp=_f(settings.servo_position_gain * mu / dt**2),
+            ctrllimited="false",
+            forcelimited="false",
+        )
+    for j in PUSHER_ACTUATORS:
+        mu = m if j != "yaw" else 0.01 * m
+        ET.SubElement(
+            actuator,
+            "velocity",
+            name=f"pusher_v{j}",
+            joint=f"pusher_{j}",
+            kv=_f(settings.servo_velocity_gain * mu / dt),
+            ctrllimited="false",
+            forcelimited="false",
+        )
+
+
+def _pose_attrs(pose: Sequence[float] | None) -> dict[str, str]:
+    if pose is None:
+        return {}
+    p = [float(v) for v in pose]
+    if len(p) != 7 or not all(math.isfinite(v) for v in p):
+        raise FormatError(f"a pose is [x, y, z, qw, qx, qy, qz], got {pose!r}")
+    return {"pos": _vec(p[:3]), "quat": _vec(p[3:])}
+
+
+def scene_mjcf(
+    physics: Mapping[str, Any],
+    *,
+    meshes: Mapping[str, Any] | None = None,
+    poses: Mapping[str, Sequence[float]] | None = None,
+    settings: ContactSettings | None = None,
+    model_name: str = "robogs_scene",
+    meshdir: str = "",
+) -> MjcfScene:
+    """Build the MJCF of a physics.json document.
+
+    Args:
+        physics: the physics.json document.
+        meshes: object name -> ``trimesh.Trimesh`` (object frame, m); an object with a mesh
+            gets its collision hull instead of a ``size_m`` box.
+        poses: object name -> ``T_world_object`` as ``[x, y, z, qw, qx, qy, qz]`` (free bodies'
+            initial pose, static objects' pose; default identity).
+        settings: solver and contact settings.
+        model_name: the ``<mujoco model>`` name.
+        meshdir: prefix of mesh file names in the XML (e.g. ``"meshes/"``).
+
+    Returns:
+        The document, its mesh assets, the free objects in qpos order and notes.
+
+    Raises:
+        FormatError: a value the scene needs is missing or malformed (the key is named).
+    """
+    settings = settings or ContactSettings()
+    meshes = dict(meshes or {})
+    poses = dict(poses or {})
+    objects = physics.get("objects") or {}
+    scene = MjcfScene(xml="")
+    root = ET.Element("mujoco", model=model_name)
+    ET.SubElement(root, "compiler", angle="radian", inertiafromgeom="false", autolimits="true")
+    grav = _floats(physics, "gravity_mps2", 3, "") if "gravity_mps2" in physics else [0, 0, -9.81]
+    ET.SubElement(
+        root,
+        "option",
+        timestep=_f(settings.timestep),
+        gravity=_vec(grav),
+        integrator="implicitfast",
+        cone=settings.cone,
+        impratio=_f(settings.impratio),
+        solver="Newton",
+        iterations=str(settings.iterations),
+        tolerance=_f(settings.tolerance),
+        noslip_iterations=str(settings.noslip_iterations),
+    )
+    asset = ET.SubElement(root, "asset")
+    world = ET.SubElement(root, "worldbody")
+    contact = ET.Element("contact")
+    actuator = ET.Element("actuator")
+    table = objects.get("table") or {}
+    normal = np.array(table.get("normal", [0.0, 0.0, 1.0]), dtype=float)
+    if normal.shape != (3,) or not np.all(np.isfinite(normal)) or np.linalg.norm(normal) == 0:
+        raise FormatError(
+            "table normal must be 3 finite numbers", path="physics.json", where="objects/table"
+        )
+    normal = normal / np.linalg.norm(normal)
+    z0 = _floats({"plane_z_m": [table.get("plane_z_m", 0.0)]}, "plane_z_m", 1, "objects/table")[0]
+    point = table.get("point_m", [0.0, 0.0, z0])
+    point = _floats({"p": point}, "p", 3, "objects/table/point_m")
+    ET.SubElement(
+        world,
+        "geom",
+        name="table",
+        type="plane",
+        size="0 0 0.05",
+        pos=_vec(point),
+        quat=_vec(_quat_from_z(normal)),
+        contype="0",
+        conaffinity="0",
+    )
+    free: dict[str, float] = {}
+    static: list[str] = []
+    for name in sorted(objects):
+        entry = objects[name]
+        if name in ("table", "pusher") or not isinstance(entry, Mapping):
+            continue
+        where = f"objects/{name}"
+        eq = entry.get("equation")
+        if eq == "rigid":
+            body = ET.SubElement(world, "body", name=name, **_pose_attrs(poses.get(name)))
+            ET.SubElement(body, "freejoint", name=name)
+            _inertial(body, entry, where)
+            _shape_geom(body, name, entry, where, meshes.get(name), scene, asset, meshdir)
+            free[name] = _number(entry, "friction_dynamic", 0.4, where)
+            for key in ("restitution", "damping_linear", "damping_angular"):
+                if float(entry.get(key) or 0.0) != 0.0:
+                    scene.unmapped.append(f"objects.{name}.{key}")
+        elif eq == "static" and ("size_m" in entry or name in meshes):
+            body = ET.SubElement(world, "body", name=name, **_pose_attrs(poses.get(name)))
+            _shape_geom(body, name, entry, where, meshes.get(name), scene, asset, meshdir)
+            static.append(name)
+    scene.objects = list(free)
+    pusher = objects.get("pusher")
+    mu_p = 0.0
+    if isinstance(pusher, Mapping):
+        _pusher(world, pusher, settings, actuator)
+        scene.pusher = "pusher"
+        mu_p = _number(pusher, "friction_dynamic", 0.0, "objects/pusher")
+    sr, si = _vec(settings.solref), _vec(settings.solimp)
+
+    def pair(g1: str, g2: str, mu: float) -> None:
+        # condim 3 even without friction, so that a fitted friction can be set on the model
+        fr = _vec([max(mu, 1e-5), max(mu, 1e-5), 0.005, 1e-4, 1e-4])
+        ET.SubElement(
+            contact, "pair", geom1=g1, geom2=g2, condim="3", friction=fr, solref=sr, solimp=si
+        )
+        scene.pairs.append((g1, g2))
+
+    names = list(free)
+    for i, a in enumerate(names):
+        pair(a, "table", free[a])
+        if scene.pusher is not None:
+            pair(a, "pusher", mu_p)
+        for b in names[i + 1 :]:
+            pair(a, b, max(free[a], free[b]))
+        for s in static:
+            pair(a, s, free[a])
+    if not len(asset):
+        root.remove(asset)
+    if len(contact):
+        root.append(contact)
+    if len(actuator):
+        root.append(actuator)
+    for key in ("effects",):
+        if physics.get(key):
+            scene.unmapped += [f"effects.{e.get('name')}" for e in physics[key]]
+    ET.indent(root)
+    scene.xml = ET.tostring(root, encoding="unicode") + "\n"
+    return scene
