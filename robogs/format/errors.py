@@ -7,6 +7,7 @@ prints a traceback for these.
 
 from __future__ import annotations
 
+import errno
 from pathlib import Path
 
 __all__ = [
@@ -18,6 +19,8 @@ __all__ = [
     "LockError",
     "ConcurrentEditError",
     "InputError",
+    "OutputError",
+    "output_error",
 ]
 
 
@@ -81,6 +84,36 @@ class LockError(RobogsError):
 
 class ConcurrentEditError(LockError):
     """The dataset changed on disk between the moment it was read and the commit of an edit."""
+
+
+class OutputError(RobogsError):
+    """Writing an output failed (disk full, read-only, name too long, busy); inputs are intact."""
+
+
+#: errno -> (what happened, what to do) for errors met while writing
+_OS_CAUSES: dict[int, tuple[str, str]] = {
+    errno.ENOSPC: ("the disk is full", "free some space or write to another disk"),
+    errno.EDQUOT: ("the disk quota is exceeded", "free some space or write to another disk"),
+    errno.EFBIG: ("the file is too large for this file system", "write to another file system"),
+    errno.EROFS: ("the file system is read-only", "write to a writable folder"),
+    errno.EACCES: ("permission denied", "write to a folder you may write to"),
+    errno.EPERM: ("operation not permitted", "write to a folder you may write to"),
+    errno.ENAMETOOLONG: ("the name is too long", "choose a shorter output name"),
+    errno.EBUSY: ("the file or folder is busy (in use or a mount point)", "close what uses it"),
+    errno.EXDEV: ("it lies on another file system", "write beside the output folder"),
+}
+
+
+def output_error(exc: OSError, *, path: str | Path | None, action: str) -> OutputError:
+    """An :class:`OutputError` for an ``OSError`` met while ``action`` (e.g. "writing")."""
+    what, hint = _OS_CAUSES.get(
+        exc.errno or -1, (exc.strerror or str(exc), "check the output folder and retry")
+    )
+    return OutputError(
+        f"{action} failed: {what}; nothing was changed",
+        path=exc.filename or path,
+        hint=hint,
+    )
 
 
 class InputError(RobogsError):

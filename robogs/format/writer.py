@@ -27,6 +27,7 @@ from __future__ import annotations
 import datetime as _dt
 import errno
 import fcntl
+import functools
 import hashlib
 import logging
 import os
@@ -34,15 +35,21 @@ import shutil
 import stat
 import uuid
 import weakref
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .cameras import CameraModel
-from .errors import ConcurrentEditError, DatasetExistsError, FormatError, LockError
+from .errors import (
+    ConcurrentEditError,
+    DatasetExistsError,
+    FormatError,
+    LockError,
+    output_error,
+)
 from .jsonio import dumps_json
 from .paths import check_relpath
 from .replace import check_replaceable, exchange, sibling_versions
@@ -86,6 +93,7 @@ def _robogs_version() -> str:
 
 
 _LOG = logging.getLogger(__name__)
+_F = TypeVar("_F", bound=Callable[..., Any])
 _LOCK_FLAGS = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
 
 
@@ -206,6 +214,26 @@ def _abandon(lock: _DatasetLock, tmp: Path) -> None:
     lock.release()
 
 
+def _writes(action: str) -> Callable[[_F], _F]:
+    """Turn an ``OSError`` of a writer method into an :class:`OutputError` naming the cause.
+
+    Disk full, read-only file system, name too long or busy is then one clear line, and a
+    converter never mistakes it for a broken input (it re-raises robogs errors as they are).
+    """
+
+    def wrap(fn: _F) -> _F:
+        @functools.wraps(fn)
+        def inner(self: DatasetWriter, *args: Any, **kwargs: Any) -> Any:
+            try:
+                return fn(self, *args, **kwargs)
+            except OSError as exc:
+                raise output_error(exc, path=self.target, action=action) from None
+
+        return inner  # type: ignore[return-value]
+
+    return wrap
+
+
 class DatasetWriter:
     """Builds a dataset version in a temp folder and swaps it in on ``commit``.
 
@@ -243,7 +271,10 @@ class DatasetWriter:
             if base is None:  # --force replaces only a robogs dataset that is not an input
                 check_replaceable(self.target, folder=True, sources=protect, what="output")
             self.tmp = parent / f".{self.target.name}.tmp-{uuid.uuid4().hex[:8]}"
-            self.tmp.mkdir()
+            try:  # writability is known before any work: a read-only parent fails here
+                self.tmp.mkdir()
+            except OSError as exc:
+                raise output_error(exc, path=self.target, action="creating the dataset") from None
         except BaseException:
             self._release_lock()
             raise
@@ -303,6 +334,7 @@ class DatasetWriter:
                 "again on the new version",
             )
 
+    @_writes("linking the previous version")
     def _link_base(self, base: Dataset) -> None:
         for rel in base.files:
             src = base.resolve(rel)
@@ -337,15 +369,18 @@ class DatasetWriter:
         final = self.path(rel)
         return final, final.with_name(final.name + ".part")
 
+    @_writes("writing the dataset")
     def write_bytes(self, rel: str, data: bytes) -> Path:
         final, part = self._part(rel)
         part.write_bytes(data)
         os.replace(part, final)
         return final
 
+    @_writes("writing the dataset")
     def write_text(self, rel: str, text: str) -> Path:
         return self.write_bytes(rel, text.encode("utf-8"))
 
+    @_writes("writing the dataset")
     def write_json(self, rel: str, obj: Any, *, schema: str | None = None) -> Path:
         """Write a JSON sidecar, checking it against ``spec/schemas/<schema>`` first."""
         if schema is not None:
@@ -358,12 +393,14 @@ class DatasetWriter:
                 )
         return self.write_text(rel, dumps_json(obj))
 
+    @_writes("writing the dataset")
     def copy_file(self, rel: str, src: str | Path) -> Path:
         final, part = self._part(rel)
         shutil.copyfile(src, part)
         os.replace(part, final)
         return final
 
+    @_writes("writing the dataset")
     def remove(self, rel: str) -> None:
         p = self.tmp / check_relpath(rel)
         if p.is_dir():
@@ -371,6 +408,7 @@ class DatasetWriter:
         elif p.exists():
             p.unlink()
 
+    @_writes("writing a table")
     def write_table(self, rel: str, table: pa.Table, *, kind: str) -> Path:
         """Write a parquet table of a kind from ``robogs.format.tables``, checking its columns.
 
@@ -388,6 +426,7 @@ class DatasetWriter:
         os.replace(part, final)
         return final
 
+    @_writes("writing splats")
     def write_splats(self, rel: str, splats: SplatSet) -> Path:
         final, part = self._part(rel)
         write_splat_ply(part, splats)
@@ -483,6 +522,7 @@ class DatasetWriter:
             files[rel] = entry
         return files
 
+    @_writes("committing the dataset")
     def commit(self) -> Dataset:
         """Write the manifest last, swap the new version into place, release the lock."""
         from .dataset import Dataset

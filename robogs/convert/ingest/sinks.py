@@ -23,7 +23,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from robogs.format.errors import FormatError, InputError
+from robogs.format.errors import FormatError, InputError, output_error
 from robogs.format.images import VideoWriter
 from robogs.format.tables import check_table_schema
 
@@ -188,9 +188,12 @@ class TableSink:
             cols.append(pa.array([self._labels[i] for i in lab[emit]], type=pa.string()))
         cols += [pa.array(vals[emit, j], type=pa.float64()) for j in range(vals.shape[1])]
         table = pa.Table.from_arrays(cols, schema=self.schema)
-        if self._writer is None:
-            self._writer = pq.ParquetWriter(self.path, self.schema, compression="zstd")
-        self._writer.write_table(table, row_group_size=1 << 16)
+        try:  # a full disk is the output's fault, never "a corrupt input"
+            if self._writer is None:
+                self._writer = pq.ParquetWriter(self.path, self.schema, compression="zstd")
+            self._writer.write_table(table, row_group_size=1 << 16)
+        except OSError as exc:
+            raise output_error(exc, path=self.path, action="writing a table") from None
         self.rows += n_emit
         first, last = int(t[emit[0]]), int(t[emit[-1]])
         self.start_ns = first if self.start_ns is None else self.start_ns
@@ -312,9 +315,12 @@ class CameraSink:
             ],
             schema=self.schema,
         )
-        if self._pw is None:
-            self._pw = pq.ParquetWriter(self.frames_path, self.schema, compression="zstd")
-        self._pw.write_table(table)
+        try:
+            if self._pw is None:
+                self._pw = pq.ParquetWriter(self.frames_path, self.schema, compression="zstd")
+            self._pw.write_table(table)
+        except OSError as exc:
+            raise output_error(exc, path=self.frames_path, action="writing a table") from None
         self._t = []
 
     def close(self) -> SinkStats:
