@@ -250,7 +250,8 @@ class DatasetWriter:
         name: str | None,
         protect: Sequence[str | Path] = (),
     ) -> None:
-        self.target = Path(target).absolute()
+        # an edit of a dataset reached through a symlink swaps the real folder, keeping the link
+        self.target = Path(target).resolve() if base is not None else Path(target).absolute()
         self.base = base
         parent = self.target.parent
         if not parent.is_dir():

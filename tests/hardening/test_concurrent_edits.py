@@ -97,3 +97,17 @@ def test_rounds_of_three_concurrent_editors_keep_every_accepted_revision(tmp_pat
     final_tags = history[-1]["objects"]["box"]["tags"]
     assert sorted(final_tags) == sorted(accepted)
     assert accepted and refused  # the race did happen, both ways
+
+
+def test_editing_through_a_symlinked_root_keeps_the_link(tmp_path: Path) -> None:
+    """Issue 19, item 12: the edit used to replace the link by a real folder."""
+    real = _dataset(tmp_path)
+    link = tmp_path / "current"
+    link.symlink_to(real, target_is_directory=True)
+    ds = Dataset.open(link)
+    with ds.edit() as w:
+        w.set_physics({"objects": {"box": {"equation": "rigid", "mass_kg": 0.7}}}, note="x")
+        w.commit()
+    assert link.is_symlink() and link.resolve() == real.resolve()
+    assert Dataset.open(real).physics()["objects"]["box"]["mass_kg"] == 0.7
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["current", "ds"]
