@@ -49,7 +49,7 @@ CASES: list[tuple[str, dict, str, dict]] = [
     ("label_unknown_frame", {}, "T010", {}),
     ("box2d_stamp_offset", {}, "T011", {}),
     ("corrupt_urdf", {}, "G001", {}),
-    ("zero_link_mass", {}, "G002", {}),
+    ("zero_moving_link_mass", {}, "G002", {}),
     ("negative_inertia", {}, "G003", {}),
     ("com_outside_link", {}, "G004", {}),
     ("scale_link_mesh_to_mm", {}, "G005", {}),

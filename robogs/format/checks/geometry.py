@@ -177,6 +177,40 @@ def _moving_links(ctx: CheckContext) -> set[str]:
     return {j.child for j in ctx.urdf().robot.joints if j.type not in ("fixed",)}
 
 
+def _mass(link: Any) -> float | None:
+    """A link's declared mass (kg), or None without an <inertial>/<mass>."""
+    inertial = link.inertial
+    return None if inertial is None or inertial.mass is None else float(inertial.mass)
+
+
+def _bodies(ctx: CheckContext) -> dict[str, tuple[str, bool, float]]:
+    """Per link: (rigid body it belongs to, whether that body moves, the body's mass in kg).
+
+    Links joined by fixed joints form one rigid body, named after its top link; simulators
+    lump them (URDF importers of MuJoCo, PyBullet and Isaac merge fixed children into their
+    parent). A body moves when a non-fixed joint carries its top link; the body at the root
+    is fixed to the world (the robot's base is bolted down, FORMAT.md §4). Its mass is the
+    sum of the positive finite masses of its links.
+    """
+    robot = ctx.urdf().robot
+    parent = {j.child: j for j in robot.joints}
+    top: dict[str, str] = {}
+    for link in robot.links:
+        name = link.name
+        while name in parent and parent[name].type == "fixed":
+            name = parent[name].parent
+        top[link.name] = name
+    mass: dict[str, float] = {}
+    for link in robot.links:
+        m = _mass(link)
+        if m is not None and np.isfinite(m) and m > 0:
+            mass[top[link.name]] = mass.get(top[link.name], 0.0) + m
+    return {
+        link.name: (top[link.name], top[link.name] in parent, mass.get(top[link.name], 0.0))
+        for link in robot.links
+    }
+
+
 @check(
     "G001",
     group="geometry",
@@ -208,30 +242,56 @@ def _urdf_loads(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     title="URDF link masses are positive",
     quantity="link mass",
     unit="kg",
-    hint="give every moving link an <inertial> with mass > 0 kg (not grams)",
+    hint="give every moving body an <inertial> with mass > 0 kg (not grams); massless frame "
+    "links (base, tool0, ee_link) are normal and merge into the body they are fixed to",
 )
 def _link_mass(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    """Graded by consequence: a negative or non-finite mass, or a moving body without any mass,
+    breaks simulation (error); a link of mass 0 fixed to a body that has mass, or to the world,
+    is a frame (note; without <inertial> it is not mentioned); a moving body with no <inertial>
+    at all cannot be simulated (warning)."""
     _robot_or_skip(ctx)
     urdf_rel = ctx.manifest["robot"]["urdf"]
-    moving = _moving_links(ctx)
+    bodies = _bodies(ctx)
     for link in ctx.urdf().robot.links:
-        inertial = link.inertial
-        where = f"link '{link.name}'"
-        if inertial is None or inertial.mass is None:
-            if link.name in moving:
+        m = _mass(link)
+        where = {"file": urdf_rel, "where": f"link '{link.name}'", "link": link.name}
+        top, moving, body_mass = bodies[link.name]
+        if m is not None and (not np.isfinite(m) or m < 0):
+            yield chk.finding(f"mass is {m:g} kg", value=m, budget=0, **where)
+            continue
+        if m is not None and m > 0:
+            continue
+        if moving and body_mass <= 0:
+            if m is None:
                 yield chk.finding(
-                    "moving link has no <inertial>; dynamics cannot be simulated",
+                    f"moving body '{top}' has no <inertial>; dynamics cannot be simulated",
                     severity="warning",
-                    file=urdf_rel,
-                    where=where,
-                    link=link.name,
+                    **where,
+                )
+            else:
+                yield chk.finding(
+                    f"mass is 0 kg and the moving body '{top}' it belongs to has no mass: "
+                    "a simulator cannot integrate it",
+                    value=m,
+                    budget=0,
+                    **where,
                 )
             continue
-        m = float(inertial.mass)
-        if not np.isfinite(m) or m <= 0:
-            yield chk.finding(
-                f"mass is {m:g} kg", value=m, budget=0, file=urdf_rel, where=where, link=link.name
-            )
+        if m is None:
+            continue  # a frame written without <inertial>: the usual spelling, nothing to say
+        lumped = (
+            f"merges into the moving body '{top}' ({body_mass:.4g} kg)"
+            if moving
+            else "is fixed to the world (its mass is not simulated)"
+        )
+        yield chk.finding(
+            f"massless frame link (mass 0 kg): it {lumped}",
+            value=m,
+            budget=0,
+            severity="info",
+            **where,
+        )
 
 
 @check(
@@ -244,18 +304,34 @@ def _link_mass(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     hint="take the inertia from the mesh and density (or a CAD tool); ixx, iyy, izz are > 0 kg m^2",
 )
 def _link_inertia(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    """A link with mass needs a physical inertia (simulators reject the others when they load
+    the model); an all-zero inertia is a note on a massless frame link (G002 says so) or on a
+    body fixed to the world, and an error on a moving body (a point mass cannot rotate)."""
     _robot_or_skip(ctx)
     urdf_rel = ctx.manifest["robot"]["urdf"]
     rel = ctx.budget("geometry.inertia_rel")
+    bodies = _bodies(ctx)
     for link in ctx.urdf().robot.links:
         inertial = link.inertial
         if inertial is None or inertial.inertia is None:
             continue
-        problem = inertia_problem(np.asarray(inertial.inertia), rel)
-        if problem:
+        inertia = np.asarray(inertial.inertia, np.float64)
+        problem = inertia_problem(inertia, rel)
+        if not problem:
+            continue
+        m = _mass(link)
+        where = {"file": urdf_rel, "where": f"link '{link.name}' <inertia>", "link": link.name}
+        zero = inertia.shape == (3, 3) and np.all(inertia == 0)
+        if zero and (m is None or m == 0):
+            continue  # a massless frame link: G002 notes it
+        if zero and not bodies[link.name][1]:
             yield chk.finding(
-                problem, file=urdf_rel, where=f"link '{link.name}' <inertia>", link=link.name
+                problem + "; the link is fixed to the world, so it is not simulated",
+                severity="info",
+                **where,
             )
+            continue
+        yield chk.finding(problem, **where)
 
 
 @check(
@@ -281,10 +357,15 @@ def _link_com(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
         com = T[:3, 3]
         d_mm = com_outside_mm(g.vertices, com)
         if d_mm is not None and d_mm > budget:
+            # a CoM left at the link origin is the URDF default: a placeholder, not a sign or
+            # unit error, and simulation still runs (with approximate gravity torques)
+            at_origin = bool(np.all(com == 0)) and bool(link.visuals)
             yield chk.finding(
-                f"CoM {fmt3(com)} m is {d_mm:.4g} mm outside the link's geometry",
+                f"CoM {fmt3(com)} m is {d_mm:.4g} mm outside the link's geometry"
+                + (" (left at the link origin, the URDF default)" if at_origin else ""),
                 value=d_mm,
                 budget=budget,
+                severity="info" if at_origin else None,
                 file=urdf_rel,
                 where=f"link '{link.name}' <inertial>",
                 link=link.name,
