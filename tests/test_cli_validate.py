@@ -139,3 +139,60 @@ def test_list_checks(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None
     assert main(["validate", "--list-checks", "--markdown", str(md)]) == 0
     catalogue = (Path(__file__).resolve().parents[1] / "spec" / "CHECKS.md").read_text()
     assert md.read_text() in catalogue
+
+
+def test_json_out_equals_json_stdout_in_the_same_run(
+    broken: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "out").mkdir()
+    out = tmp_path / "out" / "report.json"
+    assert main(["validate", str(broken), "--json", "--json-out", str(out)]) == 1
+    assert out.read_text(encoding="utf-8") == capsys.readouterr().out
+    assert [p.name for p in out.parent.iterdir()] == ["report.json"]  # no temporary file left
+
+
+def test_json_out_beside_the_text_output(
+    broken: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One run gives the text report on stdout and the JSON report in the file; the file holds
+    what ``--json`` prints (compared without the run's own wall time)."""
+    out = tmp_path / "report.json"
+    out.write_text("old")
+    assert main(["validate", str(broken), "--json-out", str(out), "--no-progress"]) == 1
+    text = capsys.readouterr().out
+    assert "T003" in text and "errors" in text and not text.lstrip().startswith("{")
+    written = json.loads(out.read_text(encoding="utf-8"))
+    assert main(["validate", str(broken), "--json"]) == 1
+    printed = json.loads(capsys.readouterr().out)
+    for doc in (written, printed):
+        assert doc["summary"].pop("seconds") >= 0.0
+    assert written == printed
+    assert [f["code"] for f in written["findings"]] == ["T003", "P003"]
+
+
+def test_json_out_is_atomic(
+    broken: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A failing write leaves the old file whole and no temporary file; a missing folder is a
+    usage error before anything runs."""
+    import os
+
+    (tmp_path / "out").mkdir()
+    out = tmp_path / "out" / "report.json"
+    out.write_text("old")
+
+    def refuse(src: str, dst: str) -> None:
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", refuse)
+    assert main(["validate", str(broken), "--json-out", str(out), "--no-progress"]) == 2
+    assert "cannot write report" in capsys.readouterr().err
+    assert out.read_text() == "old" and [p.name for p in out.parent.iterdir()] == ["report.json"]
+    monkeypatch.undo()
+    missing = tmp_path / "nowhere" / "r.json"
+    assert main(["validate", str(broken), "--json-out", str(missing), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "does not exist" in err and err.count("\n") == 1 and not missing.parent.exists()

@@ -1,5 +1,5 @@
-"""``robogs-validate`` options: ``--quick`` never loads torch; ``--stride``/``--scale`` reach the
-binding re-render."""
+"""``robogs-validate`` options: ``--quick`` never loads torch; ``--stride``/``--scale``/``--full``/
+``--rerender-budget`` reach the binding re-render."""
 
 from __future__ import annotations
 
@@ -77,9 +77,9 @@ def test_stride_and_scale_reach_the_binding_checks(
     monkeypatch: pytest.MonkeyPatch,
     one_thread: None,
 ) -> None:
-    """B004 reports how many frames it compared: ceil(frames / stride); the re-render grid is
-    the camera's resolution times ``--scale``. An unreachable PSNR floor makes B004 report the
-    clean scene (which otherwise clears it)."""
+    """With ``--full``, B004 reports how many frames it compared: ceil(frames / stride); the
+    re-render grid is the camera's resolution times ``--scale``. An unreachable PSNR floor makes
+    B004 report the clean scene (which otherwise clears it)."""
     built: list[rerender.SceneRerenderer] = []
 
     class Recording(rerender.SceneRerenderer):
@@ -92,9 +92,11 @@ def test_stride_and_scale_reach_the_binding_checks(
     compared = {}
     for stride in (20, 45):
         argv = [str(clean_root), "--select", "B004", "--stride", str(stride), "--scale", "0.25"]
+        argv += ["--full"]
         argv += ["--budget", "binding.psnr_min_db=100"]
         assert validate_main([*argv, "--json", "--no-progress"]) == 0  # a warning, not an error
         doc = json.loads(capsys.readouterr().out)
+        assert doc["summary"]["notes"] == []  # --full leaves nothing out
         (finding,) = [f for f in doc["findings"] if f["code"] == "B004"]
         compared[stride] = int(re.search(r"over (\d+) frames", finding["message"]).group(1))
     assert compared == {20: len(range(0, n, 20)), 45: len(range(0, n, 45))}
@@ -103,6 +105,39 @@ def test_stride_and_scale_reach_the_binding_checks(
     for rr in built:
         assert rr.scale == 0.25
         assert (rr.width, rr.height) == (round(rr.model.width / 4), round(rr.model.height / 4))
+
+
+def test_rerender_budget_reaches_the_binding_checks(
+    clean_root: Path, capsys: pytest.CaptureFixture[str], one_thread: None
+) -> None:
+    """A budget no frame fits in: the pass compares its minimum (6 frames), and the note in
+    the text output and the JSON summary says so, with the budget and ``--full``."""
+    n = _camera_frames(clean_root)
+    argv = [str(clean_root), "--select", "B002", "--rerender-budget", "0.001", "--no-progress"]
+    assert validate_main([*argv, "--json"]) == 0
+    (note,) = json.loads(capsys.readouterr().out)["summary"]["notes"]
+    assert f"labels compared on {rerender.MIN_PASS_FRAMES} of {n} frames" in note
+    assert "the minimum count" in note and "0.001 s re-render budget" in note
+    assert "--full for all" in note
+    assert validate_main(argv) == 0
+    text = " ".join(capsys.readouterr().out.split())  # rich wraps long lines
+    assert "note: binding re-render" in text and f"{rerender.MIN_PASS_FRAMES} of {n} frames" in text
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--rerender-budget", "0"],
+        ["--rerender-budget", "inf"],
+        ["--full", "--rerender-budget", "9"],
+    ],
+)
+def test_bad_budget_options_are_usage_errors(
+    tiny_root: Path, capsys: pytest.CaptureFixture[str], argv: list[str]
+) -> None:
+    assert validate_main([str(tiny_root), *argv, "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "rerender-budget" in err and "Traceback" not in err
 
 
 @pytest.mark.parametrize(
