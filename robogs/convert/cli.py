@@ -49,7 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="ROLE=TOPIC",
-        help="give TOPIC a role, e.g. object_pose:box=/mocap/box/pose or ignore=/rosout",
+        help="give TOPIC a role, e.g. object_pose:box=/mocap/box/pose, ee_pose:tool0=/tip_pose, "
+        "generic=/x (decoded table) or ignore=/rosout; the roles table at the end says why each "
+        "topic got its role",
     )
     g.add_argument("--world-frame", metavar="FRAME", help="TF frame that is the dataset world")
     g.add_argument(
@@ -149,7 +151,35 @@ def _summary(ds, out: Path) -> dict:
         "undecodable": prov.get("undecodable", []),
         "issues": prov.get("issues", []),
         "notes": prov.get("notes", []),
+        "roles": [
+            {
+                "topic": topic,
+                "type": rec.get("type"),
+                "role": rec.get("role"),
+                "messages": rec.get("messages", 0),
+                "written": rec.get("written", 0),
+                "reason": rec.get("reason"),
+            }
+            for topic, rec in sorted((prov.get("topics") or {}).items())
+        ],
+        "decoded": prov.get("decoded"),
+        "packages": (prov.get("robot") or {}).get("packages"),
     }
+
+
+def _print_roles(roles: list[dict]) -> None:
+    """The role of every topic and why it was chosen (override with --topic ROLE=TOPIC)."""
+    rows = [r for r in roles if r.get("reason")]
+    if not rows:
+        return
+    print("  roles (override with --topic ROLE=TOPIC or --map):")
+    w_topic = min(max(len(r["topic"]) for r in rows), 40)
+    w_role = min(max(len(str(r["role"])) for r in rows), 32)
+    for r in rows:
+        print(
+            f"    {r['topic']:<{w_topic}}  {str(r['role']):<{w_role}}  "
+            f"{r['written']}/{r['messages']}  {r['reason']}"
+        )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -235,4 +265,15 @@ def run(args: argparse.Namespace) -> int:
         )
     for n in summary["notes"]:
         print(f"  note: {n}")
+    _print_roles(summary["roles"])
+    dec = summary["decoded"]
+    if dec:
+        print(
+            f"  decoded: {dec['messages']} messages of {dec['topics']} topics, "
+            f"{dec['undecodable']} undecodable"
+            + (f"; custom types: {', '.join(dec['custom_types'])}" if dec["custom_types"] else "")
+            + (f"; ignored: {', '.join(dec['ignored_topics'])}" if dec["ignored_topics"] else "")
+        )
+    for name, pkg in sorted((summary["packages"] or {}).items()):
+        print(f"  package://{name}: {pkg['path']} ({pkg['how']})")
     return 0

@@ -348,7 +348,7 @@ def test_missing_log_and_wrong_suffix(tmp_path, chain3):
 
 
 @pytest.mark.realdata
-def test_real_ur5_urdf_with_and_without_meshes(tmp_path, real_data: Path):
+def test_real_ur5_urdf_with_and_without_meshes(tmp_path, real_data: Path, monkeypatch):
     REAL, UR5_REAL = real_data, real_data / UR5_REL
     generate_armlog(tmp_path / "logs", UR5_REAL, ArmLogSpec(segments=1, duration_s=1.0))
     ds = Dataset.open(
@@ -362,7 +362,17 @@ def test_real_ur5_urdf_with_and_without_meshes(tmp_path, real_data: Path):
     assert _provenance(ds)["robot"]["meshes"] > 0
     assert len(ds.urdf(load_meshes=True).robogs_mesh_refs) > 0
     assert ds.physics()["joints"]["elbow_joint"] == {"damping": 0.0, "friction": 0.0}
-    ds2 = Dataset.open(convert_tabular(tmp_path / "logs", tmp_path / "b", urdf=UR5_REAL))
+    # without --package: found as yourdfpy does (the ancestor that holds the mesh path)
+    ds1 = Dataset.open(convert_tabular(tmp_path / "logs", tmp_path / "b1", urdf=UR5_REAL))
+    pkg = _provenance(ds1)["robot"]["packages"]["example-robot-data"]
+    assert Path(pkg["path"]) == (REAL / "ur5").resolve() and "yourdfpy" in pkg["how"]
+    assert _provenance(ds1)["robot"]["meshes"] == _provenance(ds)["robot"]["meshes"]
+    # a URDF copied away from its meshes: no package anywhere, the URDF is kept without them
+    lone = tmp_path / "lone" / "ur5_robot.urdf"
+    lone.parent.mkdir()
+    lone.write_bytes(UR5_REAL.read_bytes())
+    monkeypatch.setenv("ROS_PACKAGE_PATH", "")
+    ds2 = Dataset.open(convert_tabular(tmp_path / "logs", tmp_path / "b", urdf=lone))
     assert any("meshes not copied" in n for n in _provenance(ds2)["notes"])
     assert ds2.urdf(load_meshes=True).robogs_mesh_refs == []
     table = ds2.episode().table("joint_states")

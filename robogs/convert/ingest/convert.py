@@ -17,7 +17,7 @@ from ..registry import Converter, detect_format, get_converter
 from .context import ConvertOptions, IngestContext
 from .progress import ProgressReporter
 from .provenance import Provenance
-from .robot import attach_robot, attach_robot_description, sibling_packages, urdf_root_link
+from .robot import attach_robot, attach_robot_description, urdf_root_link
 
 __all__ = ["convert_path"]
 
@@ -88,8 +88,9 @@ def convert_path(
         if opts.urdf is not None:
             attach_robot(ctx, opts.urdf, package_roots=opts.package_roots)
         elif ctx.robot_description:
-            roots = {**sibling_packages(src, ctx.robot_description), **(opts.package_roots or {})}
-            attach_robot_description(ctx, ctx.robot_description, package_roots=roots or None)
+            attach_robot_description(
+                ctx, ctx.robot_description, package_roots=opts.package_roots or None, source=src
+            )
         else:
             prov.note("no robot: pass --urdf to add one (the source has no robot_description)")
         if ctx.streams:

@@ -2,6 +2,9 @@
 
 Mesh URIs (``package://NAME/...`` or relative) are resolved with
 :func:`robogs.format.urdf.resolve_mesh_uri`, which refuses anything outside the allowed roots.
+The folder of each ``package://NAME`` is ``--package NAME=DIR`` when given, else found the way ROS
+and yourdfpy find it (:mod:`robogs.convert.ingest.packages`); where each package and each mesh
+was found is recorded in ``provenance.robot``.
 Each mesh is copied under ``robot/meshes/`` keeping its path relative to the deepest folder
 common to all meshes, and the copied URDF refers to it by that relative path, so the dataset
 is self-contained. Image textures of COLLADA meshes are copied along, at the same place relative
@@ -23,6 +26,7 @@ from robogs.format.urdf import mesh_refs, parse_urdf_robot, resolve_mesh_uri
 
 from .context import IngestContext
 from .dae_textures import dae_texture_refs, texture_uri
+from .packages import PackageRoot, find_packages, package_uris
 
 __all__ = ["attach_robot", "attach_robot_description", "sibling_packages", "urdf_root_link"]
 
@@ -45,9 +49,21 @@ def _safe_parse(path: Path) -> etree._ElementTree:
 
 
 def attach_robot(
-    ctx: IngestContext, urdf_path: Path, *, package_roots: dict[str, Path] | None = None
+    ctx: IngestContext,
+    urdf_path: Path,
+    *,
+    package_roots: dict[str, Path] | None = None,
+    search_from: Path | None = None,
+    known: dict[str, PackageRoot] | None = None,
 ) -> None:
     """Copy ``urdf_path`` and every mesh it uses into the dataset; declare the robot.
+
+    Args:
+        ctx: the conversion context.
+        urdf_path: the URDF file.
+        package_roots: ``--package NAME=DIR`` folders (they win over any search).
+        search_from: folder whose ancestors are searched for packages (default: the URDF's).
+        known: packages found beforehand (e.g. beside the source), tried before the search.
 
     Raises:
         RobogsError: malformed URDF, mesh URI escaping its root, missing mesh file.
@@ -56,7 +72,14 @@ def attach_robot(
     if not urdf_path.is_file():
         raise InputError("URDF file not found", path=urdf_path)
     robot = parse_urdf_robot(urdf_path)
-    roots = {k: str(v) for k, v in (package_roots or {}).items()}
+    uris = package_uris("\n".join(ref.uri for ref in mesh_refs(robot)))
+    found = find_packages(
+        uris,
+        urdf_path.resolve().parent if search_from is None else search_from,
+        explicit=package_roots,
+        known=known,
+    )
+    roots = {k: str(v.path) for k, v in found.items()}
     resolved: dict[str, Path] = {}
     for ref in mesh_refs(robot):
         if ref.uri in resolved:
@@ -68,7 +91,7 @@ def attach_robot(
                 exc.message,
                 path=urdf_path,
                 where=f"link {ref.link} mesh {ref.uri}",
-                hint=exc.hint or "pass --package NAME=FOLDER for package:// URIs",
+                hint=_package_hint(exc.hint, ref.uri, found),
             ) from None
         if not p.is_file():
             raise InputError(
@@ -104,6 +127,25 @@ def attach_robot(
         "textures": len(textures),
         "root_link": root,
     }
+    if found:
+        ctx.provenance.extra["robot"]["packages"] = {k: v.to_dict() for k, v in found.items()}
+        ctx.provenance.extra["robot"]["mesh_files"] = {
+            u: str(p) for u, p in sorted(resolved.items())
+        }
+        for name, pkg in sorted(found.items()):
+            if pkg.how != "--package":
+                ctx.provenance.note(f"package://{name} found at {pkg.path} ({pkg.how})")
+
+
+def _package_hint(hint: str | None, uri: str, found: dict[str, PackageRoot]) -> str:
+    """The hint for a mesh URI that did not resolve."""
+    name = uri[len("package://") :].split("/", 1)[0] if uri.startswith("package://") else None
+    if name and name not in found:
+        return (
+            f"package {name!r} is neither among the URDF's ancestors nor on ROS_PACKAGE_PATH; "
+            f"pass --package {name}=FOLDER"
+        )
+    return hint or "pass --package NAME=FOLDER for package:// URIs"
 
 
 def _textures(
@@ -146,14 +188,33 @@ def sibling_packages(source: Path, text: str) -> dict[str, Path]:
 
 
 def attach_robot_description(
-    ctx: IngestContext, text: str, *, package_roots: dict[str, Path] | None = None
+    ctx: IngestContext,
+    text: str,
+    *,
+    package_roots: dict[str, Path] | None = None,
+    source: Path | None = None,
 ) -> bool:
-    """Use a ``/robot_description`` URDF string; returns False (with a note) when unusable."""
+    """Use a ``/robot_description`` URDF string; returns False (with a note) when unusable.
+
+    Packages are looked for beside ``source`` (:func:`sibling_packages`), then among its
+    ancestors and on ``ROS_PACKAGE_PATH``; ``package_roots`` win."""
+    known = None
+    if source is not None:
+        known = {
+            n: PackageRoot(n, p, "beside the source")
+            for n, p in sibling_packages(source, text).items()
+        }
     with tempfile.TemporaryDirectory(prefix="robogs-urdf-") as tmp:
         path = Path(tmp) / "robot_description.urdf"
         path.write_text(text, encoding="utf-8")
         try:
-            attach_robot(ctx, path, package_roots=package_roots)
+            attach_robot(
+                ctx,
+                path,
+                package_roots=package_roots,
+                search_from=Path(source).resolve().parent if source is not None else Path(tmp),
+                known=known,
+            )
         except RobogsError as exc:
             ctx.writer.remove("robot")
             ctx.provenance.note(

@@ -139,6 +139,8 @@ class ColumnMap:
         gap_s: segment split threshold (None: automatic).
         hold: joints not in the log -> their constant position (rad or m).
         ee_pose: recorded end-effector pose columns (None: none).
+        time_from: how the time unit was chosen (the map, the column name, or a guess).
+        segment_column: column whose value names each row's trajectory (None: none).
     """
 
     layout: str
@@ -150,6 +152,8 @@ class ColumnMap:
     gap_s: float | None = None
     hold: dict[str, float] = field(default_factory=dict)
     ee_pose: EePoseColumns | None = None
+    time_from: str = "the map"
+    segment_column: str | None = None
 
     def columns(self) -> list[str]:
         """Every source column used (time first, end-effector pose columns last)."""
@@ -164,7 +168,12 @@ class ColumnMap:
         """JSON-ready description for the provenance."""
         out: dict[str, Any] = {
             "layout": self.layout,
-            "time": {"column": self.time_column, "unit": self.time_unit, "epoch_ns": self.epoch_ns},
+            "time": {
+                "column": self.time_column,
+                "unit": self.time_unit,
+                "epoch_ns": self.epoch_ns,
+                "unit_from": self.time_from,
+            },
             "effort_kind": self.effort_kind,
             "joints": {
                 j: {
@@ -185,6 +194,8 @@ class ColumnMap:
             out["hold"] = dict(self.hold)
         if self.ee_pose is not None:
             out["ee_pose"] = self.ee_pose.to_dict()
+        if self.segment_column is not None:
+            out["segment_column"] = self.segment_column
         return out
 
 
@@ -430,68 +441,99 @@ def _mismatch(path: Path, found: list[str], joint_names: list[str], layout: str)
     )
 
 
+#: time columns by name, in order of preference: (name, unit; "auto" = guessed from the values)
+_TIME_COLUMNS = (
+    *(
+        (f"{b}_{u}", u)
+        for u in ("ns", "us", "ms", "s")
+        for b in ("t", "time", "timestamp", "stamp")
+    ),
+    ("time", "auto"),
+    ("timestamp", "auto"),
+    ("t", "auto"),
+    ("stamp", "auto"),
+)
+#: columns that name a trajectory; consecutive rows with one value form one segment
+SEGMENT_COLUMNS = ("segment", "episode", "trajectory")
+_IDX = r"(?:_|\.|\[)?(\d+)\]?"
+_PRE = r"(?:field\.)?"  # rostopic echo -p / rosbag CSV exports
+#: per-joint columns by index, most specific layout first: (layout, kind, base-name pattern)
+_INDEXED = (
+    ("rtde", "position", "actual_q"),
+    ("rtde", "velocity", "actual_qd"),
+    ("rtde", "effort", "target_moment"),
+    ("franka", "effort", "tau_J"),
+    ("generic", "position", "q|pos|position|joint_pos|joint_position"),
+    ("generic", "velocity", "qd|dq|vel|velocity|joint_vel|joint_velocity"),
+    ("generic", "effort", "tau|effort|torque|joint_effort|joint_torque"),
+)
+
+
+def _indexed_family(names: set[str], base: str) -> dict[int, str]:
+    return _indexed(names, _PRE + f"(?:{base})" + _IDX)
+
+
+def _zero_based(cols: dict[int, str]) -> dict[int, str]:
+    """Indices shifted to start at 0 when they run 1..n (``q1..q6``)."""
+    if cols and min(cols) == 1 and sorted(cols) == list(range(1, len(cols) + 1)):
+        return {k - 1: v for k, v in cols.items()}
+    return cols
+
+
 def auto_mapping(columns: list[str], joint_names: list[str], path: Path) -> ColumnMap:
-    """Guess the mapping from a header (RTDE, Franka-like or generic layouts).
+    """Guess the mapping from a header (UR RTDE, Franka, generic indexed or named layouts).
+
+    Time: the first of ``t_ns``/``t_us``/``t_ms``/``t_s`` (and ``time_*``, ``timestamp_*``,
+    ``stamp_*``) with the unit its name says, else ``time``/``timestamp``/``t``/``stamp`` with
+    the unit ``auto`` (guessed from the values by :func:`guess_time_unit`). Joints by index:
+    ``actual_q_i``/``actual_qd_i``/``target_moment_i`` (RTDE), ``q``/``dq``/``qd``/``tau_J``
+    (Franka), ``q``/``pos``/``qd``/``dq``/``vel``/``tau``/``effort``/``torque`` with ``i`` from
+    0 or 1 and ``_``, ``.`` or ``[i]`` before it (``q1``, ``qd_1``, ``tau[0]``), in URDF joint
+    order; or by joint name (``position.<j>``, ``q_<j>``, ...).
 
     Raises:
-        InputError: no layout matches, or the joints do not match the URDF (both sets listed).
+        InputError: no time or position column, or the joints do not match the URDF (both sets
+            listed).
     """
     names = set(columns)
     nj = len(joint_names)
-
-    def by_index(layout, tcol, tunit, pos, vel, eff) -> ColumnMap:
-        if sorted(pos) != list(range(len(pos))) or len(pos) != nj:
-            raise _mismatch(path, [pos[k] for k in sorted(pos)], joint_names, layout)
-        joints = {}
-        for i, j in enumerate(joint_names):
-            joints[j] = JointColumns(
-                pos[i],
-                vel.get(i),
-                eff.get(i),
-                units={"position": "rad"}
-                | ({"velocity": "rad/s"} if i in vel else {})
-                | ({"effort": "N m"} if i in eff else {}),
-            )
-        if len(vel) != nj:
-            for jc in joints.values():
-                jc.velocity = None
-                jc.units.pop("velocity", None)
-        if len(eff) != nj:
-            for jc in joints.values():
-                jc.effort = None
-                jc.units.pop("effort", None)
-        return ColumnMap(layout, tcol, tunit, joints)
-
-    if "timestamp" in names and _indexed(names, r"actual_q_(\d+)"):
-        return by_index(
-            "rtde",
-            "timestamp",
-            "s",
-            _indexed(names, r"actual_q_(\d+)"),
-            _indexed(names, r"actual_qd_(\d+)"),
-            _indexed(names, r"target_moment_(\d+)"),
-        )
-    tcol, tunit = None, None
-    for c, u in (("t_ns", "ns"), ("time", "s"), ("t", "s"), ("timestamp", "s"), ("stamp", "s")):
-        if c in names:
-            tcol, tunit = c, u
-            break
-    if tcol is not None and _indexed(names, r"q(\d+)") and tcol == "time":
-        return by_index(
-            "franka",
-            tcol,
-            tunit,
-            _indexed(names, r"q(\d+)"),
-            _indexed(names, r"dq(\d+)"),
-            _indexed(names, r"tau_J(\d+)"),
-        )
+    tcol, tunit = next(((c, u) for c, u in _TIME_COLUMNS if c in names), (None, None))
     if tcol is None:
         raise InputError(
-            "no time column found (looked for t_ns, time, t, timestamp, stamp)",
+            "no time column found (looked for t_ns, t_us, t_ms, t_s, time, timestamp, t, stamp)",
             path=path,
             where="header",
             hint="pass --map MAP.yaml naming the time column and its unit",
         )
+    fams: dict[str, dict[int, str]] = {}
+    layout = "generic"
+    for lay, kind, base in _INDEXED:
+        if kind in fams:
+            continue
+        cols = _zero_based(_indexed_family(names, base))
+        if cols:
+            fams[kind] = cols
+            if lay != "generic" and layout == "generic":
+                layout = lay
+    if "position" in fams:
+        pos, vel, eff = fams["position"], fams.get("velocity", {}), fams.get("effort", {})
+        if sorted(pos) != list(range(len(pos))) or len(pos) != nj:
+            raise _mismatch(path, [pos[k] for k in sorted(pos)], joint_names, layout)
+        joints = {}
+        has_v = sorted(vel) == list(range(nj))
+        has_e = sorted(eff) == list(range(nj))
+        for i, j in enumerate(joint_names):
+            joints[j] = JointColumns(
+                pos[i],
+                vel[i] if has_v else None,
+                eff[i] if has_e else None,
+                units={"position": "rad"}
+                | ({"velocity": "rad/s"} if has_v else {})
+                | ({"effort": "N m"} if has_e else {}),
+            )
+        if layout == "rtde" and tcol == "timestamp":
+            tunit = "s"  # RTDE's timestamp is seconds since the controller started
+        return ColumnMap(layout, tcol, tunit or "s", joints)
     pos_pat = r"(?:position\.|q_|pos_)(.+)"
     vel_pat = r"(?:velocity\.|qd_|dq_|vel_)(.+)"
     eff_pat = r"(?:effort\.|tau_|effort_)(.+)"
@@ -503,19 +545,11 @@ def auto_mapping(columns: list[str], joint_names: list[str], path: Path) -> Colu
     pos, vel, eff = named(pos_pat), named(vel_pat), named(eff_pat)
     if not pos:
         raise InputError(
-            "no joint position columns found (position.<joint>, q_<joint>, pos_<joint>)",
+            "no joint position columns found (actual_q_<i>, q<i>, q_<i>, pos_<i>, "
+            "position.<joint>, q_<joint>, pos_<joint>)",
             path=path,
             where="header",
             hint="pass --map MAP.yaml naming the columns",
-        )
-    if all(k.isdigit() for k in pos):
-        return by_index(
-            "generic",
-            tcol,
-            tunit,
-            {int(k): v for k, v in pos.items()},
-            {int(k): v for k, v in vel.items() if k.isdigit()},
-            {int(k): v for k, v in eff.items() if k.isdigit()},
         )
     if set(pos) != set(joint_names):
         raise _mismatch(path, sorted(pos), joint_names, "generic")
@@ -532,7 +566,44 @@ def auto_mapping(columns: list[str], joint_names: list[str], path: Path) -> Colu
         )
         for j in joint_names
     }
-    return ColumnMap("generic", tcol, tunit, joints)
+    return ColumnMap("generic", tcol, tunit or "s", joints)
+
+
+#: (unit, seconds per unit) for the time-unit guess
+_UNITS_S = (("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9))
+
+
+def guess_time_unit(values: np.ndarray) -> tuple[str, str]:
+    """The unit of a time column from its values, and why (a phrase for the provenance).
+
+    Unix-epoch stamps are recognised by magnitude (2001..2286 is 1e9..1e10 s, 1e12..1e13 ms,
+    1e15..1e16 us, 1e18..1e19 ns). Otherwise the unit is the one whose median step gives a
+    sampling rate between 1 Hz and 20 kHz closest (in log scale) to 200 Hz, typical of arm logs.
+
+    Raises:
+        ValueError: fewer than two distinct finite values.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    steps = np.diff(v)
+    steps = steps[steps > 0]
+    if v.size < 2 or steps.size == 0:
+        raise ValueError("fewer than two increasing stamps")
+    first = float(np.median(np.abs(v[: min(v.size, 101)])))
+    for unit, lo in (("s", 1e9), ("ms", 1e12), ("us", 1e15), ("ns", 1e18)):
+        if lo <= first < 10 * lo:
+            return unit, f"Unix-epoch values near {first:.4g}"
+    dt = float(np.median(steps))
+    best: tuple[float, str, float] | None = None
+    for unit, sec in _UNITS_S:
+        rate = 1.0 / (dt * sec)
+        if 1.0 <= rate <= 20_000.0:
+            score = abs(math.log10(rate) - math.log10(200.0))
+            if best is None or score < best[0]:
+                best = (score, unit, rate)
+    if best is None:
+        raise ValueError(f"median step {dt:g} gives no sampling rate between 1 Hz and 20 kHz")
+    return best[1], f"median step {dt:g} -> {best[2]:.4g} Hz"
 
 
 # ----------------------------------------------------------------------------- reading
@@ -745,6 +816,7 @@ class LogSegment:
     effort_joints: list[str] = field(default_factory=list)
     ee_t_ns: np.ndarray | None = None
     ee: np.ndarray | None = None
+    name: str | None = None
 
 
 @dataclass
@@ -808,6 +880,8 @@ def _clean_file(
     upper: np.ndarray,
     gap_s: float | None,
 ) -> tuple[list[LogSegment], _FileReport]:
+    """Clean one file's rows and cut them into segments: at every change of the
+    ``segment_column`` value (time may restart there) and at forward time gaps."""
     report = _FileReport(rows=len(raw.lines) + sum(len(v) for v in raw.dropped.values()))
     for reason, lns in raw.dropped.items():
         report.drop(reason, lns)
@@ -882,10 +956,16 @@ def _clean_file(
         raise InputError(
             "no usable row", path=path, hint="every row was dropped; see the provenance reasons"
         )
-    # stamps: drop duplicates and samples that go back (kept order is the file order)
+    # stamps: drop duplicates and samples that go back (kept order is the file order), within
+    # each named trajectory when a segment column names them
     t_k = t_ns[idx]
-    run_max = np.maximum.accumulate(t_k)
-    prev_max = np.concatenate([[np.iinfo(np.int64).min], run_max[:-1]])
+    group = _group_ids(raw, cmap.segment_column)
+    g_k = group[idx]
+    prev_max = np.full(len(t_k), np.iinfo(np.int64).min)
+    for g in np.unique(g_k):
+        sel = np.flatnonzero(g_k == g)
+        run_max = np.maximum.accumulate(t_k[sel])
+        prev_max[sel[1:]] = run_max[:-1]
     dup = t_k == prev_max
     back = t_k < prev_max
     if back.sum() > max(_MAX_BACK_FRACTION * len(t_k), 2):
@@ -902,6 +982,7 @@ def _clean_file(
         report.drop("stamp earlier than the previous sample", lines[idx[back]])
     idx = idx[~dup & ~back]
     t_k = t_ns[idx]
+    g_k = group[idx]
     cols = [k for k, j in enumerate(joint_names) if j in cmap.joints]
     _check_degrees(
         path, cmap, q[idx][:, cols], lines[idx], lower[cols], upper[cols], logged, report
@@ -910,7 +991,8 @@ def _clean_file(
     steps = np.diff(t_k)
     med = float(np.median(steps)) if len(steps) else 0.0
     gap_ns = int((gap_s if gap_s is not None else max(1.0, 50 * med * 1e-9)) * 1e9)
-    cuts = np.flatnonzero(steps > gap_ns) + 1
+    named = np.diff(g_k) != 0
+    cuts = np.flatnonzero((steps > gap_ns) | named) + 1
     bounds = np.concatenate([[0], cuts, [len(idx)]])
     segments: list[LogSegment] = []
     from robogs.format.differentiate import savgol_derivative
@@ -941,14 +1023,41 @@ def _clean_file(
                 logged if tau is not None else [],
                 t_ns[ee_sel] if ee_sel is not None else None,
                 ee[ee_sel] if ee_sel is not None and ee is not None else None,
+                _group_name(raw, cmap.segment_column, sel[0]),
             )
         )
         report.written += len(sel)
-    if len(cuts):
+    n_gaps = int((steps > gap_ns).sum())
+    if n_gaps:
         report.notes.append(
-            f"{len(cuts)} time gap(s) over {gap_ns / 1e9:g} s split the file into {len(bounds) - 1} segments"
+            f"{n_gaps} time gap(s) over {gap_ns / 1e9:g} s split the file into {len(bounds) - 1} segments"
+        )
+    if cmap.segment_column is not None:
+        report.notes.append(
+            f"column {cmap.segment_column!r} names {len(np.unique(g_k))} trajectories; each "
+            "becomes its own episode(s), with its name as the segment"
         )
     return segments, report
+
+
+def _group_ids(raw: _Raw, column: str | None) -> np.ndarray:
+    """[N] int: the run number of each row's segment value (0 everywhere without a column)."""
+    n = len(raw.lines)
+    if column is None:
+        return np.zeros(n, dtype=np.int64)
+    vals = np.char.strip(np.asarray(raw.data[column]).astype(str))
+    change = np.concatenate([[False], vals[1:] != vals[:-1]]) if n else np.zeros(0, bool)
+    return np.cumsum(change).astype(np.int64)
+
+
+def _group_name(raw: _Raw, column: str | None, row: int) -> str | None:
+    """The segment value of a row (None without a segment column)."""
+    if column is None:
+        return None
+    v = str(raw.data[column][row]).strip()
+    if v.endswith(".0") and v[:-2].lstrip("-").isdigit():  # 3.0 from a float column
+        v = v[:-2]
+    return v or "unnamed"
 
 
 # ----------------------------------------------------------------------------- dataset
@@ -1079,6 +1188,32 @@ def _attach_robot(writer, urdf_path: Path, package_roots: dict[str, Path] | None
     prov.extra["robot"] = {"urdf": urdf_path.name, "meshes": 0, "root_link": root}
 
 
+def _resolve_time(path: Path, raw: _Raw, cmap: ColumnMap, prov) -> None:
+    """Settle the time unit of an automatic mapping (from its name, or guessed) and say so."""
+    if cmap.layout == "map":
+        return
+    if cmap.time_unit == "auto":
+        col = raw.data.get(cmap.time_column)
+        try:
+            unit, why = guess_time_unit(_to_float(col)[0] if col is not None else np.zeros(0))
+        except ValueError as exc:
+            raise InputError(
+                f"cannot tell the unit of time column {cmap.time_column!r} ({exc})",
+                path=path,
+                where=f"column {cmap.time_column!r}",
+                hint="name it t_s, t_ms, t_us or t_ns, or pass --map with time: {column, unit}",
+            ) from None
+        cmap.time_unit, cmap.time_from = unit, f"guessed: {why}"
+    elif cmap.layout == "rtde" and cmap.time_column == "timestamp":  # unit set by auto_mapping
+        cmap.time_from = "UR RTDE timestamp (s)"
+    else:
+        cmap.time_from = f"column name {cmap.time_column!r}"
+    prov.note(
+        f"{path.name}: time column {cmap.time_column!r} read in {cmap.time_unit} "
+        f"({cmap.time_from}); a map with 'time: {{column, unit}}' overrides it"
+    )
+
+
 def write_tabular(
     writer,
     log_path: Path,
@@ -1131,6 +1266,9 @@ def write_tabular(
             if fixed_map is not None:
                 cmap.hold, cmap.gap_s = dict(hold), fixed_map.gap_s
                 cmap.ee_pose = ee_spec
+        _resolve_time(f, raw, cmap, prov)
+        if cmap.segment_column is None:
+            cmap.segment_column = next((c for c in SEGMENT_COLUMNS if c in raw.data), None)
         maps[f.name] = cmap.to_dict()
         segs, rep = _clean_file(
             f, raw, cmap, joint_names, lower, upper, gap_s if gap_s is not None else cmap.gap_s
@@ -1178,8 +1316,18 @@ def write_tabular(
                 f"{f.name}: joints not in the log, held at a constant position (rad or m): "
                 + ", ".join(f"{j} = {v:g}" for j, v in hold.items())
             )
+        named: dict[str | None, int] = {}
         for seg in segs:
-            eid = _episode_id(f.stem, seg.index, len(segs), used)
+            named[seg.name] = named.get(seg.name, 0) + 1
+        seen: dict[str | None, int] = {}
+        for seg in segs:
+            if seg.name is None:
+                eid = _episode_id(f.stem, seg.index, len(segs), used)
+                segment = f"{f.name}#{seg.index}"
+            else:
+                k = seen[seg.name] = seen.get(seg.name, -1) + 1
+                eid = _episode_id(seg.name, k, named[seg.name], used)
+                segment = seg.name
             rel = f"episodes/{eid}/joint_states.parquet"
             writer.write_table(rel, _joint_table(seg, joint_names), kind="joint_states")
             ee_streams: dict[str, Any] = {}
@@ -1217,7 +1365,7 @@ def write_tabular(
                 start_ns=int(seg.t_ns[0]),
                 end_ns=int(seg.t_ns[-1]),
                 streams={"joint_states": stream, **ee_streams},
-                segment=f"{f.name}#{seg.index}",
+                segment=segment,
             )
             written.append(eid)
     if not written:
