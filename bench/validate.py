@@ -1,7 +1,15 @@
-"""Validation speed on a 10-minute episode: ``--quick`` and full (no re-rendering).
+"""Validation speed: the synthetic scenes (small, medium, large) and a 10-minute episode.
 
-Builds, in a temp folder outside the repository, a dataset with one 10-minute
-episode: joint states at 500 Hz (6 joints, positions and velocities), a 30 fps
+**Scenes** (default): for each ``--sizes`` entry, ``robogs synth OUT --size SIZE`` in a temp
+folder, then ``robogs-validate OUT --json`` as a child process (the user's command: imports,
+torch, every check, the binding re-render within its default time budget), timed for wall
+time, child CPU time and peak RSS, against the in-run baseline: a plain pyarrow
+``read_table`` of every parquet table of the same dataset (and the manifest). ``--full-sizes``
+also times ``--full`` (every frame re-rendered) for those sizes. The machine's load average
+is recorded before and after each run: the bench machine may be shared.
+
+**Long episode** (``--long-episode``): builds, in a temp folder outside the repository, a
+dataset with one 10-minute episode: joint states at 500 Hz (6 joints, positions and velocities), a 30 fps
 frame index, 640x480 panoptic label images (a pool of simple moving-rectangle
 images, repeated), 2D boxes derived from them, segments and a 6-joint URDF. Then
 it times, in this process after a warm-up import:
@@ -11,7 +19,10 @@ it times, in this process after a warm-up import:
 * ``validate()`` (target <= 30 s) against a baseline that reads every parquet
   file with ``pyarrow.parquet.read_table`` (bodies, no PNG decoding).
 
-Usage: ``PYTHONPATH=. .venv/bin/python -W ignore bench/validate.py [--minutes 10] [--threads 2] [--append]``
+Usage::
+
+    PYTHONPATH=. .venv/bin/python -W ignore bench/validate.py --sizes small,medium [--full-sizes small] [--threads 2] [--append]
+    PYTHONPATH=. .venv/bin/python -W ignore bench/validate.py --long-episode [--minutes 10] [--threads 2] [--append]
 """
 
 from __future__ import annotations
@@ -21,6 +32,7 @@ import json
 import os
 import platform
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -237,13 +249,165 @@ def _decode_floor(root: Path, sample: int = 1000) -> float:
     return (time.perf_counter() - t) / len(blobs) * pf.metadata.num_rows
 
 
+REPO = Path(__file__).resolve().parents[1]
+#: what ``robogs synth --size`` makes (its help text)
+SIZES = {"small": "4 s 160x120", "medium": "20 s 320x240", "large": "60 s 640x480"}
+
+
+def _child(cmd: list[str]) -> tuple[float, float, int, int, str]:
+    """Run ``cmd``: wall s, its own CPU s (user + sys), peak RSS (kB), exit code, stderr tail.
+
+    ``os.wait4`` gives the resource usage of this one child (not of every child so far).
+    """
+    with tempfile.TemporaryFile() as err:
+        t = time.perf_counter()
+        proc = subprocess.Popen(
+            cmd,
+            stdout=subprocess.DEVNULL,
+            stderr=err,
+            env={**os.environ, "PYTHONPATH": str(REPO), "PYTHONWARNINGS": "ignore"},
+            cwd=REPO,
+        )
+        _pid, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        err.seek(0)
+        tail = err.read().decode("utf-8", "replace").strip()[-300:]
+    return wall, usage.ru_utime + usage.ru_stime, int(usage.ru_maxrss), proc.returncode, tail
+
+
+def _robogs(*args: str) -> list[str]:
+    return [
+        sys.executable,
+        "-c",
+        "import sys; from robogs.cli.main import main; sys.exit(main())",
+        *args,
+    ]
+
+
+def _camera_frames(root: Path) -> str:
+    m = json.loads((root / "manifest.json").read_text())
+    out = []
+    for ep in m["episodes"]:
+        for st in ep["streams"].values():
+            if st.get("kind") == "camera":
+                import pyarrow.parquet as pq
+
+                out.append(str(pq.read_metadata(root / st["frames"]).num_rows))
+    return "+".join(out) or "0"
+
+
+def bench_scenes(args: argparse.Namespace) -> list[str]:
+    """Synthesise and validate each size; one line per run."""
+    sizes = [s.strip() for s in args.sizes.split(",") if s.strip()]
+    full = {s.strip() for s in args.full_sizes.split(",") if s.strip()}
+    for s in [*sizes, *full]:
+        if s not in SIZES:
+            raise SystemExit(f"unknown size {s!r}; choose from {', '.join(SIZES)}")
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover
+        cores = os.cpu_count() or 1
+    lines = [
+        f"machine: {platform.machine()} {platform.processor() or ''}".rstrip()
+        + f", cpu_count={os.cpu_count()}, usable cores={cores}, python {platform.python_version()}; "
+        f"robogs-validate --threads {args.threads} (torch, OpenMP, BLAS, label decoder)"
+    ]
+    tmp = Path(tempfile.mkdtemp(prefix="robogs-bench-validate-"))
+    try:
+        for size in sizes:
+            root = tmp / size
+            wall, cpu, _rss, proc = _child(
+                _robogs(
+                    "--threads", str(args.threads), "synth", str(root), "--size", size, "--quiet"
+                ),
+                args.threads,
+            )
+            if proc.returncode != 0:
+                lines.append(f"{size}: synth failed: {proc.stderr.strip()[-300:]}")
+                continue
+            mb = sum(p.stat().st_size for p in root.rglob("*") if p.is_file()) / 1e6
+            lines.append(
+                f"{size} ({SIZES[size]}, {_camera_frames(root)} camera frames, {mb:.1f} MB): "
+                f"synthesised in {wall:.1f} s"
+            )
+            _baseline_full(root)  # warm the page cache for both sides
+            base = min(_baseline_full(root) for _ in range(3))
+            modes = [("default", [])] + ([("--full", ["--full"])] if size in full else [])
+            for label, extra in modes:
+                load0 = os.getloadavg()[0]
+                out = tmp / f"{size}{label.strip('-')}.json"
+                cmd = _robogs(
+                    "--threads",
+                    str(args.threads),
+                    "validate",
+                    str(root),
+                    "--no-progress",
+                    "--json-out",
+                    str(out),
+                    *extra,
+                )
+                wall, cpu, rss, proc = _child(cmd, args.threads)
+                load1 = os.getloadavg()[0]
+                if proc.returncode not in (0, 1) or not out.exists():
+                    lines.append(
+                        f"  {label}: validate failed ({proc.returncode}): {proc.stderr.strip()[-300:]}"
+                    )
+                    continue
+                summary = json.loads(out.read_text())["summary"]
+                counts = summary["counts"]
+                lines.append(
+                    f"  validate {label}: {wall:.2f} s wall, {cpu:.2f} s CPU, peak RSS "
+                    f"{rss / 1024:.0f} MB; in-run baseline pyarrow read_table of "
+                    f"every table {base * 1e3:.1f} ms; ratio {wall / base:.0f}x; "
+                    f"{summary['checks_run']} checks, {counts['error']} errors, {counts['warning']} warnings; "
+                    f"load average {load0:.1f} -> {load1:.1f}"
+                )
+                for note in summary.get("notes", []):
+                    lines.append(f"    note: {note}")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="small,medium,large", help="synthetic scenes to validate")
+    ap.add_argument("--full-sizes", default="", help="sizes also validated with --full")
+    ap.add_argument("--long-episode", action="store_true", help="the 10-minute episode bench")
     ap.add_argument("--minutes", type=float, default=10.0)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--append", action="store_true", help="append the result to bench/RESULTS.md")
     args = ap.parse_args(argv)
+    if not args.long_episode:
+        lines = bench_scenes(args)
+        print("\n".join(lines))
+        if args.append:
+            _append(
+                "validate — robogs-validate on the synthetic scenes, default time budget",
+                argv,
+                lines,
+            )
+        return 0
+    return long_episode(args, argv)
 
+
+def _append(title: str, argv: list[str] | None, lines: list[str]) -> None:
+    import datetime
+
+    cmd = "PYTHONPATH=. .venv/bin/python -W ignore bench/validate.py " + " ".join(
+        argv if argv is not None else sys.argv[1:]
+    )
+    text = (
+        f"\n## {title} ({datetime.date.today().isoformat()})\n\n"
+        f"Command: `{cmd.strip()}`\n\n```\n" + "\n".join(lines) + "\n```\n"
+    )
+    with open(Path(__file__).resolve().parent / "RESULTS.md", "a", encoding="utf-8") as fh:
+        fh.write(text)
+
+
+def long_episode(args: argparse.Namespace, argv: list[str] | None) -> int:
+    """The 10-minute episode: ``--quick`` and full validation (no splats: no re-render)."""
     t = time.perf_counter()
     import torch
 
@@ -264,8 +428,6 @@ def main(argv: list[str] | None = None) -> int:
         t = time.perf_counter()
         rq = validate(root, quick=True, label_threads=args.threads)
         quick_s = time.perf_counter() - t
-        import subprocess
-
         cli = [
             sys.executable,
             "-W",
@@ -315,15 +477,9 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"finding: {f.code} {f.severity} {f.message}")
     print("\n".join(lines))
     if args.append:
-        cmd = "PYTHONPATH=. .venv/bin/python -W ignore bench/validate.py " + " ".join(
-            argv or sys.argv[1:]
+        _append(
+            f"validate — robogs-validate speed on a {args.minutes:g}-minute episode", argv, lines
         )
-        text = (
-            f"\n## validate — robogs-validate speed on a 10-minute episode (2026-11-22)\n\n"
-            f"Command: `{cmd.strip()}`\n\n```\n" + "\n".join(lines) + "\n```\n"
-        )
-        with open(Path(__file__).resolve().parent / "RESULTS.md", "a", encoding="utf-8") as fh:
-            fh.write(text)
     return 0
 
 

@@ -124,17 +124,23 @@ def test_fake_cost_chooses_8_of_120_frames_and_2_fit_frames_and_says_so(
     synth_scene: Path,
 ) -> None:
     """Default budget 4 s, one camera: the pass gets 1.6 s (8 frames at 0.2 s), the fit 2.4 s
-    (1.5 frames at 8 renders of 0.2 s: the minimum, 2). The clean scene stays clean."""
-    findings, ctx = _run(synth_scene, ["B002", "B003", "B004", "B005", "B006"], frame_cost_s=0.2)
+    (1.5 frames at 8 renders of 0.2 s: the minimum, 2, which costs more than its share). The
+    clean scene stays clean in the budgeted mode."""
+    findings, ctx = _run(synth_scene, ["B002", "B003", "B004"], frame_cost_s=0.2)
     assert [f for f in findings if f.severity != "info"] == [], findings
     job = _job(ctx)
     ps = _pass(ctx, job)
     assert ps.plan is not None and (ps.plan.count, ps.plan.total) == (8, 120)
     assert len(ps.frame_index) == 8 and ps.frame_index[0] == 0 and ps.frame_index[-1] == 119
     (note,) = run_notes(ctx)
-    assert "labels compared on 8 of 120 frames" in note
-    assert "fitted on 2 of 8 fast-moving frames" in note
-    assert "within the 4 s re-render budget" in note and "--full for all" in note
+    assert note.startswith("binding re-render ep000/camera/cam0: labels compared on 8 of 120")
+    assert note.endswith("to stay within the 4 s re-render budget; --full for all")
+
+    findings, ctx = _run(synth_scene, ["B005", "B006"], frame_cost_s=0.2)
+    assert findings == [], findings
+    (note,) = run_notes(ctx)
+    assert "the time offset and camera fitted on 2 of 8 fast-moving frames" in note
+    assert note.endswith("the minimum counts, over the 4 s re-render budget; --full for all")
 
 
 def test_full_compares_every_candidate_frame_like_before(synth_scene: Path) -> None:

@@ -130,18 +130,19 @@ def expected_seconds(code: str, ctx: CheckContext) -> float | None:
 def run_notes(ctx: CheckContext) -> list[str]:
     """Notes on what the re-render left out of this run (one per subsampled camera stream).
 
-    Example: ``ep0/camera/cam0: labels compared on 9 of 120 frames and the time offset and camera
-    fitted on 2 of 8 frames, to stay within the 4 s re-render budget (0.17 s per frame); --full
-    for all``.
+    Example: ``binding re-render ep000/camera/cam0: labels compared on 9 of 120 frames (0.17 s
+    per frame) and the time offset and camera fitted on 2 of 8 fast-moving frames (0.16 s per
+    render), to stay within the 4 s re-render budget; --full for all``. When the minimum frame
+    counts cost more than the budget, the note says so instead of "to stay within".
     """
     notes: dict[tuple[str, str], dict[str, str]] = _state(ctx).get("notes", {})
     out = []
+    budget = f"{rerender_options(ctx).budget_s:g} s re-render budget"
     for (ep, stream), parts in notes.items():
         said = " and ".join(parts[k] for k in ("pass", "fit") if k in parts)
-        out.append(
-            f"binding re-render {ep}/{stream}: {said}, to stay within the "
-            f"{rerender_options(ctx).budget_s:g} s re-render budget; --full for all"
-        )
+        over = parts.get("over")
+        why = f"the minimum counts, over the {budget}" if over else f"to stay within the {budget}"
+        out.append(f"binding re-render {ep}/{stream}: {said}, {why}; --full for all")
     return out
 
 
@@ -487,9 +488,10 @@ def _run_pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
                 ctx,
                 job,
                 "pass",
-                f"labels compared on {plan.count} of {n} frames ({cost:.2g} s per frame"
-                f"{'; the minimum count' if plan.floor else ''})",
+                f"labels compared on {plan.count} of {n} frames ({cost:.2g} s per frame)",
             )
+            if plan.floor:
+                _note(ctx, job, "over", "pass")
     planned[0] = plan.count
     compare([int(k) for k in plan.chosen])
     result = _assemble(ch, fi, t, plan, metrics, rr, lut, rr.fx * sx)
@@ -568,6 +570,7 @@ def _pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
 def _fit(ctx: CheckContext, job: _CameraJob) -> AlignmentFit | None:
     def build() -> AlignmentFit | None:
         from ..rerender import (
+            FIT_FRAME_RENDERS,
             fit_alignment,
             fit_frame_count,
             read_label_frames,
@@ -587,6 +590,8 @@ def _fit(ctx: CheckContext, job: _CameraJob) -> AlignmentFit | None:
         if not math.isinf(budget) and len(t) > 1:
             render_s = _render_cost(ctx, job, t)
             k = fit_frame_count(render_s, budget, opts.fit_frames)
+            if k * FIT_FRAME_RENDERS * render_s > budget:
+                _note(ctx, job, "over", "fit")  # the minimum count costs more than the budget
             if k < min(opts.fit_frames, len(t)):
                 _note(
                     ctx,
