@@ -1306,6 +1306,11 @@ def write_tabular(
                     f"(line {first}{', ...' if len(rep.ee_dropped) > _EXAMPLES else ''}; "
                     "the joint rows are kept)"
                 )
+        elif any(c.startswith("O_T_EE") for c in raw.columns):
+            prov.note(
+                f"{f.name}: O_T_EE* ignored (declare its link in the map to import it: "
+                "'ee_pose: {link: panda_hand_tcp, format: matrix_colmajor}')"
+            )
         elif any(c.startswith("actual_TCP_pose_") for c in raw.columns):
             prov.note(
                 f"{f.name}: actual_TCP_pose_* ignored (declare its link in the map to import it: "

@@ -61,6 +61,15 @@ def run(args: argparse.Namespace) -> int:
         if not sep or not name or not folder:
             raise InputError(f"--package expects NAME=DIR, got {item!r}")
         roots[name] = Path(folder)
+    if args.urdf is not None and Path(args.urdf).is_file():  # package:// as ROS/yourdfpy find it
+        from robogs.convert.ingest.packages import find_packages, package_uris
+
+        uris = package_uris(Path(args.urdf).read_text(encoding="utf-8", errors="replace"))
+        found = find_packages(uris, Path(args.urdf).resolve().parent, explicit=roots)
+        for name, pkg in sorted(found.items()):
+            roots[name] = pkg.path
+            if pkg.how != "--package":
+                print(f"package://{name}: {pkg.path} ({pkg.how})")
     out = synthesize(
         args.out,
         seed=args.seed,
