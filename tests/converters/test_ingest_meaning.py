@@ -278,3 +278,18 @@ def test_roles_can_be_overridden(tmp_path: Path, converted) -> None:
     assert ds.manifest["provenance"]["decoded"]["ignored_topics"] == ["/vicon/markers"]
     assert ep.streams["wrenches"]["source"] == "/forcetorque"
     assert ep.streams["streams/netft_data"]["kind"] == "generic"
+
+
+def test_cli_prints_every_role_with_its_reason(tmp_path: Path, converted, capsys) -> None:
+    from robogs.cli.main import main
+
+    src = converted[2].parent / "push.bag"
+    urdf = converted[2].parent / "planar.urdf"
+    rc = main(["convert", str(src), str(tmp_path / "o"), "--urdf", str(urdf), "--no-progress"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    lines = {ln.split()[0]: ln for ln in out.splitlines() if ln.startswith("    /")}
+    assert "ee_pose:tool" in lines["/tip_pose"] and "tracks link tool" in lines["/tip_pose"]
+    assert "generic" in lines["/robot/cartesian"] and "200/200" in lines["/robot/cartesian"]
+    assert "wrench" in lines["/netft_data"] and "one stream per topic" in lines["/netft_data"]
+    assert "decoded: 1400 messages of 7 topics, 0 undecodable; custom types: " in out
