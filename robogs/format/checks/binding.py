@@ -417,6 +417,7 @@ def _run_pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
         read_video_frames,
     )
 
+    start = time.perf_counter()  # set-up counts against the budget too
     rr, lut = _rerenderer(ctx, job)
     ch = rr.channels
     t, fi = _frames(ctx, job)
@@ -467,7 +468,7 @@ def _run_pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
     else:
         # time the two ends (always in the plan): the first absorbs the warm-up, the second is
         # the per-frame cost (render, label decode and comparison)
-        t0 = time.perf_counter()
+        must = _pass_must(ctx, job, t)
         compare([0])
         t1 = time.perf_counter()
         compare([n - 1])
@@ -479,10 +480,8 @@ def _run_pass(ctx: CheckContext, job: _CameraJob) -> _Pass:
             cost, allowed = float(opts.frame_cost_s), budget
         else:
             cost = (t2 - t1) if len(seen) == 2 and (n - 1) in metrics else _render_cost(ctx, job, t)
-            allowed = budget - (t2 - t0) + 2.0 * cost  # what is left, plus the two frames done
-        plan = plan_frames(
-            n, cost, allowed, min_frames=MIN_PASS_FRAMES, must=_pass_must(ctx, job, t)
-        )
+            allowed = budget - (t2 - start) + 2.0 * cost  # what is left, plus the two frames done
+        plan = plan_frames(n, cost, allowed, min_frames=MIN_PASS_FRAMES, must=must)
         if plan.subsampled:
             _note(
                 ctx,
