@@ -14,7 +14,6 @@ the same run. Threads (torch, OpenMP, BLAS and the label decoder) follow ``--thr
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -250,14 +249,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _threads(args: argparse.Namespace) -> int:
-    """Label-decoder threads: ``--threads`` (added by ``robogs.cli.main``) or the usable cores.
+    """Label-decoder threads: the count ``robogs.cli.main`` gave torch, OpenMP and BLAS.
 
-    torch, OpenMP and BLAS are sized by ``robogs.cli.main`` before this verb is imported.
+    ``--threads`` if given, else an exported ``OMP_NUM_THREADS`` (which ``main`` sets), else the
+    cores this process may use (:func:`robogs.cli.threads.resolve_threads`).
     """
+    from robogs.cli.threads import resolve_threads
+
     n = getattr(args, "threads", None)
-    if isinstance(n, int) and n >= 1:
-        return n
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):  # pragma: no cover - macOS, Windows
-        return max(1, os.cpu_count() or 1)
+    return resolve_threads(n if isinstance(n, int) and n >= 1 else None)

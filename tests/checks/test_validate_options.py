@@ -149,3 +149,26 @@ def test_bad_speed_options_are_usage_errors(
     assert validate_main([str(tiny_root), flag, value, "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert f"argument {flag}" in err and "Traceback" not in err
+
+
+def test_threads_reach_torch_and_the_label_decoder(
+    tiny_root: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--threads N`` sizes torch's pool during the run and the label decoder; afterwards the
+    process is as it was."""
+    import robogs.format.validate as validate_module
+
+    seen: dict[str, int] = {}
+    real = validate_module.validate
+
+    def spy(*args, **kwargs):
+        seen["label_threads"] = kwargs["label_threads"]
+        seen["torch"] = torch.get_num_threads()
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(validate_module, "validate", spy)
+    before = torch.get_num_threads()
+    for n in (1, 3):
+        assert validate_main([str(tiny_root), "--threads", str(n), "--no-progress"]) == 0
+        assert seen == {"label_threads": n, "torch": n}
+        assert torch.get_num_threads() == before
