@@ -17,7 +17,15 @@ Figures:
   an end-effector pose 5 mm off) and must be reported with the right rows: the stream is read
   to its end, not sampled.
 
-Usage: ``nice -n 10 .venv/bin/python bench/load.py [--episodes 1000] [--long-min 30] [--threads 1] [--append]``
+* (c) ``--diagnose``: two ``robogs diagnose`` processes at once on the same 2 cores (two copies
+  of a 6-push hidden-effect scenario), each against its solo time on the same cores. Cases:
+  the CLI's default threads (``--threads`` unset: the cores this process may use, passive
+  OpenMP wait), ``--threads 1`` each, and "without the setting": the same diagnosis through
+  the Python API in an interpreter with no thread variables (library defaults: OpenBLAS and
+  OpenMP pools of every core, spinning waits), which is what the CLI did before ``--threads``.
+
+Usage: ``nice -n 10 .venv/bin/python bench/load.py [--episodes 1000] [--long-min 30] [--threads 1] [--append]``;
+``.venv/bin/python bench/load.py --diagnose [--append]``
 """
 
 from __future__ import annotations
@@ -118,6 +126,78 @@ def damage_near_end(root: Path) -> dict[str, int]:
     return {"T003": gap_row, "G007": limit_row, "G008": ee_row}
 
 
+_THREAD_VARS = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "NUMBA_NUM_THREADS",
+    "OMP_WAIT_POLICY",
+)
+_CLI = "import sys; from robogs.cli.main import main; sys.exit(main(sys.argv[1:]))"
+_API = "import sys; from robogs.physics.api import diagnose; diagnose(sys.argv[1], mask_frames=0)"
+
+
+def _diagnose_cmds(root: Path, case: str) -> list[str]:
+    if case == "without":
+        return [sys.executable, "-W", "ignore", "-c", _API, str(root)]
+    extra = ["--threads", "1"] if case == "threads1" else []
+    return [sys.executable, "-W", "ignore", "-c", _CLI, *extra, "diagnose", str(root)]
+
+
+def timed_together(cmds: list[list[str]], cores: set[int]) -> list[float]:
+    """Start ``cmds`` at once pinned to ``cores``, with no thread variables set; wall [s] each."""
+    env = {k: v for k, v in os.environ.items() if k not in _THREAD_VARS}
+    t0 = time.perf_counter()
+    procs = [
+        subprocess.Popen(
+            c,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            preexec_fn=lambda: os.sched_setaffinity(0, cores),
+        )
+        for c in cmds
+    ]
+    walls = [0.0] * len(procs)
+    left = set(range(len(procs)))
+    while left:
+        for i in list(left):
+            if procs[i].poll() is not None:
+                walls[i] = time.perf_counter() - t0
+                left.discard(i)
+        time.sleep(0.05)
+    for p, c in zip(procs, cmds, strict=True):
+        if p.returncode != 0:
+            raise SystemExit(f"{c} failed:\n{p.stderr.read().decode()[-2000:]}")  # type: ignore[union-attr]
+    return walls
+
+
+def diagnose_figure(say) -> None:
+    """(c): solo and paired diagnoses on the same 2 cores, per thread setting."""
+    from robogs.synth.scenarios import make_scenario, write_scenario
+
+    cores = set(sorted(os.sched_getaffinity(0))[:2])
+    rec = make_scenario(
+        "table_tilt", seed=0, noise="nominal", kinds=("push",), n_speeds=2, n_dirs=3, check=False
+    )
+    with tempfile.TemporaryDirectory(prefix="robogs-load-") as tmp:
+        roots = [Path(tmp) / "a", Path(tmp) / "b"]
+        for r in roots:
+            write_scenario(rec, r)
+        for case, what in (
+            ("default", "robogs diagnose (default --threads: 2, passive OpenMP wait)"),
+            ("threads1", "robogs diagnose --threads 1"),
+            ("without", "without the setting (API, library-default pools)"),
+        ):
+            (solo,) = timed_together([_diagnose_cmds(roots[0], case)], cores)
+            pair = timed_together([_diagnose_cmds(r, case) for r in roots], cores)
+            say(
+                f"(c) {what} on cores {sorted(cores)}: solo {solo:.1f} s; two at once "
+                f"{pair[0]:.1f} s and {pair[1]:.1f} s = {pair[0] / solo:.2f}x and "
+                f"{pair[1] / solo:.2f}x solo (target <= 2.5x)"
+            )
+
+
 def _machine(threads: int) -> str:
     import torch
 
@@ -139,12 +219,27 @@ def main() -> int:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--skip-many", action="store_true", help="only the long-episode figure")
     ap.add_argument("--append", action="store_true", help="append to bench/RESULTS.md")
+    ap.add_argument(
+        "--diagnose", action="store_true", help="only figure (c): two diagnoses at once"
+    )
     args = ap.parse_args()
     lines = [f"machine: {_machine(args.threads)}"]
 
     def say(text: str) -> None:
         print(text, flush=True)
         lines.append(text)
+
+    if args.diagnose:
+        lines[0] = lines[0].split(", torch threads=")[0] + ", threads as each case says"
+        diagnose_figure(say)
+        if args.append:
+            _append(
+                "load — two `robogs diagnose` at once on 2 cores, with and without the thread "
+                "setting",
+                ".venv/bin/python bench/load.py --diagnose",
+                lines,
+            )
+        return 0
 
     with tempfile.TemporaryDirectory(prefix="robogs-load-") as tmp:
         tmp = Path(tmp)
@@ -212,16 +307,20 @@ def main() -> int:
             f"{m['rss_mb']:.0f} MB"
         )
     if args.append:
-        date = _dt.date.today().isoformat()
         cmd = " ".join(["nice -n 10 .venv/bin/python bench/load.py", *sys.argv[1:]])
-        cmd = cmd.replace(" --append", "")
-        body = "\n".join(lines)
-        with open(Path(__file__).with_name("RESULTS.md"), "a", encoding="utf-8") as fh:
-            fh.write(
-                f"\n## load — many episodes and a long episode, validated by streaming ({date})"
-                f"\n\nCommand: `{cmd}`\n\n```\n{body}\n```\n"
-            )
+        _append(
+            "load — many episodes and a long episode, validated by streaming",
+            cmd.replace(" --append", ""),
+            lines,
+        )
     return 0 if ok else 1
+
+
+def _append(title: str, cmd: str, lines: list[str]) -> None:
+    date = _dt.date.today().isoformat()
+    body = "\n".join(lines)
+    with open(Path(__file__).with_name("RESULTS.md"), "a", encoding="utf-8") as fh:
+        fh.write(f"\n## {title} ({date})\n\nCommand: `{cmd}`\n\n```\n{body}\n```\n")
 
 
 if __name__ == "__main__":
