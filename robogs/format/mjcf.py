@@ -81,9 +81,11 @@ class ContactSettings:
         solimp: (d0, dwidth, width m, midpoint, power) of every contact pair.
         noslip_iterations: post-solve iterations removing residual slip (0: off).
         iterations, tolerance: main solver (Newton) limits.
+        integrator: MuJoCo integrator (``"Euler"``: semi-implicit, actuator forces explicit).
         pusher_mass: kg of the pusher body (and kg m^2 x 0.01 of its yaw inertia).
         servo_velocity_gain, servo_position_gain: the pusher servos' gains in units of the
-            pusher's mass and the timestep: ``kv = gain_v * m / dt``, ``kp = gain_p * m / dt^2``.
+            pusher's mass and the timestep: ``kv = gain_v * m / dt``, ``kp = gain_p * m / dt^2``
+            (``gain_v = 1`` is dead-beat velocity tracking with explicit forces).
     """
 
     timestep: float = 1e-3
@@ -94,9 +96,10 @@ class ContactSettings:
     noslip_iterations: int = 0
     iterations: int = 50
     tolerance: float = 1e-10
-    pusher_mass: float = 1.0
-    servo_velocity_gain: float = 100.0
-    servo_position_gain: float = 10.0
+    integrator: str = "Euler"
+    pusher_mass: float = 1000.0
+    servo_velocity_gain: float = 1.0
+    servo_position_gain: float = 0.3
 
 
 @dataclass
@@ -196,11 +199,16 @@ def collision_hull(mesh: Any, name: str) -> tuple[Any, str | None]:
             hint="give the object a box size (size_m) or a closed mesh",
         )
     reasons = []
-    watertight = bool(getattr(mesh, "is_watertight", False))
+    try:  # STL and process=False loads keep one vertex per corner: weld them to judge closure
+        welded = mesh.copy()
+        welded.merge_vertices()
+    except Exception:  # not a trimesh: judge it as given
+        welded = mesh
+    watertight = bool(getattr(welded, "is_watertight", False))
     if not watertight:
         reasons.append("not watertight")
-    elif abs(float(mesh.volume)) < 0.99 * hull.volume:
-        reasons.append(f"non-convex ({abs(float(mesh.volume)) / hull.volume:.0%} of its hull)")
+    elif abs(float(welded.volume)) < 0.99 * hull.volume:
+        reasons.append(f"non-convex ({abs(float(welded.volume)) / hull.volume:.0%} of its hull)")
     n_hull = len(hull.vertices)
     if n_hull > MAX_HULL_VERTICES:
         hv = np.asarray(hull.vertices)
@@ -404,7 +412,7 @@ def scene_mjcf(
         "option",
         timestep=_f(settings.timestep),
         gravity=_vec(grav),
-        integrator="implicitfast",
+        integrator=settings.integrator,
         cone=settings.cone,
         impratio=_f(settings.impratio),
         solver="Newton",

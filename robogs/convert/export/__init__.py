@@ -92,6 +92,8 @@ _BUILTIN = {
     "mcap": "robogs.convert.export.ros2_mcap",
     "ply": "robogs.convert.export.splat_ply",
     "rerun": "robogs.convert.export.rerun_rrd",
+    "mjcf": "robogs.convert.export.mjcf",
+    "lerobot": "robogs.convert.export.lerobot",
 }
 
 

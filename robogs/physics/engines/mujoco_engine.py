@@ -2,33 +2,46 @@
 
 The MJCF comes from :func:`robogs.format.mjcf.scene_mjcf` (support plane, free objects as
 boxes or convex hulls with the physics.json mass, CoM and inertia, the pusher shape, one
-contact pair per object pair with its own friction). The pusher is a body on four joints
-(x, y, z slides, yaw hinge) driven by servos that follow the measured pusher: per step ``k ->
-k+1`` the velocity servo's target is ``(p[k+1] - p[k]) / dt`` and the position servo's target
-``p[k+1]``. With the velocity gain ``kv = 100 m / dt`` treated implicitly by the
-``implicitfast`` integrator, the pusher's velocity after a step is the target to within 1 %
-of the previous error plus ``F_contact / kv`` (2e-5 m/s for 2 N); the position servo
-(``kp = 10 m / dt^2``, explicit, ``kp dt^2 / (m + kv dt) = 0.1``) removes drift at 100 /s.
-The pusher therefore moves as measured (``tests/physics/test_mujoco_engine.py`` checks it to
-0.05 mm) while the solver sees its true velocity, which a mocap body would not give it.
+contact pair per object pair with its own friction). The pusher is a heavy body (1000 kg,
+gravity compensated) on four joints (x, y, z slides, yaw hinge) driven by servos that follow
+the measured pusher: per step ``k -> k+1`` the velocity servo's target is
+``(p[k+1] - p[k]) / dt`` with gain ``kv = m / dt`` (dead-beat: with explicit actuator forces
+the velocity after the step is the target) and the position servo's target ``p[k]`` with
+``kp = 0.3 m / dt^2`` (drift shrinks by 30 % per step). Contact forces of a few newtons move
+a 1000 kg pusher by micrometres per second, corrected at the next step, so the pusher moves
+as measured (``tests/physics/test_mujoco_engine.py`` checks 0.05 mm while pushing) and the
+solver sees its true velocity, which a mocap body would not give it (MuJoCo treats a mocap
+body's velocity as zero in the contact solver: pusher friction would oppose the object's
+motion, not the relative sliding).
+
+The drive must be smooth (as :func:`robogs.physics.prepare.build_drive` makes it): a measured
+path's velocity noise is a real acceleration of the pusher here, and a rigid paddle vibrating
+at encoder noise pumps energy into the object it touches.
+
+Why the actuator forces are explicit (``integrator="Euler"``): with ``implicitfast`` and a
+stiff implicit velocity servo, the constraint solver sees the servo's explicit force
+``kv (v* - v)``, ``kv dt / m`` (= 100) times larger than the acceleration the implicit
+update then applies; a step in the target velocity became a blow to the object (0.3 m/s pushes launched
+the box at 1 m/s). Semi-implicit Euler keeps the solver's view and the update the same.
 
 Contact settings (:class:`robogs.format.mjcf.ContactSettings`), and why:
 
-* ``cone="elliptic"`` - the exact Coulomb cone; the pyramidal cone's facets make the friction
-  force depend on the sliding direction relative to the pyramid edges (up to
-  ``1 - cos(pi/4)``, 29 %, for condim 3), which would masquerade as anisotropic friction.
+* ``cone="elliptic"`` - the exact Coulomb cone; the pyramidal cone is a polyhedral
+  approximation whose friction limit depends on the sliding direction relative to its edges,
+  which would masquerade as anisotropic friction.
 * ``impratio=10`` - frictional impedance 10x the normal one: stiff friction, so a block
   below the friction angle creeps < 0.5 mm/s (MuJoCo's docs recommend > 1 with elliptic
   cones for the same reason; the incline test bounds the creep).
 * ``solref=(0.004, 1)`` - time constant 4 dt (MuJoCo needs >= 2 dt for stability),
-  critically damped: near-plastic impacts (restitution is a separate effect) and a resting
-  penetration of a few micrometres instead of the ~0.2 mm of the default 0.02 s.
+  critically damped: a resting penetration of 2 micrometres (0.4 kg box) and little rebound.
+  Soft contacts are not fully plastic: a box struck by a 0.3 m/s pusher leaves it at up to
+  about 0.35 m/s and the pusher catches up (restitution is a separate effect). Other time
+  constants (3-6 ms, damping ratio 1.5) were not better against the scenario generator.
 * ``solimp=(0.95, 0.99, 0.001, 0.5, 2)`` - impedance 0.95 at contact rising to 0.99 within
   1 mm of penetration: hard contacts with a smooth onset.
 * ``timestep=1 ms`` - the planar model's step; a 0.5 m/s push moves 0.5 mm per step, well
   below the 10 mm pusher radius and the solimp width of the contacts it makes.
-* ``integrator="implicitfast"`` - implicit in the actuators' velocity gains (the pusher
-  servos), cheap (no Coriolis derivatives).
+* ``integrator="Euler"`` - semi-implicit Euler, actuator forces explicit (see above).
 * ``noslip_iterations=0`` - not used: the elliptic cone with ``impratio`` already keeps the
   creep within the tolerances, and noslip would add a solver pass per step.
 * ``solver="Newton"``, 50 iterations, tolerance 1e-10 - converged contact forces, so
