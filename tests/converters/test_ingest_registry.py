@@ -118,8 +118,11 @@ def test_cli_convert_json_and_errors(tmp_path: Path, synth, capsys) -> None:
         "ee_poses",
         "joint_states",
         "object_poses",
+        "streams/rosout_like",  # no role of its own: decoded into a generic table
     ]
-    assert {d["topic"] for d in summary["dropped"]} == {"/rosout_like", "/wrench/ft_sensor"}
+    assert {d["topic"] for d in summary["dropped"]} == {"/wrench/ft_sensor"}
+    roles = {r["topic"]: r["role"] for r in summary["roles"]}
+    assert roles["/rosout_like"] == "generic" and roles["/wrench/ft_sensor"] == "ignore"
     assert main(["convert", str(tmp_path / "a.mcap"), str(out)]) == 2
     err = capsys.readouterr().err
     assert (
