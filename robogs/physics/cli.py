@@ -364,6 +364,10 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
         _print_json(d)
         return 0
     _effects_table(d["effects"], f"candidate effects for {args.dataset}")
+    print(
+        f"base model (physics revision {_revision(args.dataset)}, refitted): object position "
+        f"rms {d['rms_base_mm']:.2f} mm, noise floor {d['noise_floor_mm']:.2f} mm"
+    )
     for s in d.get("skipped", []):
         print(f"  skipped {s['name']}: {s['reason']}")
     found = [e["name"] for e in d["effects"] if e.get("reported")]
@@ -492,9 +496,7 @@ def _report(args: argparse.Namespace, model: str) -> int:
     )
     print(f"wrote {path}")
     if args.rrd is not None:
-        from robogs.physics.api import compare
-
-        _residuals_rrd(compare(args.dataset).series, args.rrd)
+        _residuals_rrd({"before": pair.before.series, "after": pair.after.series}, args.rrd)
         print(f"wrote {args.rrd}")
     return 0
 
@@ -522,11 +524,11 @@ def _written_by_fit(ds_path: Path) -> bool:
     return isinstance((Dataset.open(ds_path).physics().get("fit") or {}).get("from_revision"), int)
 
 
-def _residuals_rrd(series: list[dict[str, Any]], path: Path) -> None:
-    """Log position and orientation residuals per trajectory on a 'since_start' timeline."""
+def _residuals_rrd(models: dict[str, list[dict[str, Any]]], path: Path) -> None:
+    """Log position and orientation residuals of each model ("before", "after") per
+    trajectory on a 'since_start' timeline."""
     import os
 
-    import numpy as np
     import rerun as rr
 
     rec = rr.RecordingStream("robogs", recording_id="robogs-residuals", send_properties=False)
@@ -534,21 +536,25 @@ def _residuals_rrd(series: list[dict[str, Any]], path: Path) -> None:
     rec.set_log_tick_enabled(False)
     tmp = path.with_name(f".{path.name}.part")
     rec.save(str(tmp))
-    for s in series:
-        t = rr.TimeColumn("since_start", duration=np.asarray(s["t"], np.float64))
-        err_mm = np.linalg.norm(np.asarray(s["residual_mm"]), axis=-1)
-        base = f"residuals/{s['trajectory']}"
-        rec.send_columns(
-            f"{base}/position_mm", indexes=[t], columns=rr.Scalars.columns(scalars=err_mm)
-        )
-        rec.send_columns(
-            f"{base}/orientation_deg",
-            indexes=[t],
-            columns=rr.Scalars.columns(scalars=np.asarray(s["residual_deg"], np.float64)),
-        )
+    for model, series in models.items():
+        for s in series:
+            _log_series(rec, rr, s, f"residuals/{model}/{s['trajectory']}")
     rec.flush()
     rec.disconnect()
     os.replace(tmp, path)
+
+
+def _log_series(rec: Any, rr: Any, s: dict[str, Any], base: str) -> None:
+    import numpy as np
+
+    t = rr.TimeColumn("since_start", duration=np.asarray(s["t"], np.float64))
+    err_mm = np.linalg.norm(np.asarray(s["residual_mm"]), axis=-1)
+    rec.send_columns(f"{base}/position_mm", indexes=[t], columns=rr.Scalars.columns(scalars=err_mm))
+    rec.send_columns(
+        f"{base}/orientation_deg",
+        indexes=[t],
+        columns=rr.Scalars.columns(scalars=np.asarray(s["residual_deg"], np.float64)),
+    )
 
 
 def run(args: argparse.Namespace) -> int:
