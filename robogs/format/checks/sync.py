@@ -523,7 +523,7 @@ def _stream_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 when = "behind" if est.lag_ms > 0 else "ahead of"
                 yield chk.finding(
                     f"link {link!r}: poses run {abs(est.lag_ms):.3g} ms {when} forward kinematics "
-                    f"of {js!r} (95 % interval {est.lo_ms:.3g} to {est.hi_ms:.3g} ms, "
+                    f"of {js!r} (95 % interval {est.lo_ms:.4g} to {est.hi_ms:.4g} ms, "
                     f"{est.samples} fresh samples); removing the lag takes the rms from "
                     f"{est.rms_at_zero_mm:.3g} to {est.rms_at_lag_mm:.3g} mm (offset removed)",
                     value=est.lag_ms,
