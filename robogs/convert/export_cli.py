@@ -87,6 +87,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="K",
         help="rerun: re-render every K-th labelled frame (default 10)",
     )
+    parser.add_argument(
+        "--state",
+        choices=("joints", "ee"),
+        help="lerobot: observation.state / action from joint positions (default) or EE poses",
+    )
+    parser.add_argument(
+        "--fps", type=int, help="lerobot: rate of the regular frame grid (default: camera rate)"
+    )
+    parser.add_argument(
+        "--with-labels",
+        action="store_true",
+        default=None,
+        dest="labels",
+        help="lerobot: add panoptic label (and rendered depth) image features",
+    )
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
 
 
@@ -100,6 +115,9 @@ _OPTION_FLAGS = {
     "max_hz": "--max-hz",
     "rerender": "--rerender",
     "rerender_stride": "--rerender-stride",
+    "state": "--state",
+    "fps": "--fps",
+    "labels": "--with-labels",
 }
 
 
