@@ -293,3 +293,28 @@ def test_cli_prints_every_role_with_its_reason(tmp_path: Path, converted, capsys
     assert "generic" in lines["/robot/cartesian"] and "200/200" in lines["/robot/cartesian"]
     assert "wrench" in lines["/netft_data"] and "one stream per topic" in lines["/netft_data"]
     assert "decoded: 1400 messages of 7 topics, 0 undecodable; custom types: " in out
+
+
+def test_link_fit_oracle(tmp_path: Path) -> None:
+    """Closed-form tip paths: exact, offset along the last link, and a path of its own."""
+    from robogs.convert.ingest.ee_track import link_fits, tracked_link
+    from robogs.format.kinematics import Chain
+    from robogs.format.urdf import load_urdf
+
+    (tmp_path / "p.urdf").write_text(URDF)
+    chain = Chain.from_urdf(load_urdf(tmp_path / "p.urdf", load_meshes=False))
+    k = np.arange(300)
+    t = (T0 + k * 10_000_000).astype(np.int64)
+    q = np.stack([0.8 * np.sin(0.05 * k), 0.6 * np.cos(0.03 * k)], 1)
+    tip = np.array([_tip(a, b) for a, b in q])
+    hit = tracked_link(link_fits(chain, "base_link", t, q, t, tip))
+    assert hit is not None and hit.link == "tool" and hit.rms_m < 1e-9 and hit.offset_m < 1e-9
+    # 50 mm further along link2: still the arm's path, 50 mm from the nearest link origin
+    ang = q.sum(1)
+    far = tip + 0.05 * np.stack([np.cos(ang), np.sin(ang), 0 * ang], 1)
+    hit = tracked_link(link_fits(chain, "base_link", t, q, t, far))
+    assert hit is not None and hit.link == "tool" and abs(hit.offset_m - 0.05) < 1e-9
+    # an object pushed along a line of its own tracks nothing
+    line = np.stack([0.3 + 0.001 * k, 0.05 * np.sin(0.01 * k), 0.02 + 0 * k], 1)
+    fits = link_fits(chain, "base_link", t, q, t, line)
+    assert tracked_link(fits) is None and min(f.rms_m for f in fits) > 0.01
