@@ -38,6 +38,10 @@ VERBS: dict[str, tuple[str, str]] = {
         "export a dataset to URDF, USD, MCAP, splat PLY or Rerun",
     ),
     "view": ("robogs.convert.view_cli", "write a Rerun recording of a dataset and open it"),
+    "render": (
+        "robogs.cli.render_cmd",
+        "render a new joint trajectory through the binding into a dataset",
+    ),
     "compare": (
         "robogs.physics.cli",
         "residuals of the physics model against the measurements",
