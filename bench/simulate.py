@@ -1,14 +1,22 @@
-"""Rollout throughput: a batch of 64 parameter sets in one rollout vs 64 single rollouts.
+"""Rollout throughput of the two engines on the 9-push scene, and of a 64-candidate batch.
 
-The fitter's finite-difference Jacobians and the diagnosis run many parameter sets at once;
-this measures what the leading batch dimension buys. Scenario: 9 pushes (robogs.synth.scenarios),
-dt = 1 ms, full effect catalogue in the parameter space.
+The fitter's finite-difference Jacobians and the diagnosis run many parameter sets at once.
+Scenario: 9 pushes (robogs.synth.scenarios), dt = 1 ms. Measured in one run:
 
-    .venv/bin/python bench/simulate.py
+* planar (torch): a batch of 64 parameter sets in one rollout vs 64 single rollouts, full
+  effect catalogue in the parameter space (its rollouts stop once every box rests and the end
+  effector no longer moves; steps are counted on the full grid);
+* mujoco: steps per second of one rollout of the scene (9 trajectories), and a 64-candidate
+  finite-difference batch (64 friction values x 9 trajectories = 576 MuJoCo rollouts) on
+  ``mujoco.rollout`` with 1 and 2 threads;
+* the ratio of the two engines' 64-candidate times.
+
+    .venv/bin/python bench/simulate.py [--no-write]
 """
 
 from __future__ import annotations
 
+import datetime
 import os
 import platform
 import sys
@@ -22,20 +30,18 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def main() -> None:
-    torch.set_num_threads(1)  # small tensors: one thread is fastest (and fair on a shared machine)
+def _planar(m: int) -> tuple[dict[str, float], object]:
     from robogs.physics.effects import available_effects, get_effect
     from robogs.physics.engine import Engine
     from robogs.synth.scenarios import make_scenario
 
-    eng = Engine(make_scenario("none", seed=0, kinds=("push",)))
+    rec = make_scenario("none", seed=0, kinds=("push",))
+    eng = Engine(rec)
     space = eng.space([get_effect(n) for n in available_effects(model="rigid")])
-    m = 64
     rng = np.random.default_rng(0)
     th = np.stack([eng.start(space)] * m)
     th[:, 0] *= 1.0 + 0.05 * rng.standard_normal(m)
     loc = np.zeros((m, eng.prep.n_traj, 3))
-    steps = eng.prep.drive.n_steps * eng.prep.n_traj
     eng.evaluate(space, th[:2], loc[:2])  # warm-up
     t0 = time.perf_counter()
     eng.evaluate(space, th, loc)
@@ -44,24 +50,68 @@ def main() -> None:
     for i in range(m):
         eng.evaluate(space, th[i : i + 1], loc[i : i + 1])
     single = time.perf_counter() - t0
+    return {"batched": batched, "single": single}, (rec, eng.prep)
+
+
+def _mujoco(rec, prep, m: int, threads: int) -> dict[str, float]:
+    from robogs.physics.engines import get_engine
+
+    eng = get_engine("mujoco")(rec.physics, threads=threads)
+    eng.rollout(prep.drive.subset([0]))  # warm-up (pool start)
+    t0 = time.perf_counter()
+    eng.rollout(prep.drive)
+    one = time.perf_counter() - t0
+    mu = rec.physics["objects"]["box"]["friction_dynamic"] * (1 + 1e-3 * np.arange(m))
+    t0 = time.perf_counter()
+    eng.rollout(prep.drive, params={"objects.box.friction_dynamic": mu})
+    batch = time.perf_counter() - t0
+    eng.close()
+    return {"one": one, "batch": batch}
+
+
+def main() -> None:
+    torch.set_num_threads(1)  # small tensors: one thread is fastest (and fair on a shared machine)
+    import mujoco
+
+    m = 64
+    planar, (rec, prep) = _planar(m)
+    n_t, n_s = prep.drive.n_traj, prep.drive.n_steps
+    steps = n_t * n_s
+    mj = {k: _mujoco(rec, prep, m, k) for k in (1, 2)}
     lines = [
-        "### rollout throughput (bench/simulate.py)",
+        "### rollout throughput, planar and mujoco engines (bench/simulate.py)",
         "",
         "Command: `.venv/bin/python bench/simulate.py`  ",
-        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-        f"torch {torch.__version__}, threads {torch.get_num_threads()}",
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs (shared "
+        f"with other jobs during the run), torch {torch.__version__} with 1 thread, "
+        f"mujoco {mujoco.__version__}",
+        f"Scene: 9 pushes, {n_t} trajectories x {n_s} steps of 1 ms = {steps:,} trajectory-steps "
+        "per parameter set",
         "",
-        f"- batch of {m} rollouts ({eng.prep.n_traj} trajectories x {eng.prep.drive.n_steps} steps each, "
-        f"dt 1 ms): {batched:.2f} s = {m * steps / batched:,.0f} trajectory-steps/s",
-        f"- {m} single rollouts (baseline): {single:.2f} s = {m * steps / single:,.0f} trajectory-steps/s",
-        f"- ratio batched / single throughput: {single / batched:.1f}x",
-        "- (rollouts stop early once every box rests and the end effector no longer moves; "
-        "steps counted on the full grid)",
+        f"- planar, batch of {m} sets in one rollout: {planar['batched']:.2f} s = "
+        f"{m * steps / planar['batched']:,.0f} trajectory-steps/s "
+        f"({m / planar['batched']:.1f} candidate rollouts/s)",
+        f"- planar, {m} single rollouts (baseline): {planar['single']:.2f} s = "
+        f"{m * steps / planar['single']:,.0f} trajectory-steps/s; batched / single "
+        f"{planar['single'] / planar['batched']:.1f}x",
+    ]
+    for k, r in mj.items():
+        lines += [
+            f"- mujoco, {k} thread(s), one set: {r['one']:.3f} s = {steps / r['one']:,.0f} steps/s",
+            f"- mujoco, {k} thread(s), {m} sets ({m * n_t} MuJoCo rollouts): {r['batch']:.2f} s = "
+            f"{m * steps / r['batch']:,.0f} steps/s ({m / r['batch']:.1f} candidate rollouts/s)",
+        ]
+    best = min(r["batch"] for r in mj.values())
+    lines += [
+        f"- ratio, {m}-candidate batch: planar {planar['batched']:.2f} s / best mujoco "
+        f"{best:.2f} s = {planar['batched'] / best:.2f}x (above 1: mujoco faster)",
+        f"- mujoco 2 threads / 1 thread speed-up: {mj[1]['batch'] / mj[2]['batch']:.2f}x",
+        "- the planar rollouts stop early once every box rests; mujoco integrates every step",
     ]
     print("\n".join(lines))
     if "--no-write" not in sys.argv:
         with (ROOT / "bench" / "RESULTS.md").open("a") as fh:
-            fh.write("## 2026-11-22\n\n" + "\n".join(lines) + "\n\n")
+            fh.write(f"## {datetime.date.today().isoformat()}\n\n" + "\n".join(lines) + "\n\n")
 
 
 if __name__ == "__main__":
