@@ -317,14 +317,13 @@ def bench_scenes(args: argparse.Namespace) -> list[str]:
     try:
         for size in sizes:
             root = tmp / size
-            wall, cpu, _rss, proc = _child(
+            wall, _cpu, _rss, rc, err = _child(
                 _robogs(
                     "--threads", str(args.threads), "synth", str(root), "--size", size, "--quiet"
-                ),
-                args.threads,
+                )
             )
-            if proc.returncode != 0:
-                lines.append(f"{size}: synth failed: {proc.stderr.strip()[-300:]}")
+            if rc != 0:
+                lines.append(f"{size}: synth failed ({rc}): {err}")
                 continue
             mb = sum(p.stat().st_size for p in root.rglob("*") if p.is_file()) / 1e6
             lines.append(
@@ -347,12 +346,10 @@ def bench_scenes(args: argparse.Namespace) -> list[str]:
                     str(out),
                     *extra,
                 )
-                wall, cpu, rss, proc = _child(cmd, args.threads)
+                wall, cpu, rss, rc, err = _child(cmd)
                 load1 = os.getloadavg()[0]
-                if proc.returncode not in (0, 1) or not out.exists():
-                    lines.append(
-                        f"  {label}: validate failed ({proc.returncode}): {proc.stderr.strip()[-300:]}"
-                    )
+                if rc not in (0, 1) or not out.exists():
+                    lines.append(f"  {label}: validate failed ({rc}): {err}")
                     continue
                 summary = json.loads(out.read_text())["summary"]
                 counts = summary["counts"]
