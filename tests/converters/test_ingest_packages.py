@@ -14,7 +14,7 @@ import pytest
 
 from robogs.convert.ingest.context import ConvertOptions
 from robogs.convert.ingest.convert import convert_path
-from robogs.convert.ingest.packages import find_packages, package_uris
+from robogs.format.packages import find_packages, package_uris
 from robogs.format.errors import RobogsError
 
 

@@ -3,7 +3,7 @@
 Mesh URIs (``package://NAME/...`` or relative) are resolved with
 :func:`robogs.format.urdf.resolve_mesh_uri`, which refuses anything outside the allowed roots.
 The folder of each ``package://NAME`` is ``--package NAME=DIR`` when given, else found the way ROS
-and yourdfpy find it (:mod:`robogs.convert.ingest.packages`); where each package and each mesh
+and yourdfpy find it (:mod:`robogs.format.packages`); where each package and each mesh
 was found is recorded in ``provenance.robot``.
 Each mesh is copied under ``robot/meshes/`` keeping its path relative to the deepest folder
 common to all meshes, and the copied URDF refers to it by that relative path, so the dataset
@@ -22,11 +22,11 @@ from pathlib import Path
 from lxml import etree
 
 from robogs.format.errors import InputError, RobogsError
+from robogs.format.packages import PackageRoot, find_packages, package_uris
 from robogs.format.urdf import mesh_refs, parse_urdf_robot, resolve_mesh_uri
 
 from .context import IngestContext
 from .dae_textures import dae_texture_refs, texture_uri
-from .packages import PackageRoot, find_packages, package_uris
 
 __all__ = ["attach_robot", "attach_robot_description", "sibling_packages", "urdf_root_link"]
 

@@ -1,5 +1,9 @@
 """``robogs synth OUT [--seed N] [--size small|medium|large] [--urdf PATH]``.
 
+With ``--capture static [--no-poses]`` it writes the multi-view scan of the scene at rest
+(40/60/120 views of 160x120/320x240/640x480 px by ``--size``; ``robogs.synth.multiview``) for
+``robogs reconstruct``; the true camera poses and scene mesh go beside it.
+
 With ``--effect NAME`` (``none`` for null data) it writes a hidden-effect scenario for the
 physics loop instead: pushes at 3 speeds x 3 directions, off-centre pushes, release-and-slide
 and grasp-lift-place, measured at ``--noise nominal|hard``; the hidden effect and its values go
@@ -45,6 +49,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--noise", choices=("nominal", "hard"), default="nominal", help="scenario noise level"
     )
+    parser.add_argument(
+        "--capture",
+        choices=("static",),
+        default=None,
+        help="static: the multi-view scan of the scene at rest (robot, box, table) to "
+        "reconstruct from, instead of the manipulation episode",
+    )
+    parser.add_argument(
+        "--no-poses",
+        action="store_true",
+        help="with --capture: images, intrinsics and labels only (camera extrinsics 'unknown'); "
+        "the true poses go beside OUT",
+    )
     parser.add_argument("--force", action="store_true", help="replace OUT if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -55,6 +72,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.effect is not None:
         return _scenario(args)
+    if args.capture is not None or args.no_poses:
+        return _capture(args)
     roots = {}
     for item in args.package:
         name, sep, folder = item.partition("=")
@@ -62,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"--package expects NAME=DIR, got {item!r}")
         roots[name] = Path(folder)
     if args.urdf is not None and Path(args.urdf).is_file():  # package:// as ROS/yourdfpy find it
-        from robogs.convert.ingest.packages import find_packages, package_uris
+        from robogs.format.packages import find_packages, package_uris
 
         uris = package_uris(Path(args.urdf).read_text(encoding="utf-8", errors="replace"))
         found = find_packages(uris, Path(args.urdf).resolve().parent, explicit=roots)
@@ -80,6 +99,36 @@ def run(args: argparse.Namespace) -> int:
         package_roots=roots or None,
     )
     print(f"wrote {out} (ground truth: {ground_truth_path(out)})")
+    return 0
+
+
+#: --size -> (views, width, height) of --capture static
+CAPTURE_SIZES = {"small": (40, 160, 120), "medium": (60, 320, 240), "large": (120, 640, 480)}
+
+
+def _capture(args: argparse.Namespace) -> int:
+    from robogs.synth.multiview import synthesize_multiview, write_truth
+
+    if args.capture is None:
+        raise InputError("--no-poses needs --capture static")
+    if args.urdf is not None or args.effect is not None:
+        raise InputError(
+            "--capture static scans the generated UR5 scene; it takes no --urdf or --effect"
+        )
+    n, w, h = CAPTURE_SIZES[args.size]
+    truth = synthesize_multiview(
+        args.out,
+        robot="ur5",
+        n_views=n,
+        width=w,
+        height=h,
+        seed=args.seed,
+        overwrite=args.force,
+        poses=not args.no_poses,
+    )
+    gt = write_truth(truth, args.out)
+    what = "images only, camera poses unknown" if args.no_poses else "with camera poses"
+    print(f"wrote {args.out} ({n} views of {w}x{h}, {what}; ground truth: {gt})")
     return 0
 
 
