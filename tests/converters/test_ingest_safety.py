@@ -40,10 +40,10 @@ def test_force_never_replaces_a_folder_that_is_not_a_dataset(small: Path, tmp_pa
     precious = tmp_path / "precious"
     precious.mkdir()
     (precious / "thesis.tex").write_text("keep me")
-    with pytest.raises(InputError, match="not a robogs dataset"):
+    with pytest.raises(DatasetExistsError, match="robogs did not write"):
         convert_path(small, precious, force=True)
     assert (precious / "thesis.tex").read_text() == "keep me"
-    with pytest.raises(InputError, match="contain or replace the source"):
+    with pytest.raises(DatasetExistsError, match="source"):
         convert_path(small, tmp_path, force=True)
 
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from robogs.format.dataset import MANIFEST_NAME, Dataset
-from robogs.format.errors import DatasetExistsError, InputError
+from robogs.format.dataset import Dataset
+from robogs.format.errors import InputError
 
 from ..registry import Converter, detect_format, get_converter
 from .context import ConvertOptions, IngestContext
@@ -20,32 +20,6 @@ from .provenance import Provenance
 from .robot import attach_robot, attach_robot_description, urdf_root_link
 
 __all__ = ["convert_path"]
-
-
-def _check_target(src: Path, out: Path, force: bool) -> None:
-    out_r, src_r = out.resolve(), src.resolve()
-    if out_r == src_r or out_r in src_r.parents:
-        raise InputError(
-            "the output folder would contain or replace the source",
-            path=out,
-            hint="choose an output outside the source",
-        )
-    if not out.exists() and not out.is_symlink():
-        return
-    if not force:
-        raise DatasetExistsError(
-            "output already exists",
-            path=out,
-            hint="choose another path or pass --force to replace it",
-        )
-    if out.is_symlink() or not out.is_dir():
-        raise InputError("output exists and is not a folder; refusing to replace it", path=out)
-    if any(out.iterdir()) and not (out / MANIFEST_NAME).is_file():
-        raise InputError(
-            "output folder exists and is not a robogs dataset; refusing to replace it",
-            path=out,
-            hint="remove it yourself or choose another path",
-        )
 
 
 def convert_path(
@@ -77,9 +51,9 @@ def convert_path(
     conv: Converter = get_converter(fmt) if fmt else detect_format(src)
     if not src.exists():
         raise InputError("source does not exist", path=src)
-    _check_target(src, out, force)
     prov = Provenance(conv.name, src.name)
-    writer = Dataset.create(out, overwrite=force)
+    # --force replaces only a robogs dataset, never the source or a folder holding it
+    writer = Dataset.create(out, overwrite=force, protect=[src])
     ctx = IngestContext(writer, opts, prov, ProgressReporter(opts.progress))
     with writer:
         if opts.urdf is not None:

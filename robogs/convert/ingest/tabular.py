@@ -1417,7 +1417,7 @@ def convert_tabular(
         raise InputError("URDF file not found", path=urdf_path)
     _log_files(log_path)
     prov = Provenance("tabular", log_path.name)
-    writer = Dataset.create(out, overwrite=force)
+    writer = Dataset.create(out, overwrite=force, protect=[log_path, urdf_path])
     with writer:
         write_tabular(
             writer,
