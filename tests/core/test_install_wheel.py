@@ -20,6 +20,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from filelock import FileLock
 
 REPO = Path(__file__).resolve().parents[2]
 _SKIP = {".venv", ".git", "out", "build", "dist", "__pycache__", ".pytest_cache", ".ruff_cache",
@@ -41,12 +42,39 @@ def _run(cmd: list[str], *, cwd: Path, env: dict[str, str], timeout: float):
 
 
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    """Build the wheel, install it into a fresh venv; the paths and a clean environment."""
-    base = tmp_path_factory.mktemp("wheel")
-    src = _copy_source(base / "src")
+def installed(tmp_path_factory: pytest.TempPathFactory, worker_id: str) -> dict:
+    """Build the wheel, install it into a fresh venv; the paths and a clean environment.
+
+    Under pytest-xdist the workers share one build (a folder of this test run, under a file
+    lock), so the wheel is built once however the tests are spread.
+    """
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
     env.update(OMP_NUM_THREADS="1", PIP_NO_INPUT="1", PIP_DISABLE_PIP_VERSION_CHECK="1")
+    if worker_id == "master":
+        base = tmp_path_factory.mktemp("wheel")
+        built = _build_and_install(base, env)
+    else:  # the run's basetemp parent is shared by the workers of this run only
+        base = tmp_path_factory.getbasetemp().parent / "wheel-shared"
+        with FileLock(str(base) + ".lock"):
+            built = (
+                _build_and_install(base, env)
+                if not (base / "installed").is_file()
+                else _installed_paths(base)
+            )
+    work = tmp_path_factory.mktemp("work")  # outside the checkout, one per worker
+    return {**built, "work": work, "env": env}
+
+
+def _installed_paths(base: Path) -> dict:
+    target = base / "venv"
+    site = Path((base / "installed").read_text().strip())
+    (wheel,) = sorted((base / "dist").glob("robogs-*.whl"))
+    return {"wheel": wheel, "py": target / "bin" / "python", "bin": target / "bin", "site": site}
+
+
+def _build_and_install(base: Path, env: dict[str, str]) -> dict:
+    base.mkdir(parents=True, exist_ok=True)
+    src = _copy_source(base / "src")
     res = _run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "--no-index",
          "-w", str(base / "dist"), str(src)],
@@ -72,10 +100,8 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> dict:
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     # the dependencies, from this venv's site-packages: one plain path line, no import line
     (site / "zz_robogs_test_deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
-    work = base / "work"  # outside the checkout
-    work.mkdir()
-    return {"wheel": wheels[0], "py": py, "bin": target / "bin", "site": site, "work": work,
-            "env": env}  # fmt: skip
+    (base / "installed").write_text(str(site) + "\n")
+    return _installed_paths(base)
 
 
 def test_the_wheel_ships_the_schemas_and_the_licence(installed: dict) -> None:
