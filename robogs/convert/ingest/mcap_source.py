@@ -35,13 +35,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from robogs.format.errors import InputError, RobogsError
+from robogs.format.errors import InputError
 
 from ..registry import register_converter
 from . import cdr_fast, foxglove
 from .context import IngestContext
 from .decompress import MAX_CHUNK_BYTES, DecompressionLimitError, capped_decompression
 from .messages import MessageIngest, TopicInfo
+from .read_errors import corrupt_source
 
 __all__ = ["convert_mcap", "detect_mcap", "channel_decoder"]
 
@@ -222,150 +223,144 @@ def _convert_mcap(src: Path, ctx: IngestContext) -> None:
     except OSError as exc:
         raise InputError(f"cannot open MCAP ({exc.strerror})", path=src) from None
     try:
-        reader = make_reader(_ClampedFile(fh, size), validate_crcs=True)
-        try:
-            header = reader.get_header()
-            summary = reader.get_summary()
-        except errors as exc:
-            raise InputError(
-                f"not a readable MCAP file ({type(exc).__name__}: {exc})",
-                path=src,
-                hint="the file is empty, truncated or not MCAP; `mcap recover` rebuilds "
-                "a truncated recording",
-            ) from None
-        if summary is None:
-            raise InputError(
-                "MCAP file has no summary section (truncated while recording?)",
-                path=src,
-                hint="run `mcap recover` on it, then convert the recovered file",
-            )
-        _check_chunk_indexes(summary, size, src)
-        unknown = sorted({ci.compression for ci in summary.chunk_indexes} - {"", "zstd", "lz4"})
-        if unknown:
-            raise InputError(
-                f"unknown chunk compression {', '.join(map(repr, unknown))}",
-                path=src,
-                hint="MCAP chunks are uncompressed, zstd or lz4; re-write the file with one of them",
-            )
-        prov.extra["mcap_profile"] = header.profile
-        prov.extra["mcap_library"] = header.library
-        stats = summary.statistics
-        counts: dict[int, int] = dict(stats.channel_message_counts) if stats is not None else {}
-        if stats is None:
-            prov.note("MCAP has no statistics record; counts taken by a first pass")
-            for _, channel, _ in reader.iter_messages(log_time_order=False):
-                counts[channel.id] = counts.get(channel.id, 0) + 1
-        ros2 = DecoderFactory()
-        decoders: dict[int, Callable[[bytes], Any] | None] = {}
-        by_topic: dict[str, list[int]] = {}
-        schema_of: dict[int, Any] = {}
-        for cid, ch in summary.channels.items():
-            schema = summary.schemas.get(ch.schema_id) if ch.schema_id else None
-            schema_of[cid] = schema
-            try:  # the vendored ROS IDL parser prints its complaints; the note below says it
-                with contextlib.redirect_stderr(io.StringIO()):
-                    decoders[cid] = channel_decoder(ch.message_encoding, schema, ros2)
-            except Exception as exc:  # noqa: BLE001 - a schema we cannot parse is reported, not fatal
-                decoders[cid] = None
-                prov.note(
-                    f"{ch.topic}: schema {getattr(schema, 'name', '?')} could not be parsed "
-                    f"({type(exc).__name__}: {str(exc)[:120]})"
-                )
-            by_topic.setdefault(ch.topic, []).append(cid)
-        topics: list[TopicInfo] = []
-        for topic, cids in sorted(by_topic.items()):
-            types = {_message_type(schema_of[c]) for c in cids}
-            n = sum(counts.get(c, 0) for c in cids)
-            bad = [c for c in cids if decoders[c] is None]
-            if bad or len(types) != 1:
-                ch = summary.channels[cids[0]]
-                sch = schema_of[cids[0]]
-                reason = (
-                    "several message types on one topic"
-                    if len(types) != 1
-                    else "no decoder for this encoding"
-                )
-                prov.undecodable.append(
-                    {
-                        "topic": topic,
-                        "schema": getattr(sch, "name", None),
-                        "schema_encoding": getattr(sch, "encoding", None),
-                        "message_encoding": ch.message_encoding,
-                        "messages": n,
-                        "reason": reason,
-                    }
-                )
-                rec = prov.topic(topic, ", ".join(sorted(types)), "ignore")
-                rec.messages = n
-                if n:
-                    prov.drop(topic, reason, n)
-                continue
-            topics.append(TopicInfo(topic, types.pop(), n))
-        start = stats.message_start_time if stats is not None else None
-        end = stats.message_end_time if stats is not None else None
-        time_range = (
-            (start, end) if start is not None and end is not None and start <= end else None
-        )
-        ingest = MessageIngest(ctx, time_range=time_range)
-        static, main = ingest.plan(topics)
-        where = "before the first message"
-        size_mb = src.stat().st_size / 1e6
-        try:
-            passes = (
-                (static, "static topics", False),
-                (ingest.probe_topics, "pose topics against the robot", True),
-                (main, src.name, False),
-            )
-            for group, label, probing in passes:
-                if not group:
-                    continue
-                total = sum(ingest.counts[t] for t in group)
-                ctx.progress.start(f"reading {label} ({size_mb:.0f} MB)", total)
-                for schema, channel, message in reader.iter_messages(
-                    topics=group, log_time_order=True
-                ):
-                    where = f"after topic {channel.topic} log time {message.log_time}"
-                    dec = decoders[channel.id]
-                    assert dec is not None
-                    try:
-                        msg = dec(message.data)
-                        if schema is not None and foxglove.ros_type_of(schema.name):
-                            msg = foxglove.adapt(schema.name, msg)
-                    except Exception as exc:  # noqa: BLE001 - any decoder failure is one bad message
-                        if not probing:  # counted once, in the main pass
-                            ingest.note_undecodable(
-                                channel.topic, message.log_time, f"{type(exc).__name__}: {exc}"
-                            )
-                        ctx.progress.advance()
-                        continue
-                    try:
-                        if probing:
-                            ingest.probe(channel.topic, message.log_time, msg)
-                        else:
-                            ingest.handle(channel.topic, message.log_time, msg)
-                    except (AttributeError, TypeError) as exc:
-                        if probing:  # the main pass reports it
-                            continue
-                        raise _misfit(src, channel.topic, message.log_time, exc) from None
-                    ctx.progress.advance()
-                ctx.progress.stop()
-            ingest.finish()
-        except BaseException:
-            ingest.abort()
-            raise
-    except DecompressionLimitError as exc:
-        if exc.path:
-            raise
-        raise DecompressionLimitError(exc.message, path=src, where=where, hint=exc.hint) from None
-    except RobogsError:
-        raise
-    except errors as exc:
-        raise InputError(
-            f"MCAP is corrupt ({type(exc).__name__}: {str(exc)[:200]})",
-            path=src,
-            where=where,
+        with corrupt_source(
+            src,
+            errors,
+            where=lambda: where,
+            what="MCAP",
             hint="the file is damaged; `mcap recover` may salvage it",
-        ) from None
+        ):
+            reader = make_reader(_ClampedFile(fh, size), validate_crcs=True)
+            try:
+                header = reader.get_header()
+                summary = reader.get_summary()
+            except errors as exc:
+                raise InputError(
+                    f"not a readable MCAP file ({type(exc).__name__}: {exc})",
+                    path=src,
+                    hint="the file is empty, truncated or not MCAP; `mcap recover` rebuilds "
+                    "a truncated recording",
+                ) from None
+            if summary is None:
+                raise InputError(
+                    "MCAP file has no summary section (truncated while recording?)",
+                    path=src,
+                    hint="run `mcap recover` on it, then convert the recovered file",
+                )
+            _check_chunk_indexes(summary, size, src)
+            unknown = sorted({ci.compression for ci in summary.chunk_indexes} - {"", "zstd", "lz4"})
+            if unknown:
+                raise InputError(
+                    f"unknown chunk compression {', '.join(map(repr, unknown))}",
+                    path=src,
+                    hint="MCAP chunks are uncompressed, zstd or lz4; re-write the file with one of them",
+                )
+            prov.extra["mcap_profile"] = header.profile
+            prov.extra["mcap_library"] = header.library
+            stats = summary.statistics
+            counts: dict[int, int] = dict(stats.channel_message_counts) if stats is not None else {}
+            if stats is None:
+                prov.note("MCAP has no statistics record; counts taken by a first pass")
+                for _, channel, _ in reader.iter_messages(log_time_order=False):
+                    counts[channel.id] = counts.get(channel.id, 0) + 1
+            ros2 = DecoderFactory()
+            decoders: dict[int, Callable[[bytes], Any] | None] = {}
+            by_topic: dict[str, list[int]] = {}
+            schema_of: dict[int, Any] = {}
+            for cid, ch in summary.channels.items():
+                schema = summary.schemas.get(ch.schema_id) if ch.schema_id else None
+                schema_of[cid] = schema
+                try:  # the vendored ROS IDL parser prints its complaints; the note below says it
+                    with contextlib.redirect_stderr(io.StringIO()):
+                        decoders[cid] = channel_decoder(ch.message_encoding, schema, ros2)
+                except Exception as exc:  # noqa: BLE001 - a schema we cannot parse is reported, not fatal
+                    decoders[cid] = None
+                    prov.note(
+                        f"{ch.topic}: schema {getattr(schema, 'name', '?')} could not be parsed "
+                        f"({type(exc).__name__}: {str(exc)[:120]})"
+                    )
+                by_topic.setdefault(ch.topic, []).append(cid)
+            topics: list[TopicInfo] = []
+            for topic, cids in sorted(by_topic.items()):
+                types = {_message_type(schema_of[c]) for c in cids}
+                n = sum(counts.get(c, 0) for c in cids)
+                bad = [c for c in cids if decoders[c] is None]
+                if bad or len(types) != 1:
+                    ch = summary.channels[cids[0]]
+                    sch = schema_of[cids[0]]
+                    reason = (
+                        "several message types on one topic"
+                        if len(types) != 1
+                        else "no decoder for this encoding"
+                    )
+                    prov.undecodable.append(
+                        {
+                            "topic": topic,
+                            "schema": getattr(sch, "name", None),
+                            "schema_encoding": getattr(sch, "encoding", None),
+                            "message_encoding": ch.message_encoding,
+                            "messages": n,
+                            "reason": reason,
+                        }
+                    )
+                    rec = prov.topic(topic, ", ".join(sorted(types)), "ignore")
+                    rec.messages = n
+                    if n:
+                        prov.drop(topic, reason, n)
+                    continue
+                topics.append(TopicInfo(topic, types.pop(), n))
+            start = stats.message_start_time if stats is not None else None
+            end = stats.message_end_time if stats is not None else None
+            time_range = (
+                (start, end) if start is not None and end is not None and start <= end else None
+            )
+            ingest = MessageIngest(ctx, time_range=time_range)
+            static, main = ingest.plan(topics)
+            where = "before the first message"
+            size_mb = src.stat().st_size / 1e6
+            try:
+                passes = (
+                    (static, "static topics", False),
+                    (ingest.probe_topics, "pose topics against the robot", True),
+                    (main, src.name, False),
+                )
+                for group, label, probing in passes:
+                    if not group:
+                        continue
+                    total = sum(ingest.counts[t] for t in group)
+                    ctx.progress.start(f"reading {label} ({size_mb:.0f} MB)", total)
+                    for schema, channel, message in reader.iter_messages(
+                        topics=group, log_time_order=True
+                    ):
+                        where = f"after topic {channel.topic} log time {message.log_time}"
+                        dec = decoders[channel.id]
+                        assert dec is not None
+                        try:
+                            msg = dec(message.data)
+                            if schema is not None and foxglove.ros_type_of(schema.name):
+                                msg = foxglove.adapt(schema.name, msg)
+                        except Exception as exc:  # noqa: BLE001 - any decoder failure is one bad message
+                            if not probing:  # counted once, in the main pass
+                                ingest.note_undecodable(
+                                    channel.topic, message.log_time, f"{type(exc).__name__}: {exc}"
+                                )
+                            ctx.progress.advance()
+                            continue
+                        try:
+                            if probing:
+                                ingest.probe(channel.topic, message.log_time, msg)
+                            else:
+                                ingest.handle(channel.topic, message.log_time, msg)
+                        except (AttributeError, TypeError) as exc:
+                            if probing:  # the main pass reports it
+                                continue
+                            raise _misfit(src, channel.topic, message.log_time, exc) from None
+                        ctx.progress.advance()
+                    ctx.progress.stop()
+                ingest.finish()
+            except BaseException:
+                ingest.abort()
+                raise
     finally:
         ctx.progress.stop()
         fh.close()

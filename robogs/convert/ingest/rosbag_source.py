@@ -20,8 +20,9 @@ from robogs.format.errors import InputError, RobogsError
 
 from ..registry import register_converter
 from .context import IngestContext
-from .decompress import DecompressionLimitError, capped_decompression
+from .decompress import capped_decompression
 from .messages import MessageIngest, TopicInfo
+from .read_errors import corrupt_source
 from .yamlio import read_yaml
 
 __all__ = [
@@ -158,88 +159,82 @@ def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
             hint="the file is truncated, empty, not a bag, or uses an unknown compression",
         ) from None
     try:
-        count = reader.message_count
-        start, end = reader.start_time, reader.end_time
-        time_range = (start, end) if count and start <= end else None
-        topics = []
-        for name, ti in reader.topics.items():
-            if ti.msgtype is None:
-                ctx.provenance.note(f"{name}: several message types on one topic; skipped")
-                ctx.provenance.topic(name, "mixed", "ignore").messages = ti.msgcount
-                ctx.provenance.drop(name, "several message types on one topic", ti.msgcount)
-                continue
-            topics.append(TopicInfo(name, ti.msgtype, ti.msgcount))
-        expected = ctx.provenance.extra.get("metadata_counts")
-        if expected:
-            for t in topics:
-                if t.topic in expected and expected[t.topic] != t.count:
-                    ctx.provenance.note(
-                        f"{t.topic}: metadata.yaml says {expected[t.topic]} messages, "
-                        f"the storage holds {t.count}"
-                    )
-        ingest = MessageIngest(ctx, time_range=time_range)
-        static, main = ingest.plan(topics)
-        where = "before the first message"
-        try:
-            passes = (
-                (static, "static topics", False),
-                (ingest.probe_topics, "pose topics against the robot", True),
-                (main, src.name, False),
-            )
-            for group, label, probing in passes:
-                if not group:
-                    continue
-                conns = [c for c in reader.connections if c.topic in set(group)]
-                total = sum(ingest.counts[t] for t in group)
-                ctx.progress.start(f"reading {label}", total)
-                for conn, log_time, raw in reader.messages(connections=conns):
-                    where = f"after topic {conn.topic} log time {log_time}"
-                    try:
-                        msg = reader.deserialize(raw, conn.msgtype)
-                    except RobogsError:
-                        raise
-                    except errors + (TypeError, UnicodeDecodeError) as exc:
-                        if not probing:  # counted once, in the main pass
-                            ingest.note_undecodable(
-                                conn.topic, log_time, f"{type(exc).__name__}: {exc}"
-                            )
-                        ctx.progress.advance()
-                        continue
-                    try:
-                        if probing:
-                            ingest.probe(conn.topic, log_time, msg)
-                        else:
-                            ingest.handle(conn.topic, log_time, msg)
-                    except (AttributeError, TypeError) as exc:
-                        if probing:  # the main pass reports it
-                            continue
-                        raise InputError(
-                            f"message does not fit its type ({type(exc).__name__}: "
-                            f"{str(exc)[:160]})",
-                            path=src,
-                            where=f"topic {conn.topic} log time {log_time}",
-                            hint="the message definition stored in the bag does not match "
-                            "the topic's type",
-                        ) from None
-                    ctx.progress.advance()
-                ctx.progress.stop()
-            ingest.finish()
-        except BaseException:
-            ingest.abort()
-            raise
-    except DecompressionLimitError as exc:
-        if exc.path:
-            raise
-        raise DecompressionLimitError(exc.message, path=src, where=where, hint=exc.hint) from None
-    except RobogsError:
-        raise
-    except errors as exc:
-        raise InputError(
-            f"bag is corrupt ({type(exc).__name__}: {exc})",
-            path=src,
-            where=where,
+        with corrupt_source(
+            src,
+            errors,
+            where=lambda: where,
+            what="bag",
             hint="the file may be truncated; re-record or reindex it",
-        ) from None
+        ):
+            count = reader.message_count
+            start, end = reader.start_time, reader.end_time
+            time_range = (start, end) if count and start <= end else None
+            topics = []
+            for name, ti in reader.topics.items():
+                if ti.msgtype is None:
+                    ctx.provenance.note(f"{name}: several message types on one topic; skipped")
+                    ctx.provenance.topic(name, "mixed", "ignore").messages = ti.msgcount
+                    ctx.provenance.drop(name, "several message types on one topic", ti.msgcount)
+                    continue
+                topics.append(TopicInfo(name, ti.msgtype, ti.msgcount))
+            expected = ctx.provenance.extra.get("metadata_counts")
+            if expected:
+                for t in topics:
+                    if t.topic in expected and expected[t.topic] != t.count:
+                        ctx.provenance.note(
+                            f"{t.topic}: metadata.yaml says {expected[t.topic]} messages, "
+                            f"the storage holds {t.count}"
+                        )
+            ingest = MessageIngest(ctx, time_range=time_range)
+            static, main = ingest.plan(topics)
+            where = "before the first message"
+            try:
+                passes = (
+                    (static, "static topics", False),
+                    (ingest.probe_topics, "pose topics against the robot", True),
+                    (main, src.name, False),
+                )
+                for group, label, probing in passes:
+                    if not group:
+                        continue
+                    conns = [c for c in reader.connections if c.topic in set(group)]
+                    total = sum(ingest.counts[t] for t in group)
+                    ctx.progress.start(f"reading {label}", total)
+                    for conn, log_time, raw in reader.messages(connections=conns):
+                        where = f"after topic {conn.topic} log time {log_time}"
+                        try:
+                            msg = reader.deserialize(raw, conn.msgtype)
+                        except RobogsError:
+                            raise
+                        except errors + (TypeError, UnicodeDecodeError) as exc:
+                            if not probing:  # counted once, in the main pass
+                                ingest.note_undecodable(
+                                    conn.topic, log_time, f"{type(exc).__name__}: {exc}"
+                                )
+                            ctx.progress.advance()
+                            continue
+                        try:
+                            if probing:
+                                ingest.probe(conn.topic, log_time, msg)
+                            else:
+                                ingest.handle(conn.topic, log_time, msg)
+                        except (AttributeError, TypeError) as exc:
+                            if probing:  # the main pass reports it
+                                continue
+                            raise InputError(
+                                f"message does not fit its type ({type(exc).__name__}: "
+                                f"{str(exc)[:160]})",
+                                path=src,
+                                where=f"topic {conn.topic} log time {log_time}",
+                                hint="the message definition stored in the bag does not match "
+                                "the topic's type",
+                            ) from None
+                        ctx.progress.advance()
+                    ctx.progress.stop()
+                ingest.finish()
+            except BaseException:
+                ingest.abort()
+                raise
     finally:
         ctx.progress.stop()
         try:
