@@ -101,7 +101,8 @@ def write_ros2_mcap(
 
     ``hostile`` switches on one defect: ``{"bad_image_at": i}`` (an Image with a wrong
     ``step``), ``{"clock_jump_at": i}`` (a joint stamp 5 s in the past),
-    ``{"zero_stamp_at": i}`` (a joint header stamp of 0).
+    ``{"zero_stamp_at": i}`` (a joint header stamp of 0), ``{"nan_joint_every": k}`` (the
+    first joint's position is NaN in every k-th JointState).
     """
     from mcap_ros2.writer import Writer
 
@@ -128,6 +129,8 @@ def write_ros2_mcap(
         if hostile.get("zero_stamp_at") == i:
             stamp = 0
         pos = [float(v) for v in 0.5 * rng.normal(size=3)]
+        if hostile.get("nan_joint_every") and i % hostile["nan_joint_every"] == 0:
+            pos[0] = float("nan")  # a driver that publishes NaN for a joint it lost
         vel = [float(v) for v in rng.normal(size=3)]
         eff = [float(v) for v in rng.normal(size=3)]
         # the publisher sends names in a different order every other message

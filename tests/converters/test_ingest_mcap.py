@@ -338,3 +338,19 @@ def test_ros1_encoded_and_foxglove_json_channels(tmp_path: Path, synth) -> None:
     assert ep.frames("cam").column("t_ns").to_pylist() == stamps
     und = ds.manifest["provenance"]["undecodable"]
     assert [(u["topic"], u["messages"]) for u in und] == [("/blob", 5)]
+
+
+def test_nonfinite_joint_values_are_noted_and_validated(tmp_path: Path, synth) -> None:
+    """Issue 19, item 3: NaN joints convert as recorded, with a note, and fail I009."""
+    sc = synth.write_ros2_mcap(tmp_path / "a.mcap", duration_s=0.2, hostile={"nan_joint_every": 7})
+    ds = convert_path(tmp_path / "a.mcap", tmp_path / "out")
+    col = f"position.{sc.joints[0]}"
+    n_nan = sum(1 for i in range(len(sc.joint_t)) if i % 7 == 0)
+    values = ds.episode().table("joint_states").column(col).to_numpy()
+    assert int(np.isnan(values).sum()) == n_nan
+    notes = [n for n in ds.manifest["provenance"]["notes"] if "NaN or inf" in n]
+    assert len(notes) == 1 and f"{n_nan} of {len(sc.joint_t)} values of {col}" in notes[0]
+    assert f"t_ns {sc.joint_t[0]}" in notes[0]
+    report = validate(ds.root, select=["I009"])
+    (f,) = [f for f in report.findings if f.code == "I009"]
+    assert f.value == n_nan

@@ -120,6 +120,8 @@ class TableSink:
         self.start_ns: int | None = None
         self.end_ns: int | None = None
         self.written: dict[str, int] = {}
+        #: column -> (count of NaN/inf values written, stamp of the first), noted on close
+        self.nonfinite: dict[str, tuple[int, int]] = {}
 
     def add(
         self, source: str, t_ns: int, values: tuple[float, ...] | list[float], label: str = ""
@@ -187,6 +189,11 @@ class TableSink:
         if self.label_column:
             cols.append(pa.array([self._labels[i] for i in lab[emit]], type=pa.string()))
         cols += [pa.array(vals[emit, j], type=pa.float64()) for j in range(vals.shape[1])]
+        bad = ~np.isfinite(vals[emit])
+        for j in np.flatnonzero(bad.any(axis=0)):  # kept as recorded; counted and noted
+            col, rows = self.float_columns[j], np.flatnonzero(bad[:, j])
+            n0, t0 = self.nonfinite.get(col, (0, int(t[emit[rows[0]]])))
+            self.nonfinite[col] = (n0 + int(rows.size), t0)
         table = pa.Table.from_arrays(cols, schema=self.schema)
         try:  # a full disk is the output's fault, never "a corrupt input"
             if self._writer is None:
@@ -216,6 +223,11 @@ class TableSink:
     def close(self) -> SinkStats:
         """Write the remaining rows and close the file (no file when no row was written)."""
         self._flush(final=True)
+        for col, (n, t0) in sorted(self.nonfinite.items()):
+            self.prov.note(
+                f"{self.path.name}: {n} of {self.rows} values of {col} are NaN or inf (first at "
+                f"t_ns {t0}); kept as recorded, robogs-validate reports them (I009)"
+            )
         if self._writer is not None:
             self._writer.close()
             self._writer = None
