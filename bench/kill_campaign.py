@@ -79,7 +79,7 @@ def _inputs(root: Path, command: str) -> tuple[Path, list[str]]:
     argv = [
         "reconstruct", str(target), "--iterations", "24", "--checkpoint-every", "8",
         "--tsdf-resolution", "40", "--heldout-every", "4", "--threads", "1", "--no-progress",
-        "--work-dir", str(root / "work"),
+        "--work-dir", str(root / "work"), "--force",
     ]  # fmt: skip
     return target, argv
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -107,6 +109,22 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
     p.add_argument("--keep-checkpoint", action="store_true")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-progress", action="store_true")
+    g = p.add_argument_group(
+        "coverage and floors",
+        "refuse a capture below the coverage before training, and a result below the floors "
+        "before writing it (docs/reconstruct.md, 'Coverage and floors')",
+    )
+    g.add_argument(
+        "--force",
+        action="store_true",
+        help="reconstruct and write anyway (the figures are still reported)",
+    )
+    g.add_argument("--min-views", type=int, default=8, help="training views per link and object")
+    g.add_argument(
+        "--min-span-deg", type=float, default=60.0, help="angle spanned by those views, deg"
+    )
+    g.add_argument("--min-pixels", type=int, default=100, help="pixels for a view to count")
+    g.add_argument("--min-psnr", type=float, default=20.0, help="held-out PSNR floor, dB")
 
 
 def _fmt(x: float, unit: str = "") -> str:
@@ -130,8 +148,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_reconstruct(args: argparse.Namespace) -> int:
+    from .coverage import CoverageThresholds
     from .init import InitConfig
     from .pipeline import ReconstructOptions, reconstruct
+    from .quality import QualityFloors, ReconstructionRejected
     from .train import TrainConfig
 
     if args.iterations < 1:
@@ -168,8 +188,20 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
         keep_checkpoint=args.keep_checkpoint,
         device=args.device,
         progress=not args.no_progress and not args.json,
+        coverage=CoverageThresholds(
+            min_views=args.min_views, min_span_deg=args.min_span_deg, min_pixels=args.min_pixels
+        ),
+        floors=replace(QualityFloors(), min_psnr_db=args.min_psnr),
+        force=args.force,
     )
-    rep = reconstruct(args.dataset, opts)
+    try:
+        rep = reconstruct(args.dataset, opts)
+    except ReconstructionRejected as exc:
+        # readable input, a result below its floors: a finding (exit 1), nothing written
+        if args.json:
+            print(json.dumps({"rejected": exc.message, **exc.figures}, indent=2, default=float))
+        print(f"robogs reconstruct: rejected: {exc.one_line()}", file=sys.stderr)
+        return 1
     if args.json:
         print(json.dumps(rep.to_json(), indent=2, default=float))
         return 0
@@ -205,6 +237,10 @@ def _print_reconstruct(rep: Any) -> None:
     c.print(
         f"  time {rep.timings_s.get('total', 0):.1f} s (train {rep.timings_s.get('train', 0):.1f} s)"
     )
+    for p in rep.coverage.get("problems", []):
+        c.print(f"[yellow]warning[/yellow] (--force): coverage: {p}")
+    for f in rep.quality.get("failures", []):
+        c.print(f"[yellow]warning[/yellow] (--force): {f}")
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:

@@ -31,16 +31,19 @@ import torch
 import trimesh
 
 from robogs.format.dataset import Dataset
-from robogs.format.errors import InputError
+from robogs.format.errors import InputError, RobogsError
 from robogs.format.frames import matrix_to_quat, quat_multiply, quat_to_matrix
 from robogs.format.render import RenderConfig, render
 from robogs.format.splats import SplatSet
 
 from .align import AlignmentResult, Similarity, align_to_meshes
 from .bind import bind_to_mesh
+from .coverage import CoverageThresholds, assess_coverage
+from .image_metrics import psnr
 from .init import InitConfig, initial_points, initial_tensors
 from .mesh_clean import clean_mesh
 from .model import GaussianModel, LearningRates
+from .quality import QualityFloors, assess_quality
 from .robot_geometry import link_meshes
 from .segment import TargetMap, split_mesh, target_map, vote_targets
 from .train import TrainConfig, TrainResult, train
@@ -82,6 +85,10 @@ class ReconstructOptions:
         keep_checkpoint: keep the checkpoint after a successful run.
         device: torch device ("cpu", "cuda", ...).
         progress: show progress bars.
+        coverage: what the capture must offer before training (``coverage.py``).
+        floors: what the result must reach before it is written (``quality.py``).
+        force: reconstruct a capture below ``coverage`` and write a result below ``floors``
+            (both are still measured and reported).
     """
 
     episode: str | None = None
@@ -101,6 +108,9 @@ class ReconstructOptions:
     keep_checkpoint: bool = False
     device: str = "cpu"
     progress: bool = False
+    coverage: CoverageThresholds = field(default_factory=CoverageThresholds)
+    floors: QualityFloors = field(default_factory=QualityFloors)
+    force: bool = False
 
 
 @dataclass
@@ -126,6 +136,8 @@ class ReconstructionReport:
     background: list[float]
     timings_s: dict[str, float]
     written: list[str]
+    coverage: dict[str, Any] = field(default_factory=dict)
+    quality: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -257,6 +269,25 @@ def reconstruct(
         )
     tcfg = replace(options.train, lrs=_scaled_lrs(options.train.lrs, options.lr_scale))
     timings["load"] = time.perf_counter() - t_start
+    # -- coverage: refuse before spending time ----------------------------------------------
+    t0 = time.perf_counter()
+    lmeshes = (
+        link_meshes(ds, capture.joint_positions)
+        if ds.manifest.get("robot") and capture.joint_positions
+        else {}
+    )
+    links: set[str] = set()
+    if ds.manifest.get("robot"):
+        from robogs.format.kinematics import Chain
+
+        links = set(Chain.from_urdf(ds.urdf(load_meshes=False)).link_names)
+    tmap = target_map(capture.segments, links)
+    coverage = assess_coverage(
+        train_views, tmap, _target_centres(ds, capture, lmeshes), options.coverage
+    )
+    timings["coverage"] = time.perf_counter() - t0
+    if not options.force:
+        coverage.raise_if_insufficient()
     t0 = time.perf_counter()
     ip = initial_points(ds, capture, train_views, options.init)
     init = initial_tensors(
@@ -301,22 +332,27 @@ def reconstruct(
     timings["mesh"] = time.perf_counter() - t0
     # -- segmentation -----------------------------------------------------------------------------
     t0 = time.perf_counter()
-    lmeshes = (
-        link_meshes(ds, capture.joint_positions)
-        if ds.manifest.get("robot") and capture.joint_positions
-        else {}
-    )
-    links: set[str] = set()
-    if ds.manifest.get("robot"):
-        from robogs.format.kinematics import Chain
-
-        links = set(Chain.from_urdf(ds.urdf(load_meshes=False)).link_names)
-    tmap = target_map(capture.segments, links)
     tol = 2.5 * vol.voxel_size
     v_target, _ = vote_targets(np.asarray(mesh.vertices), train_views, depths, tmap, tol)
     g_target, _ = vote_targets(means, train_views, depths, tmap, tol)
     parts = split_mesh(mesh, v_target, len(tmap.names)) if len(mesh.faces) else {}
     timings["segment"] = time.perf_counter() - t0
+    # -- floors: refuse to write what is not a reconstruction ------------------------------
+    spacing = options.init.spacing_m or extent / 110.0  # the seed spacing of init.py
+    quality = assess_quality(
+        mesh_faces=len(mesh.faces),
+        heldout_psnr_db=_heldout_psnr(model, held, tcfg),
+        link_gaussians={
+            n: int((g_target == k).sum())
+            for k, n in enumerate(tmap.names, start=1)
+            if tmap.kinds[k - 1] == "robot_link"
+        },
+        link_areas_m2={n: float(lm.mesh.area) for n, lm in lmeshes.items()},
+        spacing_m=spacing,
+        floors=options.floors,
+    )
+    if not options.force:
+        quality.raise_if_failed()  # the checkpoint stays: --force writes without retraining
     # -- alignment ----------------------------------------------------------------------------------
     align_rep: AlignmentResult | None = None
     if options.align != "off" and lmeshes:
@@ -367,6 +403,8 @@ def reconstruct(
             background=list(tcfg.background),
             timings_s=timings,
             written=written,
+            coverage=coverage.to_json(),
+            quality=quality.to_json(),
         )
 
     report = _write(
@@ -393,6 +431,36 @@ def reconstruct(
         except OSError:
             pass
     return report
+
+
+def _target_centres(
+    ds: Dataset, capture: Capture, lmeshes: dict[str, Any]
+) -> dict[str, tuple[np.ndarray, str]]:
+    """World centres at rest: links' visual mesh centroids (FK), objects' rest poses (m)."""
+    out: dict[str, tuple[np.ndarray, str]] = {
+        n: (np.asarray(lm.world_mesh().centroid, np.float64), "fk") for n, lm in lmeshes.items()
+    }
+    for name, pose in capture.object_poses.items():
+        T = _pose_T(pose)
+        c = T[:3, 3]
+        if ds.assets.get(name, {}).get("mesh"):
+            try:
+                c = T[:3, :3] @ np.asarray(ds.mesh(name).centroid) + T[:3, 3]
+            except RobogsError:
+                pass  # an unreadable asset mesh is reported where it is used
+        out[name] = (np.asarray(c, np.float64), "pose")
+    return out
+
+
+@torch.no_grad()
+def _heldout_psnr(model: GaussianModel, held: list[View], cfg: TrainConfig) -> float:
+    """Mean PSNR of the trained model in the held-out views, dB (nan without any)."""
+    if not held:
+        return float("nan")
+    rc = RenderConfig(kind=cfg.kind, background=tuple(cfg.background), validate=False)
+    g = model.gaussians()
+    vals = [psnr(render(g, v.camera, config=rc).rgb.clamp(0, 1).cpu(), v.rgb) for v in held]
+    return float(np.mean(vals))
 
 
 def _align_json(a: AlignmentResult | None, mode: str) -> dict[str, Any] | None:

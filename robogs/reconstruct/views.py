@@ -143,6 +143,15 @@ def _camera_poses(
 ) -> np.ndarray:
     """[F, 4, 4] ``T_world_cam`` of every frame; raises for frames without a pose."""
     where = f"episodes/{ep.id}/camera/{model.name}"
+    if model.extrinsics == "unknown":
+        raise InputError(
+            f"camera {model.name!r} declares its extrinsics unknown (images only): the views "
+            "have no poses",
+            path=ds.manifest_path,
+            where=where,
+            hint="recover them by structure from motion (robogs convert IMAGES OUT --sfm), or "
+            "import a COLMAP/nerfstudio capture",
+        )
     if model.extrinsics == "time_varying":
         rel = entry.get("extrinsics")
         if not isinstance(rel, str):

@@ -115,7 +115,7 @@ def test_kill_during_reconstruct(inputs: dict[str, Path], tmp_path: Path) -> Non
     argv = [
         "reconstruct", str(target), "--iterations", "6", "--checkpoint-every", "2",
         "--max-views", "4", "--tsdf-resolution", "24", "--heldout-every", "4", "--threads", "1",
-        "--no-progress", "--work-dir", str(work),
+        "--no-progress", "--work-dir", str(work), "--force",
     ]  # fmt: skip
     log = tmp_path / "log.txt"
     rng = np.random.default_rng(SEED + 2)  # first kill: mid-training, after a checkpoint

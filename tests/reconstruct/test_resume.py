@@ -27,8 +27,8 @@ def _options(work: Path) -> ReconstructOptions:
         densify=DensifyConfig(grad_threshold=1e-7),
     )
     return ReconstructOptions(
-        train=tc, heldout_every=4, tsdf_resolution=40, work_dir=work, lr_scale=3.0
-    )
+        train=tc, heldout_every=4, tsdf_resolution=40, work_dir=work, lr_scale=3.0, force=True
+    )  # 6 training views of 48x36 px: below the coverage; 12 steps: below the floors
 
 
 def _tree_digest(root: Path) -> str:

@@ -14,12 +14,18 @@ from .generate import (
     EPISODE_ID,
     LABEL_BOX,
     MultiviewTruth,
+    read_truth_poses,
     synthesize_multiview,
+    truth_path,
+    write_truth,
 )
 
 __all__ = [
     "synthesize_multiview",
     "MultiviewTruth",
+    "truth_path",
+    "write_truth",
+    "read_truth_poses",
     "EPISODE_ID",
     "CAMERA_NAME",
     "LABEL_BOX",

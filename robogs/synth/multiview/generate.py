@@ -37,6 +37,9 @@ from .two_link import two_link_robot
 __all__ = [
     "synthesize_multiview",
     "MultiviewTruth",
+    "truth_path",
+    "write_truth",
+    "read_truth_poses",
     "EPISODE_ID",
     "CAMERA_NAME",
     "LABEL_BOX",
@@ -169,6 +172,51 @@ class MultiviewTruth:
         return pts[seen], normals[seen]
 
 
+def truth_path(out: str | Path) -> Path:
+    """Where the ground truth of the capture at ``out`` goes: ``OUT.ground_truth.json`` beside it."""
+    out = Path(out)
+    return out.with_name(out.name + ".ground_truth.json")
+
+
+def write_truth(truth: MultiviewTruth, out: str | Path) -> Path:
+    """Write the truth beside the dataset ``out`` (never inside it); returns the JSON path.
+
+    ``OUT.ground_truth.json`` holds the camera poses (``T_world_cam`` per view, OpenCV axes,
+    world at the robot base, m), ``K`` (px), the joint and object rest state and the label ids;
+    ``OUT.ground_truth.ply`` the true scene mesh (m, world), for mesh metrics.
+    """
+    import json
+    import os
+
+    path = truth_path(out)
+    ply = path.with_suffix(".ply")
+    doc = {
+        "T_world_cam": np.asarray(truth.T_world_cam).tolist(),
+        "K": np.asarray(truth.K).tolist(),
+        "joint_positions": truth.joint_positions,
+        "object_poses": truth.object_poses,
+        "label_of": truth.label_of,
+        "heldout": truth.heldout,
+        "scene_mesh": ply.name,
+        "scene_size_m": float(np.linalg.norm(np.ptp(truth.scene_mesh.vertices, axis=0))),
+    }
+    for target, data in ((ply, truth.scene_mesh.export(file_type="ply")), (path, None)):
+        tmp = target.with_name(target.name + ".tmp")
+        if data is None:
+            tmp.write_text(json.dumps(doc, indent=1), encoding="utf-8")
+        else:
+            tmp.write_bytes(data)
+        os.replace(tmp, target)
+    return path
+
+
+def read_truth_poses(path: str | Path) -> np.ndarray:
+    """[V, 4, 4] true ``T_world_cam`` from a :func:`write_truth` JSON."""
+    import json
+
+    return np.asarray(json.loads(Path(path).read_text(encoding="utf-8"))["T_world_cam"])
+
+
 def _fibonacci_directions(n: int, z_min: float, rng: np.random.Generator) -> np.ndarray:
     """``n`` near-uniform unit vectors with z >= ``z_min`` (a Fibonacci lattice, random twist)."""
     i = np.arange(n) + 0.5
@@ -250,6 +298,7 @@ def synthesize_multiview(
     seed: int = 0,
     object_meshes: bool = False,
     overwrite: bool = False,
+    poses: bool = True,
 ) -> MultiviewTruth:
     """Write a static multi-view robogs dataset and return its ground truth.
 
@@ -266,6 +315,9 @@ def synthesize_multiview(
         object_meshes: also store the box (and table) meshes as asset meshes; by default the
             assets have none, as in a capture whose objects are to be reconstructed.
         overwrite: replace an existing folder.
+        poses: write the camera poses (a ``camera_extrinsics`` table); False declares the
+            camera's extrinsics ``unknown`` (images, intrinsics and labels only, as a handheld
+            capture before structure from motion); the poses stay in the returned truth.
     """
     out = Path(out)
     if robot == "two_link":
@@ -322,9 +374,9 @@ def synthesize_multiview(
         object_poses["table"] = _pose7(T_table)
     fx = 0.5 * width / math.tan(math.radians(hfov_deg) / 2)
     K = np.array([[fx, 0.0, 0.5 * width], [0.0, fx, 0.5 * height], [0.0, 0.0, 1.0]])
-    poses = _orbit_poses(n_views, centre, radius, z_min, seed)
+    cam_poses = _orbit_poses(n_views, centre, radius, z_min, seed)
     imgs, labs, depths = [], [], []
-    for T in poses:
+    for T in cam_poses:
         rgb, lab, depth = _render(parts, T, K, width, height, supersample)
         imgs.append(rgb)
         labs.append(lab)
@@ -389,10 +441,11 @@ def synthesize_multiview(
             ),
             kind="camera_labels",
         )
-        ext = np.array([_pose7(T) for T in poses])
-        ex = {"t_ns": stamps}
-        ex.update({c: ext[:, i] for i, c in enumerate(("x", "y", "z", "qw", "qx", "qy", "qz"))})
-        w.write_table(f"{cam_dir}/extrinsics.parquet", _table(ex), kind="camera_extrinsics")
+        if poses:
+            ext = np.array([_pose7(T) for T in cam_poses])
+            ex = {"t_ns": stamps}
+            ex.update({c: ext[:, i] for i, c in enumerate(("x", "y", "z", "qw", "qx", "qy", "qz"))})
+            w.write_table(f"{cam_dir}/extrinsics.parquet", _table(ex), kind="camera_extrinsics")
         _write_video(w.path(f"{cam_dir}/rgb.mkv"), images)
         w.set_camera(
             CameraModel(
@@ -403,7 +456,7 @@ def synthesize_multiview(
                 float(K[1, 1]),
                 float(K[0, 2]),
                 float(K[1, 2]),
-                extrinsics="time_varying",
+                extrinsics="time_varying" if poses else "unknown",
             )
         )
         if object_meshes:
@@ -441,7 +494,7 @@ def synthesize_multiview(
                 "frames": f"{cam_dir}/frames.parquet",
                 "video": f"{cam_dir}/rgb.mkv",
                 "labels": f"{cam_dir}/labels.parquet",
-                "extrinsics": f"{cam_dir}/extrinsics.parquet",
+                **({"extrinsics": f"{cam_dir}/extrinsics.parquet"} if poses else {}),
                 "nominal_rate_hz": None,
                 "source": "robogs.synth.multiview",
                 **none,
@@ -453,7 +506,7 @@ def synthesize_multiview(
         w.manifest["conventions"]["clock"] = "none (static capture: t_ns is the view ordinal)"
         w.manifest["generator"] = {
             "command": f"robogs.synth.multiview robot={robot} views={n_views} "
-            f"size={width}x{height} seed={seed}"
+            f"size={width}x{height} seed={seed}" + ("" if poses else " poses=unknown")
         }
         w.manifest["provenance"] = {"synthetic": True, "multiview": robot, "seed": int(seed)}
         w.commit()
@@ -461,7 +514,7 @@ def synthesize_multiview(
         meshes={p.name: p.mesh for p in parts},
         images=images,
         labels=labels,
-        T_world_cam=poses,
+        T_world_cam=cam_poses,
         K=K,
         joint_positions={n: float(q[0, i]) for i, n in enumerate(jn)},
         object_poses=object_poses,

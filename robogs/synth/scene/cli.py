@@ -1,7 +1,7 @@
 """``robogs synth OUT [--seed N] [--size small|medium|large] [--urdf PATH]``.
 
 With ``--capture static [--no-poses]`` it writes the multi-view scan of the scene at rest
-(40/60/120 views of 160x120/320x240/640x480 px by ``--size``; ``robogs.synth.multiview``) for
+(60/120/180 views of 320x240/640x480/960x720 px by ``--size``; ``robogs.synth.multiview``) for
 ``robogs reconstruct``; the true camera poses and scene mesh go beside it.
 
 With ``--effect NAME`` (``none`` for null data) it writes a hidden-effect scenario for the
@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 #: --size -> (views, width, height) of --capture static
-CAPTURE_SIZES = {"small": (40, 160, 120), "medium": (60, 320, 240), "large": (120, 640, 480)}
+CAPTURE_SIZES = {"small": (60, 320, 240), "medium": (120, 640, 480), "large": (180, 960, 720)}
 
 
 def _capture(args: argparse.Namespace) -> int:
