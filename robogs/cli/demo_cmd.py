@@ -27,17 +27,18 @@ from typing import Any
 
 __all__ = ["add_arguments", "run", "Steps", "TYPICAL_S"]
 
-#: typical seconds per step with the default arguments, single-threaded CPU time measured on
-#: the development machine (only their ratios matter: the ETA rescales them as steps finish)
+#: seconds per step with the default arguments: one run on the 2-core development machine
+#: (load average 5 from other jobs; 68 s in all). Only their ratios matter: the ETA rescales
+#: them by how fast the finished steps ran.
 TYPICAL_S: dict[str, float] = {
-    "synthesise the default scene": 8.0,
-    "validate it": 10.0,
-    "write the dataset report": 2.0,
-    "write the hidden-effect scenario": 4.0,
-    "compare": 9.0,
-    "diagnose": 16.0,
-    "fit": 10.0,
-    "write the physics report": 1.0,
+    "synthesise the default scene": 0.9,
+    "validate it": 7.6,
+    "write the dataset report": 1.1,
+    "write the hidden-effect scenario": 4.9,
+    "compare": 8.5,
+    "diagnose": 24.9,
+    "fit": 17.6,
+    "write the physics report": 0.1,
 }
 
 
@@ -184,7 +185,7 @@ def physics_demo(
     steps.end(f"{len(rec.trajectories)} trajectories ({design})")
 
     steps.start("compare")
-    before = compare(scenario)
+    before = compare(scenario, progress=_fit_progress(progress))
     rev = Dataset.open(scenario).physics().get("revision")
     steps.end(
         f"object position RMS {before.rms_mm:.2f} mm (physics revision {rev}, refitted; noise "
@@ -208,7 +209,10 @@ def physics_demo(
 
     steps.start("fit", f"--add {found[0]}" if found else "(no effect: refit the base model)")
     res = fit(
-        scenario, found[:1], note=f"demo: add {found[0]}" if found else "demo: refit the base"
+        scenario,
+        found[:1],
+        note=f"demo: add {found[0]}" if found else "demo: refit the base",
+        progress=_fit_progress(progress),
     )
     steps.end(
         f"RMS {res.rms_before:.2f} -> {res.rms_after:.2f} mm (noise floor "
@@ -238,7 +242,8 @@ _PHYSICS_STEPS = (
 
 
 def _fit_progress(show: bool) -> Callable[[int, int], None] | None:
-    """A one-line progress of the batched fit: LM iteration (at most 20) and fits running."""
+    """A one-line progress of a batched fit: LM iteration (at most 20) and fits running
+    (a fit with an effect runs three in turn: before, the fit, after)."""
     if not show:
         return None
 

@@ -77,7 +77,12 @@ def _attach_masks(res: CompareResult, ds: Any, mask_frames: int, mask_poses: str
 
 
 def compare(
-    dataset: Any, *, dt: float = 1e-3, mask_frames: int = MAX_FRAMES, mask_poses: str = "model"
+    dataset: Any,
+    *,
+    dt: float = 1e-3,
+    mask_frames: int = MAX_FRAMES,
+    mask_poses: str = "model",
+    progress: Callable[[int, int], None] | None = None,
 ) -> CompareResult:
     """Residuals of the current physics revision, refitted, against the measured streams.
 
@@ -86,10 +91,12 @@ def compare(
     from the stored values; nothing is written. With camera masks and a binding the result carries the mask-boundary stream: links by
     forward kinematics of the measured joints, the free object at the model's predicted poses
     (``mask_poses="model"``) or at its recorded poses (``"recorded"``), ``mask_frames`` frames
-    per camera stream (0: none).
+    per camera stream (0: none). ``progress(iteration, unfinished fits)`` follows the refit.
     """
     rec, ds = _open(dataset)
-    res = copy.copy(baseline(rec, dt=dt).result)  # the memoised table stays without masks
+    res = copy.copy(
+        baseline(rec, dt=dt, progress=progress).result
+    )  # the memoised table stays without masks
     _attach_masks(res, ds, mask_frames, mask_poses)
     return res
 
@@ -179,7 +186,9 @@ def _fin(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
+def _fit_engine(
+    eng: Engine, add: Sequence[str], progress: Callable[[int, int], None] | None = None
+) -> FitResult:
     """Refit the engine's revision plus ``add``; before and after are baselines (:func:`baseline`).
 
     "Before" is the baseline of the engine's revision, "after" the baseline of the document
@@ -189,7 +198,7 @@ def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
     """
     rec = eng.prep.rec
     cands = eng.check_effects(add)
-    before = baseline(rec, dt=eng.prep.drive.dt, engine=eng)
+    before = baseline(rec, dt=eng.prep.drive.dt, engine=eng, progress=progress)
     if cands:
         space = eng.space(cands)
         free = eng.base_columns(space)
@@ -199,7 +208,7 @@ def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
         starts = [th0]
         for e in cands:  # multi-start: each effect's extra start points, the others at zero
             starts += start_points(space, e, th0)[1:]
-        outs = eng.fit(space, [Problem(free=free, theta0=th) for th in starts])
+        outs = eng.fit(space, [Problem(free=free, theta0=th) for th in starts], progress=progress)
         out = min(outs, key=lambda o: o.cost)
     else:
         space, free, out = before.space, before.free, before.outcome
@@ -243,7 +252,7 @@ def _fit_engine(eng: Engine, add: Sequence[str]) -> FitResult:
     doc["effects"] = effects
     rev = rec.physics.get("revision")
     doc["fit"] = {"from_revision": rev if isinstance(rev, int) else None, "added": list(add)}
-    after = baseline(rec, doc, dt=eng.prep.drive.dt)
+    after = baseline(rec, doc, dt=eng.prep.drive.dt, progress=progress)
     return FitResult(
         params=params,
         rms_before=before.rms_mm,
@@ -265,6 +274,7 @@ def fit(
     note: str | None = None,
     dt: float = 1e-3,
     mask_frames: int = MAX_FRAMES,
+    progress: Callable[[int, int], None] | None = None,
 ) -> FitResult:
     """Refit the base model (and the effects already present) plus ``add``.
 
@@ -276,6 +286,10 @@ def fit(
     camera stream): the corrected ``cameras/<cam>.json`` is written in the same edit as the
     physics revision, whose ``sensors.<cam>.intrinsics`` keeps the previous values. Asked
     alone, it leaves the rigid-model parameters as they are.
+
+    "Before" and "after" are baselines (:mod:`robogs.physics.baseline`) of the revision
+    fitted from and of the document written; with no ``add`` the base model is refitted.
+    ``progress(iteration, unfinished fits)`` follows each fit.
     """
     camera = _camera_effects()
     cam_add = [a for a in add if a in camera]
@@ -287,7 +301,7 @@ def fit(
         )
     else:
         rec, ds = _open(dataset)
-        res = _fit_engine(Engine(rec, dt=dt), rigid_add)
+        res = _fit_engine(Engine(rec, dt=dt), rigid_add, progress)
     new_cams = []
     if cam_add:
         new_cams = _fit_cameras(

@@ -24,6 +24,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -107,11 +108,13 @@ def _fingerprint(rec: Recording) -> str:
     return h.hexdigest()
 
 
-def fit_baseline(eng: Engine) -> tuple[ParamSpace, list[int], FitOutcome, CompareResult]:
+def fit_baseline(
+    eng: Engine, progress: Callable[[int, int], None] | None = None
+) -> tuple[ParamSpace, list[int], FitOutcome, CompareResult]:
     """Refit the engine's revision: base columns and nuisance, from the stored values."""
     space = eng.space([])
     free = eng.base_columns(space)
-    (out,) = eng.fit(space, [Problem(free=list(free), theta0=eng.start(space))])
+    (out,) = eng.fit(space, [Problem(free=list(free), theta0=eng.start(space))], progress=progress)
     return space, free, out, residual_table(eng, eng.raw(out.resid))
 
 
@@ -121,6 +124,7 @@ def baseline(
     *,
     dt: float = 1e-3,
     engine: Engine | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Baseline:
     """The refitted model of ``physics`` (default: the recording's own) on ``rec``.
 
@@ -129,6 +133,7 @@ def baseline(
         physics: a physics.json document (an earlier revision, or one about to be written).
         dt: simulation step [s].
         engine: an engine already prepared for ``rec`` with this physics (saves the prepare).
+        progress: called with (iteration, unfinished fits) while the fit runs.
     """
     doc = rec.physics if physics is None else physics
     key = (_fingerprint(rec), model_key(doc), float(dt))
@@ -140,7 +145,7 @@ def baseline(
         return replace(hit, revision=rev, physics=doc)  # same model, this document's history
     if engine is None or model_key(engine.prep.rec.physics) != key[1]:
         engine = Engine(rec if physics is None else replace(rec, physics=doc), dt=dt)
-    space, free, out, res = fit_baseline(engine)
+    space, free, out, res = fit_baseline(engine, progress)
     bl = Baseline(rev, doc, space, free, out, res)
     _CACHE[key] = bl
     while len(_CACHE) > _CACHE_SIZE:
