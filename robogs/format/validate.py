@@ -217,6 +217,7 @@ def validate(
     max_per_code: int = DEFAULT_MAX_PER_CODE,
     label_threads: int = 2,
     options: dict[str, Any] | None = None,
+    runner: Callable[[CheckContext, int], Any] | None = None,
 ) -> Report:
     """Validate a dataset folder.
 
@@ -233,6 +234,9 @@ def validate(
         options: settings for checks that take them (``CheckContext.options``), e.g.
             ``{"stride": 4}``, ``{"full": True}`` or ``{"budget_s": 10.0}`` for the binding
             re-render (which by default subsamples frames to a time budget).
+        runner: ``runner(ctx, max_per_code)`` builds the object that runs each check
+            (default: in this process); :mod:`robogs.format.distributed` passes one that
+            spreads per-episode and per-file checks over workers and replays their findings.
 
     Returns:
         The :class:`Report`.
@@ -250,7 +254,7 @@ def validate(
     ctx = CheckContext(
         path, quick=quick, budgets=budgets, label_threads=label_threads, options=options
     )
-    runner = _Runner(ctx, max_per_code)
+    runner = (runner or _Runner)(ctx, max_per_code)
     for msg in plugin_errors():
         runner.add(Finding("X004", "warning", msg, Location(), hint="fix or uninstall the plug-in"))
     bar = Progress(progress, [_expected_seconds(c, ctx) for c in checks])

@@ -1,0 +1,592 @@
+"""Validate one dataset across workers (a local process, or Ray tasks) with the findings of one run.
+
+The checks are split by what their findings depend on (:data:`EPISODE_SCOPED`,
+:data:`FILE_SCOPED`; a check module may also declare ``check_scope(code) -> str``):
+
+* **episode** checks yield, for the whole dataset, the concatenation of what they yield for
+  each episode alone, in manifest order (timing, sync, stale values, finite samples, table
+  schemas, names, forward kinematics, boxes, penetration);
+* **file** checks yield the concatenation over contiguous slices of the sorted ``files``
+  section (existence, size, sha256, rows, readable and in-budget tables);
+* every other check (manifest schema, unlisted files, escaping paths, the URDF and assets, the
+  binding re-render with its dataset-wide time budget, plug-ins) runs on the driver.
+
+A worker runs its unit one *view* at a time: the manifest with ``episodes`` cut to one
+episode (``files`` empty), or ``files`` cut to a slice (no episodes). Only the URDF, chain,
+meshes and sidecars are kept from one view to the next, so a task holds at most one episode's
+tables (each at most ``MAX_TABLE_BYTES``) besides the imported modules. For each check the
+worker returns its findings (at most ``max_per_code`` per code; the rest counted, with the
+files they name), and how the check ended: normally, or by an input already reported, an
+unreadable input, or a crash. The driver replays these in check order through the ordinary
+runner, stopping a check where it stopped in the first view that ended it, so the caps per
+code, the ``X002`` de-duplication and the final sort are exactly those of
+:func:`robogs.format.validate.validate` in one process.
+
+Splitting needs a schema-valid manifest in which no table is named by two episodes; otherwise
+everything runs on the driver (one process), and :attr:`Plan.reason` says why.
+
+Ray is imported only by :class:`RayExecutor`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+from .checks.context import STREAM_FILE_FIELDS, CheckContext, InputReported
+from .checks.registry import Check, available_checks
+from .dataset import Dataset
+from .errors import RobogsError
+from .findings import Finding, severity_rank
+from .validate import CheckRun, Report, _Runner, select_checks, validate
+
+__all__ = [
+    "EPISODE_SCOPED",
+    "FILE_SCOPED",
+    "Plan",
+    "Unit",
+    "UnitResult",
+    "Executor",
+    "LocalExecutor",
+    "RayExecutor",
+    "check_scope",
+    "plan_units",
+    "run_unit",
+    "validate_distributed",
+    "DEFAULT_EPISODES_PER_TASK",
+    "DEFAULT_FILES_PER_TASK",
+]
+
+#: checks whose findings concatenate over single-episode views, in episode order
+EPISODE_SCOPED: frozenset[str] = frozenset(
+    {"S003", "S007", "I009", *(f"T{i:03d}" for i in range(1, 15)), "G007", "G008", "G009"}
+    | {"G010", "G011"}
+)
+#: checks whose findings concatenate over contiguous slices of the sorted ``files`` section
+FILE_SCOPED: frozenset[str] = frozenset({"I001", "I003", "I004", "I005", "I006", "I010"})
+#: of those, the ones that also read tables named only by streams (need every stream table listed)
+_STREAM_FILES = frozenset({"I006", "I010"})
+
+#: cache entries of a view that hold dataset-wide facts, kept from one view to the next
+_SHARED_CACHE = frozenset(
+    {"urdf", "chain", "fitted_chain", "sidecar", "mesh", "hull", "mm", "mesh-file"}
+    | {"link-geometry"}
+)
+
+DEFAULT_EPISODES_PER_TASK = 25
+DEFAULT_FILES_PER_TASK = 200
+
+
+def check_scope(chk: Check) -> str:
+    """``episode``, ``file`` or ``dataset`` (runs on the driver) for a check.
+
+    A check module may declare the scope of its own checks with a module-level
+    ``check_scope(code) -> str``; unknown plug-ins run on the driver.
+    """
+    hook = getattr(sys.modules.get(getattr(chk.fn, "__module__", "") or ""), "check_scope", None)
+    if callable(hook) and hook is not check_scope:
+        try:
+            scope = hook(chk.code)
+        except Exception:  # a wrong hint must never change findings: run it on the driver
+            scope = None
+        if scope in ("episode", "file", "dataset"):
+            return str(scope)
+    if chk.code in EPISODE_SCOPED:
+        return "episode"
+    if chk.code in FILE_SCOPED:
+        return "file"
+    return "dataset"
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One task: some episodes (manifest entries) or a slice of the ``files`` section."""
+
+    index: int
+    kind: str  # "episodes" or "files"
+    episodes: tuple[dict[str, Any], ...] = ()
+    files: tuple[tuple[str, Any], ...] = ()
+    codes: tuple[str, ...] = ()
+
+
+@dataclass
+class _Outcome:
+    """What one check yielded on a unit, and how it ended there."""
+
+    findings: list[Finding] = field(default_factory=list)
+    over: Counter = field(default_factory=Counter)  # per code, findings past the cap
+    over_files: set[str] = field(default_factory=set)  # files of those (error/warning)
+    end: str = "done"  # done | reported | error | crashed
+    error: dict[str, Any] | None = None  # the RobogsError that ended it (path, where, ...)
+    seconds: float = 0.0
+
+
+@dataclass
+class UnitResult:
+    """A unit's outcomes per check code, and the worker's peak resident memory (bytes)."""
+
+    index: int
+    outcomes: dict[str, _Outcome]
+    peak_rss: int
+    seconds: float
+    pid: int
+
+
+@dataclass
+class Plan:
+    """How a validation is split: the units, the scope of each selected check, and
+    why nothing was split (``reason``; None when split)."""
+
+    units: list[Unit]
+    scopes: dict[str, str]
+    reason: str | None = None
+
+
+def _view_manifest(base: dict[str, Any], unit: Unit, k: int | None) -> dict[str, Any]:
+    view = dict(base)
+    if unit.kind == "episodes":
+        view["episodes"] = [unit.episodes[k if k is not None else 0]]
+        view["files"] = {}
+    else:
+        view["episodes"] = []
+        view["files"] = dict(unit.files)
+    return view
+
+
+class _ViewContext(CheckContext):
+    """A :class:`CheckContext` on a part of the manifest (validated as a whole by the driver)."""
+
+    def __init__(self, root: Path, view: dict[str, Any], shared: dict[Any, Any], **kw: Any):
+        self._view = view
+        super().__init__(root, **kw)
+        self.manifest_problems = []  # the driver checked the whole manifest
+        self._cache.update(shared)
+
+    def _open(self) -> Dataset:
+        return Dataset(self.root, self._view)
+
+
+class _Recorder(_Runner):
+    """Records what the checks yield on one view instead of keeping a report."""
+
+    def __init__(self, ctx: CheckContext, max_per_code: int) -> None:
+        super().__init__(ctx, max_per_code)
+        self.out = _Outcome()
+        self.kept: Counter = Counter()
+
+    def add(self, f: Finding) -> None:
+        if self.kept[f.code] >= self.max_per_code:
+            self.out.over[f.code] += 1
+            if f.location.file and severity_rank(f.severity) <= 1:
+                self.out.over_files.add(f.location.file)
+            return
+        self.kept[f.code] += 1
+        self.out.findings.append(f)
+
+    def _input_finding(self, chk: Check, exc: RobogsError) -> Finding | None:
+        self.out.end = "error"
+        self.out.error = {
+            "path": None if exc.path is None else str(exc.path),
+            "where": exc.where,
+            "message": exc.message,
+            "hint": exc.hint,
+        }
+        return None
+
+
+def _watched(chk: Check, out: list[_Outcome]) -> Check:
+    """The check, noting in ``out[0]`` when it stops on an input reported elsewhere."""
+    fn = chk.fn
+
+    def watched(c: Check, ctx: CheckContext) -> Iterator[Finding]:
+        try:
+            yield from fn(c, ctx)
+        except InputReported:
+            out[0].end = "reported"
+            raise
+
+    return dataclasses.replace(chk, fn=watched)
+
+
+def _peak_rss() -> int:
+    try:
+        import resource
+
+        return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024  # Linux: KiB
+    except (ImportError, OSError):
+        return 0
+
+
+def run_unit(
+    root: str,
+    base: dict[str, Any],
+    unit: Unit,
+    settings: dict[str, Any],
+) -> UnitResult:
+    """Run ``unit.codes`` on each view of a unit (the body of one task).
+
+    Args:
+        root: dataset folder (the same path on every node).
+        base: the manifest without its ``episodes`` and ``files``.
+        unit: what to check.
+        settings: ``quick``, ``budgets``, ``options``, ``max_per_code``, ``label_threads``.
+    """
+    t0 = time.perf_counter()
+    checks = [c for code, c in available_checks().items() if code in set(unit.codes)]
+    missing = sorted(set(unit.codes) - {c.code for c in checks})
+    if missing:
+        raise RobogsError(
+            f"checks {', '.join(missing)} are not registered in worker process {os.getpid()}",
+            where="robogs.format.distributed",
+            hint="install check plug-ins on every node (entry point robogs.checks), or run "
+            "them on the driver with check_scope(code) -> 'dataset'",
+        )
+    checks.sort(key=lambda c: unit.codes.index(c.code))
+    max_per_code = int(settings.get("max_per_code", 50))
+    total: dict[str, _Outcome] = {c.code: _Outcome() for c in checks}
+    kept: dict[str, Counter] = {c.code: Counter() for c in checks}
+    shared: dict[Any, Any] = {}
+    n_views = len(unit.episodes) if unit.kind == "episodes" else 1
+    for k in range(n_views):
+        todo = [c for c in checks if total[c.code].end == "done"]
+        if not todo:
+            break
+        ctx = _ViewContext(
+            Path(root),
+            _view_manifest(base, unit, k),
+            shared,
+            quick=bool(settings.get("quick", False)),
+            budgets=settings.get("budgets"),
+            label_threads=int(settings.get("label_threads", 1)),
+            options=settings.get("options"),
+        )
+        rec = _Recorder(ctx, max_per_code)
+        for chk in todo:
+            rec.out, rec.kept = _Outcome(), kept[chk.code]
+            box = [rec.out]
+            t = time.perf_counter()
+            rec.run(_watched(chk, box))
+            if rec.runs[-1].status == "crashed":
+                rec.out.end = "crashed"
+            _merge(total[chk.code], rec.out, time.perf_counter() - t)
+        shared.update({key: v for key, v in ctx._cache.items() if key[0] in _SHARED_CACHE})
+        del ctx, rec
+    return UnitResult(unit.index, total, _peak_rss(), time.perf_counter() - t0, os.getpid())
+
+
+def _merge(into: _Outcome, part: _Outcome, seconds: float) -> None:
+    into.findings += part.findings
+    into.over.update(part.over)
+    into.over_files |= part.over_files
+    into.end, into.error = part.end, part.error
+    into.seconds += seconds
+
+
+def plan_units(
+    ctx: CheckContext,
+    checks: Sequence[Check],
+    *,
+    episodes_per_task: int = DEFAULT_EPISODES_PER_TASK,
+    files_per_task: int = DEFAULT_FILES_PER_TASK,
+) -> Plan:
+    """Split the selected checks of a dataset into units (see the module docstring)."""
+    scopes = {c.code: check_scope(c) for c in checks}
+    if ctx.version_error is not None or not ctx.manifest_valid:
+        return Plan([], dict.fromkeys(scopes, "dataset"), "the manifest does not follow its schema")
+    raw = ctx.manifest.get("episodes")
+    entries = [
+        e
+        for e in (raw if isinstance(raw, list) else [])
+        if isinstance(e, dict) and {"id", "start_ns", "end_ns", "streams"} <= set(e)
+    ]
+    owner: dict[str, int] = {}
+    for i, e in enumerate(entries):
+        streams = e.get("streams")
+        for st in streams.values() if isinstance(streams, dict) else []:
+            if not isinstance(st, dict):
+                continue
+            for fld in STREAM_FILE_FIELDS:
+                rel = st.get(fld)
+                if isinstance(rel, str) and owner.setdefault(rel, i) != i:
+                    reason = f"{rel!r} is named by two episodes"
+                    return Plan([], dict.fromkeys(scopes, "dataset"), reason)
+    if any(s == "file" for s in scopes.values()) and not set(owner) <= set(ctx.files):
+        for code in _STREAM_FILES & set(scopes):
+            scopes[code] = "dataset"  # they would also read tables that are not listed
+    ep_codes = tuple(c.code for c in checks if scopes[c.code] == "episode")
+    file_codes = tuple(c.code for c in checks if scopes[c.code] == "file")
+    units: list[Unit] = []
+    if ep_codes:
+        for lo in range(0, len(entries), max(1, episodes_per_task)):
+            chunk = tuple(entries[lo : lo + max(1, episodes_per_task)])
+            units.append(Unit(len(units), "episodes", episodes=chunk, codes=ep_codes))
+    if file_codes:
+        files = sorted(ctx.files.items())
+        for lo in range(0, len(files), max(1, files_per_task)):
+            chunk_f = tuple(files[lo : lo + max(1, files_per_task)])
+            units.append(Unit(len(units), "files", files=chunk_f, codes=file_codes))
+    return Plan(units, scopes)
+
+
+class Executor(Protocol):
+    """Runs units somewhere and yields their results as they finish (any order)."""
+
+    def run(self, root: str, base: dict[str, Any], units: Sequence[Unit], settings: dict[str, Any]) -> Iterator[UnitResult]: ...  # fmt: skip
+
+
+class LocalExecutor:
+    """Runs the units one after another in this process (tests, and no cluster at hand)."""
+
+    workers = 1
+
+    def run(
+        self, root: str, base: dict[str, Any], units: Sequence[Unit], settings: dict[str, Any]
+    ) -> Iterator[UnitResult]:
+        for u in units:
+            yield run_unit(root, base, u, settings)
+
+
+class RayExecutor:
+    """Runs each unit as a Ray task (``ray.init(address)`` unless Ray is already up).
+
+    A task whose worker dies is retried (``max_retries``); a task asks Ray for
+    ``memory_bytes`` of memory, so the scheduler never packs more tasks on a node than fit.
+
+    Args:
+        address: a Ray cluster address, ``auto`` for the running one, or None to start a
+            local cluster with ``num_cpus`` CPUs.
+        num_cpus: CPUs of a local cluster (None: all).
+        max_retries: retries of a task whose worker process died.
+        memory_bytes: memory reserved per task (a scheduling resource).
+        init_kwargs: more ``ray.init`` arguments (e.g. ``object_store_memory``).
+    """
+
+    def __init__(
+        self,
+        address: str | None = None,
+        *,
+        num_cpus: int | None = None,
+        max_retries: int = 3,
+        memory_bytes: int | None = None,
+        init_kwargs: dict[str, Any] | None = None,
+    ) -> None:
+        self.address = address
+        self.num_cpus = num_cpus
+        self.max_retries = max_retries
+        self.memory_bytes = memory_bytes
+        self.init_kwargs = dict(init_kwargs or {})
+        self.started = False
+        self.workers = num_cpus or 0
+
+    def _ray(self) -> Any:
+        os.environ.setdefault("RAY_DISABLE_IMPORT_WARNING", "1")
+        try:
+            import ray
+        except ImportError:
+            raise RobogsError(
+                "--ray needs the ray package",
+                where="--ray",
+                hint="pip install 'robogs[scale]'",
+            ) from None
+        if not ray.is_initialized():
+            kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
+            kw.update(self.init_kwargs)
+            if self.address:
+                ray.init(address=self.address, **kw)
+            else:
+                ray.init(num_cpus=self.num_cpus, **kw)
+            self.started = True
+        self.workers = int(ray.cluster_resources().get("CPU", 1))
+        return ray
+
+    def run(
+        self, root: str, base: dict[str, Any], units: Sequence[Unit], settings: dict[str, Any]
+    ) -> Iterator[UnitResult]:
+        ray = self._ray()
+        opts: dict[str, Any] = {"max_retries": self.max_retries, "num_cpus": 1}
+        if self.memory_bytes:
+            opts["memory"] = int(self.memory_bytes)
+        task = ray.remote(_ray_unit).options(**opts)
+        base_ref = ray.put(base)
+        pending = [task.remote(root, base_ref, u, settings) for u in units]
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            yield ray.get(done[0])
+
+    def shutdown(self) -> None:
+        """Stop the local cluster this executor started (no-op otherwise)."""
+        if self.started:
+            import ray
+
+            ray.shutdown()
+            self.started = False
+
+
+def _ray_unit(root: str, base: dict[str, Any], unit: Unit, settings: dict[str, Any]) -> UnitResult:
+    """Task body: one thread for the numerics of this worker (one task per CPU)."""
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(1)
+    return run_unit(root, base, unit, settings)
+
+
+class _Replayer(_Runner):
+    """The runner of a split validation: driver checks run here, the others are replayed."""
+
+    def __init__(
+        self,
+        ctx: CheckContext,
+        max_per_code: int,
+        *,
+        plan: Plan,
+        results: Callable[[], dict[str, list[tuple[int, _Outcome]]]],
+    ) -> None:
+        super().__init__(ctx, max_per_code)
+        self.plan = plan
+        self._results = results
+
+    def run(self, chk: Check) -> None:
+        if self.plan.reason is not None or self.plan.scopes.get(chk.code, "dataset") == "dataset":
+            super().run(chk)
+            return
+        if chk.needs_valid_manifest and not self.ctx.manifest_valid:  # pragma: no cover
+            super().run(chk)
+            return
+        parts = [o for _i, o in sorted(self._results().get(chk.code, []), key=lambda p: p[0])]
+        n, status, seconds = 0, "ran", 0.0
+        for part in parts:
+            seconds += part.seconds
+            for f in part.findings:
+                self.add(f)
+                n += 1
+            for code, k in part.over.items():
+                self.dropped[code] += k
+                n += k
+            self.reported_files |= part.over_files
+            if part.end == "reported":
+                status = "skipped" if n == 0 else "ran"
+                break
+            if part.end == "crashed":
+                status = "crashed"
+                break
+            if part.end == "error":
+                f = self._input_finding(chk, _Err(**(part.error or {})))  # type: ignore[arg-type]
+                if f is not None:
+                    self.add(f)
+                    n += 1
+                break
+        self.runs.append(CheckRun(chk.code, chk.group, chk.title, status, seconds, n))
+
+
+@dataclass
+class _Err:
+    """The parts of a ``RobogsError`` the runner reads (the error itself stays in the worker)."""
+
+    path: str | None = None
+    where: str | None = None
+    message: str = ""
+    hint: str | None = None
+
+
+@dataclass
+class Stats:
+    """How a split validation went: units, workers seen, peak RSS per worker (bytes)."""
+
+    units: int = 0
+    reason: str | None = None
+    peak_rss: dict[int, int] = field(default_factory=dict)
+    task_seconds: float = 0.0
+    wall_seconds: float = 0.0
+
+
+def validate_distributed(
+    path: str | Path,
+    *,
+    executor: Executor | None = None,
+    episodes_per_task: int = DEFAULT_EPISODES_PER_TASK,
+    files_per_task: int = DEFAULT_FILES_PER_TASK,
+    select: Iterable[str] | None = None,
+    ignore: Iterable[str] | None = None,
+    quick: bool = False,
+    budgets: dict[str, float] | None = None,
+    progress: bool | Callable[[str, float, float], None] = False,
+    max_per_code: int = 50,
+    label_threads: int = 1,
+    options: dict[str, Any] | None = None,
+    stats: Stats | None = None,
+) -> Report:
+    """:func:`robogs.format.validate.validate`, with per-episode and per-file checks in tasks.
+
+    The report's findings, their order, the per-code caps and notes are those of the
+    single-process run; ``Report.runs`` add up the workers' seconds. ``stats`` (if given)
+    is filled with the units and the peak resident memory of each worker process.
+
+    Raises:
+        FormatError: as :func:`~robogs.format.validate.validate`.
+    """
+    t0 = time.perf_counter()
+    executor = executor or LocalExecutor()
+    stats = stats if stats is not None else Stats()
+    select_l, ignore_l = list(select or []), list(ignore or [])
+    settings = {
+        "quick": quick,
+        "budgets": dict(budgets or {}),
+        "options": dict(options or {}),
+        "max_per_code": max_per_code,
+        "label_threads": 1,
+    }
+    state: dict[str, Any] = {}
+
+    def make_runner(ctx: CheckContext, cap: int) -> _Replayer:
+        checks = select_checks(
+            list(available_checks().values()), select=select_l, ignore=ignore_l, quick=quick
+        )
+        plan = plan_units(
+            ctx, checks, episodes_per_task=episodes_per_task, files_per_task=files_per_task
+        )
+        stats.units, stats.reason = len(plan.units), plan.reason
+        base = {k: v for k, v in ctx.manifest.items() if k not in ("episodes", "files")}
+        stream = executor.run(str(ctx.root), base, plan.units, settings) if plan.units else iter(())
+        state["stream"], state["left"] = stream, len(plan.units)
+
+        def results() -> dict[str, list[tuple[int, _Outcome]]]:
+            if "by_code" not in state:
+                by_code: dict[str, list[tuple[int, _Outcome]]] = {}
+                total = state["left"]
+                for done, res in enumerate(state["stream"], 1):
+                    stats.peak_rss[res.pid] = max(stats.peak_rss.get(res.pid, 0), res.peak_rss)
+                    stats.task_seconds += res.seconds
+                    for code, out in res.outcomes.items():
+                        by_code.setdefault(code, []).append((res.index, out))
+                    note = getattr(ctx.progress, "fraction", None)
+                    if callable(note):
+                        ctx.progress(f"{done}/{total} tasks")
+                        note(done / max(total, 1))
+                state["by_code"] = by_code
+            return state["by_code"]
+
+        return _Replayer(ctx, cap, plan=plan, results=results)
+
+    report = validate(
+        path,
+        select=select_l,
+        ignore=ignore_l,
+        quick=quick,
+        budgets=budgets,
+        progress=progress,
+        max_per_code=max_per_code,
+        label_threads=label_threads,
+        options=options,
+        runner=make_runner,
+    )
+    stats.wall_seconds = time.perf_counter() - t0
+    report.seconds = stats.wall_seconds
+    return report
