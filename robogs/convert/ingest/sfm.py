@@ -1,0 +1,213 @@
+"""Camera poses from images by structure from motion (``pycolmap``, CPU; the ``sfm`` extra).
+
+Steps: SIFT feature extraction, matching (exhaustive up to ``EXHAUSTIVE_MAX`` images, else
+sequential, as for video), incremental mapping (COLMAP, Schönberger & Frahm 2016). The largest
+model is kept; its frame is arbitrary (scale, origin, up). ``robogs reconstruct --align apply``
+then fits the similarity to the URDF (Umeyama + ICP on the link-labelled mesh) and moves the
+cameras into the robot's world, reporting the residual in mm.
+
+Video keyframes (:func:`select_keyframes`): frames are scored by sharpness, the variance of the
+Laplacian (Pech-Pacheco et al. 2000); a frame is kept when it is not blurred (score ≥
+``blur_ratio`` x the median score) and has moved since the last keyframe (mean absolute
+difference of the grey images ≥ ``min_change``, a cheap baseline proxy).
+
+Failure (too few registered images: blurred or duplicate frames, no parallax) raises
+:class:`SfmError` naming how many images registered.
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from robogs.format.errors import InputError
+
+__all__ = [
+    "SfmError",
+    "SfmResult",
+    "EXHAUSTIVE_MAX",
+    "sharpness",
+    "select_keyframes",
+    "run_sfm",
+]
+
+#: match every pair up to this many images; sequential (overlap 10) beyond
+EXHAUSTIVE_MAX = 60
+
+
+class SfmError(InputError):
+    """Structure from motion registered too few images."""
+
+
+@dataclass
+class SfmResult:
+    """Recovered cameras in the (arbitrary) SfM frame.
+
+    Attributes:
+        names: image names, in the order of ``T_world_cam``.
+        T_world_cam: [N, 4, 4] camera-to-world (OpenCV axes, SfM units).
+        K: [3, 3] shared intrinsics after refinement (px, pixel centres at +0.5).
+        size: (width, height) px.
+        registered: images registered.
+        total: images given.
+        points: 3D points of the model.
+        reprojection_px: mean reprojection error, px.
+    """
+
+    names: list[str]
+    T_world_cam: np.ndarray
+    K: np.ndarray
+    size: tuple[int, int]
+    registered: int
+    total: int
+    points: int
+    reprojection_px: float
+
+
+def sharpness(gray: np.ndarray) -> float:
+    """Variance of the Laplacian of a grey image (higher is sharper)."""
+    return float(cv2.Laplacian(np.asarray(gray, np.float64), cv2.CV_64F).var())
+
+
+def select_keyframes(
+    frames: list[np.ndarray], *, blur_ratio: float = 0.5, min_change: float = 2.0
+) -> list[int]:
+    """Indices of the keyframes of a video (RGB or grey uint8 frames).
+
+    Args:
+        frames: the decoded frames.
+        blur_ratio: a frame sharper than this fraction of the median sharpness is not blurred.
+        min_change: mean absolute grey difference (0-255) from the last keyframe to keep a frame.
+    """
+    grey = [f if f.ndim == 2 else cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in frames]
+    if not grey:
+        return []
+    s = np.array([sharpness(g) for g in grey])
+    floor = blur_ratio * float(np.median(s))
+    keep: list[int] = []
+    for i, g in enumerate(grey):
+        if s[i] < floor:
+            continue
+        if keep:
+            diff = np.abs(g.astype(np.int16) - grey[keep[-1]].astype(np.int16)).mean()
+            if diff < min_change:
+                continue
+        keep.append(i)
+    return keep
+
+
+def _pycolmap():
+    try:
+        import pycolmap
+    except ImportError:
+        raise InputError(
+            "structure from motion needs pycolmap",
+            hint="pip install 'robogs[sfm]'",
+        ) from None
+    return pycolmap
+
+
+def run_sfm(
+    image_dir: str | Path,
+    work: str | Path,
+    *,
+    intrinsics: tuple[float, float, float, float] | None = None,
+    sequential: bool | None = None,
+    min_registered: int = 3,
+    threads: int = 1,
+    seed: int = 0,
+) -> SfmResult:
+    """Recover the poses of the images in ``image_dir`` (one shared pinhole camera).
+
+    Args:
+        image_dir: folder of images (one camera).
+        work: scratch folder (database, models), replaced.
+        intrinsics: (fx, fy, cx, cy) px with pixel centres at +0.5 if known (refined anyway);
+            None: guessed from EXIF or the image size, then refined.
+        sequential: match neighbours only (video); None: when more than ``EXHAUSTIVE_MAX`` images.
+        min_registered: fewer registered images raise :class:`SfmError`.
+        threads: CPU threads for COLMAP.
+        seed: COLMAP's random seed (RANSAC), for repeatable runs.
+
+    Raises:
+        SfmError: fewer than ``min_registered`` images registered (or none in the largest model).
+        InputError: pycolmap missing, no images.
+    """
+    pc = _pycolmap()
+    image_dir, work = Path(image_dir), Path(work)
+    names = sorted(p.name for p in image_dir.iterdir() if p.is_file())
+    if not names:
+        raise InputError("no images to reconstruct from", path=image_dir)
+    shutil.rmtree(work, ignore_errors=True)
+    (work / "sparse").mkdir(parents=True)
+    db = work / "database.db"
+    pc.set_random_seed(seed)
+    ro = pc.ImageReaderOptions()
+    ro.camera_model = "PINHOLE"
+    if intrinsics is not None:
+        fx, fy, cx, cy = intrinsics
+        ro.camera_params = f"{fx},{fy},{cx - 0.5},{cy - 0.5}"  # COLMAP: pixel centres at integers
+    eo = pc.FeatureExtractionOptions()
+    eo.num_threads = threads
+    eo.sift.first_octave = -1  # upsample once: small images need the finest octave
+    pc.extract_features(
+        db,
+        image_dir,
+        image_names=names,
+        camera_mode=pc.CameraMode.SINGLE,
+        reader_options=ro,
+        extraction_options=eo,
+        device=pc.Device.cpu,
+    )
+    mo = pc.FeatureMatchingOptions()
+    mo.num_threads = threads
+    if sequential if sequential is not None else len(names) > EXHAUSTIVE_MAX:
+        pc.match_sequential(db, matching_options=mo, device=pc.Device.cpu)
+    else:
+        pc.match_exhaustive(db, matching_options=mo, device=pc.Device.cpu)
+    opts = pc.IncrementalPipelineOptions()
+    opts.num_threads = threads
+    models = pc.incremental_mapping(db, image_dir, work / "sparse", options=opts)
+    best = max(models.values(), key=lambda r: r.num_reg_images(), default=None)
+    n = 0 if best is None else int(best.num_reg_images())
+    if n < min_registered:
+        raise SfmError(
+            f"structure from motion registered {n} of {len(names)} images "
+            f"(need ≥ {min_registered})",
+            path=image_dir,
+            hint="the images need overlap and parallax: move the camera around the scene "
+            "(not only turn it), avoid blurred and duplicate frames",
+        )
+    return _result(best, len(names))
+
+
+def _result(rec, total: int) -> SfmResult:
+    cams = list(rec.cameras.values())
+    cam = cams[0]
+    fx, fy, cx, cy = (float(x) for x in cam.params[:4])
+    K = np.array([[fx, 0.0, cx + 0.5], [0.0, fy, cy + 0.5], [0.0, 0.0, 1.0]])
+    names, Ts = [], []
+    for im in sorted(rec.images.values(), key=lambda im: im.name):
+        if not im.has_pose:
+            continue
+        cfw = im.cam_from_world() if callable(im.cam_from_world) else im.cam_from_world
+        M = np.asarray(cfw.matrix(), np.float64)
+        T = np.eye(4)
+        T[:3, :3] = M[:3, :3].T
+        T[:3, 3] = -M[:3, :3].T @ M[:3, 3]
+        names.append(im.name)
+        Ts.append(T)
+    return SfmResult(
+        names=names,
+        T_world_cam=np.stack(Ts),
+        K=K,
+        size=(int(cam.width), int(cam.height)),
+        registered=len(names),
+        total=total,
+        points=int(rec.num_points3D()),
+        reprojection_px=float(rec.compute_mean_reprojection_error()),
+    )
