@@ -145,6 +145,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="F",
         help="binding checks: re-render at F times the camera resolution, in (0, 4] (default 1)",
     )
+    parser.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        metavar="ADDRESS",
+        help="split per-episode and per-file checks into Ray tasks (same findings as one "
+        "process): no ADDRESS starts a local cluster, 'auto' joins the running one "
+        "(needs pip install 'robogs[scale]'; docs/scale.md)",
+    )
+    parser.add_argument(
+        "--episodes-per-task",
+        type=_stride,
+        default=None,
+        metavar="N",
+        help="with --ray: episodes per task (default 25)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     parser.add_argument(
         "--list-checks",
@@ -166,10 +182,6 @@ def run(args: argparse.Namespace) -> int:
     from robogs.format.report_formats import (
         catalogue_markdown,
         render_check_list,
-        render_text,
-        to_json,
-        to_junit,
-        to_markdown,
         write_atomic,
     )
     from robogs.format.validate import validate
@@ -218,6 +230,14 @@ def run(args: argparse.Namespace) -> int:
         options["full"] = True
     if args.rerender_budget is not None:
         options["budget_s"] = args.rerender_budget
+    if getattr(args, "ray", None):
+        from robogs.cli.scale_cmd import validate_ray
+
+        try:
+            report = validate_ray(args, progress=progress, options=options)
+        except RobogsError as exc:
+            return _err(exc.one_line())
+        return _emit(args, report)
     try:
         report = validate(
             args.dataset,
@@ -231,6 +251,21 @@ def run(args: argparse.Namespace) -> int:
         )
     except RobogsError as exc:
         return _err(exc.one_line())
+    return _emit(args, report)
+
+
+def _emit(args: argparse.Namespace, report) -> int:
+    """Print and write the report; the exit code."""
+    from rich.console import Console
+
+    from robogs.format.report_formats import (
+        render_text,
+        to_json,
+        to_junit,
+        to_markdown,
+        write_atomic,
+    )
+
     text = to_json(report) + "\n"
     if args.json:
         sys.stdout.write(text)

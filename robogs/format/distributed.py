@@ -59,6 +59,7 @@ __all__ = [
     "check_scope",
     "plan_units",
     "run_unit",
+    "ray_unit",
     "validate_distributed",
     "DEFAULT_EPISODES_PER_TASK",
     "DEFAULT_FILES_PER_TASK",
@@ -366,6 +367,8 @@ class RayExecutor:
         max_retries: retries of a task whose worker process died.
         memory_bytes: memory reserved per task (a scheduling resource).
         init_kwargs: more ``ray.init`` arguments (e.g. ``object_store_memory``).
+        body: the task body (default :func:`run_unit` with one numerics thread); a wrapper
+            must call it through and return its :class:`UnitResult`.
     """
 
     def __init__(
@@ -376,8 +379,10 @@ class RayExecutor:
         max_retries: int = 3,
         memory_bytes: int | None = None,
         init_kwargs: dict[str, Any] | None = None,
+        body: Callable[..., UnitResult] | None = None,
     ) -> None:
         self.address = address
+        self.body = body or ray_unit
         self.num_cpus = num_cpus
         self.max_retries = max_retries
         self.memory_bytes = memory_bytes
@@ -396,12 +401,24 @@ class RayExecutor:
                 hint="pip install 'robogs[scale]'",
             ) from None
         if not ray.is_initialized():
-            kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
+            kw: dict[str, Any] = {
+                "include_dashboard": False,
+                "log_to_driver": False,
+                "logging_level": "ERROR",
+            }
             kw.update(self.init_kwargs)
-            if self.address:
-                ray.init(address=self.address, **kw)
-            else:
-                ray.init(num_cpus=self.num_cpus, **kw)
+            try:
+                if self.address:
+                    ray.init(address=self.address, **kw)
+                else:
+                    ray.init(num_cpus=self.num_cpus, **kw)
+            except Exception as exc:
+                raise RobogsError(
+                    f"cannot start or join a Ray cluster: {str(exc).strip()[:300]}",
+                    where=f"--ray {self.address or ''}".strip(),
+                    hint="start one with 'ray start --head', or give --ray without ADDRESS "
+                    "for a local cluster",
+                ) from None
             self.started = True
         self.workers = int(ray.cluster_resources().get("CPU", 1))
         return ray
@@ -413,12 +430,24 @@ class RayExecutor:
         opts: dict[str, Any] = {"max_retries": self.max_retries, "num_cpus": 1}
         if self.memory_bytes:
             opts["memory"] = int(self.memory_bytes)
-        task = ray.remote(_ray_unit).options(**opts)
+        task = ray.remote(self.body).options(**opts)
         base_ref = ray.put(base)
         pending = [task.remote(root, base_ref, u, settings) for u in units]
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
-            yield ray.get(done[0])
+            try:
+                result = ray.get(done[0])
+            except Exception as exc:  # a task that failed all its tries
+                for ref in pending:
+                    ray.cancel(ref)
+                first = (str(exc).strip().splitlines() or [type(exc).__name__])[-1]
+                raise RobogsError(
+                    f"a Ray task failed: {first[:300]}",
+                    where="--ray",
+                    hint="the dataset must be at the same path on every node, with robogs "
+                    "(and any check plug-in) installed there",
+                ) from None
+            yield result
 
     def shutdown(self) -> None:
         """Stop the local cluster this executor started (no-op otherwise)."""
@@ -429,7 +458,7 @@ class RayExecutor:
             self.started = False
 
 
-def _ray_unit(root: str, base: dict[str, Any], unit: Unit, settings: dict[str, Any]) -> UnitResult:
+def ray_unit(root: str, base: dict[str, Any], unit: Unit, settings: dict[str, Any]) -> UnitResult:
     """Task body: one thread for the numerics of this worker (one task per CPU)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
