@@ -62,6 +62,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="with --capture: images, intrinsics and labels only (camera extrinsics 'unknown'); "
         "the true poses go beside OUT",
     )
+    parser.add_argument(
+        "--episodes",
+        type=int,
+        default=None,
+        metavar="N",
+        help="write N short episodes of a planar 3R arm (joint_states and ee_poses, no cameras) "
+        "for load and scale tests (robogs.synth.bulk; --episode-seconds each)",
+    )
+    parser.add_argument(
+        "--episode-seconds",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="with --episodes: length of each episode, s (default 1, at 500 Hz)",
+    )
     parser.add_argument("--force", action="store_true", help="replace OUT if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -70,6 +85,10 @@ def run(args: argparse.Namespace) -> int:
     """Generate the dataset; print where it and its ground truth are. Returns 0."""
     from .generate import ground_truth_path, synthesize
 
+    if getattr(args, "episodes", None) is not None:
+        from robogs.synth.bulk import bulk_cli
+
+        return bulk_cli(args)
     if args.effect is not None:
         return _scenario(args)
     if args.capture is not None or args.no_poses:
