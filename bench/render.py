@@ -8,7 +8,7 @@ Figures (targets from the renderer's design):
 - frames per second of the forward render, 100k Gaussians at 640x480 (issue 20), threads stated;
 - novel poses (``--only novel``): the binding of ``robogs synth --size small`` rendered at joint
   configurations never recorded against the synthetic scene's independent triangle rasteriser
-  (:mod:`robogs.synth.novel_pose`): IoU per link (void band excluded, the validator's rule),
+  (``tests/render/novel_pose.py``): IoU per link (void band excluded, the validator's rule),
   boundary error (px) and PSNR, at 2x the camera resolution (320x240).
 
 Scenes are random but realistic: Gaussians spread through a 1 m cube whose centre is 1.2 m in
@@ -197,8 +197,10 @@ def bench_novel_pose(configs: int, seed: int = 0) -> tuple[list[tuple[str, str, 
 
     import numpy as np
 
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "render"))
+    from novel_pose import novel_configurations, novel_pose_metrics  # the test's harness
+
     from robogs.format import Dataset
-    from robogs.synth.novel_pose import novel_configurations, novel_pose_metrics
     from robogs.synth.scene import synthesize
 
     with tempfile.TemporaryDirectory() as tmp:

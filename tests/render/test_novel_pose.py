@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from novel_pose import novel_configurations, novel_pose_metrics
 
 from robogs.format import Dataset
-from robogs.synth.novel_pose import novel_configurations, novel_pose_metrics
 from robogs.synth.scene import synthesize
 
 IOU_MIN, BOUNDARY_MAX_PX = 0.9, 1.5

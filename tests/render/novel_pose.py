@@ -1,6 +1,10 @@
 """Novel-pose evaluation: the binding rendered at joint configurations never recorded, against
 the synthetic scene's independent triangle rasteriser.
 
+A test harness (used by ``test_novel_pose.py`` and ``bench/render.py``), not part of the
+package: it is the one place that joins the renderer and the generator, which the packages keep
+apart (``tests/core/test_import_rules.py``).
+
 For a dataset written by :func:`robogs.synth.scene.synthesize` (generated UR5), each joint
 configuration is rendered twice into the dataset's camera (optionally at ``scale`` times its
 resolution):
@@ -29,11 +33,10 @@ import torch
 from robogs.format import Dataset
 from robogs.format.cameras import CameraModel
 from robogs.format.frames import quat_to_matrix
-
-from .scene import scene as layout
-from .scene.raster import PinholeView
-from .scene.render_scene import MeshPart, SceneRenderer
-from .scene.robot_source import generated_ur5
+from robogs.synth.scene import scene as layout
+from robogs.synth.scene.raster import PinholeView
+from robogs.synth.scene.render_scene import MeshPart, SceneRenderer
+from robogs.synth.scene.robot_source import generated_ur5
 
 __all__ = ["PoseMetrics", "novel_configurations", "novel_pose_metrics"]
 
