@@ -123,6 +123,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-progress", dest="progress", action="store_false", help="hide progress")
     parser.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    parser.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        metavar="ADDRESS",
+        help="SRC is a quoted glob of bags: one Ray task per bag, all into one dataset "
+        "(episode epKKKK per bag); no ADDRESS starts a local cluster, 'auto' joins the running "
+        "one. A glob without --ray converts the bags one after another (docs/scale.md)",
+    )
 
 
 def _pairs(items: list[str], flag: str) -> dict[str, Path]:
@@ -238,6 +247,10 @@ def run(args: argparse.Namespace) -> int:
         if sys.argv[1:2] == ["convert"]
         else None,
     )
+    if getattr(args, "ray", None) is not None or any(c in str(args.src) for c in "*?["):
+        from .distributed import run_many
+
+        return run_many(args, opts)
     ds = convert_path(args.src, args.out, fmt=args.fmt, options=opts, force=args.force)
     summary = _summary(ds, args.out)
     if args.json:

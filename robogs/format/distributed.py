@@ -390,7 +390,8 @@ class RayExecutor:
         self.started = False
         self.workers = num_cpus or 0
 
-    def _ray(self) -> Any:
+    def connect(self) -> Any:
+        """Start or join the cluster (once); the ``ray`` module."""
         os.environ.setdefault("RAY_DISABLE_IMPORT_WARNING", "1")
         try:
             import ray
@@ -426,7 +427,7 @@ class RayExecutor:
     def run(
         self, root: str, base: dict[str, Any], units: Sequence[Unit], settings: dict[str, Any]
     ) -> Iterator[UnitResult]:
-        ray = self._ray()
+        ray = self.connect()
         opts: dict[str, Any] = {"max_retries": self.max_retries, "num_cpus": 1}
         if self.memory_bytes:
             opts["memory"] = int(self.memory_bytes)

@@ -30,7 +30,14 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-__all__ = ["write_bulk_dataset", "planar_urdf", "bulk_cli", "LINKS_M", "JOINTS"]
+__all__ = [
+    "write_bulk_dataset",
+    "write_bulk_bags",
+    "planar_urdf",
+    "bulk_cli",
+    "LINKS_M",
+    "JOINTS",
+]
 
 LINKS_M = (0.30, 0.25, 0.10)
 """Link lengths along x [m]: joint1->joint2, joint2->joint3, joint3->tool0."""
@@ -248,3 +255,63 @@ def bulk_cli(args: argparse.Namespace) -> int:
     write_bulk_dataset(out, n_episodes=n, duration_s=secs, seed=int(args.seed), progress=show)
     print(f"wrote {out} ({n} episodes of {secs:g} s, planar 3R arm at 500 Hz)")
     return 0
+
+
+def write_bulk_bags(
+    folder: str | Path,
+    *,
+    n_bags: int,
+    duration_s: float,
+    rate_hz: float = 200.0,
+    seed: int = 0,
+    corrupt: tuple[int, ...] = (),
+) -> list[Path]:
+    """Write ``n_bags`` ROS 2 MCAP files ``bag_KKKK.mcap``, each one ``/joint_states`` episode of
+    the planar 3R arm (header stamps on a 1 ms grid; log time 2 ms later).
+
+    Args:
+        folder: where to write (created).
+        n_bags: number of bags.
+        duration_s: length of each, s.
+        rate_hz: JointState rate, Hz.
+        seed: motion seed.
+        corrupt: indices of bags cut to their first 40 % (no footer, no summary: unreadable).
+    """
+    from mcap_ros2.writer import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    msgdef = store.generate_msgdef("sensor_msgs/msg/JointState", ros_version=2)[0]
+    rng = np.random.default_rng(seed)
+    n = int(round(duration_s * rate_hz))
+    period_ns = int(round(1e9 / rate_hz))
+    out = []
+    for k in range(n_bags):
+        motion = _motion(rng)
+        t0 = _T0_NS + k * (n * period_ns + 10_000_000_000)
+        path = folder / f"bag_{k:04d}.mcap"
+        with open(path, "wb") as fh:
+            w = Writer(fh)
+            schema = w.register_msgdef("sensor_msgs/msg/JointState", msgdef)
+            for c in _chunks(n, rate_hz, motion, t0):
+                for i, t in enumerate(c["t_ns"].tolist()):
+                    msg = {
+                        "header": {
+                            "stamp": {"sec": t // 1_000_000_000, "nanosec": t % 1_000_000_000},
+                            "frame_id": "",
+                        },
+                        "name": list(JOINTS),
+                        "position": c["q"][i].tolist(),
+                        "velocity": c["qd"][i].tolist(),
+                        "effort": [],
+                    }
+                    log = t + 2_000_000
+                    w.write_message("/joint_states", schema, msg, log_time=log, publish_time=log)
+            w.finish()
+        if k in corrupt:
+            data = path.read_bytes()
+            path.write_bytes(data[: int(len(data) * 0.4)])
+        out.append(path)
+    return out
