@@ -123,9 +123,13 @@ def test_compare_renders_the_model_poses_and_reports_the_stream(scene: Path, shi
     assert d["mask_boundary_absent"] is None
     assert d["mask_boundary"]["object_poses"].startswith("model")
     assert {r["label"] for r in d["mask_boundary"]["labels"]} >= {"box", "forearm_link"}
-    # the model starts from the measured (moved) pose: its object row grows with the shift
+    # the model is the refitted baseline (robogs.physics.baseline): its initial-pose correction
+    # puts the box where the pusher pushes it, which is where the images show it, although the
+    # recorded poses moved 30 mm (3 px). The object row stays near the clean one while the
+    # position residual against the recorded poses grows: the tracker, not the model, is off.
     c, m = _rows(clean.masks), _rows(moved.masks)
-    assert m["box"].boundary_px > c["box"].boundary_px + 1.0
+    assert m["box"].boundary_px < c["box"].boundary_px + 0.5
+    assert moved.rms_mm > clean.rms_mm + 10.0
     assert m["forearm_link"].boundary_px == pytest.approx(c["forearm_link"].boundary_px, abs=0.05)
 
 
