@@ -71,7 +71,7 @@ def test_rounds_of_three_concurrent_editors_keep_every_accepted_revision(tmp_pat
     root = _dataset(tmp_path)
     accepted: list[str] = []
     refused = 0
-    for rnd in range(6):
+    for rnd in range(20):  # the acceptance of issue 19: 20 rounds of 3 concurrent writers
         procs = [
             subprocess.Popen(
                 [sys.executable, "-c", EDITOR, str(root), f"r{rnd}p{i}", str(0.05 * i)],

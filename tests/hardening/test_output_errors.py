@@ -114,3 +114,25 @@ def test_convert_on_a_full_disk_does_not_call_the_input_corrupt(seeds, tmp_path:
     assert not (tmp_path / "out").exists()
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
     shutil.rmtree(tmp_path, ignore_errors=True)
+
+
+def test_export_to_a_read_only_folder_fails_before_the_work(
+    seeds, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from robogs.convert.export import export
+
+    real_touch = Path.touch
+    calls = []
+
+    def ro_touch(self, *a, **k):
+        if ".tmp-" in self.name:
+            raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(self))
+        return real_touch(self, *a, **k)
+
+    monkeypatch.setattr(Path, "touch", ro_touch)
+    import robogs.convert.export.splat_ply as ply_mod
+
+    monkeypatch.setattr(ply_mod, "export_ply", lambda *a, **k: calls.append(1))
+    with pytest.raises(OutputError, match="read-only"):
+        export("ply", Dataset.open(seeds.dataset), tmp_path / "scene.ply")
+    assert calls == [] and list(tmp_path.iterdir()) == []

@@ -19,7 +19,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from robogs.format.errors import DatasetExistsError, InputError
+from robogs.format.errors import DatasetExistsError, InputError, output_error
 from robogs.format.replace import check_replaceable, exchange, recover, write_export_marker
 
 __all__ = ["atomic_output", "final_path"]
@@ -93,8 +93,14 @@ def atomic_output(
                 )
     tag = uuid.uuid4().hex[:8]
     tmp = parent / f".{out.stem}.tmp-{tag}{out.suffix}"
-    if folder:
-        tmp.mkdir()
+    try:  # writability is known before the export's work: a read-only parent fails here
+        if folder:
+            tmp.mkdir()
+        else:
+            tmp.touch(exist_ok=False)
+            tmp.unlink()
+    except OSError as exc:
+        raise output_error(exc, path=out, action="creating the export") from None
     try:
         yield tmp
         if not tmp.exists():
