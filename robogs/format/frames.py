@@ -15,16 +15,22 @@ Conventions (normative for robogs):
 Every function takes torch tensors with any leading batch dimensions (float32 or float64, CPU or
 CUDA; results follow the input's dtype and device) and is differentiable. Passing numpy arrays
 instead returns numpy arrays (float64 unless the input is float32).
+
+The numpy face :func:`quat_to_matrix_np` / :func:`matrix_to_quat_np` is pure numpy (float64) and
+never imports torch, so torch-free paths (quick validation, ingest) share this one home; torch is
+imported on first use of the torch face.
 """
 
 from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
-import torch
+
+if TYPE_CHECKING:
+    import torch
 
 __all__ = [
     "quat_normalize",
@@ -34,6 +40,8 @@ __all__ = [
     "quat_rotate",
     "quat_to_matrix",
     "matrix_to_quat",
+    "quat_to_matrix_np",
+    "matrix_to_quat_np",
     "quat_slerp",
     "quat_angle_between",
     "axis_angle_to_matrix",
@@ -57,6 +65,20 @@ __all__ = [
 ]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
+
+
+class _LazyTorch:
+    """Stands in for the torch module until first use, then replaces itself by it."""
+
+    def __getattr__(self, name: str) -> Any:
+        import torch as _torch
+
+        globals()["torch"] = _torch
+        return getattr(_torch, name)
+
+
+if not TYPE_CHECKING:
+    torch = _LazyTorch()
 _NP_TYPES = (np.ndarray, np.generic)
 
 
@@ -260,6 +282,61 @@ def matrix_to_quat(R: torch.Tensor) -> torch.Tensor:
     best = pivots.argmax(dim=-1, keepdim=True)  # [..., 1]
     q = torch.gather(cand, -2, best[..., None].expand(*best.shape, 4)).squeeze(-2)
     return quat_normalize(q)
+
+
+def quat_to_matrix_np(q: np.ndarray) -> np.ndarray:
+    """Numpy face of :func:`quat_to_matrix` (float64, no torch).
+
+    Args:
+        q: [..., 4] quaternion (w, x, y, z), normalised here (norm floor 1e-12).
+
+    Returns:
+        [..., 3, 3] rotation matrix.
+    """
+    q = np.asarray(q, np.float64)
+    q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty((*q.shape[:-1], 3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - w * z)
+    R[..., 0, 2] = 2 * (x * z + w * y)
+    R[..., 1, 0] = 2 * (x * y + w * z)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - w * x)
+    R[..., 2, 0] = 2 * (x * z - w * y)
+    R[..., 2, 1] = 2 * (y * z + w * x)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def matrix_to_quat_np(R: np.ndarray) -> np.ndarray:
+    """Numpy face of :func:`matrix_to_quat` (float64, no torch; Shepperd 1978, largest pivot).
+
+    Args:
+        R: [..., 3, 3] rotation matrix (orthonormal, det +1).
+
+    Returns:
+        [..., 4] unit quaternion (w, x, y, z) with ``w >= 0``.
+    """
+    R = np.asarray(R, np.float64)
+    r00, r01, r02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
+    r10, r11, r12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
+    r20, r21, r22 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
+    tr = r00 + r11 + r22
+    pivots = np.stack((1 + tr, 1 + 2 * r00 - tr, 1 + 2 * r11 - tr, 1 + 2 * r22 - tr), axis=-1)
+    cand = np.stack(
+        (
+            np.stack((1 + tr, r21 - r12, r02 - r20, r10 - r01), axis=-1),
+            np.stack((r21 - r12, 1 + 2 * r00 - tr, r01 + r10, r02 + r20), axis=-1),
+            np.stack((r02 - r20, r01 + r10, 1 + 2 * r11 - tr, r12 + r21), axis=-1),
+            np.stack((r10 - r01, r02 + r20, r12 + r21, 1 + 2 * r22 - tr), axis=-1),
+        ),
+        axis=-2,
+    )  # [..., 4 candidates, 4]
+    best = np.argmax(pivots, axis=-1)[..., None, None]
+    q = np.take_along_axis(cand, best, axis=-2)[..., 0, :]
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.where(q[..., :1] < 0, -q, q)
 
 
 @_numpy_compatible

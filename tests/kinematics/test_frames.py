@@ -207,3 +207,55 @@ def test_batched_torch_dtype_and_grad() -> None:
     F.quat_rotate(F.quat_normalize(q32), torch.ones(3)).sum().backward()
     assert q32.grad is not None and torch.isfinite(q32.grad).all()
     assert F.make_T(torch.eye(3, dtype=torch.float32), torch.zeros(7, 3)).shape == (7, 4, 4)
+
+
+# --------------------------------------------------------------------------- numpy face
+
+
+@pytest.mark.parametrize(
+    ("q", "R"),
+    [
+        ((1.0, 0.0, 0.0, 0.0), np.eye(3)),
+        ((0.0, 1.0, 0.0, 0.0), np.diag([1.0, -1.0, -1.0])),  # pi about x
+        ((math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)), [[0, -1, 0], [1, 0, 0], [0, 0, 1]]),  # +z 90
+        ((0.5, 0.5, 0.5, 0.5), [[0, 0, 1], [1, 0, 0], [0, 1, 0]]),  # 120 deg about (1,1,1)
+    ],
+)
+def test_numpy_face_known_rotations(q: tuple[float, ...], R: object) -> None:
+    R = np.asarray(R, dtype=float)
+    assert np.abs(F.quat_to_matrix_np(np.asarray(q)) - R).max() < 1e-15
+    assert np.abs(F.quat_to_matrix_np(-2.0 * np.asarray(q)) - R).max() < 1e-15  # sign, norm
+    assert same_rotation(F.matrix_to_quat_np(R), np.asarray(q)) < 1e-15
+    assert F.matrix_to_quat_np(R)[0] >= 0
+
+
+def test_numpy_face_batch_shapes_round_trip_and_agrees_with_torch(rots: Rotation) -> None:
+    q = wxyz(rots).reshape(5, 100, 4)
+    R = F.quat_to_matrix_np(q)
+    assert R.shape == (5, 100, 3, 3)
+    assert np.abs(R - rots.as_matrix().reshape(5, 100, 3, 3)).max() < 1e-14
+    q2 = F.matrix_to_quat_np(R)
+    assert q2.shape == (5, 100, 4) and (q2[..., 0] >= 0).all()
+    assert same_rotation(q2, q) < 1e-14
+    assert np.abs(F.quat_to_matrix_np(q2) - R).max() < 1e-14
+    # both faces agree (torch face on float64 tensors)
+    Rt = F.quat_to_matrix(torch.as_tensor(q)).numpy()
+    assert np.abs(Rt - R).max() < 1e-15
+    assert np.abs(F.matrix_to_quat(torch.as_tensor(R)).numpy() - q2).max() < 1e-15
+    # single quaternion and single matrix keep their shapes
+    assert F.quat_to_matrix_np(q[0, 0]).shape == (3, 3)
+    assert F.matrix_to_quat_np(R[0, 0]).shape == (4,)
+
+
+def test_numpy_face_does_not_import_torch() -> None:
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np\n"
+        "from robogs.format.frames import quat_to_matrix_np, matrix_to_quat_np\n"
+        "matrix_to_quat_np(quat_to_matrix_np(np.array([0.9, 0.1, -0.3, 0.2])))\n"
+        "print('torch' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

@@ -206,11 +206,9 @@ def _rotvec_quat(r: np.ndarray) -> np.ndarray:
 
 def _matrix_quat(R: np.ndarray) -> np.ndarray:
     """[N, 4] (w, x, y, z) of rotation matrices [N, 3, 3] (Shepperd 1978)."""
-    import torch
+    from robogs.format.frames import matrix_to_quat_np
 
-    from robogs.format.frames import matrix_to_quat
-
-    return matrix_to_quat(torch.as_tensor(R, dtype=torch.float64)).numpy()
+    return matrix_to_quat_np(R)
 
 
 def _rigid_error(M: np.ndarray) -> np.ndarray:

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+from robogs.format.frames import matrix_to_quat_np, quat_to_matrix_np
 
 from .tf_tree import frame_path
 
@@ -33,15 +34,12 @@ _SORT_CHUNK = 1 << 18
 
 def quats_to_matrices(q_wxyz: np.ndarray) -> np.ndarray:
     """[N, 3, 3] rotations of quaternions [N, 4] (w, x, y, z); normalised first."""
-    q = np.asarray(q_wxyz, dtype=np.float64).reshape(-1, 4)
-    return Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix().reshape(-1, 3, 3)
+    return quat_to_matrix_np(np.asarray(q_wxyz, dtype=np.float64).reshape(-1, 4))
 
 
 def matrices_to_quats(R: np.ndarray) -> np.ndarray:
     """[N, 4] quaternions (w, x, y, z), ``w >= 0``, of rotations [N, 3, 3]."""
-    xyzw = Rotation.from_matrix(np.asarray(R, dtype=np.float64).reshape(-1, 3, 3)).as_quat()
-    q = xyzw[:, [3, 0, 1, 2]]
-    return np.where(q[:, :1] < 0, -q, q)
+    return matrix_to_quat_np(np.asarray(R, dtype=np.float64).reshape(-1, 3, 3))
 
 
 def slerp_wxyz(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:

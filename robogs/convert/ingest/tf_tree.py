@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from robogs.format.frames import matrix_to_quat_np, quat_to_matrix_np
+
 __all__ = [
     "StaticTfTree",
     "frame_path",
@@ -22,55 +24,15 @@ __all__ = [
 ]
 
 
-def quat_to_matrix_np(q_wxyz: np.ndarray) -> np.ndarray:
-    """[3, 3] rotation of a quaternion (w, x, y, z), normalised first.
+def pose_to_matrix(t: np.ndarray, q_wxyz: np.ndarray) -> np.ndarray:
+    """[4, 4] transform from a translation [3] (m) and a quaternion [4] (w, x, y, z).
 
-    A numpy twin of :func:`robogs.format.frames.quat_to_matrix`, so that ingest does not load
-    torch (the tests check that both agree).
+    Raises:
+        ValueError: the quaternion is zero or not finite.
     """
-    q = np.asarray(q_wxyz, dtype=np.float64)
-    n = float(np.linalg.norm(q))
+    n = float(np.linalg.norm(np.asarray(q_wxyz, dtype=np.float64)))
     if not np.isfinite(n) or n < 1e-12:
         raise ValueError("zero or non-finite quaternion")
-    w, x, y, z = q / n
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def matrix_to_quat_np(R: np.ndarray) -> np.ndarray:
-    """Quaternion (w, x, y, z), ``w >= 0``, of a [3, 3] rotation (Shepperd 1978: largest pivot).
-
-    A numpy twin of :func:`robogs.format.frames.matrix_to_quat`.
-    """
-    R = np.asarray(R, dtype=np.float64)
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    pivots = (1 + tr, 1 + 2 * R[0, 0] - tr, 1 + 2 * R[1, 1] - tr, 1 + 2 * R[2, 2] - tr)
-    k = int(np.argmax(pivots))
-    if k == 0:
-        q = np.array([1 + tr, R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    elif k == 1:
-        q = np.array(
-            [R[2, 1] - R[1, 2], 1 + 2 * R[0, 0] - tr, R[0, 1] + R[1, 0], R[0, 2] + R[2, 0]]
-        )
-    elif k == 2:
-        q = np.array(
-            [R[0, 2] - R[2, 0], R[0, 1] + R[1, 0], 1 + 2 * R[1, 1] - tr, R[1, 2] + R[2, 1]]
-        )
-    else:
-        q = np.array(
-            [R[1, 0] - R[0, 1], R[0, 2] + R[2, 0], R[1, 2] + R[2, 1], 1 + 2 * R[2, 2] - tr]
-        )
-    q /= np.linalg.norm(q)
-    return -q if q[0] < 0 else q
-
-
-def pose_to_matrix(t: np.ndarray, q_wxyz: np.ndarray) -> np.ndarray:
-    """[4, 4] transform from a translation [3] (m) and a quaternion [4] (w, x, y, z)."""
     T = np.eye(4)
     T[:3, :3] = quat_to_matrix_np(q_wxyz)
     T[:3, 3] = np.asarray(t, dtype=np.float64)

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from ..frames import quat_to_matrix_np
 from .context import CheckContext, InputReported
 
 __all__ = [
@@ -87,24 +88,6 @@ def usable_mesh(ctx: CheckContext, name: str) -> np.ndarray | None:
 
 
 # --------------------------------------------------------------------------- rigid bodies
-
-
-def quat_to_matrix_np(q: np.ndarray) -> np.ndarray:
-    """[N, 4] (w, x, y, z) quaternions (normalised here) -> [N, 3, 3] rotation matrices."""
-    q = np.asarray(q, np.float64)
-    q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty((*q.shape[:-1], 3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - w * z)
-    R[..., 0, 2] = 2 * (x * z + w * y)
-    R[..., 1, 0] = 2 * (x * y + w * z)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - w * x)
-    R[..., 2, 0] = 2 * (x * z - w * y)
-    R[..., 2, 1] = 2 * (y * z + w * x)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
 
 
 def inertia_problem(inertia: np.ndarray, rel: float) -> str | None:

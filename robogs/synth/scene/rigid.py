@@ -95,6 +95,7 @@ def invert_T(T: np.ndarray) -> np.ndarray:
     return out
 
 
+# Own copy on purpose: synth builds the oracles, so it must not share robogs.format.frames.
 def matrix_to_quat(R: np.ndarray) -> np.ndarray:
     """Rotation matrices [..., 3, 3] to unit quaternions [..., 4] (w, x, y, z), w >= 0.
 
@@ -155,6 +156,7 @@ def matrix_to_quat(R: np.ndarray) -> np.ndarray:
     return q.reshape(R.shape[:-2] + (4,))
 
 
+# Own copy on purpose: synth builds the oracles, so it must not share robogs.format.frames.
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Quaternions [..., 4] (w, x, y, z), normalised here, to rotations [..., 3, 3]."""
     q = np.asarray(q, dtype=np.float64)
