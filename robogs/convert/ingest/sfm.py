@@ -120,6 +120,7 @@ def run_sfm(
     min_registered: int = 3,
     threads: int = 1,
     seed: int = 0,
+    max_features: int = 2000,
 ) -> SfmResult:
     """Recover the poses of the images in ``image_dir`` (one shared pinhole camera).
 
@@ -132,6 +133,8 @@ def run_sfm(
         min_registered: fewer registered images raise :class:`SfmError`.
         threads: CPU threads for COLMAP.
         seed: COLMAP's random seed (RANSAC), for repeatable runs.
+        max_features: SIFT features kept per image (caps matching work: exhaustive matching
+            of N images costs N(N-1)/2 pairs of ``max_features``^2 descriptor distances).
 
     Raises:
         SfmError: fewer than ``min_registered`` images registered (or none in the largest model).
@@ -150,9 +153,10 @@ def run_sfm(
     ro.camera_model = "PINHOLE"
     if intrinsics is not None:
         fx, fy, cx, cy = intrinsics
-        ro.camera_params = f"{fx},{fy},{cx - 0.5},{cy - 0.5}"  # COLMAP: pixel centres at integers
+        ro.camera_params = f"{fx},{fy},{cx},{cy}"  # COLMAP: pixel centres at +0.5 too
     eo = pc.FeatureExtractionOptions()
     eo.num_threads = threads
+    eo.sift.max_num_features = max_features
     eo.sift.first_octave = -1  # upsample once: small images need the finest octave
     pc.extract_features(
         db,
@@ -189,7 +193,7 @@ def _result(rec, total: int) -> SfmResult:
     cams = list(rec.cameras.values())
     cam = cams[0]
     fx, fy, cx, cy = (float(x) for x in cam.params[:4])
-    K = np.array([[fx, 0.0, cx + 0.5], [0.0, fy, cy + 0.5], [0.0, 0.0, 1.0]])
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])  # same pixel convention
     names, Ts = [], []
     for im in sorted(rec.images.values(), key=lambda im: im.name):
         if not im.has_pose:

@@ -56,6 +56,9 @@ BACKGROUND_RGB = (0, 0, 0)
 _LIGHT = np.array([0.3, -0.5, 1.0]) / np.linalg.norm([0.3, -0.5, 1.0])
 _BOX_COLOR = (0.15, 0.65, 0.25)
 _TABLE_COLOR = (0.62, 0.45, 0.28)
+#: table-top texture: tile edge (m) and its fixed seed (the scene is the same for every --seed)
+_TABLE_TILE_M = 0.025
+_TEXTURE_SEED = 20261126
 
 
 @dataclass
@@ -73,19 +76,21 @@ class _Part:
         if self.face_rgb is None:
             self.colors = shade_faces(n, np.asarray(self.rgb), _LIGHT)
             return
-        self.colors = np.zeros((len(n), 3), np.uint8)
-        for rgb in np.unique(self.face_rgb, axis=0):
-            sel = (self.face_rgb == rgb).all(1)
-            self.colors[sel] = shade_faces(n[sel], rgb, _LIGHT)
+        lam = np.abs(n @ _LIGHT)  # flat two-sided Lambert, as ``shade_faces``, per face colour
+        lin = np.clip((0.35 + 0.65 * lam)[:, None] * self.face_rgb, 0.0, 1.0)
+        self.colors = np.round(255.0 * lin ** (1 / 2.2)).astype(np.uint8)
 
 
-def _checkered_table(
-    size: tuple[float, float, float], tile: float
+def _textured_table(
+    size: tuple[float, float, float], tile: float, seed: int
 ) -> tuple[trimesh.Trimesh, np.ndarray]:
-    """A box whose top face is a grid of ``tile``-m squares in two tones (asset frame at its centre).
+    """A box whose top is a grid of ``tile``-m squares of random tones (asset frame at its centre).
 
-    A uniform table top is photo-consistent at any height inside its visual hull; real tables
-    have texture, and so does this one.
+    A uniform table top is photo-consistent at any height inside its visual hull, and a
+    repeating checker gives feature matching (structure from motion) ambiguous matches; real
+    tables have irregular texture, and so does this one: every tile's tone is drawn
+    independently (seeded), a wood-like brown scaled by a factor in [0.45, 1.35] with a little
+    hue jitter, so no neighbourhood repeats.
     """
     sx, sy, sz = size
     box = trimesh.creation.box(extents=size)
@@ -100,10 +105,11 @@ def _checkered_table(
     b, c, d = a + (ny + 1), a + (ny + 2), a + 1
     faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     top = trimesh.Trimesh(verts, faces, process=False)
-    parity = np.tile(((i + j) % 2).ravel(), 2)
-    tones = np.array([_TABLE_COLOR, [0.45, 0.30, 0.18]])
+    rng = np.random.default_rng(seed)
+    tone = rng.uniform(0.45, 1.35, (nx * ny, 1)) * rng.uniform(0.85, 1.15, (nx * ny, 3))
+    tiles = np.clip(np.asarray(_TABLE_COLOR) * tone, 0.0, 1.0)
     mesh = trimesh.util.concatenate([sides, top])
-    rgb = np.concatenate([np.tile(_TABLE_COLOR, (len(sides.faces), 1)), tones[parity]])
+    rgb = np.concatenate([np.tile(_TABLE_COLOR, (len(sides.faces), 1)), np.tile(tiles, (2, 1))])
     return mesh, rgb
 
 
@@ -306,7 +312,7 @@ def synthesize_multiview(
         out: dataset folder to create.
         robot: ``"two_link"`` (procedural arm on a base, a box beside it, cameras on the whole
             sphere, nothing else) or ``"ur5"`` (the generated UR5 of ``robogs.synth.scene`` over a
-            table with a two-tone 10 cm checkered top and a box, cameras on the upper hemisphere).
+            table with a randomly toned 2.5 cm tiled top and a box, cameras on the upper hemisphere).
         n_views: number of views (every 8th is listed in ``heldout``).
         width, height: image size, px.
         hfov_deg: horizontal field of view.
@@ -359,7 +365,7 @@ def synthesize_multiview(
     if table is not None:
         T_table = np.eye(4)
         T_table[:3, 3] = table[1]
-        table_mesh, table_rgb = _checkered_table(table[0], 0.1)
+        table_mesh, table_rgb = _textured_table(table[0], _TABLE_TILE_M, _TEXTURE_SEED)
         parts.append(
             _Part(
                 "table",
