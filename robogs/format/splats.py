@@ -27,7 +27,7 @@ import numpy as np
 
 from .errors import FormatError
 
-__all__ = ["SplatSet", "read_splat_ply", "write_splat_ply", "MAX_SPLATS"]
+__all__ = ["SplatSet", "read_splat_ply", "write_splat_ply", "write_splat_arrays_ply", "MAX_SPLATS"]
 
 MAX_SPLATS = 50_000_000
 _MAX_HEADER = 64 * 1024
@@ -244,6 +244,74 @@ def read_splat_ply(path: str | Path) -> SplatSet:
     )
 
 
+_BIND_FIELDS = [
+    ("bind_id", "<i4"),
+    ("bind_face", "<i4"),
+    ("bind_u", "<f4"),
+    ("bind_v", "<f4"),
+    ("bind_offset", "<f4"),
+]
+
+
+def write_splat_arrays_ply(
+    path: str | Path,
+    *,
+    means: np.ndarray,
+    quats: np.ndarray,
+    log_scales: np.ndarray,
+    opacity_logits: np.ndarray,
+    sh: np.ndarray,
+    binding: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None,
+    comments: list[str],
+) -> None:
+    """The one 3DGS PLY writer: binary little-endian, float32 columns, int32 binding ids.
+
+    Args:
+        means: [N, 3] m; quats: [N, 4] (w, x, y, z) written as ``rot_0..3``;
+        log_scales: [N, S] written as ``scale_0..S-1``; opacity_logits: [N];
+        sh: [N, K, 3], ``f_rest_*`` channel-major as in the 3DGS reference layout;
+        binding: ``(bind_id [N], bind_face [N], bind_uv [N, 2], bind_offset [N])`` or None;
+        comments: header comment lines (without ``comment``).
+    """
+    n, k = sh.shape[0], sh.shape[1]
+    fields = [(c, "<f4") for c in ("x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2")]
+    fields += [(f"f_rest_{i}", "<f4") for i in range(3 * (k - 1))]
+    fields += [("opacity", "<f4")]
+    fields += [(f"scale_{i}", "<f4") for i in range(log_scales.shape[1])]
+    fields += [(f"rot_{i}", "<f4") for i in range(4)]
+    if binding is not None:
+        fields += _BIND_FIELDS
+    arr = np.zeros(n, dtype=np.dtype(fields))
+    for i, c in enumerate("xyz"):
+        arr[c] = means[:, i]
+    for i in range(3):
+        arr[f"f_dc_{i}"] = sh[:, 0, i]
+    rest = sh[:, 1:, :].transpose(0, 2, 1).reshape(n, -1)  # channel-major
+    for i in range(rest.shape[1]):
+        arr[f"f_rest_{i}"] = rest[:, i]
+    arr["opacity"] = opacity_logits
+    for i in range(log_scales.shape[1]):
+        arr[f"scale_{i}"] = log_scales[:, i]
+    for i in range(4):
+        arr[f"rot_{i}"] = quats[:, i]
+    if binding is not None:
+        bind_id, bind_face, bind_uv, bind_offset = binding
+        arr["bind_id"] = bind_id
+        arr["bind_face"] = bind_face
+        arr["bind_u"] = bind_uv[:, 0]
+        arr["bind_v"] = bind_uv[:, 1]
+        arr["bind_offset"] = bind_offset
+    inv = {"<f4": "float", "<i4": "int"}
+    header = ["ply", "format binary_little_endian 1.0"]
+    header += [f"comment {c}" for c in comments]
+    header += [f"element vertex {n}"]
+    header += [f"property {inv[t]} {name}" for name, t in fields]
+    header += ["end_header"]
+    with open(path, "wb") as fh:
+        fh.write(("\n".join(header) + "\n").encode("ascii"))
+        fh.write(arr.tobytes())
+
+
 def write_splat_ply(path: str | Path, splats: SplatSet) -> None:
     """Write ``splats`` in the binary little-endian 3DGS layout with binding columns."""
     n = len(splats)
@@ -252,45 +320,13 @@ def write_splat_ply(path: str | Path, splats: SplatSet) -> None:
         raise FormatError(
             f"sh must be [N, K, 3] with K in 1, 4, 9, 16; got {splats.sh.shape}", path=path
         )
-    fields = [(c, "<f4") for c in ("x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2")]
-    fields += [(f"f_rest_{i}", "<f4") for i in range(3 * (k - 1))]
-    fields += [("opacity", "<f4")]
-    fields += [(f"scale_{i}", "<f4") for i in range(splats.log_scales.shape[1])]
-    fields += [(f"rot_{i}", "<f4") for i in range(4)]
-    fields += [
-        ("bind_id", "<i4"),
-        ("bind_face", "<i4"),
-        ("bind_u", "<f4"),
-        ("bind_v", "<f4"),
-        ("bind_offset", "<f4"),
-    ]
-    arr = np.zeros(n, dtype=np.dtype(fields))
-    for i, c in enumerate("xyz"):
-        arr[c] = splats.means[:, i]
-    for i in range(3):
-        arr[f"f_dc_{i}"] = splats.sh[:, 0, i]
-    rest = splats.sh[:, 1:, :].transpose(0, 2, 1).reshape(n, -1)
-    for i in range(rest.shape[1]):
-        arr[f"f_rest_{i}"] = rest[:, i]
-    arr["opacity"] = splats.opacity_logits
-    for i in range(splats.log_scales.shape[1]):
-        arr[f"scale_{i}"] = splats.log_scales[:, i]
-    for i in range(4):
-        arr[f"rot_{i}"] = splats.quats[:, i]
-    arr["bind_id"] = splats.bind_id
-    arr["bind_face"] = splats.bind_face
-    arr["bind_u"] = splats.bind_uv[:, 0]
-    arr["bind_v"] = splats.bind_uv[:, 1]
-    arr["bind_offset"] = splats.bind_offset
-    inv = {"<f4": "float", "<i4": "int"}
-    header = [
-        "ply",
-        "format binary_little_endian 1.0",
-        "comment robogs splats; rot_* is (w,x,y,z)",
-        f"element vertex {n}",
-    ]
-    header += [f"property {inv[t]} {name}" for name, t in fields]
-    header += ["end_header"]
-    with open(path, "wb") as fh:
-        fh.write(("\n".join(header) + "\n").encode("ascii"))
-        fh.write(arr.tobytes())
+    write_splat_arrays_ply(
+        path,
+        means=splats.means,
+        quats=splats.quats,
+        log_scales=splats.log_scales,
+        opacity_logits=splats.opacity_logits,
+        sh=splats.sh,
+        binding=(splats.bind_id, splats.bind_face, splats.bind_uv, splats.bind_offset),
+        comments=["robogs splats; rot_* is (w,x,y,z)"],
+    )

@@ -36,19 +36,13 @@ import numpy as np
 
 from robogs.format import Dataset
 from robogs.format.errors import InputError
+from robogs.format.splats import write_splat_arrays_ply
 
 from . import ExportReport, register_exporter
 
 __all__ = ["FLAT_LOG_SCALE", "export_ply", "ply_property_names"]
 
 FLAT_LOG_SCALE = math.log(1e-7)
-_BINDING = [
-    ("bind_id", "<i4"),
-    ("bind_face", "<i4"),
-    ("bind_u", "<f4"),
-    ("bind_v", "<f4"),
-    ("bind_offset", "<f4"),
-]
 
 
 def ply_property_names(sh_coeffs: int, *, with_binding: bool = False) -> list[str]:
@@ -57,7 +51,7 @@ def ply_property_names(sh_coeffs: int, *, with_binding: bool = False) -> list[st
     names += [f"f_rest_{i}" for i in range(3 * (sh_coeffs - 1))]
     names += ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
     if with_binding:
-        names += [n for n, _ in _BINDING]
+        names += ["bind_id", "bind_face", "bind_u", "bind_v", "bind_offset"]
     return names
 
 
@@ -158,42 +152,24 @@ def export_ply(
          else np.concatenate([p["log_scales"], np.full((len(p["log_scales"]), 1), FLAT_LOG_SCALE)], 1)
          for p in parts]
     )  # fmt: skip
-    names = ply_property_names(k, with_binding=with_binding)
-    dtype = np.dtype([(nm, dict(_BINDING).get(nm, "<f4")) for nm in names])
-    arr = np.zeros(n, dtype=dtype)
-    means, quats = cat("means"), cat("quats")
-    for i, c in enumerate("xyz"):
-        arr[c] = means[:, i]
-    for i in range(3):
-        arr[f"f_dc_{i}"] = sh[:, 0, i]
-    rest = sh[:, 1:, :].transpose(0, 2, 1).reshape(n, -1)  # channel-major
-    for i in range(rest.shape[1]):
-        arr[f"f_rest_{i}"] = rest[:, i]
-    arr["opacity"] = cat("opacity")
-    for i in range(3):
-        arr[f"scale_{i}"] = scales[:, i]
-    for i in range(4):
-        arr[f"rot_{i}"] = quats[:, i]
-    if with_binding:
-        arr["bind_id"] = cat("bind_id")
-        arr["bind_face"] = cat("bind_face")
-        uv = cat("bind_uv")
-        arr["bind_u"], arr["bind_v"] = uv[:, 0], uv[:, 1]
-        arr["bind_offset"] = cat("bind_offset")
-    header = [
-        "ply",
-        "format binary_little_endian 1.0",
-        f"comment robogs export of {ds.name}; rot_* is (w,x,y,z); "
-        + ("rest state" if t_ns is None else f"posed at t_ns {int(t_ns)}"),
+    comments = [
+        f"robogs export of {ds.name}; rot_* is (w,x,y,z); "
+        + ("rest state" if t_ns is None else f"posed at t_ns {int(t_ns)}")
     ]
     if with_binding:
-        header.append("comment robogs_targets " + json.dumps(targets, ensure_ascii=True))
-    header += [f"element vertex {n}"]
-    header += [f"property {'int' if t == '<i4' else 'float'} {nm}" for nm, t in dtype.descr]
-    header += ["end_header"]
-    with open(out, "wb") as fh:
-        fh.write(("\n".join(header) + "\n").encode("ascii"))
-        fh.write(arr.tobytes())
+        comments.append("robogs_targets " + json.dumps(targets, ensure_ascii=True))
+    write_splat_arrays_ply(
+        out,
+        means=cat("means"),
+        quats=cat("quats"),
+        log_scales=scales,
+        opacity_logits=cat("opacity"),
+        sh=sh,
+        binding=(cat("bind_id"), cat("bind_face"), cat("bind_uv"), cat("bind_offset"))
+        if with_binding
+        else None,
+        comments=comments,
+    )
     return ExportReport(
         out=out,
         files=[out.name],
