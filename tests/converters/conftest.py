@@ -102,7 +102,8 @@ def write_ros2_mcap(
     ``hostile`` switches on one defect: ``{"bad_image_at": i}`` (an Image with a wrong
     ``step``), ``{"clock_jump_at": i}`` (a joint stamp 5 s in the past),
     ``{"zero_stamp_at": i}`` (a joint header stamp of 0), ``{"nan_joint_every": k}`` (the
-    first joint's position is NaN in every k-th JointState).
+    first joint's position is NaN in every k-th JointState), ``{"early_log_every": k}`` (every
+    k-th JointState logged ``early_log_ns``, default 2 s, before its neighbours).
     """
     from mcap_ros2.writer import Writer
 
@@ -142,6 +143,8 @@ def write_ros2_mcap(
             "velocity": [vel[k] for k in order],
             "effort": [eff[k] for k in order],
         }
+        if hostile.get("early_log_every") and i % hostile["early_log_every"] == 3:
+            log -= hostile.get("early_log_ns", 2_000_000_000)  # a recorder that logged it early
         events.append((log, 1, "/joint_states", msg))
         if hostile.get("clock_jump_at") != i and hostile.get("zero_stamp_at") != i:
             sc.joint_t.append(stamp)
