@@ -398,24 +398,16 @@ class Dataset:
 
     def mesh(self, asset: str) -> trimesh.Trimesh:
         """An asset's mesh (metres, asset frame) via trimesh."""
-        import trimesh
 
         entry = self.assets.get(asset)
         if not entry or "mesh" not in entry:
             raise FormatError(
                 f"asset {asset!r} has no mesh", path=self.manifest_path, where=f"assets/{asset}"
             )
+        from .meshes import load_mesh
+
         path = self.resolve(entry["mesh"], where=f"assets/{asset}/mesh")
-        try:
-            mesh = trimesh.load(path, force="mesh", process=False)
-        except Exception as exc:  # trimesh raises many types on bad files
-            raise FormatError(
-                f"unreadable mesh ({type(exc).__name__}: {str(exc)[:200]})",
-                path=path,
-                hint="re-export the mesh as PLY, OBJ, STL or GLB",
-            ) from None
-        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-            raise FormatError("mesh has no triangles", path=path)
+        mesh = load_mesh(path)
         v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
         if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
             raise FormatError(

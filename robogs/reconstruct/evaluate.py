@@ -28,6 +28,7 @@ import trimesh
 from robogs.format.binding import Binding
 from robogs.format.dataset import Dataset
 from robogs.format.errors import FormatError, InputError
+from robogs.format.meshes import load_mesh
 from robogs.format.render import Camera, Gaussians, RenderConfig, render
 from robogs.format.rerender import label_channels
 
@@ -231,12 +232,4 @@ def evaluate(
 
 
 def _load_mesh(path: Path) -> trimesh.Trimesh:
-    if not path.is_file():
-        raise InputError("mesh file not found", path=path)
-    try:
-        m = trimesh.load(path, force="mesh")
-    except Exception as exc:  # trimesh raises many types on bad files
-        raise InputError(f"unreadable mesh ({type(exc).__name__})", path=path) from None
-    if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
-        raise InputError("mesh has no triangles", path=path)
-    return m
+    return load_mesh(path, error=InputError, process=True)

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import FormatError, RobogsError
 from ..findings import Finding
+from ..meshes import load_mesh
 from ._common import (
     MM,
     column,
@@ -50,16 +51,7 @@ class _LinkGeometry:
 
 
 def _load_mesh_file(path: Path, scale: Any) -> np.ndarray:
-    import trimesh
-
-    try:
-        mesh = trimesh.load(path, force="mesh", process=False)
-    except Exception as exc:  # trimesh raises many types on bad files
-        raise FormatError(
-            f"unreadable mesh ({type(exc).__name__}: {str(exc)[:200]})",
-            path=path,
-            hint="re-export the mesh as STL, OBJ, PLY, GLB or DAE",
-        ) from None
+    mesh = load_mesh(path, triangles=False)
     v = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), np.float64)
     if v.size == 0 or not np.all(np.isfinite(v)):
         raise FormatError(

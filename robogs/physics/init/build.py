@@ -350,14 +350,11 @@ def _known_geometry(ds: Any, name: str, spec: ObjectSpec | None) -> _Geometry:
     if spec is not None and spec.box is not None:
         return _Geometry(np.asarray(spec.box, dtype=float), None, "user", "--object box:")
     if spec is not None and spec.mesh is not None:
-        import trimesh
+        from robogs.format.meshes import load_mesh
 
-        if not spec.mesh.is_file():
-            raise InputError("mesh file not found", path=spec.mesh, where=f"--object {name}=mesh:")
-        try:
-            mesh = trimesh.load(spec.mesh, force="mesh", process=False)
-        except Exception as exc:  # trimesh raises many types on bad files
-            raise InputError(f"unreadable mesh ({type(exc).__name__})", path=spec.mesh) from None
+        mesh = load_mesh(
+            spec.mesh, error=InputError, where=f"--object {name}=mesh:", triangles=False
+        )
         return _mesh_geometry(mesh, "user", f"--object mesh:{spec.mesh.name}")
     return _Geometry()
 
