@@ -116,6 +116,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--images", type=Path, metavar="DIR", help="image folder (default: next to the model)"
     )
     g.add_argument("--world-up", choices=_UP_AXES, help="source world's up axis, rotated to +z")
+    g.add_argument(
+        "--sfm",
+        action="store_true",
+        help="SRC is images, a video or a dataset without camera poses: recover the poses by "
+        "structure from motion (pycolmap; the 'sfm' extra); docs/reconstruct.md",
+    )
+    g.add_argument(
+        "--sfm-threads", type=int, default=1, metavar="N", help="CPU threads for --sfm (default 1)"
+    )
     parser.add_argument("--episode", default="ep000", help="episode id (default ep000)")
     p = parser.add_mutually_exclusive_group()
     p.add_argument(
@@ -209,7 +218,8 @@ def run(args: argparse.Namespace) -> int:
     roles = {}
     tf_objects: dict[str, str] = {}
     tf_cameras: dict[str, str] = {}
-    fmt = args.fmt or (detect_format(args.src).name if args.src.exists() else None)
+    sfm = getattr(args, "sfm", False)
+    fmt = args.fmt or (detect_format(args.src).name if args.src.exists() and not sfm else None)
     tabular = fmt == "tabular"
     if args.map is not None and not tabular:
         roles.update({t: str(r) for t, r in load_role_map(args.map).items()})
@@ -247,6 +257,18 @@ def run(args: argparse.Namespace) -> int:
         if sys.argv[1:2] == ["convert"]
         else None,
     )
+    if sfm:
+        from .ingest.sfm import convert_sfm
+
+        ds, res = convert_sfm(
+            args.src, args.out, options=opts, force=args.force, threads=args.sfm_threads
+        )
+        print(
+            f"wrote {args.out} (structure from motion: {res.registered} of {res.total} images "
+            f"registered, {res.points} points, reprojection {res.reprojection_px:.2f} px; "
+            "frame arbitrary: run robogs reconstruct --align apply)"
+        )
+        return 0
     if getattr(args, "ray", None) is not None or any(c in str(args.src) for c in "*?["):
         from .distributed import run_many
 

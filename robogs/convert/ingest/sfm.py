@@ -24,6 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from robogs.format.cameras import CameraModel
 from robogs.format.errors import InputError
 
 __all__ = [
@@ -33,6 +34,7 @@ __all__ = [
     "sharpness",
     "select_keyframes",
     "run_sfm",
+    "convert_sfm",
 ]
 
 #: match every pair up to this many images; sequential (overlap 10) beyond
@@ -56,6 +58,7 @@ class SfmResult:
         total: images given.
         points: 3D points of the model.
         reprojection_px: mean reprojection error, px.
+        model_dir: the largest model, written as a COLMAP binary model.
     """
 
     names: list[str]
@@ -66,6 +69,7 @@ class SfmResult:
     total: int
     points: int
     reprojection_px: float
+    model_dir: Path | None = None
 
 
 def sharpness(gray: np.ndarray) -> float:
@@ -186,7 +190,11 @@ def run_sfm(
             hint="the images need overlap and parallax: move the camera around the scene "
             "(not only turn it), avoid blurred and duplicate frames",
         )
-    return _result(best, len(names))
+    res = _result(best, len(names))
+    res.model_dir = work / "model"
+    res.model_dir.mkdir()
+    best.write(res.model_dir)
+    return res
 
 
 def _result(rec, total: int) -> SfmResult:
@@ -215,3 +223,158 @@ def _result(rec, total: int) -> SfmResult:
         points=int(rec.num_points3D()),
         reprojection_px=float(rec.compute_mean_reprojection_error()),
     )
+
+
+def _video_keyframes(video: Path, dst: Path) -> int:
+    """Write the keyframes of ``video`` to ``dst`` as PNGs; returns how many frames were read."""
+    from robogs.format.images import iter_video_frames
+
+    frames = list(iter_video_frames(video))
+    for i in select_keyframes(frames):
+        cv2.imwrite(str(dst / f"{i:06d}.png"), cv2.cvtColor(frames[i], cv2.COLOR_RGB2BGR))
+    return len(frames)
+
+
+def _unposed_camera(ds) -> tuple[str, str, dict]:
+    """(episode id, stream key, stream) of the one camera stream whose extrinsics are unknown."""
+    found = [
+        (ep.id, key, st)
+        for ep in ds.episodes
+        for key, st in ep.streams.items()
+        if st.get("kind") == "camera" and ds.camera(st["camera"]).extrinsics == "unknown"
+    ]
+    if len(found) != 1:
+        raise InputError(
+            f"--sfm on a dataset needs exactly one camera stream with extrinsics unknown, "
+            f"found {len(found)}",
+            path=ds.root,
+            hint="convert the images or the video of that camera instead",
+        )
+    return found[0]
+
+
+def _pose_dataset(src: Path, out: Path, work: Path, *, force: bool, threads: int):
+    """Copy the dataset ``src`` to ``out`` with the SfM poses and intrinsics of its unposed camera."""
+    import os
+
+    import pyarrow as pa
+
+    from robogs.format.dataset import Dataset, read_parquet
+    from robogs.format.errors import DatasetExistsError
+    from robogs.format.frames import matrix_to_quat_np
+    from robogs.format.images import iter_video_frames
+    from robogs.format.replace import check_replaceable
+
+    ds = Dataset.open(src)
+    ep_id, key, st = _unposed_camera(ds)
+    cam = ds.camera(st["camera"])
+    frames = read_parquet(ds.resolve(st["frames"]))
+    index = frames.column("frame_index").to_numpy()
+    img = work / "images"
+    img.mkdir(parents=True)
+    want = {int(i) for i in index}
+    for i, rgb in enumerate(iter_video_frames(ds.resolve(st["video"]))):
+        if i in want:
+            cv2.imwrite(str(img / f"{i:06d}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    res = run_sfm(img, work / "sfm", threads=threads)  # intrinsics from SfM (see run_sfm)
+    if res.registered < len(index):
+        raise SfmError(
+            f"structure from motion registered {res.registered} of {len(index)} images; "
+            "every view of a dataset needs a pose",
+            path=src,
+            hint="drop the blurred or duplicate views, or recapture with more overlap",
+        )
+    pos = {int(n[:6]): T for n, T in zip(res.names, res.T_world_cam, strict=True)}
+    T = np.stack([pos[int(i)] for i in index])
+    q = matrix_to_quat_np(T[:, :3, :3])
+    cols = {"t_ns": frames.column("t_ns")}
+    cols.update({c: pa.array(T[:, i, 3]) for i, c in enumerate("xyz")})
+    cols.update({c: pa.array(q[:, i]) for i, c in enumerate(("qw", "qx", "qy", "qz"))})
+    if out.exists() and not force:
+        raise DatasetExistsError(
+            "output exists", path=out, hint="pass --force to replace it, or choose another path"
+        )
+    check_replaceable(out, folder=True, sources=[src])
+    tmp = out.with_name(out.name + ".sfm-tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    shutil.copytree(src, tmp)
+    tds = Dataset.open(tmp)
+    rel = f"{Path(st['frames']).parent.as_posix()}/extrinsics.parquet"
+    fx, fy, cx, cy = res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2]
+    with tds.edit() as w:
+        w.write_table(rel, pa.table(cols), kind="camera_extrinsics")
+        w.set_camera(
+            CameraModel(
+                cam.name,
+                cam.width,
+                cam.height,
+                float(fx),
+                float(fy),
+                float(cx),
+                float(cy),
+                extrinsics="time_varying",
+            )
+        )
+        eps = [dict(e) for e in w.manifest["episodes"]]
+        for e in eps:
+            if e["id"] == ep_id:
+                e["streams"] = {**e["streams"], key: {**e["streams"][key], "extrinsics": rel}}
+        w.manifest["episodes"] = eps
+        prov = dict(w.manifest.get("provenance", {}))
+        prov["sfm"] = _sfm_json(res, "arbitrary (SfM): run reconstruct --align apply")
+        w.manifest["provenance"] = prov
+        w.commit()
+    if out.exists():
+        shutil.rmtree(out)
+    os.replace(tmp, out)
+    return Dataset.open(out), res
+
+
+def _sfm_json(res: SfmResult, frame: str) -> dict:
+    return {
+        "registered": res.registered,
+        "images": res.total,
+        "points": res.points,
+        "reprojection_px": round(res.reprojection_px, 4),
+        "frame": frame,
+        "tool": "pycolmap",
+    }
+
+
+def convert_sfm(
+    src: str | Path, out: str | Path, *, options, force: bool = False, threads: int = 1
+):
+    """``robogs convert SRC OUT --sfm``: poses by structure from motion, then a dataset.
+
+    ``SRC`` is a folder of images, a video (keyframes by sharpness and change) or a robogs
+    dataset whose one camera declares ``extrinsics: unknown`` (its frames are posed in place of
+    the unknown, labels and robot kept). Images and videos become a COLMAP model that the COLMAP
+    converter writes as cameras and static views. The frame is SfM's (arbitrary scale, origin and
+    up); ``robogs reconstruct --align apply`` moves it onto the URDF.
+
+    Returns:
+        (the written Dataset, the :class:`SfmResult`).
+    """
+    import tempfile
+
+    from .convert import convert_path
+
+    src, out = Path(src), Path(out)
+    if not src.exists():
+        raise InputError("no such file or folder", path=src)
+    with tempfile.TemporaryDirectory(prefix="robogs-sfm-") as tmp:
+        work = Path(tmp)
+        if (src / "manifest.json").is_file():
+            return _pose_dataset(src, out, work, force=force, threads=threads)
+        if src.is_dir():
+            images = src
+        else:
+            images = work / "keyframes"
+            images.mkdir()
+            n = _video_keyframes(src, images)
+            if not any(images.iterdir()):
+                raise SfmError(f"no usable keyframe in {n} video frames", path=src)
+        res = run_sfm(images, work / "sfm", threads=threads)
+        options.images = images
+        ds = convert_path(res.model_dir, out, fmt="colmap", options=options, force=force)
+        return ds, res
