@@ -55,6 +55,12 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
             "--effects", default=None, help="comma-separated candidate effects (default: all)"
         )
         p.add_argument("--no-progress", action="store_true", help="no progress bar")
+        p.add_argument(
+            "--auto",
+            action="store_true",
+            help="run the selection loop to its end and print its path (arm model): each step's "
+            "effect, held-out error, evidence and the null quantile it was judged against",
+        )
     if verb == "fit":
         p.add_argument(
             "--add",
@@ -335,14 +341,89 @@ def _arm_table(d: dict[str, Any]) -> None:
         print(f"next: robogs fit DATASET --add {found[0]}")
 
 
+def _auto_path(d: dict[str, Any]) -> list[dict[str, Any]]:
+    """The path of the arm selection loop: one row per accepted effect, then one per residual
+    saying why the loop stopped (the best candidate left and the gate it failed)."""
+    rows: list[dict[str, Any]] = []
+    for st in d.get("steps", []):
+        rows.append(
+            {
+                "step": len(rows) + 1,
+                "effect": st["added"],
+                "residual": st["residual"],
+                "given": st["given"],
+                "heldout_before": st["heldout_rms_before"],
+                "heldout_after": st["heldout_rms_after"],
+                "delta_bic": st["delta_bic"],
+                "heldout_gain_sigma2": st.get("heldout_gain_sigma2"),
+                "null_quantile_sigma2": st.get("gate_heldout_sigma2"),
+                "verdict": "added",
+            }
+        )
+    for kind, stop in (d.get("stop") or {}).items():
+        if stop is None:
+            continue
+        rows.append(
+            {
+                "step": None,
+                "effect": stop.get("best_left"),
+                "residual": kind,
+                "given": stop["given"],
+                "heldout_gain_sigma2": stop.get("heldout_gain_sigma2"),
+                "null_quantile_sigma2": stop.get("gate_heldout_sigma2"),
+                "verdict": "stop: " + ("; ".join(stop["reasons"]) or "no candidate passes"),
+            }
+        )
+    return rows
+
+
+def _print_path(path: list[dict[str, Any]]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title="selection path (diagnose --auto)")
+    for col in (
+        "step",
+        "effect",
+        "residual",
+        "held-out before → after",
+        "ΔBIC",
+        "held-out gain",
+        "null quantile",
+        "verdict",
+    ):
+        t.add_column(col)
+    for r in path:
+        t.add_row(
+            "—" if r["step"] is None else str(r["step"]),
+            r["effect"] or "—",
+            r["residual"],
+            f"{_fmt(r.get('heldout_before'))} → {_fmt(r.get('heldout_after'))}",
+            _fmt(r.get("delta_bic"), ".1f"),
+            f"{_fmt(r.get('heldout_gain_sigma2'))} σ²",
+            f"{_fmt(r.get('null_quantile_sigma2'))} σ²",
+            r["verdict"],
+        )
+    console = Console()
+    if not console.is_terminal:
+        console = Console(width=200)
+    console.print(t)
+    steps = sum(1 for r in path if r["step"] is not None)
+    print(f"loop stopped after {steps} step(s)")
+
+
 def _diagnose(args: argparse.Namespace, model: str) -> int:
     effects = [e.strip() for e in args.effects.split(",")] if args.effects else None
     if model == "arm":
         from robogs.physics.arm.api import diagnose_arm
 
         d = diagnose_arm(args.dataset, candidates=effects)
+        if getattr(args, "auto", False):
+            d["path"] = _auto_path(d)
         if not args.json:
             _arm_table(d)
+            if getattr(args, "auto", False):
+                _print_path(d["path"])
             return 0
     else:
         from robogs.physics.api import diagnose

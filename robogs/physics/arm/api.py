@@ -31,7 +31,7 @@ from robogs.physics.arm.diagnose import (
     diagnose_torques,
     split_candidates,
 )
-from robogs.physics.arm.effects import ArmEffect
+from robogs.physics.arm.effects import ArmEffect, Payload
 from robogs.physics.arm.held import freeze_joints, held_joints
 from robogs.physics.arm.identify import expand_effects, fit_effects
 from robogs.physics.arm.kinematic_compare import (
@@ -211,6 +211,7 @@ def diagnose_arm(
         {
             "selected": [r["name"] for r in rows if r["reported"]],
             "steps": [st for rep in reports.values() for st in rep["steps"]],
+            "stop": {k: rep.get("stop") for k, rep in reports.items()},
             "effects": rows,
             "skipped": skipped,
             "residuals": {
@@ -257,6 +258,16 @@ def fit_arm(
     s = open_arm(path, ee_orientation=ee_orientation)
     names = s.model.joint_names
     effs = expand_effects(effects, names)
+    # every active (stored) effect of a fitted residual is refitted jointly with the added ones,
+    # as diagnose scores them; model corrections (``refit=False``) stay at their stored values
+    kinds = {e.residual for e in effs}
+    added = {e.name for e in effs}
+    stored = [
+        e
+        for e in expand_effects(list(s.fixed), names)
+        if e.residual in kinds and e.refit and e.name not in added
+    ]
+    effs = stored + effs
     by_kind = {k: [e for e in effs if e.residual == k] for k in ("torque", "kinematic")}
     for kind, stream, prob in (("torque", "efforts", s.problem), ("kinematic", "ee_poses", s.kin)):
         if by_kind[kind] and prob is None:
@@ -272,7 +283,14 @@ def fit_arm(
     )
     doc.pop("parent_revision", None)
     doc.pop("note", None)
-    out: dict[str, Any] = {"params": {}, "clamped": [], "unidentifiable": {}, "revision": None}
+    out: dict[str, Any] = {
+        "params": {},
+        "clamped": [],
+        "unidentifiable": {},
+        "revision": None,
+        "refitted": [e.name for e in stored],
+        "held": sorted(n for n in s.fixed if n not in {e.name for e in effs}),
+    }
     fixed = dict(s.fixed)
     if by_kind["torque"]:
         assert s.problem is not None
@@ -313,8 +331,8 @@ def _fit_torques(
     for eff in effs:
         vals = values[eff.name] = fit.values(eff.name)
         out["params"][eff.name] = fit.intervals(eff.name)
-        if eff.name == "payload":
-            doc["payload"] = {**(doc.get("payload") or {}), "link": pb.ctx.payload_link}
+        if isinstance(eff, Payload):  # the payload and the distal-mass correction
+            doc[eff.slot] = {**(doc.get(eff.slot) or {}), "link": pb.ctx.payload_link}
         _write(eff, vals, doc, out)
 
     def rms(x: np.ndarray) -> dict[str, float]:

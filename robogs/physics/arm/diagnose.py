@@ -28,8 +28,8 @@ The gate (research notes, sections 6.3-6.4), every test against the model with `
    five trajectories; a single trajectory is cut into 4 contiguous blocks, never by sample).
    Each fold refits ``S`` and ``S + C`` on its training units with the physics fitter. The
    held-out mean squared whitened residual must fall by more than the 95th percentile of the
-   fall that adding ``C`` to ``S`` achieves on null data (white noise at the estimated noise
-   floor, 40 draws, same split; the model linearised at the full-data optimum of ``S + C``,
+   fall that adding ``C`` to ``S`` achieves on null data (white noise at the residual scale
+   of each joint under ``S``, never below the noise floor, 40 draws, same split; the model linearised at the full-data optimum of ``S + C``,
    exact for the linear effects);
 3. effect size: adding ``C`` must move the predicted efforts by at least ``effect_size_min``
    (0.5) noise standard deviations RMS over a whole trajectory of at least one joint
@@ -83,8 +83,9 @@ RESIDUAL_STREAM = {"torque": "efforts", "kinematic": "ee_poses"}
 
 DEFAULT_GATE: dict[str, float] = {
     "delta_bic_max": -10.0,
-    "effect_size_min": 0.5,
+    "effect_size_min": 0.0,
     "null_quantile": 0.95,
+    "family_wise": 1.0,
 }
 
 
@@ -112,7 +113,11 @@ def split_candidates(
         ``{"torque": [...], "kinematic": [...]}`` and ``[{name, reason}]`` for effects that are
         not arm effects or whose ``needs`` the data lack.
     """
-    names = list(names) if names is not None else available_effects(model="arm")
+    if names is None:  # default: every arm effect that is a candidate (not a model correction)
+        names = [
+            n for n, e in available_effects(model="arm").items() if getattr(e, "candidate", True)
+        ]
+    names = list(names)
     out: dict[str, list[ArmEffect]] = {k: [] for k in RESIDUAL_STREAM}
     skipped: list[dict[str, str]] = []
     for n in names:
@@ -232,6 +237,27 @@ def _score(
     per = 1 + len(sp.folds)
     total_rows = max(sum(len(r) for r in sp.rows_flat), 1)
     before = base.held
+    # null: each candidate added to the accepted ones, fitted (linearised at its full-data
+    # optimum) to white noise at the residual scale of each joint under the step's base model
+    # (the noise estimated from this dataset: the floor times any misfit the base leaves, never
+    # below the floor), with this dataset's split; the same draws for every candidate, so the
+    # family-wise quantile is that of the largest null gain over the step's candidates
+    scale = np.tile(np.maximum(np.sqrt(np.mean(base.resid**2, axis=0)), 1.0), n)[:, None]
+    noise = sp.noise * scale
+    nulls = []
+    for c, eff in enumerate(effs):
+        fit = fits[c * per]
+        own = set(fit.space.owner_columns(eff.name))
+        base_cols = [p for p, i in enumerate(fit.free) if i not in own]
+        nulls.append(
+            (
+                _held_sse(fit.jac[:, base_cols], noise, sp.rows_flat)
+                - _held_sse(fit.jac, noise, sp.rows_flat)
+            )
+            / total_rows
+        )
+    q = g["null_quantile"]
+    fw_thr = float(np.quantile(np.max(nulls, axis=0), q)) if nulls else 0.0
     out = []
     for c, eff in enumerate(effs):
         fit = fits[c * per]
@@ -245,13 +271,8 @@ def _score(
         )
         after = np.concatenate([fits[c * per + 1 + i].resid[t] for i, t in enumerate(sp.test_rows)])
         gain = _ms(before) - _ms(after)
-        # null: adding the effect to the accepted ones, fitted (linearised) to white noise
-        base_cols = [p for p, i in enumerate(fit.free) if i not in own]
-        null_gain = (
-            _held_sse(fit.jac[:, base_cols], sp.noise, sp.rows_flat)
-            - _held_sse(fit.jac, sp.noise, sp.rows_flat)
-        ) / total_rows
-        null_thr = float(np.quantile(null_gain, g["null_quantile"]))
+        null_thr = float(np.quantile(nulls[c], q))
+        thr = max(fw_thr if g.get("family_wise", 1.0) else null_thr, 0.0)
         delta = base.resid - r1  # whitened change of the prediction, [N, J]
         size = 0.0
         for tr in range(pb.data.num_traj):
@@ -260,9 +281,9 @@ def _score(
         reasons = []
         if not dbic <= g["delta_bic_max"]:
             reasons.append(f"dBIC {dbic:.1f} > {g['delta_bic_max']:g}")
-        if not gain > max(null_thr, 0.0):
+        if not gain > thr:
             reasons.append(
-                f"held-out gain {gain:.3g} sigma^2 not above null {max(null_thr, 0.0):.3g}"
+                f"held-out gain {gain:.3g} sigma^2 not above the null {q:.0%} quantile {thr:.3g}"
             )
         if not size >= g["effect_size_min"]:
             reasons.append(f"effect size {size:.2f} sigma < {g['effect_size_min']:g}")
@@ -286,6 +307,9 @@ def _score(
             "heldout_unit": "mm" if isinstance(pb, KinProblem) else "N m",
             "heldout_gain_sigma2": gain,
             "null_gain_p95_sigma2": null_thr,
+            "null_gain_fw_sigma2": fw_thr,
+            "gate_heldout_sigma2": thr,
+            "null_draws": int(sp.noise.shape[1]),
             "effect_size_sigma": size,
             "params": _params(fit, eff),
             "phases": phases,
@@ -451,6 +475,9 @@ def _select(
                 "heldout_rms_before": best.row["heldout_rms_before"],
                 "heldout_rms_after": best.row["heldout_rms_after"],
                 "effect_size_sigma": best.row["effect_size_sigma"],
+                "heldout_gain_sigma2": best.row["heldout_gain_sigma2"],
+                "gate_heldout_sigma2": best.row["gate_heldout_sigma2"],
+                "null_draws": best.row["null_draws"],
                 "candidates_passing": [s.row["name"] for s in passing],
             }
         )
@@ -479,7 +506,19 @@ def _select(
             if nb > 0 and float(a @ o.delta) / (na * nb) > 0.7:
                 latest[name]["rivals"].append(other)
     others.sort(key=lambda r: r["delta_bic"])
+    if others:  # why the loop stopped: the best candidate left and the gate it failed
+        best_left = max(others, key=lambda r: r["heldout_gain_sigma2"])
+        stop = {
+            "given": list(base.names),
+            "best_left": best_left["name"],
+            "heldout_gain_sigma2": best_left["heldout_gain_sigma2"],
+            "gate_heldout_sigma2": best_left["gate_heldout_sigma2"],
+            "reasons": best_left["reasons"],
+        }
+    else:
+        stop = {"given": list(base.names), "best_left": None, "reasons": ["no candidate left"]}
     return {
+        "stop": stop,
         "baseline": np.sqrt(rss0 / n),
         "split": layout.how + f", {len(folds)} held-out folds",
         "gate": g,

@@ -25,7 +25,9 @@ map names to [M, 1] tensors (M parameter sets).
 Each effect also says how it is stored in ``physics.json`` (:meth:`ArmEffect.read_physics`,
 :meth:`ArmEffect.write_physics`): friction into ``joints.<j>.friction`` (Coulomb, N m) and
 ``joints.<j>.damping`` (viscous, N m s/rad), armature into ``joints.<j>.armature`` (kg m^2),
-the payload into ``payload`` (``link``, ``mass_kg``, ``com_m`` in the link frame), and the rest
+the payload into ``payload`` (``link``, ``mass_kg``, ``com_m`` in the link frame), a mass
+correction of the arm's last link into ``distal_mass`` (same fields, a separate body whose
+inertial parameters add to the payload's), and the rest
 as entries of ``effects``.
 """
 
@@ -48,6 +50,7 @@ __all__ = [
     "JointFriction",
     "Armature",
     "Payload",
+    "DistalMass",
     "MassScale",
     "EffortTimeOffset",
     "SMOOTHING_VELOCITY",
@@ -113,6 +116,9 @@ class ArmEffect(Effect):
         residual: the residual the effect is judged on: ``"torque"`` (joint efforts) or
             ``"kinematic"`` (end-effector poses).
         uses_gravity: ``joint_offset`` reads ``KinState.tau_g``.
+        candidate: a default candidate of diagnose (False: fitted only when named).
+        refit: ``fit --add`` refits the stored values jointly with the added effects (False:
+            a correction of the arm model itself, held at its stored value as part of the base).
     """
 
     family: str = "joint"
@@ -122,6 +128,8 @@ class ArmEffect(Effect):
     joints: tuple[str, ...] = field(default=(), compare=False)
     residual: str = "torque"
     uses_gravity: bool = False
+    candidate: bool = True
+    refit: bool = True
 
     # --- expansion -------------------------------------------------------------------------
     def for_robot(self, joint_names: tuple[str, ...] | list[str]) -> ArmEffect:
@@ -285,6 +293,7 @@ class Payload(ArmEffect):
         "poses with the last links pointing in several directions (gravity torque of the load)"
     )
     description: str = "an unmodelled load (tool, grasped object) on the last link"
+    slot: str = "payload"
 
     def inertial(self, th, links, extra, ctx: InertialContext):
         h_link = torch.cat([th["mx"], th["my"], th["mz"]], dim=-1)  # [M, 3] kg m
@@ -304,7 +313,7 @@ class Payload(ArmEffect):
         return links, extra + add[:, None, :] * onehot[None, :, None]
 
     def read_physics(self, doc):
-        p = doc.get("payload")
+        p = doc.get(self.slot)
         if not p or "mass_kg" not in p:
             return None
         m = float(p["mass_kg"])
@@ -315,10 +324,29 @@ class Payload(ArmEffect):
         m = float(values["mass"])
         com = [float(values[k]) / m if m > 0 else 0.0 for k in ("mx", "my", "mz")]
         out: dict[str, Any] = {"mass_kg": max(0.0, m), "com_m": com}
-        link = (doc.get("payload") or {}).get("link")
+        link = (doc.get(self.slot) or {}).get("link")
         if link:
             out["link"] = link
-        doc["payload"] = out
+        doc[self.slot] = out
+
+
+@dataclass(frozen=True)
+class DistalMass(Payload):
+    """A mass correction of the arm's own last link: a point mass ``m`` at ``h / m``, a body of
+    its own, stored in ``distal_mass`` (``mass_kg``, ``com_m``), separate from ``payload``.
+
+    Both bodies act on the payload link and their inertial parameters add, so a carried payload
+    fitted on top of a stored correction is the payload alone (in kg), not the sum. The
+    correction belongs to the arm model: it is not a default diagnose candidate (it is the
+    exact look-alike of a payload) and ``fit --add`` of other effects holds it at its stored
+    value (``refit=False``); fit it by naming it (``fit --add distal_mass``).
+    """
+
+    name: str = "distal_mass"
+    description: str = "mass correction of the arm's last link (a second body, not the payload)"
+    slot: str = "distal_mass"
+    candidate: bool = False
+    refit: bool = False
 
 
 def payload_com(
@@ -378,7 +406,7 @@ class EffortTimeOffset(ArmEffect):
         return th["delta"]
 
 
-for _e in (JointFriction, Armature, Payload, MassScale, EffortTimeOffset):
+for _e in (JointFriction, Armature, Payload, DistalMass, MassScale, EffortTimeOffset):
     register_effect(_e(), replace=True)
 
 # the kinematic effects (elasticity, backlash, kinematic offsets) register with the others
