@@ -48,6 +48,7 @@ from .errors import FormatError, InputError
 from .frames import quat_to_matrix
 from .images import decode_label_png, iter_video_frames
 from .render import Camera, Gaussians, RenderConfig, RenderOutput, render
+from .render.camera import camera_from_model
 
 __all__ = [
     "RerenderOptions",
@@ -340,24 +341,6 @@ def valid_gaussian_mask(
     return ok
 
 
-def _render_camera(model: CameraModel, T_world_cam: np.ndarray, scale: float) -> Camera:
-    """The renderer's camera for a stored model at ``scale`` (pixel-edge coordinates scale exactly)."""
-    w = max(1, int(round(model.width * scale)))
-    h = max(1, int(round(model.height * scale)))
-    sx, sy = w / model.width, h / model.height
-    return Camera(
-        width=w,
-        height=h,
-        fx=model.fx * sx,
-        fy=model.fy * sy,
-        cx=model.cx * sx,
-        cy=model.cy * sy,
-        T_world_cam=torch.as_tensor(np.asarray(T_world_cam, np.float64)),
-        distortion_model=model.distortion_model,
-        distortion=tuple(model.distortion),
-    )
-
-
 def _shifted(T_world_cam: np.ndarray, shift_m: np.ndarray | None) -> np.ndarray:
     """``T_world_cam`` moved by ``shift_m`` [3] (m) along its own axes."""
     if shift_m is None:
@@ -417,7 +400,7 @@ class SceneRerenderer:
         self.extra = onehot[:, 1:].contiguous()
         cpu = rest.means.device.type == "cpu"
         self.config = RenderConfig(kind=rest.kind, tile_size=8 if cpu else 16, validate=False)
-        cam0 = _render_camera(camera, self.T_world_cam(0), self.scale)
+        cam0 = camera_from_model(camera, self.T_world_cam(0), self.scale)
         self.width, self.height = cam0.width, cam0.height
         self.fx, self.fy, self.cx, self.cy = cam0.fx, cam0.fy, cam0.cx, cam0.cy
 
@@ -429,7 +412,7 @@ class SceneRerenderer:
 
     def camera(self, t_ns: int, shift_m: np.ndarray | None = None) -> Camera:
         """The render camera at ``t_ns``, optionally moved by ``shift_m`` [3] m in its own frame."""
-        return _render_camera(self.model, _shifted(self.T_world_cam(t_ns), shift_m), self.scale)
+        return camera_from_model(self.model, _shifted(self.T_world_cam(t_ns), shift_m), self.scale)
 
     def render(
         self,

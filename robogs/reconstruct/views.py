@@ -28,7 +28,7 @@ from robogs.format.errors import FormatError, InputError
 from robogs.format.frames import quat_to_matrix
 from robogs.format.interp import interp_linear, interp_pose
 from robogs.format.render import Camera
-from robogs.format.render.camera import DISTORTION_MODELS
+from robogs.format.render.camera import DISTORTION_MODELS, camera_from_model
 from robogs.format.rerender import read_label_frames, read_video_frames
 
 __all__ = ["View", "Capture", "Segment", "load_capture", "split_heldout"]
@@ -253,23 +253,6 @@ def _state(
     return q, objs
 
 
-def _render_camera(model: CameraModel, T: np.ndarray, scale: float) -> Camera:
-    w = max(1, int(round(model.width * scale)))
-    h = max(1, int(round(model.height * scale)))
-    sx, sy = w / model.width, h / model.height
-    return Camera(
-        width=w,
-        height=h,
-        fx=model.fx * sx,
-        fy=model.fy * sy,
-        cx=model.cx * sx,
-        cy=model.cy * sy,
-        T_world_cam=torch.as_tensor(T, dtype=torch.float64),
-        distortion_model=model.distortion_model,
-        distortion=tuple(model.distortion),
-    )
-
-
 def load_capture(
     ds: Dataset,
     *,
@@ -380,7 +363,7 @@ def load_capture(
                     path=ep.video_path(cam_name),
                     hint="inconsistent intrinsics: fix the camera file or the video",
                 )
-            cam = _render_camera(model, raw[k][3], scale)
+            cam = camera_from_model(model, raw[k][3], scale)
             if (cam.width, cam.height) != (model.width, model.height):
                 img = cv2.resize(img, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
             lab = labs.get(fi_)

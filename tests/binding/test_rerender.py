@@ -320,7 +320,8 @@ def test_bad_splats_do_not_stop_the_rerender(scene_copy) -> None:
 def test_scaled_render_camera_keeps_pixel_edges() -> None:
     from robogs.format.cameras import CameraModel
     from robogs.format.errors import InputError
-    from robogs.format.rerender import RerenderOptions, _render_camera
+    from robogs.format.render.camera import camera_from_model as _render_camera
+    from robogs.format.rerender import RerenderOptions
 
     model = CameraModel("c", 640, 480, 500.0, 510.0, 320.5, 240.25, T_world_cam=np.eye(4))
     cam = _render_camera(model, np.eye(4), 0.5)

@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
+import numpy as np
 import torch
 
-__all__ = ["Camera", "DISTORTION_MODELS"]
+if TYPE_CHECKING:
+    from ..cameras import CameraModel
+
+__all__ = ["Camera", "DISTORTION_MODELS", "camera_from_model"]
 
 #: distortion model name -> number of coefficients (OpenCV / ROS order)
 DISTORTION_MODELS: dict[str, int] = {"none": 0, "plumb_bob": 5, "equidistant": 4}
@@ -70,3 +75,30 @@ class Camera:
         R_cw = R_wc.transpose(0, 1)
         t_cw = -(R_cw @ t_wc)
         return R_cw, t_cw, t_wc
+
+
+def camera_from_model(model: CameraModel, T_world_cam: np.ndarray, scale: float = 1.0) -> Camera:
+    """The renderer's camera for a stored camera model, resized by ``scale``.
+
+    Pixel-edge coordinates scale exactly: the size rounds to whole pixels (at least 1) and
+    ``fx, cx`` (``fy, cy``) scale by the realised width (height) ratio.
+
+    Args:
+        model: the stored intrinsics and lens model.
+        T_world_cam: [4, 4] camera pose (OpenCV axes), m.
+        scale: render resolution as a fraction of the model's.
+    """
+    w = max(1, int(round(model.width * scale)))
+    h = max(1, int(round(model.height * scale)))
+    sx, sy = w / model.width, h / model.height
+    return Camera(
+        width=w,
+        height=h,
+        fx=model.fx * sx,
+        fy=model.fy * sy,
+        cx=model.cx * sx,
+        cy=model.cy * sy,
+        T_world_cam=torch.as_tensor(np.asarray(T_world_cam, np.float64)),
+        distortion_model=model.distortion_model,
+        distortion=tuple(model.distortion),
+    )
