@@ -38,6 +38,7 @@ __all__ = [
     "MESH_SUFFIXES",
     "load_urdf",
     "parse_urdf_robot",
+    "parse_urdf_xml",
     "resolve_mesh_uri",
     "mesh_refs",
     "default_allowed_root",
@@ -74,26 +75,30 @@ class MeshRef:
 # --------------------------------------------------------------------------- XML
 
 
-def _safe_parser() -> etree.XMLParser:
+def _safe_parser(*, verbatim: bool = False, keep_blank_text: bool = False) -> etree.XMLParser:
     return etree.XMLParser(
         resolve_entities=False,
         no_network=True,
         huge_tree=False,
         load_dtd=False,
         dtd_validation=False,
-        remove_comments=True,
-        remove_pis=True,
-        remove_blank_text=True,
+        remove_comments=not verbatim,
+        remove_pis=not verbatim,
+        remove_blank_text=not keep_blank_text,
     )
 
 
-def _parse_xml_bytes(data: bytes, path: Path, what: str) -> etree._Element:
+def _parse_xml_bytes(
+    data: bytes, path: Path, what: str, *, verbatim: bool = False, keep_blank_text: bool = False
+) -> etree._Element:
     """Parse XML with entities refused; raise FormatError on anything unsafe or malformed."""
     doctype = data.find(b"<!DOCTYPE")
     if doctype >= 0 and b"<!ENTITY" in data[doctype:]:
         _raise_entities(path, what)
     try:
-        root = etree.fromstring(data, parser=_safe_parser())
+        root = etree.fromstring(
+            data, parser=_safe_parser(verbatim=verbatim, keep_blank_text=keep_blank_text)
+        )
     except etree.XMLSyntaxError as exc:
         line = getattr(exc, "lineno", None)
         where = f"line {line}" if line else None
@@ -140,6 +145,36 @@ def _read_limited(path: Path, what: str, limit: int = _MAX_XML_BYTES) -> bytes:
             hint="files this large are not supported",
         )
     return path.read_bytes()
+
+
+def parse_urdf_xml(
+    path: str | os.PathLike[str],
+    *,
+    what: str = "URDF",
+    verbatim: bool = False,
+    keep_blank_text: bool = False,
+) -> etree._Element:
+    """The hardened XML parse of a URDF (size limit, no entities, no DTD, no network).
+
+    Use it to read or rewrite the XML itself; :func:`parse_urdf_robot` also checks the robot.
+
+    Args:
+        path: the file.
+        what: its name in error messages.
+        verbatim: keep comments and processing instructions (for files that are written back).
+        keep_blank_text: keep whitespace-only text (the original indentation).
+
+    Returns:
+        The root element (``.getroottree()`` for the document).
+
+    Raises:
+        InputError: the file is missing, unreadable or not a regular file.
+        FormatError: over the size limit, malformed XML, entity or DTD declarations.
+    """
+    path = Path(path)
+    return _parse_xml_bytes(
+        _read_limited(path, what), path, what, verbatim=verbatim, keep_blank_text=keep_blank_text
+    )
 
 
 def parse_urdf_robot(path: str | os.PathLike[str]) -> yourdfpy.Robot:

@@ -76,6 +76,7 @@ from rosbags.typesys.store import Nodetype
 from robogs.format import Dataset, Episode
 from robogs.format.cameras import CameraModel
 from robogs.format.errors import FormatError, InputError
+from robogs.format.urdf import parse_urdf_xml
 
 from . import ExportReport, register_exporter
 from .atomic import final_path
@@ -411,8 +412,7 @@ def _robot_package(ds: Dataset, pkg: str) -> tuple[str, dict[str, bytes]]:
     their dataset paths below ``robot/meshes``."""
     urdf = ds.urdf(load_meshes=True)  # resolves (and checks) every mesh URI
     robot_dir = ds.urdf_path.parent.resolve()
-    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
-    root = etree.fromstring(ds.urdf_path.read_bytes(), parser)
+    root = parse_urdf_xml(ds.urdf_path, verbatim=True, keep_blank_text=True)
     uri_to_path = {ref.uri: ref.path for ref in urdf.robogs_mesh_refs if ref.path is not None}
     files: dict[str, bytes] = {}
     for mesh in root.iter("mesh"):

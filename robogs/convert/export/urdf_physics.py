@@ -56,6 +56,7 @@ from lxml import etree
 from robogs.format import Dataset
 from robogs.format.errors import FormatError, InputError
 from robogs.format.kinematics import Chain, chain_with_offsets, read_joint_offsets
+from robogs.format.urdf import parse_urdf_xml
 
 from . import ExportReport, register_exporter
 from .arm_physics import (
@@ -206,16 +207,6 @@ def _mujoco_element() -> etree._Element:
         el, "compiler", strippath="false", discardvisual="false", balanceinertia="false"
     )
     return el
-
-
-def _parse(path: Path) -> etree._Element:
-    parser = etree.XMLParser(
-        resolve_entities=False, no_network=True, load_dtd=False, remove_blank_text=True
-    )
-    try:
-        return etree.parse(str(path), parser).getroot()
-    except etree.XMLSyntaxError as exc:  # ds.urdf() parsed it already; this is a race or a bug
-        raise FormatError(f"URDF is not well-formed XML ({exc.msg})", path=path) from None
 
 
 def _object_urdf(name: str, inertia: BodyInertia | None, mesh_rel: str | None) -> etree._Element:
@@ -405,7 +396,7 @@ def export_urdf(ds: Dataset, out: Path, *, objects: bool = True) -> ExportReport
         )
     urdf = ds.urdf(load_meshes=True)
     physics = ds.physics() if ds.manifest.get("physics") else None
-    root = _parse(ds.urdf_path)
+    root = parse_urdf_xml(ds.urdf_path, verbatim=True)
     robot_name = _SAFE.sub("_", root.get("name") or "robot")
     meshes = _MeshCopier(out)
     uri_to_path = {ref.uri: ref.path for ref in urdf.robogs_mesh_refs if ref.path is not None}

@@ -22,8 +22,8 @@ from pathlib import Path
 from lxml import etree
 
 from robogs.format.errors import InputError, RobogsError
-from robogs.format.packages import PackageRoot, find_packages, package_uris
-from robogs.format.urdf import mesh_refs, parse_urdf_robot, resolve_mesh_uri
+from robogs.format.packages import PackageRoot, find_packages, package_uris, package_xml_name
+from robogs.format.urdf import mesh_refs, parse_urdf_robot, parse_urdf_xml, resolve_mesh_uri
 
 from .context import IngestContext
 from .dae_textures import dae_texture_refs, texture_uri
@@ -39,13 +39,6 @@ def urdf_root_link(urdf_path: Path) -> str:
     children = {j.child for j in robot.joints}
     roots = [link.name for link in robot.links if link.name not in children]
     return roots[0] if roots else robot.links[0].name
-
-
-def _safe_parse(path: Path) -> etree._ElementTree:
-    parser = etree.XMLParser(
-        resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False
-    )
-    return etree.parse(str(path), parser)
 
 
 def attach_robot(
@@ -113,7 +106,7 @@ def attach_robot(
     for p in sorted(textures):
         assert common is not None
         ctx.writer.copy_file(f"robot/meshes/{p.relative_to(common).as_posix()}", p)
-    tree = _safe_parse(urdf_path)
+    tree = parse_urdf_xml(urdf_path, verbatim=True, keep_blank_text=True).getroottree()
     for mesh in tree.getroot().iter("mesh"):
         fn = mesh.get("filename")
         if fn in new_rel:
@@ -178,11 +171,7 @@ def sibling_packages(source: Path, text: str) -> dict[str, Path]:
     out: dict[str, Path] = {}
     for name in sorted(set(re.findall(r"package://([A-Za-z0-9_]+)/", text))):
         folder = Path(source).parent / name
-        try:
-            found = _safe_parse(folder / "package.xml").getroot().findtext("name")
-        except (OSError, etree.XMLSyntaxError):
-            continue
-        if (found or "").strip() == name:
+        if package_xml_name(folder / "package.xml") == name:
             out[name] = folder
     return out
 

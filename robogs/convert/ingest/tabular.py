@@ -1150,8 +1150,9 @@ def _strip_meshes(urdf_path: Path) -> tuple[bytes, int]:
     """URDF bytes with every mesh geometry (visual/collision) removed, and how many."""
     from lxml import etree
 
-    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
-    tree = etree.parse(str(urdf_path), parser)
+    from robogs.format.urdf import parse_urdf_xml
+
+    tree = parse_urdf_xml(urdf_path, verbatim=True, keep_blank_text=True).getroottree()
     n = 0
     for tag in ("visual", "collision"):
         for el in list(tree.getroot().iter(tag)):

@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from lxml import etree
+
+from robogs.format.urdf import parse_urdf_xml
 
 __all__ = ["Shape", "collision_shapes", "segment_param", "shape_distance"]
 
@@ -76,8 +77,7 @@ def _capsules(urdf_path: Path) -> dict[str, list[tuple[np.ndarray, float, float]
     The file was already parsed and checked by :func:`robogs.format.urdf.parse_urdf_robot`
     (no entities, no DTD); it is read again here with the same refusals.
     """
-    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
-    root = etree.fromstring(urdf_path.read_bytes(), parser=parser)
+    root = parse_urdf_xml(urdf_path)
     out: dict[str, list[tuple[np.ndarray, float, float]]] = {}
     for link in root.iter("link"):
         for col in link.iter("collision"):

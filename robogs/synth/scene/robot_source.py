@@ -208,7 +208,7 @@ def imported_robot(
     if TOOL_LINK in src_model.links:
         raise InputError(f"URDF already has a link named {TOOL_LINK!r}", path=urdf_path)
     roots = {k: Path(v) for k, v in (package_roots or {}).items()}
-    try:
+    try:  # own parse on purpose: synth stays independent of robogs.format.urdf, which it tests
         tree = DET.fromstring(data, forbid_dtd=True)
     except Exception as exc:  # already parsed once; defensive
         raise InputError(f"URDF is not readable XML ({exc})", path=urdf_path) from None
