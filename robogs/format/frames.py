@@ -231,11 +231,16 @@ def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
     """
     q = _as_float(q)
     q = q / q.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    w, x, y, z = q.unbind(-1)
+    rows = _matrix_entries(*q.unbind(-1))
+    return torch.stack(rows, dim=-1).reshape(*q.shape[:-1], 3, 3)
+
+
+def _matrix_entries(w: Any, x: Any, y: Any, z: Any) -> tuple[Any, ...]:
+    """The 9 entries (row-major) of the rotation of a unit quaternion; numpy or torch."""
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
-    rows = (
+    return (
         1 - 2 * (yy + zz),
         2 * (xy - wz),
         2 * (xz + wy),
@@ -246,7 +251,23 @@ def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
         2 * (yz + wx),
         1 - 2 * (xx + yy),
     )
-    return torch.stack(rows, dim=-1).reshape(*q.shape[:-1], 3, 3)
+
+
+def _shepperd_rows(R: Any) -> tuple[tuple[Any, ...], tuple[tuple[Any, ...], ...]]:
+    """Shepperd's 4 pivots and 4 candidates (each 4 x its pivot component times the
+    quaternion) of rotations ``R`` [..., 3, 3]; numpy or torch, unstacked."""
+    r00, r01, r02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
+    r10, r11, r12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
+    r20, r21, r22 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
+    tr = r00 + r11 + r22
+    pivots = (1 + tr, 1 + 2 * r00 - tr, 1 + 2 * r11 - tr, 1 + 2 * r22 - tr)
+    cand = (
+        (pivots[0], r21 - r12, r02 - r20, r10 - r01),
+        (r21 - r12, pivots[1], r01 + r10, r02 + r20),
+        (r02 - r20, r01 + r10, pivots[2], r12 + r21),
+        (r10 - r01, r02 + r20, r12 + r21, pivots[3]),
+    )
+    return pivots, cand
 
 
 @_numpy_compatible
@@ -263,22 +284,9 @@ def matrix_to_quat(R: torch.Tensor) -> torch.Tensor:
     Returns:
         [..., 4] unit quaternion (w, x, y, z) with ``w >= 0``.
     """
-    R = _as_float(R)
-    r00, r01, r02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
-    r10, r11, r12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
-    r20, r21, r22 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
-    tr = r00 + r11 + r22
-    pivots = torch.stack((1 + tr, 1 + 2 * r00 - tr, 1 + 2 * r11 - tr, 1 + 2 * r22 - tr), dim=-1)
-    # Each candidate is 4 * (its pivot component) times the quaternion.
-    cand = torch.stack(
-        (
-            torch.stack((1 + tr, r21 - r12, r02 - r20, r10 - r01), dim=-1),
-            torch.stack((r21 - r12, 1 + 2 * r00 - tr, r01 + r10, r02 + r20), dim=-1),
-            torch.stack((r02 - r20, r01 + r10, 1 + 2 * r11 - tr, r12 + r21), dim=-1),
-            torch.stack((r10 - r01, r02 + r20, r12 + r21, 1 + 2 * r22 - tr), dim=-1),
-        ),
-        dim=-2,
-    )  # [..., 4 candidates, 4]
+    pivot_rows, cand_rows = _shepperd_rows(_as_float(R))
+    pivots = torch.stack(pivot_rows, dim=-1)
+    cand = torch.stack([torch.stack(c, dim=-1) for c in cand_rows], dim=-2)  # [..., 4, 4]
     best = pivots.argmax(dim=-1, keepdim=True)  # [..., 1]
     q = torch.gather(cand, -2, best[..., None].expand(*best.shape, 4)).squeeze(-2)
     return quat_normalize(q)
@@ -295,18 +303,8 @@ def quat_to_matrix_np(q: np.ndarray) -> np.ndarray:
     """
     q = np.asarray(q, np.float64)
     q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty((*q.shape[:-1], 3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - w * z)
-    R[..., 0, 2] = 2 * (x * z + w * y)
-    R[..., 1, 0] = 2 * (x * y + w * z)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - w * x)
-    R[..., 2, 0] = 2 * (x * z - w * y)
-    R[..., 2, 1] = 2 * (y * z + w * x)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
+    rows = _matrix_entries(q[..., 0], q[..., 1], q[..., 2], q[..., 3])
+    return np.stack(rows, axis=-1).reshape(*q.shape[:-1], 3, 3)
 
 
 def matrix_to_quat_np(R: np.ndarray) -> np.ndarray:
@@ -318,21 +316,9 @@ def matrix_to_quat_np(R: np.ndarray) -> np.ndarray:
     Returns:
         [..., 4] unit quaternion (w, x, y, z) with ``w >= 0``.
     """
-    R = np.asarray(R, np.float64)
-    r00, r01, r02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
-    r10, r11, r12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
-    r20, r21, r22 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
-    tr = r00 + r11 + r22
-    pivots = np.stack((1 + tr, 1 + 2 * r00 - tr, 1 + 2 * r11 - tr, 1 + 2 * r22 - tr), axis=-1)
-    cand = np.stack(
-        (
-            np.stack((1 + tr, r21 - r12, r02 - r20, r10 - r01), axis=-1),
-            np.stack((r21 - r12, 1 + 2 * r00 - tr, r01 + r10, r02 + r20), axis=-1),
-            np.stack((r02 - r20, r01 + r10, 1 + 2 * r11 - tr, r12 + r21), axis=-1),
-            np.stack((r10 - r01, r02 + r20, r12 + r21, 1 + 2 * r22 - tr), axis=-1),
-        ),
-        axis=-2,
-    )  # [..., 4 candidates, 4]
+    pivot_rows, cand_rows = _shepperd_rows(np.asarray(R, np.float64))
+    pivots = np.stack(pivot_rows, axis=-1)
+    cand = np.stack([np.stack(c, axis=-1) for c in cand_rows], axis=-2)  # [..., 4, 4]
     best = np.argmax(pivots, axis=-1)[..., None, None]
     q = np.take_along_axis(cand, best, axis=-2)[..., 0, :]
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
