@@ -90,6 +90,7 @@ def _adopt(reg: Registry[Converter], name: str, obj: object) -> None:
 
 
 #: the converter registry (keys: format names)
+# Declared like the exporter registry (convert/export/__init__.py): same call by design.
 REGISTRY: Registry[Converter] = Registry(
     "converters",
     ENTRY_POINT_GROUP,

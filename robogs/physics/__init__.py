@@ -28,6 +28,7 @@ _LAZY = {
 }
 
 
+# PEP 562 lazy names; physics/arm/__init__.py has the same few lines for its own table by design.
 def __getattr__(name: str) -> Any:
     if name in _LAZY:
         import importlib

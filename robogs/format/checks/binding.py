@@ -788,6 +788,7 @@ def _face_points(
     return p + np.where(offset[:, None] != 0.0, offset[:, None] * n, 0.0)
 
 
+# Checks share one shape by design: a @check(...) registration over a finding loop.
 @check(
     "B001",
     group="binding",

@@ -203,6 +203,7 @@ def _bodies(ctx: CheckContext) -> dict[str, tuple[str, bool, float]]:
     }
 
 
+# Checks share one shape by design: a @check(...) registration over a finding loop.
 @check(
     "G001",
     group="geometry",

@@ -57,6 +57,7 @@ def _differs(chk: Check, rel: str, text: str, actual: int, listed: int) -> Itera
         )
 
 
+# Checks share one shape by design: a @check(...) registration over a finding loop.
 @check(
     "I001",
     group="integrity",

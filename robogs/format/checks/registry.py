@@ -218,6 +218,7 @@ def check(
     """Decorator registering ``fn(check, ctx)`` as a :class:`Check`."""
 
     def deco(fn: CheckFn) -> CheckFn:
+        # A keyword pass-through: alike other keyword lists (render/projection) in shape only.
         register_check(
             Check(
                 code=code,

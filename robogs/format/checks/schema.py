@@ -32,6 +32,7 @@ def _newer_minor(ctx: CheckContext) -> bool:
     return ctx.newer_minor
 
 
+# Checks share one shape by design: a @check(...) registration over a finding loop.
 @check(
     "S001",
     group="schema",

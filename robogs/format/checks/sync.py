@@ -244,6 +244,7 @@ def _fit(
     )
 
 
+# Checks share one shape by design: a @check(...) registration over a finding loop.
 @check(
     "T012",
     group="time",

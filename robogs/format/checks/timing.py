@@ -201,6 +201,7 @@ def _loc(s: _Series, **extra: object) -> dict[str, object]:
     return loc
 
 
+# Checks share one shape by design: a @check(...) registration over a finding loop.
 @check(
     "T001",
     group="time",

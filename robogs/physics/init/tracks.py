@@ -157,6 +157,7 @@ def link_paths(
     if not rest or chain is None or not ep.has("joint_states"):
         return out
     js = ep.table("joint_states")
+    # physics/recording.py has the same joint_states read; merge once that file is free.
     missing = [j for j in chain.joint_names if f"position.{j}" not in js.column_names]
     if missing:
         raise FormatError(

@@ -91,6 +91,7 @@ FAMILY["none"] = "none"
 class ScenarioTrajectory:
     """Same attribute names as ``robogs.physics.recording.Trajectory``."""
 
+    # A copy on purpose: synth writes the oracle data and must not import robogs.physics.
     name: str
     t_ns: np.ndarray
     object_pos: np.ndarray

@@ -644,6 +644,7 @@ def _physics(robot: RobotAssets, box: BoxDynamics) -> dict[str, Any]:
     }
 
 
+# generate() names every argument again: synth is kept explicit and independent.
 def _ground_truth(
     seed,
     size,
