@@ -56,6 +56,7 @@ from lxml import etree
 from robogs.format import Dataset
 from robogs.format.errors import FormatError, InputError
 from robogs.format.kinematics import Chain, chain_with_offsets, read_joint_offsets
+from robogs.format.meshes import load_mesh
 from robogs.format.urdf import parse_urdf_xml
 
 from . import ExportReport, register_exporter
@@ -156,16 +157,7 @@ def write_mesh(src: Path, dst_stem: Path) -> Path:
         dst = dst_stem.with_suffix(suffix)
         shutil.copyfile(src, dst)
         return dst
-    import trimesh
-
-    try:
-        mesh = trimesh.load(str(src), force="mesh", process=False)
-    except Exception as exc:  # trimesh raises many types for unreadable files
-        raise FormatError(
-            f"mesh cannot be read for conversion to STL ({type(exc).__name__}: {exc})", path=src
-        ) from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise FormatError("mesh has no triangles to write as STL", path=src)
+    mesh = load_mesh(src)
     dst = dst_stem.with_suffix(".stl")
     mesh.export(str(dst), file_type="stl")
     return dst
