@@ -167,14 +167,13 @@ def _require_inputs(
 
 def _mesh_loader(ds: Any, urdf_path: Path):
     def load(uri: str):
-        import trimesh
-
+        from robogs.format.meshes import load_mesh
         from robogs.format.urdf import resolve_mesh_uri
 
         p = resolve_mesh_uri(uri, urdf_path, ds.root)
         if not p.is_file():
             raise FormatError(f"collision mesh not found ({p})", path=urdf_path, where=uri)
-        return trimesh.load(p, force="mesh", process=False)
+        return load_mesh(p, where=uri, triangles=False)
 
     return load
 
