@@ -9,7 +9,8 @@ forward kinematics). ``--model`` picks one when both apply.
 Every "before" and "after" of the object model is a baseline
 (:mod:`robogs.physics.baseline`): a physics revision with its base parameters, present effects
 and per-trajectory initial poses refitted, so compare, diagnose, fit and report agree.
-Exit codes: 0 done, 2 usage error or unreadable input.
+Exit codes: 0 done, 1 diagnose found no effect while the model does not reproduce the data
+(:mod:`robogs.physics.sanity`), 2 usage error or unreadable input.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from robogs.format.errors import InputError
+from robogs.physics.sanity import finish_command, none_found_text, note_diagnosis
+from robogs.physics.split import add_split_argument, split_option
 
 __all__ = ["add_arguments_for", "run"]
 
@@ -34,6 +37,7 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
         "end-effector poses vs forward kinematics (default auto)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object for machines")
+    add_split_argument(p)
     if verb in ("compare", "diagnose", "fit"):
         p.add_argument(
             "--mask-frames",
@@ -441,10 +445,15 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
                     progress=lambda i, n: bar.update(task, completed=i, total=n),
                     mask_frames=args.mask_frames,
                 ).to_dict()
+    note_diagnosis(d)
+    if getattr(args, "auto", False):
+        d["path_note"] = "--auto: the object model ranks one step (no loop yet)"
     if args.json:
         _print_json(d)
         return 0
     _effects_table(d["effects"], f"candidate effects for {args.dataset}")
+    if d.get("path_note"):
+        print(f"note: {d['path_note']}")
     print(
         f"base model (physics revision {_revision(args.dataset)}, refitted): object position "
         f"rms {d['rms_base_mm']:.2f} mm, noise floor {d['noise_floor_mm']:.2f} mm"
@@ -452,7 +461,7 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
     for s in d.get("skipped", []):
         print(f"  skipped {s['name']}: {s['reason']}")
     found = [e["name"] for e in d["effects"] if e.get("reported")]
-    print("missing effect(s): " + (", ".join(found) if found else "none above the noise"))
+    print("missing effect(s): " + (", ".join(found) if found else none_found_text()))
     if found:
         print(f"next: robogs fit {args.dataset} --add {found[0]}")
     return 0
@@ -477,10 +486,14 @@ def _fit(args: argparse.Namespace, model: str) -> int:
             _print_json(d)
             return 0
         if "rms_before_nm" in d:
-            print("joint-torque RMS [N·m] before → after (noise floor):")
+            print(
+                "joint-torque RMS [N·m] before → after in-sample, held-out after "
+                f"({d.get('heldout_split', '')}), noise floor:"
+            )
             for j, before in d["rms_before_nm"].items():
                 print(
-                    f"  {j:24s} {before:.4g} → {d['rms_after_nm'][j]:.4g}  ({d['noise_floor_nm'][j]:.3g})"
+                    f"  {j:24s} {before:.4g} → {d['rms_after_nm'][j]:.4g}  held-out "
+                    f"{d['heldout_rms_after_nm'][j]:.4g}  ({d['noise_floor_nm'][j]:.3g})"
                 )
         if "ee" in d:
             ee = d["ee"]
@@ -642,6 +655,6 @@ def run(args: argparse.Namespace) -> int:
     if not args.dataset.exists():
         raise InputError("dataset folder does not exist", path=args.dataset)
     model = _model(args.dataset, args.model)
-    return {"compare": _compare, "diagnose": _diagnose, "fit": _fit, "report": _report}[args.verb](
-        args, model
-    )
+    verb = {"compare": _compare, "diagnose": _diagnose, "fit": _fit, "report": _report}[args.verb]
+    with split_option(getattr(args, "split", "auto")):  # cut + sanity: robogs.physics.split
+        return finish_command(args, verb(args, model))

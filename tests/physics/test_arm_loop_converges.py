@@ -171,3 +171,31 @@ def test_diagnose_auto_prints_the_path_and_stops(tmp_path, ur5, capsys):
     assert main(["diagnose", str(ds), "--auto"]) == 0
     text = capsys.readouterr().out
     assert "selection path" in text and "loop stopped after 2 step(s)" in text
+
+
+def test_fit_prints_held_out_error(tmp_path, ur5):
+    """``fit`` reports held-out RMS per joint. Oracle: each fold refitted on its own (one fit per
+    fold, not batched) and its residual taken on the units it did not see; and the held-out RMS
+    is no lower than the in-sample one and far below the base model's for a real payload."""
+    from robogs.physics.arm.api import open_arm
+    from robogs.physics.arm.diagnose import unit_folds
+    from robogs.physics.arm.identify import fit_many, unit_layout
+
+    ds = _log(tmp_path, ur5, "payload", 5, 1.0)
+    out = fit_arm(ds, ["payload"], write=False)
+    s = open_arm(ds)
+    pb = s.problem
+    sig = pb.sigma.cpu().numpy()
+    layout = unit_layout(pb)
+    held = np.zeros((pb.n, len(sig)))
+    for f in unit_folds(layout):
+        keep = ~np.isin(np.arange(layout.n_units), f)
+        one = fit_many(pb, [["payload"]], fixed=s.fixed, masks=[keep], layout=layout)[0]
+        rows = np.isin(layout.unit, f)
+        held[rows] = one.resid[rows] * sig
+    for k, j in enumerate(pb.data.joint_names):
+        want = float(np.sqrt(np.mean(held[:, k] ** 2)))
+        got = out["heldout_rms_after_nm"][j]
+        assert got == pytest.approx(want, rel=1e-3)
+        assert got >= out["rms_after_nm"][j] * 0.999
+    assert sum(out["heldout_rms_after_nm"].values()) < 0.5 * sum(out["rms_before_nm"].values())

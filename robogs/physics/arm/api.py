@@ -30,10 +30,11 @@ from robogs.physics.arm.diagnose import (
     diagnose_kinematic,
     diagnose_torques,
     split_candidates,
+    unit_folds,
 )
 from robogs.physics.arm.effects import ArmEffect, Payload
 from robogs.physics.arm.held import freeze_joints, held_joints
-from robogs.physics.arm.identify import expand_effects, fit_effects
+from robogs.physics.arm.identify import expand_effects, fit_effects, fit_many, unit_layout
 from robogs.physics.arm.kinematic_compare import (
     compare_kinematic,
     orientation_rms_deg,
@@ -339,6 +340,22 @@ def _fit_torques(
         return {j: float(np.sqrt(np.mean(x[:, k] ** 2))) for k, j in enumerate(names)}
 
     out["rms_before_nm"], out["rms_after_nm"] = rms(before), rms(after)
+    # held-out: the same joint fit per fold of whole trajectories (as diagnose splits them),
+    # each fold's residual on the units it did not see; "before" is the base (nothing fitted)
+    layout = unit_layout(pb)
+    folds = unit_folds(layout)
+    masks = []
+    for f in folds:
+        m = np.ones(layout.n_units, bool)
+        m[f] = False
+        masks.append(m)
+    fold_fits = fit_many(pb, [effs] * len(folds), fixed=fixed, masks=masks, layout=layout)
+    held = np.zeros_like(after)
+    for f, ff in zip(folds, fold_fits, strict=True):
+        rows = np.isin(layout.unit, f)
+        held[rows] = ff.resid[rows] * sig
+    out["heldout_rms_after_nm"] = rms(held)
+    out["heldout_split"] = layout.how + f", {len(folds)} held-out folds"
     out["noise_floor_nm"] = {j: float(sig[k]) for k, j in enumerate(names)}
     return values
 
