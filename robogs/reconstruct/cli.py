@@ -227,7 +227,14 @@ def _print_reconstruct(rep: Any) -> None:
         f"  mesh {rep.mesh_faces} faces (removed {rep.clean['small_components']} small components, "
         f"{rep.clean['inner_shells']} inner shells)"
     )
-    if rep.alignment:
+    pre = (rep.alignment or {}).get("sfm_prealign")
+    if pre:
+        c.print(
+            f"  cameras from SfM moved onto the URDF (labelled hull): scale {pre['scale']:.5f}, "
+            f"rotation {pre['rotation_deg']:.3f} deg, residual rms {pre['rms_mm']:.2f} mm, "
+            f"median {pre['median_mm']:.2f} mm"
+        )
+    if rep.alignment and "mode" in rep.alignment:
         a = rep.alignment
         c.print(
             f"  alignment to the URDF ({a['mode']}): scale {a['scale']:.5f}, rotation {a['rotation_deg']:.3f} deg, "

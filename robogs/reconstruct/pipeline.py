@@ -43,6 +43,7 @@ from .image_metrics import psnr
 from .init import InitConfig, initial_points, initial_tensors
 from .mesh_clean import clean_mesh
 from .model import GaussianModel, LearningRates
+from .prealign import needs_prealign, prealign_json, prealign_sfm
 from .quality import QualityFloors, assess_quality
 from .robot_geometry import link_meshes
 from .segment import TargetMap, split_mesh, target_map, vote_targets
@@ -260,6 +261,33 @@ def reconstruct(
         scale=options.scale,
         max_views=options.max_views,
     )
+    prealign: dict[str, Any] | None = None
+    if needs_prealign(ds):  # cameras in an SfM frame: move them into the robot's world first
+        t0 = time.perf_counter()
+        full = capture
+        if options.scale != 1.0:  # the hull at full resolution: ~1.5 % of the scene, not ~2 %
+            full = load_capture(ds, episode=options.episode, cameras=options.cameras or None)
+        pre = prealign_sfm(ds, full)
+        with ds.edit() as w:
+            _transform_cameras(w, ds, capture, pre.transform)
+            prov = dict(w.manifest.get("provenance", {}))
+            prealign = prealign_json(pre)
+            prov["sfm"] = {
+                **prov["sfm"],
+                "frame": "robot (labelled hull fitted to the URDF)",
+                "prealign": prealign,
+            }
+            w.manifest["provenance"] = prov
+            w.commit()
+        ds = Dataset.open(path)
+        capture = load_capture(
+            ds,
+            episode=options.episode,
+            cameras=list(options.cameras) if options.cameras else None,
+            scale=options.scale,
+            max_views=options.max_views,
+        )
+        timings["prealign"] = time.perf_counter() - t0
     train_views, held = split_heldout(capture.views, options.heldout_every)
     if len(train_views) < 2:
         raise InputError(
@@ -397,7 +425,9 @@ def reconstruct(
             gaussians_unassigned=int((g_target == 0).sum()),
             mesh_faces=len(mesh.faces),
             clean=asdict(clean_rep),
-            alignment=_align_json(align_rep, options.align),
+            alignment=_align_json(align_rep, options.align)
+            if prealign is None
+            else {**(_align_json(align_rep, options.align) or {}), "sfm_prealign": prealign},
             binding_max_mm=bind_max,
             kind=tcfg.kind,
             background=list(tcfg.background),
