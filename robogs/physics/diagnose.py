@@ -51,6 +51,7 @@ __all__ = [
     "HELDOUT_MIN_GAIN",
     "EFFECT_SIZE_MIN",
     "RIVAL_COSINE",
+    "RIGID_RIVAL_COSINE",
 ]
 
 DBIC_MAX = -10.0
@@ -58,6 +59,11 @@ HELDOUT_MIN_GAIN = 0.12
 EFFECT_SIZE_MIN = 6.0
 AFFECTED_Z = 3.0
 RIVAL_COSINE = 0.9
+"""Cosine above which camera-intrinsics parts are rivals (:mod:`robogs.physics.intrinsics`)."""
+RIGID_RIVAL_COSINE = 0.7
+"""Cosine of the predicted changes above which two rigid-model effects are rivals (the arm
+model uses the same 0.7): a table tilt and anisotropic friction reach 0.78 on six pushes in
+three directions (no opposite pair), a tilt and viscous damping stay under 0.3."""
 _N_FOLDS = 5
 
 
@@ -92,6 +98,7 @@ class EffectRow:
     params: list[ParamEstimate]
     phases: list[str] = field(default_factory=list)
     rivals: list[str] = field(default_factory=list)
+    similarity: dict[str, float] = field(default_factory=dict)
     separate_by: str = ""
     note: str = ""
     unit: str = "mm"  # of the RMS fields (``px`` for effects seen in mask boundaries)
@@ -195,6 +202,65 @@ def _gn_step(out: FitOutcome, space: ParamSpace, free: list[int], train: np.ndar
     step = -np.linalg.solve(a + 1e-9 * np.diag(d), j.T @ r)
     th[free] = np.clip(th[free] + step, space.lower[free], space.upper[free])
     return th
+
+
+def _paired_better(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether held-out chi^2 per trajectory ``a`` [T] is clearly below ``b`` [T]: the mean
+    paired difference over trajectories exceeds twice its standard error (and T >= 3)."""
+    d = b - a
+    if d.size < 3:
+        return False
+    se = float(np.std(d, ddof=1) / np.sqrt(d.size))
+    return float(d.mean()) > 2.0 * se and float(d.mean()) > 0
+
+
+def _rivals(rows: list[EffectRow], deltas: list[np.ndarray], held_t: list[np.ndarray]) -> None:
+    """Rivals from the data: the cosine of the whitened predicted changes (each effect fitted
+    with the base model, against the base fit) over this dataset's trajectories, measured for
+    every pair that moves the predictions (effect size >= 2 sigma) and stored in
+    ``similarity``; pairs with cosine >= ``RIGID_RIVAL_COSINE`` are rivals. Two reported rivals are
+    reported together: the one with clearly better held-out evidence (paired over trajectories,
+    :func:`_paired_better`) stays, the other is withdrawn (verdict ``rival``); otherwise both
+    stay as an unresolved pair (verdict ``unresolved``). The separating experiment is named as
+    missing from the data, since the data did not separate them (that is what the cosine says).
+    """
+    flat = [d.reshape(-1) for d in deltas]
+    norms = [float(np.linalg.norm(f)) for f in flat]
+    for i, ri in enumerate(rows):
+        if ri.effect_size < 2.0 or norms[i] == 0:
+            continue
+        for j, rj in enumerate(rows):
+            if i == j or rj.effect_size < 2.0 or norms[j] == 0:
+                continue
+            cos = float(flat[i] @ flat[j]) / (norms[i] * norms[j])
+            ri.similarity[rj.name] = cos
+            if cos >= RIGID_RIVAL_COSINE:
+                ri.rivals.append(rj.name)
+        if ri.rivals:
+            cs = ", ".join(f"{n} (cos {ri.similarity[n]:.2f})" for n in ri.rivals)
+            ri.note = (ri.note + "; " if ri.note else "") + (
+                f"predicted changes nearly collinear with {cs} on this data; the experiment that "
+                f"separates them is missing from it: {ri.separate_by}"
+            )
+    for i, ri in enumerate(rows):
+        for j, rj in enumerate(rows):
+            if j <= i or rj.name not in ri.rivals or not (ri.reported and rj.reported):
+                continue
+            if _paired_better(held_t[i + 1], held_t[j + 1]):
+                win, lose = ri, rj
+            elif _paired_better(held_t[j + 1], held_t[i + 1]):
+                win, lose = rj, ri
+            else:
+                for a, b in ((ri, rj), (rj, ri)):
+                    a.verdict = "unresolved"
+                    a.note += f"; unresolved pair with {b.name}: neither has clearly better held-out evidence"
+                continue
+            lose.reported = False
+            lose.verdict = "rival"
+            lose.note += (
+                f"; withdrawn: {win.name} has clearly better held-out error on the same "
+                "trajectories (paired over trajectories)"
+            )
 
 
 def diagnose_recording(
@@ -336,21 +402,7 @@ def diagnose_recording(
                 note="" if ident else f"unidentifiable: {why}; to identify it: {e.separate_by}",
             )
         )
-    # rivals: nearly collinear predicted changes among effects that move predictions at all
-    flat = [d.reshape(-1) for d in deltas]
-    for i, ri in enumerate(rows):
-        if ri.effect_size < 2.0:
-            continue
-        for j, rj in enumerate(rows):
-            if i == j or rj.effect_size < 2.0:
-                continue
-            den = np.linalg.norm(flat[i]) * np.linalg.norm(flat[j])
-            if den > 0 and float(flat[i] @ flat[j]) / den > RIVAL_COSINE:
-                ri.rivals.append(rj.name)
-        if ri.rivals:
-            ri.note = (ri.note + "; " if ri.note else "") + (
-                f"hard to tell from {', '.join(ri.rivals)} with this data: {ri.separate_by}"
-            )
+    _rivals(rows, deltas, held_t)
     rows.sort(key=lambda r: (not r.reported, r.delta_bic))
     bcols = space.owner_columns("base")
     return DiagnoseResult(
