@@ -214,12 +214,19 @@ def _ee_from_joints(ds: Any, ep: Any, chain: Any, link: str) -> tuple[np.ndarray
     return t, Te[:, :3, 3].numpy().copy(), matrix_to_quat(Te[:, :3, :3]).numpy().copy()
 
 
-def load_recording(dataset: Any, *, object_name: str | None = None) -> Recording:
-    """Read a robogs dataset into a :class:`Recording` (one trajectory per episode).
+def load_recording(
+    dataset: Any, *, object_name: str | None = None, split: str | None = None
+) -> Recording:
+    """Read a robogs dataset into a :class:`Recording`, each episode cut into trajectories.
 
     Args:
         dataset: a ``robogs.format.dataset.Dataset`` or a dataset folder.
         object_name: the free object; default the only ``rigid`` object in physics.json.
+        split: ``auto`` (cut at stream gaps, object teleports and rest-motion-rest, see
+            :mod:`robogs.physics.split`), ``none`` (one trajectory per episode) or
+            ``at=T1,T2,...`` (s from each episode's start); default the mode of the enclosing
+            :func:`~robogs.physics.split.split_option` block, else ``auto``. The pieces are
+            listed in ``meta["split"]``.
 
     The end effector is ``objects.pusher.link`` of physics.json (default: the manifest's
     ``robot.ee_link``), read from ``ee_poses`` and moved by ``objects.pusher.offset_m`` (the
@@ -251,7 +258,14 @@ def load_recording(dataset: Any, *, object_name: str | None = None) -> Recording
     grasp_joint = pusher.get("grasp_joint")
     thr = float(pusher.get("grasp_threshold", 0.5))
     offset = pusher.get("offset_m")  # the pusher shape's centre in the link frame [m]
+    from robogs.physics.split import current_split, parse_split, split_recording_trajectory
+
+    log = current_split()
+    mode, at_s = parse_split(split) if split is not None else ("auto", ())
+    if split is None and log is not None:
+        mode, at_s = log.mode, log.at_s
     trajs: list[Trajectory] = []
+    pieces: list[Any] = []
     chain = None
     for ep in ds.episodes:
         _require_stream(
@@ -291,6 +305,18 @@ def load_recording(dataset: Any, *, object_name: str | None = None) -> Recording
                 jv = js.column(col).to_numpy().astype(float)
                 idx = np.clip(np.searchsorted(jt, et_ns, side="right") - 1, 0, len(jt) - 1)
                 grasp = jv[idx] > thr
-        trajs.append(Trajectory(ep.id, t, pos, quat, et_ns, epos, equat, grasp, kind=ep.segment))
-    rec = Recording(trajectories=trajs, physics=physics, object_name=object_name)
-    return as_recording(rec)
+        whole = Trajectory(ep.id, t, pos, quat, et_ns, epos, equat, grasp, kind=ep.segment)
+        start = getattr(ep, "start_ns", None)
+        parts, rows = split_recording_trajectory(
+            whole, mode, at_s, int(start) if isinstance(start, (int, np.integer)) else None
+        )
+        trajs += parts
+        pieces += rows
+    rec = Recording(
+        trajectories=trajs, physics=physics, object_name=object_name, meta={"split": pieces}
+    )
+    rec = as_recording(rec)
+    if log is not None:
+        log.pieces += pieces
+        log.recordings.append(rec)
+    return rec
