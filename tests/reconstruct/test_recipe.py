@@ -1,0 +1,89 @@
+"""The structure-from-motion recipe of docs/reconstruct.md, run as written at a small size.
+
+The shell block after the ``recipe`` marker runs line by line in an empty folder; only the
+training size changes (see the doc). The oracle is the sample's ground truth: after the recipe
+the stored camera centres are within 1 % of the scene size of the true ones and the rotations
+within 1 degree, in the robot's world (no fit to the truth).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+DOC = Path(__file__).resolve().parents[2] / "docs" / "reconstruct.md"
+FULL = "--iterations 3000 --threads 2"
+SMALL = "--iterations 150 --scale 0.5 --force --threads 2 --no-progress"
+
+
+def recipe_lines() -> list[str]:
+    text = DOC.read_text(encoding="utf-8")
+    m = re.search(r"<!-- recipe:[^\n]*-->\s*```sh\n(.*?)```", text, re.S)
+    assert m, "docs/reconstruct.md lost its recipe block"
+    return [ln for ln in m.group(1).splitlines() if ln.strip()]
+
+
+def test_the_recipe_block_is_what_the_test_expects():
+    lines = recipe_lines()
+    assert [ln.split()[:2] for ln in lines] == [
+        ["robogs", "synth"],
+        ["robogs", "convert"],
+        ["robogs", "reconstruct"],
+        ["robogs-validate", "scan-posed"],
+    ]
+    assert "--sfm" in lines[1] and FULL in lines[2] and "--align apply" in lines[2]
+
+
+def _run(line: str, cwd: Path) -> subprocess.CompletedProcess:
+    env = dict(os.environ, OMP_NUM_THREADS="2", PYTHONUNBUFFERED="1")
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    return subprocess.run(
+        shlex.split(line), cwd=cwd, env=env, capture_output=True, text=True, timeout=600
+    )
+
+
+@pytest.mark.slow
+def test_recipe_recovers_the_cameras_in_the_robots_world(tmp_path: Path):
+    """~3 min on 2 cores: synth 5 s, SfM 25 s, pre-alignment 30 s, reconstruction 100 s."""
+    pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
+    from robogs.format.dataset import Dataset, read_parquet
+    from robogs.format.frames import quat_to_matrix_np
+
+    lines = recipe_lines()
+    for line in lines[:3]:
+        r = _run(line.replace(FULL, SMALL), tmp_path)
+        assert r.returncode == 0, f"{line}\n{r.stderr[-2000:]}"
+        if line.startswith("robogs convert"):
+            assert "60 of 60 images registered" in r.stdout
+        if line.startswith("robogs reconstruct"):
+            out = r.stdout + r.stderr
+            assert "cameras from SfM moved onto the URDF" in out
+            assert "alignment to the URDF (apply)" in out
+    ds = Dataset.open(tmp_path / "scan-posed")
+    sfm = ds.manifest["provenance"]["sfm"]
+    assert sfm["registered"] == sfm["images"] == 60
+    assert sfm["frame"].startswith("robot") and sfm["prealign"]["rms_mm"] < 20.0
+    tab = read_parquet(ds.resolve("episodes/static/cameras/orbit/extrinsics.parquet"))
+    p = np.stack([tab.column(c).to_numpy() for c in "xyz"], -1)
+    q = np.stack([tab.column(c).to_numpy() for c in ("qw", "qx", "qy", "qz")], -1)
+    truth = json.loads((tmp_path / "scan.ground_truth.json").read_text())
+    Tt = np.asarray(truth["T_world_cam"])
+    err = np.linalg.norm(p - Tt[:, :3, 3], axis=1)
+    assert err.max() < 0.01 * truth["scene_size_m"], err.max()
+    d = np.einsum("nji,njk->nik", quat_to_matrix_np(q), Tt[:, :3, :3])
+    ang = np.degrees(np.arccos(np.clip((np.trace(d, axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    assert ang.max() < 1.0
+    r = _run(lines[3], tmp_path)
+    errors = sorted(set(re.findall(r"^(\w\d{3}) error", r.stdout, re.M)))
+    assert r.returncode in (0, 1) and "errors" in r.stdout
+    # at 150 steps and half resolution the reconstructed table mesh still holds floaters above
+    # its top, so the box reads as sunk into it (G011); nothing else may fail
+    assert set(errors) <= {"G011"}, r.stdout[-3000:]
