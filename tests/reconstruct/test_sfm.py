@@ -7,6 +7,7 @@ centres are within 1 % of the scene size and the rotations within 1 degree.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import cv2
@@ -86,3 +87,30 @@ def test_sfm_recovers_the_static_capture(tmp_path: Path):
     assert err.max() < 0.01 * size, json.dumps({"max_m": err.max(), "size_m": size})
     ang = _rotation_deg(np.einsum("ij,njk->nik", S.R, res.T_world_cam[:, :3, :3]), Tt[:, :3, :3])
     assert ang.max() < 1.0
+
+
+def test_convert_sfm_on_duplicate_frames_is_one_line_naming_the_count(tmp_path: Path, capsys):
+    """``robogs convert DIR OUT --sfm`` on six copies of one image: exit 2, no dataset."""
+    pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
+    from robogs.cli.main import main
+
+    img = tmp_path / "img"
+    img.mkdir()
+    g = cv2.cvtColor(_texture(5), cv2.COLOR_GRAY2BGR)
+    for i in range(6):
+        cv2.imwrite(str(img / f"{i:03d}.png"), g)
+    code = main(["convert", str(img), str(tmp_path / "out"), "--sfm"])
+    err = capsys.readouterr().err
+    assert code == 2 and re.search(r"registered [0-2] of 6 images", err), err
+    assert "Traceback" not in err and not (tmp_path / "out").exists()
+
+
+def test_convert_sfm_on_a_posed_dataset_is_refused(tmp_path: Path, capsys):
+    """Mutation of the input kind: a dataset whose camera has poses has nothing to recover."""
+    from robogs.cli.main import main
+    from robogs.synth.multiview import synthesize_multiview
+
+    synthesize_multiview(tmp_path / "d", n_views=4, width=16, height=12)
+    code = main(["convert", str(tmp_path / "d"), str(tmp_path / "out"), "--sfm"])
+    err = capsys.readouterr().err
+    assert code == 2 and "extrinsics unknown, found 0" in err, err
