@@ -161,6 +161,7 @@ def _summary(
         "wall_diagnose_s": t_diag,
         "wall_single_fit_s": t_fit,
         "n_samples": rep["n_samples"],
+        "steps": len(rep["steps"]),
     }
     if label.removeprefix("ee:") == "none":
         out["rank1"] = not reported
@@ -268,8 +269,8 @@ def _table(results: list[dict]) -> list[str]:
     lines = [
         "| hidden effect | runs | rank-1 | false extra | param err median (worst) | "
         "median / 10 % target | diagnose s (median) | single fit s | diagnose / fit | "
-        "others reported (runs) | unidentifiable ok |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "others reported (runs) | unidentifiable ok | loop steps (max) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for eff in EFFECTS:
         rs = [r for r in results if r["effect"] == eff]
@@ -296,7 +297,8 @@ def _table(results: list[dict]) -> list[str]:
         other = ", ".join(f"{n} ({k})" for n, k in sorted(others.items(), key=lambda x: -x[1]))
         lines.append(
             f"| {eff} | {len(rs)} | {100 * rank1:.0f} % | {100 * also:.0f} % | {err} | {ratio} | "
-            f"{td:.1f} | {tf:.2f} | {td / tf:.1f}x | {other or '—'} | {unid} |"
+            f"{td:.1f} | {tf:.2f} | {td / tf:.1f}x | {other or '—'} | {unid} | "
+            f"{max(r.get('steps', 0) for r in rs)} |"
         )
     return lines
 

@@ -312,7 +312,10 @@ def _arm_table(d: dict[str, Any]) -> None:
             {
                 **e,
                 "params": _param_rows(e["params"]),
-                "verdict": "missing"
+                "verdict": (
+                    f"missing (held-out gain {_fmt(e.get('heldout_gain_sigma2'))} > null "
+                    f"quantile {_fmt(e.get('gate_heldout_sigma2'))} σ²)"
+                )
                 if e["reported"]
                 else "; ".join(e.get("reasons", [])) or "not supported",
             }
