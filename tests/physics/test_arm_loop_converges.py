@@ -20,6 +20,8 @@ from robogs.physics.arm import diagnose_arm, fit_arm
 from robogs.synth.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
 
 LAST = "wrist_3_link"
+NOMINAL = (0.2, 0.2, 0.15, 0.05, 0.05, 0.05)
+"""The generator's nominal effort noise, N m per joint (the tests also run 4x)."""
 
 
 def _heavier_last_link(d: float) -> tuple[str, list[float]]:
@@ -35,7 +37,7 @@ def _heavier_last_link(d: float) -> tuple[str, list[float]]:
     return text[: m.start()] + new + text[m.end() :], com
 
 
-def _dataset(root: Path, urdf: Path, d: float, m: float, seed: int) -> Path:
+def _dataset(root: Path, urdf: Path, d: float, m: float, seed: int, scale: float = 1.0) -> Path:
     true_text, com = _heavier_last_link(d)
     true_urdf = root / "true.urdf"
     true_urdf.write_text(true_text)
@@ -45,6 +47,7 @@ def _dataset(root: Path, urdf: Path, d: float, m: float, seed: int) -> Path:
         segments=4,
         duration_s=4.0,
         params={"mass": m, "com": [0.0, 0.03, 0.08]},
+        effort_noise=tuple(scale * s for s in NOMINAL),
     )
     generate_armlog(root / "logs", true_urdf, spec)
     ds = root / "ds"
@@ -62,10 +65,11 @@ def _dataset(root: Path, urdf: Path, d: float, m: float, seed: int) -> Path:
     return ds
 
 
+@pytest.mark.parametrize("scale", [1.0, 4.0])
 @pytest.mark.parametrize("d", [0.6, 2.5])
-def test_payload_is_reported_in_kg_whatever_distal_correction_is_stored(tmp_path, ur5, d):
+def test_payload_is_reported_in_kg_whatever_distal_correction_is_stored(tmp_path, ur5, d, scale):
     m = 1.8
-    ds = _dataset(tmp_path, ur5, d=d, m=m, seed=3)
+    ds = _dataset(tmp_path, ur5, d=d, m=m, seed=3, scale=scale)
     # diagnose (the loop run to its end) with the correction stored reports the payload alone
     rep = diagnose_arm(ds)
     assert rep["selected"] == ["payload"] and len(rep["steps"]) <= 5
@@ -105,9 +109,6 @@ def test_fit_add_refits_stored_effects_jointly_as_diagnose_scores_them(tmp_path,
     d1 = first["params"]["payload"]["mass"]["value"]
     d2 = second["params"]["payload"]["mass"]["value"]
     assert not np.isclose(d1, d2, rtol=1e-4)
-
-
-NOMINAL = (0.2, 0.2, 0.15, 0.05, 0.05, 0.05)
 
 
 def _log(root: Path, urdf: Path, effect: str, seed: int, scale: float) -> Path:
