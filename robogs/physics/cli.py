@@ -47,6 +47,14 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
             help="camera frames per stream re-rendered for the mask-boundary stream and "
             "camera_intrinsics (default 30; 0: none)",
         )
+    if verb in ("diagnose", "fit"):
+        p.add_argument(
+            "--holdout",
+            default=None,
+            metavar="TRAJ[,TRAJ...]",
+            help="trajectories held out for the held-out error (arm model; default: leave one "
+            "trajectory out, 5 groups above five trajectories)",
+        )
     if verb == "compare":
         p.add_argument(
             "--mask-poses",
@@ -348,6 +356,23 @@ def _arm_table(d: dict[str, Any]) -> None:
         print(f"next: robogs fit DATASET --add {found[0]}")
 
 
+def _holdout(args: argparse.Namespace) -> list[str] | None:
+    """``--holdout`` as a list of trajectory names (None: the default folds)."""
+    raw = getattr(args, "holdout", None)
+    if not raw:
+        return None
+    return [n.strip() for n in raw.split(",") if n.strip()]
+
+
+def _no_object_holdout(args: argparse.Namespace) -> None:
+    if _holdout(args):
+        raise InputError(
+            "--holdout is implemented for the arm model only",
+            path=args.dataset,
+            hint="leave it out: the object model holds out 5 folds of whole trajectories",
+        )
+
+
 def _auto_path(d: dict[str, Any]) -> list[dict[str, Any]]:
     """The path of the arm selection loop: one row per accepted effect, then one per residual
     saying why the loop stopped (the best candidate left and the gate it failed)."""
@@ -424,7 +449,7 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
     if model == "arm":
         from robogs.physics.arm.api import diagnose_arm
 
-        d = diagnose_arm(args.dataset, candidates=effects)
+        d = diagnose_arm(args.dataset, candidates=effects, holdout=_holdout(args))
         if getattr(args, "auto", False):
             d["path"] = _auto_path(d)
         if not args.json:
@@ -434,6 +459,8 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
             return 0
     else:
         from robogs.physics.api import diagnose
+
+        _no_object_holdout(args)
 
         if args.no_progress or args.json:
             d = diagnose(args.dataset, effects=effects, mask_frames=args.mask_frames).to_dict()
@@ -484,19 +511,22 @@ def _fit(args: argparse.Namespace, model: str) -> int:
             )
         from robogs.physics.arm.api import fit_arm
 
-        d = fit_arm(args.dataset, args.add, write=not args.dry_run, note=args.note)
+        d = fit_arm(
+            args.dataset, args.add, write=not args.dry_run, note=args.note, holdout=_holdout(args)
+        )
         if args.json:
             _print_json(d)
             return 0
         if "rms_before_nm" in d:
             print(
-                "joint-torque RMS [N·m] before → after in-sample, held-out after "
+                "joint-torque RMS [N·m] before → after in-sample, held-out before → after "
                 f"({d.get('heldout_split', '')}), noise floor:"
             )
             for j, before in d["rms_before_nm"].items():
                 print(
                     f"  {j:24s} {before:.4g} → {d['rms_after_nm'][j]:.4g}  held-out "
-                    f"{d['heldout_rms_after_nm'][j]:.4g}  ({d['noise_floor_nm'][j]:.3g})"
+                    f"{d['heldout_rms_before_nm'][j]:.4g} → {d['heldout_rms_after_nm'][j]:.4g}  "
+                    f"({d['noise_floor_nm'][j]:.3g})"
                 )
         if "ee" in d:
             ee = d["ee"]
@@ -531,6 +561,7 @@ def _fit(args: argparse.Namespace, model: str) -> int:
     else:
         from robogs.physics.api import fit
 
+        _no_object_holdout(args)
         res = fit(
             args.dataset,
             args.add,

@@ -29,6 +29,7 @@ from robogs.physics.arm.compare import base_prediction, compare_torques
 from robogs.physics.arm.diagnose import (
     diagnose_kinematic,
     diagnose_torques,
+    holdout_folds,
     split_candidates,
     unit_folds,
 )
@@ -233,6 +234,7 @@ def fit_arm(
     write: bool = True,
     note: str | None = None,
     ee_orientation: bool | None = None,
+    holdout: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """Fit ``effects`` together and write them into physics.json as a new revision.
 
@@ -295,7 +297,7 @@ def fit_arm(
     fixed = dict(s.fixed)
     if by_kind["torque"]:
         assert s.problem is not None
-        fixed.update(_fit_torques(s.problem, by_kind["torque"], s.fixed, doc, out))
+        fixed.update(_fit_torques(s.problem, by_kind["torque"], s.fixed, doc, out, holdout))
     if by_kind["kinematic"]:
         assert s.kin is not None
         _fit_kinematic(s.kin, by_kind["kinematic"], fixed, doc, out)
@@ -321,8 +323,10 @@ def _fit_torques(
     fixed: dict[str, dict[str, float]],
     doc: dict[str, Any],
     out: dict[str, Any],
+    holdout: Sequence[str] | None = None,
 ) -> dict[str, dict[str, float]]:
-    """Fit torque effects, write them into ``doc``; return their fitted values."""
+    """Fit torque effects, write them into ``doc``; return their fitted values (and the
+    held-out RMS of the same joint fit per fold: default folds, or ``holdout`` trajectories)."""
     fit = fit_effects(pb, effs, fixed=fixed)
     sig = pb.sigma.cpu().numpy()
     before = (pb.tau - base_prediction(pb, fixed)).cpu().numpy()
@@ -343,19 +347,23 @@ def _fit_torques(
     # held-out: the same joint fit per fold of whole trajectories (as diagnose splits them),
     # each fold's residual on the units it did not see; "before" is the base (nothing fitted)
     layout = unit_layout(pb)
-    folds = unit_folds(layout)
+    folds = holdout_folds(pb, layout, holdout) if holdout else unit_folds(layout)
     masks = []
     for f in folds:
         m = np.ones(layout.n_units, bool)
         m[f] = False
         masks.append(m)
     fold_fits = fit_many(pb, [effs] * len(folds), fixed=fixed, masks=masks, layout=layout)
+    test = np.concatenate([np.flatnonzero(np.isin(layout.unit, f)) for f in folds])
     held = np.zeros_like(after)
     for f, ff in zip(folds, fold_fits, strict=True):
         rows = np.isin(layout.unit, f)
         held[rows] = ff.resid[rows] * sig
-    out["heldout_rms_after_nm"] = rms(held)
-    out["heldout_split"] = layout.how + f", {len(folds)} held-out folds"
+    out["heldout_rms_before_nm"] = rms(before[test])
+    out["heldout_rms_after_nm"] = rms(held[test])
+    out["heldout_split"] = layout.how + (
+        f", held out: {', '.join(holdout)}" if holdout else f", {len(folds)} held-out folds"
+    )
     out["noise_floor_nm"] = {j: float(sig[k]) for k, j in enumerate(names)}
     return values
 

@@ -56,6 +56,7 @@ from typing import Any
 
 import numpy as np
 
+from robogs.format.errors import InputError
 from robogs.physics.arm.compare import ARM_PHASES, base_prediction, label_phases
 from robogs.physics.arm.effects import ArmEffect, payload_com
 from robogs.physics.arm.identify import (
@@ -80,6 +81,7 @@ __all__ = [
     "diagnose_kinematic",
     "split_candidates",
     "unit_folds",
+    "holdout_folds",
     "DEFAULT_GATE",
     "RESIDUAL_STREAM",
 ]
@@ -100,6 +102,32 @@ def unit_folds(layout: UnitLayout) -> list[np.ndarray]:
     n = layout.n_units
     groups = [[k] for k in range(n)] if n <= 5 else [list(range(g, n, 5)) for g in range(5)]
     return [np.asarray(g, dtype=np.int64) for g in groups]
+
+
+def holdout_folds(
+    pb: ArmProblem | KinProblem, layout: UnitLayout, names: Sequence[str]
+) -> list[np.ndarray]:
+    """One held-out fold: the units of the named trajectories (``--holdout``).
+
+    Raises:
+        InputError: a name that is not a trajectory of the data, all trajectories named, or a
+            single-trajectory dataset (its units are blocks, not trajectories).
+    """
+    known = list(pb.data.traj_names)
+    if pb.data.num_traj < 2:
+        raise InputError(
+            "--holdout needs at least two trajectories", hint="leave it out (default folds)"
+        )
+    bad = [n for n in names if n not in known]
+    if bad:
+        raise InputError(
+            f"--holdout: no trajectory named {', '.join(bad)}",
+            hint="trajectories: " + ", ".join(known[:20]),
+        )
+    idx = sorted({known.index(n) for n in names})
+    if not idx or len(idx) >= len(known):
+        raise InputError("--holdout must leave some trajectories to fit on", hint="name fewer")
+    return [np.asarray(idx, dtype=np.int64)]
 
 
 def _ms(x: np.ndarray) -> float:
@@ -338,6 +366,7 @@ def diagnose_torques(
     null_draws: int = 40,
     seed: int = 0,
     max_effects: int | None = None,
+    holdout: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """Select the effects missing from the torque model by forward selection (module docstring).
 
@@ -363,7 +392,7 @@ def diagnose_torques(
         {"name": e.name, "reason": "judged on the end-effector poses (diagnose_kinematic)"}
         for e in groups["kinematic"]
     ]
-    out = _select(pb, fixed, groups["torque"], gate, null_draws, seed, max_effects)
+    out = _select(pb, fixed, groups["torque"], gate, null_draws, seed, max_effects, holdout)
     sig = pb.sigma.cpu().numpy()
     names = pb.data.joint_names
     return {
@@ -387,6 +416,7 @@ def diagnose_kinematic(
     null_draws: int = 40,
     seed: int = 0,
     max_effects: int | None = None,
+    holdout: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """Select the effects missing from the kinematic model (end-effector poses) by forward
     selection, with the same gate as :func:`diagnose_torques`.
@@ -402,7 +432,7 @@ def diagnose_kinematic(
         {"name": e.name, "reason": "judged on the joint torques (diagnose_torques)"}
         for e in groups["torque"]
     ]
-    out = _select(kp, fixed, groups["kinematic"], gate, null_draws, seed, max_effects)
+    out = _select(kp, fixed, groups["kinematic"], gate, null_draws, seed, max_effects, holdout)
     info = describe(kp)
     return {
         "model": "arm",
@@ -430,6 +460,7 @@ def _select(
     null_draws: int,
     seed: int,
     max_effects: int | None,
+    holdout: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """Forward selection of ``effs`` on the residual of ``pb`` (see the module docstring)."""
     g = {**DEFAULT_GATE, **(gate or {})}
@@ -441,7 +472,7 @@ def _select(
         r0 = ((pb.tau - base_prediction(pb, fixed)) / pb.sigma).cpu().numpy()  # [N, J]
     rss0 = (r0**2).sum(axis=0) * sig**2
     layout = unit_layout(pb)
-    folds = unit_folds(layout)
+    folds = holdout_folds(pb, layout, holdout) if holdout else unit_folds(layout)
     test_rows = [np.flatnonzero(np.isin(layout.unit, f)) for f in folds]
     rng = np.random.default_rng(seed)
     sp = _Split(
@@ -526,7 +557,8 @@ def _select(
     return {
         "stop": stop,
         "baseline": np.sqrt(rss0 / n),
-        "split": layout.how + f", {len(folds)} held-out folds",
+        "split": layout.how
+        + (f", held out: {', '.join(holdout)}" if holdout else f", {len(folds)} held-out folds"),
         "gate": g,
         "selection": "forward: each step refits the candidates on top of the accepted effects",
         "selected": [r["name"] for r in accepted_rows],
