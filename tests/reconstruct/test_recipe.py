@@ -52,7 +52,7 @@ def _run(line: str, cwd: Path) -> subprocess.CompletedProcess:
 
 @pytest.mark.slow
 def test_recipe_recovers_the_cameras_in_the_robots_world(tmp_path: Path):
-    """~3 min on 2 cores: synth 5 s, SfM 25 s, pre-alignment 30 s, reconstruction 100 s."""
+    """~200 s on 2 loaded cores: synth 5 s, SfM 25 s, pre-alignment 30 s, reconstruction 140 s."""
     pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
     from robogs.format.dataset import Dataset, read_parquet
     from robogs.format.frames import quat_to_matrix_np

@@ -114,3 +114,31 @@ def test_convert_sfm_on_a_posed_dataset_is_refused(tmp_path: Path, capsys):
     code = main(["convert", str(tmp_path / "d"), str(tmp_path / "out"), "--sfm"])
     err = capsys.readouterr().err
     assert code == 2 and "extrinsics unknown, found 0" in err, err
+
+
+@pytest.mark.slow
+def test_convert_sfm_on_a_video_keeps_one_keyframe_per_view(tmp_path: Path):
+    """~70 s on a loaded 2-core machine: every view of the static sample twice in a lossless video; the duplicates are
+    dropped as keyframes and the 60 views become a posed COLMAP-route dataset that validates."""
+    pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
+    from robogs.cli.main import main
+    from robogs.format.dataset import Dataset
+    from robogs.format.validate import validate
+    from robogs.synth.multiview import synthesize_multiview
+
+    truth = synthesize_multiview(
+        tmp_path / "cap", robot="ur5", n_views=60, width=320, height=240, seed=3, poses=False
+    )
+    video = tmp_path / "walk.mkv"
+    vw = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"FFV1"), 10.0, (320, 240))
+    for im in truth.images:
+        for _ in range(2):
+            vw.write(cv2.cvtColor(im, cv2.COLOR_RGB2BGR))
+    vw.release()
+    argv = ["convert", str(video), str(tmp_path / "out"), "--sfm", "--sfm-threads", "2"]
+    assert main(argv) == 0
+    ds = Dataset.open(tmp_path / "out")
+    sfm = ds.manifest["provenance"]["sfm"]
+    assert sfm["images"] == 60 and sfm["registered"] >= 57
+    assert sfm["frame"].startswith("arbitrary")
+    assert [f for f in validate(tmp_path / "out").findings if f.severity == "error"] == []

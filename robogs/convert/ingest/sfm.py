@@ -18,7 +18,7 @@ Failure (too few registered images: blurred or duplicate frames, no parallax) ra
 from __future__ import annotations
 
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -375,6 +375,11 @@ def convert_sfm(
             if not any(images.iterdir()):
                 raise SfmError(f"no usable keyframe in {n} video frames", path=src)
         res = run_sfm(images, work / "sfm", threads=threads)
-        options.images = images
-        ds = convert_path(res.model_dir, out, fmt="colmap", options=options, force=force)
+        opts = replace(options, images=images)
+        ds = convert_path(res.model_dir, out, fmt="colmap", options=opts, force=force)
+        with ds.edit() as w:
+            prov = dict(w.manifest.get("provenance", {}))
+            prov["sfm"] = _sfm_json(res, "arbitrary (SfM): run reconstruct --align apply")
+            w.manifest["provenance"] = prov
+            ds = w.commit()
         return ds, res
