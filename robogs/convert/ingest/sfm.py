@@ -125,6 +125,7 @@ def run_sfm(
     threads: int = 1,
     seed: int = 0,
     max_features: int = 2000,
+    verbose: bool = False,
 ) -> SfmResult:
     """Recover the poses of the images in ``image_dir`` (one shared pinhole camera).
 
@@ -132,19 +133,25 @@ def run_sfm(
         image_dir: folder of images (one camera).
         work: scratch folder (database, models), replaced.
         intrinsics: (fx, fy, cx, cy) px with pixel centres at +0.5 if known (refined anyway);
-            None: guessed from EXIF or the image size, then refined.
+            None: guessed from EXIF or the image size, then refined. On the synthetic static
+            sample the true values as a start led the mapper to a wrong model (fx 146 instead
+            of 343 px, bench/RESULTS.md) while the size-based guess converged; ``convert
+            --sfm`` uses the guess.
         sequential: match neighbours only (video); None: when more than ``EXHAUSTIVE_MAX`` images.
         min_registered: fewer registered images raise :class:`SfmError`.
         threads: CPU threads for COLMAP.
         seed: COLMAP's random seed (RANSAC), for repeatable runs.
         max_features: SIFT features kept per image (caps matching work: exhaustive matching
             of N images costs N(N-1)/2 pairs of ``max_features``^2 descriptor distances).
+        verbose: keep COLMAP's own log (glog, on stderr); else nothing but fatal errors.
 
     Raises:
         SfmError: fewer than ``min_registered`` images registered (or none in the largest model).
         InputError: pycolmap missing, no images.
     """
     pc = _pycolmap()
+    if not verbose:  # COLMAP logs every step through glog; the result and errors are ours
+        pc.logging.minloglevel = 3  # FATAL only: failures reach the user as SfmError
     image_dir, work = Path(image_dir), Path(work)
     names = sorted(p.name for p in image_dir.iterdir() if p.is_file())
     if not names:
