@@ -32,3 +32,33 @@ def test_missing_unreadable_and_empty(tmp_path: Path) -> None:
     with pytest.raises(FormatError, match="no triangles"):
         load_mesh(tmp_path / "empty.obj")
     load_mesh(tmp_path / "empty.obj", triangles=False)  # vertex-only callers check themselves
+
+
+def test_a_zip_bomb_mesh_is_refused_before_unpacking(tmp_path: Path) -> None:
+    """Issue 19: vertices and decompressed bytes are budgeted. A 3MF/ZAE is a zip; a 300 MB
+    member compressed to a few hundred kB is refused from the archive's directory alone."""
+    import zipfile
+
+    from robogs.format.meshes import MAX_MESH_BYTES
+
+    bomb = tmp_path / "bomb.3mf"
+    with zipfile.ZipFile(bomb, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        with zf.open("3D/3dmodel.model", "w", force_zip64=True) as fh:
+            chunk = b"\0" * (1 << 20)
+            for _ in range(MAX_MESH_BYTES // len(chunk) + 8):
+                fh.write(chunk)
+    assert bomb.stat().st_size < 2_000_000
+    with pytest.raises(FormatError, match="unpacked from .*over the 268435456-byte budget"):
+        load_mesh(bomb)
+
+
+def test_the_vertex_budget(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import robogs.format.meshes as meshes
+
+    p = tmp_path / "box.stl"
+    trimesh.creation.box((0.1, 0.1, 0.1)).export(p)
+    n = len(load_mesh(p).vertices)  # STL repeats vertices per triangle (process=False): 36
+    assert n == 36
+    monkeypatch.setattr(meshes, "MAX_MESH_VERTICES", n - 1)
+    with pytest.raises(FormatError, match="36 vertices, over the 35 budget"):
+        load_mesh(p)
