@@ -130,8 +130,9 @@ def test_extra_layer_plugs_in(tiny: Dataset, tmp_path: Path) -> None:
     def marker(ctx: rerun_log.RerunContext) -> None:
         ctx.rec.log("extra/marker", rr.Points3D([[1.0, 2.0, 3.0]]), static=True)
 
-    rerun_log.register_layer("test_marker", marker)
-    rerun_log.write_rrd(tiny, tmp_path / "m.rrd", layers=["robot", "test_marker"])
+    with rerun_log.REGISTRY.sandbox():  # the layer is undone after the block (no leak to
+        rerun_log.register_layer("test_marker", marker)  # other tests in this worker)
+        rerun_log.write_rrd(tiny, tmp_path / "m.rrd", layers=["robot", "test_marker"])
     entities = {c.entity_path for c in RrdReader(tmp_path / "m.rrd").stream().collect().stream()}
     assert "/extra/marker" in entities and "/world/robot/link2" in entities
     assert not any(e.startswith("/plots") for e in entities)

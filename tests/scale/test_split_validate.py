@@ -115,7 +115,7 @@ def test_tables_shared_by_episodes_run_in_one_process(mutated, tmp_path):
     import json
     import shutil
 
-    ds = tmp_path / "shared"
+    ds = tmp_path / "one_table_two_episodes"
     shutil.copytree(mutated, ds)
     m = json.loads((ds / "manifest.json").read_text())
     m["episodes"][1]["streams"]["ee_poses"]["path"] = m["episodes"][0]["streams"]["ee_poses"][
