@@ -20,6 +20,7 @@ import logging
 import os
 import shutil
 import stat
+import time
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -103,9 +104,26 @@ def _remove(path: Path) -> None:
         path.unlink(missing_ok=True)
 
 
-def recover(target: Path, *, suffix: str = "") -> None:
-    """Complete or undo a swap a crash interrupted, and clean up leftovers (with a note)."""
+def recover(target: Path, *, suffix: str = "", stale_tmp_s: float | None = None) -> None:
+    """Complete or undo a swap a crash interrupted, and clean up leftovers (with a note).
+
+    Args:
+        target: the output path.
+        suffix: the output's suffix, kept after the tag in the sibling names.
+        stale_tmp_s: also remove ``tmp`` siblings older than this (s); None keeps them (a
+            writer that holds the target's lock removes its own).
+    """
     target = Path(target)
+    if stale_tmp_s is not None:
+        now = time.time()
+        for p in sibling_versions(target, "tmp", suffix):
+            try:
+                age = now - p.lstat().st_mtime
+            except OSError:
+                continue
+            if age > stale_tmp_s:
+                _remove(p)
+                _LOG.warning("robogs: note: removed %s, left %.0f s ago by a killed run", p, age)
     olds = sibling_versions(target, "old", suffix)
     if olds and not (target.exists() or target.is_symlink()):
         os.rename(olds[-1], target)

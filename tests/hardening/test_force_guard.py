@@ -4,6 +4,7 @@ swap interrupted between its two renames is recovered by the next run (item 10).
 from __future__ import annotations
 
 import hashlib
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -116,3 +117,28 @@ def test_a_kill_between_the_two_renames_is_recovered(tmp_path: Path) -> None:
             pass
     assert out.read_text() == "old export"
     assert not [p for p in tmp_path.iterdir() if ".old-" in p.name]
+
+
+def test_a_killed_exports_temp_output_is_cleaned_once_stale(tmp_path: Path) -> None:
+    out = tmp_path / "scene.usda"
+    young = tmp_path / ".scene.tmp-0123abcd.usda"
+    old = tmp_path / ".scene.tmp-4567cdef.usda"
+    for p in (young, old):
+        p.write_text("half an export")
+    os.utime(old, (os.path.getmtime(old) - 7200,) * 2)  # two hours old: a killed run's
+    with atomic_output(out, folder=False) as tmp:
+        tmp.write_text("export")
+    assert out.read_text() == "export"
+    assert young.exists() and not old.exists()  # a young one may belong to a running export
+
+
+def test_an_export_on_a_full_disk_is_an_output_error(ds: Dataset, tmp_path: Path) -> None:
+    import errno
+
+    from robogs.format.errors import OutputError
+
+    out = tmp_path / "x.ply"
+    with pytest.raises(OutputError, match="the disk is full"):
+        with atomic_output(out, folder=False) as tmp:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp))
+    assert list(tmp_path.iterdir()) == [tmp_path / "data"]

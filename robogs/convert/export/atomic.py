@@ -74,7 +74,9 @@ def atomic_output(
         raise InputError(
             "parent folder of the output does not exist", path=parent, hint="create it first"
         )
-    recover(out, suffix=out.suffix)  # a swap a crash interrupted: restore or clean, with a note
+    # a swap a crash interrupted: restore or clean, with a note; temp outputs of a killed export
+    # are removed once an hour old (a younger one may belong to a running export)
+    recover(out, suffix=out.suffix, stale_tmp_s=3600.0)
     if out.exists() or out.is_symlink():
         if not force:
             raise DatasetExistsError(
@@ -122,5 +124,10 @@ def atomic_output(
                 raise
             if old is not None:
                 _remove(old)
+    except OSError as exc:  # a full disk or read-only folder while writing the export
+        name = getattr(exc, "filename", None)
+        if name is None or str(Path(name).absolute()).startswith((str(tmp), str(out))):
+            raise output_error(exc, path=out, action="writing the export") from None
+        raise
     finally:
         _remove(tmp)
