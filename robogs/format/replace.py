@@ -94,7 +94,13 @@ def sibling_versions(target: Path, kind: str, suffix: str = "") -> list[Path]:
         tag = name[len(head) : len(name) - len(suffix)] if suffix else name[len(head) :]
         if len(tag) == 8 and all(c in "0123456789abcdef" for c in tag):
             out.append(target.parent / name)
-    return sorted(out, key=lambda p: p.lstat().st_mtime_ns)
+    stamped = []
+    for p in out:  # another process may remove one between the listing and the stat
+        try:
+            stamped.append((p.lstat().st_mtime_ns, p.name, p))
+        except OSError:
+            continue
+    return [p for _, _, p in sorted(stamped)]
 
 
 def _remove(path: Path) -> None:

@@ -52,7 +52,7 @@ from .errors import (
 )
 from .jsonio import dumps_json
 from .paths import check_relpath
-from .replace import check_replaceable, exchange, sibling_versions
+from .replace import check_replaceable, exchange, recover, sibling_versions
 from .schemas import schema_problems
 from .spec_version import SPEC_VERSION
 from .splats import SplatSet, write_splat_ply
@@ -308,13 +308,9 @@ class DatasetWriter:
             lock.release()
 
     def _recover(self) -> None:
-        """Finish or undo a swap interrupted by a crash, and remove stale temp folders."""
-        olds = sibling_versions(self.target, "old")
-        if olds and not self.target.exists():
-            os.rename(olds[-1], self.target)
-            olds = olds[:-1]
-        for p in [*olds, *sibling_versions(self.target, "tmp")]:
-            shutil.rmtree(p, ignore_errors=True)
+        """Finish or undo a swap interrupted by a crash, and remove temp folders: the lock is
+        held, so every temp folder of this dataset belongs to a dead writer (with a note)."""
+        recover(self.target, stale_tmp_s=-1.0)
 
     def _check_unchanged(self, base: Dataset | None) -> None:
         """Optimistic concurrency: under the lock, the dataset must still be the version read.
