@@ -25,12 +25,15 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from .errors import DatasetExistsError, FormatError
+from .errors import DatasetExistsError, FormatError, RobogsError
+from .jsonio import read_json
 
 __all__ = [
     "EXPORT_MARKER",
     "check_replaceable",
     "exchange",
+    "inside_source",
+    "remove_path",
     "recover",
     "sibling_versions",
     "write_export_marker",
@@ -103,7 +106,8 @@ def sibling_versions(target: Path, kind: str, suffix: str = "") -> list[Path]:
     return [p for _, _, p in sorted(stamped)]
 
 
-def _remove(path: Path) -> None:
+def remove_path(path: Path) -> None:
+    """Remove a file, link or folder tree if it is there (temp and previous versions)."""
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path, ignore_errors=True)
     else:
@@ -128,7 +132,7 @@ def recover(target: Path, *, suffix: str = "", stale_tmp_s: float | None = None)
             except OSError:
                 continue
             if age > stale_tmp_s:
-                _remove(p)
+                remove_path(p)
                 _LOG.warning("robogs: note: removed %s, left %.0f s ago by a killed run", p, age)
     olds = sibling_versions(target, "old", suffix)
     if olds and not (target.exists() or target.is_symlink()):
@@ -136,19 +140,17 @@ def recover(target: Path, *, suffix: str = "", stale_tmp_s: float | None = None)
         _LOG.warning("robogs: note: restored %s from %s (an interrupted swap)", target, olds[-1])
         olds = olds[:-1]
     for p in olds:
-        _remove(p)
+        remove_path(p)
         _LOG.warning("robogs: note: removed %s, left by an interrupted swap", p)
 
 
 def _is_robogs_dataset(folder: Path) -> bool:
     m = folder / "manifest.json"
     try:
-        st = os.lstat(m)
-        if not stat.S_ISREG(st.st_mode) or st.st_size > 64 * 1024 * 1024:
+        if not stat.S_ISREG(os.lstat(m).st_mode):  # a link is never taken as a manifest
             return False
-        with open(m, "rb") as fh:
-            doc = json.loads(fh.read())
-    except (OSError, ValueError):
+        doc = read_json(m, what="manifest")
+    except (OSError, RobogsError):
         return False
     return isinstance(doc, dict) and doc.get("format") == "robogs" and "spec_version" in doc
 
@@ -159,6 +161,16 @@ def _is_robogs_export(folder: Path) -> bool:
         return stat.S_ISREG(os.lstat(marker).st_mode)
     except OSError:
         return False
+
+
+def inside_source(path: Path, sources: Iterable[str | Path]) -> Path | None:
+    """The source that ``path`` is, or lies inside (resolved), or None."""
+    real = Path(path).absolute().resolve()
+    for src in sources:
+        s = Path(src).absolute().resolve()
+        if s == real or s in real.parents:
+            return s
+    return None
 
 
 def _related(a: Path, b: Path) -> bool:

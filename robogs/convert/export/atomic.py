@@ -13,23 +13,22 @@ from __future__ import annotations
 
 import os
 import re
-import shutil
 import uuid
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
 from robogs.format.errors import DatasetExistsError, InputError, output_error
-from robogs.format.replace import check_replaceable, exchange, recover, write_export_marker
+from robogs.format.replace import (
+    check_replaceable,
+    exchange,
+    inside_source,
+    recover,
+    remove_path,
+    write_export_marker,
+)
 
 __all__ = ["atomic_output", "final_path"]
-
-
-def _remove(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
-    elif path.exists() or path.is_symlink():
-        path.unlink(missing_ok=True)
 
 
 _TMP = re.compile(r"^\.(?P<stem>.+)\.tmp-[0-9a-f]{8}(?P<suffix>.*)$")
@@ -83,16 +82,12 @@ def atomic_output(
                 "output already exists", path=out, hint="choose another path or pass --force"
             )
         check_replaceable(out, folder=folder, sources=sources)
-    else:
-        check_replaceable(out, folder=folder, sources=sources)  # never inside a source
-        for src in sources:
-            s = Path(src).absolute().resolve()
-            if s == out.resolve() or s in out.resolve().parents:
-                raise InputError(
-                    "the output lies inside the dataset being exported",
-                    path=out,
-                    hint="write exports outside the dataset folder",
-                )
+    elif inside_source(out, sources) is not None:
+        raise InputError(
+            "the output lies inside the dataset being exported",
+            path=out,
+            hint="write exports outside the dataset folder",
+        )
     tag = uuid.uuid4().hex[:8]
     tmp = parent / f".{out.stem}.tmp-{tag}{out.suffix}"
     try:  # writability is known before the export's work: a read-only parent fails here
@@ -110,7 +105,7 @@ def atomic_output(
         if folder:
             write_export_marker(tmp, fmt=fmt, source=next(iter(sources), ""))
         if out.exists() and exchange(tmp, out):
-            _remove(tmp)  # tmp now holds the previous version
+            remove_path(tmp)  # tmp now holds the previous version
         else:
             old = None
             if out.exists() or out.is_symlink():
@@ -123,11 +118,11 @@ def atomic_output(
                     os.rename(old, out)
                 raise
             if old is not None:
-                _remove(old)
+                remove_path(old)
     except OSError as exc:  # a full disk or read-only folder while writing the export
         name = getattr(exc, "filename", None)
         if name is None or str(Path(name).absolute()).startswith((str(tmp), str(out))):
             raise output_error(exc, path=out, action="writing the export") from None
         raise
     finally:
-        _remove(tmp)
+        remove_path(tmp)
