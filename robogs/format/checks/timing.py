@@ -174,18 +174,8 @@ def _steps(
     """Consecutive stamps of a series, batch by batch: (period as float64 ns, t before,
     t after, row before, row after)."""
     prev: tuple[int, int] | None = None
-    offset = 0
-    cols = ("t_ns",) if s.ent_col is None else ("t_ns", s.ent_col)
-    for b in batches(ctx, s.rel, cols):
-        t = b.column(0).to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
-        rows = np.arange(offset, offset + t.size)
-        offset += t.size
-        if s.ent_col is not None:
-            mask = pc.equal(_keys(b.column(1)), s.entity).to_numpy(zero_copy_only=False)
-            t, rows = t[mask], rows[mask]
-        if t.size == 0:
-            continue
-        if prev is not None:
+    for t, rows in _stamps(ctx, s):
+        if prev is not None:  # the step across the batch boundary
             t = np.concatenate(([prev[0]], t))
             rows = np.concatenate(([prev[1]], rows))
         prev = (int(t[-1]), int(rows[-1]))
