@@ -50,6 +50,7 @@ _BUILTIN_MODULES = (
     "robogs.convert.ingest.nerfstudio",
     "robogs.convert.ingest.colmap",
     "robogs.convert.ingest.tabular",
+    "robogs.convert.ingest.lerobot",
 )
 
 DetectFn = Callable[[Path], bool]

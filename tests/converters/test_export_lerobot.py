@@ -208,8 +208,9 @@ def test_cli_prints_resampling(scene: Path, capsys: pytest.CaptureFixture[str]) 
 def test_lerobot_package_loads(exported: Path) -> None:
     pytest.importorskip(
         "lerobot.datasets.lerobot_dataset",
-        reason="optional reader: lerobot 0.4 needs torch < 2.11 and a torchvision built for it; "
-        "this venv pins torch 2.13 (the layout tests above read the same files)",
+        reason="optional reader: lerobot 0.4.4 (the newest for Python 3.11; 0.5+ needs Python "
+        ">= 3.12) pins torch < 2.11 and torchvision < 0.26, this venv has torch 2.13 (checked "
+        "2026-11-26; the layout tests above and test_lerobot_roundtrip read the same files)",
     )
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
