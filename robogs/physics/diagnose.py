@@ -361,6 +361,7 @@ def diagnose_recording(
         excess = base.cost - (n - len(base_cols))
         explained = float(np.clip((base.cost - out.cost) / excess, 0.0, 1.0)) if excess > 0 else 0.0
         red = (base.resid**2 - out.resid**2).reshape(prep.n_traj, -1, 4).sum(-1)
+        red = red[:, : phase.shape[1]]  # pose samples (the force block follows them)
         total = red[mask].sum()
         phases = []
         if total > 0:

@@ -122,8 +122,8 @@ class Engine:
             return fn(torch.as_tensor(thetas), torch.as_tensor(locals_)).numpy()
 
     def raw(self, weighted: np.ndarray) -> np.ndarray:
-        """Weighted residuals [..., T, N*4] -> raw [..., T, N, 4] (m, rad)."""
-        r = weighted * self.sig
+        """Weighted residuals [..., T, N*4 (+ force block)] -> raw pose [..., T, N, 4] (m, rad)."""
+        r = weighted[..., : self.sig.shape[-1]] * self.sig
         return r.reshape(*r.shape[:-1], -1, 4)
 
     def summarise(self, out: FitOutcome, free: list[int]) -> FitSummary:

@@ -142,6 +142,9 @@ class Drive:
         init_vel: optional initial CoM velocity [T, 3] m/s (default: at rest).
         carry_vel: optional smoothed EE velocity [T, S, 3] m/s given to a carried object
             (default: ``pusher_vel``).
+        wrench_bin: optional [T, S] int64: the wrench sample whose averaging window holds each
+            step (-1: none); with it :func:`simulate` returns the pusher's contact force.
+        wrench_width: [T, W] duration of each wrench sample's window [s].
     """
 
     dt: float
@@ -156,6 +159,8 @@ class Drive:
     obs_mask: torch.Tensor
     init_vel: torch.Tensor | None = None
     carry_vel: torch.Tensor | None = None
+    wrench_bin: torch.Tensor | None = None
+    wrench_width: torch.Tensor | None = None
 
     @property
     def n_traj(self) -> int:
@@ -177,6 +182,8 @@ class Drive:
             *(getattr(self, f)[ii] for f in ("init_pos", "init_yaw", "obs_t", "obs_mask")),
             None if self.init_vel is None else self.init_vel[ii],
             None if self.carry_vel is None else self.carry_vel[ii],
+            None if self.wrench_bin is None else self.wrench_bin[ii],
+            None if self.wrench_width is None else self.wrench_width[ii],
         )
 
 
@@ -185,13 +192,16 @@ class SimResult:
     """Sampled predictions in the sensor frame: pos [M, T, N, 3] m, yaw [M, T, N] rad.
 
     ``dense_pos`` [M, T, S, 3] / ``dense_yaw`` [M, T, S] hold the object-frame pose at every
-    step (world frame, model clock).
+    step (world frame, model clock). ``force`` [M, T, W, 3] N (when the drive has
+    ``wrench_bin``): the force the object exerts on the pusher, world frame, averaged over each
+    wrench sample's window (the contact impulses of its steps over its duration).
     """
 
     pos: torch.Tensor
     yaw: torch.Tensor
     dense_pos: torch.Tensor
     dense_yaw: torch.Tensor
+    force: torch.Tensor | None = None
 
 
 def yaw_rotate(
@@ -264,11 +274,15 @@ def _pusher_impulse(
     rate: torch.Tensor,
     grasping: torch.Tensor,
     dt: float,
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+) -> tuple[torch.Tensor, ...]:
     """Frictionless, inelastic, speculative contact of the pusher's end spheres with the box.
 
     With two end spheres the 2x2 linear complementarity problem is solved exactly by
     enumerating its four cases (Cottle, Pang & Stone 1992); one sphere is the scalar case.
+
+    Returns:
+        the box's vx, vy, yaw rate after the contact, and the impulse [N s] the box gives the
+        pusher in this step (x, y, world; the reaction of the one the pusher gives the box).
     """
     hx, hy, hz = (0.5 * s for s in scene.size)
     pts, pv = _pusher_points(scene, c, cv, psi, rate)  # [T, J, 3]
@@ -329,10 +343,11 @@ def _pusher_impulse(
         flush = (gap[..., 0] < 1e-3) & (gap[..., 1] < 1e-3) & active[..., 0] & active[..., 1]
         flush = flush & (l1b + l2b > 0)
         lam = torch.where(flush.unsqueeze(-1), torch.stack([l1b, l2b], -1), lam)
-    vx = vx - (lam * nx).sum(-1) / mass
-    vy = vy - (lam * ny).sum(-1) / mass
+    jx, jy = (lam * nx).sum(-1), (lam * ny).sum(-1)
+    vx = vx - jx / mass
+    vy = vy - jy / mass
     wf = wf - (lam * rxn).sum(-1) / inertia
-    return vx, vy, wf
+    return vx, vy, wf, jx, jy
 
 
 def simulate(
@@ -446,6 +461,14 @@ def simulate(
     quiet_until = int(np.argmax(near.any(axis=0))) if near.any() else n_s - 1
     quiet_until = max(quiet_until - 2, 0)
 
+    impulse, wbin, bins_any = None, None, None
+    if drive.wrench_bin is not None and drive.wrench_width is not None:
+        wbin = drive.wrench_bin.to(dev)
+        bins_any = (wbin >= 0).any(dim=0).cpu().numpy()
+        impulse = torch.zeros(
+            (m_sets, n_t, int(drive.wrench_width.shape[1]), 2), dtype=dt_, device=dev
+        )
+
     traj_p = [p]
     traj_y = [yaw]
     k = -1
@@ -526,7 +549,7 @@ def simulate(
 
         # ---- pusher: frictionless inelastic speculative contact on the box sides ------------
         if pusher_low[k]:
-            vx, vy, wf = _pusher_impulse(
+            vx, vy, wf, jx, jy = _pusher_impulse(
                 scene,
                 p,
                 yaw,
@@ -544,6 +567,10 @@ def simulate(
                 grasp[:, k],
                 dt,
             )
+            if impulse is not None and bins_any[k]:
+                b = wbin[:, k]  # [T]
+                ts = torch.nonzero(b >= 0).squeeze(1)
+                impulse[:, ts, b[ts]] += torch.stack([jx, jy], -1)[:, ts]
 
         v_new = torch.stack([vx, vy, vz], dim=-1)
         p = p + dt * v_new
@@ -598,7 +625,11 @@ def simulate(
     yaw_s = torch.gather(dense_y, 2, i0) * (1 - frac) + torch.gather(dense_y, 2, i1) * frac
     for e, th in sensor_fx:
         pos, yaw_s = e.to_sensor(_lift(th), pos, yaw_s)
-    return SimResult(pos=pos, yaw=yaw_s, dense_pos=dense_o, dense_yaw=dense_y)
+    force = None
+    if impulse is not None:
+        width = drive.wrench_width.to(dev, dt_).clamp(min=dt).unsqueeze(0).unsqueeze(-1)
+        force = torch.nn.functional.pad(impulse / width, (0, 1))
+    return SimResult(pos=pos, yaw=yaw_s, dense_pos=dense_o, dense_yaw=dense_y, force=force)
 
 
 def _lift(th: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:

@@ -19,7 +19,31 @@ from robogs.physics.recording import Recording, as_recording, yaw_of
 from robogs.physics.scene import scene_from_physics
 from robogs.physics.smoothing import local_polynomial
 
-__all__ = ["Prepared", "prepare", "build_drive", "excitations"]
+__all__ = ["Prepared", "WrenchData", "prepare", "build_drive", "excitations", "wrench_data"]
+
+REST_MARGIN_M = 0.01
+"""A wrench sample counts as out of contact (its offset and noise are estimated from such
+samples) when the pusher is this far beyond its reach of the object."""
+MIN_REST_SAMPLES = 20
+
+
+@dataclass
+class WrenchData:
+    """The measured force on the pusher, as the residuals use it.
+
+    Attributes:
+        meas: [T, W, 3] force on the tool [N], world axes, offset removed (0 padding).
+        sigma: [3] noise floor per axis [N] (1.4826 MAD of the samples out of contact).
+        mask: [T, W] samples in the residuals (inside the simulated span, not while grasping).
+        offset: [T, 3] the offset removed per trajectory [N] (median out of contact).
+        n_rest: number of out-of-contact samples the offset and noise come from.
+    """
+
+    meas: torch.Tensor
+    sigma: torch.Tensor
+    mask: torch.Tensor
+    offset: np.ndarray
+    n_rest: int
 
 
 @dataclass
@@ -33,6 +57,8 @@ class Prepared:
         sig_pos: [T, N, 3] m; sig_yaw: [T, N] rad - per-sample deviations (jitter included).
         phase: [T, N] phase index (-1 padding).
         excitation: which needs the data meets (``contact``, ``sliding``, ``impact``...).
+        wrench: the measured pusher force (None without one); ``wrench_note`` says why a
+            recorded one is not used.
     """
 
     rec: Recording
@@ -48,6 +74,8 @@ class Prepared:
     mask: torch.Tensor
     phase: np.ndarray
     excitation: set[str]
+    wrench: WrenchData | None = None
+    wrench_note: str = ""
 
     @property
     def n_traj(self) -> int:
@@ -55,8 +83,9 @@ class Prepared:
 
     @property
     def n_residuals(self) -> int:
-        """Number of scalar residuals (4 per valid sample: x, y, z, yaw)."""
-        return int(self.mask.sum()) * 4
+        """Number of scalar residuals (4 per valid pose sample: x, y, z, yaw; 3 per force)."""
+        n_w = 0 if self.wrench is None else int(self.wrench.mask.sum()) * 3
+        return int(self.mask.sum()) * 4 + n_w
 
 
 def _initial_pose(pos: np.ndarray, yaw: np.ndarray, lab: PhaseLabels) -> tuple[np.ndarray, float]:
@@ -149,6 +178,86 @@ def build_drive(
     return drive, t0
 
 
+def _interp_rows(t: np.ndarray, tp: np.ndarray, xp: np.ndarray) -> np.ndarray:
+    return np.stack([np.interp(t, tp, xp[:, a]) for a in range(xp.shape[1])], axis=-1)
+
+
+def wrench_data(
+    rec: Recording, scene: BoxScene, drive: Drive, t0: np.ndarray
+) -> tuple[WrenchData | None, str]:
+    """Wrench residual inputs; sets ``drive.wrench_bin`` / ``wrench_width`` in place.
+
+    Each sample stands for the window between the midpoints to its neighbours; the model's
+    contact impulses of the steps whose midpoint falls in it, over its duration, are its
+    prediction. The sensor's offset (tool weight, drift) and noise floor are estimated from the
+    samples at which the pusher is more than ``REST_MARGIN_M`` beyond its reach of the object
+    (out of contact, so the true contact force is zero): per trajectory the median, pooled
+    over trajectories the 1.4826 MAD. Returns (None, why) when nothing can be used.
+    """
+    trs = rec.trajectories
+    if not any(t.wrench_t_ns is not None and len(t.wrench_t_ns) for t in trs):
+        return None, ""
+    n_t, n_s = drive.n_traj, drive.n_steps
+    dt = drive.dt
+    n_w = max(0 if t.wrench_t_ns is None else len(t.wrench_t_ns) for t in trs)
+    meas = np.zeros((n_t, n_w, 3))
+    mask = np.zeros((n_t, n_w), dtype=bool)
+    rest = np.zeros((n_t, n_w), dtype=bool)
+    width = np.zeros((n_t, n_w))
+    bins = -np.ones((n_t, n_s), dtype=np.int64)
+    mid = (np.arange(n_s) + 0.5) * dt
+    reach = (
+        0.5 * float(np.hypot(*scene.size[:2]))
+        + scene.pusher_radius
+        + 0.5 * scene.pusher_length
+        + REST_MARGIN_M
+    )
+    for i, tr in enumerate(trs):
+        if tr.wrench_t_ns is None or len(tr.wrench_t_ns) < 2:
+            continue
+        tw = (tr.wrench_t_ns - t0[i]) * 1e-9
+        n = len(tw)
+        half = 0.5 * float(np.median(np.diff(tw)))
+        edges = np.concatenate([[tw[0] - half], 0.5 * (tw[1:] + tw[:-1]), [tw[-1] + half]])
+        width[i, :n] = np.diff(edges)
+        j = np.searchsorted(edges, mid, side="right") - 1
+        ok = (j >= 0) & (j < n)
+        bins[i, ok] = j[ok]
+        meas[i, :n] = tr.wrench_force
+        te = (tr.ee_t_ns - t0[i]) * 1e-9
+        to = (tr.t_ns - t0[i]) * 1e-9
+        inside = (edges[:-1] >= 0.0) & (edges[1:] <= (n_s - 1) * dt)
+        jg = np.clip(np.searchsorted(te, tw, side="right") - 1, 0, len(te) - 1)
+        mask[i, :n] = inside & ~tr.grasp[jg]
+        d = _interp_rows(tw, te, tr.ee_pos)[:, :2] - _interp_rows(tw, to, tr.object_pos)[:, :2]
+        rest[i, :n] = (np.hypot(d[:, 0], d[:, 1]) > reach) & mask[i, :n]
+    n_rest = int(rest.sum())
+    if n_rest < MIN_REST_SAMPLES:
+        return None, (
+            f"wrench not used: {n_rest} samples out of contact (at least {MIN_REST_SAMPLES} "
+            "are needed to estimate the sensor's offset and noise)"
+        )
+    pooled = np.median(meas[rest], axis=0)
+    offset = np.zeros((n_t, 3))
+    for i in range(n_t):
+        r = rest[i]
+        offset[i] = np.median(meas[i, r], axis=0) if r.sum() >= MIN_REST_SAMPLES else pooled
+    dev = meas - offset[:, None, :]
+    sigma = 1.4826 * np.median(np.abs(dev[rest]), axis=0)
+    sigma = np.maximum(sigma, 1e-3)
+    f = torch.float64
+    drive.wrench_bin = torch.as_tensor(bins)
+    drive.wrench_width = torch.as_tensor(width, dtype=f)
+    data = WrenchData(
+        meas=torch.as_tensor(dev * mask[..., None], dtype=f),
+        sigma=torch.as_tensor(sigma, dtype=f),
+        mask=torch.as_tensor(mask),
+        offset=offset,
+        n_rest=n_rest,
+    )
+    return data, ""
+
+
 def excitations(rec: Recording, labels: list[PhaseLabels]) -> set[str]:
     """Which ``needs`` words the data satisfies."""
     have = {"object_poses", "ee_poses"}
@@ -209,6 +318,10 @@ def prepare(
         myaw[i, :n] = np.unwrap(yaw_of(tr.object_quat))
         spos[i, :n], syaw[i, :n] = noise.per_sample(lab.vel, lab.yaw_rate)
         phase[i, :n] = lab.label
+    wrench, wrench_note = wrench_data(rec, scene, drive, t0)
+    excitation = excitations(rec, labels)
+    if wrench is not None:
+        excitation.add("wrenches")
     f = torch.float64
     return Prepared(
         rec=rec,
@@ -223,5 +336,7 @@ def prepare(
         sig_yaw=torch.as_tensor(syaw, dtype=f),
         mask=drive.obs_mask.clone(),
         phase=phase,
-        excitation=excitations(rec, labels),
+        excitation=excitation,
+        wrench=wrench,
+        wrench_note=wrench_note,
     )

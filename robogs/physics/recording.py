@@ -33,6 +33,10 @@ class Trajectory:
         ee_quat: T_world_ee rotation [E, 4] (w, x, y, z).
         grasp: grasp flag at ``ee_t_ns`` [E] bool (object attached to the EE while True).
         kind: free text describing the motion (``push``, ``release_slide``, ``grasp_place``).
+        wrench_t_ns: optional force-sensor stamps [W] int64 ns.
+        wrench_force: optional measured force on the tool [W, 3] N, world axes (the force the
+            environment exerts on the sensor, offset included: :mod:`robogs.physics.prepare`
+            removes it using the samples out of contact).
     """
 
     name: str
@@ -44,6 +48,8 @@ class Trajectory:
     ee_quat: np.ndarray
     grasp: np.ndarray
     kind: str = ""
+    wrench_t_ns: np.ndarray | None = None
+    wrench_force: np.ndarray | None = None
 
 
 @dataclass
@@ -91,8 +97,20 @@ def check_finite(rec: Recording) -> None:
                         where=f"episodes/{tr.name}/{stream}",
                         hint="drop or repair the sample before comparing with the model",
                     )
-        for stream, stamps in (("object_poses", tr.t_ns), ("ee_poses", tr.ee_t_ns)):
-            if len(stamps) < 2:
+        if tr.wrench_t_ns is not None:
+            bad = ~np.isfinite(tr.wrench_force).all(axis=-1)
+            if bad.any() or len(tr.wrench_t_ns) != len(tr.wrench_force):
+                raise InputError(
+                    "non-finite or misaligned wrench samples"
+                    + (f" at t_ns={int(tr.wrench_t_ns[int(np.argmax(bad))])}" if bad.any() else ""),
+                    where=f"episodes/{tr.name}/wrenches",
+                    hint="drop or repair the samples before comparing with the model",
+                )
+        streams = [("object_poses", tr.t_ns), ("ee_poses", tr.ee_t_ns)]
+        if tr.wrench_t_ns is not None and len(tr.wrench_t_ns):
+            streams.append(("wrenches", tr.wrench_t_ns))
+        for stream, stamps in streams:
+            if len(stamps) < 2 and stream != "wrenches":
                 raise InputError(
                     f"{stream} has fewer than 2 samples", where=f"episodes/{tr.name}/{stream}"
                 )
@@ -117,6 +135,8 @@ def as_recording(obj: Any) -> Recording:
                     name=str(t.name),
                     **{f: np.asarray(getattr(t, f)) for f in _TRAJ_FIELDS},
                     kind=str(getattr(t, "kind", "")),
+                    wrench_t_ns=getattr(t, "wrench_t_ns", None),
+                    wrench_force=getattr(t, "wrench_force", None),
                 )
             )
         rec = Recording(
@@ -129,6 +149,14 @@ def as_recording(obj: Any) -> Recording:
         t.t_ns = np.asarray(t.t_ns, dtype=np.int64)
         t.ee_t_ns = np.asarray(t.ee_t_ns, dtype=np.int64)
         t.grasp = np.asarray(t.grasp, dtype=bool)
+        if (t.wrench_t_ns is None) != (t.wrench_force is None):
+            raise InputError(
+                "a trajectory has wrench stamps without forces or forces without stamps",
+                where=f"episodes/{t.name}/wrenches",
+            )
+        if t.wrench_t_ns is not None:
+            t.wrench_t_ns = np.asarray(t.wrench_t_ns, dtype=np.int64)
+            t.wrench_force = np.asarray(t.wrench_force, dtype=float).reshape(-1, 3)
     check_finite(rec)
     return rec
 
@@ -214,6 +242,77 @@ def _ee_from_joints(ds: Any, ep: Any, chain: Any, link: str) -> tuple[np.ndarray
     return t, Te[:, :3, 3].numpy().copy(), matrix_to_quat(Te[:, :3, :3]).numpy().copy()
 
 
+def _frame_rotation(ds: Any, frame: str, ee_link: Any) -> tuple[str, np.ndarray] | None:
+    """How a wrench frame is oriented: ``("world", I)`` for the world / base frame,
+    ``("ee", R_link_frame)`` for the pusher link or a named frame fixed to it; None otherwise."""
+    robot = ds.manifest.get("robot") or {}
+    if frame in ("world", "map", robot.get("base_link")):
+        return "world", np.eye(3)
+    if frame == ee_link:
+        return "ee", np.eye(3)
+    named = (robot.get("frames") or {}).get(frame)
+    if isinstance(named, dict) and named.get("parent") == ee_link:
+        T = np.asarray(named.get("T_parent_frame"), dtype=float).reshape(4, 4)
+        return "ee", T[:3, :3]
+    return None
+
+
+def _wrench_world(
+    ds: Any,
+    ep: Any,
+    frame: Any,
+    ee_link: Any,
+    ee_t: np.ndarray,
+    ee_quat: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The measured force of the pusher's force-torque sensor: stamps [W] and force [W, 3] N in
+    world axes (rotated by the pusher link's orientation at the nearest earlier EE sample), or
+    None when the episode has no ``wrenches``. The frame is ``objects.pusher.wrench_frame``,
+    else the only frame of the table."""
+    import pyarrow.compute as pc
+
+    from robogs.format.frames import quat_to_matrix_np
+
+    if not ep.has("wrenches"):
+        return None
+    wt = ep.table("wrenches")
+    frames = sorted(set(wt.column("frame").to_pylist()))
+    if frame is None:
+        if len(frames) != 1:
+            raise FormatError(
+                f"wrenches has frames {', '.join(frames)}: which one is the pusher's sensor?",
+                path=ep.table_path("wrenches"),
+                where="objects/pusher/wrench_frame",
+                hint="robogs physics set objects.pusher.wrench_frame=<frame>",
+            )
+        frame = frames[0]
+    wt = wt.filter(pc.equal(wt.column("frame"), frame))
+    if wt.num_rows == 0:
+        raise FormatError(
+            f"wrenches has no rows in frame {frame!r}",
+            path=ep.table_path("wrenches"),
+            where="objects/pusher/wrench_frame",
+            hint=f"frames: {', '.join(frames)}",
+        )
+    rot = _frame_rotation(ds, str(frame), ee_link)
+    if rot is None:
+        raise FormatError(
+            f"wrench frame {frame!r} is neither the world, the pusher link {ee_link!r} nor a "
+            "named frame fixed to it",
+            path=ep.table_path("wrenches"),
+            where="frame",
+            hint="declare it in robot.frames (robogs convert keeps static TF frames)",
+        )
+    t = np.asarray(wt.column("t_ns").to_numpy(), dtype=np.int64)
+    f = np.stack([wt.column(c).to_numpy().astype(float) for c in ("fx", "fy", "fz")], axis=-1)
+    kind, r_fixed = rot
+    if kind == "ee":
+        idx = np.clip(np.searchsorted(ee_t, t, side="right") - 1, 0, len(ee_t) - 1)
+        r = quat_to_matrix_np(ee_quat[idx]) @ r_fixed
+        f = np.einsum("nij,nj->ni", r, f)
+    return t, f
+
+
 def load_recording(
     dataset: Any, *, object_name: str | None = None, split: str | None = None
 ) -> Recording:
@@ -232,7 +331,9 @@ def load_recording(
     ``robot.ee_link``), read from ``ee_poses`` and moved by ``objects.pusher.offset_m`` (the
     pusher's centre in the link frame, default none); an episode without ``ee_poses`` is driven by
     forward kinematics of its ``joint_states`` (with the physics revision's fitted joint
-    offsets). Grasp flags come from the joint named ``objects.pusher.grasp_joint``
+    offsets). The ``wrenches`` of frame ``objects.pusher.wrench_frame`` (default: the only
+    frame there), the force on the tool, are rotated into world axes. Grasp flags come from the
+    joint named ``objects.pusher.grasp_joint``
     in ``joint_states`` (grasping while its position exceeds ``grasp_threshold``); without it
     the object is never attached.
     """
@@ -258,6 +359,7 @@ def load_recording(
     grasp_joint = pusher.get("grasp_joint")
     thr = float(pusher.get("grasp_threshold", 0.5))
     offset = pusher.get("offset_m")  # the pusher shape's centre in the link frame [m]
+    wrench_frame = pusher.get("wrench_frame")
     from robogs.physics.split import current_split, parse_split, split_recording_trajectory
 
     log = current_split()
@@ -306,6 +408,9 @@ def load_recording(
                 idx = np.clip(np.searchsorted(jt, et_ns, side="right") - 1, 0, len(jt) - 1)
                 grasp = jv[idx] > thr
         whole = Trajectory(ep.id, t, pos, quat, et_ns, epos, equat, grasp, kind=ep.segment)
+        wr = _wrench_world(ds, ep, wrench_frame, ee_link, et_ns, equat)
+        if wr is not None:
+            whole.wrench_t_ns, whole.wrench_force = wr
         start = getattr(ep, "start_ns", None)
         parts, rows = split_recording_trajectory(
             whole, mode, at_s, int(start) if isinstance(start, (int, np.integer)) else None

@@ -250,6 +250,11 @@ def split_trajectory(tr: Any, cuts: list[Cut], pad_s: float | None = 0.6) -> lis
         me = (tr.ee_t_ns >= a) & (tr.ee_t_ns < b)
         if mo.sum() < 4 or me.sum() < 2:
             continue
+        wt, wf = getattr(tr, "wrench_t_ns", None), getattr(tr, "wrench_force", None)
+        extra = {}
+        if wt is not None and wf is not None:
+            mw = (wt >= a) & (wt < b)
+            extra = {"wrench_t_ns": wt[mw], "wrench_force": wf[mw]}
         out.append(
             replace(
                 tr,
@@ -261,6 +266,7 @@ def split_trajectory(tr: Any, cuts: list[Cut], pad_s: float | None = 0.6) -> lis
                 ee_pos=tr.ee_pos[me],
                 ee_quat=tr.ee_quat[me],
                 grasp=tr.grasp[me],
+                **extra,
             )
         )
     return out
