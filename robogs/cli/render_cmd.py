@@ -6,10 +6,17 @@
     robogs render scene/ out/ --from-episode ep000 --edit elbow_joint=+0.1
     robogs render scene/ out/ --joints traj.parquet --camera cam0 --camera new_cam.json
     robogs render scene/ out/ --from-episode ep000 --orbit 1
+    robogs render scene/ out/ --joints traj.csv --simulate       # objects pushed in simulation
+    robogs render scene/ lr/ --joints traj.csv --format lerobot  # straight into LeRobot v3
 
 OUT is a robogs dataset sharing the source's robot, assets, physics and cameras, with one
 rendered episode (RGB video, panoptic labels, depth, 2-D boxes, the commanded joints, FK end-
-effector poses and the replayed object poses); see :mod:`robogs.format.render_trajectory`.
+effector poses and the object poses); see :mod:`robogs.format.render_trajectory`. Objects are
+replayed from the source episode, or with ``--simulate`` rolled out by a physics engine
+(:mod:`robogs.physics.engines`) from the pusher motion of the commanded joints
+(:func:`simulate_objects`). ``--format lerobot`` writes the rendered episode (and with
+``--with-recorded`` the source's episodes too, marked ``recorded``) as a LeRobot v3 dataset
+instead (:mod:`robogs.convert.export.lerobot`, rendered episodes marked ``rendered``).
 """
 
 from __future__ import annotations
@@ -17,8 +24,11 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
-__all__ = ["add_arguments", "run"]
+import numpy as np
+
+__all__ = ["add_arguments", "run", "simulate_objects"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -64,6 +74,33 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="frame rate with --joints or --orbit (--from-episode keeps the recorded frame "
         "stamps); default 30",
     )
+    p.add_argument(
+        "--simulate",
+        action="store_true",
+        help="simulate the free object from the commanded pusher motion (physics engine, the "
+        "dataset's physics.json) instead of replaying its recorded poses",
+    )
+    p.add_argument(
+        "--engine", default="auto", help="with --simulate: physics engine (default auto)"
+    )
+    p.add_argument(
+        "--format",
+        choices=("robogs", "lerobot"),
+        default="robogs",
+        help="robogs dataset (default) or a LeRobot v3 dataset at OUT",
+    )
+    p.add_argument(
+        "--with-recorded",
+        action="store_true",
+        dest="with_recorded",
+        help="with --format lerobot: also export the source's recorded episodes (same cameras)",
+    )
+    p.add_argument(
+        "--state",
+        choices=("joints", "ee"),
+        default="joints",
+        help="with --format lerobot: observation.state / action as joints or EE poses",
+    )
     p.add_argument("--backend", default="torch", help="render backend (default torch)")
     p.add_argument("--force", action="store_true", help="replace OUT if it is a robogs dataset")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -108,10 +145,18 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"\rrendering {done}/{total} frames", end="", file=sys.stderr, flush=True)
 
-    summary = render_dataset(
-        src,
-        args.out,
-        traj,
+    if args.with_recorded and args.format != "lerobot":
+        raise InputError("--with-recorded applies to --format lerobot", where="--with-recorded")
+    poses, objects_source, sim_notes = None, None, []
+    if args.simulate:
+        poses, objects_source, sim_notes = simulate_objects(
+            src, src.episode(episode), traj, engine=args.engine
+        )
+    taken = {e["id"] for e in src.manifest.get("episodes", [])}
+    new_episode = next(
+        f"render{i:03d}" for i in range(len(taken) + 1) if f"render{i:03d}" not in taken
+    )
+    render_kw: dict[str, Any] = dict(
         episode=episode,
         cameras=cameras,
         camera_files=files,
@@ -119,15 +164,161 @@ def run(args: argparse.Namespace) -> int:
         frame_stamps=stamps,
         fps=args.fps,
         backend=args.backend,
-        overwrite=args.force,
         progress=progress,
+        object_poses=poses,
+        objects_source=objects_source,
+        new_episode=new_episode,
     )
+    if args.format == "lerobot":
+        summary, report = _render_lerobot(src, traj, args, render_kw)
+    else:
+        summary = render_dataset(src, args.out, traj, overwrite=args.force, **render_kw)
+        report = None
     if not args.quiet:
         print(file=sys.stderr)
     frames = ", ".join(f"{c}: {n}" for c, n in summary.frames.items())
-    print(f"wrote {summary.out} (episode {summary.episode}; frames {frames}; joints {traj.source})")
+    what = "LeRobot v3 dataset " if report is not None else ""
+    print(
+        f"wrote {what}{args.out} (episode {summary.episode}; frames {frames}; joints {traj.source})"
+    )
     for w in summary.warnings:
         print(f"robogs render: warning: {w}", file=sys.stderr)
-    for n in summary.notes:
+    for n in [*sim_notes, *summary.notes, *(report.notes if report is not None else [])]:
         print(f"  note: {n}", file=sys.stderr)
     return 0
+
+
+def _render_lerobot(
+    src: Any, traj: Any, args: argparse.Namespace, kw: dict[str, Any]
+) -> tuple[Any, Any]:
+    """Render into a temporary robogs dataset beside OUT, export it as LeRobot v3 at OUT."""
+    import shutil
+    import tempfile
+
+    from robogs.convert.export import export
+    from robogs.format.render_trajectory import render_dataset
+
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        from robogs.format.errors import DatasetExistsError
+
+        raise DatasetExistsError("output exists", path=out, hint="pass --force to replace it")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.render-", dir=out.parent))
+    try:
+        summary = render_dataset(src, tmp / "ds", traj, keep_episodes=args.with_recorded, **kw)
+        episode = None if args.with_recorded else summary.episode
+        report = export(
+            "lerobot",
+            tmp / "ds",
+            out,
+            force=args.force,
+            episode=episode,
+            state=args.state,
+            labels=True,
+        )
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return summary, report
+
+
+def simulate_objects(
+    src: Any,
+    ep: Any,
+    traj: Any,
+    *,
+    engine: str = "auto",
+    dt: float = 1e-3,
+) -> tuple[dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]], str, list[str]]:
+    """Object poses rolled out by a physics engine from the pusher motion of ``traj``.
+
+    The pusher is ``objects.pusher.link`` of physics.json (default ``robot.ee_link``), moved by
+    ``objects.pusher.offset_m`` (m, link frame) as :func:`robogs.physics.recording.
+    load_recording` reads it; its pose is forward kinematics of the commanded joints (with the
+    physics revision's fitted joint offsets), linearly interpolated onto a grid of step ``dt``
+    (s). The free object (the only ``rigid`` one) starts at rest at its recorded pose in ``ep``
+    at the trajectory's first stamp (clamped); the engine uses the dataset's physics.json
+    parameters as they are (``robogs physics fit`` writes fitted ones there).
+
+    Returns:
+        ``{object: (t_ns [N], position [N, 3] m, quaternion [N, 4] wxyz)}`` at the trajectory's
+        stamps, a one-line description for the provenance, and notes from the engine.
+
+    Raises:
+        InputError: no physics.json, no single rigid object, no pusher link, no engine able to
+            represent the scene, or no recorded pose to start the object from.
+    """
+    import torch
+
+    from robogs.format.errors import InputError
+    from robogs.format.frames import matrix_to_quat, quat_to_matrix
+    from robogs.format.interp import interp_pose
+    from robogs.format.kinematics import Chain, dataset_fitted_chain
+    from robogs.physics.engines import ObjectState, choose_engine, get_engine, make_drive
+    from robogs.physics.engines.base import quat_yaw
+
+    if not isinstance(src.manifest.get("physics"), str):
+        raise InputError("--simulate needs physics.json", path=src.manifest_path, where="physics")
+    physics = src.physics()
+    objects = physics.get("objects") or {}
+    rigid = [k for k, v in objects.items() if isinstance(v, dict) and v.get("equation") == "rigid"]
+    if len(rigid) != 1:
+        raise InputError(
+            f"--simulate needs exactly one rigid object in physics.json, found {len(rigid)}",
+            path=src.resolve("physics.json"),
+            where="objects",
+        )
+    obj = rigid[0]
+    pusher = objects.get("pusher") or {}
+    link = pusher.get("link") or (src.manifest.get("robot") or {}).get("ee_link")
+    chain, _ = dataset_fitted_chain(src, Chain.from_urdf(src.urdf(load_meshes=False)))
+    if not isinstance(link, str) or link not in chain.link_names:
+        raise InputError(
+            f"--simulate needs the pusher link (objects.pusher.link or robot.ee_link), got {link!r}",
+            path=src.manifest_path,
+            where="robot/ee_link",
+        )
+    if not ep.has("object_poses"):
+        raise InputError(
+            f"--simulate starts {obj!r} from its recorded pose; episode {ep.id!r} has none",
+            where=f"episodes/{ep.id}",
+        )
+    name = engine
+    if engine == "auto":
+        name, _ = choose_engine(physics)
+    with torch.no_grad():
+        T = chain.forward(torch.as_tensor(traj.q, dtype=torch.float64))
+        base = (src.manifest.get("robot") or {}).get("base_link")
+        if isinstance(base, str) and base in chain.link_names and base != chain.link_names[0]:
+            T = torch.linalg.inv(T[:, chain.link_index(base)]).unsqueeze(1) @ T
+        Te = T[:, chain.link_index(link)]
+    pos = Te[:, :3, 3].numpy().copy()
+    quat = matrix_to_quat(Te[:, :3, :3]).numpy()
+    if pusher.get("offset_m") is not None:
+        pos = pos + np.einsum(
+            "nij,j->ni", quat_to_matrix(quat), np.asarray(pusher["offset_m"], float)
+        )
+    t_s = (traj.t_ns - traj.t_ns[0]) * 1e-9
+    grid = np.arange(int(np.ceil(t_s[-1] / dt)) + 2) * dt
+    p_grid = np.stack([np.interp(grid, t_s, pos[:, a]) for a in range(3)], -1)
+    yaw_grid = np.interp(grid, t_s, np.unwrap(quat_yaw(quat)))
+    tab = ep.table("object_poses")
+    m = np.asarray(tab.column("object").to_pylist()) == obj
+    if m.sum() == 0:
+        raise InputError(f"episode {ep.id!r} has no recorded pose of {obj!r}", where="object_poses")
+    p0, q0 = interp_pose(
+        traj.t_ns[:1],
+        tab.column("t_ns").to_numpy()[m].astype(np.int64),
+        np.stack([tab.column(c).to_numpy()[m] for c in ("x", "y", "z")], -1),
+        np.stack([tab.column(c).to_numpy()[m] for c in ("qw", "qx", "qy", "qz")], -1),
+        outside="clamp",
+    )
+    drive = make_drive(dt, p_grid[None], yaw_grid[None], t_s[None], p0, quat_yaw(q0))
+    sim = get_engine(name)(physics, object_name=obj, dt=dt, threads=1)
+    pred = sim.rollout(drive, {obj: ObjectState(p0, q0)})
+    out = {obj: (traj.t_ns.copy(), pred.pos[obj][0, 0], pred.quat[obj][0, 0])}
+    rev = physics.get("revision")
+    desc = (
+        f"simulated by the {name} engine from the commanded pusher motion ({link}; physics "
+        f"revision {rev}, dt {dt:g} s, start at rest at the recorded pose)"
+    )
+    return out, desc, list(pred.notes)

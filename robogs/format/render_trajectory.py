@@ -2,7 +2,9 @@
 
 The bound Gaussians of a dataset are posed at every frame stamp by forward kinematics of the
 *commanded* joints (``x(t) = T_L(q(t)) · T_L(q0)⁻¹ · x0``, :class:`robogs.format.binding.Binding`)
-and objects follow the source episode's pose stream (replayed, clamped at its ends). Each frame
+and objects follow the source episode's pose stream (replayed, clamped at its ends) or poses
+given by the caller (``object_poses``: the CLI's ``--simulate`` rolls them out with a physics
+engine; this module does not import :mod:`robogs.physics`). Each frame
 is rendered by :class:`robogs.format.rerender.SceneRerenderer`, the validator's re-renderer,
 with one label channel per bound target, which gives per frame:
 
@@ -55,6 +57,7 @@ __all__ = [
     "RenderedFrame",
     "TrajectoryRenderer",
     "RenderSummary",
+    "PoseStreams",
     "render_dataset",
 ]
 
@@ -379,19 +382,30 @@ def _rate(t: np.ndarray) -> float | None:
     return float(1e9 / np.median(np.diff(t))) if len(t) > 1 else None
 
 
-def _object_table(ep: Episode, t: np.ndarray) -> pa.Table | None:
-    """The source episode's object poses sampled at ``t`` (interpolated, clamped at the ends)."""
-    if not ep.has("object_poses"):
+#: object name -> (t_ns [N] int64, position [N, 3] m, quaternion [N, 4] wxyz), T_world_object
+PoseStreams = dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+def _object_table(ep: Episode, t: np.ndarray, given: PoseStreams | None = None) -> pa.Table | None:
+    """Object poses sampled at ``t`` (interpolated, clamped at the ends): ``given`` streams
+    where named, the source episode's recorded ones otherwise."""
+    given = given or {}
+    streams: PoseStreams = dict(given)
+    if ep.has("object_poses"):
+        tab = ep.table("object_poses")
+        names = np.asarray(tab.column("object").to_pylist())
+        for name in sorted(set(names.tolist()) - set(given)):
+            m = names == name
+            ts = tab.column("t_ns").to_numpy()[m].astype(np.int64)
+            p = np.stack([tab.column(c).to_numpy()[m] for c in ("x", "y", "z")], -1)
+            q = np.stack([tab.column(c).to_numpy()[m] for c in ("qw", "qx", "qy", "qz")], -1)
+            streams[name] = (ts, p, q)
+    if not streams:
         return None
-    tab = ep.table("object_poses")
-    names = np.asarray(tab.column("object").to_pylist())
     parts = []
-    for name in sorted(set(names.tolist())):
-        m = names == name
-        ts = tab.column("t_ns").to_numpy()[m].astype(np.int64)
-        p = np.stack([tab.column(c).to_numpy()[m] for c in ("x", "y", "z")], -1)
-        q = np.stack([tab.column(c).to_numpy()[m] for c in ("qw", "qx", "qy", "qz")], -1)
-        pos, quat = interp_pose(t, ts, p, q, outside="clamp")
+    for name in sorted(streams):
+        ts, p, q = streams[name]
+        pos, quat = interp_pose(t, np.asarray(ts, np.int64), p, q, outside="clamp")
         parts.append((name, pos, quat))
     n = len(t)
     cols: dict[str, Any] = {
@@ -423,6 +437,9 @@ def render_dataset(
     backend: str = "torch",
     overwrite: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    object_poses: PoseStreams | None = None,
+    objects_source: str | None = None,
+    keep_episodes: bool = False,
 ) -> RenderSummary:
     """Render ``traj`` into a new dataset at ``out`` (see the module docstring).
 
@@ -443,6 +460,12 @@ def render_dataset(
         backend: render backend.
         overwrite: replace ``out`` (only a robogs dataset that is not ``src``).
         progress: called with (frames done, frames in all).
+        object_poses: poses for some objects instead of the source episode's (e.g. simulated
+            from the commanded pusher motion by the CLI's ``--simulate``); the others are
+            replayed.
+        objects_source: how ``object_poses`` were made, for the stream and the provenance.
+        keep_episodes: also keep the source's episodes (files shared) beside the rendered one,
+            so that recorded and rendered episodes can be exported together.
 
     Returns:
         What was written, with a warning per camera that saw nothing in some frames.
@@ -503,13 +526,29 @@ def render_dataset(
     if len(set(names)) != len(names):
         raise InputError(f"camera names repeat: {names}", hint="give each camera file its own name")
     base_binding = _CommandedBinding(src, ep.id, traj)
+    for name, (ts, p, q) in (object_poses or {}).items():
+        base_binding.set_object_poses(name, ts, p, q)
+    replayed = f"replayed from episode {ep.id}"
+    obj_source = (
+        f"{objects_source or 'given'} ({', '.join(sorted(object_poses))}); others {replayed}"
+        if object_poses
+        else replayed
+    )
     writer = Dataset.create(out, overwrite=overwrite, protect=[src.root])
     summary = RenderSummary(out, new_episode, {}, {})
     with writer:
+        kept = [e for e in src.manifest.get("episodes", []) if e["id"] != new_episode]
+        kept_dirs = tuple(f"episodes/{e['id']}/" for e in kept) if keep_episodes else ()
         for rel in src.files:
-            if rel.startswith("episodes/") or rel.startswith("cameras/"):
+            if rel.startswith("cameras/") or (
+                rel.startswith("episodes/") and not (kept_dirs and rel.startswith(kept_dirs))
+            ):
                 continue
             _link_or_copy(src.resolve(rel), writer.path(rel))
+        if keep_episodes:
+            writer.manifest["episodes"] = [dict(e) for e in kept]
+            for c in src.camera_names:
+                writer.set_camera(src.camera(c))
         for key in ("robot", "assets", "physics", "budgets"):
             if key in src.manifest:
                 writer.manifest[key] = src.manifest[key]
@@ -545,14 +584,14 @@ def render_dataset(
                 "source": "forward kinematics of the commanded joints",
                 **derived,
             }
-        objects = _object_table(ep, traj.t_ns)
+        objects = _object_table(ep, traj.t_ns, object_poses)
         if objects is not None:
             writer.write_table(f"{e}/object_poses.parquet", objects, kind="object_poses")
             streams["object_poses"] = {
                 "kind": "object_poses",
                 "path": f"{e}/object_poses.parquet",
                 "nominal_rate_hz": _rate(traj.t_ns),
-                "source": f"replayed from episode {ep.id}",
+                "source": obj_source,
                 **derived,
             }
         writer.write_table(f"{e}/segments.parquet", ep.table("segments"), kind="segments")
@@ -670,15 +709,17 @@ def render_dataset(
             new_episode, start_ns=start, end_ns=end, streams=streams, segment=ep.segment
         )
         prov = dict(src.manifest.get("provenance") or {})
+        before = (prov.get("rendered") or {}).get("episodes") or {} if keep_episodes else {}
         prov["rendered"] = {
             "source": src.name,
             "episodes": {
+                **{k: v for k, v in before.items() if k in {e["id"] for e in kept}},
                 new_episode: {
                     "joints": traj.source,
-                    "objects": f"replayed from episode {ep.id}",
+                    "objects": obj_source,
                     "cameras": names,
                     "backend": backend,
-                }
+                },
             },
         }
         writer.manifest["provenance"] = prov
