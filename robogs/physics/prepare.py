@@ -21,10 +21,15 @@ from robogs.physics.smoothing import local_polynomial
 
 __all__ = ["Prepared", "WrenchData", "prepare", "build_drive", "excitations", "wrench_data"]
 
-REST_MARGIN_M = 0.01
+REST_MARGIN_M = 0.005
 """A wrench sample counts as out of contact (its offset and noise are estimated from such
-samples) when the pusher is this far beyond its reach of the object."""
+samples) when the pusher's surface is this far from the object's box."""
 MIN_REST_SAMPLES = 20
+FORCE_BIN_S = 0.02
+"""Forces are compared as means over bins of this duration: the model's contact impulse of
+the bin's steps over its duration against the mean of the sensor samples in it. (A kinematic
+pusher's force is the mass times its acceleration, a second derivative of measured positions:
+per 1 ms step it is noise; over 20 ms it is the force.)"""
 
 
 @dataclass
@@ -32,15 +37,17 @@ class WrenchData:
     """The measured force on the pusher, as the residuals use it.
 
     Attributes:
-        meas: [T, W, 3] force on the tool [N], world axes, offset removed (0 padding).
-        sigma: [3] noise floor per axis [N] (1.4826 MAD of the samples out of contact).
-        mask: [T, W] samples in the residuals (inside the simulated span, not while grasping).
+        meas: [T, W, 3] mean force on the tool per bin [N], world axes, offset removed.
+        sigma: [3] noise floor of one sample per axis [N] (1.4826 MAD out of contact).
+        count: [T, W] samples per bin (the bin's deviation is ``sigma / sqrt(count)``).
+        mask: [T, W] bins in the residuals (holding samples, none while grasping).
         offset: [T, 3] the offset removed per trajectory [N] (median out of contact).
         n_rest: number of out-of-contact samples the offset and noise come from.
     """
 
     meas: torch.Tensor
     sigma: torch.Tensor
+    count: torch.Tensor
     mask: torch.Tensor
     offset: np.ndarray
     n_rest: int
@@ -182,75 +189,97 @@ def _interp_rows(t: np.ndarray, tp: np.ndarray, xp: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(t, tp, xp[:, a]) for a in range(xp.shape[1])], axis=-1)
 
 
+def _capsule_box_gap(
+    ee_pos: np.ndarray,
+    ee_yaw: np.ndarray,
+    obj_pos: np.ndarray,
+    obj_yaw: np.ndarray,
+    scene: BoxScene,
+) -> np.ndarray:
+    """Planar distance [m] from the pusher's surface (sphere, or capsule along the EE y axis,
+    sampled at 5 points) to the box footprint; negative inside. Shapes [K, 3], [K] -> [K]."""
+    hx, hy = 0.5 * scene.size[0], 0.5 * scene.size[1]
+    best = np.full(len(ee_pos), np.inf)
+    for u in np.linspace(-0.5, 0.5, 5 if scene.pusher_length > 0 else 1):
+        px = ee_pos[:, 0] - np.sin(ee_yaw) * u * scene.pusher_length - obj_pos[:, 0]
+        py = ee_pos[:, 1] + np.cos(ee_yaw) * u * scene.pusher_length - obj_pos[:, 1]
+        c, s = np.cos(obj_yaw), np.sin(obj_yaw)
+        lx, ly = c * px + s * py, -s * px + c * py
+        ex, ey = np.abs(lx) - hx, np.abs(ly) - hy
+        out = np.hypot(np.maximum(ex, 0.0), np.maximum(ey, 0.0))
+        d = np.where((ex > 0) | (ey > 0), out, np.maximum(ex, ey))
+        best = np.minimum(best, d - scene.pusher_radius)
+    return best
+
+
 def wrench_data(
     rec: Recording, scene: BoxScene, drive: Drive, t0: np.ndarray
 ) -> tuple[WrenchData | None, str]:
     """Wrench residual inputs; sets ``drive.wrench_bin`` / ``wrench_width`` in place.
 
-    Each sample stands for the window between the midpoints to its neighbours; the model's
-    contact impulses of the steps whose midpoint falls in it, over its duration, are its
-    prediction. The sensor's offset (tool weight, drift) and noise floor are estimated from the
-    samples at which the pusher is more than ``REST_MARGIN_M`` beyond its reach of the object
-    (out of contact, so the true contact force is zero): per trajectory the median, pooled
-    over trajectories the 1.4826 MAD. Returns (None, why) when nothing can be used.
+    Forces are compared per bin of ``FORCE_BIN_S`` on the simulation grid: the model's contact
+    impulses of the bin's steps over its duration against the mean of the sensor samples in it.
+    The sensor's offset (tool weight, drift) and noise floor come from the samples at which the
+    pusher's surface is more than ``REST_MARGIN_M`` from the box (out of contact, so the true
+    contact force is zero): per trajectory the median (pooled over trajectories when one has
+    fewer than ``MIN_REST_SAMPLES``), and the pooled 1.4826 MAD. Returns (None, why) when a
+    recorded wrench cannot be used, (None, "") without one.
     """
     trs = rec.trajectories
     if not any(t.wrench_t_ns is not None and len(t.wrench_t_ns) for t in trs):
         return None, ""
     n_t, n_s = drive.n_traj, drive.n_steps
     dt = drive.dt
-    n_w = max(0 if t.wrench_t_ns is None else len(t.wrench_t_ns) for t in trs)
-    meas = np.zeros((n_t, n_w, 3))
-    mask = np.zeros((n_t, n_w), dtype=bool)
-    rest = np.zeros((n_t, n_w), dtype=bool)
-    width = np.zeros((n_t, n_w))
-    bins = -np.ones((n_t, n_s), dtype=np.int64)
-    mid = (np.arange(n_s) + 0.5) * dt
-    reach = (
-        0.5 * float(np.hypot(*scene.size[:2]))
-        + scene.pusher_radius
-        + 0.5 * scene.pusher_length
-        + REST_MARGIN_M
-    )
+    k_bin = max(int(round(FORCE_BIN_S / dt)), 1)
+    n_b = int(np.ceil(n_s / k_bin))
+    samples: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
     for i, tr in enumerate(trs):
-        if tr.wrench_t_ns is None or len(tr.wrench_t_ns) < 2:
+        if tr.wrench_t_ns is None or len(tr.wrench_t_ns) == 0:
+            samples.append((np.zeros(0), np.zeros((0, 3)), np.zeros(0, bool), np.zeros(0, int)))
             continue
         tw = (tr.wrench_t_ns - t0[i]) * 1e-9
-        n = len(tw)
-        half = 0.5 * float(np.median(np.diff(tw)))
-        edges = np.concatenate([[tw[0] - half], 0.5 * (tw[1:] + tw[:-1]), [tw[-1] + half]])
-        width[i, :n] = np.diff(edges)
-        j = np.searchsorted(edges, mid, side="right") - 1
-        ok = (j >= 0) & (j < n)
-        bins[i, ok] = j[ok]
-        meas[i, :n] = tr.wrench_force
         te = (tr.ee_t_ns - t0[i]) * 1e-9
         to = (tr.t_ns - t0[i]) * 1e-9
-        inside = (edges[:-1] >= 0.0) & (edges[1:] <= (n_s - 1) * dt)
+        b = np.floor(tw / (k_bin * dt)).astype(np.int64)
         jg = np.clip(np.searchsorted(te, tw, side="right") - 1, 0, len(te) - 1)
-        mask[i, :n] = inside & ~tr.grasp[jg]
-        d = _interp_rows(tw, te, tr.ee_pos)[:, :2] - _interp_rows(tw, to, tr.object_pos)[:, :2]
-        rest[i, :n] = (np.hypot(d[:, 0], d[:, 1]) > reach) & mask[i, :n]
-    n_rest = int(rest.sum())
+        usable = (tw >= 0.0) & (b < n_b) & ~tr.grasp[jg]
+        gap = _capsule_box_gap(
+            _interp_rows(tw, te, tr.ee_pos),
+            np.interp(tw, te, np.unwrap(yaw_of(tr.ee_quat))),
+            _interp_rows(tw, to, tr.object_pos),
+            np.interp(tw, to, np.unwrap(yaw_of(tr.object_quat))),
+            scene,
+        )
+        rest = usable & (gap > REST_MARGIN_M)
+        samples.append((tr.wrench_force, rest, usable, b))
+    n_rest = int(sum(r.sum() for _, r, _, _ in samples))
     if n_rest < MIN_REST_SAMPLES:
         return None, (
             f"wrench not used: {n_rest} samples out of contact (at least {MIN_REST_SAMPLES} "
             "are needed to estimate the sensor's offset and noise)"
         )
-    pooled = np.median(meas[rest], axis=0)
+    pooled = np.median(np.concatenate([f[r] for f, r, _, _ in samples]), axis=0)
     offset = np.zeros((n_t, 3))
-    for i in range(n_t):
-        r = rest[i]
-        offset[i] = np.median(meas[i, r], axis=0) if r.sum() >= MIN_REST_SAMPLES else pooled
-    dev = meas - offset[:, None, :]
-    sigma = 1.4826 * np.median(np.abs(dev[rest]), axis=0)
-    sigma = np.maximum(sigma, 1e-3)
-    f = torch.float64
+    for i, (f, r, _, _) in enumerate(samples):
+        offset[i] = np.median(f[r], axis=0) if r.sum() >= MIN_REST_SAMPLES else pooled
+    dev = np.concatenate([f[r] - offset[i] for i, (f, r, _, _) in enumerate(samples)])
+    sigma = np.maximum(1.4826 * np.median(np.abs(dev), axis=0), 1e-3)
+    meas = np.zeros((n_t, n_b, 3))
+    count = np.zeros((n_t, n_b))
+    for i, (f, _, u, b) in enumerate(samples):
+        np.add.at(meas[i], b[u], f[u] - offset[i])
+        np.add.at(count[i], b[u], 1.0)
+    mask = count > 0
+    meas = meas / np.maximum(count, 1.0)[..., None]
+    bins = np.broadcast_to(np.arange(n_s) // k_bin, (n_t, n_s)).copy()
+    width = np.full((n_t, n_b), k_bin * dt)
+    f64 = torch.float64
     drive.wrench_bin = torch.as_tensor(bins)
-    drive.wrench_width = torch.as_tensor(width, dtype=f)
+    drive.wrench_width = torch.as_tensor(width, dtype=f64)
     data = WrenchData(
-        meas=torch.as_tensor(dev * mask[..., None], dtype=f),
-        sigma=torch.as_tensor(sigma, dtype=f),
+        meas=torch.as_tensor(meas, dtype=f64),
+        sigma=torch.as_tensor(sigma, dtype=f64),
+        count=torch.as_tensor(np.maximum(count, 1.0), dtype=f64),
         mask=torch.as_tensor(mask),
         offset=offset,
         n_rest=n_rest,

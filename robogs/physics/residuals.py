@@ -1,8 +1,9 @@
 """Weighted residuals of the rigid model against the measured object poses and pusher force.
 
 Layout per trajectory: the pose block, 4 per object sample (x, y, z [m], yaw [rad]), then,
-when the recording carries the pusher's force sensor, the force block, 4 per wrench sample
-(fx, fy, fz [N], world axes, and a 0 so that both blocks share the width 4). Each residual is
+when the recording carries the pusher's force sensor, the force block, 4 per force bin
+(fx, fy, fz [N], world axes, and a 0 so that both blocks share the width 4; the mean of the
+bin's samples, :data:`robogs.physics.prepare.FORCE_BIN_S`). Each residual is
 divided by its own noise floor (pose: :mod:`robogs.physics.noise`; force: the sensor's,
 from the samples out of contact, :func:`robogs.physics.prepare.wrench_data`), so forces enter
 the objective in N against the sensor noise, and mass, which poses alone cannot tell, becomes
@@ -49,8 +50,9 @@ def weighted_residuals(sim: SimResult, prep: Prepared) -> torch.Tensor:
     rf = force_residuals(sim, prep)
     if rf is None:
         return r
-    sf = torch.nn.functional.pad(prep.wrench.sigma, (0, 1), value=1.0)
-    rf = rf / sf
+    w = prep.wrench
+    sf = torch.nn.functional.pad(w.sigma, (0, 1), value=1.0) / w.count.sqrt().unsqueeze(-1)
+    rf = rf / sf.unsqueeze(0)
     return torch.cat([r, rf.reshape(rf.shape[0], rf.shape[1], -1)], dim=-1)
 
 
