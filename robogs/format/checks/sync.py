@@ -290,10 +290,13 @@ def _camera_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 _MAX_STREAM_LAG_NS = 100_000_000
 #: coarse grid step of the search, ns
 _GRID_NS = 1_000_000
-#: end-effector samples used per link (evenly spaced; bounds the cost on long episodes)
-_MAX_OBS = 50_000
+#: runs of contiguous observed samples a fit uses, and samples per run (:func:`motion_windows`)
+_WINDOWS = 16
+_PER_WINDOW = 250
+#: reference kept beyond the largest searched lag around each run, ns
+_MARGIN_NS = 20_000_000
 #: samples used by the coarse grid search (Gauss-Newton then uses all)
-_GRID_SAMPLES = 4_000
+_GRID_SAMPLES = 1_000
 #: contiguous blocks of the delete-one-block jackknife
 _BLOCKS = 10
 #: two-sided 97.5 % quantile of Student's t with _BLOCKS - 1 degrees of freedom
@@ -328,8 +331,11 @@ class StreamLag:
 
 
 def _shifted(t_ref: np.ndarray, p_ref: np.ndarray, tq: np.ndarray) -> np.ndarray:
-    """[M, C] reference values linearly interpolated at float times ``tq`` (same origin)."""
-    return np.stack([np.interp(tq, t_ref, p_ref[:, c]) for c in range(p_ref.shape[1])], axis=1)
+    """[M, C] reference values linearly interpolated at float times ``tq`` (same origin),
+    held at the first and last sample outside the reference's span (as ``np.interp``)."""
+    i = np.clip(np.searchsorted(t_ref, tq, side="right") - 1, 0, t_ref.size - 2)
+    w = np.clip((tq - t_ref[i]) / (t_ref[i + 1] - t_ref[i]), 0.0, 1.0)[:, None]
+    return p_ref[i] * (1.0 - w) + p_ref[i + 1] * w
 
 
 def _cost(r: np.ndarray) -> float:
@@ -348,7 +354,7 @@ def estimate_stream_lag(
     """Lag of ``p_obs`` behind ``p_ref`` (least squares on interpolated positions).
 
     The cost ``sum |p_obs(t) - p_ref(t - lag) - b|^2`` (``b`` the mean residual) is evaluated
-    on a 1 ms grid over ``[-max_lag, max_lag]`` (on at most 4,000 evenly spaced samples), refined by a parabola through the best grid
+    on a 1 ms grid over ``[-max_lag, max_lag]`` (on at most 1,000 evenly spaced samples), refined by a parabola through the best grid
     point and its neighbours, then by Gauss-Newton steps with the reference velocity (central
     differences of the interpolant). The interval comes from a delete-one-block jackknife
     (Efron and Tibshirani 1993, ch. 11; blocks keep the serial correlation inside).
@@ -381,7 +387,9 @@ def estimate_stream_lag(
 
     grid = np.arange(-max_lag_ns, max_lag_ns + 1, _GRID_NS, dtype=np.float64)
     sub = np.unique(np.linspace(0, to.size - 1, min(to.size, _GRID_SAMPLES)).astype(np.int64))
-    costs = np.array([_cost(po[sub] - _shifted(tr, pr, to[sub] - g)) for g in grid])
+    vals = _shifted(tr, pr, (to[sub][None, :] - grid[:, None]).ravel())  # every lag at once
+    rg = po[sub][None] - vals.reshape(grid.size, sub.size, -1)
+    costs = np.sum((rg - rg.mean(axis=1, keepdims=True)) ** 2, axis=(1, 2))
     i = int(np.clip(np.argmin(costs), 1, grid.size - 2))
     c0, c1, c2 = costs[i - 1], costs[i], costs[i + 1]
     curv = c0 - 2 * c1 + c2
@@ -424,10 +432,56 @@ def estimate_stream_lag(
     )
 
 
+def motion_windows(
+    t: np.ndarray, p: np.ndarray, *, windows: int = _WINDOWS, per: int = _PER_WINDOW
+) -> np.ndarray:
+    """Indices of the samples a lag fit uses: ``windows`` contiguous runs of ``per`` samples.
+
+    A lag is timed by motion, so the runs with the longest path ``sum |p[k+1] - p[k]|`` are
+    kept (in time order); a series of at most ``windows * per`` samples is kept whole. This
+    bounds the cost of the fit, and of the reference it needs, on long episodes.
+
+    Args:
+        t: [N] stamps, ns, increasing.
+        p: [N, C] values (e.g. positions, m).
+    """
+    n = t.size
+    if n <= windows * per:
+        return np.arange(n)
+    k = n // per
+    step = np.concatenate([[0.0], np.linalg.norm(np.diff(p, axis=0), axis=1)])
+    score = np.add.reduceat(step[: k * per], np.arange(k) * per)
+    best = np.sort(np.argsort(score, kind="stable")[-windows:])
+    return (best[:, None] * per + np.arange(per)[None, :]).ravel()
+
+
+def _near(t_ref: np.ndarray, t_obs: np.ndarray, margin_ns: int) -> np.ndarray:
+    """[N] bool: reference stamps within ``margin_ns`` of some observed stamp.
+
+    The observed stamps come in contiguous runs; a run's span is widened by the margin."""
+    keep = np.zeros(t_ref.size, bool)
+    if t_obs.size == 0:
+        return keep
+    gaps = np.flatnonzero(np.diff(t_obs) > margin_ns)
+    starts = t_obs[np.concatenate([[0], gaps + 1])] - margin_ns
+    ends = t_obs[np.concatenate([gaps, [t_obs.size - 1]])] + margin_ns
+    lo = np.searchsorted(t_ref, starts, side="left")
+    hi = np.searchsorted(t_ref, ends, side="right")
+    edge = np.zeros(t_ref.size + 1, np.int64)
+    np.add.at(edge, lo, 1)
+    np.add.at(edge, hi, -1)
+    keep = np.cumsum(edge[:-1]) > 0
+    # one sample beyond each span, so interpolation brackets every query
+    keep[1:] |= keep[:-1]
+    keep[:-1] |= keep[1:]
+    return keep
+
+
 def _fk_positions(
-    ctx: CheckContext, js_rel: str, links: list[str]
+    ctx: CheckContext, js_rel: str, links: list[str], t_need: np.ndarray
 ) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
-    """Joint stamps without held samples and the FK positions (world, m) of ``links`` there."""
+    """Fresh (not held) joint stamps near ``t_need`` and the FK positions (world, m) of
+    ``links`` there: forward kinematics runs only where the fit will interpolate it."""
     import torch
 
     chain = ctx.fitted_chain()[0]
@@ -444,30 +498,31 @@ def _fk_positions(
     t, q = np.concatenate(ts), np.concatenate(qs)
     if t.size < 3 or not np.all(np.diff(t) > 0):
         return None  # reported by T001
-    fresh = ~held_mask(t, q)
+    near = _near(t, np.sort(t_need), _MAX_STREAM_LAG_NS + _MARGIN_NS)
+    t, q = t[near], q[near]
+    fresh = ~held_mask(t, q)  # runs are far apart: a repeat across two runs is not held
     t, q = t[fresh], q[fresh]
-    out = {link: np.empty((t.size, 3)) for link in links}
-    idx = {link: chain.link_index(link) for link in links}
-    for lo in range(0, t.size, 8192):
-        T = _world_from_root(
-            ctx, chain.forward(torch.as_tensor(q[lo : lo + 8192], dtype=torch.float64)), chain
-        ).numpy()
-        for link, k in idx.items():
-            out[link][lo : lo + 8192] = T[:, k, :3, 3]
-    return t, out
+    if t.size < 3:
+        return None
+    with torch.inference_mode():
+        T = _world_from_root(ctx, chain.forward(torch.as_tensor(q, dtype=torch.float64)), chain)
+        pos = T[..., :3, 3].numpy()  # [N, L, 3]
+    return t, {link: pos[:, chain.link_index(link)] for link in links}
 
 
 def _ee_series(ctx: CheckContext, rel: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Per link of an ee_poses table: (stamps, positions) of its fresh (not held) samples."""
+    """Per link of an ee_poses table: (stamps, positions) of the fresh (not held) samples in
+    the windows of most motion (:func:`motion_windows`)."""
     cols = ("t_ns", "link", "x", "y", "z", "qw", "qx", "qy", "qz")
     parts: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     for b in batches(ctx, rel, cols):
-        links = column(b, "link").astype(str)
+        enc = b.column(1).dictionary_encode()
+        codes = enc.indices.to_numpy(zero_copy_only=False)
         t = column(b, "t_ns").astype(np.int64)
         v = np.stack([column(b, c) for c in cols[2:]], axis=1).astype(np.float64)
-        for link in np.unique(links).tolist():
-            sel = links == link
-            parts.setdefault(link, []).append((t[sel], v[sel]))
+        for k, link in enumerate(enc.dictionary.to_pylist()):
+            sel = codes == k
+            parts.setdefault(str(link), []).append((t[sel], v[sel]))
     out = {}
     for link, chunks in parts.items():
         t = np.concatenate([c[0] for c in chunks])
@@ -476,10 +531,8 @@ def _ee_series(ctx: CheckContext, rel: str) -> dict[str, tuple[np.ndarray, np.nd
             continue  # reported by T001
         keep = ~held_mask(t, v)
         t, p = t[keep], v[keep, :3]
-        if t.size > _MAX_OBS:
-            sel = np.linspace(0, t.size - 1, _MAX_OBS).round().astype(np.int64)
-            t, p = t[sel], p[sel]
-        out[link] = (t, p)
+        sel = motion_windows(t, p)
+        out[link] = (t[sel], p[sel])
     return out
 
 
@@ -509,7 +562,8 @@ def _stream_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             continue
         try:
             obs = {k: v for k, v in _ee_series(ctx, rel).items() if k in chain.link_names}
-            ref = _fk_positions(ctx, ep.streams[js]["path"], sorted(obs)) if obs else None
+            t_need = np.concatenate([v[0] for v in obs.values()]) if obs else None
+            ref = _fk_positions(ctx, ep.streams[js]["path"], sorted(obs), t_need) if obs else None
         except InputReported:
             continue
         if ref is None:
