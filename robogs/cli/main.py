@@ -30,14 +30,14 @@ VERBS: dict[str, tuple[str, str]] = {
     ),
     "validate": ("robogs.cli.validate_cmd", "check a dataset against the spec"),
     "convert": (
-        "robogs.convert.cli",
+        "robogs.cli.convert_cmd",
         "convert a bag, MCAP, video, capture or joint log into a dataset",
     ),
     "export": (
-        "robogs.convert.export_cli",
+        "robogs.cli.export_cmd",
         "export a dataset to URDF, USD, MCAP, splat PLY or Rerun",
     ),
-    "view": ("robogs.convert.view_cli", "write a Rerun recording of a dataset and open it"),
+    "view": ("robogs.cli.view_cmd", "write a Rerun recording of a dataset and open it"),
     "render": (
         "robogs.cli.render_cmd",
         "render a new joint trajectory through the binding into a dataset",

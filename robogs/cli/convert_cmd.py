@@ -11,9 +11,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from robogs.convert.registry import available_converters, get_converter
 from robogs.format.errors import InputError
-
-from .registry import available_converters, get_converter
 
 __all__ = ["add_arguments", "run"]
 
@@ -202,9 +201,14 @@ def _print_roles(roles: list[dict]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``robogs convert``; returns the exit code."""
-    from .ingest.context import ConvertOptions
-    from .ingest.convert import convert_path
-    from .ingest.roles import load_frame_map, load_role_map, parse_frame_flags, parse_topic_flags
+    from robogs.convert.ingest.context import ConvertOptions
+    from robogs.convert.ingest.convert import convert_path
+    from robogs.convert.ingest.roles import (
+        load_frame_map,
+        load_role_map,
+        parse_frame_flags,
+        parse_topic_flags,
+    )
 
     if args.list_formats:
         for name in available_converters():
@@ -213,7 +217,7 @@ def run(args: argparse.Namespace) -> int:
     if args.src is None or args.out is None:
         print("robogs convert: error: SRC and OUT are required", file=sys.stderr)
         return 2
-    from .registry import detect_format
+    from robogs.convert.registry import detect_format
 
     roles = {}
     tf_objects: dict[str, str] = {}
@@ -258,7 +262,7 @@ def run(args: argparse.Namespace) -> int:
         else None,
     )
     if sfm:
-        from .ingest.sfm import convert_sfm
+        from robogs.convert.ingest.sfm import convert_sfm
 
         ds, res = convert_sfm(
             args.src, args.out, options=opts, force=args.force, threads=args.sfm_threads
@@ -270,7 +274,7 @@ def run(args: argparse.Namespace) -> int:
         )
         return 0
     if getattr(args, "ray", None) is not None or any(c in str(args.src) for c in "*?["):
-        from .distributed import run_many
+        from robogs.convert.distributed import run_many
 
         return run_many(args, opts)
     ds = convert_path(args.src, args.out, fmt=args.fmt, options=opts, force=args.force)

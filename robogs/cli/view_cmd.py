@@ -13,8 +13,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from robogs.cli.export_cmd import print_report
 from robogs.convert.export import export
-from robogs.convert.export_cli import print_report
 from robogs.format.errors import InputError
 
 __all__ = ["add_arguments", "run", "viewer_command"]
