@@ -53,14 +53,17 @@ def convert_path(
         raise InputError("source does not exist", path=src)
     prov = Provenance(conv.name, src.name)
     # --force replaces only a robogs dataset, never the source or a folder holding it
-    writer = Dataset.create(out, overwrite=force, protect=[src])
+    writer = Dataset.create(
+        out, overwrite=force, protect=[src, *([opts.urdf] if opts.urdf else [])]
+    )
     ctx = IngestContext(writer, opts, prov, ProgressReporter(opts.progress))
     with writer:
         if opts.urdf is not None:
             ctx.robot_root_link = urdf_root_link(opts.urdf)
         conv.convert(src, ctx)
         if opts.urdf is not None:
-            attach_robot(ctx, opts.urdf, package_roots=opts.package_roots)
+            if "urdf" not in (writer.manifest.get("robot") or {}):  # (tabular may attach it)
+                attach_robot(ctx, opts.urdf, package_roots=opts.package_roots)
         elif ctx.robot_description:
             attach_robot_description(
                 ctx, ctx.robot_description, package_roots=opts.package_roots or None, source=src
