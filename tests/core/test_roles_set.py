@@ -1,0 +1,165 @@
+"""``robogs roles`` and ``robogs roles set``: re-role a decoded generic stream.
+
+The fixture is the synthetic scene (``robogs.synth.scene``) with its object poses moved, by
+hand here, into a generic table shaped like a decoded ``geometry_msgs/PoseStamped`` topic
+(``pose.position.x`` ... ``header.frame_id``): ``set`` must rebuild the object stream, value for
+value, and the result must validate as the original does.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from robogs.cli.main import main
+from robogs.format.validate import validate
+
+TOPIC = "/mocap/box/pose"
+GENERIC = "streams/mocap_box_pose"
+
+
+def _digest(root: Path) -> str:
+    h = hashlib.sha256()
+    for p in sorted(root.rglob("*")):
+        if p.is_file():
+            h.update(p.relative_to(root).as_posix().encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def _rehash(root: Path, m: dict, *rels: str) -> None:
+    for rel in rels:
+        p = root / rel
+        m["files"][rel] = {
+            "sha256": hashlib.sha256(p.read_bytes()).hexdigest(),
+            "size": p.stat().st_size,
+            "rows": pq.ParquetFile(p).metadata.num_rows,
+        }
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """(clean synthetic scene, the same with its object poses as a generic PoseStamped table)."""
+    from robogs.synth.scene import synthesize
+
+    base = tmp_path_factory.mktemp("roles")
+    clean = synthesize(base / "clean", seed=0, size="small") and base / "clean"
+    gen = base / "generic"
+    shutil.copytree(clean, gen)
+    m = json.loads((gen / "manifest.json").read_text())
+    ep = m["episodes"][0]
+    st = ep["streams"].pop("object_poses")
+    tab = pq.read_table(gen / st["path"])
+    rel = "episodes/ep000/streams/mocap_box_pose.parquet"
+    (gen / rel).parent.mkdir(parents=True)
+    n = tab.num_rows
+    pq.write_table(
+        pa.table(
+            {
+                "t_ns": tab.column("t_ns"),
+                "header.seq": pa.array(np.arange(n), pa.int64()),
+                "header.frame_id": pa.array(["world"] * n),
+                **{f"pose.position.{a}": tab.column(a) for a in "xyz"},
+                **{f"pose.orientation.{a}": tab.column(f"q{a}") for a in "xyzw"},
+            }
+        ),
+        gen / rel,
+    )
+    (gen / st["path"]).unlink()
+    del m["files"][st["path"]]
+    ep["streams"][GENERIC] = {
+        "kind": "generic",
+        "path": rel,
+        "stamp_source": st["stamp_source"],
+        "offset_ns": 0,
+        "nominal_rate_hz": st["nominal_rate_hz"],
+        "source": TOPIC,
+    }
+    m.setdefault("provenance", {})["topics"] = {
+        TOPIC: {"type": "my_msgs/msg/Tracked", "role": "generic", "reason": "custom type"}
+    }
+    _rehash(gen, m, rel)
+    (gen / "manifest.json").write_text(json.dumps(m, indent=2))
+    return clean, gen
+
+
+def _errors(root: Path) -> set[str]:
+    return validate(root, ignore=["binding"]).codes(min_severity="error")
+
+
+def test_generic_pose_becomes_an_object_stream_that_validates(
+    scene: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    clean, gen = scene
+    ds = tmp_path / "ds"
+    shutil.copytree(gen, ds)
+    assert main(["roles", "set", str(ds), TOPIC, "object_pose:box"]) == 0
+    out = capsys.readouterr().out
+    assert "'object_poses'" in out and "frame world" in out
+    m = json.loads((ds / "manifest.json").read_text())
+    streams = m["episodes"][0]["streams"]
+    assert GENERIC not in streams and streams["object_poses"]["kind"] == "object_poses"
+    assert not (ds / "episodes/ep000/streams/mocap_box_pose.parquet").exists()
+    want = pq.read_table(clean / "episodes/ep000/object_poses.parquet")
+    got = pq.read_table(ds / streams["object_poses"]["path"])
+    assert got.column("object").to_pylist() == want.column("object").to_pylist()
+    for c in ("t_ns", "x", "y", "z", "qw", "qx", "qy", "qz"):
+        np.testing.assert_allclose(got.column(c).to_numpy(), want.column(c).to_numpy(), atol=1e-12)
+    assert m["provenance"]["topics"][TOPIC]["role"] == "object_pose:box"
+    assert "was: custom type" in m["provenance"]["topics"][TOPIC]["reason"]
+    assert _errors(ds) == _errors(clean) == set()
+
+
+def test_roles_lists_streams_with_reasons(
+    scene: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    _clean, gen = scene
+    assert main(["roles", str(gen), "--json"]) == 0
+    rows = {r["stream"]: r for r in json.loads(capsys.readouterr().out)}
+    assert rows[GENERIC]["kind"] == "generic" and rows[GENERIC]["reason"] == "custom type"
+    assert rows["joint_states"]["role"] == "joint_states"
+
+
+@pytest.mark.parametrize(
+    ("target", "role", "needle"),
+    [
+        ("/no/such/topic", "object_pose:box", "no stream or topic '/no/such/topic'"),
+        (TOPIC, "wrench:ft_sensor", "has no columns for role 'wrench:ft_sensor'"),
+        ("joint_states", "ignore", "not a decoded generic table"),
+        (TOPIC, "ee_pose:no_such_link", "link 'no_such_link' is not in the robot URDF"),
+        (TOPIC, "teleport:box", "unknown role 'teleport:box'"),
+    ],
+)
+def test_bad_requests_are_one_line_and_change_nothing(
+    scene: tuple[Path, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    target: str,
+    role: str,
+    needle: str,
+) -> None:
+    ds = tmp_path / "ds"
+    shutil.copytree(scene[1], ds)
+    before = _digest(ds)
+    assert main(["roles", "set", str(ds), target, role]) == 2
+    err = capsys.readouterr().err.strip()
+    assert needle in err and "\n" not in err and "Traceback" not in err
+    assert _digest(ds) == before
+    assert not list(tmp_path.glob(".ds*"))  # no temp folder or lock left behind
+
+
+def test_ignore_removes_the_stream(scene: tuple[Path, Path], tmp_path: Path) -> None:
+    ds = tmp_path / "ds"
+    shutil.copytree(scene[1], ds)
+    assert main(["roles", "set", str(ds), GENERIC, "ignore"]) == 0
+    m = json.loads((ds / "manifest.json").read_text())
+    assert GENERIC not in m["episodes"][0]["streams"]
+    assert "episodes/ep000/streams/mocap_box_pose.parquet" not in m["files"]
+    assert m["provenance"]["topics"][TOPIC]["role"] == "ignore"
