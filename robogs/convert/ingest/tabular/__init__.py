@@ -106,7 +106,8 @@ def convert_tabular(
     gap_s: float | None = None,
     package_roots: dict[str, str | Path] | None = None,
 ) -> Path:
-    """Deprecated: ``convert_path(log_path, out, fmt="tabular", options=...)``.
+    """Deprecated: ``convert_path(log_path, out, fmt="tabular", options=...)`` with
+    ``ConvertOptions(urdf=urdf, source=TabularOptions(mapping, gap_s, meshes_optional=True))``.
 
     Converts joint logs into a new dataset (atomically) through the one driver, with
     ``meshes_optional``: a URDF whose meshes do not resolve is copied without them.
@@ -126,8 +127,6 @@ def convert_tabular(
     Raises:
         InputError: unusable logs or mapping (file, row and column named).
     """
-    from dataclasses import dataclass, field
-
     from robogs.format.errors import InputError
 
     from ..context import ConvertOptions
@@ -135,22 +134,17 @@ def convert_tabular(
 
     warnings.warn(
         "convert_tabular is deprecated: use robogs.convert.ingest.convert.convert_path(src, out, "
-        'fmt="tabular", options=...)',
+        'fmt="tabular", options=ConvertOptions(urdf=..., source=TabularOptions(...)))',
         DeprecationWarning,
         stacklevel=2,
     )
     urdf_path = Path(urdf)
     if not urdf_path.is_file():
         raise InputError("URDF file not found", path=urdf_path)
-    tab = TabularOptions(Path(mapping) if mapping else None, gap_s, meshes_optional=True)
-
-    @dataclass(frozen=True)
-    class _Options(ConvertOptions):
-        tabular: TabularOptions = field(default=tab)
-
-    opts = _Options(
+    opts = ConvertOptions(
         urdf=urdf_path,
         package_roots={k: Path(v) for k, v in (package_roots or {}).items()},
+        source=TabularOptions(Path(mapping) if mapping else None, gap_s, meshes_optional=True),
     )
     convert_path(log_path, out, fmt="tabular", options=opts, force=force)
     return Path(out)

@@ -1,17 +1,15 @@
 """Options of the tabular converter and its command-line flags.
 
 The convert CLI calls :func:`add_arguments` on its parser and :func:`options_from_args` on the
-parsed arguments, and hands the :class:`TabularOptions` to the converter inside the shared
-``ConvertOptions`` (see :func:`from_convert_options` for where it is looked up). ``--map`` is
+parsed arguments, and hands the :class:`TabularOptions` to the converter as the shared
+``ConvertOptions``'s ``source`` (:func:`from_convert_options` reads it back). ``--map`` is
 shared with the bag converters (a role map there): it is read here, not added.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -75,20 +73,15 @@ def options_from_args(args: argparse.Namespace) -> TabularOptions:
 
 
 def from_convert_options(options: Any) -> TabularOptions:
-    """The tabular options carried by a ``ConvertOptions``.
-
-    A field holding a :class:`TabularOptions`, or a mapping with one under ``"tabular"``, wins;
-    otherwise they are built from the legacy ``mapping`` and ``gap_s`` fields.
-    """
-    if dataclasses.is_dataclass(options):
-        for f in dataclasses.fields(options):
-            value = getattr(options, f.name)
-            if isinstance(value, TabularOptions):
-                return value
-            if isinstance(value, Mapping) and isinstance(value.get("tabular"), TabularOptions):
-                return value["tabular"]
+    """The tabular options of a ``ConvertOptions``: its ``source`` when that is a
+    :class:`TabularOptions`, else built from the per-converter fields it answers
+    (``mapping``, ``gap_s``, ``meshes_optional``; the 0.2 flat keywords)."""
+    source = getattr(options, "source", None)
+    if isinstance(source, TabularOptions):
+        return source
     mapping = getattr(options, "mapping", None)
     return TabularOptions(
         mapping=Path(mapping) if mapping is not None else None,
         gap_s=getattr(options, "gap_s", None),
+        meshes_optional=bool(getattr(options, "meshes_optional", False)),
     )
