@@ -11,12 +11,11 @@ import shlex
 import sys
 from pathlib import Path
 
-from robogs.convert.registry import available_converters, get_converter
+from robogs.convert.ingest.option_flags import add_video_flag
+from robogs.convert.registry import available_converters, get_converter, options_of
 from robogs.format.errors import InputError
 
 __all__ = ["add_arguments", "run"]
-
-_UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,12 +35,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--list-formats", action="store_true", help="list the source formats and exit"
     )
     parser.add_argument("--force", action="store_true", help="replace an existing dataset at OUT")
-    g = parser.add_argument_group("bags and MCAP")
+    g = parser.add_argument_group("shared by the converters")
     g.add_argument(
         "--map",
         type=Path,
         metavar="YAML",
-        help="topic -> role mapping (YAML); for a tabular joint log, its column mapping",
+        help="read by the source's converter: for a bag/MCAP a topic -> role (and TF frame) "
+        "mapping; for a tabular joint log its column mapping",
     )
     g.add_argument(
         "--topic",
@@ -52,33 +52,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "generic=/x (decoded table) or ignore=/rosout; the roles table at the end says why each "
         "topic got its role",
     )
-    g.add_argument("--world-frame", metavar="FRAME", help="TF frame that is the dataset world")
-    g.add_argument(
-        "--tf-object",
-        action="append",
-        default=[],
-        metavar="NAME=FRAME",
-        help="write TF frame FRAME as object NAME's poses (repeatable; replaces the default "
-        "choice of every moving frame that is not a robot link or camera)",
-    )
-    g.add_argument(
-        "--no-tf-objects", action="store_true", help="do not write moving TF frames as objects"
-    )
-    g.add_argument(
-        "--tf-camera",
-        action="append",
-        default=[],
-        metavar="CAM=FRAME",
-        help="TF frame (OpenCV axes) of camera CAM, instead of its images' frame_id",
-    )
-    g.add_argument(
-        "--tf-tolerance-ms",
-        type=float,
-        default=100.0,
-        metavar="MS",
-        help="how far a stamp may lie outside a moving TF frame's samples (default 100 ms)",
-    )
-    g = parser.add_argument_group("robot")
     g.add_argument("--urdf", type=Path, help="robot URDF (copied with its meshes into robot/)")
     g.add_argument(
         "--package",
@@ -87,34 +60,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME=FOLDER",
         help="folder of a package:// name used by the URDF's meshes",
     )
-    g = parser.add_argument_group("videos and image folders")
     g.add_argument(
-        "--camera", type=Path, metavar="FILE", help="calibration (ROS/OpenCV YAML, ROS INI)"
+        "--split-at-gaps",
+        nargs="?",
+        const="auto",
+        default=None,
+        metavar="SECONDS",
+        help="cut each episode where every stream pauses longer than SECONDS (default: 10x the "
+        "median period of the densest stream, printed) into episodes <episode>_000, ...",
     )
-    g.add_argument(
-        "--camera-name", metavar="NAME", help="camera name (default: from the calibration or file)"
-    )
-    g.add_argument(
-        "--stamps", type=Path, metavar="CSV", help="frame stamps: CSV with frame_index,t_ns"
-    )
-    g.add_argument(
-        "--assume-fps",
-        type=float,
-        metavar="FPS",
-        help="derive frame stamps as i/FPS (recorded as stamp_source 'derived')",
-    )
-    g.add_argument(
-        "--offset-ns", type=int, default=0, help="added to container/sidecar stamps (ns)"
-    )
-    g.add_argument(
-        "--joints", type=Path, metavar="CSV", help="joint log: t_ns, position.<joint> ..."
-    )
-    g.add_argument("--no-video", action="store_true", help="write frames tables only (no rgb.mp4)")
-    g = parser.add_argument_group("static captures (nerfstudio, COLMAP)")
-    g.add_argument(
-        "--images", type=Path, metavar="DIR", help="image folder (default: next to the model)"
-    )
-    g.add_argument("--world-up", choices=_UP_AXES, help="source world's up axis, rotated to +z")
+    add_video_flag(g)  # read by bags, videos and captures (each declares it once)
+    # each converter adds its own group (registry: Converter.options)
+    seen: set[int] = set()
+    for conv in available_converters().values():
+        spec = options_of(conv)
+        if spec is not None and id(spec.add_arguments) not in seen:
+            seen.add(id(spec.add_arguments))
+            spec.add_arguments(parser)
+    g = parser.add_argument_group("structure from motion")
     g.add_argument(
         "--sfm",
         action="store_true",
@@ -180,6 +143,7 @@ def _summary(ds, out: Path) -> dict:
             for topic, rec in sorted((prov.get("topics") or {}).items())
         ],
         "decoded": prov.get("decoded"),
+        "split_at_gaps": prov.get("split_at_gaps"),
         "packages": (prov.get("robot") or {}).get("packages"),
     }
 
@@ -199,16 +163,72 @@ def _print_roles(roles: list[dict]) -> None:
         )
 
 
+def _split_gap(value: str | None) -> tuple[bool, float | None]:
+    """``--split-at-gaps [SECONDS]`` -> (split, gap in s or None for the derived one)."""
+    if value is None:
+        return False, None
+    if value == "auto":
+        return True, None
+    try:
+        gap = float(value)
+    except ValueError:
+        gap = float("nan")
+    if not (gap > 0 and gap < 1e9):
+        raise InputError(
+            f"--split-at-gaps expects a positive number of seconds, got {value!r}",
+            where="--split-at-gaps",
+        )
+    return True, gap
+
+
+def _source_format(args: argparse.Namespace, sfm: bool) -> str | None:
+    """The converter that will run: ``--from``, else detected (the first match of a glob)."""
+    from robogs.convert.registry import detect_format
+
+    if args.fmt:
+        return args.fmt
+    if sfm:
+        return "colmap"  # the poses recovered by --sfm are converted as a COLMAP model
+    src = args.src
+    if not src.exists() and any(c in str(src) for c in "*?["):
+        import glob
+
+        first = sorted(glob.glob(str(src)))[:1]
+        src = Path(first[0]) if first else src
+    return detect_format(src).name if src.exists() else None
+
+
+def _print_cuts(records: list[dict] | None) -> None:
+    """The cut table of ``--split-at-gaps``: the gap, then each piece and the pause after it."""
+    for rec in records or []:
+        how = (
+            f"derived: {rec['gap_s'] / rec['median_period_s']:.0f} x the median period "
+            f"{rec['median_period_s'] * 1e3:.3g} ms of {rec['densest']}"
+            if rec["derived"]
+            else "given"
+        )
+        print(
+            f"  split {rec['episode']} at pauses > {rec['gap_s']:.3g} s ({how}): "
+            f"{len(rec['episodes'])} episode(s)"
+        )
+        cuts = rec["cuts"]
+        for k, e in enumerate(rec["episodes"]):
+            pause = (
+                f"  then pause {cuts[k]['pause_s']:.3f} s, cut at {cuts[k]['cut_ns']}"
+                if k < len(cuts)
+                else ""
+            )
+            print(
+                f"    {e['id']:<16} {e['start_ns']} .. {e['end_ns']} "
+                f"({(e['end_ns'] - e['start_ns']) / 1e9:.3f} s){pause}"
+            )
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``robogs convert``; returns the exit code."""
     from robogs.convert.ingest.context import ConvertOptions
     from robogs.convert.ingest.convert import convert_path
-    from robogs.convert.ingest.roles import (
-        load_frame_map,
-        load_role_map,
-        parse_frame_flags,
-        parse_topic_flags,
-    )
+    from robogs.convert.ingest.roles import parse_topic_flags
 
     if args.list_formats:
         for name in available_converters():
@@ -217,46 +237,20 @@ def run(args: argparse.Namespace) -> int:
     if args.src is None or args.out is None:
         print("robogs convert: error: SRC and OUT are required", file=sys.stderr)
         return 2
-    from robogs.convert.registry import detect_format
-
-    roles = {}
-    tf_objects: dict[str, str] = {}
-    tf_cameras: dict[str, str] = {}
     sfm = getattr(args, "sfm", False)
-    fmt = args.fmt or (detect_format(args.src).name if args.src.exists() and not sfm else None)
-    tabular = fmt == "tabular"
-    if args.map is not None and not tabular:
-        roles.update({t: str(r) for t, r in load_role_map(args.map).items()})
-        tf_objects, tf_cameras = load_frame_map(args.map)
-    tf_objects.update(parse_frame_flags(args.tf_object, "--tf-object"))
-    tf_cameras.update(parse_frame_flags(args.tf_camera, "--tf-camera"))
-    if not args.tf_tolerance_ms >= 0:
-        raise InputError("--tf-tolerance-ms must be >= 0", where="--tf-tolerance-ms")
-    roles.update({t: str(r) for t, r in parse_topic_flags(args.topic).items()})
-    if args.assume_fps is not None and not args.assume_fps > 0:
-        raise InputError("--assume-fps must be positive", where="--assume-fps")
+    fmt = _source_format(args, sfm)
+    spec = options_of(get_converter(fmt)) if fmt else None
+    split, gap_s = _split_gap(args.split_at_gaps)
     progress = sys.stderr.isatty() if args.progress is None else bool(args.progress)
     opts = ConvertOptions(
-        roles=roles,
+        roles={t: str(r) for t, r in parse_topic_flags(args.topic).items()},
         urdf=args.urdf,
         package_roots=_pairs(args.package, "--package"),
         episode=args.episode,
-        world_frame=args.world_frame,
-        camera_file=args.camera,
-        camera_name=args.camera_name,
-        stamps_csv=args.stamps,
-        assume_fps=args.assume_fps,
-        offset_ns=args.offset_ns,
-        joints_csv=args.joints,
-        images=args.images,
-        world_up=args.world_up,
-        video=not args.no_video,
-        mapping=args.map if tabular else None,
-        tf_objects=tf_objects,
-        tf_auto_objects=not args.no_tf_objects,
-        tf_cameras=tf_cameras,
-        tf_tolerance_ns=int(round(args.tf_tolerance_ms * 1e6)),
         progress=progress,
+        split_gaps=split,
+        split_gap_s=gap_s,
+        source=spec.options_from_args(args) if spec is not None else None,
         command="robogs convert " + " ".join(shlex.quote(a) for a in sys.argv[2:])
         if sys.argv[1:2] == ["convert"]
         else None,
@@ -291,6 +285,7 @@ def run(args: argparse.Namespace) -> int:
     if summary["cameras"]:
         print(f"  cameras: {', '.join(summary['cameras'])}")
     print(f"  robot: {'yes' if summary['robot'] else 'no'}")
+    _print_cuts(summary["split_at_gaps"])
     for d in summary["dropped"]:
         reasons = "; ".join(f"{k} x{v}" for k, v in d["reasons"].items())
         print(f"  not converted: {d['topic']} ({d['type']}) x{d['messages']}: {reasons}")

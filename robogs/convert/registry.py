@@ -1,8 +1,10 @@
 """Registry of ingest converters, keyed by source format name.
 
-A converter is a name, a ``detect(path) -> bool`` predicate, and a
+A converter is a name, a ``detect(path) -> bool`` predicate, a
 ``convert(src, ctx)`` function that fills an :class:`~robogs.convert.ingest.context.IngestContext`
-(a dataset writer plus the provenance record). The built-in converters register
+(a dataset writer plus the provenance record), and optionally its own options
+(:class:`ConverterOptions`: a dataclass, ``add_arguments(parser)`` and
+``options_from_args(args)``), which the convert CLI adds as one argument group. The built-in converters register
 themselves when this registry is first used; third-party packages add theirs
 through the entry-point group ``robogs.converters``: an entry point may load to a
 :class:`Converter` (registered as is), a module, or a callable taking no argument that
@@ -17,11 +19,13 @@ Example:
 
 from __future__ import annotations
 
+import argparse
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from robogs.format.errors import InputError
 from robogs.format.plugins import ENTRY_POINT_GROUPS, Entry, RegistrationError, Registry
@@ -31,6 +35,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Converter",
+    "ConverterOptions",
     "ENTRY_POINT_GROUP",
     "register_converter",
     "available_converters",
@@ -38,6 +43,7 @@ __all__ = [
     "REGISTRY",
     "get_converter",
     "detect_format",
+    "options_of",
 ]
 
 ENTRY_POINT_GROUP = ENTRY_POINT_GROUPS["converters"]
@@ -58,6 +64,39 @@ ConvertFn = Callable[[Path, "IngestContext"], None]
 
 
 @dataclass(frozen=True)
+class ConverterOptions:
+    """A converter's own options and command-line flags.
+
+    Attributes:
+        type: the frozen dataclass of its options (``ConvertOptions.source`` when it runs).
+        add_arguments: ``add_arguments(parser)``: adds its flags as one argument group.
+        options_from_args: ``options_from_args(args) -> type``; raises ``InputError`` on a
+            bad flag.
+    """
+
+    type: type
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    options_from_args: Callable[[argparse.Namespace], Any]
+
+    @classmethod
+    def from_module(cls, module: str, type_name: str) -> ConverterOptions:
+        """The options of a module exposing ``type_name``, ``add_arguments`` and
+        ``options_from_args``."""
+        mod = importlib.import_module(module)
+        return cls(getattr(mod, type_name), mod.add_arguments, mod.options_from_args)
+
+
+#: options of the built-in converters whose modules do not declare them (adapter)
+_BUILTIN_OPTIONS: dict[str, tuple[str, str]] = {
+    "video": ("robogs.convert.ingest.video_options", "VideoOptions"),
+    "images": ("robogs.convert.ingest.video_options", "VideoOptions"),
+    "nerfstudio": ("robogs.convert.ingest.capture_options", "CaptureOptions"),
+    "colmap": ("robogs.convert.ingest.capture_options", "CaptureOptions"),
+    "tabular": ("robogs.convert.ingest.tabular.options", "TabularOptions"),
+}
+
+
+@dataclass(frozen=True)
 class Converter:
     """One source format.
 
@@ -68,6 +107,7 @@ class Converter:
         description: one line for listings.
         priority: detection order, higher first (a folder with ``transforms.json``
             is nerfstudio before it is an image folder).
+        options: its own options and flags (None: it takes only the shared core).
     """
 
     name: str
@@ -75,6 +115,7 @@ class Converter:
     convert: ConvertFn
     description: str = ""
     priority: int = 0
+    options: ConverterOptions | None = None
 
 
 def _adopt(reg: Registry[Converter], name: str, obj: object) -> None:
@@ -110,6 +151,7 @@ def register_converter(
     *,
     description: str = "",
     priority: int = 0,
+    options: ConverterOptions | None = None,
     replace: bool = False,
 ) -> Converter:
     """Add a converter to the registry.
@@ -120,6 +162,7 @@ def register_converter(
         convert: ``convert(src, ctx)``.
         description: one line for listings.
         priority: detection order, higher first.
+        options: the converter's own options dataclass and flags.
         replace: allow replacing an existing converter of that name.
 
     Returns:
@@ -132,7 +175,7 @@ def register_converter(
     if not name or not all(c.isalnum() or c in "_-" for c in name):
         raise RegistrationError(f"invalid converter name {name!r}")
     return REGISTRY.register(
-        name, Converter(name, detect, convert, description, priority), replace=replace
+        name, Converter(name, detect, convert, description, priority, options), replace=replace
     )
 
 
@@ -178,3 +221,13 @@ def detect_format(path: str | Path) -> Converter:
         path=p,
         hint=f"pass --from with one of {', '.join(convs)}",
     )
+
+
+def options_of(conv: Converter) -> ConverterOptions | None:
+    """The options of ``conv``: its own, else the built-in adapter's (None: core only)."""
+    if conv.options is not None:
+        return conv.options
+    spec = _BUILTIN_OPTIONS.get(conv.name)
+    if spec is None or conv.convert.__module__.partition(".ingest")[0] != "robogs.convert":
+        return None
+    return ConverterOptions.from_module(*spec)

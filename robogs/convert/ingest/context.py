@@ -3,12 +3,19 @@
 A converter's job is ``convert(src, ctx)``: read ``src`` and write tables, videos and
 cameras through ``ctx.writer``, declare streams with :meth:`IngestContext.add_stream`, and
 record everything it skipped in ``ctx.provenance``. Creating the writer, attaching the
-robot, writing the provenance block and committing are done by
+robot, writing the provenance block, cutting at gaps and committing are done by
 :func:`robogs.convert.ingest.convert.convert_path` around it.
+
+Options come in two parts (``robogs/convert/design.md``): the shared core in
+:class:`ConvertOptions`, and the options dataclass of the converter that runs (``source``:
+:class:`~.bag_options.BagOptions`, :class:`~.video_options.VideoOptions`,
+:class:`~.capture_options.CaptureOptions`, ``tabular.options.TabularOptions``, or a plug-in's).
 """
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,78 +25,138 @@ from robogs.format.writer import DatasetWriter
 from .progress import ProgressReporter
 from .provenance import Provenance
 
-__all__ = ["ConvertOptions", "IngestContext"]
+__all__ = ["ConvertOptions", "IngestContext", "LEGACY_FIELDS"]
+
+#: the per-converter fields of the 0.2 flat ``ConvertOptions``; still accepted as keywords
+#: (routed to the options of the converter that runs, see :meth:`ConvertOptions.resolve`)
+LEGACY_FIELDS = frozenset(
+    {
+        "world_frame",
+        "camera_file",
+        "camera_name",
+        "stamps_csv",
+        "assume_fps",
+        "offset_ns",
+        "joints_csv",
+        "images",
+        "world_up",
+        "video",
+        "stamp_tolerance_ns",
+        "jump_back_ns",
+        "jump_forward_ns",
+        "mapping",
+        "gap_s",
+        "tf_objects",
+        "tf_auto_objects",
+        "tf_cameras",
+        "tf_tolerance_ns",
+        "tf_spill_rows",
+    }
+)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class ConvertOptions:
-    """User choices for a conversion (all optional).
+    """The shared core of a conversion's options, plus the running converter's own.
 
     Attributes:
         roles: topic -> role overrides (``joint_states``, ``camera_image``, ``camera_info``,
             ``camera_labels``, ``object_pose:<name>``, ``ee_pose:<link>``, ``wrench:<frame>``,
-            ``tf_static``, ``robot_description``, ``ignore``).
+            ``tf_static``, ``robot_description``, ``ignore``), from ``--topic``.
         urdf: robot URDF to copy into ``robot/`` (with its meshes).
         package_roots: ``package://NAME`` -> folder, for the URDF's mesh URIs.
-        episode: id of the episode written.
-        world_frame: TF frame that is the dataset world (default: ``world``, then the
-            URDF root link, ``base_link``, ``base``, ``map``).
-        camera_file: calibration YAML/INI for a video or image-folder source.
-        camera_name: camera name for a video or image-folder source.
-        stamps_csv: sidecar ``frame_index,t_ns`` CSV for a video or image folder.
-        assume_fps: derive frame stamps as ``offset + i / fps`` (only when asked; recorded
-            as ``stamp_source: derived``).
-        offset_ns: offset added to video/container stamps to put them on the dataset clock.
-        joints_csv: joint log (``t_ns``, ``position.<joint>`` ...) next to a video.
-        images: image folder of a static capture (COLMAP/nerfstudio) when not the default.
-        world_up: world up axis of a static capture (``+y`` rotates a y-up world to z-up);
-            ``None`` keeps the source world as it is.
-        video: decode images and write ``rgb.mp4`` (False: frames tables only).
+        episode: id of the episode written (the base name when cut at gaps).
         progress: show a progress bar on stderr.
-        stamp_tolerance_ns: header stamps further than this outside the bag's time range are
-            not plausible.
-        jump_back_ns: a stamp going back by more than this is a clock jump (sample dropped).
-        jump_forward_ns: a stamp jumping forward by more than this is reported.
         command: the command line, for the provenance record.
-        mapping: column mapping YAML of a tabular joint log (``--map`` for that format).
-        gap_s: a jump in time longer than this splits a tabular log into segments.
-        tf_objects: object name -> TF frame written as its ``object_poses`` (``--tf-object``);
-            when given, only these frames become objects.
-        tf_auto_objects: without ``tf_objects``, write every moving TF frame that is not a
-            robot link or camera frame as an object (``--no-tf-objects`` turns it off).
-        tf_cameras: camera name -> TF frame of the camera (OpenCV axes), instead of the
-            images' ``header.frame_id`` (``--tf-camera``).
-        tf_tolerance_ns: a stamp may lie this far outside a moving TF edge's samples (its first
-            or last sample is used); further out there is no transform.
-        tf_spill_rows: ``/tf`` samples per edge kept in RAM before spilling to a temp file.
+        split_gaps: cut every episode where all its streams pause (``--split-at-gaps``).
+        split_gap_s: the pause (s) that cuts; None derives it from the data (10x the median
+            period of the densest stream).
+        source: the options dataclass of the converter that runs (None: its defaults).
+        legacy: 0.2 flat keywords (:data:`LEGACY_FIELDS`) not yet routed to ``source``.
+
+    Reading a per-converter field on the options (``ctx.options.video``) reads it from
+    ``source``, then ``legacy``: converters written against the flat 0.2 options keep working.
     """
 
     roles: dict[str, str] = field(default_factory=dict)
     urdf: Path | None = None
     package_roots: dict[str, Path] = field(default_factory=dict)
     episode: str = "ep000"
-    world_frame: str | None = None
-    camera_file: Path | None = None
-    camera_name: str | None = None
-    stamps_csv: Path | None = None
-    assume_fps: float | None = None
-    offset_ns: int = 0
-    joints_csv: Path | None = None
-    images: Path | None = None
-    world_up: str | None = None
-    video: bool = True
     progress: bool = False
-    stamp_tolerance_ns: int = 10_000_000_000
-    jump_back_ns: int = 1_000_000_000
-    jump_forward_ns: int = 3600 * 1_000_000_000
     command: str | None = None
-    mapping: Path | None = None
-    gap_s: float | None = None
-    tf_objects: dict[str, str] = field(default_factory=dict)
-    tf_auto_objects: bool = True
-    tf_cameras: dict[str, str] = field(default_factory=dict)
-    tf_tolerance_ns: int = 100_000_000
-    tf_spill_rows: int = 1 << 18
+    split_gaps: bool = False
+    split_gap_s: float | None = None
+    source: Any = None
+    legacy: Mapping[str, Any] = field(default_factory=dict)
+
+    def __init__(
+        self,
+        *,
+        roles: Mapping[str, str] | None = None,
+        urdf: Path | None = None,
+        package_roots: Mapping[str, Path] | None = None,
+        episode: str = "ep000",
+        progress: bool = False,
+        command: str | None = None,
+        split_gaps: bool = False,
+        split_gap_s: float | None = None,
+        source: Any = None,
+        legacy: Mapping[str, Any] | None = None,
+        **flat: Any,
+    ) -> None:
+        unknown = sorted(set(flat) - LEGACY_FIELDS)
+        if unknown:
+            raise TypeError(f"ConvertOptions got unexpected keyword(s) {', '.join(unknown)}")
+        merged = {**(legacy or {}), **flat}
+        if source is not None and dataclasses.is_dataclass(source):
+            names = {f.name for f in dataclasses.fields(source)}
+            own = {k: v for k, v in merged.items() if k in names}
+            if own:
+                source = dataclasses.replace(source, **own)
+                merged = {k: v for k, v in merged.items() if k not in names}
+        for name, value in (
+            ("roles", dict(roles or {})),
+            ("urdf", urdf),
+            ("package_roots", dict(package_roots or {})),
+            ("episode", episode),
+            ("progress", progress),
+            ("command", command),
+            ("split_gaps", split_gaps),
+            ("split_gap_s", split_gap_s),
+            ("source", source),
+            ("legacy", merged),
+        ):
+            object.__setattr__(self, name, value)
+
+    def __getattr__(self, name: str) -> Any:
+        """A per-converter field: from ``source``, then from the legacy keywords."""
+        if name.startswith("__") or name in ("source", "legacy"):
+            raise AttributeError(name)
+        d = self.__dict__
+        src = d.get("source")
+        if src is not None and hasattr(src, name):
+            return getattr(src, name)
+        legacy = d.get("legacy") or {}
+        if name in legacy:
+            return legacy[name]
+        raise AttributeError(
+            f"ConvertOptions has no {name!r} (neither a core option nor one of "
+            f"{type(src).__name__ if src is not None else 'the converter'}'s options)"
+        )
+
+    def resolve(self, options_type: type | None) -> ConvertOptions:
+        """These options with ``source`` an instance of ``options_type`` (the running
+        converter's class): the given one, else one built from the legacy keywords it has."""
+        if options_type is None or isinstance(self.source, options_type):
+            return self
+        names = {f.name for f in dataclasses.fields(options_type)}
+        own = {k: v for k, v in self.legacy.items() if k in names}
+        rest = {k: v for k, v in self.legacy.items() if k not in names}
+        return dataclasses.replace(self, source=options_type(**own), legacy=rest)
+
+    def source_as(self, options_type: type) -> Any:
+        """The running converter's options as ``options_type`` (its defaults when absent)."""
+        return self.resolve(options_type).source
 
 
 @dataclass

@@ -13,8 +13,9 @@ from pathlib import Path
 from robogs.format.dataset import Dataset
 from robogs.format.errors import InputError
 
-from ..registry import Converter, detect_format, get_converter
+from ..registry import Converter, detect_format, get_converter, options_of
 from .context import ConvertOptions, IngestContext
+from .gaps import split_episodes
 from .progress import ProgressReporter
 from .provenance import Provenance
 from .robot import attach_robot, attach_robot_description, urdf_root_link
@@ -36,7 +37,10 @@ def convert_path(
         src: bag, MCAP, video, image folder, nerfstudio or COLMAP capture.
         out: dataset folder to create.
         fmt: source format name (default: detected from ``src``).
-        options: conversion options.
+        options: conversion options: the shared core, the converter's own in ``source``
+            (0.2 flat keywords are routed there); ``split_gaps`` cuts every episode where all
+            its streams pause (:mod:`.gaps`), the cut table going to
+            ``provenance.split_at_gaps``.
         force: replace an existing dataset at ``out``.
 
     Returns:
@@ -47,8 +51,9 @@ def convert_path(
             output without ``force``; nothing is written in that case.
     """
     src, out = Path(src), Path(out)
-    opts = options or ConvertOptions()
     conv: Converter = get_converter(fmt) if fmt else detect_format(src)
+    spec = options_of(conv)
+    opts = (options or ConvertOptions()).resolve(spec.type if spec is not None else None)
     if not src.exists():
         raise InputError("source does not exist", path=src)
     prov = Provenance(conv.name, src.name)
@@ -89,6 +94,10 @@ def convert_path(
         if ctx.clock:
             writer.manifest["conventions"]["clock"] = ctx.clock
         writer.manifest["provenance"] = prov.to_dict()
+        if opts.split_gaps:
+            writer.manifest["provenance"]["split_at_gaps"] = split_episodes(
+                writer, opts.split_gap_s
+            )
         if opts.command:
             writer.manifest["generator"] = {"command": opts.command[:2000]}
         return writer.commit()

@@ -39,6 +39,7 @@ from robogs.format.errors import InputError
 
 from ..registry import register_converter
 from . import cdr_fast, foxglove
+from .bag_options import BAG_OPTIONS
 from .context import IngestContext
 from .decompress import MAX_CHUNK_BYTES, DecompressionLimitError, capped_decompression
 from .messages import MessageIngest, TopicInfo
@@ -371,5 +372,6 @@ register_converter(
     detect_mcap,
     convert_mcap,
     description="MCAP file (ROS 2, ROS 1, JSON/Foxglove, protobuf/Foxglove)",
+    options=BAG_OPTIONS,
     priority=60,
 )

@@ -27,6 +27,7 @@ from robogs.format.cameras import CameraModel
 from robogs.format.errors import InputError
 from robogs.format.images import encode_label_png
 
+from .bag_options import BagOptions
 from .calibration import camera_from_info_msg
 from .context import IngestContext
 from .generic import GenericTable
@@ -159,6 +160,7 @@ class MessageIngest:
     def __init__(self, ctx: IngestContext, *, time_range: tuple[int, int] | None) -> None:
         self.ctx = ctx
         self.opts = ctx.options
+        self.bag: BagOptions = ctx.options.source_as(BagOptions)
         self.prov = ctx.provenance
         self.time_range = time_range
         self.roles: dict[str, Role] = {}
@@ -168,8 +170,8 @@ class MessageIngest:
         self.tf = TfIngest(
             self.prov,
             self._plausible,
-            tolerance_ns=self.opts.tf_tolerance_ns,
-            spill_rows=self.opts.tf_spill_rows,
+            tolerance_ns=self.bag.tf_tolerance_ns,
+            spill_rows=self.bag.tf_spill_rows,
         )
         self._static_topics: set[str] = set()
         self._main_started = False
@@ -207,7 +209,7 @@ class MessageIngest:
         """
         overrides = {
             t: parse_role(r, where=f"role of {t}") if isinstance(r, str) else r
-            for t, r in self.opts.roles.items()
+            for t, r in {**self.bag.role_map, **self.opts.roles}.items()
         }
         known = {t.topic for t in topics}
         missing = sorted(set(overrides) - known)
@@ -322,7 +324,7 @@ class MessageIngest:
             return False
         if self.time_range is None:
             return True
-        tol = self.opts.stamp_tolerance_ns
+        tol = self.bag.stamp_tolerance_ns
         return self.time_range[0] - tol <= t <= self.time_range[1] + tol
 
     def _stamp(self, topic: str, msg: Any, log_time: int) -> int | None:
@@ -358,8 +360,8 @@ class MessageIngest:
     def _sink_kwargs(self) -> dict[str, Any]:
         return {
             "provenance": self.prov,
-            "jump_back_ns": self.opts.jump_back_ns,
-            "jump_forward_ns": self.opts.jump_forward_ns,
+            "jump_back_ns": self.bag.jump_back_ns,
+            "jump_forward_ns": self.bag.jump_forward_ns,
         }
 
     # ------------------------------------------------------------------ probing
@@ -705,7 +707,7 @@ class MessageIngest:
                 w.path(f"{ep}/cameras/{name}/rgb.mp4"),
                 topic=topic,
                 provenance=self.prov,
-                video=self.opts.video,
+                video=self.bag.video,
                 fps_hint=self._fps_hint(topic),
             )
             header = getattr(msg, "header", None)
@@ -715,7 +717,7 @@ class MessageIngest:
         if not cam.sink.accepts(t):
             return
         rgb = None
-        if self.opts.video:
+        if self.bag.video:
             out = self._decode(topic, t, msg)
             if out is None:
                 return
@@ -813,11 +815,11 @@ class MessageIngest:
         """The TF frame taken as the dataset world."""
         if self._world is None:
             frames = self.tf.buf.frames
-            cands = [self.opts.world_frame] if self.opts.world_frame else []
+            cands = [self.bag.world_frame] if self.bag.world_frame else []
             cands += [self.ctx.robot_root_link] if self.ctx.robot_root_link else []
             cands += list(_WORLD_CANDIDATES)
             self._world = next(
-                (c for c in cands if c in frames), cands[0] if self.opts.world_frame else "world"
+                (c for c in cands if c in frames), cands[0] if self.bag.world_frame else "world"
             )
         return self._world
 
@@ -879,12 +881,12 @@ class MessageIngest:
             return
         world = self.world_frame()
         cam_frames = {c.frame_id for c in self._cameras.values() if c.frame_id}
-        cam_frames |= {f.lstrip("/") for f in self.opts.tf_cameras.values()}
+        cam_frames |= {f.lstrip("/") for f in self.bag.tf_cameras.values()}
         taken = {r.name or safe_name(t) for t, r in self.roles.items() if r.kind == "object_pose"}
         self.tf.select_objects(
             world,
-            explicit=dict(self.opts.tf_objects),
-            auto=self.opts.tf_auto_objects,
+            explicit=dict(self.bag.tf_objects),
+            auto=self.bag.tf_auto_objects,
             camera_frames=cam_frames,
             robot_links=self._robot_links(),
             taken=taken,
@@ -1141,7 +1143,7 @@ class MessageIngest:
                 f"{frame or '(no frame_id)'!r}; T_world_cam set to identity"
             )
             return np.eye(4), None
-        if frame and "optical" not in frame and frame not in self.opts.tf_cameras.values():
+        if frame and "optical" not in frame and frame not in self.bag.tf_cameras.values():
             self.prov.note(
                 f"camera {name}: frame {frame!r} is taken as an optical frame (x right, y down, "
                 "z forward); pass --tf-camera CAM=FRAME to choose another"
@@ -1181,7 +1183,7 @@ class MessageIngest:
         from dataclasses import replace
 
         ctx, ep = self.ctx, self.ctx.episode_dir()
-        unknown = sorted(set(self.opts.tf_cameras) - set(self._cameras))
+        unknown = sorted(set(self.bag.tf_cameras) - set(self._cameras))
         if unknown:
             raise InputError(
                 f"--tf-camera names camera(s) not in the source: {', '.join(unknown)}",
@@ -1193,7 +1195,7 @@ class MessageIngest:
             model = cam.model
             extrinsics_rel = None
             if model is not None:
-                frame = self.opts.tf_cameras.get(name, cam.frame_id).lstrip("/")
+                frame = self.bag.tf_cameras.get(name, cam.frame_id).lstrip("/")
                 T, extrinsics_rel = self._camera_extrinsics(name, cam, frame)
                 if stats is not None and cam.sink is not None and cam.sink.size is not None:
                     if cam.sink.size != (model.width, model.height):
@@ -1221,7 +1223,7 @@ class MessageIngest:
                     "nominal_rate_hz": stats.rate_hz,
                     "source": cam.image_topic or "",
                 }
-                if self.opts.video:
+                if self.bag.video:
                     entry["video"] = f"{ep}/cameras/{name}/rgb.mp4"
                 if name in self._labels_writers:
                     entry["labels"] = f"{ep}/cameras/{name}/labels.parquet"

@@ -19,6 +19,7 @@ from typing import Any
 from robogs.format.errors import InputError, RobogsError
 
 from ..registry import register_converter
+from .bag_options import BAG_OPTIONS
 from .context import IngestContext
 from .decompress import capped_decompression
 from .messages import MessageIngest, TopicInfo
@@ -284,12 +285,18 @@ def convert_ros2(src: Path, ctx: IngestContext) -> None:
 
 
 register_converter(
-    "ros1", detect_ros1, convert_ros1, description="ROS 1 .bag file (rosbags)", priority=50
+    "ros1",
+    detect_ros1,
+    convert_ros1,
+    description="ROS 1 .bag file (rosbags)",
+    options=BAG_OPTIONS,
+    priority=50,
 )
 register_converter(
     "ros2",
     detect_ros2,
     convert_ros2,
     description="ROS 2 bag folder with metadata.yaml (sqlite3 or mcap storage)",
+    options=BAG_OPTIONS,
     priority=100,
 )
