@@ -29,6 +29,7 @@ VERBS: dict[str, tuple[str, str]] = {
         "generate a synthetic scene (optionally with a hidden physical effect)",
     ),
     "validate": ("robogs.cli.validate_cmd", "check a dataset against the spec"),
+    "migrate": ("robogs.cli.migrate_cmd", "rewrite a dataset into the sharded (chunked) layout"),
     "convert": (
         "robogs.cli.convert_cmd",
         "convert a bag, MCAP, video, capture or joint log into a dataset",
@@ -55,6 +56,7 @@ VERBS: dict[str, tuple[str, str]] = {
         "fill splats, meshes and binding from multi-view frames",
     ),
     "evaluate": ("robogs.reconstruct.cli", "image and mesh quality metrics"),
+    "roles": ("robogs.cli.roles_cmd", "list stream roles with reasons; set: re-role a generic stream"),
     "plugins": (
         "robogs.cli.plugins_cmd",
         "list the checks, converters, exporters, effects, backends and layers, with status",

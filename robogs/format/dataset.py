@@ -1,7 +1,8 @@
 """``Dataset``: the one way to read a robogs dataset (writing goes through ``DatasetWriter``).
 
 Everything is lazy: opening reads only ``manifest.json``; tables, images,
-meshes, splats and the URDF are read when asked for. Nothing here writes to
+meshes, splats and the URDF are read when asked for, and the chunk indexes of a sharded
+dataset (``robogs.format.shards``) when its episodes or files are. Nothing here writes to
 the dataset folder.
 
 Example:
@@ -27,6 +28,7 @@ from .errors import FormatError
 from .jsonio import read_json
 from .paths import resolve_inside
 from .schemas import schema_problems
+from .shards import ShardProblem, expand, is_sharded, read_chunk
 from .spec_version import migrate
 from .splats import SplatSet, read_splat_ply
 
@@ -192,6 +194,9 @@ class Dataset:
         #: identity of the manifest file as read (device, inode, size, mtime ns); an edit
         #: refuses to commit over a dataset whose manifest is no longer this one
         self.manifest_stamp: tuple[int, int, int, int] | None = None
+        #: problems with chunk indexes met by ``full_manifest(lenient=True)``
+        self.shard_problems: list[ShardProblem] = []
+        self._merged: dict[str, Any] | None = None
 
     # -- opening and creating -------------------------------------------------
     @classmethod
@@ -289,7 +294,40 @@ class Dataset:
 
     @property
     def files(self) -> dict[str, dict[str, Any]]:
-        return dict(self.manifest.get("files", {}))
+        """Every listed file (a sharded dataset's chunk indexes are read for it)."""
+        return dict(self.full_manifest().get("files", {}))
+
+    @property
+    def sharded(self) -> bool:
+        """True for the chunked layout of spec 1.1.0 (episodes listed in chunk indexes)."""
+        return is_sharded(self.manifest)
+
+    def full_manifest(self, *, lenient: bool = False) -> dict[str, Any]:
+        """The manifest with every chunk index merged in (the manifest itself when flat).
+
+        Read once and kept. With ``lenient`` an unreadable or malformed index is left out and
+        noted in :attr:`shard_problems` (the validator reports them) instead of raising.
+
+        Raises:
+            FormatError: a chunk index cannot be read (not ``lenient``).
+        """
+        if not self.sharded:
+            return self.manifest
+        if self._merged is None:
+            problems: list[ShardProblem] | None = [] if lenient else None
+            self._merged = expand(
+                self.root, self.manifest, problems=problems, manifest_path=self.manifest_path
+            )
+            self.shard_problems = problems or []
+        return self._merged
+
+    @property
+    def num_episodes(self) -> int:
+        """Number of episodes, from the manifest alone (no chunk index is read)."""
+        shards = self.manifest.get("shards")
+        if isinstance(shards, dict) and isinstance(shards.get("episodes"), int):
+            return int(shards["episodes"])
+        return len(self.full_manifest().get("episodes", []))
 
     @cached_property
     def budgets(self) -> dict[str, float]:
@@ -303,10 +341,22 @@ class Dataset:
     # -- episodes ---------------------------------------------------------------
     @property
     def episodes(self) -> list[Episode]:
-        return [Episode(self, e) for e in self.manifest.get("episodes", [])]
+        return [Episode(self, e) for e in self.full_manifest().get("episodes", [])]
 
     def episode(self, episode_id: str | None = None) -> Episode:
-        """One episode by id (the only one if ``episode_id`` is None)."""
+        """One episode by id (the only one if ``episode_id`` is None).
+
+        A sharded dataset reads its chunk indexes one at a time until the episode is found.
+        """
+        if self.sharded and self._merged is None and episode_id is not None:
+            for e in self.manifest.get("episodes", []):
+                if e.get("id") == episode_id:
+                    return Episode(self, e)
+            for entry in self.manifest["shards"].get("chunks", []):
+                doc = read_chunk(self.root, entry, manifest_path=self.manifest_path)
+                for e in doc["episodes"]:
+                    if isinstance(e, dict) and e.get("id") == episode_id:
+                        return Episode(self, e)
         eps = self.episodes
         if episode_id is None and len(eps) == 1:
             return eps[0]

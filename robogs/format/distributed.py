@@ -583,7 +583,8 @@ def validate_distributed(
             ctx, checks, episodes_per_task=episodes_per_task, files_per_task=files_per_task
         )
         stats.units, stats.reason = len(plan.units), plan.reason
-        base = {k: v for k, v in ctx.manifest.items() if k not in ("episodes", "files")}
+        # the workers get episodes and files through their units, never the chunk indexes
+        base = {k: v for k, v in ctx.manifest.items() if k not in ("episodes", "files", "shards")}
         stream = executor.run(str(ctx.root), base, plan.units, settings) if plan.units else iter(())
         state["stream"], state["left"] = stream, len(plan.units)
 

@@ -282,7 +282,8 @@ class DatasetWriter:
         # on abort, garbage collection or interpreter exit: temp folder and lock file go
         self._finalizer = weakref.finalize(self, _abandon, self._lock, self.tmp)
         if base is not None:
-            self.manifest: dict[str, Any] = {k: v for k, v in base.manifest.items() if k != "files"}
+            merged = base.full_manifest()  # a sharded base: its chunk indexes merged in
+            self.manifest: dict[str, Any] = {k: v for k, v in merged.items() if k != "files"}
             self._link_base(base)
         else:
             self.manifest = {
@@ -536,7 +537,17 @@ class DatasetWriter:
         }
         self.manifest["spec_version"] = SPEC_VERSION
         self.manifest["files"] = self._file_entries()
-        problems = schema_problems("manifest", self.manifest)
+        sharded = "shards" in self.manifest  # the chunked layout (checked merged, then split)
+        merged = {k: v for k, v in self.manifest.items() if k != "shards"}
+        problems = schema_problems("manifest", merged if sharded else self.manifest)
+        if sharded and not problems:  # one index per episodes/chunk-NNN/
+            from .checks.context import STREAM_FILE_FIELDS
+            from .shards import shard_manifest
+
+            self.manifest = shard_manifest(
+                self.tmp, self.manifest, stream_fields=tuple(STREAM_FILE_FIELDS), hasher=sha256_file
+            )
+            problems = schema_problems("manifest", self.manifest)
         if problems:
             raise FormatError(
                 f"refusing to commit an invalid manifest: {problems[0].message}",

@@ -10,7 +10,8 @@ end-effector pose has a closed form:
 
 Each episode holds ``joint_states`` (positions and analytic velocities of a sum of sines) and
 ``ee_poses`` (the closed-form pose of ``tool0``), both at ``rate_hz`` on an int64 ns clock.
-Tables are written in row groups of 65,536 rows, like the robogs writer.
+Tables are written in row groups of 65,536 rows, like the robogs writer. Large datasets use the
+chunked layout of spec 1.1.0 (``chunk_size``).
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ import pyarrow.parquet as pq
 __all__ = [
     "write_bulk_dataset",
     "write_bulk_bags",
+    "SHARD_ABOVE",
+    "DEFAULT_CHUNK_SIZE",
     "planar_urdf",
     "bulk_cli",
     "LINKS_M",
@@ -47,6 +50,11 @@ _BASE_Z = 0.1
 _T0_NS = 1_700_000_000_000_000_000
 _ROW_GROUP = 1 << 16
 _CHUNK_ROWS = 1 << 18
+#: ``robogs synth --episodes N`` shards above this many episodes (the flat manifest lists every
+#: file: 2 entries per episode) ...
+SHARD_ABOVE = 100
+#: ... in chunks of this many episodes, as LeRobot v3's chunk folders
+DEFAULT_CHUNK_SIZE = 1000
 
 
 def planar_urdf() -> str:
@@ -148,6 +156,20 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+def _file_entry(p: Path) -> dict[str, Any]:
+    entry: dict[str, Any] = {"sha256": _sha256(p), "size": p.stat().st_size}
+    if p.suffix == ".parquet":
+        entry["rows"] = pq.ParquetFile(p).metadata.num_rows
+    return entry
+
+
+def _write_json(path: Path, doc: Any) -> None:
+    """Write JSON through a temporary file renamed over ``path``."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(doc, indent=1), encoding="utf-8")
+    os.replace(tmp, path)
+
+
 def write_bulk_dataset(
     root: str | Path,
     *,
@@ -155,10 +177,15 @@ def write_bulk_dataset(
     duration_s: float,
     rate_hz: float = 500.0,
     seed: int = 0,
+    chunk_size: int | None = None,
     progress: Any = None,
 ) -> dict[str, Any]:
     """Write a dataset of ``n_episodes`` episodes of ``duration_s`` seconds each; return its manifest.
 
+    With ``chunk_size`` the dataset has the chunked layout of spec 1.1.0 (FORMAT.md 9.1):
+    episode ``k`` in ``episodes/chunk-{k // chunk_size:03d}/<id>/``, one ``index.json`` per
+    chunk with its episodes and files, and a manifest that lists only the robot and the
+    indexes. Without it, the flat 1.0 layout (``episodes/<id>/``, every file in the manifest).
     The manifest is written last, atomically (a temporary file renamed over it).
 
     Args:
@@ -167,6 +194,7 @@ def write_bulk_dataset(
         duration_s: length of each episode, s.
         rate_hz: joint and end-effector sample rate, Hz.
         seed: motion seed.
+        chunk_size: episodes per chunk (None: flat layout).
         progress: called as ``progress(episodes_written, n_episodes)`` (optional).
     """
     root = Path(root)
@@ -177,37 +205,48 @@ def write_bulk_dataset(
     n = int(round(duration_s * rate_hz))
     period_ns = int(round(1e9 / rate_hz))
     width = max(3, len(str(n_episodes - 1)))
-    episodes = []
+    episodes: list[dict[str, Any]] = []
+    chunks: dict[int, dict[str, Any]] = {}
     for k in range(n_episodes):
         eid = f"ep{k:0{width}d}"
+        folder = (
+            f"episodes/{eid}"
+            if chunk_size is None
+            else f"episodes/chunk-{k // chunk_size:03d}/{eid}"
+        )
         t0 = _T0_NS + k * (n * period_ns + 10_000_000_000)
-        _write_tables(root / "episodes" / eid, n, rate_hz, _motion(rng), t0)
+        _write_tables(root / folder, n, rate_hz, _motion(rng), t0)
         streams = {
             name: {
                 "kind": name,
-                "path": f"episodes/{eid}/{name}.parquet",
+                "path": f"{folder}/{name}.parquet",
                 "stamp_source": "synthetic",
                 "offset_ns": 0,
                 "nominal_rate_hz": rate_hz,
             }
             for name in ("joint_states", "ee_poses")
         }
-        episodes.append(
-            {"id": eid, "start_ns": t0, "end_ns": t0 + (n - 1) * period_ns, "streams": streams}
-        )
+        entry = {"id": eid, "start_ns": t0, "end_ns": t0 + (n - 1) * period_ns, "streams": streams}
+        if chunk_size is None:
+            episodes.append(entry)
+        else:
+            part = chunks.setdefault(k // chunk_size, {"episodes": [], "files": {}})
+            part["episodes"].append(entry)
+            for name in ("joint_states", "ee_poses"):
+                rel = f"{folder}/{name}.parquet"
+                part["files"][rel] = _file_entry(root / rel)
         if progress is not None:
             progress(k + 1, n_episodes)
     files: dict[str, dict[str, Any]] = {}
-    for p in sorted(root.rglob("*")):
-        if p.is_file():
-            rel = p.relative_to(root).as_posix()
-            entry: dict[str, Any] = {"sha256": _sha256(p), "size": p.stat().st_size}
-            if p.suffix == ".parquet":
-                entry["rows"] = pq.ParquetFile(p).metadata.num_rows
-            files[rel] = entry
-    manifest = {
+    if chunk_size is None:
+        for p in sorted(root.rglob("*")):
+            if p.is_file():
+                files[p.relative_to(root).as_posix()] = _file_entry(p)
+    else:
+        files["robot/robot.urdf"] = _file_entry(root / "robot" / "robot.urdf")
+    manifest: dict[str, Any] = {
         "format": "robogs",
-        "spec_version": "1.0.0",
+        "spec_version": "1.0.0" if chunk_size is None else "1.1.0",
         "name": root.name,
         "created_utc": "2026-01-01T00:00:00+00:00",
         "generator": {"name": "robogs.synth.bulk"},
@@ -227,9 +266,30 @@ def write_bulk_dataset(
         "episodes": episodes,
         "files": files,
     }
-    tmp = root / ".manifest.json.tmp"
-    tmp.write_text(json.dumps(manifest, indent=1), encoding="utf-8")
-    os.replace(tmp, root / "manifest.json")
+    if chunk_size is not None:
+        index = []
+        for c, part in sorted(chunks.items()):
+            rel = f"episodes/chunk-{c:03d}/index.json"
+            doc = {"format": "robogs-chunk", "chunk": c, **part}
+            _write_json(root / rel, doc)
+            files[rel] = _file_entry(root / rel)
+            rows = sum(f["rows"] for f in part["files"].values())
+            index.append(
+                {
+                    "index": rel,
+                    "episodes": len(part["episodes"]),
+                    "files": len(part["files"]),
+                    "rows": rows,
+                }
+            )
+        manifest["shards"] = {
+            "layout": "chunked",
+            "chunk_size": chunk_size,
+            "episodes": n_episodes,
+            "chunks": index,
+        }
+        manifest["files"] = dict(sorted(files.items()))
+    _write_json(root / "manifest.json", manifest)
     return manifest
 
 
@@ -252,8 +312,22 @@ def bulk_cli(args: argparse.Namespace) -> int:
         if not args.quiet and (done == total or done % max(1, total // 20) == 0):
             print(f"\r{done}/{total} episodes", end="\n" if done == total else "", file=sys.stderr)
 
-    write_bulk_dataset(out, n_episodes=n, duration_s=secs, seed=int(args.seed), progress=show)
-    print(f"wrote {out} ({n} episodes of {secs:g} s, planar 3R arm at 500 Hz)")
+    chunk = getattr(args, "chunk_size", None)
+    if chunk is None:
+        chunk = DEFAULT_CHUNK_SIZE if n > SHARD_ABOVE else 0
+    if chunk < 0:
+        print("robogs synth: error: --chunk-size must be >= 0", file=sys.stderr)
+        return 2
+    write_bulk_dataset(
+        out,
+        n_episodes=n,
+        duration_s=secs,
+        seed=int(args.seed),
+        chunk_size=chunk or None,
+        progress=show,
+    )
+    layout = f"sharded, {chunk} episodes per chunk" if chunk else "flat"
+    print(f"wrote {out} ({n} episodes of {secs:g} s, planar 3R arm at 500 Hz; {layout})")
     return 0
 
 

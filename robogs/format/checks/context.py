@@ -143,7 +143,8 @@ class CheckContext:
         self.progress = progress or (lambda _msg: None)
         self.version_error: VersionError | None = None
         self.dataset = self._open()
-        self.manifest: dict[str, Any] = self.dataset.manifest
+        # a sharded dataset's chunk indexes merged in; their problems are reported by I011
+        self.manifest: dict[str, Any] = self.dataset.full_manifest(lenient=True)
         self.manifest_problems = schema_problems("manifest", self.manifest)
         self.budget_problems: list[str] = []
         self.budgets = self._budgets(budgets or {})

@@ -433,3 +433,35 @@ def _table_budget(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             budget=_context.MAX_TABLE_BYTES / 2**20,
             file=rel,
         )
+
+
+@check(
+    "I011",
+    group="integrity",
+    severity="error",
+    title="chunk indexes are readable and agree with the manifest",
+    needs_full=False,
+    needs_valid_manifest=False,
+    quantity="index problems",
+    hint="rewrite the indexes with the writer (robogs migrate DATASET --to sharded)",
+)
+def _chunk_indexes(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    """Sharded layout (spec 1.1.0): every chunk index is listed in the manifest's own ``files``
+    (so I001/I003/I004 verify its size and sha256), reads as a chunk index, holds the episode,
+    file and row counts the manifest states, and lists only files under its chunk folder."""
+    shards = ctx.manifest.get("shards")
+    if shards is None:
+        return
+    own = ctx.dataset.manifest.get("files")
+    own = own if isinstance(own, dict) else {}
+    chunks = shards.get("chunks") if isinstance(shards, dict) else None
+    for i, entry in enumerate(chunks if isinstance(chunks, list) else []):
+        rel = entry.get("index") if isinstance(entry, dict) else None
+        if isinstance(rel, str) and rel not in own:
+            yield chk.finding(
+                "chunk index is not listed in the manifest's files (its hash is not checked)",
+                file=rel,
+                where=f"/shards/chunks/{i}",
+            )
+    for p in ctx.dataset.shard_problems:
+        yield chk.finding(p.message, file=p.file, where=p.where)

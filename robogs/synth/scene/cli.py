@@ -77,6 +77,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="S",
         help="with --episodes: length of each episode, s (default 1, at 500 Hz)",
     )
+    parser.add_argument(
+        "--chunk-size",
+        type=int,
+        default=None,
+        metavar="K",
+        help="with --episodes: K episodes per episodes/chunk-NNN/ folder (spec 1.1 sharded "
+        "layout; 0 = flat); default 1000 when N > 100, flat otherwise",
+    )
     parser.add_argument("--force", action="store_true", help="replace OUT if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
