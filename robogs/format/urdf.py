@@ -34,6 +34,8 @@ from lxml import etree
 from robogs.format.errors import FormatError, InputError, PathEscapeError, RobogsError
 
 __all__ = [
+    "Capsule",
+    "capsules",
     "MeshRef",
     "MESH_SUFFIXES",
     "load_urdf",
@@ -70,6 +72,26 @@ class MeshRef:
     kind: str
     uri: str
     path: Path | None = None
+
+
+@dataclass(frozen=True)
+class Capsule:
+    """One ``<capsule radius length>`` geometry (the SDFormat / Gazebo primitive, also read by
+    MuJoCo's and Drake's URDF parsers): a cylinder of ``length`` with hemispherical caps,
+    its axis along z of ``origin`` (total extent ``length + 2 radius``).
+
+    Attributes:
+        link: the link that holds it.
+        kind: ``"visual"`` or ``"collision"``.
+        origin: [4, 4] T_link_geometry (the element's ``<origin>``).
+        radius, length: [m].
+    """
+
+    link: str
+    kind: str
+    origin: Any
+    radius: float
+    length: float
 
 
 # --------------------------------------------------------------------------- XML
@@ -202,6 +224,7 @@ def parse_urdf_robot(path: str | os.PathLike[str]) -> yourdfpy.Robot:
     if root.get("name") is None:
         raise FormatError("<robot> has no name attribute", path=path, where="<robot>")
     _check_elements(root, path)
+    caps = _take_capsules(root, path)
     try:
         # yourdfpy's own parser entry point (URDF.load calls it after an unsafe parse).
         robot = yourdfpy.URDF._parse_robot(xml_element=root)
@@ -212,7 +235,68 @@ def parse_urdf_robot(path: str | os.PathLike[str]) -> yourdfpy.Robot:
             hint="check numeric attributes (xyz, rpy, axis, limits) and required tags",
         ) from None
     _check_tree(robot, path)
+    robot.robogs_capsules = caps
     return robot
+
+
+def _origin_matrix(el: etree._Element | None, path: Path, where: str) -> Any:
+    import numpy as np
+
+    from robogs.format.frames import rpy_to_matrix
+
+    T = np.eye(4)
+    if el is None:
+        return T
+    try:
+        xyz = [float(x) for x in (el.get("xyz") or "0 0 0").split()]
+        rpy = [float(x) for x in (el.get("rpy") or "0 0 0").split()]
+        if len(xyz) != 3 or len(rpy) != 3:
+            raise ValueError("three numbers expected")
+    except ValueError as exc:
+        raise FormatError(f"bad <origin> ({exc})", path=path, where=where) from None
+    T[:3, :3] = np.asarray(rpy_to_matrix(np.array(rpy)))
+    T[:3, 3] = xyz
+    return T
+
+
+def _take_capsules(root: etree._Element, path: Path) -> list[Capsule]:
+    """Read every ``<capsule>`` geometry and remove its element from ``root`` (yourdfpy
+    refuses the tag). Raises FormatError for a missing, non-finite or negative size."""
+    import math
+
+    out: list[Capsule] = []
+    for link in root.findall("link"):
+        for kind in ("visual", "collision"):
+            for el in link.findall(kind):
+                cap = el.find("geometry/capsule")
+                if cap is None:
+                    continue
+                where = f"link '{link.get('name')}' {kind} capsule"
+                try:
+                    r, length = float(cap.get("radius", "nan")), float(cap.get("length", "nan"))
+                except ValueError:
+                    r = length = math.nan
+                if not (math.isfinite(r) and math.isfinite(length) and r > 0 and length >= 0):
+                    raise FormatError(
+                        "capsule needs radius > 0 and length >= 0 (metres)",
+                        path=path,
+                        where=where,
+                        hint='e.g. <capsule radius="0.01" length="0.04"/>',
+                    )
+                T = _origin_matrix(el.find("origin"), path, where)
+                out.append(Capsule(str(link.get("name")), kind, T, r, length))
+                link.remove(el)
+    return out
+
+
+def capsules(
+    robot: yourdfpy.Robot | yourdfpy.URDF, kind: str | None = "collision"
+) -> list[Capsule]:
+    """The ``<capsule>`` geometries of a robot parsed by :func:`parse_urdf_robot` (or loaded
+    by :func:`load_urdf`), of one ``kind`` (``collision``, ``visual``; None: both)."""
+    rob = getattr(robot, "robot", robot)
+    caps = list(getattr(rob, "robogs_capsules", []) or [])
+    return [c for c in caps if kind is None or c.kind == kind]
 
 
 def _check_elements(root: etree._Element, path: Path) -> None:

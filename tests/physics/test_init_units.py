@@ -58,8 +58,8 @@ def test_collision_shapes_as_swept_spheres(tmp_path: Path) -> None:
 
 
 def test_capsule_collisions_are_read_from_the_xml(tmp_path: Path) -> None:
-    """yourdfpy drops ``<capsule>`` (and robogs' URDF loader refuses it): read from the XML."""
-    from robogs.physics.init.pusher import _capsules
+    """yourdfpy refuses ``<capsule>``: robogs' URDF loader keeps it (axis along origin z)."""
+    from robogs.format.urdf import capsules, load_urdf
 
     path = tmp_path / "cap.urdf"
     path.write_text(
@@ -67,8 +67,12 @@ def test_capsule_collisions_are_read_from_the_xml(tmp_path: Path) -> None:
         '<origin xyz="0 0 -0.03" rpy="1.5707963267948966 0 0"/>'
         '<geometry><capsule radius="0.015" length="0.06"/></geometry></collision></link></robot>'
     )
-    ((T, r, length),) = _capsules(path)["c"]
-    assert r == 0.015 and length == 0.06
+    urdf = load_urdf(path, load_meshes=False)
+    ((cap,),) = [capsules(urdf)]
+    T, r, length = cap.origin, cap.radius, cap.length
+    assert cap.link == "c" and r == 0.015 and length == 0.06
+    (shape,) = collision_shapes(urdf, path)
+    assert shape.kind == "capsule" and shape.radius == 0.015 and shape.length == pytest.approx(0.06)
     assert np.allclose(T[:3, 3], [0, 0, -0.03]) and np.allclose(T[:3, 2], [0, -1, 0], atol=1e-12)
 
 

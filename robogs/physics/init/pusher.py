@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from robogs.format.urdf import parse_urdf_xml
+from robogs.format.urdf import capsules
 
 __all__ = ["Shape", "collision_shapes", "segment_param", "shape_distance"]
 
@@ -71,40 +71,12 @@ def _mesh_shape(link: str, mesh: Any, T: np.ndarray) -> Shape:
     return Shape(link, "mesh", mid - half * u, mid + half * u, r, "mesh -> capsule on its axis")
 
 
-def _capsules(urdf_path: Path) -> dict[str, list[tuple[np.ndarray, float, float]]]:
-    """``<capsule radius length>`` collisions by link (yourdfpy drops them): origin, r, length.
-
-    The file was already parsed and checked by :func:`robogs.format.urdf.parse_urdf_robot`
-    (no entities, no DTD); it is read again here with the same refusals.
-    """
-    root = parse_urdf_xml(urdf_path)
-    out: dict[str, list[tuple[np.ndarray, float, float]]] = {}
-    for link in root.iter("link"):
-        for col in link.iter("collision"):
-            cap = col.find("geometry/capsule")
-            if cap is None:
-                continue
-            T = np.eye(4)
-            org = col.find("origin")
-            if org is not None:
-                from robogs.format.frames import rpy_to_matrix
-
-                xyz = [float(x) for x in (org.get("xyz") or "0 0 0").split()]
-                rpy = [float(x) for x in (org.get("rpy") or "0 0 0").split()]
-                T[:3, :3] = np.asarray(rpy_to_matrix(np.array(rpy)))
-                T[:3, 3] = xyz
-            out.setdefault(link.get("name"), []).append(
-                (T, float(cap.get("radius")), float(cap.get("length")))
-            )
-    return out
-
-
 def collision_shapes(urdf: Any, urdf_path: Path, *, mesh_loader: Any = None) -> list[Shape]:
     """Swept spheres of every collision element of a ``yourdfpy.URDF`` (see module docstring).
 
     Args:
         urdf: the model (meshes need not be loaded).
-        urdf_path: its file (capsules are read from it).
+        urdf_path: its file (unused; kept for callers).
         mesh_loader: ``(filename) -> trimesh.Trimesh`` for mesh collisions; None skips them.
     """
     shapes: list[Shape] = []
@@ -136,10 +108,9 @@ def collision_shapes(urdf: Any, urdf_path: Path, *, mesh_loader: Any = None) -> 
                     mesh = mesh.copy()
                     mesh.apply_scale(np.broadcast_to(np.asarray(scale, dtype=float), 3))
                 shapes.append(_mesh_shape(link.name, mesh, T))
-    for name, caps in _capsules(Path(urdf_path)).items():
-        for T, r, length in caps:
-            a, b = _segment(T, 0.5 * length)
-            shapes.append(Shape(name, "capsule", a, b, r))
+    for cap in capsules(urdf):  # yourdfpy does not know the tag; robogs.format.urdf keeps them
+        a, b = _segment(np.asarray(cap.origin, dtype=float), 0.5 * cap.length)
+        shapes.append(Shape(cap.link, "capsule", a, b, cap.radius))
     return shapes
 
 
