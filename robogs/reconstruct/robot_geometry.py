@@ -16,6 +16,7 @@ import trimesh
 from robogs.format.dataset import Dataset
 from robogs.format.errors import FormatError
 from robogs.format.kinematics import Chain
+from robogs.format.meshes import load_mesh
 
 __all__ = ["LinkMesh", "link_meshes", "link_poses"]
 
@@ -80,7 +81,7 @@ def link_meshes(ds: Dataset, joint_positions: dict[str, float]) -> dict[str, Lin
         path = resolved.get((link.name, "visual", visual.geometry.mesh.filename))
         if path is None:
             continue
-        mesh = trimesh.load(path, force="mesh", process=False)
+        mesh = load_mesh(path, where=f"link {link.name} visual", triangles=False)
         if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
             continue
         v = np.asarray(mesh.vertices, np.float64)

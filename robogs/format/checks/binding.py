@@ -720,7 +720,8 @@ def _rest_q(ctx: CheckContext, entry: dict[str, Any]) -> torch.Tensor:
 def _link_triangles(ctx: CheckContext, entry: dict[str, Any]) -> dict[str, np.ndarray | str]:
     """Per link: world triangles [F, 3, 3] of its first visual mesh at the rest state, or why none."""
     import torch
-    import trimesh
+
+    from ..meshes import load_mesh
 
     urdf = ctx.urdf()
     chain = ctx.fitted_chain()[0]
@@ -743,12 +744,12 @@ def _link_triangles(ctx: CheckContext, entry: dict[str, Any]) -> dict[str, np.nd
             out[link.name] = "visual mesh could not be resolved"
             continue
         try:
-            mesh = trimesh.load(path, force="mesh", process=False)
-            v = np.asarray(mesh.vertices, np.float64)
-            f = np.asarray(mesh.faces, np.int64)
-        except Exception as exc:  # trimesh raises many types on bad files
-            out[link.name] = f"visual mesh unreadable ({type(exc).__name__})"
+            mesh = load_mesh(path, where=f"link {link.name} visual")
+        except RobogsError as exc:
+            out[link.name] = f"has an unreadable visual mesh ({exc.message})"
             continue
+        v = np.asarray(mesh.vertices, np.float64)
+        f = np.asarray(mesh.faces, np.int64)
         if visual.geometry.mesh.scale is not None:
             v = v * np.broadcast_to(np.asarray(visual.geometry.mesh.scale, np.float64), (3,))
         M = T[chain.link_index(link.name)].numpy() @ np.asarray(

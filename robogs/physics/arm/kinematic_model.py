@@ -43,6 +43,7 @@ import torch
 
 from robogs.format.dataset import Dataset
 from robogs.format.errors import InputError
+from robogs.format.frames import quat_to_matrix_np
 from robogs.format.interp import interp_linear
 from robogs.format.kinematics.offsets import perpendicular
 from robogs.physics.arm.effects import InertialContext, KinState
@@ -432,18 +433,6 @@ class KinProblem:
         return self.R is not None
 
 
-def _quat_matrix(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    return np.stack(
-        [
-            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-        ],
-        axis=-1,
-    ).reshape(-1, 3, 3)  # fmt: skip
-
-
 def prepare_kinematic(
     model: ArmModel,
     data: KinData,
@@ -483,7 +472,7 @@ def prepare_kinematic(
         pos=torch.as_tensor(data.pos, dtype=dt, device=device),
         R=None
         if data.quat is None
-        else torch.as_tensor(_quat_matrix(data.quat), dtype=dt, device=device),
+        else torch.as_tensor(quat_to_matrix_np(data.quat), dtype=dt, device=device),
         frames=_frames(model, data.link, dt, device),
     )
     if sigma is None:
