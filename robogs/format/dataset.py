@@ -424,6 +424,14 @@ class Dataset:
             raise FormatError("dataset has no robot", path=self.manifest_path, where="robot")
         return self.resolve(robot["urdf"], where="robot/urdf")
 
+    @property
+    def named_frames(self) -> dict[str, Any]:
+        """Named frames fixed to robot links (``robot.frames``, spec 1.1.0; empty without):
+        name -> :class:`robogs.format.named_frames.NamedFrame`, checked rigid."""
+        from .named_frames import read_named_frames
+
+        return read_named_frames(self.manifest, self.manifest_path)
+
     def urdf(self, *, load_meshes: bool = True) -> yourdfpy.URDF:
         """The robot as a ``yourdfpy.URDF``; mesh URIs resolve inside the dataset."""
         from .urdf import load_urdf

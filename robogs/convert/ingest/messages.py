@@ -1044,6 +1044,7 @@ class MessageIngest:
             writer.close()
         self._finish_cameras()
         self.tf.account([t for t, r in self.roles.items() if r.kind == "tf"])
+        self.tf.keep_static_frames(ctx.writer.manifest, self._robot_links())
         self.tf.close()
         for topic, n_index in self.counts.items():
             role = self.roles.get(topic)

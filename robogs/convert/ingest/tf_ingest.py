@@ -365,6 +365,38 @@ class TfIngest:
                 + (" ..." if len(left) > 20 else "")
             )
 
+    def keep_static_frames(self, manifest: dict[str, Any], robot_links: set[str]) -> list[str]:
+        """Keep the static frames that hang from robot links as named frames (spec 1.1.0,
+        ``robot.frames``): every ``/tf_static`` edge whose parent is a robot link or an already
+        kept frame and whose child is not a link. Returns the kept names (none without a robot
+        in the manifest, with a note)."""
+        from robogs.format.named_frames import NamedFrame, add_named_frames
+
+        static = {(p, c): self.buf.lookup(p, c) for p, c in self.buf.static_edges}
+        kept: dict[str, NamedFrame] = {}
+        grew = True
+        while grew:
+            grew = False
+            for (p, c), T in sorted(static.items()):
+                if c in kept or c in robot_links or not (p in robot_links or p in kept):
+                    continue
+                kept[c] = NamedFrame(c, p, np.asarray(T, dtype=float), "/tf_static")
+                grew = True
+        if not kept:
+            return []
+        if not manifest.get("robot"):
+            self.prov.note(
+                "static tf frames on robot links not kept (no robot: pass --urdf): "
+                + ", ".join(sorted(kept))
+            )
+            return []
+        add_named_frames(manifest, kept)
+        self.prov.note(
+            "static tf frames kept as named frames (robot.frames): "
+            + ", ".join(f"{f.parent}->{n}" for n, f in sorted(kept.items()))
+        )
+        return sorted(kept)
+
     def close(self) -> None:
         """Remove temp files."""
         self.buf.close()
