@@ -192,47 +192,18 @@ def clean_file(
         raise InputError(
             "no usable row", path=path, hint="every row was dropped; see the provenance reasons"
         )
-    # stamps: drop duplicates and samples that go back (kept order is the file order), within
-    # each named trajectory when a segment column names them
-    t_k = t_ns[idx]
     group = _group_ids(raw, cmap.segment_column)
-    g_k = group[idx]
-    prev_max = np.full(len(t_k), np.iinfo(np.int64).min)
-    for g in np.unique(g_k):
-        sel = np.flatnonzero(g_k == g)
-        run_max = np.maximum.accumulate(t_k[sel])
-        prev_max[sel[1:]] = run_max[:-1]
-    dup = t_k == prev_max
-    back = t_k < prev_max
-    if back.sum() > max(_MAX_BACK_FRACTION * len(t_k), 2):
-        first = int(np.argmax(back))
-        raise InputError(
-            f"{int(back.sum())} of {len(t_k)} stamps go back in time (not monotonic)",
-            path=path,
-            where=f"line {lines[idx[first]]}, column {cmap.time_column!r}",
-            hint="sort the log by time, or check the time column and its unit",
-        )
-    if dup.any():
-        report.drop("duplicate stamp", lines[idx[dup]])
-    if back.any():
-        report.drop("stamp earlier than the previous sample", lines[idx[back]])
-    idx = idx[~dup & ~back]
+    idx = _monotonic(t_ns, idx, group, lines, path, cmap.time_column, report)
     t_k = t_ns[idx]
     g_k = group[idx]
     cols = [k for k, j in enumerate(joint_names) if j in cmap.joints]
     _check_degrees(
         path, cmap, q[idx][:, cols], lines[idx], lower[cols], upper[cols], logged, report
     )
-    # segments at forward gaps
-    steps = np.diff(t_k)
-    med = float(np.median(steps)) if len(steps) else 0.0
-    gap_ns = int((gap_s if gap_s is not None else max(1.0, 50 * med * 1e-9)) * 1e9)
-    named = np.diff(g_k) != 0
-    cuts = np.flatnonzero((steps > gap_ns) | named) + 1
-    bounds = np.concatenate([[0], cuts, [len(idx)]])
-    segments: list[LogSegment] = []
-    from robogs.format.differentiate import savgol_derivative
+    bounds, gap_ns, n_gaps = _cuts(t_k, g_k, gap_s)
+    from robogs.format.differentiate import savgol_derivative  # scipy: loaded when used
 
+    segments: list[LogSegment] = []
     for s in range(len(bounds) - 1):
         sel = idx[bounds[s] : bounds[s + 1]]
         if len(sel) < 5:
@@ -263,7 +234,6 @@ def clean_file(
             )
         )
         report.written += len(sel)
-    n_gaps = int((steps > gap_ns).sum())
     if n_gaps:
         report.notes.append(
             f"{n_gaps} time gap(s) over {gap_ns / 1e9:g} s split the file into {len(bounds) - 1} segments"
@@ -274,6 +244,56 @@ def clean_file(
             "becomes its own episode(s), with its name as the segment"
         )
     return segments, report
+
+
+def _monotonic(
+    t_ns: np.ndarray,
+    idx: np.ndarray,
+    group: np.ndarray,
+    lines: np.ndarray,
+    path: Path,
+    time_column: str,
+    report: FileReport,
+) -> np.ndarray:
+    """The rows ``idx`` less duplicated stamps and stamps going back (the kept order is the
+    file order), within each named trajectory ``group``; more than 1 % going back is an error."""
+    t_k = t_ns[idx]
+    g_k = group[idx]
+    prev_max = np.full(len(t_k), np.iinfo(np.int64).min)
+    for g in np.unique(g_k):
+        sel = np.flatnonzero(g_k == g)
+        run_max = np.maximum.accumulate(t_k[sel])
+        prev_max[sel[1:]] = run_max[:-1]
+    dup = t_k == prev_max
+    back = t_k < prev_max
+    if back.sum() > max(_MAX_BACK_FRACTION * len(t_k), 2):
+        first = int(np.argmax(back))
+        raise InputError(
+            f"{int(back.sum())} of {len(t_k)} stamps go back in time (not monotonic)",
+            path=path,
+            where=f"line {lines[idx[first]]}, column {time_column!r}",
+            hint="sort the log by time, or check the time column and its unit",
+        )
+    if dup.any():
+        report.drop("duplicate stamp", lines[idx[dup]])
+    if back.any():
+        report.drop("stamp earlier than the previous sample", lines[idx[back]])
+    return idx[~dup & ~back]
+
+
+def _cuts(t_k: np.ndarray, g_k: np.ndarray, gap_s: float | None) -> tuple[np.ndarray, int, int]:
+    """Segment bounds of increasing stamps ``t_k`` (ns): at every change of the trajectory id
+    ``g_k`` and at forward steps over ``gap_s`` (None: max(1 s, 50 median steps)).
+
+    Returns:
+        ``(bounds [S + 1], gap_ns, number of time gaps)``.
+    """
+    steps = np.diff(t_k)
+    med = float(np.median(steps)) if len(steps) else 0.0
+    gap_ns = int((gap_s if gap_s is not None else max(1.0, 50 * med * 1e-9)) * 1e9)
+    named = np.diff(g_k) != 0
+    cuts = np.flatnonzero((steps > gap_ns) | named) + 1
+    return np.concatenate([[0], cuts, [len(t_k)]]), gap_ns, int((steps > gap_ns).sum())
 
 
 def _group_ids(raw: RawLog, column: str | None) -> np.ndarray:

@@ -38,6 +38,7 @@ _EXAMPLES = 5
 
 
 def _episode_id(stem: str, k: int, n: int, used: set[str]) -> str:
+    """A unique episode id: ``stem`` (sanitised), ``<stem>_sKK`` when the file has ``n > 1``."""
     base = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)[:56] or "log"
     eid = base if n == 1 else f"{base}_s{k:02d}"
     while eid in used:
@@ -47,6 +48,7 @@ def _episode_id(stem: str, k: int, n: int, used: set[str]) -> str:
 
 
 def _joint_table(seg: LogSegment, joint_names: list[str]) -> pa.Table:
+    """The ``joint_states`` table of a segment (t_ns; rad or m, rad/s or m/s, N m or N)."""
     cols: dict[str, Any] = {"t_ns": pa.array(seg.t_ns, type=pa.int64())}
     for k, j in enumerate(joint_names):
         cols[f"position.{j}"] = pa.array(seg.q[:, k], type=pa.float64())
@@ -60,6 +62,7 @@ def _joint_table(seg: LogSegment, joint_names: list[str]) -> pa.Table:
 
 
 def _ee_table(seg: LogSegment, link: str) -> pa.Table:
+    """The ``ee_poses`` table of a segment: ``T_world_link`` as x y z (m), qw qx qy qz."""
     assert seg.ee is not None and seg.ee_t_ns is not None
     cols: dict[str, Any] = {
         "t_ns": pa.array(seg.ee_t_ns, type=pa.int64()),
@@ -70,7 +73,8 @@ def _ee_table(seg: LogSegment, link: str) -> pa.Table:
     return pa.table(cols)
 
 
-def _physics_from_urdf(urdf) -> dict[str, Any]:
+def _physics_from_urdf(urdf: Any) -> dict[str, Any]:
+    """A first ``physics.json``: the URDF's joint ``<dynamics damping friction>``, gravity -z."""
     joints: dict[str, dict[str, float]] = {}
     for j in urdf.robot.joints:
         d = j.dynamics
