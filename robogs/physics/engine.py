@@ -4,6 +4,13 @@
 effects already present in its physics.json (they belong to the base model and are refitted
 with it). It builds parameter spaces, fits problems, and turns weighted residuals back into
 millimetres and degrees.
+
+Rollouts come from one of two backends (``backend``): ``planar``, the batched torch model of
+:mod:`robogs.physics.model`, or ``mujoco``, the same scene compiled to MuJoCo
+(:mod:`robogs.physics.engines.mujoco_fit`; every catalogue effect is mapped, see
+:mod:`robogs.physics.engines.mujoco_effects`). ``auto`` picks with
+:func:`robogs.physics.engines.choose_engine` (planar when it can represent the scene) and keeps
+the reason in :attr:`Engine.backend_reason`.
 """
 
 from __future__ import annotations
@@ -16,13 +23,40 @@ import torch
 
 from robogs.format.errors import InputError
 from robogs.physics.effects import Effect, get_effect
-from robogs.physics.fit import FitOutcome, Problem, fit_problems
+from robogs.physics.fit import FitOutcome, Problem, ResidualFn, fit_problems
 from robogs.physics.prepare import Prepared, prepare
-from robogs.physics.residuals import residual_fn
+from robogs.physics.residuals import residual_fn, weighted_residuals
 from robogs.physics.scene import base_params
 from robogs.physics.space import ParamSpace
 
-__all__ = ["Engine", "FitSummary", "rms_mm"]
+__all__ = ["BACKENDS", "Engine", "FitSummary", "rms_mm", "resolve_backend"]
+
+BACKENDS = ("auto", "planar", "mujoco")
+"""Values of ``engine=`` / ``--engine``."""
+
+
+def resolve_backend(physics: dict, name: str = "planar") -> tuple[str, str]:
+    """``(backend, reason)`` for ``name`` in :data:`BACKENDS` (``auto``: choose_engine).
+
+    Raises:
+        InputError: an unknown name, or a named engine that cannot represent the scene.
+    """
+    from robogs.physics.engines import choose_engine, get_engine
+
+    if name not in BACKENDS:
+        raise InputError(
+            f"unknown engine {name!r}", where="--engine", hint=f"one of {', '.join(BACKENDS)}"
+        )
+    if name == "auto":
+        return choose_engine(physics)
+    ok, why = get_engine(name).can_represent(physics, None)
+    if not ok:
+        raise InputError(
+            f"the {name} engine cannot represent this scene: {why}",
+            where="--engine",
+            hint="use --engine auto to pick one that can",
+        )
+    return name, "requested"
 
 
 def rms_mm(raw: np.ndarray, mask: np.ndarray) -> float:
@@ -49,10 +83,22 @@ class Engine:
     Args:
         recording: a Recording or any recording-like object.
         dt: simulation step [s].
+        backend: ``planar``, ``mujoco`` or ``auto`` (see the module docstring).
+        threads: MuJoCo rollout threads (the planar model uses torch's threads).
     """
 
-    def __init__(self, recording: object, *, dt: float = 1e-3) -> None:
+    def __init__(
+        self, recording: object, *, dt: float = 1e-3, backend: str = "planar", threads: int = 1
+    ) -> None:
         self.prep: Prepared = prepare(recording, dt=dt)
+        self.backend, self.backend_reason = resolve_backend(self.prep.rec.physics, backend)
+        self._mujoco = None
+        if self.backend == "mujoco":
+            from robogs.physics.engines.mujoco_fit import MujocoFit
+
+            self._mujoco = MujocoFit(
+                self.prep.rec.physics, self.prep.rec.object_name, dt=dt, threads=threads
+            )
         self.present: list[tuple[Effect, dict[str, float]]] = []
         for entry in self.prep.rec.physics.get("effects", []) or []:
             eff = get_effect(str(entry["name"]))
@@ -104,7 +150,7 @@ class Engine:
         """Fit problems over ``space`` (all at once); intervals include the leave-one-trajectory-
         out jackknife (``fit_problems(cluster_jackknife=True)``): a release speed off by encoder
         noise shifts a whole slide, and a few fast slides carry most of the drag information."""
-        fn = residual_fn(self.prep, space)
+        fn = self.residual_fn(space)
         return fit_problems(
             fn,
             space,
@@ -115,9 +161,21 @@ class Engine:
             cluster_jackknife=True,
         )
 
+    def residual_fn(self, space: ParamSpace) -> ResidualFn:
+        """``fn(theta [M, Q], local [M, T, 3]) -> weighted residuals`` on the chosen backend."""
+        if self._mujoco is None:
+            return residual_fn(self.prep, space)
+        sim, prep = self._mujoco, self.prep
+
+        def fn(theta: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
+            out = sim.simulate(theta, space, prep.drive, prep.scene, init_offset=local)
+            return weighted_residuals(out, prep)
+
+        return fn
+
     def evaluate(self, space: ParamSpace, thetas: np.ndarray, locals_: np.ndarray) -> np.ndarray:
         """Weighted residuals [M, T, N*4] of parameter sets ``thetas`` [M, Q]."""
-        fn = residual_fn(self.prep, space)
+        fn = self.residual_fn(space)
         with torch.no_grad():
             return fn(torch.as_tensor(thetas), torch.as_tensor(locals_)).numpy()
 

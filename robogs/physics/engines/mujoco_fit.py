@@ -1,0 +1,358 @@
+"""MuJoCo rollouts for the fitting engine: ``simulate`` over a parameter space, as the planar
+:func:`robogs.physics.model.simulate` does, so residuals, finite-difference Jacobians, fits and
+the diagnosis run unchanged on MuJoCo (:class:`robogs.physics.engine.Engine` with
+``backend="mujoco"``).
+
+Per call, ``theta [M, Q]`` becomes M compiled models (base friction and every effect with a
+MuJoCo counterpart, :mod:`robogs.physics.engines.mujoco_effects`), and the M x T rollouts run
+on a ``mujoco.rollout`` thread pool. Stretches where nothing has to be changed from Python run as
+one multi-step call; a step is taken alone when an effect applies a state-dependent force
+(``xfrc_applied`` computed from the state) or a trajectory starts, holds or ends a grasp.
+
+Grasps: while the drive grasps, the object follows the end effector rigidly (its pose in the
+EE yaw frame is frozen at the onset, as in the planar model; velocity from ``carry_vel``).
+From the onset on, the pusher geometry of that trajectory is moved 10 m up (it sits inside
+the grasped object, and after a release it must not strike it: the planar model skips pusher
+contact while grasping, and its pushes never follow a grasp).
+
+Not modelled here: the pusher force (``SimResult.force`` is None, so wrench residuals, and
+with them a mass identifiable from forces, are planar-only); ``friction_static`` (MuJoCo has one
+Coulomb coefficient).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import mujoco
+import numpy as np
+import torch
+
+from robogs.physics.effects import overrides
+from robogs.physics.engines.base import quat_yaw
+from robogs.physics.engines.mujoco_effects import (
+    NATIVE,
+    ObjectSlots,
+    apply_body,
+    classify,
+    step_forces,
+)
+from robogs.physics.engines.mujoco_engine import _STATE, MujocoEngine
+from robogs.physics.model import Drive, SimResult, _base_body, _lift
+from robogs.physics.space import ParamSpace
+
+__all__ = ["MujocoFit", "PUSHER_PARK_M"]
+
+PUSHER_PARK_M = 10.0
+"""How far up [m] a grasping trajectory's pusher geometry is moved from the grasp onset on."""
+
+_MAX_CHUNK = 256  # steps per multi-step rollout call (bounds the state buffer)
+
+
+class MujocoFit:
+    """MuJoCo ``simulate`` for one prepared recording's scene.
+
+    Args:
+        physics: the physics.json document; object_name: the fitted object.
+        threads: rollout threads (1: the calling thread).
+        engine: an already built :class:`MujocoEngine` of this scene (else one is built).
+    """
+
+    def __init__(
+        self,
+        physics: Mapping[str, Any],
+        object_name: str,
+        *,
+        dt: float = 1e-3,
+        threads: int = 1,
+        engine: MujocoEngine | None = None,
+    ) -> None:
+        self.eng = engine or MujocoEngine(physics, object_name=object_name, dt=dt, threads=threads)
+        m = self.eng.model
+        self.nq, self.nv = m.nq, m.nv
+        b = self.eng._bid[object_name]
+        self.obj = object_name
+        pairs = [
+            k for k, (g1, g2) in enumerate(self.eng.scene.pairs) if {g1, g2} == {object_name, "table"}
+        ]
+        self.slots = ObjectSlots(
+            body=b,
+            dof=self.eng._vadr[object_name],
+            table_pairs=pairs,
+            nominal_mass=float(m.body_mass[b]),
+            nominal_inertia=np.array(m.body_inertia[b]),
+            nominal_ipos=np.array(m.body_ipos[b]),
+        )
+        self.qa = 1 + self.eng._qadr[object_name]  # state columns of the object's qpos
+        self.va = 1 + self.nq + self.eng._vadr[object_name]
+        self.pq = None if self.eng._pusher_q is None else 1 + self.eng._pusher_q[0]
+        self.gravity = float(-m.opt.gravity[2])
+        self.nbody = m.nbody
+        half = m.geom_size[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, object_name)]
+        self.z_rest_gap = 1e-3  # [m] above the resting height still counts as on the table
+        self.table_z = float(physics.get("objects", {}).get("table", {}).get("plane_z_m", 0.0))
+        self.half_z = float(half[2]) if half.shape[0] >= 3 else 0.0
+
+    # ------------------------------------------------------------------ models per set
+    def models(self, theta: torch.Tensor, space: ParamSpace, scene: Any) -> tuple[list, Any, list]:
+        """(M compiled models, bodies [M, 1], per-step force effects with their parameters)."""
+        effects = [(e, space.theta_dict(theta, e.name)) for e in space.effects if e.model == "rigid"]
+        body_fx, native_fx, force_fx = classify([e for e, _ in effects])
+        ths = dict((e.name, th) for e, th in effects)
+        body = _base_body(scene, theta, space)
+        for e in body_fx:
+            body = e.body(ths[e.name], body)
+        tc = float(self.eng.settings.solref[0])
+        out = []
+        for i in range(theta.shape[0]):
+            mi = apply_body(self.eng.model, body, i, self.slots, timeconst=tc)
+            for e in native_fx:
+                NATIVE[e.name](mi, {k: float(v[i, 0]) for k, v in ths[e.name].items()}, self.slots)
+            out.append(mi)
+        force = [(e, ths[e.name]) for e in force_fx if _active(e, ths[e.name])]
+        return out, body, force
+
+    # ------------------------------------------------------------------ simulate
+    def simulate(
+        self,
+        theta: torch.Tensor,
+        space: ParamSpace,
+        drive: Drive,
+        scene: Any,
+        init_offset: torch.Tensor | None = None,
+    ) -> SimResult:
+        """Object poses at the measurement stamps for M parameter sets x T trajectories
+        (see :func:`robogs.physics.model.simulate`; ``SimResult.force`` is None)."""
+        theta = torch.as_tensor(theta, dtype=torch.float64)
+        m_sets, n_t, n_s, dt = theta.shape[0], drive.n_traj, drive.n_steps, drive.dt
+        models, body, force_fx = self.models(theta, space, scene)
+        sensor_fx = [
+            (e, space.theta_dict(theta, e.name))
+            for e in space.effects
+            if e.model == "rigid" and e.family == "sensor"
+        ]
+        # initial pose: measured (sensor frame) + nuisance offset -> world
+        ipos = drive.init_pos.to(torch.float64).unsqueeze(0).expand(m_sets, n_t, 3)
+        iyaw = drive.init_yaw.to(torch.float64).unsqueeze(0).expand(m_sets, n_t)
+        if init_offset is not None:
+            off = torch.as_tensor(init_offset, dtype=torch.float64)
+            ipos = ipos + torch.nn.functional.pad(off[..., :2], (0, 1))
+            iyaw = iyaw + off[..., 2]
+        for e, th in reversed(sensor_fx):
+            if overrides(e, "from_sensor"):
+                ipos, iyaw = e.from_sensor(th, ipos, iyaw)
+        x0 = self.eng._initial_states(drive, None, n_t)  # [T, nstate], pusher set
+        n_r = m_sets * n_t
+        x = np.repeat(x0[None], m_sets, 0).reshape(n_r, -1)
+        ip = ipos.numpy().reshape(n_r, 3)
+        iy = iyaw.numpy().reshape(n_r)
+        x[:, self.qa : self.qa + 3] = ip
+        x[:, self.qa + 3 : self.qa + 7] = _yaw_quat(iy)
+        x[:, self.va : self.va + 6] = 0.0
+        if drive.init_vel is not None:
+            x[:, self.va : self.va + 3] = np.tile(drive.init_vel.numpy(), (m_sets, 1))
+        ctrl = self.eng._controls(drive)  # [T, S-1, nu]
+        grasp = drive.grasp.numpy()
+        park = np.zeros((n_t, n_s))
+        if grasp.any():
+            first = np.where(grasp.any(1), np.argmax(grasp, 1), n_s)
+            park = (np.arange(n_s)[None] >= first[:, None]) * PUSHER_PARK_M
+            if self.pq is not None:
+                ctrl[..., 2] += park[:, :-1]
+        dense = self._run(models, x, ctrl, drive, body, force_fx, grasp, park, m_sets)
+        dpos = torch.as_tensor(dense[..., :3])
+        dyaw = torch.as_tensor(np.unwrap(quat_yaw(dense[..., 3:]), axis=-1))
+        return _observe(dpos, dyaw, drive, sensor_fx, dt)
+
+    def _run(
+        self,
+        models: list,
+        x: np.ndarray,
+        ctrl: np.ndarray,
+        drive: Drive,
+        body: Any,
+        force_fx: list,
+        grasp: np.ndarray,
+        park: np.ndarray,
+        m_sets: int,
+    ) -> np.ndarray:
+        """Dense object poses [M, T, S, 7] (position, quaternion w x y z)."""
+        n_t, n_s, dt = drive.n_traj, drive.n_steps, drive.dt
+        n_r = m_sets * n_t
+        t_of = np.tile(np.arange(n_t), m_sets)
+        models_r = [models[i] for i in range(m_sets) for _ in range(n_t)]
+        pool = self.eng._pool_get()
+        datas = [mujoco.MjData(self.eng.model) for _ in range(self.eng.threads)]
+        dense = np.empty((n_r, n_s, 7))
+        dense[:, 0] = x[:, self.qa : self.qa + 7]
+        g_any = grasp.any(0)
+        onset = np.zeros_like(grasp)
+        onset[:, 1:] = grasp[:, 1:] & ~grasp[:, :-1]
+        onset[:, 0] = grasp[:, 0]
+        # steps k whose transition k -> k+1 must be taken alone (a grasp holds or starts at k+1,
+        # or the park jump happens at k+1)
+        single = np.zeros(n_s, bool)
+        single[:-1] = g_any[1:] | (np.diff(park, axis=1) != 0).any(0)
+        if force_fx:
+            single[:] = True
+        nu = ctrl.shape[-1]
+        spec = mujoco.mjtState.mjSTATE_CTRL.value
+        if force_fx:
+            spec |= mujoco.mjtState.mjSTATE_XFRC_APPLIED.value
+        pusher = drive.pusher.numpy()
+        ee_yaw = drive.ee_yaw.numpy()
+        cvel = (drive.pusher_vel if drive.carry_vel is None else drive.carry_vel).numpy()
+        rate = drive.ee_yaw_rate.numpy()
+        rel_p = np.zeros((n_r, 3))
+        rel_q = np.tile([1.0, 0, 0, 0], (n_r, 1))
+        if onset[:, 0].any():
+            rel_p, rel_q = self._grasp_rel(x, pusher[:, 0], ee_yaw[:, 0], t_of, onset[:, 0], rel_p, rel_q)
+        k = 0
+        while k < n_s - 1:
+            if single[k]:
+                n = 1
+            else:
+                nxt = np.flatnonzero(single[k:])
+                n = int(nxt[0]) if nxt.size else n_s - 1 - k
+                n = max(1, min(n, _MAX_CHUNK, n_s - 1 - k))
+            if onset[:, k + 1].any() if k + 1 < n_s else False:
+                rel_p, rel_q = self._grasp_rel(
+                    x, pusher[:, k], ee_yaw[:, k], t_of, onset[:, k + 1], rel_p, rel_q
+                )
+            c = ctrl[t_of, k : k + n]
+            if force_fx:
+                xf = self._forces(x, body, force_fx, m_sets, n_t)
+                full = np.zeros((n_r, n, nu + 6 * self.nbody))
+                full[..., :nu] = c
+                full[:, 0, nu + 6 * self.slots.body : nu + 6 * self.slots.body + 6] = xf
+                c = full
+            state, _ = pool.rollout(
+                models_r, datas, x, c if c.shape[-1] else None, control_spec=spec, nstep=n
+            )
+            dense[:, k + 1 : k + 1 + n] = state[:, :, self.qa : self.qa + 7]
+            x = np.array(state[:, -1])
+            k += n
+            if self.pq is not None:
+                jump = (park[:, k] - park[:, k - 1])[t_of] if k >= 1 else 0.0
+                x[:, self.pq + 2] += jump
+            if g_any[k]:
+                hold = grasp[t_of, k]
+                self._attach(x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q)
+                dense[hold, k] = x[hold, self.qa : self.qa + 7]
+        return dense.reshape(m_sets, n_t, n_s, 7)
+
+    def _grasp_rel(self, x, p_ee, yaw_ee, t_of, on_t, rel_p, rel_q):
+        """Freeze the object pose in the EE yaw frame for rollouts whose grasp starts now."""
+        on = on_t[t_of]
+        if not on.any():
+            return rel_p, rel_q
+        rel_p, rel_q = rel_p.copy(), rel_q.copy()
+        ey = yaw_ee[t_of][on]
+        d = x[on, self.qa : self.qa + 3] - p_ee[t_of][on]
+        c, s = np.cos(-ey), np.sin(-ey)
+        rel_p[on] = np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1], d[:, 2]], -1)
+        rel_q[on] = _qmul(_yaw_quat(-ey), x[on, self.qa + 3 : self.qa + 7])
+        return rel_p, rel_q
+
+    def _attach(self, x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q) -> None:
+        """Set held objects on the EE (pose, velocity) at step ``k`` in the state rows."""
+        tt = t_of[hold]
+        ey = ee_yaw[tt, k]
+        c, s = np.cos(ey), np.sin(ey)
+        rp = rel_p[hold]
+        rx, ry = c * rp[:, 0] - s * rp[:, 1], s * rp[:, 0] + c * rp[:, 1]
+        x[hold, self.qa : self.qa + 3] = pusher[tt, k] + np.stack([rx, ry, rp[:, 2]], -1)
+        q = _qmul(_yaw_quat(ey), rel_q[hold])
+        x[hold, self.qa + 3 : self.qa + 7] = q
+        r = rate[tt, k]
+        v = cvel[tt, k] + np.stack([-r * ry, r * rx, np.zeros_like(r)], -1)
+        x[hold, self.va : self.va + 3] = v
+        # free-joint angular velocity is in the body frame: R^T (0, 0, rate)
+        x[hold, self.va + 3 : self.va + 6] = _rot_t(q, np.stack([0 * r, 0 * r, r], -1))
+
+    def _forces(self, x, body, force_fx, m_sets: int, n_t: int) -> np.ndarray:
+        """Per-step applied wrench [M*T, 6] of the force effects from the current state."""
+        q = x[:, self.qa + 3 : self.qa + 7]
+        v = x[:, self.va : self.va + 3]
+        w_body = x[:, self.va + 3 : self.va + 6]
+        w = _rot(q, w_body)[:, 2]
+        # velocity of the CoM = origin velocity + omega x (R ipos)
+        com = _rot(q, np.broadcast_to(np.asarray(body.com.numpy())[:, 0], (m_sets, 2)).repeat(n_t, 0))
+        vc = v + np.cross(_rot(q, w_body), com)
+        yaw = quat_yaw(q)
+        gap = x[:, self.qa + 2] - (self.table_z + self.half_z)
+        f = step_forces(
+            force_fx,
+            body,
+            vc.reshape(m_sets, n_t, 3),
+            w.reshape(m_sets, n_t),
+            yaw.reshape(m_sets, n_t),
+            (gap < self.z_rest_gap).reshape(m_sets, n_t),
+            self.gravity,
+            self.eng.dt,
+        )
+        return f.reshape(m_sets * n_t, 6)
+
+
+def _active(e: Any, th: dict[str, torch.Tensor]) -> bool:
+    """Whether any set moves the effect off its switched-off values."""
+    zero = {p.name: p.zero for p in e.params}
+    return not e.params or any(bool((v != zero[k]).any()) for k, v in th.items())
+
+
+def _observe(dpos, dyaw, drive: Drive, sensor_fx, dt: float) -> SimResult:
+    """Sample the dense poses at the (effect-mapped) stamps and map them into the sensor frame
+    (the same observation as the planar model's)."""
+    m_sets, n_t, n_s = dpos.shape[:3]
+    t_q = drive.obs_t.to(torch.float64).unsqueeze(0).expand(m_sets, n_t, -1)
+    for e, th in sensor_fx:
+        t_q = e.sample_times(_lift(th), t_q)
+    fidx = (t_q / dt).clamp(0.0, n_s - 1 - 1e-9)
+    i0 = fidx.floor().long()
+    frac = fidx - i0
+    i1 = (i0 + 1).clamp(max=n_s - 1)
+    g0 = torch.gather(dpos, 2, i0.unsqueeze(-1).expand(-1, -1, -1, 3))
+    g1 = torch.gather(dpos, 2, i1.unsqueeze(-1).expand(-1, -1, -1, 3))
+    pos = g0 * (1 - frac).unsqueeze(-1) + g1 * frac.unsqueeze(-1)
+    yaw = torch.gather(dyaw, 2, i0) * (1 - frac) + torch.gather(dyaw, 2, i1) * frac
+    for e, th in sensor_fx:
+        pos, yaw = e.to_sensor(_lift(th), pos, yaw)
+    return SimResult(pos=pos, yaw=yaw, dense_pos=dpos, dense_yaw=dyaw, force=None)
+
+
+def _yaw_quat(yaw: np.ndarray) -> np.ndarray:
+    yaw = np.asarray(yaw, float)
+    z = np.zeros_like(yaw)
+    return np.stack([np.cos(yaw / 2), z, z, np.sin(yaw / 2)], -1)
+
+
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of (w, x, y, z) quaternions [..., 4]."""
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        -1,
+    )
+
+
+def _rot(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors [..., 3] (or planar [..., 2], z = 0) by unit quaternions [..., 4]."""
+    if v.shape[-1] == 2:
+        v = np.concatenate([v, np.zeros(v.shape[:-1] + (1,))], -1)
+    u, w = q[..., 1:], q[..., :1]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def _rot_t(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors by the inverse of unit quaternions."""
+    qc = q.copy()
+    qc[..., 1:] *= -1
+    return _rot(qc, v)
