@@ -23,6 +23,7 @@ from robogs.convert.ingest.tabular import (
     options_from_args,
 )
 from robogs.convert.ingest.tabular.options import from_convert_options
+from robogs.format.dataset import Dataset
 from robogs.format.errors import InputError
 
 MESH = '<visual><geometry><mesh filename="meshes/missing.stl"/></geometry></visual>'
@@ -110,8 +111,6 @@ def test_convert_tabular_is_a_deprecated_alias_of_the_driver(tmp_path: Path) -> 
     ds = convert_path(
         log, tmp_path / "ref", options=ConvertOptions(urdf=_urdf(tmp_path / "u.urdf"), gap_s=0.1)
     )
-    from robogs.format.dataset import Dataset
-
     got = Dataset.open(out)
     assert [e.id for e in got.episodes] == [e.id for e in ds.episodes]
     for a, b in zip(got.episodes, ds.episodes, strict=True):
@@ -119,3 +118,21 @@ def test_convert_tabular_is_a_deprecated_alias_of_the_driver(tmp_path: Path) -> 
     assert got.manifest["provenance"]["converter"] == "tabular"
     with pytest.warns(DeprecationWarning), pytest.raises(InputError, match="URDF file not found"):
         convert_tabular(log, tmp_path / "x", urdf=tmp_path / "nope.urdf")
+
+
+def test_cli_flags_reach_the_converter(tmp_path: Path, capsys) -> None:
+    """``robogs convert LOG OUT --urdf U --gap-s S --meshes-optional``; a bad flag is one line."""
+    from robogs.cli.main import main
+
+    urdf, log = _urdf(tmp_path / "c2.urdf", mesh=True), _log(tmp_path / "log.csv")
+    argv = ["convert", str(log), str(tmp_path / "out"), "--urdf", str(urdf)]
+    assert main([*argv, "--gap-s", "0.1", "--meshes-optional"]) == 0, capsys.readouterr().err
+    ds = Dataset.open(tmp_path / "out")
+    assert [e.table("joint_states").num_rows for e in ds.episodes] == [100, 100]
+    assert any("meshes not copied" in n for n in ds.manifest["provenance"]["notes"])
+    capsys.readouterr()
+    bad = ["convert", str(log), str(tmp_path / "bad"), "--urdf", str(urdf), "--gap-s", "-1"]
+    assert main(bad) == 2
+    err = capsys.readouterr().err
+    assert "--gap-s" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "bad").exists()
