@@ -56,6 +56,7 @@ VERBS: dict[str, tuple[str, str]] = {
         "fill splats, meshes and binding from multi-view frames",
     ),
     "evaluate": ("robogs.reconstruct.cli", "image and mesh quality metrics"),
+    "roles": ("robogs.cli.roles_cmd", "list stream roles with reasons; set: re-role a generic stream"),
     "plugins": (
         "robogs.cli.plugins_cmd",
         "list the checks, converters, exporters, effects, backends and layers, with status",
