@@ -101,7 +101,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default="joints",
         help="with --format lerobot: observation.state / action as joints or EE poses",
     )
-    p.add_argument("--backend", default="torch", help="render backend (default torch)")
+    p.add_argument(
+        "--backend",
+        default="auto",
+        help="render backend: auto (numba on CPU when installed, else torch), torch, numba",
+    )
     p.add_argument("--force", action="store_true", help="replace OUT if it is a robogs dataset")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
