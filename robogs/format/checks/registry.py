@@ -61,6 +61,7 @@ BUILTIN_MODULES: tuple[str, ...] = (
     "integrity",
     "timing",
     "sync",
+    "lag_pairs",
     "geometry",
     "physics",
     "binding",

@@ -34,7 +34,13 @@ from .registry import Check, check
 from .stale import held_mask
 from .streaming import batches
 
-__all__ = ["LagEstimate", "StreamLag", "estimate_camera_lag", "estimate_stream_lag"]
+__all__ = [
+    "LagEstimate",
+    "StreamLag",
+    "cached_camera_lag",
+    "estimate_camera_lag",
+    "estimate_stream_lag",
+]
 
 _MAX_FRAMES = 300
 _STEP_NS = 5_000_000
@@ -244,6 +250,18 @@ def _fit(
     )
 
 
+def cached_camera_lag(ctx: CheckContext, ep, stream: str) -> LagEstimate | None:
+    """:func:`estimate_camera_lag`, once per camera stream and context (T012 and T015 share it);
+    None when it cannot be estimated or its inputs are unreadable (reported elsewhere)."""
+    key = ("camera-lag", ep.id, stream)
+    if key not in ctx._cache:
+        try:
+            ctx._cache[key] = estimate_camera_lag(ctx, ep, stream)
+        except (InputReported, RobogsError):
+            ctx._cache[key] = None
+    return ctx._cache[key]
+
+
 # Checks share one shape by design: a @check(...) registration over a finding loop.
 @check(
     "T012",
@@ -261,12 +279,7 @@ def _camera_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     if not ctx.has_robot():
         return
     for ep, name, st in ctx.streams(("camera",)):
-        try:
-            est = estimate_camera_lag(ctx, ep, name)
-        except InputReported:
-            continue
-        except RobogsError:
-            continue  # unreadable URDF, labels or camera: reported by their own checks
+        est = cached_camera_lag(ctx, ep, name)  # unreadable inputs: reported by their checks
         if est is None:
             continue
         significant = abs(est.offset_ms) > 3.0 * est.stderr_ms
@@ -318,7 +331,8 @@ class StreamLag:
             (robust to the serial correlation of the residuals), ms.
         lo_ms, hi_ms: 95 % interval (Student's t with blocks - 1 degrees of freedom), ms.
         samples: observed samples used.
-        rms_at_zero_mm, rms_at_lag_mm: residual rms (offset removed) at lag 0 and at the lag, mm.
+        rms_at_zero, rms_at_lag: residual rms (offset removed) at lag 0 and at the lag, in the
+            units of the values (m for positions, px for image points).
     """
 
     lag_ms: float
@@ -326,8 +340,8 @@ class StreamLag:
     lo_ms: float
     hi_ms: float
     samples: int
-    rms_at_zero_mm: float
-    rms_at_lag_mm: float
+    rms_at_zero: float
+    rms_at_lag: float
 
 
 def _shifted(t_ref: np.ndarray, p_ref: np.ndarray, tq: np.ndarray) -> np.ndarray:
@@ -350,6 +364,7 @@ def estimate_stream_lag(
     *,
     max_lag_ns: int = _MAX_STREAM_LAG_NS,
     blocks: int = _BLOCKS,
+    min_speed: float = _MIN_SPEED,
 ) -> StreamLag | None:
     """Lag of ``p_obs`` behind ``p_ref`` (least squares on interpolated positions).
 
@@ -366,6 +381,8 @@ def estimate_stream_lag(
         p_obs: [M, C] observed values, same units and frame.
         max_lag_ns: largest lag searched.
         blocks: jackknife blocks.
+        min_speed: rms speed of the reference (value units per s) below which the motion is too
+            slow to time (None is returned).
 
     Returns:
         The estimate, or None when too few observed samples lie inside the reference's span
@@ -409,7 +426,7 @@ def estimate_stream_lag(
     r = resid(lag)
     jac = (_shifted(tr, pr, to - lag + h) - _shifted(tr, pr, to - lag - h)) / (2 * h)
     speed_rms = float(np.sqrt(np.mean(np.sum((jac - jac.mean(axis=0)) ** 2, axis=1)))) * 1e9
-    if speed_rms < _MIN_SPEED:
+    if speed_rms < min_speed:
         return None
     reps = []
     for idx in np.array_split(np.arange(to.size), blocks):
@@ -427,8 +444,8 @@ def estimate_stream_lag(
         lo_ms=(lag - _T975 * se) * 1e-6,
         hi_ms=(lag + _T975 * se) * 1e-6,
         samples=int(to.size),
-        rms_at_zero_mm=float(np.sqrt(_cost(resid(0.0)) / n)) * MM,
-        rms_at_lag_mm=float(np.sqrt(_cost(r) / n)) * MM,
+        rms_at_zero=float(np.sqrt(_cost(resid(0.0)) / n)),
+        rms_at_lag=float(np.sqrt(_cost(r) / n)),
     )
 
 
@@ -580,7 +597,7 @@ def _stream_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                     f"link {link!r}: poses run {abs(est.lag_ms):.3g} ms {when} forward kinematics "
                     f"of {js!r} (95 % interval {est.lo_ms:.4g} to {est.hi_ms:.4g} ms, "
                     f"{est.samples} fresh samples); removing the lag takes the rms from "
-                    f"{est.rms_at_zero_mm:.3g} to {est.rms_at_lag_mm:.3g} mm (offset removed)",
+                    f"{est.rms_at_zero * MM:.3g} to {est.rms_at_lag * MM:.3g} mm (offset removed)",
                     value=est.lag_ms,
                     budget=budget,
                     file=rel,

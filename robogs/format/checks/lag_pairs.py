@@ -1,0 +1,540 @@
+"""Lag between other pairs of streams that observe the same motion (T015, T016).
+
+T015, object pose vs a camera's 2-D boxes: each recorded object pose is projected into the
+camera (the asset mesh's convex hull through the pinhole model of its static extrinsics and
+intrinsics), and the centre of the projected box is compared with the centre of the object's
+box in each frame (the ``boxes2d`` rows, or the boxes of its label masks). The lag of the image
+centres behind the projected ones is fitted by :func:`~robogs.format.checks.sync.
+estimate_stream_lag` (in px). The frames are stamped by the camera, whose own offset against
+the robot T012 measures; that offset is removed, so T015 reports how late the *pose stream* is
+on the robot's clock, and a late camera is reported once (by T012).
+
+T016, wrench vs contact: contact starts when the object starts to move. For every rise of the
+force magnitude out of its floor (the sensor's offset removed), the object's displacement from
+its rest position around it is extrapolated back to zero along its first millimetres of motion,
+and the force back to its floor along its rise; the lag is the mean of ``t_force - t_motion``
+over the pushes (Student's t interval). A rigid pusher touches and loads the object at once, so
+a clean recording gives a lag within the sampling; a force ramp slower than the first
+millimetre of motion shows as a small positive lag.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import RobogsError
+from ..findings import Finding
+from ..frames import quat_to_matrix_np
+from ._common import column, frame_stamps
+from .context import CheckContext, InputReported
+from .registry import Check, check
+from .stale import held_mask
+from .streaming import batches
+from .sync import _project, cached_camera_lag, estimate_stream_lag
+
+__all__ = ["ContactLag", "contact_lag", "projected_centres"]
+
+#: rms speed (px/s) of the projected object below which a camera cannot time it
+_MIN_PX_SPEED = 5.0
+#: share by which removing a lag must lower the box-centre rms to count as seen (below it the
+#: boxes' pixel quantisation, not the timing, dominates the residuals)
+_MIN_GAIN = 0.05
+#: jackknife blocks for the (short) box series
+_BOX_BLOCKS = 8
+#: two-sided 97.5 % Student's t quantiles by degrees of freedom (1..10; beyond: 2.0)
+_T975 = (12.71, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228)
+#: window around a force rise searched for the object's rest and motion, ns
+_CONTACT_WINDOW_NS = 250_000_000
+#: displacement (m) from rest taken as "moving" at least (and 6 sigma of the pose noise)
+_MOVE_M = 1e-3
+#: span after the first moving sample over which the start of the motion is fitted, ns
+_ONSET_FIT_NS = 60_000_000
+
+
+# --------------------------------------------------------------------------- shared
+
+
+def _poses(ctx: CheckContext, rel: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per object of an ``object_poses`` table: fresh (not held) stamps [N] and [N, 7]
+    ``x, y, z, qw, qx, qy, qz``; series whose stamps do not increase are left out (T001)."""
+    cols = ("t_ns", "object", "x", "y", "z", "qw", "qx", "qy", "qz")
+    parts: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for b in batches(ctx, rel, cols):
+        enc = b.column(1).dictionary_encode()
+        codes = enc.indices.to_numpy(zero_copy_only=False)
+        t = column(b, "t_ns").astype(np.int64)
+        v = np.stack([column(b, c) for c in cols[2:]], axis=1).astype(np.float64)
+        for k, name in enumerate(enc.dictionary.to_pylist()):
+            sel = codes == k
+            parts.setdefault(str(name), []).append((t[sel], v[sel]))
+    out = {}
+    for name, chunks in parts.items():
+        t = np.concatenate([c[0] for c in chunks])
+        v = np.concatenate([c[1] for c in chunks])
+        if t.size < 3 or not np.all(np.diff(t) > 0) or not np.all(np.isfinite(v)):
+            continue  # T001 / I009
+        keep = ~held_mask(t, v)
+        out[name] = (t[keep], v[keep])
+    return out
+
+
+def _t975(dof: int) -> float:
+    return _T975[dof - 1] if 1 <= dof <= len(_T975) else 2.0
+
+
+# --------------------------------------------------------------------------- T015
+
+
+def projected_centres(cam, T_world_obj: np.ndarray, hull: np.ndarray) -> np.ndarray:
+    """[N, 2] centres (px) of the boxes of ``hull`` (object frame, m) seen by ``cam`` at each
+    pose ``T_world_obj`` [N, 4, 4]; NaN where a vertex lies behind the camera."""
+    T_cam_obj = np.linalg.inv(cam.T_world_cam)[None] @ T_world_obj
+    p = np.einsum("nij,vj->nvi", T_cam_obj[:, :3, :3], hull) + T_cam_obj[:, None, :3, 3]
+    uv = _project(cam, p)
+    c = 0.5 * (uv.min(axis=1) + uv.max(axis=1))
+    c[p[..., 2].min(axis=1) <= 1e-3] = np.nan
+    return c
+
+
+def _pose_matrices(v: np.ndarray) -> np.ndarray:
+    T = np.tile(np.eye(4), (v.shape[0], 1, 1))
+    q = v[:, 3:7] / np.linalg.norm(v[:, 3:7], axis=1, keepdims=True)
+    T[:, :3, :3] = quat_to_matrix_np(q)
+    T[:, :3, 3] = v[:, :3]
+    return T
+
+
+def _object_labels(ctx: CheckContext, ep) -> dict[str, list[int]]:
+    seg = ctx.find_stream(ep, "segments")
+    if seg is None:
+        return {}
+    out: dict[str, list[int]] = {}
+    for r in ctx.stream_table(ep, seg, columns=("label_id", "kind", "target")).to_pylist():
+        if r["kind"] == "object" and r["target"]:
+            out.setdefault(str(r["target"]), []).append(int(r["label_id"]))
+    return out
+
+
+def _camera_stream(ep, camera: str) -> str | None:
+    for name, st in ep.streams.items():
+        if isinstance(st, dict) and st.get("kind") == "camera" and st.get("camera") == camera:
+            return name
+    return None
+
+
+def _frame_clock(ctx: CheckContext, ep, cam_stream: str | None) -> tuple[np.ndarray, np.ndarray]:
+    """(frame indices, stamps) of a camera's frame table; empty when it has none."""
+    if cam_stream is None or not isinstance(ep.streams[cam_stream].get("frames"), str):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    t, idx = frame_stamps(
+        ctx.stream_table(ep, cam_stream, field="frames", columns=("t_ns", "frame_index"))
+    )
+    order = np.argsort(idx)
+    return idx[order], t[order]
+
+
+def _camera_offset_ms(ctx: CheckContext, ep, cam_stream: str | None) -> float | None:
+    """T012's lag of the camera's frame stamps behind the joints (ms); None if unknown."""
+    if cam_stream is None or not ctx.has_robot():
+        return None
+    est = cached_camera_lag(ctx, ep, cam_stream)
+    return None if est is None else float(est.offset_ms)
+
+
+def _observed_boxes(
+    ctx: CheckContext, ep, camera: str, labels: list[int], cam
+) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """Stamps [M] and centres [M, 2] (px) of an object's unclipped boxes in one camera, and
+    the file they come from (``boxes2d`` rows, else the camera's label masks)."""
+    cam_stream = _camera_stream(ep, camera)
+    f_idx, f_t = _frame_clock(ctx, ep, cam_stream)
+    cols = ("t_ns", "camera", "frame_index", "label_id", "x_min", "y_min", "x_max", "y_max")
+    for name, st in ep.streams.items():
+        if not (isinstance(st, dict) and st.get("kind") == "boxes2d"):
+            continue
+        rel = st.get("path")
+        if not isinstance(rel, str):
+            continue
+        tab = ctx.stream_table(ep, name, columns=cols)
+        sel = (column(tab, "camera").astype(str) == camera) & np.isin(
+            column(tab, "label_id"), labels
+        )
+        if sel.sum() == 0:
+            continue
+        box = np.stack([column(tab, c, sel) for c in cols[4:]], 1).astype(np.float64)
+        t = column(tab, "t_ns", sel).astype(np.int64)
+        fi = column(tab, "frame_index", sel).astype(np.int64)
+        return _unclipped(*_restamp(t, fi, f_idx, f_t), box, cam, rel)
+    if cam_stream is None or not isinstance(ep.streams[cam_stream].get("labels"), str):
+        return None
+    lb = ctx.label_boxes(ep, cam_stream)
+    sel = np.isin(lb.label_id, labels) & np.isin(lb.frame_index, f_idx)
+    if not sel.any():
+        return None
+    fi = lb.frame_index[sel]
+    t = f_t[np.searchsorted(f_idx, fi)]
+    box = np.stack([lb.x_min, lb.y_min, lb.x_max, lb.y_max], 1)[sel].astype(np.float64)
+    return _unclipped(t, fi, box, cam, ep.streams[cam_stream]["labels"])
+
+
+def _restamp(
+    t: np.ndarray, fi: np.ndarray, f_idx: np.ndarray, f_t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Box stamps taken from the frame table where it lists the frame (T011 checks the box
+    stamps against it), else the boxes' own ``t_ns``."""
+    if f_idx.size:
+        k = np.clip(np.searchsorted(f_idx, fi), 0, f_idx.size - 1)
+        known = f_idx[k] == fi
+        t = np.where(known, f_t[k], t)
+    return t, fi
+
+
+def _unclipped(
+    t: np.ndarray, fi: np.ndarray, box: np.ndarray, cam, rel: str
+) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """Boxes touching the image border are left out (their centre does not follow the object);
+    several boxes of the object in one frame (split by occlusion) become their union."""
+    inside = (box[:, 0] > 0) & (box[:, 1] > 0) & (box[:, 2] < cam.width) & (box[:, 3] < cam.height)
+    t, fi, box = t[inside], fi[inside], box[inside]
+    if t.size == 0:
+        return None
+    frames, first, inv = np.unique(fi, return_index=True, return_inverse=True)
+    lo = np.full((frames.size, 2), np.inf)
+    hi = np.full((frames.size, 2), -np.inf)
+    np.minimum.at(lo, inv, box[:, :2])
+    np.maximum.at(hi, inv, box[:, 2:])
+    tt = t[first]
+    order = np.argsort(tt)
+    return tt[order], (0.5 * (lo + hi))[order], rel
+
+
+@dataclass(frozen=True)
+class _BoxLag:
+    lag_ms: float  # the pose stream behind the camera's frames
+    pose_lag_ms: float  # the pose stream behind the robot's clock (camera offset removed)
+    lo_ms: float
+    hi_ms: float
+    stderr_ms: float
+    samples: int
+    rms_px: tuple[float, float]
+    camera_offset_ms: float | None
+
+
+def box_lag(ctx: CheckContext, ep, obj: str, camera: str, t_p, v_p) -> tuple[_BoxLag, str] | None:
+    """T015's fit for one object in one camera (None: not enough to time it)."""
+    cam = ctx.camera(camera)
+    if cam.T_world_cam is None or cam.extrinsics != "static":
+        return None
+    labels = _object_labels(ctx, ep).get(obj)
+    if not labels:
+        return None
+    obs = _observed_boxes(ctx, ep, camera, labels, cam)
+    if obs is None:
+        return None
+    t_b, c_b, rel = obs
+    try:
+        hull = ctx.asset_hull_vertices(obj)
+    except (InputReported, RobogsError):
+        hull = np.zeros((1, 3))  # no mesh: the object's origin
+    c_p = projected_centres(cam, _pose_matrices(v_p), hull)
+    ok = np.all(np.isfinite(c_p), axis=1)
+    if ok.sum() < 3:
+        return None
+    est = estimate_stream_lag(
+        t_p[ok], c_p[ok], t_b, c_b, blocks=_BOX_BLOCKS, min_speed=_MIN_PX_SPEED
+    )
+    if est is None:
+        return None
+    cam_off = _camera_offset_ms(ctx, ep, _camera_stream(ep, camera))
+    # boxes behind projected poses by L = camera offset - pose delay
+    pose_lag = (cam_off or 0.0) - est.lag_ms
+    half = est.hi_ms - est.lag_ms
+    out = _BoxLag(
+        lag_ms=-est.lag_ms,
+        pose_lag_ms=pose_lag,
+        lo_ms=pose_lag - half,
+        hi_ms=pose_lag + half,
+        stderr_ms=est.stderr_ms,
+        samples=est.samples,
+        rms_px=(est.rms_at_zero, est.rms_at_lag),
+        camera_offset_ms=cam_off,
+    )
+    return out, rel
+
+
+@check(
+    "T015",
+    group="time",
+    severity="error",
+    title="object poses agree in time with the camera's boxes",
+    quantity="fitted lag of the object poses behind the object's 2-D boxes (camera offset "
+    "from T012 removed)",
+    unit="ms",
+    budget="time.lag_ms",
+    hint="the object pose stream (mocap, tracker) is stamped late (or early) against the "
+    "images: correct its offset_ns by the lag, or stamp it where it is measured",
+)
+def _object_box_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    budget = ctx.budget("time.lag_ms")
+    for ep, name, st in ctx.streams(("object_poses",)):
+        rel = st.get("path")
+        cams = sorted(
+            {str(s.get("camera")) for s in ep.streams.values() if s.get("kind") == "camera"}
+            | _box_cameras(ctx, ep)
+        )
+        if not isinstance(rel, str) or not cams:
+            continue
+        try:
+            poses = _poses(ctx, rel)
+        except InputReported:
+            continue
+        for obj, (t_p, v_p) in sorted(poses.items()):
+            for camera in cams:
+                try:
+                    got = box_lag(ctx, ep, obj, camera, t_p, v_p)
+                except (InputReported, RobogsError):
+                    continue  # unreadable camera, boxes or labels: reported by their checks
+                if got is None:
+                    continue
+                est, box_rel = got
+                explains = est.rms_px[1] < (1.0 - _MIN_GAIN) * est.rms_px[0]
+                if abs(est.pose_lag_ms) <= budget or abs(est.pose_lag_ms) <= 3 * est.stderr_ms:
+                    continue
+                if not explains:
+                    continue  # the boxes are too coarse for the motion: no evidence either way
+                when = "behind" if est.pose_lag_ms > 0 else "ahead of"
+                cam_note = (
+                    f"camera offset {est.camera_offset_ms:.3g} ms (T012) removed"
+                    if est.camera_offset_ms is not None
+                    else "camera offset unknown (no robot link labels), taken as 0"
+                )
+                yield chk.finding(
+                    f"object {obj!r}: poses run {abs(est.pose_lag_ms):.3g} ms {when} the robot's "
+                    f"clock as seen by camera {camera!r} (95 % interval {est.lo_ms:.4g} to "
+                    f"{est.hi_ms:.4g} ms, {est.samples} boxes from {box_rel}; {cam_note}); "
+                    f"removing it takes the box-centre rms from {est.rms_px[0]:.3g} to "
+                    f"{est.rms_px[1]:.3g} px",
+                    value=est.pose_lag_ms,
+                    budget=budget,
+                    file=rel,
+                    episode=ep.id,
+                    stream=name,
+                )
+
+
+def _box_cameras(ctx: CheckContext, ep) -> set[str]:
+    out: set[str] = set()
+    for name, st in ep.streams.items():
+        if isinstance(st, dict) and st.get("kind") == "boxes2d" and isinstance(st.get("path"), str):
+            try:
+                tab = ctx.stream_table(ep, name, columns=("camera",))
+            except InputReported:
+                continue
+            out |= set(tab.column("camera").unique().to_pylist())
+    return out
+
+
+# --------------------------------------------------------------------------- T016
+
+
+@dataclass(frozen=True)
+class ContactLag:
+    """Lag of the wrench's contact onsets behind the object's motion onsets.
+
+    Attributes:
+        lag_ms: mean of ``t_force - t_motion`` over the pushes, ms (positive: wrench late).
+        lo_ms, hi_ms: 95 % interval (Student's t over the pushes; one push: the sampling).
+        stderr_ms: standard error, ms.
+        pushes: force rises paired with a motion onset.
+        lags_ms: the per-push lags, ms.
+    """
+
+    lag_ms: float
+    lo_ms: float
+    hi_ms: float
+    stderr_ms: float
+    pushes: int
+    lags_ms: tuple[float, ...]
+
+
+def _noise(x: np.ndarray) -> float:
+    """Noise sigma of a series from its first differences (robust: MAD)."""
+    d = np.diff(x, axis=0)
+    return float(1.4826 * np.median(np.abs(d - np.median(d, axis=0))) / np.sqrt(2.0))
+
+
+def _rises(t: np.ndarray, m: np.ndarray, hi: float) -> list[float]:
+    """Times (ns) at which ``m`` leaves its floor on each rise above ``hi`` (held 3 samples,
+    after 8 samples below it): the line through the two samples that bracket the level halfway
+    between the floor (median of the 8 samples before) and the plateau (median of the 3 after),
+    extrapolated back to the floor. Noise on the floor does not move it, unlike a threshold."""
+    above = m > hi
+    out = []
+    k = 8
+    while k < m.size - 3:
+        if above[k] and not above[k - 1] and above[k : k + 3].all() and not above[k - 8 : k].any():
+            floor = float(np.median(m[k - 8 : k - 1]))
+            mid = 0.5 * (floor + float(np.median(m[k : k + 3])))
+            i = k
+            while i < k + 2 and m[i] <= mid:
+                i += 1
+            while i > k - 7 and m[i - 1] > mid:
+                i -= 1
+            slope = (m[i] - m[i - 1]) / float(t[i] - t[i - 1])
+            if slope > 0:
+                out.append(float(t[i - 1] - (m[i - 1] - floor) / slope))
+            while k < m.size and above[k]:
+                k += 1
+        k += 1
+    return out
+
+
+def _motion_onset(t: np.ndarray, p: np.ndarray, t_force: float, sigma: float) -> float | None:
+    """When the object starts to move near ``t_force`` (ns), or None.
+
+    Its rest position is the median of the window's first half before ``t_force``; the first
+    samples whose displacement along the motion exceeds the threshold (up to
+    :data:`_ONSET_FIT_NS` later) are fitted by a line, extrapolated back to zero displacement.
+    """
+    w = (t >= t_force - _CONTACT_WINDOW_NS) & (t <= t_force + _CONTACT_WINDOW_NS)
+    tw, pw = t[w], p[w]
+    if tw.size < 8:
+        return None
+    thr = max(_MOVE_M, 6.0 * sigma)
+    rest_sel = tw < t_force - 0.5 * _CONTACT_WINDOW_NS
+    if rest_sel.sum() < 3:
+        return None
+    rest = np.median(pw[rest_sel], axis=0)
+    d = np.linalg.norm(pw - rest, axis=1)
+    if np.any(d[rest_sel] > thr):
+        return None  # not at rest before the push
+    over = np.flatnonzero(d > thr)
+    if over.size == 0:
+        return None
+    a = over[0]
+    fit = np.flatnonzero((tw >= tw[a]) & (tw <= tw[a] + _ONSET_FIT_NS))
+    if fit.size < 2:
+        fit = np.arange(a, min(a + 2, tw.size))
+    if fit.size < 2:
+        return None
+    u = pw[fit[-1]] - rest
+    u /= np.linalg.norm(u)
+    along = (pw[fit] - rest) @ u  # displacement along the motion (noise across it ignored)
+    tt = (tw[fit] - tw[a]).astype(np.float64)
+    slope, icept = np.polyfit(tt, along, 1)
+    if slope <= 0:
+        return None
+    return float(tw[a] - icept / slope)
+
+
+def contact_lag(
+    t_w: np.ndarray, f: np.ndarray, t_o: np.ndarray, p_o: np.ndarray
+) -> ContactLag | None:
+    """Lag of a wrench's force rises behind an object's motion onsets.
+
+    Args:
+        t_w: [N] int64 wrench stamps, ns (increasing); f: [N, 3] forces, N (any frame).
+        t_o: [M] int64 object stamps, ns (increasing); p_o: [M, 3] positions, m.
+
+    Returns:
+        The lag, or None when the force never rises clearly out of its floor or no rise meets
+        an object at rest that starts to move.
+    """
+    if t_w.size < 20 or t_o.size < 8:
+        return None
+    floor = np.median(f, axis=0)  # the sensor's offset (pushes last a minority of the time)
+    m = np.linalg.norm(f - floor, axis=1)
+    sig = _noise(m)
+    top = float(np.percentile(m, 99))
+    hi = max(8.0 * sig, 0.3 * top)
+    if top < 2.0 * hi or not np.isfinite(hi):
+        return None
+    sig_p = _noise(p_o)
+    lags = []
+    for t_f in _rises(t_w, m, hi):
+        t_m = _motion_onset(t_o, p_o, t_f, sig_p)
+        if t_m is not None and abs(t_f - t_m) < 0.5 * _CONTACT_WINDOW_NS:
+            lags.append((t_f - t_m) * 1e-6)
+    if not lags:
+        return None
+    arr = np.array(lags)
+    n = arr.size
+    if n >= 3:
+        se = float(arr.std(ddof=1) / np.sqrt(n))
+        half = _t975(n - 1) * se
+    else:  # the sampling bounds it: one period of each stream
+        per = float(np.median(np.diff(t_w)) + np.median(np.diff(t_o))) * 1e-6
+        se, half = per / np.sqrt(12.0), per
+    lag = float(arr.mean())
+    return ContactLag(lag, lag - half, lag + half, se, n, tuple(float(x) for x in arr))
+
+
+def _wrench_series(ctx: CheckContext, rel: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    cols = ("t_ns", "frame", "fx", "fy", "fz")
+    parts: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for b in batches(ctx, rel, cols):
+        enc = b.column(1).dictionary_encode()
+        codes = enc.indices.to_numpy(zero_copy_only=False)
+        t = column(b, "t_ns").astype(np.int64)
+        v = np.stack([column(b, c) for c in cols[2:]], axis=1).astype(np.float64)
+        for k, name in enumerate(enc.dictionary.to_pylist()):
+            sel = codes == k
+            parts.setdefault(str(name), []).append((t[sel], v[sel]))
+    out = {}
+    for name, chunks in parts.items():
+        t = np.concatenate([c[0] for c in chunks])
+        v = np.concatenate([c[1] for c in chunks])
+        if t.size >= 20 and np.all(np.diff(t) > 0) and np.all(np.isfinite(v)):
+            out[name] = (t, v)
+    return out
+
+
+@check(
+    "T016",
+    group="time",
+    severity="error",
+    title="wrench agrees in time with the contacts it measures",
+    quantity="mean lag of the force rises behind the object's motion onsets",
+    unit="ms",
+    budget="time.sync_ms",
+    hint="the force-torque stream is stamped late (or early) against the poses: correct its "
+    "offset_ns by the lag (a slow force ramp before the object moves also shows as a small "
+    "positive lag)",
+)
+def _wrench_contact_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
+    budget = ctx.budget("time.sync_ms")
+    for ep, name, st in ctx.streams(("wrenches",)):
+        obj_stream = ctx.find_stream(ep, "object_poses")
+        rel = st.get("path")
+        if obj_stream is None or not isinstance(rel, str):
+            continue
+        try:
+            wrenches = _wrench_series(ctx, rel)
+            objects = _poses(ctx, ep.streams[obj_stream]["path"])
+        except InputReported:
+            continue
+        for frame, (t_w, f) in sorted(wrenches.items()):
+            best: tuple[str, ContactLag] | None = None
+            for obj, (t_o, v_o) in sorted(objects.items()):
+                est = contact_lag(t_w, f, t_o, v_o[:, :3])
+                if est is not None and (best is None or est.pushes > best[1].pushes):
+                    best = (obj, est)
+            if best is None:
+                continue
+            obj, est = best
+            significant = est.pushes < 3 or abs(est.lag_ms) > 3.0 * est.stderr_ms
+            if abs(est.lag_ms) > budget and significant and not est.lo_ms <= 0.0 <= est.hi_ms:
+                when = "behind" if est.lag_ms > 0 else "ahead of"
+                yield chk.finding(
+                    f"wrench {frame!r}: force rises run {abs(est.lag_ms):.3g} ms {when} the "
+                    f"motion onsets of {obj!r} (95 % interval {est.lo_ms:.4g} to "
+                    f"{est.hi_ms:.4g} ms over {est.pushes} push(es))",
+                    value=est.lag_ms,
+                    budget=budget,
+                    file=rel,
+                    episode=ep.id,
+                    stream=name,
+                )
