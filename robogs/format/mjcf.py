@@ -10,7 +10,9 @@ What the document holds (world frame = the dataset world, z up, metres):
 * ``table`` - a plane through ``objects.table.point_m`` (default ``(0, 0, plane_z_m)``) with
   normal ``objects.table.normal`` (default +z), so a fitted tilted plane stays tilted;
 * one free body per ``rigid`` object (``mass_kg``, ``com_m``, ``inertia_kgm2`` as an explicit
-  ``<inertial>``; the geometry is never used for mass): a box of ``size_m``, or the convex hull
+  ``<inertial>``; the geometry is never used for mass): a box of ``size_m`` resting on an
+  n x n grid of small spheres on its bottom face (:func:`footprint_points`: the friction
+  torque of a uniformly loaded face, not of four corners), or the convex hull
   of the object's mesh when one is given (:func:`collision_hull`; MuJoCo collides a mesh
   through its convex hull anyway, so a non-convex, open or too-detailed mesh is replaced by its
   hull, decimated to :data:`MAX_HULL_VERTICES`, and the substitution is reported);
@@ -53,6 +55,7 @@ __all__ = [
     "ContactSettings",
     "MjcfScene",
     "collision_hull",
+    "footprint_points",
     "scene_mjcf",
 ]
 
@@ -83,6 +86,8 @@ class ContactSettings:
         iterations, tolerance: main solver (Newton) limits.
         integrator: MuJoCo integrator (``"Euler"``: semi-implicit, actuator forces explicit).
         pusher_mass: kg of the pusher body (and kg m^2 x 0.01 of its yaw inertia).
+        footprint_grid: a box rests on the support through an n x n grid of small spheres
+            on its bottom face (0: through the box geom itself); see :func:`footprint_points`.
         servo_velocity_gain, servo_position_gain: the pusher servos' gains in units of the
             pusher's mass and the timestep: ``kv = gain_v * m / dt``, ``kp = gain_p * m / dt^2``
             (``gain_v = 1`` is dead-beat velocity tracking with explicit forces).
@@ -98,6 +103,7 @@ class ContactSettings:
     tolerance: float = 1e-10
     integrator: str = "Euler"
     pusher_mass: float = 1000.0
+    footprint_grid: int = 4
     servo_velocity_gain: float = 1.0
     servo_position_gain: float = 0.3
 
@@ -114,6 +120,9 @@ class MjcfScene:
         pairs: ``(geom1, geom2)`` of every contact pair, in ``<contact>`` order.
         notes: substitutions made (hulled or decimated meshes), one line each.
         unmapped: physics.json keys present but not represented in MuJoCo.
+        table_pairs: object name -> rows of its contact pairs with the support (footprint
+            spheres and the box geom itself).
+        feet: object name -> its footprint sphere geoms.
     """
 
     xml: str
@@ -123,6 +132,8 @@ class MjcfScene:
     pairs: list[tuple[str, str]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     unmapped: list[str] = field(default_factory=list)
+    table_pairs: dict[str, list[int]] = field(default_factory=dict)
+    feet: dict[str, list[str]] = field(default_factory=dict)
 
 
 def _f(v: float) -> str:
@@ -271,6 +282,38 @@ def _inertial(body: ET.Element, entry: Mapping[str, Any], where: str) -> float:
     return mass
 
 
+FOOTPRINT_RADIUS = 1e-3
+"""Radius [m] of the footprint spheres (their lowest points lie on the box's bottom face)."""
+
+FOOTPRINT_GAP = 2e-4
+"""The box geom touches the support only beyond this penetration [m] (pair ``gap``): a flat box
+rests on its footprint spheres alone, a box landing on an edge or corner on the box geom."""
+
+
+def footprint_points(size: Sequence[float], n: int) -> np.ndarray:
+    """[n*n, 2] support points (object frame, m) of an ``sx x sy`` bottom face.
+
+    Why: MuJoCo collides a box with a plane at its four corners, so a turning box meets
+    friction at the corner distance ``hypot(sx, sy) / 2`` (0.050 m for 8 x 6 cm), while a
+    uniformly loaded face (Coulomb friction with uniform pressure, the limit-surface model of
+    Goyal, Ruina & Papadopoulos 1991, and the scenario generator) has the mean radius of the
+    face (0.027 m): the corner box turned 5-7 deg less under off-centre pushes. Equal-load
+    points on a midpoint grid, spread so their mean distance from the centre equals the
+    face's, give the same maximum friction torque ``mu N r_mean``; the soft contacts share
+    the load equally on a flat face.
+    """
+    sx, sy = float(size[0]), float(size[1])
+    u = (np.arange(n) + 0.5) / n - 0.5
+    gx, gy = np.meshgrid(u * sx, u * sy, indexing="ij")
+    m = 200
+    v = (np.arange(m) + 0.5) / m - 0.5
+    fx, fy = np.meshgrid(v * sx, v * sy, indexing="ij")
+    r_face = float(np.hypot(fx, fy).mean())
+    r_grid = float(np.hypot(gx, gy).mean())
+    k = min(r_face / r_grid if r_grid > 0 else 1.0, 1.0 / (1.0 - 1.0 / n))  # stay on the face
+    return np.stack([gx.ravel(), gy.ravel()], -1) * k
+
+
 def _shape_geom(
     parent: ET.Element,
     name: str,
@@ -280,8 +323,10 @@ def _shape_geom(
     scene: MjcfScene,
     asset: ET.Element,
     meshdir: str,
+    footprint: int = 0,
 ) -> None:
-    """A box of ``size_m`` or the collision hull of ``mesh`` (object frame)."""
+    """A box of ``size_m`` (with ``footprint`` x ``footprint`` support spheres) or the
+    collision hull of ``mesh`` (object frame)."""
     attrs = {"name": name, "contype": "0", "conaffinity": "0", "group": "1"}
     if mesh is not None:
         hull, note = collision_hull(mesh, name)
@@ -298,6 +343,18 @@ def _shape_geom(
     elif "size_m" in entry:
         half = [0.5 * s for s in _floats(entry, "size_m", 3, where)]
         ET.SubElement(parent, "geom", type="box", size=_vec(half), **attrs)
+        if footprint > 0:
+            z = -half[2] + FOOTPRINT_RADIUS
+            for i, (x, y) in enumerate(footprint_points([2 * half[0], 2 * half[1]], footprint)):
+                ET.SubElement(
+                    parent,
+                    "geom",
+                    type="sphere",
+                    size=_f(FOOTPRINT_RADIUS),
+                    pos=_vec([x, y, z]),
+                    **{**attrs, "name": f"{name}_foot{i}", "group": "3"},
+                )
+                scene.feet.setdefault(name, []).append(f"{name}_foot{i}")
     else:
         raise FormatError(
             f"object {name!r} has neither size_m nor a mesh",
@@ -457,7 +514,17 @@ def scene_mjcf(
             body = ET.SubElement(world, "body", name=name, **_pose_attrs(poses.get(name)))
             ET.SubElement(body, "freejoint", name=name)
             _inertial(body, entry, where)
-            _shape_geom(body, name, entry, where, meshes.get(name), scene, asset, meshdir)
+            _shape_geom(
+                body,
+                name,
+                entry,
+                where,
+                meshes.get(name),
+                scene,
+                asset,
+                meshdir,
+                settings.footprint_grid,
+            )
             free[name] = _number(entry, "friction_dynamic", 0.4, where)
             for key in ("restitution", "damping_linear", "damping_angular"):
                 if float(entry.get(key) or 0.0) != 0.0:
@@ -475,17 +542,30 @@ def scene_mjcf(
         mu_p = _number(pusher, "friction_dynamic", 0.0, "objects/pusher")
     sr, si = _vec(settings.solref), _vec(settings.solimp)
 
-    def pair(g1: str, g2: str, mu: float) -> None:
+    def pair(g1: str, g2: str, mu: float, **extra: str) -> None:
         # condim 3 even without friction, so that a fitted friction can be set on the model
         fr = _vec([max(mu, 1e-5), max(mu, 1e-5), 0.005, 1e-4, 1e-4])
         ET.SubElement(
-            contact, "pair", geom1=g1, geom2=g2, condim="3", friction=fr, solref=sr, solimp=si
+            contact,
+            "pair",
+            geom1=g1,
+            geom2=g2,
+            condim="3",
+            friction=fr,
+            solref=sr,
+            solimp=si,
+            **extra,
         )
         scene.pairs.append((g1, g2))
 
     names = list(free)
     for i, a in enumerate(names):
-        pair(a, "table", free[a])
+        feet = scene.feet.get(a, [])
+        for g in feet:
+            scene.table_pairs.setdefault(a, []).append(len(scene.pairs))
+            pair(g, "table", free[a])
+        scene.table_pairs.setdefault(a, []).append(len(scene.pairs))
+        pair(a, "table", free[a], **({"gap": _f(FOOTPRINT_GAP)} if feet else {}))
         if scene.pusher is not None:
             pair(a, "pusher", mu_p)
         for b in names[i + 1 :]:

@@ -31,7 +31,7 @@ from robogs.physics.diagnose import (
     diagnose_recording,
     start_points,
 )
-from robogs.physics.engine import Engine
+from robogs.physics.engine import Engine, resolve_backend
 from robogs.physics.fit import Problem
 from robogs.physics.masks import MAX_FRAMES
 from robogs.physics.recording import Recording, as_recording, load_recording
@@ -83,6 +83,7 @@ def compare(
     mask_frames: int = MAX_FRAMES,
     mask_poses: str = "model",
     progress: Callable[[int, int], None] | None = None,
+    engine: str = "planar",
 ) -> CompareResult:
     """Residuals of the current physics revision, refitted, against the measured streams.
 
@@ -92,10 +93,13 @@ def compare(
     forward kinematics of the measured joints, the free object at the model's predicted poses
     (``mask_poses="model"``) or at its recorded poses (``"recorded"``), ``mask_frames`` frames
     per camera stream (0: none). ``progress(iteration, unfinished fits)`` follows the refit.
+    ``engine``: ``planar``, ``mujoco`` or ``auto`` (:func:`robogs.physics.engine.resolve_backend`).
     """
     rec, ds = _open(dataset)
     res = copy.copy(
-        baseline(rec, dt=dt, progress=progress).result
+        baseline(
+            rec, dt=dt, progress=progress, backend=resolve_backend(rec.physics, engine)[0]
+        ).result
     )  # the memoised table stays without masks
     _attach_masks(res, ds, mask_frames, mask_poses)
     return res
@@ -108,6 +112,7 @@ def diagnose(
     progress: Callable[[int, int], None] | None = None,
     dt: float = 1e-3,
     mask_frames: int = MAX_FRAMES,
+    engine: str = "planar",
 ) -> DiagnoseResult:
     """Rank candidate effects (see :mod:`robogs.physics.diagnose`).
 
@@ -118,7 +123,7 @@ def diagnose(
     names = None if effects is None else list(effects)
     camera = _camera_effects()
     rigid = None if names is None else [n for n in names if n not in camera]
-    eng = Engine(rec, dt=dt)
+    eng = Engine(rec, dt=dt, backend=engine)
     res = diagnose_recording(rec, effects=rigid, progress=progress, dt=dt, engine=eng)
     res.rms_base = baseline(rec, dt=dt, engine=eng).rms_mm  # the shared "before"
     if names is None or any(n in camera for n in names):
@@ -252,7 +257,7 @@ def _fit_engine(
     doc["effects"] = effects
     rev = rec.physics.get("revision")
     doc["fit"] = {"from_revision": rev if isinstance(rev, int) else None, "added": list(add)}
-    after = baseline(rec, doc, dt=eng.prep.drive.dt, progress=progress)
+    after = baseline(rec, doc, dt=eng.prep.drive.dt, progress=progress, backend=eng.backend)
     return FitResult(
         params=params,
         rms_before=before.rms_mm,
@@ -275,6 +280,7 @@ def fit(
     dt: float = 1e-3,
     mask_frames: int = MAX_FRAMES,
     progress: Callable[[int, int], None] | None = None,
+    engine: str = "planar",
 ) -> FitResult:
     """Refit the base model (and the effects already present) plus ``add``.
 
@@ -301,7 +307,7 @@ def fit(
         )
     else:
         rec, ds = _open(dataset)
-        res = _fit_engine(Engine(rec, dt=dt), rigid_add, progress)
+        res = _fit_engine(Engine(rec, dt=dt, backend=engine), rigid_add, progress)
     new_cams = []
     if cam_add:
         new_cams = _fit_cameras(
@@ -425,7 +431,9 @@ def _label(bl: Baseline) -> str:
     return f"{rev}, refitted"
 
 
-def report_baselines(dataset: Any, *, add: Sequence[str] = (), dt: float = 1e-3) -> ReportPair:
+def report_baselines(
+    dataset: Any, *, add: Sequence[str] = (), dt: float = 1e-3, engine: str = "planar"
+) -> ReportPair:
     """What :func:`report` compares; every value comes from :func:`baseline`.
 
     * ``add`` given: before = the current revision, after = the document ``fit --add`` would
@@ -435,13 +443,16 @@ def report_baselines(dataset: Any, *, add: Sequence[str] = (), dt: float = 1e-3)
     * else before = after = the current revision.
     """
     rec, ds = _open(dataset)
-    return _report_pair(rec, ds, add, dt)
+    return _report_pair(rec, ds, add, dt, engine)
 
 
-def _report_pair(rec: Recording, ds: Any, add: Sequence[str], dt: float) -> ReportPair:
+def _report_pair(
+    rec: Recording, ds: Any, add: Sequence[str], dt: float, engine: str = "planar"
+) -> ReportPair:
     rigid = [a for a in add if a not in _camera_effects()]
+    backend = resolve_backend(rec.physics, engine)[0]
     if rigid:
-        res = _fit_engine(Engine(rec, dt=dt), rigid)
+        res = _fit_engine(Engine(rec, dt=dt, backend=backend), rigid)
         if res.compare_before is None or res.compare_after is None:  # pragma: no cover
             raise RuntimeError("comparison missing")
         rev = "unwritten revision" if res.from_revision is None else f"revision {res.from_revision}"
@@ -455,9 +466,9 @@ def _report_pair(rec: Recording, ds: Any, add: Sequence[str], dt: float) -> Repo
             res.from_revision,
             None,
         )
-    after = baseline(rec, dt=dt)
+    after = baseline(rec, dt=dt, backend=backend)
     parent = _fitted_from(rec, ds)
-    before = after if parent is None else baseline(rec, parent, dt=dt)
+    before = after if parent is None else baseline(rec, parent, dt=dt, backend=backend)
     added = list((rec.physics.get("fit") or {}).get("added") or []) if parent is not None else []
     return ReportPair(
         before.result,
@@ -478,6 +489,7 @@ def report(
     add: Sequence[str] = (),
     dt: float = 1e-3,
     pair: ReportPair | None = None,
+    engine: str = "planar",
 ) -> Path:
     """Write an HTML report of residuals before and after (see :func:`report_baselines`;
     ``pair``: one it already returned for this dataset, instead of ``add`` and ``dt``).
@@ -486,7 +498,7 @@ def report(
     """
     if pair is None:
         rec, ds = _open(dataset)
-        pair = _report_pair(rec, ds, add, dt)
+        pair = _report_pair(rec, ds, add, dt, engine)
     else:
         ds = _as_dataset(dataset)
     before = copy.copy(pair.before)  # the memoised table stays without masks

@@ -125,6 +125,7 @@ def baseline(
     dt: float = 1e-3,
     engine: Engine | None = None,
     progress: Callable[[int, int], None] | None = None,
+    backend: str | None = None,
 ) -> Baseline:
     """The refitted model of ``physics`` (default: the recording's own) on ``rec``.
 
@@ -134,17 +135,27 @@ def baseline(
         dt: simulation step [s].
         engine: an engine already prepared for ``rec`` with this physics (saves the prepare).
         progress: called with (iteration, unfinished fits) while the fit runs.
+        backend: rollout engine (``planar``, ``mujoco``, ``auto``; default: ``engine``'s, else
+            planar).
     """
     doc = rec.physics if physics is None else physics
-    key = (_fingerprint(rec), model_key(doc), float(dt))
+    if backend is None:
+        backend = getattr(engine, "backend", "planar")
+    key = (_fingerprint(rec), model_key(doc), float(dt), backend)
     rev = doc.get("revision")
     rev = int(rev) if isinstance(rev, int) else None
     hit = _CACHE.get(key)
     if hit is not None:
         _CACHE.move_to_end(key)
         return replace(hit, revision=rev, physics=doc)  # same model, this document's history
-    if engine is None or model_key(engine.prep.rec.physics) != key[1]:
-        engine = Engine(rec if physics is None else replace(rec, physics=doc), dt=dt)
+    if (
+        engine is None
+        or model_key(engine.prep.rec.physics) != key[1]
+        or getattr(engine, "backend", "planar") != backend
+    ):
+        engine = Engine(
+            rec if physics is None else replace(rec, physics=doc), dt=dt, backend=backend
+        )
     space, free, out, res = fit_baseline(engine, progress)
     bl = Baseline(rev, doc, space, free, out, res)
     _CACHE[key] = bl

@@ -185,8 +185,10 @@ class MujocoEngine:
                     if "pusher" in (a, b):
                         m.pair_friction[k, :2] = max(v, 1e-5)
             elif obj in self._bid and what == "friction_dynamic":
+                support = set(self.scene.table_pairs.get(obj, []))
+                feet = set(self.scene.feet.get(obj, []))
                 for k, (a, b) in enumerate(self.scene.pairs):
-                    if a == obj and b not in self._bid and b != "pusher":
+                    if k in support or (a in feet | {obj} and b not in self._bid and b != "pusher"):
                         m.pair_friction[k, :2] = max(v, 1e-5)
             elif obj in self._bid and what == "mass_kg" and v > 0:
                 b = self._bid[obj]

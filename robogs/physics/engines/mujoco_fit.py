@@ -38,7 +38,7 @@ from robogs.physics.engines.mujoco_effects import (
     classify,
     step_forces,
 )
-from robogs.physics.engines.mujoco_engine import _STATE, MujocoEngine
+from robogs.physics.engines.mujoco_engine import MujocoEngine
 from robogs.physics.model import Drive, SimResult, _base_body, _lift
 from robogs.physics.space import ParamSpace
 
@@ -73,9 +73,7 @@ class MujocoFit:
         self.nq, self.nv = m.nq, m.nv
         b = self.eng._bid[object_name]
         self.obj = object_name
-        pairs = [
-            k for k, (g1, g2) in enumerate(self.eng.scene.pairs) if {g1, g2} == {object_name, "table"}
-        ]
+        pairs = list(self.eng.scene.table_pairs.get(object_name, []))
         self.slots = ObjectSlots(
             body=b,
             dof=self.eng._vadr[object_name],
@@ -97,7 +95,9 @@ class MujocoFit:
     # ------------------------------------------------------------------ models per set
     def models(self, theta: torch.Tensor, space: ParamSpace, scene: Any) -> tuple[list, Any, list]:
         """(M compiled models, bodies [M, 1], per-step force effects with their parameters)."""
-        effects = [(e, space.theta_dict(theta, e.name)) for e in space.effects if e.model == "rigid"]
+        effects = [
+            (e, space.theta_dict(theta, e.name)) for e in space.effects if e.model == "rigid"
+        ]
         body_fx, native_fx, force_fx = classify([e for e, _ in effects])
         ths = dict((e.name, th) for e, th in effects)
         body = _base_body(scene, theta, space)
@@ -178,7 +178,7 @@ class MujocoFit:
         m_sets: int,
     ) -> np.ndarray:
         """Dense object poses [M, T, S, 7] (position, quaternion w x y z)."""
-        n_t, n_s, dt = drive.n_traj, drive.n_steps, drive.dt
+        n_t, n_s = drive.n_traj, drive.n_steps
         n_r = m_sets * n_t
         t_of = np.tile(np.arange(n_t), m_sets)
         models_r = [models[i] for i in range(m_sets) for _ in range(n_t)]
@@ -207,7 +207,9 @@ class MujocoFit:
         rel_p = np.zeros((n_r, 3))
         rel_q = np.tile([1.0, 0, 0, 0], (n_r, 1))
         if onset[:, 0].any():
-            rel_p, rel_q = self._grasp_rel(x, pusher[:, 0], ee_yaw[:, 0], t_of, onset[:, 0], rel_p, rel_q)
+            rel_p, rel_q = self._grasp_rel(
+                x, pusher[:, 0], ee_yaw[:, 0], t_of, onset[:, 0], rel_p, rel_q
+            )
         k = 0
         while k < n_s - 1:
             if single[k]:
@@ -278,7 +280,9 @@ class MujocoFit:
         w_body = x[:, self.va + 3 : self.va + 6]
         w = _rot(q, w_body)[:, 2]
         # velocity of the CoM = origin velocity + omega x (R ipos)
-        com = _rot(q, np.broadcast_to(np.asarray(body.com.numpy())[:, 0], (m_sets, 2)).repeat(n_t, 0))
+        com = _rot(
+            q, np.broadcast_to(np.asarray(body.com.numpy())[:, 0], (m_sets, 2)).repeat(n_t, 0)
+        )
         vc = v + np.cross(_rot(q, w_body), com)
         yaw = quat_yaw(q)
         gap = x[:, self.qa + 2] - (self.table_z + self.half_z)
