@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +39,13 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--json", action="store_true", help="print one JSON object for machines")
     add_split_argument(p)
+    p.add_argument(
+        "--engine",
+        choices=("auto", "planar", "mujoco"),
+        default="planar",
+        help="object model's simulator: planar (torch, one box on a plane), mujoco (3-D "
+        "contacts) or auto (planar when it can represent the scene; prints the choice)",
+    )
     if verb in ("compare", "diagnose", "fit"):
         p.add_argument(
             "--mask-frames",
@@ -210,7 +218,12 @@ def _compare(args: argparse.Namespace, model: str) -> int:
         return 0
     from robogs.physics.api import compare
 
-    res = compare(args.dataset, mask_frames=args.mask_frames, mask_poses=args.mask_poses)
+    res = compare(
+        args.dataset,
+        mask_frames=args.mask_frames,
+        mask_poses=args.mask_poses,
+        engine=_engine(args),
+    )
     d = res.to_dict()
     rev = _revision(args.dataset)
     d["baseline"] = {"revision": rev, "refitted": _REFITTED}
@@ -463,7 +476,9 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
         _no_object_holdout(args)
 
         if args.no_progress or args.json:
-            d = diagnose(args.dataset, effects=effects, mask_frames=args.mask_frames).to_dict()
+            d = diagnose(
+                args.dataset, effects=effects, mask_frames=args.mask_frames, engine=_engine(args)
+            ).to_dict()
         else:
             from rich.progress import Progress
 
@@ -474,6 +489,7 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
                     effects=effects,
                     progress=lambda i, n: bar.update(task, completed=i, total=n),
                     mask_frames=args.mask_frames,
+                    engine=_engine(args),
                 ).to_dict()
     note_diagnosis(d)
     if getattr(args, "auto", False):
@@ -568,6 +584,7 @@ def _fit(args: argparse.Namespace, model: str) -> int:
             write=not args.dry_run,
             note=args.note,
             mask_frames=args.mask_frames,
+            engine=_engine(args),
         )
         d = res.to_dict()
         if args.json:
@@ -610,10 +627,11 @@ def _report(args: argparse.Namespace, model: str) -> int:
     from robogs.physics.api import diagnose, report, report_baselines
 
     add = list(args.add)
+    engine = _engine(args)
     if not add and not _written_by_fit(args.dataset):
-        add = [r.name for r in diagnose(args.dataset).reported][:1]
+        add = [r.name for r in diagnose(args.dataset, engine=engine).reported][:1]
     out = args.out or args.dataset.with_name(args.dataset.name + ".physics.html")
-    pair = report_baselines(args.dataset, add=add)
+    pair = report_baselines(args.dataset, add=add, engine=engine)
     path = report(args.dataset, out, pair=pair)
     if args.json:
         _print_json({"html": str(path), **pair.to_dict()})
@@ -630,6 +648,19 @@ def _report(args: argparse.Namespace, model: str) -> int:
 
 
 _REFITTED = "base parameters, present effects and each trajectory's initial pose"
+
+
+def _engine(args: argparse.Namespace) -> str:
+    """The object-model engine of ``--engine`` (``auto`` resolved; the choice and the reason
+    printed, on stderr with ``--json``)."""
+    name = getattr(args, "engine", "planar")
+    if name == "auto":
+        from robogs.format import Dataset
+        from robogs.physics.engine import resolve_backend
+
+        name, why = resolve_backend(Dataset.open(args.dataset).physics(), "auto")
+        print(f"engine: {name} (auto: {why})", file=sys.stderr if args.json else sys.stdout)
+    return name
 
 
 def _revision(ds_path: Path) -> int | None:
