@@ -35,14 +35,15 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def _one(args: tuple[str, str, int]) -> dict:
+def _one(args: tuple[str, str, int, str]) -> dict:
     import torch
 
     torch.set_num_threads(1)
     from robogs.physics.diagnose import diagnose_recording
+    from robogs.physics.engine import Engine
     from robogs.synth.scenarios import FAMILY, make_scenario
 
-    effect, noise, seed = args
+    effect, noise, seed, backend = args
     undetectable = None
     try:
         rec = make_scenario(effect, seed=seed, noise=noise)
@@ -50,7 +51,7 @@ def _one(args: tuple[str, str, int]) -> dict:
         undetectable = str(exc)
         rec = make_scenario(effect, seed=seed, noise=noise, check=False)
     t0 = time.perf_counter()
-    res = diagnose_recording(rec)
+    res = diagnose_recording(rec, engine=Engine(rec, backend=backend))
     wall = time.perf_counter() - t0
     rows = res.rows
     reported = [r for r in rows if r.reported]
@@ -60,6 +61,7 @@ def _one(args: tuple[str, str, int]) -> dict:
         "effect": effect,
         "noise": noise,
         "seed": seed,
+        "engine": backend,
         "wall_s": wall,
         "undetectable": undetectable,
         "z_design": rec.meta.get("detectability_z"),
@@ -163,19 +165,21 @@ def _table(results: list[dict], noise: str) -> tuple[list[str], dict]:
     return lines, summary
 
 
-def _timing() -> str:
+def _timing(backend: str = "planar") -> str:
     import torch
 
     torch.set_num_threads(1)
     from robogs.physics.diagnose import diagnose_recording
+    from robogs.physics.engine import Engine
     from robogs.synth.scenarios import make_scenario
 
     rec = make_scenario("none", seed=0, kinds=("push",))
     t0 = time.perf_counter()
-    res = diagnose_recording(rec)
+    res = diagnose_recording(rec, engine=Engine(rec, backend=backend))
     wall = time.perf_counter() - t0
     return (
-        f"diagnose, full catalogue ({len(res.rows)} candidates), 9-push scenario: {wall:.1f} s "
+        f"diagnose ({backend} engine), full catalogue ({len(res.rows)} candidates), "
+        f"9-push scenario: {wall:.1f} s "
         f"(target 60 s; ratio {wall / 60:.2f}); torch threads 1"
     )
 
@@ -192,17 +196,23 @@ def main() -> None:
     ap.add_argument("--no-write", action="store_true")
     ap.add_argument("--no-timing", action="store_true")
     ap.add_argument("--report-only", action="store_true", help="tabulate --out without running")
+    ap.add_argument(
+        "--engine",
+        choices=("planar", "mujoco"),
+        default="planar",
+        help="rollout engine of the fits (use a separate --out per engine)",
+    )
     a = ap.parse_args()
     from robogs.synth.scenarios import TRUE_PARAMS
 
     effects = a.effects or sorted(TRUE_PARAMS)
     seeds = range(a.first_seed, a.first_seed + a.seeds)
-    jobs = [(e, n, s) for s in seeds for n in a.noise for e in effects]  # seed-major
+    jobs = [(e, n, s, a.engine) for s in seeds for n in a.noise for e in effects]  # seed-major
     out = Path(a.out)
     done = []
     if out.exists():
         done = [json.loads(line) for line in out.read_text().splitlines() if line.strip()]
-    have = {(r["effect"], r["noise"], r["seed"]) for r in done}
+    have = {(r["effect"], r["noise"], r["seed"], r.get("engine", "planar")) for r in done}
     todo = [] if a.report_only else [j for j in jobs if j not in have]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=a.jobs) as ex, out.open("a") as fh:
@@ -225,12 +235,18 @@ def main() -> None:
                 f"({r['wall_s']:.0f} s)",
                 flush=True,
             )
-    left = len([j for j in jobs if j not in {(r["effect"], r["noise"], r["seed"]) for r in done}])
-    results = [r for r in done if (r["effect"], r["noise"], r["seed"]) in set(jobs)]
+    have = {(r["effect"], r["noise"], r["seed"], r.get("engine", "planar")) for r in done}
+    left = len([j for j in jobs if j not in have])
+    results = [
+        r
+        for r in done
+        if (r["effect"], r["noise"], r["seed"], r.get("engine", "planar")) in set(jobs)
+    ]
     n_done = len(results)
     cmd = " ".join(["nice -n 10 .venv/bin/python bench/diagnose.py", *sys.argv[1:]])
     text = [
-        f"### diagnose hidden-effect suite ({a.seeds} seeds per effect and noise level; "
+        f"### diagnose hidden-effect suite, {a.engine} engine ({a.seeds} seeds per effect and "
+        "noise level; "
         f"{n_done} of {len(jobs)} cases finished{f', {left} left' if left else ''})",
         "",
         f"Command: `{cmd}` (resumes from `{os.path.relpath(out, ROOT)}`)  ",
@@ -243,7 +259,7 @@ def main() -> None:
         lines, _ = _table(results, n)
         text += lines + [""]
     if not a.report_only and not a.no_timing:
-        text.append(_timing())
+        text.append(_timing(a.engine))
     print("\n".join(text))
     if not a.no_write:
         res_md = ROOT / "bench" / "RESULTS.md"
