@@ -94,8 +94,9 @@ def frame_in_link(
 
 
 def add_named_frames(manifest: dict[str, Any], frames: dict[str, NamedFrame]) -> None:
-    """Store ``frames`` in ``manifest['robot']['frames']`` (the robot entry must exist)."""
-    robot = dict(manifest["robot"])
+    """Store ``frames`` in ``manifest['robot']['frames']`` (a robot entry without its ``urdf``
+    yet is valid only until the writer attaches the URDF)."""
+    robot = dict(manifest.get("robot") or {})
     out = dict(robot.get("frames") or {})
     for name, f in sorted(frames.items()):
         entry: dict[str, Any] = {

@@ -368,8 +368,8 @@ class TfIngest:
     def keep_static_frames(self, manifest: dict[str, Any], robot_links: set[str]) -> list[str]:
         """Keep the static frames that hang from robot links as named frames (spec 1.1.0,
         ``robot.frames``): every ``/tf_static`` edge whose parent is a robot link or an already
-        kept frame and whose child is not a link. Returns the kept names (none without a robot
-        in the manifest, with a note)."""
+        kept frame and whose child is not a link. Returns the kept names (none when the robot's
+        links are unknown: no ``--urdf`` and no ``robot_description``)."""
         from robogs.format.named_frames import NamedFrame, add_named_frames
 
         static = {(p, c): self.buf.lookup(p, c) for p, c in self.buf.static_edges}
@@ -384,13 +384,7 @@ class TfIngest:
                 grew = True
         if not kept:
             return []
-        if not manifest.get("robot"):
-            self.prov.note(
-                "static tf frames on robot links not kept (no robot: pass --urdf): "
-                + ", ".join(sorted(kept))
-            )
-            return []
-        add_named_frames(manifest, kept)
+        add_named_frames(manifest, kept)  # the robot's URDF is attached to the same entry later
         self.prov.note(
             "static tf frames kept as named frames (robot.frames): "
             + ", ".join(f"{f.parent}->{n}" for n, f in sorted(kept.items()))

@@ -3,11 +3,12 @@
 An independent numpy simulator (it shares no code with ``robogs.physics`` or ``robogs.convert``)
 of the experiment that makes an object's mass identifiable: a flat pusher (a capsule of radius
 ``r`` and length ``L`` along the tool's y axis, centred at the tool origin) approaches a box
-resting on a table, touches its -x face and then pushes it with a commanded force
+resting on a table, touches its -x face (odd pushes: its -y face) and then pushes it with a
+commanded force
 
     F(t) = F_a * s(t) * (1 + 0.5 sin(2 pi t / T_p)),   0 <= t <= T_p,
 
-(``s`` a 25 ms cosine ramp up and down) along the box's x axis, staying on the face while
+(``s`` a 25 ms cosine ramp up and down) along the face normal, staying on the face while
 ``F > 0``. The box slides with Coulomb friction (static ``mu_s``, dynamic ``mu_d``): it moves
 once ``F > mu_s m g`` and accelerates at ``F / m - mu_d g``. When the force ends the tool
 brakes at ``BRAKE`` = 10 m/s^2 (harder than friction brakes the box), so the box slides on alone and stops.
@@ -98,12 +99,11 @@ def _ramp(t: np.ndarray, dur: float, rise: float = 0.025) -> np.ndarray:
     return np.where((t >= 0) & (t <= dur), up * down, 0.0)
 
 
-def _one_push(
-    truth: ForcePushTruth, start: np.ndarray, yaw: float, f_a: float, t_p: float
-) -> dict[str, np.ndarray]:
-    """Fine-step truth of one push: times [K] s, box travel s [K] m along the push, tool travel
-    and the force the box exerts on the tool along the push direction [K] N (<= 0)."""
-    hx = 0.5 * truth.size[0]
+def _one_push(truth: ForcePushTruth, half: float, f_a: float, t_p: float) -> dict[str, np.ndarray]:
+    """Fine-step truth of one push on a face ``half`` [m] from the box centre: times [K] s, box
+    travel [K] m along the push, tool travel and the force the box exerts on the tool along the
+    push direction [K] N (<= 0)."""
+    hx = half
     standoff, t_wait, t_app, t_rest0 = 0.03, 0.3, 0.4, 0.2
     t_force0 = t_wait + t_app + t_rest0
     n_max = int(6.0 / FINE_DT)
@@ -183,7 +183,9 @@ def make_force_push(
         start = np.array([0.45 + rng.uniform(-0.03, 0.03), rng.uniform(-0.05, 0.05)])
         f_a = truth.mass * G * (truth.mu_s + 0.05 + 0.08 * (i % 3))
         t_p = 0.25 + 0.05 * (i % 2)
-        sim = _one_push(truth, start, yaw, f_a, t_p)
+        y_face = i % 2 == 1  # odd pushes on the box's -y face (both extents are seen)
+        sim = _one_push(truth, 0.5 * truth.size[1 if y_face else 0], f_a, t_p)
+        box_yaw = yaw - 0.5 * np.pi if y_face else yaw
         d = np.array([np.cos(yaw), np.sin(yaw)])
         t_end = float(sim["t"][-1])
 
@@ -195,7 +197,7 @@ def make_force_push(
         obj_pos = np.column_stack([box, np.full(len(to), table_z + hz)])
         obj_pos += rng.normal(0.0, truth.sigma_pos, obj_pos.shape)
         rv = rng.normal(0.0, truth.sigma_rot, (len(to), 3))
-        obj_quat = _yaw_quat(yaw + rv[:, 2])
+        obj_quat = _yaw_quat(box_yaw + rv[:, 2])
         tilt = 0.5 * rv[:, :2]
         obj_quat[:, 1:3] += tilt * obj_quat[:, :1]
         obj_quat /= np.linalg.norm(obj_quat, axis=1, keepdims=True)
