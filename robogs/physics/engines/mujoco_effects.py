@@ -205,7 +205,7 @@ def step_forces(
             _, mu_d = e.friction(th, body.mu_s, body.mu_d, slip)
             dmu = dmu + (mu_d - body.mu_d)
     # extra Coulomb deceleration, capped at the speed it can remove in one step
-    dec = (dmu * gravity).clamp(max=None)
+    dec = dmu * gravity
     dec = torch.minimum(dec.abs(), speed / dt) * torch.sign(dec)
     dec = torch.where(torch.as_tensor(on_table) & (speed > 1e-6), dec, torch.zeros_like(dec))
     acc = acc.clone()
