@@ -11,15 +11,17 @@ import shlex
 import sys
 from pathlib import Path
 
-from robogs.convert.ingest.option_flags import add_video_flag
-from robogs.convert.registry import available_converters, get_converter, options_of
 from robogs.format.errors import InputError
 
 __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Declare the options of ``robogs convert``."""
+    """Declare the options of ``robogs convert``: the shared core, then each converter's own
+    group (its registry entry's ``options.add_arguments``)."""
+    from robogs.convert.ingest.option_flags import add_video_flag
+    from robogs.convert.registry import available_converters, options_of
+
     parser.add_argument(
         "src",
         nargs="?",
@@ -229,6 +231,7 @@ def run(args: argparse.Namespace) -> int:
     from robogs.convert.ingest.context import ConvertOptions
     from robogs.convert.ingest.convert import convert_path
     from robogs.convert.ingest.roles import parse_topic_flags
+    from robogs.convert.registry import available_converters, get_converter, options_of
 
     if args.list_formats:
         for name in available_converters():

@@ -12,16 +12,20 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from robogs.convert.export import ExportReport, available_exporters, export, get_exporter
 from robogs.format.errors import InputError
+
+if TYPE_CHECKING:
+    from robogs.convert.export import ExportReport
 
 __all__ = ["add_arguments", "run", "options_from_args", "print_report"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare ``robogs export``'s arguments."""
+    from robogs.convert.export import available_exporters
+
     formats = available_exporters()
     parser.add_argument(
         "format",
@@ -152,6 +156,8 @@ def print_report(report: ExportReport, *, as_json: bool = False) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Export; 0 on success (errors are ``RobogsError``, printed by the dispatcher)."""
+    from robogs.convert.export import export, get_exporter
+
     options = options_from_args(args)
     accepted = get_exporter(args.format).options()
     unknown = [_OPTION_FLAGS[k] for k in options if k not in accepted]

@@ -13,8 +13,6 @@ import sys
 import tempfile
 from pathlib import Path
 
-from robogs.cli.export_cmd import print_report
-from robogs.convert.export import export
 from robogs.format.errors import InputError
 
 __all__ = ["add_arguments", "run", "viewer_command"]
@@ -62,6 +60,9 @@ def viewer_command(rrd: Path) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Write the recording, then start the viewer if asked."""
+    from robogs.cli.export_cmd import print_report
+    from robogs.convert.export import export
+
     out = args.out
     force = args.force
     if out is None:
