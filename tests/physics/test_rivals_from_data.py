@@ -11,7 +11,7 @@ from __future__ import annotations
 import pytest
 from physics_scenarios import scenario
 
-from robogs.physics.diagnose import RIGID_RIVAL_COSINE, diagnose_recording
+from robogs.physics.diagnose import diagnose_recording
 
 CANDIDATES = ["table_tilt", "anisotropic_friction", "viscous_damping"]
 
@@ -25,7 +25,7 @@ def test_tilt_is_never_reported_as_anisotropic_friction_alone(seed):
     # measured, symmetric, and above the rival threshold on this design
     cos = tilt.similarity["anisotropic_friction"]
     assert cos == pytest.approx(aniso.similarity["table_tilt"], abs=1e-9)
-    assert cos >= RIGID_RIVAL_COSINE
+    assert cos >= tilt.rival_cutoff["anisotropic_friction"]  # derived from this data
     assert "anisotropic_friction" in tilt.rivals and "table_tilt" in aniso.rivals
     reported = [r.name for r in res.reported]
     # either the tilt comes first (the rival withdrawn) or the pair is unresolved
