@@ -10,6 +10,7 @@ meshes, camera models and label boxes. Nothing here writes to the dataset.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,7 +25,7 @@ from ..cameras import CameraModel
 from ..dataset import MANIFEST_NAME, Dataset, Episode, parquet_metadata, read_parquet
 from ..errors import FormatError, PathEscapeError, RobogsError, VersionError
 from ..jsonio import read_json
-from ..paths import resolve_inside
+from ..paths import check_relpath, resolve_inside
 from ..schemas import schema_problems
 from ..spec_version import SPEC_VERSION, parse_version
 from ..tables import check_table_schema, null_problems
@@ -304,19 +305,42 @@ class CheckContext:
                 if ref.rel in self._unsafe:
                     continue
                 try:
-                    resolve_inside(self.root, ref.rel, source=MANIFEST_NAME, where=ref.where)
+                    self._cache[("path", ref.rel)] = self._resolve(ref.rel, ref.where)
                 except PathEscapeError as exc:
                     self._unsafe[ref.rel] = exc
         return self._unsafe
 
     def path(self, rel: str, *, where: str | None = None) -> Path:
-        """Absolute path of a manifest path; unsafe ones raise :class:`InputReported`."""
+        """Absolute path of a manifest path (resolved once); unsafe ones raise
+        :class:`InputReported`."""
         if not isinstance(rel, str) or rel in self.unsafe_paths:
             raise InputReported(rel)
-        try:
-            return resolve_inside(self.root, rel, source=MANIFEST_NAME, where=where)
-        except PathEscapeError:
-            raise InputReported(rel) from None
+        full = self._cache.get(("path", rel))
+        if full is None:
+            try:
+                full = self._resolve(rel, where)
+            except PathEscapeError:
+                raise InputReported(rel) from None
+            self._cache[("path", rel)] = full
+        return full
+
+    def _resolve(self, rel: str, where: str | None) -> Path:
+        """:func:`resolve_inside` with each folder looked at once: a path none of whose parts
+        is a symlink resolves to the resolved root joined with it (what ``realpath`` gives);
+        one through a symlink is resolved in full."""
+        clean = check_relpath(rel, source=MANIFEST_NAME, where=where)
+        root = self._cache.get(("dir", ""))
+        if root is None:
+            root = self._cache[("dir", "")] = self.root.resolve()
+        prefix = ""
+        for part in clean.split("/"):
+            prefix = f"{prefix}/{part}" if prefix else part
+            linked = self._cache.get(("link", prefix))
+            if linked is None:
+                linked = self._cache[("link", prefix)] = os.path.islink(os.path.join(root, prefix))
+            if linked:
+                return resolve_inside(self.root, rel, source=MANIFEST_NAME, where=where)
+        return root / clean
 
     def existing(self, rel: str, *, where: str | None = None) -> Path:
         """Like :meth:`path`, and the file must exist (a missing one is reported elsewhere)."""
