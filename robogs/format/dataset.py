@@ -367,7 +367,8 @@ class Dataset:
             f"no episode {episode_id!r}",
             path=self.manifest_path,
             where="episodes",
-            hint=f"available: {', '.join(e.id for e in eps) or 'none'}",
+            hint=f"available: {', '.join(e.id for e in eps[:20]) or 'none'}"
+            + (f", ... ({len(eps)} in all)" if len(eps) > 20 else ""),
         )
 
     # -- cameras, physics, robot, assets ---------------------------------------

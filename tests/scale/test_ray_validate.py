@@ -84,3 +84,24 @@ def test_cli_ray_json_equals_cli_single(ray_cluster, dataset, capsys):
     assert split["summary"]["counts"] == one["summary"]["counts"]
     # 100 episodes in tasks of 7, 206 files in tasks of 200; both workers named
     assert "ray: 17 tasks on 2 worker processes" in err
+
+
+@pytest.fixture(scope="module")
+def sharded(tmp_path_factory) -> Path:
+    """The same defects in the sharded layout (chunks of 40 episodes: 3 chunk indexes)."""
+    return mutated_bulk(
+        tmp_path_factory.mktemp("ray-sharded") / "ds", 100, duration_s=0.3, chunk_size=40
+    )
+
+
+def test_ray_two_workers_on_sharded_layout_equal_single_process(ray_cluster, sharded):
+    single = validate(sharded)
+    assert EXPECTED_CODES <= single.codes() and "I011" not in single.codes()
+    stats = Stats()
+    split = validate_distributed(
+        sharded, executor=RayExecutor(), episodes_per_task=20, files_per_task=70, stats=stats
+    )
+    # 100 episodes in tasks of 20; 200 episode files + 3 indexes + the URDF in tasks of 70
+    assert stats.reason is None and stats.units == 5 + 3
+    assert len(stats.peak_rss) == 2, "both workers must have taken tasks"
+    assert _facts(split) == _facts(single)
