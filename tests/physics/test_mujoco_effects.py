@@ -180,3 +180,28 @@ def test_user_plugin_effect_runs_on_both_engines():
     for backend in ("mujoco", "planar"):
         x = _run(eff, {"f": 0.2}, backend)
         assert np.max(np.abs(x - want)) < 1.5e-3, (backend, x - want)
+
+
+@pytest.mark.parametrize("height", [0.02, 0.05])
+def test_restitution_bounce_on_mujoco(height):
+    """A flat box dropped ``height`` m bounces to e^2 height (e within 0.03 of the requested
+    restitution; plastic at e = 0)."""
+    phys = _physics()
+    scene = scene_from_physics(phys, "box", dt=DT)
+    eff = get_effect("restitution")
+    space = ParamSpace(base_params(scene), [eff])
+    s = 501
+    pusher = np.zeros((1, s, 3))
+    pusher[..., 2] = 1.0
+    obs = np.arange(s)[None] * DT
+    drive = make_drive(
+        DT, pusher, np.zeros((1, s)), obs, np.array([[0.0, 0.0, HZ + height]]), np.zeros(1)
+    )
+    sim = MujocoFit(phys, "box", dt=DT)
+    for e in (0.0, 0.3, 0.5, 0.7):
+        th = torch.as_tensor(space.zero[None].copy())
+        th[0, space.index("restitution", "e_delta")] = e
+        z = sim.simulate(th, space, drive, scene).pos[0, 0, :, 2].numpy() - HZ
+        i = int(np.argmin(z[:250]))
+        e_eff = math.sqrt(max(float(z[i:].max()), 0.0) / height)
+        assert abs(e_eff - e) < 0.03 if e > 0 else e_eff < 0.03, (e, e_eff)
