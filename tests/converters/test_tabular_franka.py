@@ -221,3 +221,22 @@ def test_a_map_ee_pose_overrides_the_guess(tmp_path: Path) -> None:
     )
     assert not any("link guessed" in n for n in ds.manifest["provenance"]["notes"])
     assert Dataset.open(tmp_path / "out").manifest["robot"]["ee_link"] == "panda_link8"
+
+
+def test_the_guessed_link_is_checked_against_fk(tmp_path: Path) -> None:
+    """The guess is only as good as the robot's configuration: a log of flange poses (no hand
+    configured) against a URDF with a hand TCP is caught by G008 (FK vs recorded pose), off by
+    the TCP's 103.4 mm; the right link validates clean."""
+    from robogs.format.validate import validate
+
+    urdf = _panda_urdf(tmp_path / "panda.urdf")
+    t, q, dq, tau = _motion(300)
+    arm = parse_arm(urdf)
+    for link, out in (("panda_hand_tcp", "good"), ("panda_link8", "bad")):
+        p, R = urdf_fk(arm, q, link)
+        _franka_csv(tmp_path / f"{out}.csv", t, q, dq, tau, _o_t_ee(p, Rotation.from_matrix(R)))
+        convert_path(tmp_path / f"{out}.csv", tmp_path / out, options=ConvertOptions(urdf=urdf))
+    assert validate(tmp_path / "good", select=["G008"]).findings == []
+    bad = validate(tmp_path / "bad", select=["G008"]).findings
+    assert [f.severity for f in bad] == ["error"]
+    assert bad[0].value == pytest.approx(103.4, abs=0.5)  # mm: the hand's TCP offset
