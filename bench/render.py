@@ -6,6 +6,11 @@ Figures (targets from the renderer's design):
 - speed-up of the tiled backend over the dense oracle at 2k Gaussians, 128x96;
 - the same on CUDA when a GPU is present;
 - frames per second of the forward render, 100k Gaussians at 640x480 (issue 20), threads stated;
+- frames per second of a ``robogs render`` frame (``--only fps``): 100k 2DGS surfels with 10 label
+  channels (RGB, soft labels, median depth, argmax labels), at 1 and 2 threads in the same run
+  (the 1-thread figure is the in-run baseline), wall and process-CPU time, load average stated;
+  with ``--dataset DIR`` also ``render_dataset`` end to end (encode and write included) on that
+  dataset's first camera (``robogs synth --size large`` has 104k Gaussians at 640x480);
 - novel poses (``--only novel``): the binding of ``robogs synth --size small`` rendered at joint
   configurations never recorded against the synthetic scene's independent triangle rasteriser
   (``tests/render/novel_pose.py``): IoU per link (void band excluded, the validator's rule),
@@ -21,7 +26,8 @@ RSS before), measured first, before any larger render has raised the high-water 
 counts everything the step allocates (autograd's saved tensors included) and is what the OS
 must provide.
 
-Usage: python bench/render.py [--threads 2] [--repeats 5] [--only all|speed|novel] [--no-append]
+Usage: python bench/render.py [--threads 2] [--repeats 5] [--only all|speed|novel|fps]
+[--dataset DIR] [--no-append]
 """
 
 from __future__ import annotations
@@ -39,7 +45,13 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from robogs.format.render import Camera, Gaussians, RenderConfig, available_backends, render  # noqa: E402
+from robogs.format.render import (  # noqa: E402
+    Camera,
+    Gaussians,
+    RenderConfig,
+    available_backends,
+    render,
+)
 from robogs.format.render.binning import bin_tiles  # noqa: E402
 from robogs.format.render.projection import project  # noqa: E402
 
@@ -191,6 +203,70 @@ def bench_oracle(repeats: int, device: str = "cpu") -> dict[str, float]:
     return {"tiled": tiled[0], "dense": dense[0], "ratio": dense[0] / tiled[0], "max_diff": diff}
 
 
+def bench_label_frame(
+    repeats: int, threads: int, backend: str = "torch", n: int = 100_000
+) -> dict[str, float]:
+    """Time one ``robogs render`` frame: 2DGS, 10 one-hot label channels, labels by argmax
+    (torch and numba threads both set to ``threads``)."""
+    g, f = make_scene(n, 640, seed=3, kind="2dgs")
+    lab = torch.randint(0, 10, (n,), generator=torch.Generator().manual_seed(4))
+    g = Gaussians(
+        g.means,
+        g.quats,
+        g.log_scales,
+        g.opacity_logits,
+        g.sh[:, :1].contiguous(),
+        extra=torch.nn.functional.one_hot(lab, 10).float(),
+    )
+    cam = make_camera(640, 480, f)
+    cfg = RenderConfig(kind="2dgs", tile_size=8, validate=False)
+
+    def frame() -> None:
+        out = render(g, cam, config=cfg, backend=backend)
+        none = (1.0 - out.extra.sum(-1, keepdim=True)).clamp(0.0, 1.0)
+        torch.cat([none, out.extra], -1).argmax(-1)
+        (out.rgb.clamp(0, 1) * 255).round().to(torch.uint8)
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    if backend == "numba":
+        import numba
+
+        numba.set_num_threads(threads)
+    try:
+        with torch.no_grad():
+            wall, med, cpu = timed(frame, repeats)
+    finally:
+        torch.set_num_threads(before)
+    return {"wall": wall, "median": med, "cpu": cpu, "threads": threads, "backend": backend}
+
+
+def bench_render_dataset(path: str, frames: int = 12) -> dict[str, float]:
+    """``render_dataset`` end to end over ``frames`` recorded stamps of the first camera."""
+    import shutil
+    import tempfile
+
+    from robogs.format import Dataset
+    from robogs.format.kinematics import Chain
+    from robogs.format.render_trajectory import episode_trajectory, render_dataset
+
+    ds = Dataset.open(path)
+    ep = ds.episode()
+    cam = ds.camera_names[0]
+    traj = episode_trajectory(ep, Chain.from_urdf(ds.urdf(load_meshes=False)), {})
+    t = ep.frames(cam).column("t_ns").to_numpy()
+    t = t[len(t) // 3 : len(t) // 3 + frames]
+    out = Path(tempfile.mkdtemp(prefix="bench-render-")) / "out"
+    try:
+        c0, t0 = time.process_time(), time.perf_counter()
+        render_dataset(ds, out, traj, cameras=[cam], frame_stamps=t)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    finally:
+        shutil.rmtree(out.parent, ignore_errors=True)
+    m = ds.camera(cam)
+    return {"wall": wall, "cpu": cpu, "frames": len(t), "size": f"{m.width}x{m.height}"}
+
+
 def bench_novel_pose(configs: int, seed: int = 0) -> tuple[list[tuple[str, str, str, str]], str]:
     """Rows of the novel-pose comparison (per link worst IoU and boundary, PSNR) and a summary."""
     import tempfile
@@ -251,7 +327,8 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--no-append", action="store_true", help="do not append to bench/RESULTS.md")
-    ap.add_argument("--only", choices=("all", "speed", "novel"), default="all")
+    ap.add_argument("--only", choices=("all", "speed", "novel", "fps"), default="all")
+    ap.add_argument("--dataset", help="with --only fps: also time render_dataset on this dataset")
     ap.add_argument("--configs", type=int, default=8, help="novel-pose configurations")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
@@ -268,6 +345,40 @@ def main() -> None:
         head.append(summary)
         rows += nrows
     if args.only == "novel":
+        _emit(head, rows, args)
+        return
+    if args.only == "fps":
+        backends = ["torch"] + (["numba"] if "numba" in available_backends() else [])
+        base = None
+        for th in sorted({1, args.threads}):
+            for b in backends:
+                r = bench_label_frame(args.repeats, th, b)
+                base = base or r  # the in-run baseline: torch, 1 thread
+                rows.append(
+                    (
+                        f"frames/s, robogs render frame (2DGS 100k + 10 label channels) "
+                        f"@ 640x480, {b}, {th} thread(s)",
+                        f"{1 / r['wall']:.2f} frames/s ({r['wall']:.3f} s best of "
+                        f"{args.repeats}; median {r['median']:.3f}; cpu {r['cpu']:.3f})",
+                        f"torch 1 thread: {base['wall']:.3f} s (cpu {base['cpu']:.3f}); "
+                        "target >= 1 frame/s",
+                        f"{base['wall'] / r['wall']:.2f}x wall, {base['cpu'] / r['cpu']:.2f}x "
+                        f"cpu; {1 / r['wall']:.2f}x target",
+                    )
+                )
+        two = r
+        if args.dataset:
+            e2e = bench_render_dataset(args.dataset)
+            rows.append(
+                (
+                    f"render_dataset end to end, {e2e['size']}, {args.threads} threads",
+                    f"{e2e['frames'] / e2e['wall']:.2f} frames/s ({e2e['frames']} frames in "
+                    f"{e2e['wall']:.2f} s; cpu {e2e['cpu']:.2f} s)",
+                    f"render alone ({two['backend']}): {two['wall']:.3f} s per frame",
+                    f"{e2e['wall'] / e2e['frames'] / two['wall']:.2f}x the render alone",
+                )
+            )
+        head.append(f"load avg after: {os.getloadavg()[0]:.1f}")
         _emit(head, rows, args)
         return
 
