@@ -26,8 +26,10 @@ from robogs.format.errors import InputError
 from robogs.physics.baseline import Baseline, baseline
 from robogs.physics.compare import CompareResult
 from robogs.physics.diagnose import (
+    AutoPath,
     DiagnoseResult,
     ParamEstimate,
+    auto_loop,
     diagnose_recording,
     start_points,
 )
@@ -37,7 +39,16 @@ from robogs.physics.masks import MAX_FRAMES
 from robogs.physics.recording import Recording, as_recording, load_recording
 from robogs.physics.report import render_report
 
-__all__ = ["compare", "diagnose", "fit", "FitResult", "report", "report_baselines", "revert"]
+__all__ = [
+    "compare",
+    "diagnose",
+    "diagnose_auto",
+    "fit",
+    "FitResult",
+    "report",
+    "report_baselines",
+    "revert",
+]
 
 
 def _open(dataset: Any) -> tuple[Recording, Any]:
@@ -135,6 +146,22 @@ def diagnose(
         res.rows.extend(f.row for f in fits)
         res.rows.sort(key=lambda r: (not r.reported, r.delta_bic))
     return res
+
+
+def diagnose_auto(
+    dataset: Any,
+    *,
+    effects: Sequence[str] | None = None,
+    dt: float = 1e-3,
+    max_steps: int = 5,
+    progress: Callable[[int, int], None] | None = None,
+) -> AutoPath:
+    """The object model's selection loop to its end (:func:`robogs.physics.diagnose.auto_loop`);
+    camera-mask effects are left out (they are not part of the rigid-object model)."""
+    rec, _ = _open(dataset)
+    camera = _camera_effects()
+    rigid = None if effects is None else [n for n in effects if n not in camera]
+    return auto_loop(rec, effects=rigid, dt=dt, max_steps=max_steps, progress=progress)
 
 
 @dataclass

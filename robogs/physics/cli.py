@@ -78,8 +78,14 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
         p.add_argument(
             "--auto",
             action="store_true",
-            help="run the selection loop to its end and print its path (arm model): each step's "
+            help="run the selection loop to its end and print its path: each step's "
             "effect, held-out error, evidence and the null quantile it was judged against",
+        )
+        p.add_argument(
+            "--plot",
+            type=Path,
+            default=None,
+            help="--auto, object model: PNG of the path (default <dataset>.diagnose-auto.png)",
         )
     if verb == "fit":
         p.add_argument(
@@ -457,6 +463,47 @@ def _print_path(path: list[dict[str, Any]]) -> None:
     print(f"loop stopped after {steps} step(s)")
 
 
+def _object_auto(args: argparse.Namespace, effects: list[str] | None) -> int:
+    """``diagnose --auto`` for the object model: the loop to its end, its path as a table and
+    a PNG (``--plot``, default ``<dataset>.diagnose-auto.png``)."""
+    from robogs.physics.api import diagnose_auto
+    from robogs.physics.diagnose import plot_path
+
+    p = diagnose_auto(args.dataset, effects=effects)
+    rows = [
+        {
+            "step": s.step if s.verdict.startswith("added") else None,
+            "effect": s.effect,
+            "residual": "object poses",
+            "heldout_before": s.heldout_rms_before,
+            "heldout_after": s.heldout_rms_after,
+            "delta_bic": s.delta_bic,
+            "heldout_gain_sigma2": s.heldout_gain_sigma2,
+            "null_quantile_sigma2": s.null_threshold_sigma2,
+            "verdict": s.verdict,
+        }
+        for s in p.steps
+    ]
+    ds = Path(str(args.dataset)).expanduser()
+    plot = getattr(args, "plot", None) or ds.parent / f"{ds.name}.diagnose-auto.png"
+    plot_path(p, plot)
+    d = {**p.to_dict(), "path_table": rows, "plot": str(plot)}
+    if args.json:
+        _print_json(d)
+        return 0
+    _effects_table(d["last"]["effects"], f"candidate effects left for {args.dataset}")
+    _print_path(rows)
+    g = d["last"]["gate"]
+    print(
+        f"null calibration (linearised held-out null, family-wise 5 %): {p.calibration_seconds:.1f} s "
+        f"in all, {g.get('draws')} draws per step{' (cached)' if g.get('cached') else ''}"
+    )
+    for s in d["last"]["skipped"]:
+        print(f"  skipped {s['name']}: {s['reason']}")
+    print(f"accepted: {', '.join(p.accepted) or 'nothing'}; plot: {plot}")
+    return 0
+
+
 def _diagnose(args: argparse.Namespace, model: str) -> int:
     effects = [e.strip() for e in args.effects.split(",")] if args.effects else None
     if model == "arm":
@@ -474,6 +521,8 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
         from robogs.physics.api import diagnose
 
         _no_object_holdout(args)
+        if getattr(args, "auto", False):
+            return _object_auto(args, effects)
 
         if args.no_progress or args.json:
             d = diagnose(
@@ -492,8 +541,6 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
                     engine=_engine(args),
                 ).to_dict()
     note_diagnosis(d)
-    if getattr(args, "auto", False):
-        d["path_note"] = "--auto: the object model ranks one step (no loop yet)"
     if args.json:
         _print_json(d)
         return 0

@@ -57,6 +57,7 @@ __all__ = [
     "AutoPath",
     "diagnose_recording",
     "auto_loop",
+    "plot_path",
     "quasi_static",
     "rival_cutoff",
     "start_points",
@@ -650,7 +651,9 @@ class AutoPath:
 
     @property
     def accepted(self) -> list[str]:
-        return [s.effect for s in self.steps if s.effect is not None and s.verdict.startswith("added")]
+        return [
+            s.effect for s in self.steps if s.effect is not None and s.verdict.startswith("added")
+        ]
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -733,3 +736,43 @@ def auto_loop(
         entry = {"name": top.name, "params": {p.name: p.value for p in top.params}}
         doc.setdefault("effects", []).append(entry)
         given.append(top.name)
+
+
+def plot_path(path: AutoPath, out: Any) -> Any:
+    """Write the selection path as a PNG (atomic): held-out RMS after each step [mm], and each
+    step's held-out evidence against the null quantile it was judged against [sigma^2]."""
+    import os
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    st = path.steps
+    labels = ["base"] + [
+        (s.effect or "—") + ("" if s.verdict.startswith("added") else " (stop)") for s in st
+    ]
+    rms = [st[0].heldout_rms_before if st else float("nan")]
+    rms += [s.heldout_rms_after if s.verdict.startswith("added") else rms[-1] for s in st]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
+    a1.plot(range(len(rms)), rms, "o-")
+    a1.set_xticks(range(len(rms)), labels, rotation=30, ha="right", fontsize=8)
+    a1.set_ylabel("held-out position RMS [mm]")
+    a1.set_title("held-out error along the path")
+    x = np.arange(len(st))
+    a2.bar(x - 0.2, [max(s.heldout_gain_sigma2, 0.0) for s in st], 0.4, label="held-out gain")
+    a2.bar(x + 0.2, [s.null_threshold_sigma2 for s in st], 0.4, label="null quantile (family-wise)")
+    a2.set_xticks(x, labels[1:], rotation=30, ha="right", fontsize=8)
+    a2.set_yscale("symlog", linthresh=1.0)
+    a2.set_ylabel("sigma^2")
+    a2.set_title("evidence vs the dataset's null")
+    a2.legend(fontsize=8)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+    os.replace(tmp, out)
+    return out
