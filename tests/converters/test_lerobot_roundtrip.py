@@ -141,3 +141,40 @@ def test_not_v3_is_refused(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="not v3"):
         convert_path(tmp_path / "lr", tmp_path / "out", fmt="lerobot")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    ("column", "shift", "message"),
+    [
+        ("videos/observation.images.cam0/from_timestamp", 100.0, "video has no frame"),
+        ("length", 1, "data rows"),
+    ],
+)
+def test_inconsistent_metadata_is_one_clear_error(
+    scene: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    column: str,
+    shift: float,
+    message: str,
+) -> None:
+    """meta/episodes pointing past the video or the data rows: a one-line error, no output."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from robogs.cli.main import main
+    from robogs.format.errors import FormatError
+
+    _, lr = _round_trip(scene, 30, f"_bad{column[:3]}")
+    path = lr / "meta/episodes/chunk-000/file-000.parquet"
+    tab = pq.read_table(path)
+    i = tab.column_names.index(column)
+    col = tab.column(column)
+    pq.write_table(tab.set_column(i, column, pa.compute.add(col, pa.scalar(shift, col.type))), path)
+    with pytest.raises(FormatError, match=message):
+        convert_path(lr, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    capsys.readouterr()
+    assert main(["convert", str(lr), str(tmp_path / "out2")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0] and "Traceback" not in err[0]

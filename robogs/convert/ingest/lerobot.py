@@ -126,26 +126,31 @@ def _camera_model(name: str, meta: dict[str, Any] | None) -> CameraModel | None:
     )
 
 
-def _decode(video: Path, wanted: np.ndarray) -> dict[int, np.ndarray]:
-    """RGB frames at file positions ``wanted`` (sorted), decoded in one pass."""
-    from robogs.format.images import iter_video_frames
+def _copy_frames(video: Path, wanted: np.ndarray, out: Path, fps: int) -> None:
+    """Decode ``video`` once and write its frames at file positions ``wanted`` (increasing) to
+    the MP4 ``out``, one at a time (memory: one frame)."""
+    from robogs.format.images import VideoWriter, iter_video_frames
 
-    want = set(int(i) for i in wanted)
-    last = max(want) if want else -1
-    out: dict[int, np.ndarray] = {}
-    for i, img in enumerate(iter_video_frames(video)):
-        if i in want:
-            out[i] = img
-        if i >= last:
-            break
-    missing = sorted(want - set(out))
-    if missing:
+    k, writer = 0, None
+    try:
+        for i, img in enumerate(iter_video_frames(video)):
+            if k == len(wanted):
+                break
+            if i != int(wanted[k]):
+                continue
+            if writer is None:
+                writer = VideoWriter(out, img.shape[1], img.shape[0], fps)
+            writer.write(img)
+            k += 1
+    finally:
+        if writer is not None:
+            writer.close()
+    if k < len(wanted):
         raise FormatError(
-            f"video has no frame {missing[0]} ({len(missing)} frames missing)",
+            f"video has no frame {int(wanted[k])} ({len(wanted) - k} frames missing)",
             path=video,
             hint="the episode's from_timestamp / length point past the end of the file",
         )
-    return out
 
 
 def _image_bytes(tab: pa.Table, col: str) -> list[bytes | None]:
@@ -159,8 +164,6 @@ def convert_lerobot(src: Path, ctx: IngestContext) -> None:
         InputError: not a v3 folder, missing files.
         FormatError: inconsistent metadata (a column of the wrong width, a video too short).
     """
-    from robogs.format.images import VideoWriter
-
     info = _info(src)
     if info is None:
         raise InputError("no readable meta/info.json", path=src, hint="a LeRobot v3 folder")
@@ -301,14 +304,8 @@ def convert_lerobot(src: Path, ctx: IngestContext) -> None:
                     f"camera {name}: {int((~keep).sum())} repeated frames (the same recorded "
                     "frame picked twice by the resampling) written once"
                 )
-            frames = _decode(src / vrel, pos[keep])
             cdir = f"{e}/cameras/{name}"
-            first = frames[int(pos[keep][0])]
-            with VideoWriter(
-                ctx.writer.path(f"{cdir}/rgb.mp4"), first.shape[1], first.shape[0], fps
-            ) as vw:
-                for p in pos[keep]:
-                    vw.write(frames[int(p)])
+            _copy_frames(src / vrel, pos[keep], ctx.writer.path(f"{cdir}/rgb.mp4"), fps)
             tk = t_cam[keep]
             idx = np.arange(len(tk), dtype=np.int64)
             ctx.writer.write_table(
