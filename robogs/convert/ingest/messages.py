@@ -132,7 +132,7 @@ class MessageIngest:
     def handle(self, topic: str, log_time: int, msg: Any) -> None:
         """Process one decoded message of a planned topic."""
         self.read[topic] = self.read.get(topic, 0) + 1
-        role = self.roles.get(topic)
+        role = self.topic_plan.roles.get(topic)
         if role is None or role.kind == "ignore":
             return
         if topic not in self._static_topics:
@@ -250,7 +250,7 @@ class MessageIngest:
         self.tf.keep_static_frames(self.ctx.writer.manifest, self._robot_links())
         self.tf.close()
         for topic, n_index in self.counts.items():
-            role = self.roles.get(topic)
+            role = self.topic_plan.roles.get(topic)
             if role is None or role.kind == "ignore":
                 continue
             got = self.read.get(topic, 0)
