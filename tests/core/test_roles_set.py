@@ -163,3 +163,35 @@ def test_ignore_removes_the_stream(scene: tuple[Path, Path], tmp_path: Path) -> 
     assert GENERIC not in m["episodes"][0]["streams"]
     assert "episodes/ep000/streams/mocap_box_pose.parquet" not in m["files"]
     assert m["provenance"]["topics"][TOPIC]["role"] == "ignore"
+
+
+def test_generic_wrench_becomes_a_wrench_stream(scene: tuple[Path, Path], tmp_path: Path) -> None:
+    """A decoded WrenchStamped-like table (``wrench.force.x`` ...) becomes ``wrenches``."""
+    ds = tmp_path / "ds"
+    shutil.copytree(scene[1], ds)
+    m = json.loads((ds / "manifest.json").read_text())
+    rel = "episodes/ep000/streams/netft_data.parquet"
+    t = np.arange(1_000_000_000, 2_000_000_000, 2_000_000, dtype=np.int64)
+    vals = {
+        f"wrench.{g}.{a}": np.sin(t * 1e-9 + i)
+        for i, (g, a) in enumerate((g, a) for g in ("force", "torque") for a in "xyz")
+    }
+    pq.write_table(pa.table({"t_ns": t, "header.frame_id": ["ft"] * t.size, **vals}), ds / rel)
+    m["episodes"][0]["streams"]["streams/netft_data"] = {
+        "kind": "generic",
+        "path": rel,
+        "stamp_source": "log_time",
+        "offset_ns": 0,
+        "nominal_rate_hz": 500.0,
+        "source": "/netft_data",
+    }
+    _rehash(ds, m, rel)
+    (ds / "manifest.json").write_text(json.dumps(m, indent=2))
+    assert main(["roles", "set", str(ds), "/netft_data", "wrench:ft_sensor"]) == 0
+    m = json.loads((ds / "manifest.json").read_text())
+    st = m["episodes"][0]["streams"]["wrenches"]
+    assert st["kind"] == "wrenches" and st["nominal_rate_hz"] == pytest.approx(500.0)
+    got = pq.read_table(ds / st["path"])
+    assert set(got.column("frame").to_pylist()) == {"ft_sensor"}
+    for i, c in enumerate(("fx", "fy", "fz", "tx", "ty", "tz")):
+        np.testing.assert_array_equal(got.column(c).to_numpy(), np.sin(t * 1e-9 + i))
