@@ -178,3 +178,24 @@ def test_inconsistent_metadata_is_one_clear_error(
     assert main(["convert", str(lr), str(tmp_path / "out2")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0] and "Traceback" not in err[0]
+
+
+def test_ee_state_round_trip(scene: Path, tmp_path: Path) -> None:
+    """``--state ee``: the EE pose comes back as ``ee_poses`` of ``robot.ee_link``; the export's
+    state is the recorded ee_poses stream at the grid (the oracle here), float32 storage."""
+    lr = tmp_path / "lr_ee"
+    export("lerobot", scene, lr, state="ee")
+    back = convert_path(lr, tmp_path / "back_ee")
+    sep = Dataset.open(scene).episode()
+    ep = back.episode(sep.id)
+    assert not ep.has("joint_states") and not ep.has("actions")  # an EE action has no table
+    ee, ee0 = ep.table("ee_poses"), sep.table("ee_poses")
+    link = Dataset.open(scene).manifest["robot"]["ee_link"]
+    assert set(ee.column("link").to_pylist()) == {link}
+    t = ee.column("t_ns").to_numpy()
+    for c in ("x", "y", "z"):
+        want = np.interp(t, ee0.column("t_ns").to_numpy(), ee0.column(c).to_numpy())
+        assert np.abs(ee.column(c).to_numpy() - want).max() < 1e-6, c
+    q = np.stack([ee.column(c).to_numpy() for c in ("qw", "qx", "qy", "qz")], -1)
+    assert np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)
+    assert "no EE command table" in " ".join(back.manifest["provenance"]["notes"])
