@@ -131,3 +131,26 @@ def test_render_straight_to_lerobot_mixed_with_recorded(scene: Path, tmp_path: P
     assert main([*args, "--quiet", "--force"]) == 0
     info = json.loads((lr / "meta" / "info.json").read_text())
     assert info["total_episodes"] == 1 and list(info["robogs"]["episodes"]) == ["render000"]
+
+
+def test_simulate_without_a_rigid_object_is_one_clear_error(
+    scene: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import shutil
+
+    bad = tmp_path / "static"
+    shutil.copytree(scene, bad)
+    ds = Dataset.open(bad)
+    doc = ds.physics()
+    doc["objects"]["box"]["equation"] = "static"
+    with ds.edit() as w:
+        w.set_physics(doc)
+        w.commit()
+    traj = tmp_path / "short.csv"
+    _short_traj(scene, traj)
+    capsys.readouterr()
+    args = ["render", str(bad), str(tmp_path / "o"), "--joints", str(traj), "--simulate"]
+    assert main([*args, "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "exactly one rigid object" in err[0]
+    assert not (tmp_path / "o").exists()
