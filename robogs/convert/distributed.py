@@ -5,7 +5,9 @@ into its own dataset under ``OUT.partial/.parts/k`` with episode id ``ep{k:04d}`
 then moves each episode's files into ``OUT.partial/episodes/``, takes the files outside the
 episodes (robot, cameras) from the first bag that converted and requires the same bytes from
 the others, and writes the manifest once, at the end (a temporary file renamed over it), before
-renaming ``OUT.partial`` to ``OUT``. A bag that fails (unreadable, or with a robot unlike the
+renaming ``OUT.partial`` to ``OUT``. With ``chunk_size`` (by default when more than 100 bags
+converted) the dataset has the sharded layout of spec 1.1.0: the ``k``-th converted episode in
+``episodes/chunk-{k // chunk_size:03d}/``, one index per chunk. A bag that fails (unreadable, or with a robot unlike the
 first's) is left out and named, with its one-line error, in ``provenance.failed``; the others
 land. A Ray task whose worker dies is retried (``max_retries``).
 """
@@ -23,7 +25,10 @@ from typing import Any
 from robogs.format.errors import InputError, RobogsError
 from robogs.format.jsonio import dumps_json, read_json
 
-__all__ = ["BagResult", "ManyResult", "convert_many", "convert_bag", "MERGED_KEYS"]
+__all__ = ["BagResult", "ManyResult", "convert_many", "convert_bag", "MERGED_KEYS", "SHARD_ABOVE"]
+
+#: more converted episodes than this give the sharded layout (unless ``chunk_size`` says)
+SHARD_ABOVE = 100
 
 #: manifest sections that every bag's dataset must share (besides episodes, files, provenance)
 MERGED_KEYS = ("format", "spec_version", "conventions", "robot", "cameras", "assets", "physics")
@@ -116,6 +121,7 @@ def convert_many(
     executor: Any = None,
     force: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    chunk_size: int | None = None,
 ) -> ManyResult:
     """Convert ``sources`` (one episode each) into one dataset at ``out``.
 
@@ -128,6 +134,9 @@ def convert_many(
         executor: a :class:`robogs.format.distributed.RayExecutor`, or None for this process.
         force: replace an existing ``out``.
         progress: called as ``progress(bags_done, n_bags)``.
+        chunk_size: episodes per chunk of the sharded layout; None: sharded in chunks of
+            :data:`~robogs.format.shards.DEFAULT_CHUNK_SIZE` when more than
+            :data:`SHARD_ABOVE` episodes converted, flat otherwise; 0: flat.
 
     Raises:
         InputError: no sources, ``out`` exists (without ``force``), or no bag converted.
@@ -166,6 +175,7 @@ def convert_many(
             hint="convert one bag alone to see why",
         )
     shutil.rmtree(parts)
+    manifest = _shard(stage, manifest, chunk_size)
     tmp = stage / ".manifest.json.tmp"
     tmp.write_text(dumps_json(manifest), encoding="utf-8")
     os.replace(tmp, stage / "manifest.json")  # the manifest is written last, once
@@ -174,6 +184,33 @@ def convert_many(
     os.replace(stage, out)
     result.wall_seconds = time.perf_counter() - t0
     return result
+
+
+def _shard(stage: Path, manifest: dict[str, Any], chunk_size: int | None) -> dict[str, Any]:
+    """The merged manifest in the sharded layout (files moved in ``stage``), or as it is."""
+    from robogs.format.checks.context import STREAM_FILE_FIELDS
+    from robogs.format.shards import DEFAULT_CHUNK_SIZE, plan_moves, rename_refs, shard_manifest
+    from robogs.format.writer import sha256_file
+
+    n = len(manifest["episodes"])
+    if chunk_size is None:
+        chunk_size = DEFAULT_CHUNK_SIZE if n > SHARD_ABOVE else 0
+    if not chunk_size:
+        return manifest
+    fields = tuple(STREAM_FILE_FIELDS)
+    moves = plan_moves(manifest["episodes"], manifest["files"], chunk_size, fields)
+    for old, new in moves.items():
+        (stage / new).parent.mkdir(parents=True, exist_ok=True)
+        os.replace(stage / old, stage / new)
+    for old in moves:  # the episode folders left empty
+        parent = (stage / old).parent
+        while parent != stage and parent.is_dir() and not any(parent.iterdir()):
+            parent.rmdir()
+            parent = parent.parent
+    merged = rename_refs({k: v for k, v in manifest.items() if k != "files"}, moves)
+    merged["files"] = {moves.get(r, r): e for r, e in manifest["files"].items()}
+    merged["shards"] = {"layout": "chunked", "chunk_size": chunk_size}
+    return shard_manifest(stage, merged, stream_fields=fields, hasher=sha256_file)
 
 
 def _merge(stage: Path, bags: list[BagResult], result: ManyResult) -> dict[str, Any] | None:

@@ -38,6 +38,8 @@ __all__ = [
     "expand",
     "is_sharded",
     "migrate_layout",
+    "plan_moves",
+    "rename_refs",
     "read_chunk",
     "shard_manifest",
 ]
@@ -303,7 +305,7 @@ class Migration:
     verified: int
 
 
-def _moves(
+def plan_moves(
     episodes: list[dict[str, Any]], files: dict[str, Any], chunk_size: int, fields: tuple[str, ...]
 ) -> dict[str, str]:
     """Old path -> new path of every file of the ``k``-th episode, into chunk ``k // chunk_size``.
@@ -342,14 +344,14 @@ def _moves(
     return {old: new for old, new in moves.items() if old != new}
 
 
-def _rename_refs(obj: Any, moves: dict[str, str]) -> Any:
+def rename_refs(obj: Any, moves: dict[str, str]) -> Any:
     """``obj`` with every string that is a moved path replaced by its new path."""
     if isinstance(obj, str):
         return moves.get(obj, obj)
     if isinstance(obj, dict):
-        return {k: _rename_refs(v, moves) for k, v in obj.items()}
+        return {k: rename_refs(v, moves) for k, v in obj.items()}
     if isinstance(obj, list):
-        return [_rename_refs(v, moves) for v in obj]
+        return [rename_refs(v, moves) for v in obj]
     return obj
 
 
@@ -397,7 +399,7 @@ def migrate_layout(
         )
     fields = tuple(STREAM_FILE_FIELDS)
     episodes = list(merged.get("episodes", []))
-    moves = _moves(episodes, files, chunk_size, fields) if to == "sharded" else {}
+    moves = plan_moves(episodes, files, chunk_size, fields) if to == "sharded" else {}
     note(f"moving {len(moves)} files")
     with ds.edit() as w:
         for old, new in moves.items():
@@ -409,7 +411,7 @@ def migrate_layout(
             while parent != w.tmp and parent.is_dir() and not any(parent.iterdir()):
                 parent.rmdir()
                 parent = parent.parent
-        w.manifest = _rename_refs(w.manifest, moves)
+        w.manifest = rename_refs(w.manifest, moves)
         if to == "sharded":
             w.manifest["shards"] = {"layout": LAYOUT, "chunk_size": chunk_size}
         else:

@@ -4,6 +4,7 @@ a corrupt bag is named and the others land; the merged dataset validates clean."
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -56,3 +57,26 @@ def test_ray_glob_equals_the_local_merge(ray_cluster, bags, tmp_path, capsys):
     assert "2 worker processes" in capsys.readouterr().out
     a, b = _check_merged(local), _check_merged(ray)
     assert a["files"] == b["files"] and a["episodes"] == b["episodes"]
+
+
+def test_many_bags_into_the_sharded_layout(bags, tmp_path):
+    from robogs.convert.distributed import convert_many
+    from robogs.convert.ingest.context import ConvertOptions
+    from robogs.format.dataset import Dataset
+
+    out = tmp_path / "sharded"
+    srcs = sorted((bags / "bags").glob("*.mcap"))
+    opts = ConvertOptions(urdf=bags / "planar.urdf", progress=False)
+    res = convert_many(srcs, out, opts, chunk_size=3)
+    assert [Path(f["source"]).name for f in res.failed] == ["bag_0005.mcap"]
+    m = json.loads((out / "manifest.json").read_text())
+    assert [c["episodes"] for c in m["shards"]["chunks"]] == [3, 3, 1]
+    assert m["episodes"] == [] and not any(r.startswith("episodes/ep") for r in m["files"])
+    ds = Dataset.open(out)
+    ids = [f"ep{k:04d}" for k in range(8) if k != 5]
+    assert [e.id for e in ds.episodes] == ids
+    # the 4th converted episode (ep0003) is the first of chunk 1
+    assert ds.episode("ep0003").table_path("joint_states").parent.parent.name == "chunk-001"
+    report = validate(out)
+    assert report.findings == [], [f.message for f in report.findings]
+    assert {"I004", "I011", "T002"} <= {r.code for r in report.runs if r.status == "ran"}
