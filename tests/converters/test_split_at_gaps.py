@@ -256,3 +256,64 @@ def test_tabular_log_is_cut_too(tmp_path: Path) -> None:
         options=ConvertOptions(urdf=tmp_path / "arm.urdf"),
     )
     assert len(one.episodes) == 1
+
+
+def test_boxes_follow_their_frames_and_a_silent_camera_has_no_stream(tmp_path: Path) -> None:
+    """Hand-built episode: a generic stream in three windows, a camera (no video) in the first
+    two, 2-D boxes on some frames. After the cut each piece's boxes name its own renumbered
+    frames (same stamps), and the third piece has no camera stream."""
+    import pyarrow as pa
+
+    from robogs.convert.ingest.gaps import split_episodes
+
+    ms = 1_000_000
+    windows = [(0, 1000), (2000, 3000), (4000, 5000)]  # ms
+    t_all = np.concatenate([np.arange(a, b, 10) for a, b in windows]) * ms + T0
+    t_cam = np.concatenate([np.arange(a, b, 100) for a, b in windows[:2]]) * ms + T0
+    frames = pa.table({"t_ns": t_cam, "frame_index": np.arange(t_cam.size, dtype=np.int64)})
+    pick = np.array([1, 4, 12, 17])  # frames with a box: two in each window
+    boxes = pa.table(
+        {
+            "t_ns": t_cam[pick],
+            "camera": ["cam"] * pick.size,
+            "frame_index": pick.astype(np.int64),
+            "label_id": pa.array(np.arange(pick.size), pa.int32()),
+            **{c: np.ones(pick.size) for c in ("x_min", "y_min", "x_max", "y_max")},
+        }
+    )
+    w = Dataset.create(tmp_path / "ds")
+    try:
+        ep = "episodes/e"
+        w.write_table(f"{ep}/g.parquet", pa.table({"t_ns": t_all}), kind="generic")
+        w.write_table(f"{ep}/cam/frames.parquet", frames, kind="camera_frames")
+        w.write_table(f"{ep}/boxes.parquet", boxes, kind="boxes2d")
+        base = {"stamp_source": "log_time", "offset_ns": 0}
+        w.add_episode(
+            "e",
+            start_ns=int(t_all[0]),
+            end_ns=int(t_all[-1]),
+            streams={
+                "streams/g": {"kind": "generic", "path": f"{ep}/g.parquet", **base},
+                "camera/cam": {
+                    "kind": "camera",
+                    "camera": "cam",
+                    "frames": f"{ep}/cam/frames.parquet",
+                    **base,
+                },
+                "boxes2d": {"kind": "boxes2d", "path": f"{ep}/boxes.parquet", **base},
+            },
+        )
+        (rec,) = split_episodes(w, 0.5)
+        assert [e["id"] for e in rec["episodes"]] == ["e_000", "e_001", "e_002"]
+        eps = {e["id"]: e["streams"] for e in w.manifest["episodes"]}
+        assert sorted(eps["e_002"]) == ["streams/g"]
+        for k in range(2):
+            st = eps[f"e_{k:03d}"]
+            f = pq.read_table(w.tmp / st["camera/cam"]["frames"]).to_pydict()
+            b = pq.read_table(w.tmp / st["boxes2d"]["path"]).to_pydict()
+            assert f["frame_index"] == list(range(10))
+            assert len(b["t_ns"]) == 2
+            for t, i in zip(b["t_ns"], b["frame_index"], strict=True):
+                assert f["t_ns"][i] == t  # the box's frame is the frame of its stamp
+    finally:
+        w.abort()

@@ -140,6 +140,35 @@ def _windows(cuts: tuple[Cut, ...]) -> Iterator[tuple[int, int]]:
     yield from zip(edges[:-1], edges[1:], strict=True)
 
 
+def _slice(
+    table: pa.Table, lo: int, hi: int, kept: dict[str, list[np.ndarray]], k: int
+) -> pa.Table | None:
+    """Rows of piece ``k`` (``lo <= t_ns < hi``; an unstamped table whole); a table of
+    ``camera, frame_index`` rows (2-D boxes) gets the piece's new frame indexes. None: empty."""
+    if "t_ns" not in table.column_names:
+        return table
+    t = table.column("t_ns")
+    piece = table.filter(pc.and_(pc.greater_equal(t, lo), pc.less(t, hi)))
+    if not piece.num_rows:
+        return None
+    if {"camera", "frame_index"} <= set(piece.column_names):
+        cams = piece.column("camera").to_pylist()
+        old = piece.column("frame_index").to_numpy()
+        new = np.full(old.size, -1, np.int64)
+        for cam in set(cams):
+            rows = np.array([c == cam for c in cams])
+            idx = kept[cam][k] if cam in kept else np.empty(0, np.int64)
+            if not idx.size:
+                continue  # that camera has no frame in this piece: its boxes go
+            pos = np.searchsorted(idx, old[rows])
+            hit = (pos < idx.size) & (idx[np.minimum(pos, idx.size - 1)] == old[rows])
+            new[np.flatnonzero(rows)[hit]] = pos[hit]
+        piece = piece.filter(pa.array(new >= 0))
+        j = piece.schema.get_field_index("frame_index")
+        piece = piece.set_column(j, piece.schema.field(j), pa.array(new[new >= 0]))
+    return piece
+
+
 def _moved(rel: str, base: str, new: str) -> str:
     prefix = f"episodes/{base}/"
     return f"episodes/{new}/{rel[len(prefix) :]}" if rel.startswith(prefix) else rel
@@ -151,8 +180,13 @@ def _split_camera(
     base: str,
     windows: list[tuple[int, int]],
     ids: list[str],
-) -> list[dict[str, Any]]:
-    """Slice a camera stream: frames, video (re-encoded per piece), labels, extrinsics."""
+) -> tuple[list[dict[str, Any] | None], list[np.ndarray]]:
+    """Slice a camera stream: frames, video (re-encoded per piece), labels, extrinsics.
+
+    Returns:
+        Per piece: its stream entry (None when no frame falls in it), and the source frame
+        indexes it kept (in order; the new index of a frame is its position there).
+    """
     frames = _read(writer, st["frames"])
     t = frames.column("t_ns").to_numpy()
     fi = frames.column("frame_index").to_numpy()
@@ -171,6 +205,10 @@ def _split_camera(
             for k, v in st.items()
         }
         idx = fi[sel]
+        pieces.append((entry, idx))
+        if not idx.size:  # the camera saw nothing in this piece: no stream there
+            out.append(None)
+            continue
         renumber = pa.array(np.arange(idx.size, dtype=np.int64))
         piece = frames.filter(pa.array(sel)).set_column(
             frames.schema.get_field_index("frame_index"),
@@ -198,10 +236,9 @@ def _split_camera(
                 ext.filter(pc.and_(pc.greater_equal(et, lo), pc.less(et, hi))),
             )
         out.append(entry)
-        pieces.append((entry, idx))
     if isinstance(video, str) and (writer.tmp / video).is_file():
         _split_video(writer, writer.tmp / video, fi, pieces, st.get("nominal_rate_hz") or 30.0)
-    return out
+    return out, [idx for _, idx in pieces]
 
 
 def _split_video(
@@ -281,22 +318,27 @@ def split_episodes(writer: DatasetWriter, gap_s: float | None) -> list[dict[str,
                 hint="choose another --episode",
             )
         new_streams: list[dict[str, Any]] = [{} for _ in ids]
+        kept: dict[str, list[np.ndarray]] = {}  # camera -> source frame indexes per piece
         for name, st in streams.items():
             if st.get("kind") == "camera" and isinstance(st.get("frames"), str):
-                for k, entry in enumerate(_split_camera(writer, st, base, windows, ids)):
-                    new_streams[k][name] = entry
+                entries, kept[str(st.get("camera", name))] = _split_camera(
+                    writer, st, base, windows, ids
+                )
+                for k, entry in enumerate(entries):
+                    if entry is not None:
+                        new_streams[k][name] = entry
+        for name, st in streams.items():
+            if st.get("kind") == "camera" and isinstance(st.get("frames"), str):
                 continue
             rel = st.get("path")
             table = _read(writer, rel) if isinstance(rel, str) else None
-            stamped = table is not None and "t_ns" in table.column_names
             for k, ((lo, hi), eid) in enumerate(zip(windows, ids, strict=True)):
                 entry = dict(st)
                 if table is not None:
+                    piece = _slice(table, lo, hi, kept, k)
+                    if piece is None:
+                        continue
                     entry["path"] = _moved(rel, base, eid)
-                    piece = table
-                    if stamped:
-                        t = table.column("t_ns")
-                        piece = table.filter(pc.and_(pc.greater_equal(t, lo), pc.less(t, hi)))
                     _write(writer, entry["path"], piece)
                 new_streams[k][name] = entry
         _copy_unreferenced(writer, base, ids, streams)
