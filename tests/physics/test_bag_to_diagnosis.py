@@ -54,7 +54,7 @@ def _physics(ds: Path) -> dict:
 
 def _mass_row(run: subprocess.CompletedProcess) -> dict:
     doc = json.loads(run.stdout)
-    return next(r for r in doc["rows"] if r["name"] == "mass")
+    return next(r for r in doc["effects"] if r["name"] == "mass")
 
 
 @pytest.fixture(scope="module")
@@ -102,6 +102,12 @@ def test_physics_init_recovers_table_size_and_pusher(heavy: Path) -> None:
     assert doc["sources"]["objects.box.size_m"]["source"] == "estimated"
     assert max(abs(a - b) for a, b in zip(est, TRUTH.size, strict=True)) < 0.005
     assert doc["objects"]["box"]["mass_kg"] == pytest.approx(PRIOR_MASS, rel=0.03)
+    # a shape given by the user goes to the named frame kept from /tf_static
+    _robogs(heavy, "physics", "init", "ds", "--force", "--object", "pusher=sphere:0.01",
+            "--object", f"table=plane:{TRUTH.table_z}")  # fmt: skip
+    pusher = _physics(ds)["objects"]["pusher"]
+    assert pusher["link"] == "tool0" and pusher["offset_m"] == pytest.approx([0, 0, -0.1])
+    assert "named frame pusher_tip" in _physics(ds)["sources"]["objects.pusher.radius_m"]["detail"]
 
 
 def test_mass_found_as_on_the_scenario_given_directly(heavy: Path) -> None:

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from robogs.format.errors import FormatError, InputError
+from robogs.format.errors import FormatError, InputError, RobogsError
 from robogs.physics.init.priors import (
     DEFAULT_MATERIAL,
     MaterialTable,
@@ -198,6 +198,22 @@ def _contact_samples(tracks: list[ObjectTrack]) -> list[tuple[ObjectTrack, np.nd
     return [(tr, np.flatnonzero(tr.moving)) for tr in tracks if tr.moving.any()]
 
 
+def _named_frames_on_links(ds: Any, chain: Any) -> dict[str, tuple[str, np.ndarray]]:
+    """Named frames (``robot.frames``) fixed to links of ``chain``: name -> (link, T_link_frame)."""
+    from robogs.format.named_frames import frame_in_link
+
+    if chain is None:
+        return {}
+    links = set(chain.link_names)
+    out = {}
+    for name in ds.named_frames:
+        try:
+            out[name] = frame_in_link(ds.named_frames, name, links)
+        except RobogsError:
+            continue  # hangs from something that is not a robot link: not a pusher candidate
+    return out
+
+
 def _choose_pusher(
     ds: Any,
     tracks: list[ObjectTrack],
@@ -217,13 +233,28 @@ def _choose_pusher(
     for ep in ds.episodes:
         if ep.has("ee_poses"):
             ee_links |= set(ep.table("ee_poses", columns=["link"]).column("link").to_pylist())
+    on_links = _named_frames_on_links(ds, chain)
+    frame_pick = link is not None and link in on_links and link not in set(chain.link_names)
+    if frame_pick:
+        on_links = {link: on_links[link]}  # --pusher NAMED_FRAME
+        link = on_links[link][0]
     user = spec is not None and (spec.sphere is not None or spec.capsule is not None)
     if user:
         r, length = (spec.sphere, 0.0) if spec.sphere is not None else spec.capsule  # type: ignore[misc]
         half = 0.5 * float(length)
         links = {link} if link else ee_links | set(chain.link_names if chain is not None else [])
         a, b = np.array([0.0, -half, 0.0]), np.array([0.0, half, 0.0])
-        cands = {lk: [Shape(lk, "user", a, b, float(r))] for lk in links}
+        # the user's shape centred at the named frames kept from the source (spec 1.1.0), which
+        # mark a tool where no link origin is; at the link origins when there are none (or
+        # when --pusher names a link)
+        cands = {}
+        for name, (lk, T) in on_links.items():
+            if link is None or (lk == link and frame_pick):
+                p = T[:3, 3]
+                note = f"centred at named frame {name}"
+                cands.setdefault(lk, []).append(Shape(lk, "user", p + a, p + b, float(r), note))
+        if not cands:
+            cands = {lk: [Shape(lk, "user", a, b, float(r))] for lk in links}
     else:
         cands = {}
         for s in shapes:
