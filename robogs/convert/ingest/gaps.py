@@ -26,7 +26,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from robogs.format.errors import InputError
+from robogs.format.errors import InputError, output_error
 from robogs.format.images import VideoWriter, iter_video_frames
 from robogs.format.writer import DatasetWriter
 
@@ -115,11 +115,18 @@ def _read(writer: DatasetWriter, rel: str, columns: list[str] | None = None) -> 
 
 
 def _write(writer: DatasetWriter, rel: str, table: pa.Table) -> None:
-    """Write ``table`` at ``rel`` in the temp folder (atomic rename, the original schema)."""
+    """Write ``table`` at ``rel`` in the temp folder (atomic rename, the original schema).
+
+    Raises:
+        OutputError: the disk refused it (full, read-only, ...).
+    """
     final = writer.path(rel)
     part = final.with_name(final.name + ".part")
-    pq.write_table(table, part, compression="zstd", row_group_size=1 << 16)
-    os.replace(part, final)
+    try:
+        pq.write_table(table, part, compression="zstd", row_group_size=1 << 16)
+        os.replace(part, final)
+    except OSError as exc:
+        raise output_error(exc, path=writer.target, action="cutting at gaps") from None
 
 
 def _stream_stamps(writer: DatasetWriter, streams: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -127,7 +134,8 @@ def _stream_stamps(writer: DatasetWriter, streams: dict[str, Any]) -> dict[str, 
     for name, st in streams.items():
         for key in _STAMPED:
             rel = st.get(key)
-            if isinstance(rel, str) and (writer.tmp / rel).is_file():
+            path = writer.tmp / rel if isinstance(rel, str) else None
+            if path is not None and path.is_file() and "t_ns" in pq.read_schema(path).names:
                 t = _read(writer, rel, ["t_ns"]).column("t_ns").to_numpy().astype(np.int64)
                 out[f"{name}:{key}" if key != "path" else name] = t
     return out
@@ -170,8 +178,9 @@ def _slice(
 
 
 def _moved(rel: str, base: str, new: str) -> str:
-    prefix = f"episodes/{base}/"
-    return f"episodes/{new}/{rel[len(prefix) :]}" if rel.startswith(prefix) else rel
+    """Where piece ``new`` keeps its slice of ``rel``: in its own episode folder (a file
+    outside ``episodes/<base>/`` is never overwritten, its slices go under the piece)."""
+    return f"episodes/{new}/{rel.removeprefix(f'episodes/{base}/')}"
 
 
 def _split_camera(
