@@ -227,8 +227,47 @@ def _wrench_dataset(root: Path, delay_ms: float) -> Path:
 def test_delayed_wrench_is_caught_against_the_contacts(tmp_path: Path) -> None:
     (f,) = _findings(_wrench_dataset(tmp_path / "ds", 20.0), "T016")
     assert f.value == pytest.approx(20.0, abs=1.5)
-    assert f.location.stream == "wrenches" and "3 push(es)" in f.message
+    assert f.location.stream == "wrenches" and "over 3 pushes" in f.message
+    assert f.severity == "error"
 
 
 def test_wrench_on_time_gives_no_t016(tmp_path: Path) -> None:
     assert _findings(_wrench_dataset(tmp_path / "ds", 0.0), "T016") == []
+
+
+def test_wrench_ahead_of_the_motion_is_a_note(tmp_path: Path) -> None:
+    """A force before the motion can be physical (a build-up to breakaway): info, not error."""
+    (f,) = _findings(_wrench_dataset(tmp_path / "ds", -20.0), "T016")
+    assert f.severity == "info" and f.value == pytest.approx(-20.0, abs=1.5)
+
+
+def test_force_controlled_pushes_give_no_t016_error(tmp_path: Path) -> None:
+    """The force-controlled pushes of ``robogs.synth.scenarios.force_push`` (the force ramps up
+    to break the box away, so it leads the motion on clean stamps) are at most a note."""
+    from robogs.synth.scenarios.force_push import make_force_push
+
+    trajs = make_force_push(seed=0).trajectories
+    t_o = np.concatenate([tr.t_ns for tr in trajs])
+    p_o = np.concatenate([tr.object_pos for tr in trajs])
+    t_w = np.concatenate([tr.wrench_t_ns for tr in trajs])
+    f = np.concatenate([tr.wrench_tool for tr in trajs])
+    ep = "episodes/ep000"
+    with Dataset.create(tmp_path / "ds") as w:
+        w.set_asset("box", kind="object")
+        q = np.zeros(t_o.size)
+        poses = {"t_ns": pa.array(t_o, pa.int64()), "object": ["box"] * t_o.size}
+        poses.update({"x": p_o[:, 0], "y": p_o[:, 1], "z": p_o[:, 2], "qw": q + 1, "qx": q})
+        poses.update({"qy": q, "qz": q})
+        w.write_table(f"{ep}/object_poses.parquet", pa.table(poses), kind="object_poses")
+        wr = {"t_ns": pa.array(t_w, pa.int64()), "frame": ["tool0"] * t_w.size}
+        wr.update({c: f[:, i] for i, c in enumerate(("fx", "fy", "fz"))})
+        wr.update({c: np.zeros(t_w.size) for c in ("tx", "ty", "tz")})
+        w.write_table(f"{ep}/wrenches.parquet", pa.table(wr), kind="wrenches")
+        streams = {
+            k: {"kind": k, "path": f"{ep}/{k}.parquet", "stamp_source": "synthetic", "offset_ns": 0}
+            for k in ("object_poses", "wrenches")
+        }
+        w.add_episode("ep000", start_ns=int(t_o[0]), end_ns=int(t_o[-1]), streams=streams)
+        w.commit()
+    found = _findings(tmp_path / "ds", "T016")
+    assert all(x.severity == "info" and x.value < 0 for x in found), [x.to_dict() for x in found]

@@ -263,3 +263,58 @@ def test_chunks_with_context_cover_every_sample_once() -> None:
         assert lo >= min(40, g0 + lo) and a.size - hi >= min(40, 1000 - (g0 + hi))
         seen.extend(a[lo:hi].tolist())
     assert seen == list(range(1000))
+
+
+# --------------------------------------------------------------------------- T013 cost bounds
+
+
+def test_motion_windows_keep_the_runs_that_move() -> None:
+    """A series at rest but for three bursts: the windows are exactly the bursts' runs."""
+    from robogs.format.checks.sync import motion_windows
+
+    n, per = 20_000, 250
+    t = np.arange(n, dtype=np.int64) * 2_000_000
+    p = np.zeros((n, 3))
+    moving = [3, 41, 77]  # run indices
+    for k in moving:
+        p[k * per : (k + 1) * per, 0] = np.sin(np.linspace(0, 3, per))
+    idx = motion_windows(t, p, windows=3, per=per)
+    assert np.array_equal(idx, np.concatenate([np.arange(k * per, (k + 1) * per) for k in moving]))
+    short = np.arange(100)
+    assert np.array_equal(motion_windows(t[:100], p[:100], windows=3, per=per), short)
+
+
+def test_reference_near_the_runs_brackets_every_query() -> None:
+    """Brute force: every reference sample within the margin of an observed stamp is kept,
+    plus one on each side; nothing farther than one sample beyond the margin."""
+    from robogs.format.checks.sync import _near
+
+    rng = np.random.default_rng(3)
+    t_ref = np.cumsum(rng.integers(1_000_000, 3_000_000, 5_000)).astype(np.int64)
+    t_obs = np.sort(rng.choice(t_ref, 40, replace=False)) + 500_000
+    margin = 10_000_000
+    keep = _near(t_ref, t_obs, margin)
+    dist = np.min(np.abs(t_ref[:, None] - t_obs[None, :]), axis=1)
+    inside = dist <= margin
+    assert keep[inside].all()
+    grown = inside.copy()
+    grown[1:] |= inside[:-1]
+    grown[:-1] |= inside[1:]
+    assert not keep[~grown].any()
+
+
+def test_delayed_poses_on_a_long_episode_are_timed_on_the_runs_of_most_motion(
+    tmp_path: Path,
+) -> None:
+    """60 s of the synthetic scene played back and forth (the bench's episode): the fit uses
+    16 runs and forward kinematics near them only, and still finds the 12 ms within 1 ms."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
+    try:
+        import time_lag
+    finally:
+        sys.path.pop(0)
+    root = time_lag.build(tmp_path / "long", 60.0, 12.0)
+    (f,) = _found(validate(root, select=["T013"]), "T013")
+    assert f.value == pytest.approx(12.0, abs=1.0)

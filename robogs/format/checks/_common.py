@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..frames import quat_to_matrix_np
+from .assets import hull_vertices, mesh_unit_problem
 from .context import CheckContext, InputReported
 
 __all__ = [
@@ -80,9 +81,9 @@ def stream_tables(
 def usable_mesh(ctx: CheckContext, name: str) -> np.ndarray | None:
     """Hull vertices [V, 3] (m, asset frame) of an asset whose mesh loads and is in metres."""
     try:
-        if ctx.mesh_unit_problem(name):
+        if mesh_unit_problem(ctx, name):
             return None  # reported by G006
-        return ctx.asset_hull_vertices(name)
+        return hull_vertices(ctx, name)
     except InputReported:
         return None
 

@@ -1,10 +1,19 @@
-"""``CheckContext``: the dataset as the checks see it, opened lazily, with caches.
+"""``CheckContext``: a tolerant, caching view of one :class:`~robogs.format.dataset.Dataset`.
 
-The context reads ``manifest.json`` once (without raising on schema problems,
-which become findings), knows which paths are unsafe (those are reported by
-the integrity checks and never opened by anyone), and caches what several
-checks read: parquet footers, tables, the URDF and its kinematic chain, asset
-meshes, camera models and label boxes. Nothing here writes to the dataset.
+The checks read the dataset through the context, and the context reads it through the
+``Dataset`` readers (``read_parquet``, ``parquet_metadata``, ``Dataset.camera``,
+``Dataset.physics``, ``Dataset.urdf``, ``Dataset.mesh``). What it adds is only:
+
+* **tolerance**: the manifest is read without raising on schema problems (they become
+  findings); a path that leaves the root is never opened; a read that fails is cached as a
+  failure and raised as :class:`InputReported` (or, for the robot and meshes, as the
+  ``RobogsError`` that the check reading it reports), so one broken file is one finding, from
+  the check that owns it, and never a crash of the others;
+* **caching**: what several checks read (footers, tables, sidecars, the URDF and its chain,
+  meshes, label boxes) is read once, by :meth:`CheckContext.cached`.
+
+Layout facts (which fields name files, entity columns) live in :mod:`.layout`, facts derived
+from meshes in :mod:`.assets`. Nothing here writes to the dataset.
 """
 
 from __future__ import annotations
@@ -16,7 +25,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -29,6 +37,14 @@ from ..paths import check_relpath, resolve_inside
 from ..schemas import schema_problems
 from ..spec_version import SPEC_VERSION, parse_version
 from ..tables import check_table_schema, null_problems
+from .layout import (
+    ENTITY_COLUMNS,
+    PERIODIC_KINDS,
+    STREAM_FILE_FIELDS,
+    PathRef,
+    path_refs,
+    table_kind,
+)
 
 if TYPE_CHECKING:
     import trimesh
@@ -43,50 +59,9 @@ __all__ = [
     "PathRef",
     "STREAM_FILE_FIELDS",
     "table_kind",
-    "MM_SUSPECT_EXTENT_M",
     "PERIODIC_KINDS",
     "ENTITY_COLUMNS",
 ]
-
-#: stream kinds sampled at a (nominal) rate; camera means its frame table
-PERIODIC_KINDS: tuple[str, ...] = (
-    "joint_states",
-    "actions",
-    "ee_poses",
-    "object_poses",
-    "wrenches",
-    "camera",
-)
-
-#: column naming the entity of each row, for tables that interleave several series
-ENTITY_COLUMNS: dict[str, str] = {
-    "ee_poses": "link",
-    "object_poses": "object",
-    "wrenches": "frame",
-    "boxes2d": "camera",
-    "boxes3d": "object",
-}
-
-#: stream fields that name a file, and the table kind of each (None: not a table)
-STREAM_FILE_FIELDS: dict[str, str | None] = {
-    "path": "",
-    "frames": "camera_frames",
-    "labels": "camera_labels",
-    "extrinsics": "camera_extrinsics",
-    "video": None,
-}
-
-#: an object or table mesh larger than this (m) was almost surely exported in mm
-MM_SUSPECT_EXTENT_M = 10.0
-
-
-def table_kind(stream: dict[str, Any], field: str) -> str | None:
-    """Table kind (``robogs.format.tables``) of a stream's file field, None for non-tables."""
-    kind = STREAM_FILE_FIELDS.get(field)
-    if kind == "":
-        return str(stream.get("kind", ""))
-    return kind
-
 
 #: largest decompressed size (bytes) of a table that a check may read whole into memory; a larger
 #: one is reported by I010 and skipped by those checks (the streaming checks still read it)
@@ -102,12 +77,10 @@ class InputReported(Exception):
 
 
 @dataclass(frozen=True)
-class PathRef:
-    """A path named by the manifest (or a URDF): where it is named and what it is."""
+class _Failed:
+    """A cached read failure."""
 
-    rel: str
-    where: str
-    role: str
+    error: RobogsError
 
 
 class CheckContext:
@@ -259,42 +232,8 @@ class CheckContext:
 
     # -- paths --------------------------------------------------------------------------
     def path_refs(self) -> list[PathRef]:
-        """Every path the manifest names (files, streams, robot, assets, cameras, physics)."""
-        m = self.manifest
-        refs: list[PathRef] = [PathRef(rel, f"/files/{rel}", "file") for rel in self.files]
-
-        def add(value: Any, where: str, role: str) -> None:
-            if isinstance(value, str):
-                refs.append(PathRef(value, where, role))
-
-        robot = m.get("robot")
-        if isinstance(robot, dict):
-            add(robot.get("urdf"), "/robot/urdf", "urdf")
-            add(robot.get("mdh"), "/robot/mdh", "mdh")
-            if isinstance(robot.get("splats"), dict):
-                add(robot["splats"].get("path"), "/robot/splats/path", "splats")
-        assets = m.get("assets")
-        if isinstance(assets, dict):
-            for name, a in assets.items():
-                if isinstance(a, dict):
-                    add(a.get("mesh"), f"/assets/{name}/mesh", "mesh")
-                    if isinstance(a.get("splats"), dict):
-                        add(a["splats"].get("path"), f"/assets/{name}/splats/path", "splats")
-        add(m.get("physics"), "/physics", "physics")
-        cams = m.get("cameras")
-        if isinstance(cams, dict):
-            for name, rel in cams.items():
-                add(rel, f"/cameras/{name}", "camera")
-        eps = m.get("episodes")
-        for i, e in enumerate(eps if isinstance(eps, list) else []):
-            streams = e.get("streams") if isinstance(e, dict) else None
-            if not isinstance(streams, dict):
-                continue
-            for sname, st in streams.items():
-                if isinstance(st, dict):
-                    for fld in STREAM_FILE_FIELDS:
-                        add(st.get(fld), f"/episodes/{i}/streams/{sname}/{fld}", fld)
-        return refs
+        """Every path the manifest names (:func:`.layout.path_refs`)."""
+        return path_refs(self.manifest)
 
     @property
     def unsafe_paths(self) -> dict[str, PathEscapeError]:
@@ -349,51 +288,34 @@ class CheckContext:
             raise InputReported(rel)
         return p
 
+    # -- the one tolerant read -------------------------------------------------------------
+    def cached(self, key: Any, build: Callable[[], Any], *, reported: bool = True) -> Any:
+        """``build()`` once per ``key``; its failure (a ``RobogsError``) is cached as well.
+
+        Args:
+            key: cache key (a tuple naming what is read).
+            build: the read, through a ``Dataset`` reader.
+            reported: the failure is reported by an integrity or schema check, so it is raised
+                as :class:`InputReported` (the caller skips quietly); False re-raises the
+                ``RobogsError`` for the calling check to report (URDF, meshes).
+        """
+        if key not in self._cache:
+            try:
+                self._cache[key] = build()
+            except RobogsError as exc:
+                self._cache[key] = _Failed(exc)
+        value = self._cache[key]
+        if isinstance(value, _Failed):
+            if reported:
+                raise InputReported(str(key[-1])) from value.error
+            raise value.error
+        return value
+
     # -- tables ----------------------------------------------------------------------------
     def footer(self, rel: str) -> pq.FileMetaData:
         """Parquet footer of a manifest path (cached); broken files raise :class:`InputReported`."""
-        key = ("footer", rel)
-        if key not in self._cache:
-            try:
-                self._cache[key] = parquet_metadata(self.existing(rel))
-            except FormatError as exc:
-                self._cache[key] = exc
-        value = self._cache[key]
-        if isinstance(value, FormatError):
-            raise InputReported(rel) from value
-        return value
-
-    def t_range(self, rel: str) -> tuple[int, int] | None:
-        """(min, max) ``t_ns`` of a table from its footer statistics; None if absent or empty.
-
-        Full mode falls back to reading the column when the footer has no statistics.
-        """
-        md = self.footer(rel)
-        schema = md.schema.to_arrow_schema()
-        names = schema.names
-        if "t_ns" not in names or md.num_rows == 0:
-            return None
-        if names.count("t_ns") != 1 or not pa.types.is_int64(schema.field("t_ns").type):
-            raise InputReported(rel)  # S003 reports the column
-        j = names.index("t_ns")
-        lo: list[int] = []
-        hi: list[int] = []
-        for g in range(md.num_row_groups):
-            rg = md.row_group(g)
-            if rg.num_rows == 0:
-                continue
-            stats = rg.column(j).statistics
-            if stats is None or not stats.has_min_max:
-                lo = []
-                break
-            lo.append(int(stats.min))
-            hi.append(int(stats.max))
-        if lo:
-            return min(lo), max(hi)
-        if self.quick:
-            return None
-        t = self.table(rel, columns=("t_ns",)).column("t_ns").to_numpy(zero_copy_only=False)
-        return (int(t.min()), int(t.max())) if t.size else None
+        path = self.existing(rel)
+        return self.cached(("footer", rel), lambda: parquet_metadata(path))
 
     def table_kinds(self) -> dict[str, str]:
         """Table kind of every table a stream names, keyed by relative path."""
@@ -420,17 +342,16 @@ class CheckContext:
         if self.table_bytes(rel) > MAX_TABLE_BYTES:
             raise InputReported(rel)  # I010 reports it
         key = ("table", rel, columns)
-        if key not in self._cache:
-            full = self._cache.get(("table", rel, None))
-            if full is not None and columns is not None:
-                self._cache[key] = full.select(list(columns))
-            else:
-                tab = read_parquet(self.existing(rel), columns=list(columns) if columns else None)
-                if kind is not None and null_problems(kind, tab):
-                    self._cache[("table-ok", rel)] = False
-                    raise InputReported(rel)  # S003 reports the nulls
-                self._cache[key] = tab
-        return self._cache[key]
+        full = self._cache.get(("table", rel, None))
+        if key not in self._cache and columns is not None and isinstance(full, pa.Table):
+            self._cache[key] = full.select(list(columns))
+        path = self.existing(rel)
+        cols = list(columns) if columns else None
+        tab = self.cached(key, lambda: read_parquet(path, columns=cols))  # I006 reports failures
+        if kind is not None and null_problems(kind, tab):
+            self._cache[("table-ok", rel)] = False
+            raise InputReported(rel)  # S003 reports the nulls
+        return tab
 
     def table_bytes(self, rel: str) -> int:
         """Size of a parquet table once read into memory, bytes, from its footer alone.
@@ -476,11 +397,6 @@ class CheckContext:
             raise InputReported(f"{stream}/{field}")
         return self.table(rel, columns=columns)
 
-    def stamps(self, ep: Episode, stream: str, *, field: str = "path") -> np.ndarray:
-        """[N] int64 ``t_ns`` of a stream's table."""
-        col = self.stream_table(ep, stream, field=field, columns=("t_ns",)).column("t_ns")
-        return col.to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
-
     def find_stream(self, ep: Episode, kind: str) -> str | None:
         """Name of the first stream of ``kind`` in an episode that names a table."""
         for name, st in ep.streams.items():
@@ -489,47 +405,26 @@ class CheckContext:
         return None
 
     # -- sidecars -------------------------------------------------------------------------
-    def sidecar(self, rel: str, schema: str) -> dict[str, Any]:
-        """A JSON sidecar that follows its schema; otherwise :class:`InputReported`."""
-        key = ("sidecar", rel, schema)
-        if key not in self._cache:
-            try:
-                doc = read_json(self.existing(rel), what=f"{schema} file")
-                self._cache[key] = (
-                    doc if isinstance(doc, dict) and not schema_problems(schema, doc) else None
-                )
-            except FormatError:
-                self._cache[key] = None
-        doc = self._cache[key]
-        if doc is None:
-            raise InputReported(rel)
-        return doc
-
     def physics(self) -> dict[str, Any]:
-        """``physics.json`` (schema-valid), or :class:`InputReported`."""
+        """``physics.json`` through :meth:`Dataset.physics` (schema-valid), or
+        :class:`InputReported` (S00x reports an invalid one)."""
         rel = self.manifest.get("physics")
         if not isinstance(rel, str):
             raise InputReported("physics")
-        return self.sidecar(rel, "physics")
+        self.existing(rel)
+        return self.cached(("sidecar", "physics"), self.dataset.physics)
 
     def camera(self, name: str) -> CameraModel:
-        """A camera model (schema-valid), or :class:`InputReported`."""
-        rel = (self.manifest.get("cameras") or {}).get(name)
+        """A camera model through :meth:`Dataset.camera` (schema-valid), or
+        :class:`InputReported`."""
+        cams = self.manifest.get("cameras")
+        rel = cams.get(name) if isinstance(cams, dict) else None
         if not isinstance(rel, str):
             raise InputReported(f"cameras/{name}")
-        return CameraModel.from_dict(self.sidecar(rel, "camera"))
+        self.existing(rel)
+        return self.cached(("sidecar", "camera", name), lambda: self.dataset.camera(name))
 
     # -- robot and meshes ----------------------------------------------------------------
-    def _cached(self, key: Any, build: Callable[[], Any]) -> Any:
-        if key not in self._cache:
-            try:
-                self._cache[key] = build()
-            except RobogsError as exc:
-                self._cache[key] = exc
-        value = self._cache[key]
-        if isinstance(value, RobogsError):
-            raise value
-        return value
 
     def urdf(self) -> yourdfpy.URDF:
         """The robot URDF, kinematics only (cached); errors are raised as ``RobogsError``.
@@ -542,13 +437,13 @@ class CheckContext:
         if not isinstance(rel, str):
             raise InputReported("robot/urdf")
         path = self.existing(rel)
-        return self._cached(("urdf",), lambda: self._load_urdf(path))
+        return self.cached(("urdf",), lambda: self._load_urdf(path), reported=False)
 
     def _load_urdf(self, path: Path) -> yourdfpy.URDF:
-        """Kinematic model plus ``robogs_mesh_refs`` (resolved mesh paths), without loading meshes."""
-        from ..urdf import MeshRef, load_urdf, mesh_refs, resolve_mesh_uri
+        """:meth:`Dataset.urdf` without meshes, plus ``robogs_mesh_refs`` (resolved mesh paths)."""
+        from ..urdf import MeshRef, mesh_refs, resolve_mesh_uri
 
-        urdf = load_urdf(path, root=self.root, load_meshes=False)
+        urdf = self.dataset.urdf(load_meshes=False)
         refs: list[MeshRef] = []
         cache: dict[str, Path] = {}
         for ref in mesh_refs(urdf):
@@ -573,8 +468,10 @@ class CheckContext:
         """Forward kinematics of the robot (cached)."""
         from ..kinematics import Chain
 
-        return self._cached(
-            ("chain",), lambda: Chain.from_urdf(self.urdf(), floating_as_fixed=True)
+        return self.cached(
+            ("chain",),
+            lambda: Chain.from_urdf(self.urdf(), floating_as_fixed=True),
+            reported=False,
         )
 
     def fitted_chain(self) -> tuple[Chain, str]:
@@ -591,7 +488,7 @@ class CheckContext:
                 return chain, ""  # no physics.json, or reported by S00x
             return fitted_chain(chain, physics, path=self.manifest.get("physics"))
 
-        return self._cached(("fitted_chain",), build)
+        return self.cached(("fitted_chain",), build, reported=False)
 
     def has_robot(self) -> bool:
         robot = self.manifest.get("robot")
@@ -616,46 +513,7 @@ class CheckContext:
         if not isinstance(rel, str):
             raise InputReported(f"assets/{name}/mesh")
         self.existing(rel)
-        return self._cached(("mesh", name), lambda: self.dataset.mesh(name))
-
-    def asset_hull_vertices(self, name: str) -> np.ndarray:
-        """[V, 3] convex-hull vertices of an asset mesh (asset frame, m); bounds the mesh."""
-
-        def build() -> np.ndarray:
-            mesh = self.asset_mesh(name)
-            try:
-                return np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
-            except Exception:  # degenerate (flat) meshes have no 3D hull
-                return np.asarray(mesh.vertices, dtype=np.float64)
-
-        return self._cached(("hull", name), build)
-
-    def mesh_unit_problem(self, name: str) -> str | None:
-        """Why an asset mesh looks like millimetres (None if it looks like metres).
-
-        Two signs: an object/table mesh larger than :data:`MM_SUSPECT_EXTENT_M`, or
-        a mesh 100-10000x larger than the ``size_m`` physics.json gives it.
-        """
-        key = ("mm", name)
-        if key not in self._cache:
-            self._cache[key] = self._mesh_unit_problem(name)
-        return self._cache[key]
-
-    def _mesh_unit_problem(self, name: str) -> str | None:
-        extent = float(np.max(np.ptp(self.asset_hull_vertices(name), axis=0)))
-        if self.asset_kind(name) in ("object", "table") and extent > MM_SUSPECT_EXTENT_M:
-            return f"mesh extent {extent:.4g} m exceeds {MM_SUSPECT_EXTENT_M:g} m"
-        try:
-            size = (self.physics().get("objects") or {}).get(name, {}).get("size_m")
-        except InputReported:
-            size = None
-        if size:
-            ratio = extent / max(float(max(size)), 1e-12)
-            if 100.0 <= ratio <= 10000.0:
-                return (
-                    f"mesh extent {extent:.4g} m is {ratio:.0f}x the physics size {max(size):.4g} m"
-                )
-        return None
+        return self.cached(("mesh", name), lambda: self.dataset.mesh(name), reported=False)
 
     # -- label images -------------------------------------------------------------------
     def label_boxes(self, ep: Episode, stream: str) -> LabelBoxes:
@@ -668,6 +526,8 @@ class CheckContext:
         path = self.existing(rel)
         self._require_schema(rel)
         self.progress(f"label boxes {ep.id}/{stream}")
-        return self._cached(
-            ("labels", rel), lambda: scan_label_boxes(path, threads=self.label_threads)
+        return self.cached(
+            ("labels", rel),
+            lambda: scan_label_boxes(path, threads=self.label_threads),
+            reported=False,
         )

@@ -27,7 +27,8 @@ from ._common import (
     stream_tables,
     usable_mesh,
 )
-from .context import MM_SUSPECT_EXTENT_M, CheckContext, InputReported
+from .assets import MM_SUSPECT_EXTENT_M, hull_vertices, mesh_unit_problem
+from .context import CheckContext, InputReported
 from .registry import Check, check
 from .streaming import MedianSketch, SampleWindow, batches
 
@@ -65,10 +66,7 @@ def _load_mesh_file(path: Path, scale: Any) -> np.ndarray:
 
 
 def _mesh_vertices(ctx: CheckContext, path: Path, scale: Any) -> np.ndarray:
-    key = ("mesh-file", str(path))
-    if key not in ctx._cache:
-        ctx._cache[key] = _load_mesh_file(path, None)
-    v = ctx._cache[key]
+    v = ctx.cached(("mesh-file", str(path)), lambda: _load_mesh_file(path, None), reported=False)
     return v * np.broadcast_to(np.asarray(scale, np.float64), (3,)) if scale is not None else v
 
 
@@ -97,9 +95,12 @@ def link_geometry(ctx: CheckContext, *, prefer: str = "collision") -> dict[str, 
         prefer: ``"collision"`` (for mass properties) or ``"visual"`` (for images);
             the other kind is used when a link has none of the preferred one.
     """
-    key = ("link-geometry", prefer)
-    if key in ctx._cache:
-        return ctx._cache[key]
+    return ctx.cached(
+        ("link-geometry", prefer), lambda: _link_geometry(ctx, prefer), reported=False
+    )
+
+
+def _link_geometry(ctx: CheckContext, prefer: str) -> dict[str, _LinkGeometry]:
     from ..urdf import MESH_SUFFIXES, resolve_mesh_uri
 
     urdf = ctx.urdf()
@@ -153,7 +154,6 @@ def link_geometry(ctx: CheckContext, *, prefer: str = "collision") -> dict[str, 
                     link.name, np.concatenate(parts), tuple(sources), problem
                 )
                 break
-    ctx._cache[key] = out
     return out
 
 
@@ -402,7 +402,7 @@ def _link_units(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 def _asset_units(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     for name in ctx.asset_names():
         try:
-            problem = ctx.mesh_unit_problem(name)
+            problem = mesh_unit_problem(ctx, name)
         except InputReported:
             continue
         except RobogsError as exc:
@@ -415,7 +415,7 @@ def _asset_units(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             )
             continue
         if problem:
-            ext = float(np.max(np.ptp(ctx.asset_hull_vertices(name), axis=0)))
+            ext = float(np.max(np.ptp(hull_vertices(ctx, name), axis=0)))
             yield chk.finding(
                 f"{problem}: looks like millimetres",
                 value=ext,
@@ -776,11 +776,12 @@ def object_poses(
     tab = ctx.stream_table(
         ep, stream, columns=("t_ns", "object", "x", "y", "z", "qw", "qx", "qy", "qz")
     )
-    key = ("object-rows", ep.id, stream)
-    if key not in ctx._cache:
+
+    def index() -> dict[str, np.ndarray]:
         names = column(tab, "object").astype(str)
-        ctx._cache[key] = {n: np.flatnonzero(names == n) for n in np.unique(names)}
-    rows = ctx._cache[key].get(obj)
+        return {n: np.flatnonzero(names == n) for n in np.unique(names)}
+
+    rows = ctx.cached(("object-rows", ep.id, stream), index).get(obj)
     if rows is None or rows.size == 0:
         return None
     t = np.array(column(tab, "t_ns", rows), dtype=np.int64)

@@ -14,8 +14,9 @@ force magnitude out of its floor (the sensor's offset removed), the object's dis
 its rest position around it is extrapolated back to zero along its first millimetres of motion,
 and the force back to its floor along its rise; the lag is the mean of ``t_force - t_motion``
 over the pushes (Student's t interval). A rigid pusher touches and loads the object at once, so
-a clean recording gives a lag within the sampling; a force ramp slower than the first
-millimetre of motion shows as a small positive lag.
+a clean recording gives a lag within the sampling. A force cannot follow the motion it causes,
+so a positive lag (wrench late) is an error; a negative one may be physical (a force-controlled
+push builds up to break the object away) and is a note. At least three pushes are needed.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from ..errors import RobogsError
 from ..findings import Finding
 from ..frames import quat_to_matrix_np
 from ._common import column, frame_stamps
+from .assets import hull_vertices
 from .context import CheckContext, InputReported
 from .registry import Check, check
 from .stale import held_mask
@@ -50,6 +52,8 @@ _T975 = (12.71, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228)
 _CONTACT_WINDOW_NS = 250_000_000
 #: displacement (m) from rest taken as "moving" at least (and 6 sigma of the pose noise)
 _MOVE_M = 1e-3
+#: pushes a wrench lag needs before it is reported (its interval comes from their spread)
+_MIN_PUSHES = 3
 #: span after the first moving sample over which the start of the motion is fitted, ns
 _ONSET_FIT_NS = 60_000_000
 
@@ -236,7 +240,7 @@ def box_lag(ctx: CheckContext, ep, obj: str, camera: str, t_p, v_p) -> tuple[_Bo
         return None
     t_b, c_b, rel = obs
     try:
-        hull = ctx.asset_hull_vertices(obj)
+        hull = hull_vertices(ctx, obj)
     except (InputReported, RobogsError):
         hull = np.zeros((1, 3))  # no mesh: the object's origin
     c_p = projected_centres(cam, _pose_matrices(v_p), hull)
@@ -500,9 +504,8 @@ def _wrench_series(ctx: CheckContext, rel: str) -> dict[str, tuple[np.ndarray, n
     quantity="mean lag of the force rises behind the object's motion onsets",
     unit="ms",
     budget="time.sync_ms",
-    hint="the force-torque stream is stamped late (or early) against the poses: correct its "
-    "offset_ns by the lag (a slow force ramp before the object moves also shows as a small "
-    "positive lag)",
+    hint="the force-torque stream is stamped late against the poses (a force cannot follow the "
+    "motion it causes): correct its offset_ns by the lag",
 )
 def _wrench_contact_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("time.sync_ms")
@@ -525,16 +528,27 @@ def _wrench_contact_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             if best is None:
                 continue
             obj, est = best
-            significant = est.pushes < 3 or abs(est.lag_ms) > 3.0 * est.stderr_ms
-            if abs(est.lag_ms) > budget and significant and not est.lo_ms <= 0.0 <= est.hi_ms:
-                when = "behind" if est.lag_ms > 0 else "ahead of"
+            if est.pushes < _MIN_PUSHES or abs(est.lag_ms) <= budget:
+                continue
+            if est.lo_ms <= 0.0 <= est.hi_ms or abs(est.lag_ms) <= 3.0 * est.stderr_ms:
+                continue
+            where = dict(file=rel, episode=ep.id, stream=name)
+            span = f"(95 % interval {est.lo_ms:.4g} to {est.hi_ms:.4g} ms over {est.pushes} pushes)"
+            if est.lag_ms > 0:  # a force cannot follow the motion it causes: the stamps are off
                 yield chk.finding(
-                    f"wrench {frame!r}: force rises run {abs(est.lag_ms):.3g} ms {when} the "
-                    f"motion onsets of {obj!r} (95 % interval {est.lo_ms:.4g} to "
-                    f"{est.hi_ms:.4g} ms over {est.pushes} push(es))",
+                    f"wrench {frame!r}: force rises run {est.lag_ms:.3g} ms behind the motion "
+                    f"onsets of {obj!r} {span}",
                     value=est.lag_ms,
                     budget=budget,
-                    file=rel,
-                    episode=ep.id,
-                    stream=name,
+                    **where,
+                )
+            else:  # a force may build up before the object breaks away: a note
+                yield chk.finding(
+                    f"wrench {frame!r}: force rises run {-est.lag_ms:.3g} ms ahead of the motion "
+                    f"onsets of {obj!r} {span}: a force that builds up to break the object away "
+                    "does this; with position-controlled pushes the wrench is stamped early",
+                    value=est.lag_ms,
+                    budget=budget,
+                    severity="info",
+                    **where,
                 )

@@ -88,8 +88,9 @@ def held_blocks(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
         after = v[e + 1] - v[e]
         dt_in = (t[f] - t[b]).astype(np.float64)[:, None]
         dt_out = (t[e + 1] - t[f]).astype(np.float64)[:, None]
-        same_way = before * after > 0
-        fast = np.abs(after) / dt_out >= CATCH_UP * np.abs(before) / dt_in
+        with np.errstate(invalid="ignore"):  # non-finite values (I009) compare False
+            same_way = before * after > 0
+            fast = np.abs(after) / dt_out >= CATCH_UP * np.abs(before) / dt_in
         held[inner] = np.any(same_way & fast, axis=1)
     return first, last, held
 

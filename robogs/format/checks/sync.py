@@ -253,13 +253,14 @@ def _fit(
 def cached_camera_lag(ctx: CheckContext, ep, stream: str) -> LagEstimate | None:
     """:func:`estimate_camera_lag`, once per camera stream and context (T012 and T015 share it);
     None when it cannot be estimated or its inputs are unreadable (reported elsewhere)."""
-    key = ("camera-lag", ep.id, stream)
-    if key not in ctx._cache:
+
+    def build() -> LagEstimate | None:
         try:
-            ctx._cache[key] = estimate_camera_lag(ctx, ep, stream)
+            return estimate_camera_lag(ctx, ep, stream)
         except (InputReported, RobogsError):
-            ctx._cache[key] = None
-    return ctx._cache[key]
+            return None
+
+    return ctx.cached(("camera-lag", ep.id, stream), build)
 
 
 # Checks share one shape by design: a @check(...) registration over a finding loop.
@@ -516,6 +517,7 @@ def _fk_positions(
     if t.size < 3 or not np.all(np.diff(t) > 0):
         return None  # reported by T001
     near = _near(t, np.sort(t_need), _MAX_STREAM_LAG_NS + _MARGIN_NS)
+    near &= np.all(np.isfinite(q), axis=1)  # I009 reports the others
     t, q = t[near], q[near]
     fresh = ~held_mask(t, q)  # runs are far apart: a repeat across two runs is not held
     t, q = t[fresh], q[fresh]
@@ -546,6 +548,8 @@ def _ee_series(ctx: CheckContext, rel: str) -> dict[str, tuple[np.ndarray, np.nd
         v = np.concatenate([c[1] for c in chunks])
         if t.size < 3 or not np.all(np.diff(t) > 0):
             continue  # reported by T001
+        finite = np.all(np.isfinite(v), axis=1)  # I009 reports the others
+        t, v = t[finite], v[finite]
         keep = ~held_mask(t, v)
         t, p = t[keep], v[keep, :3]
         sel = motion_windows(t, p)

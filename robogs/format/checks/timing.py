@@ -129,10 +129,7 @@ def _scan(ctx: CheckContext, ent_col: str | None, **meta: object) -> list[_Serie
 
 def _series(ctx: CheckContext) -> Iterator[_Series]:
     """Every stamped series of the dataset (cached per context: facts only, no stamps)."""
-    key = ("timing-series",)
-    if key not in ctx._cache:
-        ctx._cache[key] = list(_build_series(ctx))
-    yield from ctx._cache[key]
+    yield from ctx.cached(("timing-series",), lambda: list(_build_series(ctx)))
 
 
 def _build_series(ctx: CheckContext) -> Iterator[_Series]:
@@ -341,10 +338,7 @@ def _periods(ctx: CheckContext, s: _Series, gap_factor: float) -> _Periods | Non
 def _all_periods(ctx: CheckContext) -> Iterator[tuple[_Series, _Periods]]:
     gf = ctx.budget("time.gap_factor")
     for i, s in enumerate(_series(ctx)):
-        key = ("timing-periods", i, gf)
-        if key not in ctx._cache:
-            ctx._cache[key] = _periods(ctx, s, gf)
-        per = ctx._cache[key]
+        per = ctx.cached(("timing-periods", i, gf), lambda s=s: _periods(ctx, s, gf))
         if per is not None:
             yield s, per
 
@@ -488,6 +482,39 @@ def _jitter_max(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             )
 
 
+def t_range(ctx: CheckContext, rel: str) -> tuple[int, int] | None:
+    """(min, max) ``t_ns`` of a table from its footer statistics; None if absent or empty.
+
+    Full mode falls back to reading the column when the footer has no statistics.
+    """
+    md = ctx.footer(rel)
+    schema = md.schema.to_arrow_schema()
+    names = schema.names
+    if "t_ns" not in names or md.num_rows == 0:
+        return None
+    if names.count("t_ns") != 1 or not pa.types.is_int64(schema.field("t_ns").type):
+        raise InputReported(rel)  # S003 reports the column
+    j = names.index("t_ns")
+    lo: list[int] = []
+    hi: list[int] = []
+    for g in range(md.num_row_groups):
+        rg = md.row_group(g)
+        if rg.num_rows == 0:
+            continue
+        stats = rg.column(j).statistics
+        if stats is None or not stats.has_min_max:
+            lo = []
+            break
+        lo.append(int(stats.min))
+        hi.append(int(stats.max))
+    if lo:
+        return min(lo), max(hi)
+    if ctx.quick:
+        return None
+    t = ctx.table(rel, columns=("t_ns",)).column("t_ns").to_numpy(zero_copy_only=False)
+    return (int(t.min()), int(t.max())) if t.size else None
+
+
 def _ranges(ctx: CheckContext) -> Iterator[tuple[object, str, dict, str, tuple[int, int]]]:
     for ep, name, st in ctx.streams():
         kind = st.get("kind")
@@ -495,7 +522,7 @@ def _ranges(ctx: CheckContext) -> Iterator[tuple[object, str, dict, str, tuple[i
         if kind in ("segments", "generic") or not isinstance(rel, str):
             continue
         try:
-            rng = ctx.t_range(rel)
+            rng = t_range(ctx, rel)
         except InputReported:
             continue
         if rng is not None:
