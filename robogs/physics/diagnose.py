@@ -301,24 +301,27 @@ def _experiment_present(separate_by: str, feats: dict[str, Any]) -> bool | None:
 def _rivals(
     rows: list[EffectRow],
     deltas: list[np.ndarray],
-    held_t: list[np.ndarray],
     feats: dict[str, Any],
-    names: list[str],
 ) -> None:
     """Rivals from the data.
 
     The cosine of the whitened predicted changes (each effect fitted with the base model,
     against the base fit) is measured over this dataset's trajectories for every pair and stored
-    in ``similarity``; ``j`` is a rival of ``i`` when either would pass its gate on the other's
-    signal (:func:`rival_cutoff`, stored in ``rival_cutoff``). Two reported rivals are judged by
-    held-out error paired over trajectories (:func:`_paired_better`): the clearly better one
-    stays and the data separated them (the note names the trajectories where they differ most),
-    the other is withdrawn (verdict ``rival``); otherwise both stay as an unresolved pair. The
-    separating experiment is named as missing only when the data lack it
-    (:func:`design_features`); when present, the note says so.
+    in ``similarity``. Two effects that both show evidence (held-out gain above their own 95 %
+    null quantile) are rivals when either would pass its gate on the other's signal alone
+    (:func:`rival_cutoff`, stored in ``rival_cutoff``).
+
+    Two reported rivals are resolved by leakage: fitted to the signal of ``a``, ``b`` gains
+    about ``cos^2 S_a`` (``S`` the held-out gain, sigma^2). When ``S_b`` is within that plus
+    its null threshold and ``S_a`` is not within the converse, the data separated them: ``b``
+    is withdrawn (verdict ``rival``) and both notes say by how much. When each is within the
+    other's leakage the pair is unresolved (both stay, verdict ``unresolved``). The separating
+    experiment is named as missing only when the data lack it (:func:`design_features`); when
+    present, the note says so.
     """
     flat = [d.reshape(-1) for d in deltas]
     norms = [float(np.linalg.norm(f)) for f in flat]
+    shows = [r.heldout_gain_sigma2 > r.null_q95_sigma2 for r in rows]
     for i, ri in enumerate(rows):
         if norms[i] == 0:
             continue
@@ -332,7 +335,7 @@ def _rivals(
                 rival_cutoff(norms[j], ri.null_threshold_sigma2),
             )
             ri.rival_cutoff[rj.name] = cut
-            if cos >= cut and cut < 1.0:
+            if shows[i] and shows[j] and cos >= cut and cut < 1.0:
                 ri.rivals.append(rj.name)
         if ri.rivals:
             cs = ", ".join(
@@ -348,30 +351,39 @@ def _rivals(
             ri.note = (ri.note + "; " if ri.note else "") + (
                 f"predicted changes look alike with {cs} on this data; {exp}"
             )
-    for i, ri in enumerate(rows):
-        for j, rj in enumerate(rows):
-            if j <= i or rj.name not in ri.rivals or not (ri.reported and rj.reported):
-                continue
-            hi, hj = held_t[i + 1], held_t[j + 1]
-            if _paired_better(hi, hj):
-                win, lose, d = ri, rj, hj - hi
-            elif _paired_better(hj, hi):
-                win, lose, d = rj, ri, hi - hj
-            else:
-                for a, b in ((ri, rj), (rj, ri)):
-                    a.verdict = "unresolved"
-                    a.note += f"; unresolved pair with {b.name}: neither has clearly better held-out evidence"
-                continue
-            top = [names[t] for t in np.argsort(-d)[:2] if d[t] > 0]
-            se = float(np.std(d, ddof=1) / np.sqrt(d.size))
+    pairs = [
+        (i, j)
+        for i in range(len(rows))
+        for j in range(len(rows))
+        if rows[j].name in rows[i].rivals
+        and rows[i].heldout_gain_sigma2 >= rows[j].heldout_gain_sigma2
+        and i != j
+    ]
+    pairs.sort(key=lambda ij: -rows[ij[0]].heldout_gain_sigma2)
+    for i, j in pairs:
+        a, b = rows[i], rows[j]
+        if not (a.reported and b.reported):
+            continue
+        c2 = a.similarity[b.name] ** 2
+        leak_b = c2 * a.heldout_gain_sigma2 + b.null_threshold_sigma2
+        leak_a = c2 * b.heldout_gain_sigma2 + a.null_threshold_sigma2
+        if b.heldout_gain_sigma2 <= leak_b and a.heldout_gain_sigma2 > leak_a:
             what = (
-                f"separated by this data: held-out chi^2 lower by {d.mean():.1f} +- {se:.1f} "
-                f"sigma^2 per trajectory, most on {', '.join(top)}"
+                f"separated by this data: {b.name}'s held-out gain {b.heldout_gain_sigma2:.1f} "
+                f"sigma^2 is no more than {a.name}'s signal gives it ({leak_b:.1f}), while "
+                f"{a.name}'s {a.heldout_gain_sigma2:.1f} exceeds what {b.name} explains "
+                f"({leak_a:.1f})"
             )
-            lose.reported = False
-            lose.verdict = "rival"
-            lose.note += f"; withdrawn: {win.name} has clearly better held-out error ({what})"
-            win.note += f"; {what}"
+            b.reported, b.verdict = False, "rival"
+            b.note += f"; withdrawn: {a.name} has clearly better held-out evidence ({what})"
+            a.note += f"; {what}"
+        elif b.heldout_gain_sigma2 <= leak_b:
+            for x, y in ((a, b), (b, a)):
+                x.verdict = "unresolved"
+                x.note += (
+                    f"; unresolved pair with {y.name}: each one's held-out evidence is what the "
+                    "other's signal would give it"
+                )
 
 
 def quasi_static(prep: Any) -> tuple[bool, int]:
@@ -560,8 +572,7 @@ def diagnose_recording(
             )
         )
     feats = design_features(prep.rec, float(prep.noise.sigma_pos))
-    traj_names = [tr.name for tr in prep.rec.trajectories]
-    _rivals(rows, deltas, held_t, feats, traj_names)
+    _rivals(rows, deltas, feats)
     rows.sort(key=lambda r: (not r.reported, r.delta_bic))
     bcols = space.owner_columns("base")
     return DiagnoseResult(
