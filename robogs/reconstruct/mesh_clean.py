@@ -29,7 +29,8 @@ __all__ = ["CleanReport", "clean_mesh"]
 
 @dataclass
 class CleanReport:
-    """What cleaning removed."""
+    """What cleaning removed (``fragments``: faces of a link's or object's small pieces, removed
+    after segmentation by ``segment.drop_fragments``)."""
 
     components_in: int
     inner_shells: int
@@ -37,6 +38,7 @@ class CleanReport:
     faces_in: int
     faces_out: int
     flipped: int = 0
+    fragments: int = 0
 
 
 def clean_mesh(

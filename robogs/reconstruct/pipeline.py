@@ -46,7 +46,7 @@ from .model import GaussianModel, LearningRates
 from .prealign import needs_prealign, prealign_json, prealign_sfm
 from .quality import QualityFloors, assess_quality
 from .robot_geometry import link_meshes
-from .segment import TargetMap, split_mesh, target_map, vote_targets
+from .segment import TargetMap, drop_fragments, split_mesh, target_map, vote_targets
 from .train import TrainConfig, TrainResult, train
 from .tsdf import extract_mesh, fuse_tsdf
 from .views import Capture, View, load_capture, split_heldout
@@ -362,6 +362,7 @@ def reconstruct(
     t0 = time.perf_counter()
     tol = 2.5 * vol.voxel_size
     v_target, _ = vote_targets(np.asarray(mesh.vertices), train_views, depths, tmap, tol)
+    mesh, v_target, clean_rep.fragments = _without_fragments(mesh, v_target)
     g_target, _ = vote_targets(means, train_views, depths, tmap, tol)
     parts = split_mesh(mesh, v_target, len(tmap.names)) if len(mesh.faces) else {}
     timings["segment"] = time.perf_counter() - t0
@@ -491,6 +492,24 @@ def _heldout_psnr(model: GaussianModel, held: list[View], cfg: TrainConfig) -> f
     g = model.gaussians()
     vals = [psnr(render(g, v.camera, config=rc).rgb.clamp(0, 1).cpu(), v.rgb) for v in held]
     return float(np.mean(vals))
+
+
+def _without_fragments(
+    mesh: trimesh.Trimesh, v_target: np.ndarray
+) -> tuple[trimesh.Trimesh, np.ndarray, int]:
+    """The mesh less each target's fragments (:func:`segment.drop_fragments`), the vertex
+    targets re-indexed, and the number of faces dropped."""
+    if len(mesh.faces) == 0:
+        return mesh, v_target, 0
+    keep = drop_fragments(mesh, v_target)
+    if keep.all():
+        return mesh, v_target, 0
+    faces = np.asarray(mesh.faces)[keep]
+    used = np.unique(faces)
+    remap = np.full(len(mesh.vertices), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    out = trimesh.Trimesh(np.asarray(mesh.vertices)[used], remap[faces], process=False)
+    return out, np.asarray(v_target)[used], int((~keep).sum())
 
 
 def _align_json(a: AlignmentResult | None, mode: str) -> dict[str, Any] | None:

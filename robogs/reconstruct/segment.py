@@ -19,7 +19,14 @@ from scipy.spatial import cKDTree
 
 from .views import Segment, View
 
-__all__ = ["TargetMap", "target_map", "vote_targets", "split_mesh"]
+__all__ = [
+    "TargetMap",
+    "target_map",
+    "vote_targets",
+    "face_targets",
+    "drop_fragments",
+    "split_mesh",
+]
 
 
 @dataclass
@@ -97,13 +104,49 @@ def vote_targets(
     return target, share.numpy()
 
 
+def face_targets(mesh: trimesh.Trimesh, vertex_target: np.ndarray) -> np.ndarray:
+    """[F] target of each face: its vertices' majority, else its first vertex's."""
+    t = np.asarray(vertex_target)[np.asarray(mesh.faces)]
+    return np.where((t[:, 1] == t[:, 2]), t[:, 1], t[:, 0])
+
+
+def drop_fragments(
+    mesh: trimesh.Trimesh, vertex_target: np.ndarray, *, min_fraction: float = 0.2
+) -> np.ndarray:
+    """[F] bool: faces kept once every target is reduced to its main pieces.
+
+    A link or object is one rigid body, so its faces should form one connected piece (two or
+    three where another part hides its middle). Faces of target k are grouped into connected
+    components (shared edges between faces of k only); a component is kept when its area is at
+    least ``min_fraction`` of the largest component of k, so the threshold comes from the target
+    itself. What goes are floaters between the cameras and the target (rendered depth
+    in front of it, voted to it because they project onto its pixels) and bits of a neighbour's
+    surface that won the vote at a boundary. Unassigned faces (target 0) are kept.
+    """
+    ft = face_targets(mesh, vertex_target)
+    keep = np.ones(len(ft), bool)
+    if len(ft) == 0:
+        return keep
+    adj = np.asarray(mesh.face_adjacency)
+    same = ft[adj[:, 0]] == ft[adj[:, 1]]
+    labels = trimesh.graph.connected_component_labels(adj[same], node_count=len(ft))
+    area = np.asarray(mesh.area_faces)
+    comp_area = np.bincount(labels, weights=area)
+    for k in np.unique(ft):
+        if k <= 0:
+            continue
+        comps = np.unique(labels[ft == k])
+        big = comp_area[comps].max()
+        small = comps[comp_area[comps] < min_fraction * big]
+        keep &= ~np.isin(labels, small)
+    return keep
+
+
 def split_mesh(
     mesh: trimesh.Trimesh, vertex_target: np.ndarray, n_targets: int
 ) -> dict[int, trimesh.Trimesh]:
-    """Sub-mesh per target index 1..n: faces whose vertices' majority (else first vertex) is it."""
-    f = np.asarray(mesh.faces)
-    t = vertex_target[f]
-    maj = np.where((t[:, 1] == t[:, 2]), t[:, 1], t[:, 0])
+    """Sub-mesh per target index 1..n: the faces of :func:`face_targets` k."""
+    maj = face_targets(mesh, vertex_target)
     out = {}
     for k in range(1, n_targets + 1):
         sel = maj == k
