@@ -16,7 +16,15 @@ import numpy as np
 
 from robogs.format.errors import FormatError, InputError
 
-__all__ = ["Trajectory", "Recording", "as_recording", "load_recording", "check_finite", "yaw_of"]
+__all__ = [
+    "Trajectory",
+    "Recording",
+    "as_recording",
+    "load_recording",
+    "check_finite",
+    "yaw_of",
+    "link_frames",
+]
 
 
 @dataclass
@@ -206,13 +214,18 @@ def _robot_chain(ds: Any, physics: dict[str, Any], ee_link: Any, episode: str) -
     return fitted_chain(chain, physics, path=ds.manifest.get("physics"))[0]
 
 
-def _ee_from_joints(ds: Any, ep: Any, chain: Any, link: str) -> tuple[np.ndarray, ...]:
-    """End-effector poses (world = robot base frame) by forward kinematics of the measured
-    joints, at the ``joint_states`` stamps: (t_ns [N], position [N, 3] m, quaternion [N, 4] wxyz).
+def link_frames(
+    ds: Any, ep: Any, chain: Any, t_query: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every link's pose by forward kinematics of an episode's measured ``joint_states``, in
+    the frame of ``robot.base_link`` (the world): stamps [N] int64 ns and T_base_link
+    [N, L, 4, 4] (L = ``chain.link_names``), at the joint stamps or, with ``t_query``, with the
+    joints linearly interpolated at those stamps.
+
+    Raises:
+        FormatError: the episode lacks ``joint_states`` or one of the chain's joints.
     """
     import torch
-
-    from robogs.format.frames import matrix_to_quat
 
     _require_stream(
         ds,
@@ -225,7 +238,7 @@ def _ee_from_joints(ds: Any, ep: Any, chain: Any, link: str) -> tuple[np.ndarray
     missing = [j for j in chain.joint_names if f"position.{j}" not in js.column_names]
     if missing:
         raise FormatError(
-            f"joint_states lacks joints {', '.join(missing[:6])} needed for the end-effector pose",
+            f"joint_states lacks joints {', '.join(missing[:6])} of the robot URDF",
             path=ep.table_path("joint_states"),
             where="columns",
             hint="record every actuated joint of the URDF, or record ee_poses",
@@ -234,12 +247,25 @@ def _ee_from_joints(ds: Any, ep: Any, chain: Any, link: str) -> tuple[np.ndarray
     q = np.stack(
         [js.column(f"position.{j}").to_numpy().astype(float) for j in chain.joint_names], 1
     )
+    if t_query is not None:
+        q = np.stack([np.interp(t_query, t, q[:, j]) for j in range(q.shape[1])], axis=1)
+        t = np.asarray(t_query, dtype=np.int64)
     T = chain.forward(torch.as_tensor(q, dtype=torch.float64))  # [N, L, 4, 4] root frame
     base = (ds.manifest.get("robot") or {}).get("base_link")
     if isinstance(base, str) and base in chain.link_names and base != chain.link_names[0]:
         T = torch.linalg.inv(T[:, chain.link_index(base)]).unsqueeze(1) @ T
+    return t, T.numpy()
+
+
+def _ee_from_joints(ds: Any, ep: Any, chain: Any, link: str) -> tuple[np.ndarray, ...]:
+    """End-effector poses (world = robot base frame) by forward kinematics of the measured
+    joints, at the ``joint_states`` stamps: (t_ns [N], position [N, 3] m, quaternion [N, 4] wxyz).
+    """
+    from robogs.format.frames import matrix_to_quat_np
+
+    t, T = link_frames(ds, ep, chain)
     Te = T[:, chain.link_index(link)]
-    return t, Te[:, :3, 3].numpy().copy(), matrix_to_quat(Te[:, :3, :3]).numpy().copy()
+    return t, Te[:, :3, 3].copy(), matrix_to_quat_np(Te[:, :3, :3])
 
 
 def _frame_rotation(ds: Any, frame: str, ee_link: Any) -> tuple[str, np.ndarray] | None:

@@ -14,8 +14,6 @@ from typing import Any
 
 import numpy as np
 
-from robogs.format.errors import FormatError
-
 __all__ = ["ObjectTrack", "object_tracks", "link_paths", "WINDOW_S"]
 
 WINDOW_S = 0.15
@@ -131,7 +129,6 @@ def link_paths(
         link -> (positions [N, 3] m, rotations [N, 3, 3], how: ``ee_poses`` or ``FK``); a link
         with neither a recorded pose nor the joints to compute it is left out.
     """
-    import torch
 
     from robogs.format.frames import quat_to_matrix
 
@@ -156,25 +153,9 @@ def link_paths(
     rest = [lk for lk in links if lk not in out]
     if not rest or chain is None or not ep.has("joint_states"):
         return out
-    js = ep.table("joint_states")
-    # physics/recording.py has the same joint_states read; merge once that file is free.
-    missing = [j for j in chain.joint_names if f"position.{j}" not in js.column_names]
-    if missing:
-        raise FormatError(
-            f"joint_states lacks joints {', '.join(missing[:6])} of the robot URDF",
-            path=ep.table_path("joint_states"),
-            where="columns",
-            hint="record every actuated joint of the URDF, or record ee_poses",
-        )
-    tj = js.column("t_ns").to_numpy().astype(np.int64)
-    q = np.stack(
-        [js.column(f"position.{j}").to_numpy().astype(float) for j in chain.joint_names], 1
-    )
-    qi = _interp_rows(t_ns, tj, q)
-    T = chain.forward(torch.as_tensor(qi, dtype=torch.float64)).numpy()  # [N, L, 4, 4] root frame
-    base = (ds.manifest.get("robot") or {}).get("base_link")
-    if isinstance(base, str) and base in chain.link_names and base != chain.link_names[0]:
-        T = np.linalg.inv(T[:, chain.link_index(base)])[:, None] @ T
+    from robogs.physics.recording import link_frames
+
+    _, T = link_frames(ds, ep, chain, t_query=t_ns)  # [N, L, 4, 4] in the base frame
     for link in rest:
         if link in chain.link_names:
             Tl = T[:, chain.link_index(link)]
