@@ -160,6 +160,7 @@ class MujocoFit:
             park = (np.arange(n_s)[None] >= first[:, None]) * PUSHER_PARK_M
             if self.pq is not None:
                 ctrl[..., 2] += park[:, :-1]
+                x[:, self.pq + 2] += np.tile(park[:, 0], m_sets)  # grasped from the start
         dense = self._run(models, x, ctrl, drive, body, force_fx, grasp, park, m_sets)
         dpos = torch.as_tensor(dense[..., :3])
         dyaw = torch.as_tensor(np.unwrap(quat_yaw(dense[..., 3:]), axis=-1))
