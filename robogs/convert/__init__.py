@@ -7,6 +7,7 @@ Ingest converters are kept in a registry keyed by source format; see
 
 from .registry import (
     Converter,
+    ConverterOptions,
     available_converters,
     detect_format,
     get_converter,
@@ -15,6 +16,7 @@ from .registry import (
 
 __all__ = [
     "Converter",
+    "ConverterOptions",
     "available_converters",
     "detect_format",
     "get_converter",
