@@ -1,0 +1,56 @@
+"""``robogs diagnose --auto`` for the object model, and quasi-static recognition.
+
+Oracles: the hidden effect of design B (robogs.synth.scenarios.design_b) must be accepted first
+and the loop must stop (no candidate passes once it is in the base model); on slow pushes whose
+box stops at once, the dynamics-level effects must be reported unobservable, never ranked.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from robogs.cli.main import main
+from robogs.physics.diagnose import DYNAMIC_EFFECTS, diagnose_recording
+from robogs.synth.scenarios import write_scenario
+from robogs.synth.scenarios.design_b import make_design_b
+
+
+@pytest.mark.slow
+def test_auto_loop_cli_accepts_the_hidden_tilt_then_stops(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path / "cache"))
+    ds = tmp_path / "b_tilt"
+    write_scenario(make_design_b("table_tilt", seed=3), ds)
+    png = tmp_path / "path.png"
+    args = ["diagnose", str(ds), "--auto", "--effects", "table_tilt,viscous_damping"]
+    assert main([*args, "--plot", str(png), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    path = d["path"]
+    assert d["accepted"] == ["table_tilt"]
+    assert path[0]["effect"] == "table_tilt" and path[0]["verdict"].startswith("added")
+    assert path[0]["heldout_rms_after"] < path[0]["heldout_rms_before"]
+    assert path[0]["heldout_gain_sigma2"] > path[0]["null_threshold_sigma2"] > 0
+    assert path[-1]["verdict"].startswith("stop: no candidate passes")
+    assert len(path) <= 6  # at most 5 accepted steps and the stop
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the second step ran with the tilt in the base model: it is no longer a candidate
+    assert "table_tilt" not in {e["name"] for e in d["last"]["effects"]}
+    assert d["last"]["gate"]["draws"] >= 100
+
+
+@pytest.mark.slow
+def test_quasi_static_pushes_make_dynamics_unobservable(tmp_path, monkeypatch):
+    monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path))
+    rec = make_design_b("none", seed=1, quasi_static=True)
+    res = diagnose_recording(rec, effects=["viscous_damping", "quadratic_drag", "table_tilt"])
+    assert res.design["quasi_static"] is True
+    skipped = dict(res.skipped)
+    for name in ("viscous_damping", "quadratic_drag"):
+        assert name in DYNAMIC_EFFECTS
+        assert skipped[name].startswith("unobservable: quasi-static")
+        assert "releases the object at speed" in skipped[name]
+    assert [r.name for r in res.rows] == ["table_tilt"]  # only the static effect is ranked
+    # the converse: design B's normal pushes slide, so viscous damping is ranked there
+    res = diagnose_recording(make_design_b("none", seed=1), effects=["viscous_damping"])
+    assert res.design["quasi_static"] is False and [r.name for r in res.rows] == ["viscous_damping"]
