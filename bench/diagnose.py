@@ -8,6 +8,13 @@ design (``robogs.synth.scenarios.KINDS``, the same for every effect and for null
 (``mass``: poses do not depend on it) are still diagnosed; for them the table counts how often
 the true effect is reported unidentifiable and never reported.
 
+``--noise B`` runs design B instead (:mod:`robogs.synth.scenarios.design_b`: 9 trajectories,
+slides <= 60 mm, a sphere pusher, a smaller lighter box, 60 fps camera with 8 % dropped samples,
+250 Hz encoders, random gaps); its generator decides detectability from the expected ΔBIC. The
+gate is the data-derived one (:mod:`robogs.physics.gate`); each case records the null
+calibration's cost (``cal_s``, ``cal_draws``) and whether a hidden tilt came out as anisotropic
+friction alone (``tilt_ok``).
+
 Prints the pass table (right family first, exact effect first, true effect in the top 3,
 false positives on null, median parameter error, time-offset error, RMS after the fix over the
 noise floor) and appends it to bench/RESULTS.md; also times diagnose with the full catalogue on
