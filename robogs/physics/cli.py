@@ -170,6 +170,7 @@ def _effects_table(effects: list[dict[str, Any]], title: str) -> None:
         "family",
         "ΔBIC",
         "held-out before → after",
+        "evidence / null quantile",
         "explained",
         "parameters",
         "phases",
@@ -194,6 +195,9 @@ def _effects_table(effects: list[dict[str, Any]], title: str) -> None:
             _fmt(e.get("delta_bic"), ".1f"),
             f"{_fmt(e.get('heldout_rms_before'))} → {_fmt(e.get('heldout_rms_after'))}"
             + (f" {e['unit']}" if e.get("unit", "mm") != "mm" else ""),
+            f"{_fmt(e.get('heldout_gain_sigma2'))} / {_fmt(e.get('null_threshold_sigma2'))} σ²"
+            if e.get("null_threshold_sigma2") is not None
+            else "—",
             _fmt(e.get("explained"), ".0%") if e.get("explained") is not None else "—",
             params,
             ", ".join(e.get("phases", [])),
