@@ -27,7 +27,7 @@ import torch
 
 from robogs.physics.space import ParamSpace
 
-__all__ = ["Problem", "FitOutcome", "fit_problems", "jacobian_fd", "ResidualFn"]
+__all__ = ["Problem", "FitOutcome", "fit_problems", "jacobian_fd", "ResidualFn", "on_bounds"]
 
 ResidualFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 """``fn(theta [M, Q], local [M, T, L]) -> weighted residuals [M, T, K]`` (zero where invalid)."""
@@ -70,6 +70,8 @@ class FitOutcome:
             its bounds and the sensitive parameters are not near-collinear (condition < 1e8).
         why_param: [P] why each parameter is not identifiable ("" when it is); ``why``: all.
         iterations, converged: optimiser bookkeeping.
+        on_bound: [P] ``"lower"`` / ``"upper"`` where a free parameter ended on a bound of
+            the space (a projected step held it there), ``""`` elsewhere.
     """
 
     theta: np.ndarray
@@ -88,6 +90,18 @@ class FitOutcome:
     why: str = ""
     iterations: int = 0
     converged: bool = False
+    on_bound: list[str] = field(default_factory=list)
+
+
+def on_bounds(space: ParamSpace, theta: np.ndarray, free: Sequence[int]) -> list[str]:
+    """``"lower"``, ``"upper"`` or ``""`` per column of ``free``: within 1e-6 of the span
+    from a bound of ``space`` (the fitter's projected steps stop exactly there)."""
+    out = []
+    for c in free:
+        lo, hi = float(space.lower[c]), float(space.upper[c])
+        tol = 1e-6 * (hi - lo)
+        out.append("lower" if theta[c] <= lo + tol else "upper" if theta[c] >= hi - tol else "")
+    return out
 
 
 @dataclass
@@ -426,6 +440,7 @@ def _finish(
         jac_local=st.jac_local,
         iterations=st.it,
         converged=st.converged,
+        on_bound=on_bounds(space, st.theta, st.prob.free),
     )
     if p == 0:
         return out

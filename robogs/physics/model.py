@@ -66,6 +66,8 @@ class BoxScene:
         gravity: magnitude of gravity along -z [m/s^2].
         dt: integration step [s].
         bounce_min_speed: approach speeds below this give a plastic impact [m/s].
+        friction_bounds: (low, high) of the fitted dynamic friction coefficient [-] (the
+            material prior's bounds recorded by ``robogs physics init``, else 0.02-2).
     """
 
     size: tuple[float, float, float]
@@ -82,6 +84,7 @@ class BoxScene:
     gravity: float = 9.81
     dt: float = 1e-3
     bounce_min_speed: float = 0.05
+    friction_bounds: tuple[float, float] = (0.02, 2.0)
 
     @cached_property
     def friction_radius(self) -> float:

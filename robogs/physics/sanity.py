@@ -27,7 +27,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Finding", "Sanity", "assess", "note_diagnosis", "none_found_text", "finish_command"]
+__all__ = [
+    "Finding",
+    "Sanity",
+    "assess",
+    "bound_notes",
+    "note_diagnosis",
+    "none_found_text",
+    "finish_command",
+]
 
 
 @dataclass
@@ -188,6 +196,31 @@ def assess(
     return Sanity(findings, rms, floor, ratio)
 
 
+def bound_notes(rec: Any, dt: float = 1e-3) -> list[str]:
+    """One line per refitted base parameter that sits on a bound of its prior (or of the
+    model's range): the data pull it outside what the prior allows, so its value is the bound,
+    not an estimate (:func:`robogs.physics.fit.on_bounds` on the memoised baseline fit)."""
+    from robogs.physics.baseline import baseline
+
+    b = baseline(rec, dt=dt)
+    sources = b.physics.get("sources") or {}
+    out = []
+    for c, side in zip(b.free, b.outcome.on_bound, strict=False):
+        if not side:
+            continue
+        slot = b.space.slots[c]
+        bound = slot.param.lower if side == "lower" else slot.param.upper
+        key = f"objects.{rec.object_name}.{slot.param.name}"
+        src = sources.get(key, {}).get("source") if slot.owner == "base" else None
+        where = f" of {src}" if src and str(src).startswith("prior") else ""
+        out.append(
+            f"{slot.key} = {float(b.outcome.theta[c]):.4g} sits on its {side} bound "
+            f"{bound:.4g}{where}: the data pull it beyond; check the prior "
+            f"(robogs physics set ... {key}=...) or the model"
+        )
+    return out
+
+
 def _recordings() -> list[Any]:
     from robogs.physics.split import current_split
 
@@ -208,6 +241,7 @@ def _assess_all() -> list[Sanity]:
         return []
     if "sanity" not in log.notes:
         log.notes["sanity"] = [assess(r) for r in _recordings()[:1]]
+        log.notes["at_bound"] = [line for r in _recordings()[:1] for line in bound_notes(r)]
     return log.notes["sanity"]
 
 
@@ -249,6 +283,7 @@ def finish_command(args: argparse.Namespace, rc: int) -> int:
         doc = {
             "split": {"mode": log.mode, "trajectories": [asdict(p) for p in pieces]},
             "sanity": [s.to_dict() for s in sanities],
+            "at_bound": log.notes.get("at_bound", []),
         }
         print(json.dumps(doc, default=float), file=sys.stderr)
     else:
@@ -258,6 +293,8 @@ def finish_command(args: argparse.Namespace, rc: int) -> int:
         for s in bad:
             for line in s.lines():
                 print(line)
+        for line in log.notes.get("at_bound", []):
+            print(line)
     if bad and log.notes.get("diagnose_found") is False and rc == 0:
         return 1  # diagnose found nothing while the model fails: not "none above the noise"
     return rc

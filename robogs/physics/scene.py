@@ -57,7 +57,16 @@ def scene_from_physics(physics: dict[str, Any], object_name: str, *, dt: float =
         pusher_length=float(objects.get("pusher", {}).get("length_m", 0.0)),
         gravity=float(-grav[2]),
         dt=dt,
+        friction_bounds=_prior_bounds(physics, f"objects.{object_name}.friction_dynamic"),
     )
+
+
+def _prior_bounds(physics: dict[str, Any], key: str) -> tuple[float, float]:
+    """``sources.<key>.bounds`` of a prior (robogs physics init), else the model's 0.02-2."""
+    b = ((physics.get("sources") or {}).get(key) or {}).get("bounds")
+    if isinstance(b, list) and len(b) == 2 and 0 < float(b[0]) < float(b[1]):
+        return float(b[0]), float(b[1])
+    return 0.02, 2.0
 
 
 def base_params(scene: BoxScene) -> list:
@@ -65,4 +74,5 @@ def base_params(scene: BoxScene) -> list:
     from robogs.physics.effects import Param
 
     mu = scene.friction_dynamic
-    return [Param("friction_dynamic", "-", 0.02, 2.0, min(max(mu, 0.02), 2.0), max(mu, 0.05))]
+    lo, hi = scene.friction_bounds
+    return [Param("friction_dynamic", "-", lo, hi, min(max(mu, lo), hi), max(mu, 0.05))]
