@@ -58,7 +58,11 @@ def run(args: argparse.Namespace) -> int:
 
     t = time.perf_counter()
     m = migrate_layout(args.dataset, to=args.to, chunk_size=args.chunk_size, progress=note)
-    how = f"{m.chunks} chunks of <= {args.chunk_size} episodes" if m.layout == "sharded" else "flat layout"
+    how = (
+        f"sharded layout ({m.chunks} chunk(s) of <= {args.chunk_size} episodes)"
+        if m.layout == "sharded"
+        else "flat layout"
+    )
     print(
         f"migrated {args.dataset} to the {how}: {m.episodes} episodes, {m.moved} files moved, "
         f"{m.verified} hashes verified, in {time.perf_counter() - t:.1f} s"

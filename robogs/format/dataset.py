@@ -305,21 +305,38 @@ class Dataset:
     def full_manifest(self, *, lenient: bool = False) -> dict[str, Any]:
         """The manifest with every chunk index merged in (the manifest itself when flat).
 
-        Read once and kept. With ``lenient`` an unreadable or malformed index is left out and
-        noted in :attr:`shard_problems` (the validator reports them) instead of raising.
+        Read once and kept, and checked against the manifest schema (as a flat manifest is
+        when opened). With ``lenient`` (the validator, which reports problems as findings)
+        an unreadable or malformed index is left out and noted in :attr:`shard_problems`, and
+        nothing is schema-checked.
 
         Raises:
-            FormatError: a chunk index cannot be read (not ``lenient``).
+            FormatError: a chunk index cannot be read, or the merged manifest breaks the
+                schema (not ``lenient``).
         """
         if not self.sharded:
             return self.manifest
         if self._merged is None:
             problems: list[ShardProblem] | None = [] if lenient else None
-            self._merged = expand(
+            merged = expand(
                 self.root, self.manifest, problems=problems, manifest_path=self.manifest_path
             )
-            self.shard_problems = problems or []
+            if not lenient:
+                self._schema_checked(merged)
+            self._merged, self.shard_problems = merged, problems or []
         return self._merged
+
+    def _schema_checked(self, manifest: dict[str, Any], *, index: str | None = None) -> None:
+        """Raise the first schema problem of a merged manifest (or of one chunk's entry)."""
+        problems = schema_problems("manifest", {k: v for k, v in manifest.items() if k != "shards"})
+        if problems:
+            p = problems[0]
+            raise FormatError(
+                p.message,
+                path=self.root / index if index else self.manifest_path,
+                where=p.pointer if index is None else f"an episode entry: {p.pointer}",
+                hint="run robogs-validate for the full list",
+            )
 
     @property
     def num_episodes(self) -> int:
@@ -356,6 +373,8 @@ class Dataset:
                 doc = read_chunk(self.root, entry, manifest_path=self.manifest_path)
                 for e in doc["episodes"]:
                     if isinstance(e, dict) and e.get("id") == episode_id:
+                        one = {**self.manifest, "episodes": [e], "files": {}}
+                        self._schema_checked(one, index=entry["index"])
                         return Episode(self, e)
         eps = self.episodes
         if episode_id is None and len(eps) == 1:

@@ -120,7 +120,7 @@ def test_migrate_flat_to_sharded_and_back(tmp_path, capsys):
     write_bulk_dataset(root, n_episodes=23, duration_s=0.1, seed=5)
     before = json.loads((root / "manifest.json").read_text())
     assert main(["migrate", str(root), "--chunk-size", "10", "--quiet"]) == 0
-    assert "3 chunks" in capsys.readouterr().out
+    assert "3 chunk(s)" in capsys.readouterr().out
     ds = Dataset.open(root)
     assert ds.spec_version == "1.1.0" and ds.num_episodes == 23
     assert sorted(p.name for p in (root / "episodes").iterdir()) == [
@@ -193,3 +193,21 @@ def test_synth_episodes_shards_large_n(tmp_path, capsys):
     report = validate(out, quick=True)
     assert report.findings == [] and time.perf_counter() - t < 60
     shutil.rmtree(out)
+
+
+def test_reader_schema_checks_chunk_episodes(tmp_path):
+    root = tmp_path / "ds"
+    write_bulk_dataset(root, n_episodes=10, duration_s=0.1, chunk_size=5)
+    idx = root / "episodes/chunk-001/index.json"
+    doc = json.loads(idx.read_text())
+    del doc["episodes"][2]["start_ns"]  # ep007
+    idx.write_text(json.dumps(doc))
+    ds = Dataset.open(root)  # the manifest alone is fine
+    assert ds.episode("ep001").id == "ep001"
+    with pytest.raises(FormatError, match="start_ns") as err:
+        ds.episode("ep007")
+    assert "chunk-001/index.json" in str(err.value)
+    with pytest.raises(FormatError, match="start_ns"):
+        ds.episodes  # noqa: B018
+    s001 = [f for f in validate(root, quick=True).findings if f.code == "S001"]
+    assert any("start_ns" in f.message for f in s001), [f.message for f in s001]
