@@ -48,7 +48,7 @@ def _short_traj(scene: Path, path: Path) -> None:
     path.write_text("\n".join(",".join(map(str, r)) for r in [["t_ns", *names], *body]) + "\n")
 
 
-def test_simulated_box_matches_the_recorded_within_the_compare_residual(scene: Path) -> None:
+def test_simulated_box_matches_the_recorded_within_a_few_noise_floors(scene: Path) -> None:
     from robogs.physics.api import compare
 
     ds = Dataset.open(scene)
@@ -64,10 +64,13 @@ def test_simulated_box_matches_the_recorded_within_the_compare_residual(scene: P
     at = np.stack([np.interp(t_rec[inside], t_sim, p_sim[:, k]) for k in range(3)], -1)
     rms_mm = float(np.sqrt(np.mean(np.sum((at - p_rec[inside]) ** 2, -1)))) * 1e3
     moved_mm = float(np.linalg.norm(p_rec[inside][-1] - p_rec[inside][0])) * 1e3
-    ref = compare(ds, mask_frames=0).rms_mm  # the fitted model's residual on the same data
-    print(f"simulated vs recorded {rms_mm:.2f} mm, compare residual {ref:.2f} mm")
-    assert moved_mm > 5 * rms_mm  # the box is pushed: staying put would not pass
-    assert rms_mm <= ref * 1.05
+    res = compare(ds, mask_frames=0)  # the refitted model's residual and the data's noise floor
+    ref, floor = res.rms_mm, res.noise_floor_mm
+    print(f"simulated vs recorded {rms_mm:.2f} mm, compare {ref:.2f} mm, floor {floor:.2f} mm")
+    assert moved_mm > 20 * rms_mm  # the box is pushed: staying put would not pass
+    # the rollout uses physics.json as stored (no refit of friction or initial pose), so it
+    # may leave more than compare's refitted residual, but only a few noise floors more
+    assert rms_mm <= ref + 3.0 * floor
 
 
 def test_pusher_lifted_clear_leaves_the_box_at_rest(scene: Path) -> None:

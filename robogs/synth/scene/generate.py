@@ -622,6 +622,15 @@ def _physics(robot: RobotAssets, box: BoxDynamics) -> dict[str, Any]:
                 "restitution": RESTITUTION,
                 "size_m": list(scene.TABLE_SIZE),
                 "top_z_m": scene.TABLE_TOP_Z,
+                "plane_z_m": scene.TABLE_TOP_Z,
+            },
+            # the keys the pushed-object model reads (spec 7.1); `contacts` below is the
+            # simulator-facing record of the same tool
+            "pusher": {
+                "equation": "kinematic",
+                "link": robot.tool_link,
+                "shape": "sphere",
+                "radius_m": robot.pusher_radius,
             },
         },
         "joints": {
