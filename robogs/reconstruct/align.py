@@ -13,6 +13,7 @@ no manual pre-alignment. The residual is the point-to-surface distance after ali
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -92,7 +93,8 @@ class AlignmentResult:
         before_rms_mm: the same before alignment (identity).
         pairs: matched points used in the last iteration.
         iterations: ICP iterations run.
-        per_target_mm: median distance per target after alignment.
+        per_target_mm: median distance per target after alignment (excluded ones too).
+        excluded: targets left out of the fit and of the RMS, median and p90.
     """
 
     transform: Similarity
@@ -103,6 +105,7 @@ class AlignmentResult:
     pairs: int
     iterations: int
     per_target_mm: dict[str, float] = field(default_factory=dict)
+    excluded: list[str] = field(default_factory=list)
 
 
 def _initial_guess(src: list[np.ndarray], dst: list[np.ndarray], with_scale: bool) -> Similarity:
@@ -132,6 +135,7 @@ def align_to_meshes(
     iterations: int = 100,
     samples: int = 20_000,
     seed: int = 0,
+    exclude: Collection[str] = (),
 ) -> AlignmentResult:
     """Fit a similarity taking labelled points onto the meshes of the same names (ICP + Umeyama).
 
@@ -141,11 +145,14 @@ def align_to_meshes(
         with_scale: estimate the scale (else a rigid transform).
         iterations: maximum ICP iterations.
         samples: points sampled on each mesh for nearest-neighbour queries.
+        exclude: targets that do not enter the fit nor the residual figures (their median
+            distance after the fit is still reported), e.g. parts the mesh cannot resolve.
 
     Raises:
         InputError: no target has both points and a mesh.
     """
-    names = [n for n in sorted(points) if n in meshes and len(points[n]) > 0]
+    usable = [n for n in sorted(points) if n in meshes and len(points[n]) > 0]
+    names = [n for n in usable if n not in exclude]
     if not names:
         raise InputError(
             "no reconstructed points are labelled as a link with a mesh: nothing to align",
@@ -191,6 +198,10 @@ def align_to_meshes(
             break
     d, _ = match(x)
     per = {n: float(np.median(d[owner == i]) * 1e3) for i, n in enumerate(names)}
+    out = [n for n in usable if n not in names]
+    for k, n in enumerate(out):
+        p, _ = trimesh.sample.sample_surface(meshes[n], samples, seed=seed + len(names) + k)
+        per[n] = float(np.median(cKDTree(p).query(total.apply(points[n]), k=1)[0]) * 1e3)
     return AlignmentResult(
         total,
         float(np.sqrt((d**2).mean()) * 1e3),
@@ -200,4 +211,5 @@ def align_to_meshes(
         pairs,
         it,
         per,
+        out,
     )

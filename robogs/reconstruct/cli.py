@@ -240,6 +240,11 @@ def _print_reconstruct(rep: Any) -> None:
             f"  alignment to the URDF ({a['mode']}): scale {a['scale']:.5f}, rotation {a['rotation_deg']:.3f} deg, "
             f"residual rms {a['rms_mm']:.2f} mm, median {a['median_mm']:.2f} mm"
         )
+        for n in a.get("excluded", []):
+            c.print(
+                f"  alignment: {n} left out of the fit (below the coverage), median residual "
+                f"{a['per_link_median_mm'][n]:.1f} mm"
+            )
     c.print(f"  binding residual max {rep.binding_max_mm:.2e} mm; wrote {', '.join(rep.written)}")
     c.print(
         f"  time {rep.timings_s.get('total', 0):.1f} s (train {rep.timings_s.get('train', 0):.1f} s)"

@@ -392,7 +392,13 @@ def reconstruct(
         }
         pts = {n: p for n, p in pts.items() if n in lmeshes}
         if pts:
-            align_rep = align_to_meshes(pts, {n: lm.world_mesh() for n, lm in lmeshes.items()})
+            align_rep = align_to_meshes(
+                pts,
+                {n: lm.world_mesh() for n, lm in lmeshes.items()},
+                # a link below the coverage (only with --force) is a blob seen from one side:
+                # it would bias the fit; its residual is reported apart
+                exclude={t.name for t in coverage.targets if t.problem(coverage.thresholds)},
+            )
             if options.align == "apply":
                 S = align_rep.transform
                 _apply_similarity(model, S)
@@ -528,6 +534,7 @@ def _align_json(a: AlignmentResult | None, mode: str) -> dict[str, Any] | None:
         "pairs": a.pairs,
         "iterations": a.iterations,
         "per_link_median_mm": a.per_target_mm,
+        "excluded": a.excluded,
         "matrix": S.matrix().tolist(),
     }
 

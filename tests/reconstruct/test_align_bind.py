@@ -81,3 +81,28 @@ def test_binding_round_trip_is_exact_and_uses_the_nearest_face():
     assert (
         np.sign(off[np.abs(r - 0.1) > 0.003]) == np.sign(r - 0.1)[np.abs(r - 0.1) > 0.003]
     ).all()
+
+
+def test_an_excluded_blob_neither_biases_the_fit_nor_the_rms_but_is_reported():
+    """Three boxes seen exactly (moved by a known similarity) and a fourth reconstructed as a
+    blob 1.5x its size: with it the RMS is the blob's; left out, the transform is recovered,
+    the RMS is the true surfaces' and the blob's median residual is still reported."""
+    meshes = {
+        f"l{i}": trimesh.creation.box((0.1, 0.08, 0.06)).apply_translation(c)
+        for i, c in enumerate([(0, 0, 0), (0.4, 0, 0), (0, 0.3, 0.1), (0.2, 0.2, 0.4)])
+    }
+    S = _sim(3, 0.8, 25.0, 100.0)
+    inv = Similarity(1 / S.scale, S.R.T, -(S.R.T @ S.t) / S.scale)
+    pts = {}
+    for i, (n, m) in enumerate(meshes.items()):
+        p, _ = trimesh.sample.sample_surface(m, 3000, seed=10 + i)
+        if n == "l3":  # the blob: 1.5x about its centre
+            c = m.centroid
+            p = c + 1.5 * (p - c)
+        pts[n] = inv.apply(p)
+    biased = align_to_meshes(pts, meshes)
+    clean = align_to_meshes(pts, meshes, exclude={"l3"})
+    assert clean.excluded == ["l3"] and biased.excluded == []
+    assert clean.rms_mm < 1.0 < biased.rms_mm
+    assert abs(clean.transform.scale - S.scale) < 1e-3
+    assert clean.per_target_mm["l3"] > 5.0 and set(clean.per_target_mm) == set(meshes)
