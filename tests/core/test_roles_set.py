@@ -195,3 +195,59 @@ def test_generic_wrench_becomes_a_wrench_stream(scene: tuple[Path, Path], tmp_pa
     assert set(got.column("frame").to_pylist()) == {"ft_sensor"}
     for i, c in enumerate(("fx", "fy", "fz", "tx", "ty", "tz")):
         np.testing.assert_array_equal(got.column(c).to_numpy(), np.sin(t * 1e-9 + i))
+
+
+def test_ee_pose_at_another_rate_gets_its_own_stream(
+    scene: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """120 Hz poses given to a link beside the 500 Hz ``ee_poses``: a stream of their own (one
+    nominal rate per stream), the existing table untouched; the same link again is refused."""
+    ds = tmp_path / "ds"
+    shutil.copytree(scene[1], ds)
+    before_ee = (ds / "episodes/ep000/ee_poses.parquet").read_bytes()
+    gen = pq.read_table(ds / "episodes/ep000/streams/mocap_box_pose.parquet")
+    assert main(["roles", "set", str(ds), GENERIC, "ee_pose:wrist_3_link"]) == 0
+    m = json.loads((ds / "manifest.json").read_text())
+    st = m["episodes"][0]["streams"]["ee_poses/mocap_box_pose"]
+    assert st["nominal_rate_hz"] == pytest.approx(120.0, rel=0.01) and st["source"] == TOPIC
+    got = pq.read_table(ds / st["path"])
+    assert set(got.column("link").to_pylist()) == {"wrist_3_link"}
+    np.testing.assert_array_equal(
+        got.column("x").to_numpy(), gen.column("pose.position.x").to_numpy()
+    )
+    assert (ds / "episodes/ep000/ee_poses.parquet").read_bytes() == before_ee
+
+
+def test_ee_pose_at_the_same_rate_joins_the_ee_poses_table(
+    scene: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """500 Hz poses given to another link are merged into ``ee_poses``, rows in stamp order."""
+    ds = tmp_path / "ds"
+    shutil.copytree(scene[1], ds)
+    m = json.loads((ds / "manifest.json").read_text())
+    old = pq.read_table(ds / "episodes/ep000/ee_poses.parquet")
+    rel = "episodes/ep000/streams/tcp.parquet"
+    cols = {f"pose.position.{a}": old.column(a) for a in "xyz"}
+    cols.update({f"pose.orientation.{a}": old.column(f"q{a}") for a in "xyzw"})
+    pq.write_table(pa.table({"t_ns": old.column("t_ns"), **cols}), ds / rel)
+    m["episodes"][0]["streams"]["streams/tcp"] = {
+        "kind": "generic",
+        "path": rel,
+        "stamp_source": "log_time",
+        "offset_ns": 0,
+        "nominal_rate_hz": 500.0,
+        "source": "/tcp",
+    }
+    _rehash(ds, m, rel)
+    (ds / "manifest.json").write_text(json.dumps(m, indent=2))
+    assert main(["roles", "set", str(ds), "/tcp", "ee_pose:wrist_3_link"]) == 0
+    m = json.loads((ds / "manifest.json").read_text())
+    st = m["episodes"][0]["streams"]["ee_poses"]
+    got = pq.read_table(ds / st["path"])
+    assert got.num_rows == 2 * old.num_rows
+    assert set(got.column("link").to_pylist()) == {*old.column("link").to_pylist(), "wrist_3_link"}
+    assert np.all(np.diff(got.column("t_ns").to_numpy()) >= 0)
+    assert "/tcp" in st["source"] and "streams/tcp" not in m["episodes"][0]["streams"]
+    before = _digest(ds)
+    assert main(["roles", "set", str(ds), GENERIC, "ee_pose:wrist_3_link"]) == 2  # taken
+    assert _digest(ds) == before
