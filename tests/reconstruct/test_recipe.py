@@ -1,9 +1,12 @@
 """The structure-from-motion recipe of docs/reconstruct.md, run as written at a small size.
 
 The shell block after the ``recipe`` marker runs line by line in an empty folder; only the
-training size changes (see the doc). The oracle is the sample's ground truth: after the recipe
-the stored camera centres are within 1 % of the scene size of the true ones and the rotations
-within 1 degree, in the robot's world (no fit to the truth).
+training size changes (see the doc). The oracles are the sample's ground truth and a recorded
+episode: after the recipe the stored camera centres are within 1 % of the scene size of the
+true ones and the rotations within 1 degree, in the robot's world (no fit to the truth); the
+dataset validates without errors; and the reconstruction re-rendered along the joints of a
+recorded episode of the same robot (``robogs synth --size small``) covers the robot's pixels of
+that recording (IoU of the robot masks at matched stamps).
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ import pytest
 DOC = Path(__file__).resolve().parents[2] / "docs" / "reconstruct.md"
 FULL = "--iterations 3000 --threads 2"
 SMALL = "--iterations 150 --scale 0.5 --force --threads 2 --no-progress"
+#: robot-mask IoU of the re-rendered episode against the recording (measured: see the test)
+IOU_MIN = 0.8
 
 
 def recipe_lines() -> list[str]:
@@ -38,8 +43,12 @@ def test_the_recipe_block_is_what_the_test_expects():
         ["robogs", "convert"],
         ["robogs", "reconstruct"],
         ["robogs-validate", "scan-posed"],
+        ["robogs", "synth"],
+        ["robogs", "render"],
+        ["robogs-validate", "replay"],
     ]
     assert "--sfm" in lines[1] and FULL in lines[2] and "--align apply" in lines[2]
+    assert "--joints episode/" in lines[5] and "--camera episode/" in lines[5]
 
 
 def _run(line: str, cwd: Path) -> subprocess.CompletedProcess:
@@ -50,9 +59,27 @@ def _run(line: str, cwd: Path) -> subprocess.CompletedProcess:
     )
 
 
+def _robot_masks(root: Path) -> tuple[np.ndarray, np.ndarray]:
+    """([F] t_ns, [F, H, W] bool robot-link pixels) of the one camera of a dataset's episode."""
+    from robogs.format.dataset import Dataset, read_parquet
+
+    ds = Dataset.open(root)
+    ep = ds.episode(None)
+    cam = ds.camera_names[0]
+    seg = read_parquet(ep.table_path("segments")).to_pylist()
+    robot = [r["label_id"] for r in seg if r["kind"] == "robot_link"]
+    t = ep.frames(cam).column("t_ns").to_numpy()
+    masks = np.stack([np.isin(lab, robot) for _, lab in ep.iter_labels(cam)])
+    return t, masks
+
+
+def _errors(stdout: str) -> list[str]:
+    return sorted(set(re.findall(r"^(\w\d{3}) error", stdout, re.M)))
+
+
 @pytest.mark.slow
-def test_recipe_recovers_the_cameras_in_the_robots_world(tmp_path: Path):
-    """~200 s on 2 loaded cores: synth 5 s, SfM 25 s, pre-alignment 30 s, reconstruction 140 s."""
+def test_recipe_recovers_the_cameras_and_rerenders_an_episode(tmp_path: Path):
+    """~90 s on 2 idle cores (see docs/reconstruct.md for the split)."""
     pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
     from robogs.format.dataset import Dataset, read_parquet
     from robogs.format.frames import quat_to_matrix_np
@@ -81,9 +108,24 @@ def test_recipe_recovers_the_cameras_in_the_robots_world(tmp_path: Path):
     d = np.einsum("nji,njk->nik", quat_to_matrix_np(q), Tt[:, :3, :3])
     ang = np.degrees(np.arccos(np.clip((np.trace(d, axis1=1, axis2=2) - 1) / 2, -1, 1)))
     assert ang.max() < 1.0
+    align = ds.manifest["provenance"]["reconstruction"]["report"]["alignment"]
+    assert align["rms_mm"] <= 5.0, align  # links below the coverage at this size left out
     r = _run(lines[3], tmp_path)
-    errors = sorted(set(re.findall(r"^(\w\d{3}) error", r.stdout, re.M)))
-    assert r.returncode in (0, 1) and "errors" in r.stdout
-    # at 150 steps and half resolution the reconstructed table mesh still holds floaters above
-    # its top, so the box reads as sunk into it (G011); nothing else may fail
-    assert set(errors) <= {"G011"}, r.stdout[-3000:]
+    # at 150 steps and half resolution the reconstructed table top is still 2-3 cm above the
+    # true one (the photo-hull seeds sit 3.4 cm above it; docs/reconstruct.md), so the box
+    # reads as sunk into it (G011); nothing else may fail
+    assert r.returncode in (0, 1) and set(_errors(r.stdout)) <= {"G011"}, r.stdout[-3000:]
+    # re-rendered along a recorded episode of the same robot
+    for line in lines[4:]:
+        r = _run(line, tmp_path)
+        ok = (0, 1) if line.startswith("robogs-validate") else (0,)
+        assert r.returncode in ok, f"{line}\n{r.stdout[-2000:]}\n{r.stderr[-2000:]}"
+    assert set(_errors(r.stdout)) <= {"G011"}, r.stdout[-3000:]
+    t_rec, rec = _robot_masks(tmp_path / "episode")
+    t_ren, ren = _robot_masks(tmp_path / "replay")
+    near = np.abs(t_rec[None, :] - t_ren[:, None]).argmin(1)
+    gap_ms = np.abs(t_rec[near] - t_ren).max() / 1e6
+    assert gap_ms < 20.0, gap_ms  # the recording's frames are ~33 ms apart
+    inter = (ren & rec[near]).sum()
+    iou = inter / (ren | rec[near]).sum()
+    assert iou > IOU_MIN, iou
