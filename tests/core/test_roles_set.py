@@ -251,3 +251,27 @@ def test_ee_pose_at_the_same_rate_joins_the_ee_poses_table(
     before = _digest(ds)
     assert main(["roles", "set", str(ds), GENERIC, "ee_pose:wrist_3_link"]) == 2  # taken
     assert _digest(ds) == before
+
+
+def test_a_concurrent_edit_is_refused_and_nothing_is_lost(
+    scene: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    """Another command commits between our read and our edit: ours is refused (exit 2), theirs
+    stays (optimistic concurrency of the writer)."""
+    from robogs.format.dataset import Dataset as _Dataset
+
+    ds = tmp_path / "ds"
+    shutil.copytree(scene[1], ds)
+    edit = _Dataset.edit
+
+    def edit_after_another(self):
+        with edit(_Dataset.open(self.root)) as w:  # the other command
+            w.manifest["name"] = "theirs"
+            w.commit()
+        return edit(self)
+
+    monkeypatch.setattr(_Dataset, "edit", edit_after_another)
+    assert main(["roles", "set", str(ds), TOPIC, "object_pose:box"]) == 2
+    assert "changed on disk" in capsys.readouterr().err
+    m = json.loads((ds / "manifest.json").read_text())
+    assert m["name"] == "theirs" and GENERIC in m["episodes"][0]["streams"]
