@@ -146,6 +146,7 @@ def _columns(names: list[str], kind: str) -> tuple[str, ...] | None:
         return all(c in names for c in cols)
 
     found = []
+    # "" covers a flat Pose / Wrench message ("position.x"); "pose." a PoseStamped, and so on
     for prefix in sorted({n.rsplit(".", 2)[0] + "." if n.count(".") >= 2 else "" for n in names}):
         if kind == "wrenches":
             cols = tuple(f"{prefix}{g}.{a}" for g in ("force", "torque") for a in "xyz")
@@ -159,14 +160,6 @@ def _columns(names: list[str], kind: str) -> tuple[str, ...] | None:
             )
             if all_in(cols):
                 found.append(cols)
-    if not found:
-        for pos, rot in _POSE_FORMS:  # a flat Pose / Transform message
-            cols = (*(f"{pos}.{a}" for a in "xyz"), *(f"{rot}.{a}" for a in "wxyz"))
-            if kind != "wrenches" and all_in(cols):
-                found.append(cols)
-        cols = tuple(f"{g}.{a}" for g in ("force", "torque") for a in "xyz")
-        if kind == "wrenches" and all_in(cols):
-            found.append(cols)
     if len(found) > 1:
         raise FormatError(
             f"the table holds {len(found)} candidate sets of columns: "
@@ -291,7 +284,12 @@ def _plan(ds: Dataset, ep: Episode, name: str, kind: str | None, entity: str, ro
             ep, name, source, None, None, None, RoleChange(ep.id, name, role, None, 0, 0, lines)
         )
     tab = ep.table(name)
-    cols = _columns(tab.column_names, kind)
+    try:
+        cols = _columns(tab.column_names, kind)
+    except FormatError as exc:
+        raise FormatError(
+            exc.message, path=ep.table_path(name), where=where, hint=exc.hint
+        ) from None
     if cols is None:
         want = (
             "<P>.force.{x,y,z} and <P>.torque.{x,y,z}"
@@ -306,7 +304,10 @@ def _plan(ds: Dataset, ep: Episode, name: str, kind: str | None, entity: str, ro
             + (" ..." if tab.num_columns > 12 else ""),
         )
     t = tab.column("t_ns").to_numpy(zero_copy_only=False).astype(np.int64)
-    v = _values(tab, cols)
+    try:
+        v = _values(tab, cols)
+    except FormatError as exc:
+        raise FormatError(exc.message, path=ep.table_path(name), where=exc.where) from None
     ok = np.all(np.isfinite(v), axis=1)
     if kind != "wrenches":
         qn = np.linalg.norm(v[:, 3:], axis=1)
