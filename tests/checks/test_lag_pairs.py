@@ -271,3 +271,31 @@ def test_force_controlled_pushes_give_no_t016_error(tmp_path: Path) -> None:
         w.commit()
     found = _findings(tmp_path / "ds", "T016")
     assert all(x.severity == "info" and x.value < 0 for x in found), [x.to_dict() for x in found]
+
+
+def test_boxes_from_masks_time_like_the_boxes2d_rows(clean_root: Path, tmp_path: Path) -> None:
+    """The synthetic scene's boxes2d rows are the boxes of its label masks: without the rows,
+    T015 reads the masks and must use the same frames, stamps and centres (same fit)."""
+    import json
+    import shutil
+
+    from robogs.format.checks.context import CheckContext
+    from robogs.format.checks.lag_pairs import _poses, box_lag
+
+    def fit(root: Path):
+        ctx = CheckContext(root)
+        ep = ctx.episodes[0]
+        t_p, v_p = _poses(ctx, ep.streams["object_poses"]["path"])["box"]
+        return box_lag(ctx, ep, "box", "cam0", t_p, v_p)
+
+    rows = fit(clean_root)
+    masks_root = tmp_path / "ds"
+    shutil.copytree(clean_root, masks_root)
+    m = json.loads((masks_root / "manifest.json").read_text())
+    m["episodes"][0]["streams"].pop("boxes2d")
+    (masks_root / "manifest.json").write_text(json.dumps(m))
+    masks = fit(masks_root)
+    assert rows is not None and masks is not None
+    assert rows[1].endswith("boxes2d.parquet") and masks[1].endswith("labels.parquet")
+    assert masks[0].samples == rows[0].samples
+    assert masks[0].pose_lag_ms == pytest.approx(rows[0].pose_lag_ms, abs=1e-6)
