@@ -91,6 +91,12 @@ class MujocoFit:
         self.z_rest_gap = 1e-3  # [m] above the resting height still counts as on the table
         self.table_z = float(physics.get("objects", {}).get("table", {}).get("plane_z_m", 0.0))
         self.half_z = float(half[2]) if half.shape[0] >= 3 else 0.0
+        # lowest height of the object frame that does not penetrate a horizontal table: a
+        # measured start or carried pose a fraction of a millimetre into the table would make
+        # the stiff soft contact throw the box up at the release (a chaotic hop that broke the
+        # finite-difference Jacobians of fast slides); -inf where unknown (meshes)
+        box = m.geom_type[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, object_name)]
+        self.rest_z = self.table_z + self.half_z if box == mujoco.mjtGeom.mjGEOM_BOX else -np.inf
 
     # ------------------------------------------------------------------ models per set
     def models(self, theta: torch.Tensor, space: ParamSpace, scene: Any) -> tuple[list, Any, list]:
@@ -148,6 +154,7 @@ class MujocoFit:
         ip = ipos.numpy().reshape(n_r, 3)
         iy = iyaw.numpy().reshape(n_r)
         x[:, self.qa : self.qa + 3] = ip
+        x[:, self.qa + 2] = np.maximum(ip[:, 2], self.rest_z)  # never start inside the table
         x[:, self.qa + 3 : self.qa + 7] = _yaw_quat(iy)
         x[:, self.va : self.va + 6] = 0.0
         if drive.init_vel is not None:
@@ -266,6 +273,7 @@ class MujocoFit:
         rp = rel_p[hold]
         rx, ry = c * rp[:, 0] - s * rp[:, 1], s * rp[:, 0] + c * rp[:, 1]
         x[hold, self.qa : self.qa + 3] = pusher[tt, k] + np.stack([rx, ry, rp[:, 2]], -1)
+        x[hold, self.qa + 2] = np.maximum(x[hold, self.qa + 2], self.rest_z)
         q = _qmul(_yaw_quat(ey), rel_q[hold])
         x[hold, self.qa + 3 : self.qa + 7] = q
         r = rate[tt, k]
