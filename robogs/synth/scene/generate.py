@@ -45,7 +45,13 @@ from .raster import PinholeView
 from .render_scene import MeshPart, SceneRenderer, label_boxes
 from .rigid import invert_T, make_T, matrix_to_quat, quat_to_matrix, yaw_quat
 from .robot_source import RobotAssets, generated_ur5, imported_robot
-from .splat_sampling import SurfaceSamples, concat_samples, sample_surface
+from .splat_sampling import (
+    SurfaceSamples,
+    check_spacing,
+    concat_samples,
+    sample_surface,
+    splat_count,
+)
 
 __all__ = [
     "synthesize",
@@ -165,7 +171,7 @@ def _camera(preset: scene.SizePreset) -> CameraModel:
 
 
 def _splat_count(mesh: trimesh.Trimesh, spacing: float) -> int:
-    return int(np.clip(mesh.area / spacing**2, 200, 60000))
+    return splat_count(float(mesh.area), spacing)
 
 
 def _image_colors(part: MeshPart, T_world_part: np.ndarray) -> np.ndarray:
@@ -231,6 +237,7 @@ def synthesize(
     overwrite: bool = False,
     progress: bool = True,
     package_roots: dict[str, str | Path] | None = None,
+    splat_spacing_m: float | None = None,
 ) -> Path:
     """Generate the synthetic push scene as a robogs dataset at ``out``.
 
@@ -242,18 +249,21 @@ def synthesize(
         overwrite: replace an existing dataset at ``out``.
         progress: show a progress bar.
         package_roots: ``{package: folder}`` for ``package://`` URIs of ``urdf``.
+        splat_spacing_m: mean surfel spacing, m (default: the size's, 10/6/4 mm); only the
+            splats change (frames and tables are the same for a seed).
 
     Returns:
         ``out``. The ground truth is written to :func:`ground_truth_path` (``out`` + ``.ground_truth.json``).
 
     Raises:
-        InputError: unknown size, unreadable URDF or meshes.
+        InputError: unknown size, spacing out of range, unreadable URDF or meshes.
         DatasetExistsError: ``out`` exists and ``overwrite`` is False.
     """
     if size not in scene.SIZES:
         raise InputError(f"unknown size {size!r}", hint=f"choose one of {', '.join(scene.SIZES)}")
     out = Path(out)
     preset = scene.SIZES[size]
+    sp = preset.splat_spacing_m if splat_spacing_m is None else check_spacing(splat_spacing_m)
     rng = np.random.default_rng(seed)
     t_wall = time.perf_counter()
     robot = generated_ur5() if urdf is None else imported_robot(urdf, package_roots)
@@ -437,7 +447,6 @@ def synthesize(
             "joint_positions": {n: float(q_rest[0, i]) for i, n in enumerate(jn)},
             "object_poses": {"box": box_rest.tolist(), "table": table_rest.tolist()},
         }
-        sp = preset.splat_spacing_m
         rob_s = [
             sample_surface(
                 np.asarray(robot.meshes[lk].vertices),
@@ -561,8 +570,10 @@ def synthesize(
             EPISODE_ID, start_ns=start_ns, end_ns=end_ns, streams=streams, segment="push"
         )
         writer.manifest["conventions"]["clock"] = "synthetic"
-        cmd = f"robogs synth {out.name} --seed {seed} --size {size}" + (
-            f" --urdf {Path(urdf).name}" if urdf else ""
+        cmd = (
+            f"robogs synth {out.name} --seed {seed} --size {size}"
+            + (f" --urdf {Path(urdf).name}" if urdf else "")
+            + (f" --splat-spacing {sp:g}" if splat_spacing_m is not None else "")
         )
         writer.manifest["generator"] = {"command": cmd}
         writer.manifest["provenance"] = {
@@ -570,6 +581,7 @@ def synthesize(
             "seed": int(seed),
             "size": size,
             "robot": "generated UR5 (published DH)" if urdf is None else Path(urdf).name,
+            "splat_spacing_m": sp,
         }
         writer.commit()
         step("done")
