@@ -275,3 +275,38 @@ def test_a_concurrent_edit_is_refused_and_nothing_is_lost(
     assert "changed on disk" in capsys.readouterr().err
     m = json.loads((ds / "manifest.json").read_text())
     assert m["name"] == "theirs" and GENERIC in m["episodes"][0]["streams"]
+
+
+def test_roles_on_a_converted_bag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """End to end on the converter's own output: a ROS 1 bag with custom message types (written
+    with rosbags in ``tests/converters/test_ingest_meaning.py``) converts to generic streams
+    with reasons; a position-only custom pose cannot be an ee pose (one line, nothing changed);
+    the custom marker topic can be ignored."""
+    import importlib.util
+
+    from robogs.convert.ingest.context import ConvertOptions
+    from robogs.convert.ingest.convert import convert_path
+
+    src = Path(__file__).resolve().parents[1] / "converters" / "test_ingest_meaning.py"
+    spec = importlib.util.spec_from_file_location("_ingest_meaning", src)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    urdf = tmp_path / "planar.urdf"
+    urdf.write_text(mod.URDF)
+    mod._write_bag(tmp_path / "push.bag")
+    out = tmp_path / "out"
+    convert_path(tmp_path / "push.bag", out, options=ConvertOptions(urdf=urdf))
+    capsys.readouterr()
+    assert main(["roles", str(out), "--json"]) == 0
+    rows = {r["stream"]: r for r in json.loads(capsys.readouterr().out)}
+    for name in ("streams/robot_cartesian", "streams/vicon_markers"):
+        assert rows[name]["kind"] == "generic" and rows[name]["reason"], rows[name]
+    before = _digest(out)
+    assert main(["roles", "set", str(out), "/robot/cartesian", "ee_pose:tool"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "has no columns for role 'ee_pose:tool'" in err and "\n" not in err
+    assert _digest(out) == before
+    assert main(["roles", "set", str(out), "/vicon/markers", "ignore"]) == 0
+    m = json.loads((out / "manifest.json").read_text())
+    assert "streams/vicon_markers" not in m["episodes"][0]["streams"]
+    assert m["provenance"]["topics"]["/vicon/markers"]["role"] == "ignore"
