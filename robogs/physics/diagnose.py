@@ -615,7 +615,7 @@ def _calibrate(
         [_fingerprint(rec), model_key(rec.physics), f"{eng.prep.scene.dt:g}", type(eng).__name__]
     )
     lin = [
-        gate_mod.LinearCandidate(e.name, o.jac, o.jac_local, n_base, o.resid)
+        gate_mod.LinearCandidate(e.name, o.jac, o.jac_local, n_base)
         for e, o in zip(cands, outs[1:], strict=True)
     ]
     valid = (base.resid != 0) | np.any(base.jac != 0, axis=-1)

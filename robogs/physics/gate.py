@@ -12,11 +12,11 @@ Jacobian of the candidate's fit (base columns plus the effect's) and ``J_l`` [T,
 each trajectory's nuisance parameters; the full fits of ``B`` (base columns only) and ``B + C``
 are linear least squares (nuisance parameters profiled out per trajectory), the folds' Gauss-
 Newton steps are exact, and the whole procedure above is repeated on simulated noise ``e``, zero
-where the data have no sample (this dataset's drops, rates, jitter and split). The noise is a
-wild cluster bootstrap (default, :func:`calibrate`): each trajectory's residual of the
-candidate's fit with a random sign per trajectory, so that errors shared by the samples of one
-trajectory enter the null; or (``method="white"``) Gaussian white noise at each trajectory's
-scale estimated from first differences of the base residual (a difference-based variance
+where the data have no sample (this dataset's drops, rates, jitter and split). Two noises, and
+each candidate's threshold is the larger of the two (:func:`calibrate`): a wild cluster
+bootstrap, the base fit's residual of each trajectory with a sign per trajectory, so that
+errors shared by the samples of one trajectory enter the null; and Gaussian white noise at each
+trajectory's scale estimated from first differences of the base residual (a difference-based variance
 estimator, Rice 1984, Ann. Statist. 12, which ignores a smooth misfit). It costs no rollout:
 the Jacobians are those the fits already computed (the linearisation of the arm model's null,
 :mod:`robogs.physics.arm.diagnose`; a bootstrap linearised at the estimate, Efron & Tibshirani
@@ -52,6 +52,7 @@ __all__ = [
     "ALPHA",
     "N_DRAWS",
     "MAX_CELLS",
+    "MIN_PATTERNS",
     "Calibration",
     "LinearCandidate",
     "calibrate",
@@ -64,6 +65,8 @@ ALPHA = 0.05
 """Family-wise false-positive rate of the gate."""
 N_DRAWS = 400
 """Null draws (min-P resolution 1/N_DRAWS; 20 draws beyond the 5 % quantile at 400)."""
+MIN_PATTERNS = 128
+"""Fewest distinct sign patterns (``2^(T-1)``) for the wild null (T >= 8 trajectories)."""
 MAX_CELLS = 4.0e8
 """Bound on the calibration's work: draws x residuals x parameters summed over candidates;
 the draw count is cut (never below 100) to stay under it."""
@@ -80,15 +83,12 @@ class LinearCandidate:
         jac: [T, K, P] whitened residual Jacobian of the free global parameters.
         jac_local: [T, K, L] Jacobian of each trajectory's nuisance parameters.
         n_base: the first ``n_base`` columns of ``jac`` are the base model's.
-        resid: [T, K] whitened residual of the candidate's fit (the wild bootstrap resamples it;
-            None: the base fit's).
     """
 
     name: str
     jac: np.ndarray
     jac_local: np.ndarray
     n_base: int
-    resid: np.ndarray | None = None
 
 
 @dataclass
@@ -276,6 +276,51 @@ def _write(path: Path, cal: Calibration) -> None:
         pass
 
 
+def _simulate(
+    cands: Sequence[LinearCandidate],
+    valid: np.ndarray,
+    folds: Sequence[np.ndarray],
+    draws: int,
+    noise: Any,
+    pos: list[int] | None = None,
+) -> np.ndarray:
+    """Null statistics [draws, C]: ``noise(n, c)`` gives the next ``n`` draws [n, T, K] (the
+    same draws for every candidate; ``pos[0]`` is advanced past each chunk)."""
+    null = np.zeros((draws, len(cands)))
+    t_n, k = valid.shape
+    chunk = max(1, int(4e6 // max(t_n * k, 1)))
+    for s0 in range(0, draws, chunk):
+        n = min(chunk, draws - s0)
+        shared = noise(n, -1)
+        for c, cand in enumerate(cands):
+            jac = cand.jac * valid[..., None]
+            q = _profile(cand.jac_local, valid)
+            r_b, h_b = _linear_heldout(jac[..., : cand.n_base], q, shared, folds)
+            r_c, h_c = _linear_heldout(jac, q, shared, folds)
+            null[s0 : s0 + n, c] = heldout_statistic(h_b, h_c, r_b - r_c)
+        if pos is not None:
+            pos[0] += n
+    return null
+
+
+def _minp(
+    null: np.ndarray, names: Sequence[str], alpha: float
+) -> tuple[float, dict[str, float], dict[str, float]]:
+    """Single-step min-P: per-candidate level, thresholds and own 95 % quantiles."""
+    d = null.shape[0]
+    if not names:
+        return alpha, {}, {}
+    srt = np.sort(null, axis=0)
+    p = np.stack(
+        [d - np.searchsorted(srt[:, c], null[:, c], side="left") for c in range(len(names))],
+        axis=1,
+    ) / float(d)
+    a = float(np.quantile(p.min(axis=1), alpha))
+    thr = {n: float(np.quantile(null[:, c], 1.0 - a)) for c, n in enumerate(names)}
+    q95 = {n: float(np.quantile(null[:, c], 0.95)) for c, n in enumerate(names)}
+    return a, thr, q95
+
+
 def calibrate(
     cands: Sequence[LinearCandidate],
     base_resid: np.ndarray,
@@ -286,7 +331,7 @@ def calibrate(
     draws: int = N_DRAWS,
     seed: int = 0,
     alpha: float = ALPHA,
-    method: str = "wild",
+    method: str = "both",
 ) -> Calibration:
     """Simulate the held-out statistic's null for every candidate on the same draws.
 
@@ -299,18 +344,21 @@ def calibrate(
         draws: null draws (cut to keep draws x residuals x parameters under ``MAX_CELLS``).
         seed: random seed of the draws.
         alpha: family-wise level.
-        method: ``"wild"`` (default): each candidate's own fit residual of every trajectory times
-            a random sign per trajectory, the same signs for every candidate of a draw (a wild
-            cluster bootstrap, Cameron, Gelbach & Miller 2008, Rev. Econ. Stat. 90, with the
-            unrestricted residuals so that a real effect's signal does not enter its own null).
-            It keeps what varies from one trajectory to the next (a release speed off by
-            encoder noise shifts a whole slide), which white noise misses: on design-B null
-            data white noise let a tilt and quadratic drag through in 2 of 3 seeds;
-            ``"white"``: Gaussian white noise at each trajectory's difference-based scale.
+        method: ``"both"`` (default): each candidate's threshold is the larger of the two
+            below. ``"wild"``: the base fit's residual of every trajectory times a sign per
+            trajectory (a wild cluster bootstrap of the restricted residuals, Cameron, Gelbach &
+            Miller 2008, Rev. Econ. Stat. 90; every one of the ``2^(T-1)`` patterns when they
+            are few, an exact randomisation test), which keeps what varies from one trajectory
+            to the next (a release speed off by encoder noise shifts a whole slide); skipped
+            under ``MIN_PATTERNS`` patterns (T < 8), as the report notes. On design-B null data
+            white noise alone let a tilt, quadratic drag or anisotropic friction through in 3
+            of 4 seeds. ``"white"``: Gaussian white noise at each trajectory's
+            difference-based scale.
     """
-    if method not in ("wild", "white"):
-        raise ValueError(f"method must be 'wild' or 'white', got {method!r}")
+    if method not in ("both", "wild", "white"):
+        raise ValueError(f"method must be 'both', 'wild' or 'white', got {method!r}")
     names = [c.name for c in cands]
+    t_n = base_resid.shape[0]
     per_draw = float(sum(c.jac.shape[0] * c.jac.shape[1] * c.jac.shape[2] for c in cands))
     draws = int(max(100, min(draws, MAX_CELLS // max(per_draw, 1.0))))
     path = None
@@ -321,50 +369,56 @@ def calibrate(
             return hit
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
-    scale = diff_scale(base_resid, valid)
-    null = np.zeros((draws, len(cands)))
-    chunk = max(1, int(4e6 // max(base_resid.size, 1)))
-    for s0 in range(0, draws, chunk):
-        n = min(chunk, draws - s0)
-        w = rng.choice([-1.0, 1.0], size=(n, base_resid.shape[0]))
-        if method == "white":
-            e = rng.standard_normal((n, *base_resid.shape)) * scale[None, :, None] * valid[None]
-        for c, cand in enumerate(cands):
-            if method == "wild":
-                r0 = base_resid if cand.resid is None else cand.resid
-                e = w[:, :, None] * (r0 * valid)[None]
-            jac = cand.jac * valid[..., None]
-            q = _profile(cand.jac_local, valid)
-            r_b, h_b = _linear_heldout(jac[..., : cand.n_base], q, e, folds)
-            r_c, h_c = _linear_heldout(jac, q, e, folds)
-            null[s0 : s0 + n, c] = heldout_statistic(h_b, h_c, r_b - r_c)
-    if len(cands):
-        # per-candidate p-value of every draw (ties count as exceeding), smallest per draw
-        srt = np.sort(null, axis=0)
-        p = np.stack(
-            [
-                draws - np.searchsorted(srt[:, c], null[:, c], side="left")
-                for c in range(len(cands))
-            ],
-            axis=1,
-        ) / float(draws)
-        alpha_adj = float(np.quantile(p.min(axis=1), alpha))
-    else:
-        alpha_adj = alpha
-    thr = {
-        n: float(max(np.quantile(null[:, c], 1.0 - alpha_adj), 1e-6)) for c, n in enumerate(names)
-    }
-    q95 = {n: float(np.quantile(null[:, c], 0.95)) for c, n in enumerate(names)}
+    nulls: dict[str, np.ndarray] = {}
+    note = ""
+    if method in ("both", "white"):
+        scale = diff_scale(base_resid, valid)
+
+        def white(n: int) -> np.ndarray:
+            return rng.standard_normal((n, *base_resid.shape)) * scale[None, :, None] * valid[None]
+
+        nulls["white"] = _simulate(cands, valid, folds, draws, lambda n, c: white(n))
+    if method in ("both", "wild"):
+        n_pat = 2 ** (t_n - 1)  # w and -w give the same statistic (the model is linear)
+        if n_pat < MIN_PATTERNS:
+            note = (
+                f"{t_n} trajectories: too few sign patterns ({n_pat}) to resample what varies "
+                "between trajectories; white-noise null only"
+            )
+        else:
+            if n_pat <= max(draws, 1024):  # every pattern once (an exact randomisation test)
+                bits = (np.arange(n_pat)[:, None] >> np.arange(t_n - 1)[None]) & 1
+                signs = np.concatenate([np.ones((n_pat, 1)), 1.0 - 2.0 * bits], axis=1)
+            else:
+                signs = rng.choice([-1.0, 1.0], size=(draws, t_n))
+            rw = base_resid * valid
+            pos = [0]
+
+            def wild(n: int, c: int) -> np.ndarray:
+                w = signs[pos[0] : pos[0] + n]
+                return w[:, :, None] * rw[None]
+
+            nulls["wild"] = _simulate(cands, valid, folds, len(signs), wild, pos)
+    thr: dict[str, float] = {n: 1e-6 for n in names}
+    q95: dict[str, float] = {n: 0.0 for n in names}
+    alpha_adj = alpha
+    for null in nulls.values():
+        a_k, t_k, q_k = _minp(null, names, alpha)
+        alpha_adj = min(alpha_adj, a_k)
+        for n in names:
+            thr[n] = max(thr[n], t_k[n])
+            q95[n] = max(q95[n], q_k[n])
+    null = nulls.get("wild", nulls.get("white"))
     cal = Calibration(
         thresholds=thr,
         q95=q95,
         alpha_adj=alpha_adj,
         alpha=alpha,
-        draws=draws,
+        draws=int(sum(len(v) for v in nulls.values())),
         seconds=time.perf_counter() - t0,
-        cells=per_draw * draws,
+        cells=per_draw * sum(len(v) for v in nulls.values()),
         key=path.stem if path else "",
-        method=method,
+        method=method + (f" ({note})" if note else ""),
         null=null,
     )
     if path is not None:
