@@ -136,13 +136,14 @@ def _baseline(ds: Path) -> tuple[list[dict], float]:
     from robogs.format.validate import validate
 
     if "baseline" not in RESULTS:
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         one = validate(ds, label_threads=1)
-        wall = time.perf_counter() - t
+        wall, cpu = time.perf_counter() - t, time.process_time() - c
         say(
             "baseline",
-            f"one process: {wall:.1f} s, {len(one.findings)} findings",
+            f"one process: {wall:.1f} s ({cpu:.1f} s CPU), {len(one.findings)} findings",
             wall_s=wall,
+            cpu_s=cpu,
             facts=_facts(one),
         )
     return RESULTS["baseline"]["facts"], RESULTS["baseline"]["wall_s"]
@@ -163,20 +164,27 @@ def phase_throughput(tmp: Path, a: argparse.Namespace) -> None:
             ex.connect()
             ray.get([ray.remote(lambda: 0).remote() for _ in range(2 * w)])  # start the workers
             st = Stats()
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             rep = validate_distributed(
                 ds, executor=ex, stats=st, episodes_per_task=a.episodes_per_task
             )
-            wall = time.perf_counter() - t
+            wall, driver_cpu = time.perf_counter() - t, time.process_time() - c
         finally:
             ray.shutdown()
         first = first or wall
         rss = sorted(v / 2**20 for v in st.peak_rss.values())
+        cpu = sorted(st.cpu_seconds.values())
+        # load-independent: the task CPU per worker; on W idle cores the tasks need at least
+        # max(cpu) seconds, so sum / max bounds the speed-up the split allows
         say(
             f"ray_{w}",
             f"ray {w} workers: {wall:.1f} s, x{first / wall:.2f} vs 1 worker, x{base / wall:.2f} "
             f"vs one process, {st.units} tasks, peak RSS per worker {', '.join(f'{r:.0f}' for r in rss)} "
-            f"MiB, findings identical: {_facts(rep) == facts}",
+            f"MiB, findings identical: {_facts(rep) == facts}; CPU: driver {driver_cpu:.1f} s, "
+            f"tasks {' + '.join(f'{x:.1f}' for x in cpu)} = {sum(cpu):.1f} s (sum / max "
+            f"{sum(cpu) / max(max(cpu, default=1), 1e-9):.2f})",
+            driver_cpu_s=driver_cpu,
+            task_cpu_s=cpu,
             wall_s=wall,
             speedup_vs_1=first / wall,
             speedup_vs_process=base / wall,

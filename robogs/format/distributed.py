@@ -138,6 +138,7 @@ class UnitResult:
     peak_rss: int
     seconds: float
     pid: int
+    cpu_seconds: float = 0.0  # CPU time of the task's process (user + system), load-independent
 
 
 @dataclass
@@ -239,7 +240,7 @@ def run_unit(
         unit: what to check.
         settings: ``quick``, ``budgets``, ``options``, ``max_per_code``, ``label_threads``.
     """
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     checks = [c for code, c in available_checks().items() if code in set(unit.codes)]
     missing = sorted(set(unit.codes) - {c.code for c in checks})
     if missing:
@@ -279,7 +280,8 @@ def run_unit(
             _merge(total[chk.code], rec.out, time.perf_counter() - t)
         shared.update({key: v for key, v in ctx._cache.items() if key[0] in _SHARED_CACHE})
         del ctx, rec
-    return UnitResult(unit.index, total, _peak_rss(), time.perf_counter() - t0, os.getpid())
+    cpu = time.process_time() - c0
+    return UnitResult(unit.index, total, _peak_rss(), time.perf_counter() - t0, os.getpid(), cpu)
 
 
 def _merge(into: _Outcome, part: _Outcome, seconds: float) -> None:
@@ -528,12 +530,14 @@ class _Err:
 
 @dataclass
 class Stats:
-    """How a split validation went: units, workers seen, peak RSS per worker (bytes)."""
+    """How a split validation went: units, workers seen, peak RSS per worker (bytes), task CPU."""
 
     units: int = 0
     reason: str | None = None
     peak_rss: dict[int, int] = field(default_factory=dict)
     task_seconds: float = 0.0
+    #: CPU seconds of the tasks, per worker process (does not depend on the machine's load)
+    cpu_seconds: dict[int, float] = field(default_factory=dict)
     wall_seconds: float = 0.0
 
 
@@ -595,6 +599,9 @@ def validate_distributed(
                 for done, res in enumerate(state["stream"], 1):
                     stats.peak_rss[res.pid] = max(stats.peak_rss.get(res.pid, 0), res.peak_rss)
                     stats.task_seconds += res.seconds
+                    stats.cpu_seconds[res.pid] = (
+                        stats.cpu_seconds.get(res.pid, 0.0) + res.cpu_seconds
+                    )
                     for code, out in res.outcomes.items():
                         by_code.setdefault(code, []).append((res.index, out))
                     note = getattr(ctx.progress, "fraction", None)
