@@ -195,8 +195,8 @@ def test_contact_lag_needs_a_force_that_rises() -> None:
     assert contact_lag(t_w, flat, t_o, p_o) is None
 
 
-def _wrench_dataset(root: Path, delay_ms: float) -> Path:
-    t_w, f, t_o, p_o = _contact_series(delay_ms)
+def _contact_dataset(root: Path, t_w, f, t_o, p_o, rates=(120.0, 500.0)) -> Path:
+    """One episode: object poses ``p_o`` at ``t_o`` (no rotation), forces ``f`` at ``t_w``."""
     ep = "episodes/ep000"
     with Dataset.create(root) as w:
         w.set_asset("box", kind="object")
@@ -217,11 +217,16 @@ def _wrench_dataset(root: Path, delay_ms: float) -> Path:
                 "offset_ns": 0,
                 "nominal_rate_hz": hz,
             }
-            for k, hz in (("object_poses", 120.0), ("wrenches", 500.0))
+            for k, hz in zip(("object_poses", "wrenches"), rates, strict=True)
         }
-        w.add_episode("ep000", start_ns=T0, end_ns=int(max(t_w[-1], t_o[-1])), streams=streams)
+        start, end = int(min(t_w[0], t_o[0])), int(max(t_w[-1], t_o[-1]))
+        w.add_episode("ep000", start_ns=start, end_ns=end, streams=streams)
         w.commit()
     return root
+
+
+def _wrench_dataset(root: Path, delay_ms: float) -> Path:
+    return _contact_dataset(root, *_contact_series(delay_ms))
 
 
 def test_delayed_wrench_is_caught_against_the_contacts(tmp_path: Path) -> None:
@@ -251,24 +256,7 @@ def test_force_controlled_pushes_give_no_t016_error(tmp_path: Path) -> None:
     p_o = np.concatenate([tr.object_pos for tr in trajs])
     t_w = np.concatenate([tr.wrench_t_ns for tr in trajs])
     f = np.concatenate([tr.wrench_tool for tr in trajs])
-    ep = "episodes/ep000"
-    with Dataset.create(tmp_path / "ds") as w:
-        w.set_asset("box", kind="object")
-        q = np.zeros(t_o.size)
-        poses = {"t_ns": pa.array(t_o, pa.int64()), "object": ["box"] * t_o.size}
-        poses.update({"x": p_o[:, 0], "y": p_o[:, 1], "z": p_o[:, 2], "qw": q + 1, "qx": q})
-        poses.update({"qy": q, "qz": q})
-        w.write_table(f"{ep}/object_poses.parquet", pa.table(poses), kind="object_poses")
-        wr = {"t_ns": pa.array(t_w, pa.int64()), "frame": ["tool0"] * t_w.size}
-        wr.update({c: f[:, i] for i, c in enumerate(("fx", "fy", "fz"))})
-        wr.update({c: np.zeros(t_w.size) for c in ("tx", "ty", "tz")})
-        w.write_table(f"{ep}/wrenches.parquet", pa.table(wr), kind="wrenches")
-        streams = {
-            k: {"kind": k, "path": f"{ep}/{k}.parquet", "stamp_source": "synthetic", "offset_ns": 0}
-            for k in ("object_poses", "wrenches")
-        }
-        w.add_episode("ep000", start_ns=int(t_o[0]), end_ns=int(t_o[-1]), streams=streams)
-        w.commit()
+    _contact_dataset(tmp_path / "ds", t_w, f, t_o, p_o, rates=(None, None))
     found = _findings(tmp_path / "ds", "T016")
     assert all(x.severity == "info" and x.value < 0 for x in found), [x.to_dict() for x in found]
 

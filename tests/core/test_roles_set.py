@@ -44,6 +44,23 @@ def _rehash(root: Path, m: dict, *rels: str) -> None:
         }
 
 
+def _add_generic(ds: Path, name: str, table: pa.Table, topic: str) -> None:
+    """Declare ``table`` as the 500 Hz generic stream ``streams/<name>`` decoded from ``topic``."""
+    m = json.loads((ds / "manifest.json").read_text())
+    rel = f"episodes/ep000/streams/{name}.parquet"
+    pq.write_table(table, ds / rel)
+    m["episodes"][0]["streams"][f"streams/{name}"] = {
+        "kind": "generic",
+        "path": rel,
+        "stamp_source": "log_time",
+        "offset_ns": 0,
+        "nominal_rate_hz": 500.0,
+        "source": topic,
+    }
+    _rehash(ds, m, rel)
+    (ds / "manifest.json").write_text(json.dumps(m, indent=2))
+
+
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """(clean synthetic scene, the same with its object poses as a generic PoseStamped table)."""
@@ -169,24 +186,13 @@ def test_generic_wrench_becomes_a_wrench_stream(scene: tuple[Path, Path], tmp_pa
     """A decoded WrenchStamped-like table (``wrench.force.x`` ...) becomes ``wrenches``."""
     ds = tmp_path / "ds"
     shutil.copytree(scene[1], ds)
-    m = json.loads((ds / "manifest.json").read_text())
-    rel = "episodes/ep000/streams/netft_data.parquet"
     t = np.arange(1_000_000_000, 2_000_000_000, 2_000_000, dtype=np.int64)
     vals = {
         f"wrench.{g}.{a}": np.sin(t * 1e-9 + i)
         for i, (g, a) in enumerate((g, a) for g in ("force", "torque") for a in "xyz")
     }
-    pq.write_table(pa.table({"t_ns": t, "header.frame_id": ["ft"] * t.size, **vals}), ds / rel)
-    m["episodes"][0]["streams"]["streams/netft_data"] = {
-        "kind": "generic",
-        "path": rel,
-        "stamp_source": "log_time",
-        "offset_ns": 0,
-        "nominal_rate_hz": 500.0,
-        "source": "/netft_data",
-    }
-    _rehash(ds, m, rel)
-    (ds / "manifest.json").write_text(json.dumps(m, indent=2))
+    tab = pa.table({"t_ns": t, "header.frame_id": ["ft"] * t.size, **vals})
+    _add_generic(ds, "netft_data", tab, "/netft_data")
     assert main(["roles", "set", str(ds), "/netft_data", "wrench:ft_sensor"]) == 0
     m = json.loads((ds / "manifest.json").read_text())
     st = m["episodes"][0]["streams"]["wrenches"]
@@ -224,22 +230,10 @@ def test_ee_pose_at_the_same_rate_joins_the_ee_poses_table(
     """500 Hz poses given to another link are merged into ``ee_poses``, rows in stamp order."""
     ds = tmp_path / "ds"
     shutil.copytree(scene[1], ds)
-    m = json.loads((ds / "manifest.json").read_text())
     old = pq.read_table(ds / "episodes/ep000/ee_poses.parquet")
-    rel = "episodes/ep000/streams/tcp.parquet"
     cols = {f"pose.position.{a}": old.column(a) for a in "xyz"}
     cols.update({f"pose.orientation.{a}": old.column(f"q{a}") for a in "xyzw"})
-    pq.write_table(pa.table({"t_ns": old.column("t_ns"), **cols}), ds / rel)
-    m["episodes"][0]["streams"]["streams/tcp"] = {
-        "kind": "generic",
-        "path": rel,
-        "stamp_source": "log_time",
-        "offset_ns": 0,
-        "nominal_rate_hz": 500.0,
-        "source": "/tcp",
-    }
-    _rehash(ds, m, rel)
-    (ds / "manifest.json").write_text(json.dumps(m, indent=2))
+    _add_generic(ds, "tcp", pa.table({"t_ns": old.column("t_ns"), **cols}), "/tcp")
     assert main(["roles", "set", str(ds), "/tcp", "ee_pose:wrist_3_link"]) == 0
     m = json.loads((ds / "manifest.json").read_text())
     st = m["episodes"][0]["streams"]["ee_poses"]

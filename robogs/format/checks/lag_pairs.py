@@ -34,8 +34,8 @@ from .assets import hull_vertices
 from .context import CheckContext, InputReported
 from .registry import Check, check
 from .stale import held_mask
-from .streaming import batches
-from .sync import _project, cached_camera_lag, estimate_stream_lag
+from .streaming import entity_series
+from .sync import _POSE_COLS, _project, cached_camera_lag, estimate_stream_lag
 
 __all__ = ["ContactLag", "contact_lag", "projected_centres"]
 
@@ -64,20 +64,8 @@ _ONSET_FIT_NS = 60_000_000
 def _poses(ctx: CheckContext, rel: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Per object of an ``object_poses`` table: fresh (not held) stamps [N] and [N, 7]
     ``x, y, z, qw, qx, qy, qz``; series whose stamps do not increase are left out (T001)."""
-    cols = ("t_ns", "object", "x", "y", "z", "qw", "qx", "qy", "qz")
-    parts: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for b in batches(ctx, rel, cols):
-        enc = b.column(1).dictionary_encode()
-        codes = enc.indices.to_numpy(zero_copy_only=False)
-        t = column(b, "t_ns").astype(np.int64)
-        v = np.stack([column(b, c) for c in cols[2:]], axis=1).astype(np.float64)
-        for k, name in enumerate(enc.dictionary.to_pylist()):
-            sel = codes == k
-            parts.setdefault(str(name), []).append((t[sel], v[sel]))
     out = {}
-    for name, chunks in parts.items():
-        t = np.concatenate([c[0] for c in chunks])
-        v = np.concatenate([c[1] for c in chunks])
+    for name, (t, v) in entity_series(ctx, rel, "object", _POSE_COLS).items():
         if t.size < 3 or not np.all(np.diff(t) > 0) or not np.all(np.isfinite(v)):
             continue  # T001 / I009
         keep = ~held_mask(t, v)
@@ -477,20 +465,8 @@ def contact_lag(
 
 
 def _wrench_series(ctx: CheckContext, rel: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    cols = ("t_ns", "frame", "fx", "fy", "fz")
-    parts: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for b in batches(ctx, rel, cols):
-        enc = b.column(1).dictionary_encode()
-        codes = enc.indices.to_numpy(zero_copy_only=False)
-        t = column(b, "t_ns").astype(np.int64)
-        v = np.stack([column(b, c) for c in cols[2:]], axis=1).astype(np.float64)
-        for k, name in enumerate(enc.dictionary.to_pylist()):
-            sel = codes == k
-            parts.setdefault(str(name), []).append((t[sel], v[sel]))
     out = {}
-    for name, chunks in parts.items():
-        t = np.concatenate([c[0] for c in chunks])
-        v = np.concatenate([c[1] for c in chunks])
+    for name, (t, v) in entity_series(ctx, rel, "frame", ("fx", "fy", "fz")).items():
         if t.size >= 20 and np.all(np.diff(t) > 0) and np.all(np.isfinite(v)):
             out[name] = (t, v)
     return out

@@ -23,6 +23,7 @@ from .context import CheckContext, InputReported
 __all__ = [
     "BATCH_ROWS",
     "batches",
+    "entity_series",
     "kth_smallest",
     "next_smallest",
     "percentile",
@@ -62,6 +63,32 @@ def batches(
             yield batch
     except (pa.ArrowException, OSError, ValueError):
         raise InputReported(rel) from None  # I006 reads every table and reports it
+
+
+def entity_series(
+    ctx: CheckContext, rel: str, entity: str, values: tuple[str, ...]
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per entity of an interleaving table (``link``, ``object``, ``frame``): its ``t_ns`` [N]
+    int64 and ``values`` [N, C] float64, in table order, read batch by batch.
+
+    Raises:
+        InputReported: as :func:`batches`.
+    """
+    parts: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for b in batches(ctx, rel, ("t_ns", entity, *values)):
+        enc = b.column(1).dictionary_encode()
+        codes = enc.indices.to_numpy(zero_copy_only=False)
+        t = b.column(0).to_numpy(zero_copy_only=False).astype(np.int64)
+        v = np.stack(
+            [b.column(i + 2).to_numpy(zero_copy_only=False) for i in range(len(values))], axis=1
+        ).astype(np.float64)
+        for k, name in enumerate(enc.dictionary.to_pylist()):
+            sel = codes == k
+            parts.setdefault(str(name), []).append((t[sel], v[sel]))
+    return {
+        name: (np.concatenate([c[0] for c in chunks]), np.concatenate([c[1] for c in chunks]))
+        for name, chunks in parts.items()
+    }
 
 
 def _bits(values: np.ndarray) -> np.ndarray:

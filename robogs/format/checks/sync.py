@@ -32,7 +32,7 @@ from .context import CheckContext, InputReported
 from .geometry import _world_from_root, joint_positions, link_geometry
 from .registry import Check, check
 from .stale import held_mask
-from .streaming import batches
+from .streaming import batches, entity_series
 
 __all__ = [
     "LagEstimate",
@@ -300,6 +300,8 @@ def _camera_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 
 # --------------------------------------------------------------------------- stream to stream (T013)
 
+#: value columns of a pose table
+_POSE_COLS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 #: largest lag searched between two streams, ns
 _MAX_STREAM_LAG_NS = 100_000_000
 #: coarse grid step of the search, ns
@@ -532,20 +534,8 @@ def _fk_positions(
 def _ee_series(ctx: CheckContext, rel: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Per link of an ee_poses table: (stamps, positions) of the fresh (not held) samples in
     the windows of most motion (:func:`motion_windows`)."""
-    cols = ("t_ns", "link", "x", "y", "z", "qw", "qx", "qy", "qz")
-    parts: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for b in batches(ctx, rel, cols):
-        enc = b.column(1).dictionary_encode()
-        codes = enc.indices.to_numpy(zero_copy_only=False)
-        t = column(b, "t_ns").astype(np.int64)
-        v = np.stack([column(b, c) for c in cols[2:]], axis=1).astype(np.float64)
-        for k, link in enumerate(enc.dictionary.to_pylist()):
-            sel = codes == k
-            parts.setdefault(str(link), []).append((t[sel], v[sel]))
     out = {}
-    for link, chunks in parts.items():
-        t = np.concatenate([c[0] for c in chunks])
-        v = np.concatenate([c[1] for c in chunks])
+    for link, (t, v) in entity_series(ctx, rel, "link", _POSE_COLS).items():
         if t.size < 3 or not np.all(np.diff(t) > 0):
             continue  # reported by T001
         finite = np.all(np.isfinite(v), axis=1)  # I009 reports the others
