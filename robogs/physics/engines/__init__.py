@@ -9,6 +9,11 @@ Built in:
   batched torch model of :mod:`robogs.physics.model` (one box on a horizontal plane,
   frictionless sphere or capsule pusher).
 
+The fitting engine (:class:`robogs.physics.engine.Engine`, ``backend="planar"|"mujoco"|"auto"``)
+rolls out parameter spaces with effects on either simulator: the MuJoCo side is
+:mod:`~robogs.physics.engines.mujoco_fit`, the effect mapping
+:mod:`~robogs.physics.engines.mujoco_effects`.
+
 An engine is a class following :class:`~robogs.physics.engines.base.Engine`; a user engine is
 registered with :func:`register_engine` or an entry point whose object is such a class::
 
