@@ -555,6 +555,13 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
         f"base model (physics revision {_revision(args.dataset)}, refitted): object position "
         f"rms {d['rms_base_mm']:.2f} mm, noise floor {d['noise_floor_mm']:.2f} mm"
     )
+    g = d.get("gate") or {}
+    if "draws" in g:
+        print(
+            f"gate: {g.get('method')}, family-wise {g.get('alpha', 0.05):.0%}; calibration "
+            f"{g.get('seconds', 0.0):.1f} s, {g.get('draws')} draws"
+            + (" (cached)" if g.get("cached") else "")
+        )
     for s in d.get("skipped", []):
         print(f"  skipped {s['name']}: {s['reason']}")
     found = [e["name"] for e in d["effects"] if e.get("reported")]
