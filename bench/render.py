@@ -11,10 +11,11 @@ Figures (targets from the renderer's design):
   (the 1-thread figure is the in-run baseline), wall and process-CPU time, load average stated;
   with ``--dataset DIR`` also ``render_dataset`` end to end (encode and write included) on that
   dataset's first camera (``robogs synth --size large`` has 104k Gaussians at 640x480);
-- novel poses (``--only novel``): the binding of ``robogs synth --size small`` rendered at joint
-  configurations never recorded against the synthetic scene's independent triangle rasteriser
-  (``tests/render/novel_pose.py``): IoU per link (void band excluded, the validator's rule),
-  boundary error (px) and PSNR, at 2x the camera resolution (320x240).
+- novel poses (``--only novel``): the binding of ``robogs synth --size small --splat-spacing
+  0.007`` (``--spacing``, ``--seed``) rendered at joint configurations never recorded against
+  the synthetic scene's independent triangle rasteriser (``tests/render/novel_pose.py``): IoU
+  per link (void band excluded, the validator's rule), boundary error (px) and PSNR, at 2x the
+  camera resolution (320x240).
 
 Scenes are random but realistic: Gaussians spread through a 1 m cube whose centre is 1.2 m in
 front of the camera (f = 0.9 W, so the cube fills most of the frame), with a screen-space 3-sigma
@@ -27,7 +28,7 @@ counts everything the step allocates (autograd's saved tensors included) and is 
 must provide.
 
 Usage: python bench/render.py [--threads 2] [--repeats 5] [--only all|speed|novel|fps]
-[--dataset DIR] [--no-append]
+[--dataset DIR] [--configs 8] [--seed 0] [--spacing M] [--no-append]
 """
 
 from __future__ import annotations
@@ -267,21 +268,25 @@ def bench_render_dataset(path: str, frames: int = 12) -> dict[str, float]:
     return {"wall": wall, "cpu": cpu, "frames": len(t), "size": f"{m.width}x{m.height}"}
 
 
-def bench_novel_pose(configs: int, seed: int = 0) -> tuple[list[tuple[str, str, str, str]], str]:
-    """Rows of the novel-pose comparison (per link worst IoU and boundary, PSNR) and a summary."""
+def bench_novel_pose(
+    configs: int, seed: int = 0, spacing: float | None = None
+) -> tuple[list[tuple[str, str, str, str]], str]:
+    """Rows of the novel-pose comparison (per link worst IoU and boundary, PSNR) and a summary,
+    on ``synth --size small --splat-spacing spacing`` (default: the test's ``SPACING_M``)."""
     import tempfile
 
     import numpy as np
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "render"))
-    from novel_pose import novel_configurations, novel_pose_metrics  # the test's harness
+    from novel_pose import SPACING_M, novel_configurations, novel_pose_metrics  # test harness
 
     from robogs.format import Dataset
     from robogs.synth.scene import synthesize
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "s"
-        synthesize(out, seed=seed, size="small", progress=False)
+        spacing = SPACING_M if spacing is None else spacing
+        synthesize(out, seed=seed, size="small", progress=False, splat_spacing_m=spacing)
         qs = novel_configurations(Dataset.open(out), configs, seed=seed)
         t0 = time.perf_counter()
         res = novel_pose_metrics(out, qs, scale=2.0)
@@ -316,7 +321,8 @@ def bench_novel_pose(configs: int, seed: int = 0) -> tuple[list[tuple[str, str, 
         )
     )
     summary = (
-        f"novel poses: {len(res)} configurations of synth --size small seed {seed}, each >= "
+        f"novel poses: {len(res)} configurations of synth --size small seed {seed} "
+        f"--splat-spacing {spacing:g}, each >= "
         f"{dist:.2f} rad (max-norm) from every recorded joint state, 320x240, {wall:.1f} s"
     )
     return rows, summary
@@ -330,6 +336,10 @@ def main() -> None:
     ap.add_argument("--only", choices=("all", "speed", "novel", "fps"), default="all")
     ap.add_argument("--dataset", help="with --only fps: also time render_dataset on this dataset")
     ap.add_argument("--configs", type=int, default=8, help="novel-pose configurations")
+    ap.add_argument("--seed", type=int, default=0, help="novel-pose scene and configuration seed")
+    ap.add_argument(
+        "--spacing", type=float, default=None, help="novel-pose surfel spacing, m (default 0.007)"
+    )
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     machine = (
@@ -341,7 +351,7 @@ def main() -> None:
     ]
     rows: list[tuple[str, str, str, str]] = []  # figure, measured, baseline / target, ratio
     if args.only in ("all", "novel"):
-        nrows, summary = bench_novel_pose(args.configs)
+        nrows, summary = bench_novel_pose(args.configs, args.seed, args.spacing)
         head.append(summary)
         rows += nrows
     if args.only == "novel":

@@ -38,7 +38,13 @@ from robogs.synth.scene.raster import PinholeView
 from robogs.synth.scene.render_scene import MeshPart, SceneRenderer
 from robogs.synth.scene.robot_source import generated_ur5
 
-__all__ = ["PoseMetrics", "novel_configurations", "novel_pose_metrics"]
+__all__ = ["SPACING_M", "PoseMetrics", "novel_configurations", "novel_pose_metrics"]
+
+#: surfel spacing of the scene the test and bench build (``robogs synth --splat-spacing``), m.
+#: At 2x the small camera (320x240, f = 266 px) 7 mm is 1.6 px at the 1.18 m working distance
+#: (10 mm, the small preset's, is 2.3 px: above the 1.5 px boundary budget); bench/RESULTS.md
+#: has the sweep (10/8/7/6/5 mm, worst link of 8 configurations per scene).
+SPACING_M = 0.007
 
 
 @dataclass(frozen=True)
