@@ -391,13 +391,15 @@ def reconstruct(
             if tmap.kinds[k - 1] == "robot_link"
         }
         pts = {n: p for n, p in pts.items() if n in lmeshes}
+        # a link below the coverage (only with --force) is a blob seen from one side: it
+        # would bias the fit; its residual is reported apart (all of them fit when none is
+        # covered)
+        poor = {t.name for t in coverage.targets if t.problem(coverage.thresholds)}
         if pts:
             align_rep = align_to_meshes(
                 pts,
                 {n: lm.world_mesh() for n, lm in lmeshes.items()},
-                # a link below the coverage (only with --force) is a blob seen from one side:
-                # it would bias the fit; its residual is reported apart
-                exclude={t.name for t in coverage.targets if t.problem(coverage.thresholds)},
+                exclude=poor if set(pts) - poor else (),
             )
             if options.align == "apply":
                 S = align_rep.transform
