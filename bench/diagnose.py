@@ -123,6 +123,8 @@ def _one(args: tuple[str, str, int, str]) -> dict:
             "dchi2": r.heldout_dchi2,
             "size": r.effect_size,
             "size_total": r.effect_size_total,
+            "stat_sigma2": r.heldout_gain_sigma2,
+            "null_thr_sigma2": r.null_threshold_sigma2,
             "ident": r.verdict != "unidentifiable",
             "verdict": r.verdict,
             "reported": r.reported,
