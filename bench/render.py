@@ -359,6 +359,10 @@ def main() -> None:
         return
     if args.only == "fps":
         backends = ["torch"] + (["numba"] if "numba" in available_backends() else [])
+        if "numba" in backends:
+            # discarded: the first numba configuration of a process ran at ~4x the CPU time of
+            # the later ones in every order tried (2.2-2.8 s vs 0.56 s, 2026-11-26)
+            bench_label_frame(1, args.threads, "numba")
         base = None
         for th in sorted({1, args.threads}):
             for b in backends:
