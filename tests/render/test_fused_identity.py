@@ -24,6 +24,7 @@ pytestmark = pytest.mark.skipif(
 FIELDS = ("rgb", "alpha", "depth_expected", "depth_median", "normals", "extra")
 
 
+# Repeats fused._composite's per-pair arithmetic by design: it is the old path checked against.
 def _pixel_major(tiles, offsets, gids, prm, feats, tiles_x, ts, width, height, surfels, near,
                  inv_sq, out) -> None:  # fmt: skip
     """The kernel before the change, pixel by pixel (compiled below, serial)."""
