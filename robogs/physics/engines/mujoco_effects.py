@@ -84,7 +84,8 @@ class ObjectSlots:
     Attributes:
         body: body id; dof: first DOF address of its free joint; table_pairs: contact-pair rows
         object-table; nominal_mass [kg], nominal_inertia [3] kg m^2 (principal, body frame),
-        nominal_ipos [3] m: the compiled values.
+        nominal_ipos [3] m: the compiled values; tilt_inertia_scale: factor on the roll and
+        pitch inertia (see ``robogs.physics.engines.mujoco_fit.MujocoFit``).
     """
 
     body: int
@@ -93,6 +94,7 @@ class ObjectSlots:
     nominal_mass: float
     nominal_inertia: np.ndarray
     nominal_ipos: np.ndarray
+    tilt_inertia_scale: float = 1.0
 
 
 BOUNCE_TIMECONST = 0.02
@@ -165,6 +167,7 @@ def apply_body(
     s = mass / slots.nominal_mass
     inertia = slots.nominal_inertia * s
     inertia[2] = float(body.inertia_z[m, 0])
+    inertia[:2] *= slots.tilt_inertia_scale
     model.body_mass[b] = mass
     model.body_inertia[b] = inertia
     model.body_ipos[b, :2] = body.com[m, 0].numpy()
