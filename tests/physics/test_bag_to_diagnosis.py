@@ -148,8 +148,8 @@ def test_mass_found_as_on_the_scenario_given_directly(heavy: Path) -> None:
     strict=True,
     reason="known gap: on the converted null bag diagnose reports mass with dm = 0.001 "
     "[-0.006, 0.008] (the interval covers 0) but a held-out chi2 fall of 1111 sigma^2 (gate "
-    "threshold 5.1) and dBIC -313: the base+mass fit reaches a better friction optimum than the "
-    "base fit (multi-start), so the gain is not the mass's",
+    "threshold 5.1) and dBIC -313: likely the base+mass fit reaches a better friction optimum than the "
+    "base fit (its extra start points; not confirmed), so the gain is not the mass's",
 )
 def test_null_bag_reports_nothing(tmp_path: Path) -> None:
     _bag(tmp_path, PRIOR_MASS)
