@@ -9,6 +9,9 @@ Scenario: 9 pushes (robogs.synth.scenarios), dt = 1 ms. Measured in one run:
 * mujoco: steps per second of one rollout of the scene (9 trajectories), and a 64-candidate
   finite-difference batch (64 friction values x 9 trajectories = 576 MuJoCo rollouts) on
   ``mujoco.rollout`` with 1 and 2 threads;
+* the fitting path (``Engine.evaluate`` on each backend): 64 parameter sets over the full
+  catalogue, with no effect, a model-parameter effect (viscous damping: MuJoCo DOF damping) and
+  a per-step force effect (Stribeck: one ``mujoco.rollout`` call per step);
 * the ratio of the two engines' 64-candidate times.
 
     .venv/bin/python bench/simulate.py [--no-write]
@@ -69,6 +72,27 @@ def _mujoco(rec, prep, m: int, threads: int) -> dict[str, float]:
     return {"one": one, "batch": batch}
 
 
+def _fit_path(rec, backend: str, threads: int, m: int, active: str | None) -> float:
+    """Seconds of one ``Engine.evaluate`` of ``m`` parameter sets over the full catalogue
+    space on ``backend`` (``active``: that effect at its nominal value in every set, so the
+    MuJoCo path applies per-step forces when it is a force effect)."""
+    from robogs.physics.effects import available_effects, get_effect
+    from robogs.physics.engine import Engine
+
+    eng = Engine(rec, backend=backend, threads=threads)
+    space = eng.space([get_effect(n) for n in available_effects(model="rigid")])
+    th = np.stack([eng.start(space)] * m)
+    th[:, 0] *= 1.0 + 1e-3 * np.arange(m)
+    if active is not None:
+        for c in space.owner_columns(active):
+            th[:, c] = space.slots[c].param.nominal
+    loc = np.zeros((m, eng.prep.n_traj, 3))
+    eng.evaluate(space, th[:1], loc[:1])  # warm-up
+    t0 = time.perf_counter()
+    eng.evaluate(space, th, loc)
+    return time.perf_counter() - t0
+
+
 def main() -> None:
     torch.set_num_threads(1)  # small tensors: one thread is fastest (and fair on a shared machine)
     import mujoco
@@ -107,7 +131,25 @@ def main() -> None:
         f"{best:.2f} s = {planar['batched'] / best:.2f}x (above 1: mujoco faster)",
         f"- mujoco 2 threads / 1 thread speed-up: {mj[1]['batch'] / mj[2]['batch']:.2f}x",
         "- the planar rollouts stop early once every box rests; mujoco integrates every step",
+        "",
+        f"Fitting path (`Engine.evaluate`, {m} parameter sets over the full catalogue space, "
+        "effects at zero unless named; residuals included):",
+        "",
     ]
+    fit_rows = {}
+    for active in (None, "viscous_damping", "stribeck"):
+        fit_rows[(active, "planar", 1)] = _fit_path(rec, "planar", 1, m, active)
+        for k in (1, 2):
+            fit_rows[(active, "mujoco", k)] = _fit_path(rec, "mujoco", k, m, active)
+    for (active, backend, k), sec in fit_rows.items():
+        ref = fit_rows[(active, "planar", 1)]
+        what = active or "no effect"
+        how = {None: "", "viscous_damping": " (model parameter)", "stribeck": " (per-step force)"}
+        lines.append(
+            f"- {backend}, {k} thread(s), {what}{how[active] if backend == 'mujoco' else ''}: "
+            f"{sec:.2f} s = {m * steps / sec:,.0f} steps/s, {m / sec:.1f} candidate rollouts/s "
+            f"(planar / this = {ref / sec:.2f}x)"
+        )
     print("\n".join(lines))
     if "--no-write" not in sys.argv:
         with (ROOT / "bench" / "RESULTS.md").open("a") as fh:
