@@ -22,8 +22,14 @@ from robogs.physics.space import BASE, ParamSpace
 
 __all__ = ["PlanarEngine", "MAX_TILT_DEG"]
 
-MAX_TILT_DEG = 1.0
-"""A support plane tilted more than this is not horizontal for the planar model."""
+MAX_TILT_DEG = 3.0
+"""A support plane tilted more than this is not horizontal for the planar model [deg].
+
+Below it the planar model keeps the plane horizontal at ``plane_z_m`` (``robogs physics init``
+notes any tilt above 1 deg) and the catalogue's ``tilt`` effect carries the in-plane pull of
+gravity; at 3 deg the plane rises 5 mm over a 100 mm slide, about the size of the pose noise
+of the recordings this model is fitted to, beyond which the lost height dominates and a 3-D
+engine is needed."""
 
 
 class PlanarEngine:
