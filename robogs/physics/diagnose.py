@@ -26,7 +26,8 @@ split; the model linearised at each candidate's fit, min-P over the candidates s
 data any candidate passes 5 % of the time), and the fit must be identifiable. Each row carries
 the quantile it was judged against (``null_threshold_sigma2``), its own 95 % quantile and its
 null p-value; ``DiagnoseResult.gate`` the calibration's cost (draws, seconds, cached).
-ΔBIC and the effect size are reported, not gated.
+ΔBIC and the effect size are reported, not gated, except under 8 trajectories: there the
+between-trajectory variation cannot be resampled and ``delta_bic <= -10`` is required as well.
 
 Quasi-static data (:func:`quasi_static`): when no object slides more than ``QS_SAMPLES``
 samples after losing contact, the dynamics-level effects (viscous, quadratic drag, Stribeck,
@@ -536,7 +537,10 @@ def diagnose_recording(
         why = "; ".join(dict.fromkeys(out.why_param[j] for j in jj if out.why_param[j]))
         stat = float(gate_mod.heldout_statistic(held_t[0], held_t[i], delta))
         thr = cal.thresholds[e.name]
-        gate = stat > thr and ident
+        # too few trajectories to resample what varies between them (gate.MIN_PATTERNS): the
+        # white-noise null alone misses it, so strong in-sample evidence is required as well
+        few = "white-noise null only" in cal.method
+        gate = stat > thr and ident and (not few or dbic <= DBIC_MAX)
         p_own = cal.p_value(e.name, stat)
         if not ident:
             verdict = "unidentifiable"
