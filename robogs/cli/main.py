@@ -25,7 +25,7 @@ __all__ = ["main", "validate_main", "VERBS"]
 #: verb -> (module implementing it, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
     "synth": (
-        "robogs.synth.scene.cli",
+        "robogs.cli.synth_cmd",
         "generate a synthetic scene (optionally with a hidden physical effect)",
     ),
     "validate": ("robogs.cli.validate_cmd", "check a dataset against the spec"),
@@ -52,11 +52,14 @@ VERBS: dict[str, tuple[str, str]] = {
     "report": ("robogs.physics.cli", "HTML report with residual plots before and after"),
     "physics": ("robogs.physics.init.cli", "physics.json from the data: init, show, set KEY=VALUE"),
     "reconstruct": (
-        "robogs.reconstruct.cli",
+        "robogs.cli.reconstruct_cmd",
         "fill splats, meshes and binding from multi-view frames",
     ),
-    "evaluate": ("robogs.reconstruct.cli", "image and mesh quality metrics"),
-    "roles": ("robogs.cli.roles_cmd", "list stream roles with reasons; set: re-role a generic stream"),
+    "evaluate": ("robogs.cli.reconstruct_cmd", "image and mesh quality metrics"),
+    "roles": (
+        "robogs.cli.roles_cmd",
+        "list stream roles with reasons; set: re-role a generic stream",
+    ),
     "plugins": (
         "robogs.cli.plugins_cmd",
         "list the checks, converters, exporters, effects, backends and layers, with status",

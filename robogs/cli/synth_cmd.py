@@ -100,7 +100,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Generate the dataset; print where it and its ground truth are. Returns 0."""
-    from .generate import ground_truth_path, synthesize
+    from robogs.synth.scene.generate import ground_truth_path, synthesize
 
     if getattr(args, "splat_spacing", None) is not None and any(
         x is not None for x in (args.effect, args.capture, getattr(args, "episodes", None))

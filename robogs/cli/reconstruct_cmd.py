@@ -10,8 +10,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from robogs.format.errors import InputError
 
 __all__ = ["add_arguments_for", "run"]
@@ -134,6 +132,8 @@ def _fmt(x: float, unit: str = "") -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    import torch
+
     if args.threads is not None:
         if args.threads < 1:
             raise InputError(f"--threads must be >= 1, got {args.threads}")
@@ -148,11 +148,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_reconstruct(args: argparse.Namespace) -> int:
-    from .coverage import CoverageThresholds
-    from .init import InitConfig
-    from .pipeline import ReconstructOptions, reconstruct
-    from .quality import QualityFloors, ReconstructionRejected
-    from .train import TrainConfig
+    from robogs.reconstruct.coverage import CoverageThresholds
+    from robogs.reconstruct.init import InitConfig
+    from robogs.reconstruct.pipeline import ReconstructOptions, reconstruct
+    from robogs.reconstruct.quality import QualityFloors, ReconstructionRejected
+    from robogs.reconstruct.train import TrainConfig
 
     if args.iterations < 1:
         raise InputError(f"--iterations must be >= 1, got {args.iterations}")
@@ -256,7 +256,7 @@ def _print_reconstruct(rep: Any) -> None:
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
-    from .evaluate import evaluate
+    from robogs.reconstruct.evaluate import evaluate
 
     rep = evaluate(
         args.dataset,
