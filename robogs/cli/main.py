@@ -44,13 +44,13 @@ VERBS: dict[str, tuple[str, str]] = {
         "render a new joint trajectory through the binding into a dataset",
     ),
     "compare": (
-        "robogs.physics.cli",
+        "robogs.cli.physics_cmd",
         "residuals of the physics model against the measurements",
     ),
-    "diagnose": ("robogs.physics.cli", "rank the physical effects the model is missing"),
-    "fit": ("robogs.physics.cli", "add effects, refit and write a new physics revision"),
-    "report": ("robogs.physics.cli", "HTML report with residual plots before and after"),
-    "physics": ("robogs.physics.init.cli", "physics.json from the data: init, show, set KEY=VALUE"),
+    "diagnose": ("robogs.cli.physics_cmd", "rank the physical effects the model is missing"),
+    "fit": ("robogs.cli.physics_cmd", "add effects, refit and write a new physics revision"),
+    "report": ("robogs.cli.physics_cmd", "HTML report with residual plots before and after"),
+    "physics": ("robogs.cli.physics_init_cmd", "physics.json from the data: init, show, set KEY=VALUE"),
     "reconstruct": (
         "robogs.cli.reconstruct_cmd",
         "fill splats, meshes and binding from multi-view frames",

@@ -11,8 +11,8 @@ import pytest
 from physics_scenarios import scenario
 
 from robogs.cli.main import main
+from robogs.cli.physics_cmd import _effects_table
 from robogs.physics.api import diagnose
-from robogs.physics.cli import _effects_table
 from robogs.synth.mutations import perturb_intrinsics
 
 

@@ -22,13 +22,13 @@ from pathlib import Path
 from typing import Any
 
 from robogs.format.errors import InputError
-from robogs.physics.sanity import finish_command, none_found_text, note_diagnosis
-from robogs.physics.split import add_split_argument, split_option
 
 __all__ = ["add_arguments_for", "run"]
 
 
 def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
+    from robogs.physics.split import add_split_argument
+
     p.add_argument("dataset", type=Path, help="robogs dataset folder")
     p.add_argument(
         "--model",
@@ -509,6 +509,8 @@ def _object_auto(args: argparse.Namespace, effects: list[str] | None) -> int:
 
 
 def _diagnose(args: argparse.Namespace, model: str) -> int:
+    from robogs.physics.sanity import none_found_text, note_diagnosis
+
     effects = [e.strip() for e in args.effects.split(",")] if args.effects else None
     if model == "arm":
         from robogs.physics.arm.api import diagnose_arm
@@ -775,6 +777,9 @@ def _log_series(rec: Any, rr: Any, s: dict[str, Any], base: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from robogs.physics.sanity import finish_command
+    from robogs.physics.split import split_option
+
     if not args.dataset.exists():
         raise InputError("dataset folder does not exist", path=args.dataset)
     model = _model(args.dataset, args.model)
