@@ -8,6 +8,7 @@
     robogs render scene/ out/ --from-episode ep000 --orbit 1
     robogs render scene/ out/ --joints traj.csv --simulate       # objects pushed in simulation
     robogs render scene/ lr/ --joints traj.csv --format lerobot  # straight into LeRobot v3
+    robogs render scene/ vid/ --joints traj.csv --format video --normals  # plain files
 
 OUT is a robogs dataset sharing the source's robot, assets, physics and cameras, with one
 rendered episode (RGB video, panoptic labels, depth, 2-D boxes, the commanded joints, FK end-
@@ -17,6 +18,10 @@ replayed from the source episode, or with ``--simulate`` rolled out by a physics
 (:func:`simulate_objects`). ``--format lerobot`` writes the rendered episode (and with
 ``--with-recorded`` the source's episodes too, marked ``recorded``) as a LeRobot v3 dataset
 instead (:mod:`robogs.convert.export.lerobot`, rendered episodes marked ``rendered``).
+``--format video`` writes a plain folder readable without robogs (:func:`write_video_folder`:
+``<camera>/rgb.mp4``, ``labels/``, ``depth/`` and with ``--normals`` ``normals/`` PNGs per frame,
+``frames.csv``, ``boxes.csv``, ``labels.json``, ``video.json``). ``--normals`` adds the
+rendered surface normals (:class:`robogs.format.render_trajectory.RenderedFrame`).
 """
 
 from __future__ import annotations
@@ -28,7 +33,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["add_arguments", "run", "simulate_objects"]
+__all__ = ["add_arguments", "run", "simulate_objects", "write_video_folder", "VIDEO_FORMAT"]
+
+#: ``format`` of ``video.json``: marks a folder written by ``robogs render --format video``
+VIDEO_FORMAT = "robogs-render-video"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -85,9 +93,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--format",
-        choices=("robogs", "lerobot"),
+        choices=("robogs", "lerobot", "video"),
         default="robogs",
-        help="robogs dataset (default) or a LeRobot v3 dataset at OUT",
+        help="robogs dataset (default), a LeRobot v3 dataset, or a plain folder of videos, "
+        "label/depth PNGs and CSVs (video) at OUT",
+    )
+    p.add_argument(
+        "--normals",
+        action="store_true",
+        help="also write the rendered surface normals (camera frame, RGB PNGs n*0.5+0.5; "
+        "--format robogs or video)",
     )
     p.add_argument(
         "--with-recorded",
@@ -151,6 +166,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.with_recorded and args.format != "lerobot":
         raise InputError("--with-recorded applies to --format lerobot", where="--with-recorded")
+    if args.normals and args.format == "lerobot":
+        raise InputError("--normals applies to --format robogs or video", where="--normals")
     poses, objects_source, sim_notes = None, None, []
     if args.simulate:
         poses, objects_source, sim_notes = simulate_objects(
@@ -172,8 +189,11 @@ def run(args: argparse.Namespace) -> int:
         object_poses=poses,
         objects_source=objects_source,
         new_episode=new_episode,
+        normals=args.normals,
     )
-    if args.format == "lerobot":
+    if args.format == "video":
+        summary, report = _render_video(src, traj, args, render_kw), None
+    elif args.format == "lerobot":
         summary, report = _render_lerobot(src, traj, args, render_kw)
     else:
         summary = render_dataset(src, args.out, traj, overwrite=args.force, **render_kw)
@@ -182,6 +202,7 @@ def run(args: argparse.Namespace) -> int:
         print(file=sys.stderr)
     frames = ", ".join(f"{c}: {n}" for c, n in summary.frames.items())
     what = "LeRobot v3 dataset " if report is not None else ""
+    what = "video folder " if args.format == "video" else what
     print(
         f"wrote {what}{args.out} (episode {summary.episode}; frames {frames}; joints {traj.source})"
     )
@@ -223,6 +244,145 @@ def _render_lerobot(
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return summary, report
+
+
+def _render_video(src: Any, traj: Any, args: argparse.Namespace, kw: dict[str, Any]) -> Any:
+    """Render into a temporary dataset beside OUT, write the video folder from it, rename it
+    into place (OUT is replaced only with ``--force`` and only if it is such a folder)."""
+    import json
+    import shutil
+    import tempfile
+
+    from robogs.format.errors import DatasetExistsError
+    from robogs.format.render_trajectory import render_dataset
+
+    out = Path(args.out)
+    if out.exists() or out.is_symlink():
+        marker = out / "video.json"
+        ours = False
+        if out.is_dir() and not out.is_symlink() and marker.is_file():
+            try:
+                ours = json.loads(marker.read_text()).get("format") == VIDEO_FORMAT
+            except (OSError, ValueError, AttributeError):
+                ours = False
+        if not args.force:
+            raise DatasetExistsError("output exists", path=out, hint="pass --force to replace it")
+        if not ours:
+            raise DatasetExistsError(
+                "output exists and is not a robogs render video folder; refusing to replace it",
+                path=out,
+                hint="choose another OUT",
+            )
+    if not out.parent.is_dir():
+        from robogs.format.errors import InputError
+
+        raise InputError("the parent folder of OUT does not exist", path=out)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.render-", dir=out.parent))
+    try:
+        summary = render_dataset(src, tmp / "ds", traj, **kw)
+        write_video_folder(tmp / "ds", summary.episode, tmp / "video")
+        if out.exists():
+            out.rename(tmp / "old")
+        (tmp / "video").rename(out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    summary.out = out
+    return summary
+
+
+def write_video_folder(dataset: str | Path, episode: str, out: str | Path) -> None:
+    """Write episode ``episode`` of a rendered dataset as a plain folder at ``out`` (new).
+
+    Per camera: ``<cam>/rgb.mp4`` (the dataset's video, copied), ``<cam>/labels/<frame:06d>.png``
+    (the dataset's 16-bit panoptic label PNGs, byte for byte), ``<cam>/depth/<frame:06d>.png``
+    (uint16 mm, 0: no hit), ``<cam>/normals/<frame:06d>.png`` where the dataset has normals, and
+    ``<cam>/frames.csv`` (``frame_index,t_ns``; int64 ns, dataset clock). Beside them
+    ``boxes.csv`` (pixel edges, max exclusive), ``labels.json`` (label id -> link or object) and
+    ``video.json`` (the layout, units, cameras).
+    """
+    import csv
+    import json
+    import shutil
+
+    from robogs.format import Dataset
+
+    ds = Dataset.open(dataset)
+    ep = ds.episode(episode)
+    out = Path(out)
+    out.mkdir()
+    cams: dict[str, Any] = {}
+    for cam in sorted(ep.camera_streams):
+        cdir = out / cam
+        cdir.mkdir()
+        shutil.copyfile(ep.video_path(cam), cdir / "rgb.mp4")
+        fr = ep.frames(cam)
+        idx = fr.column("frame_index").to_numpy()
+        with open(cdir / "frames.csv", "w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(["frame_index", "t_ns"])
+            w.writerows(zip(idx.tolist(), fr.column("t_ns").to_numpy().tolist(), strict=True))
+        lab = _pq_read(ep.labels_path(cam))
+        images = {"labels": (lab.column("frame_index"), lab.column("png"))}
+        for kind in ("depth", "normals"):
+            if ep.has(f"{kind}/{cam}"):
+                t = ep.table(f"{kind}/{cam}")
+                images[kind] = (t.column("frame_index"), t.column("png"))
+        for kind, (fi, png) in images.items():
+            (cdir / kind).mkdir()
+            for k, blob in zip(fi.to_pylist(), png.to_pylist(), strict=True):
+                (cdir / kind / f"{int(k):06d}.png").write_bytes(blob)
+        m = ds.camera(cam)
+        d = m.to_dict()
+        if ep.camera_streams[cam].get("extrinsics"):
+            d["extrinsics_csv"] = f"{cam}/extrinsics.csv"
+            x = _pq_read(ds.resolve(ep.camera_streams[cam]["extrinsics"]))
+            with open(cdir / "extrinsics.csv", "w", newline="", encoding="utf-8") as fh:
+                w = csv.writer(fh)
+                w.writerow(x.column_names)
+                w.writerows(zip(*(x.column(c).to_pylist() for c in x.column_names), strict=True))
+        cams[cam] = {"frames": len(idx), "images": sorted(images), "camera": d}
+    rows = ep.table("boxes2d").to_pylist() if ep.has("boxes2d") else []
+    cols = ["t_ns", "camera", "frame_index", "label_id", "x_min", "y_min", "x_max", "y_max"]
+    with open(out / "boxes.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(cols)
+        for r in rows:
+            w.writerow([r[c] if isinstance(r[c], str) else int(r[c]) for c in cols])
+    labels = {
+        str(int(s["label_id"])): {
+            "name": s["target"],
+            "kind": s["kind"],
+            "category": s["category"],
+            "instance": s["instance"],
+        }
+        for s in ep.table("segments").to_pylist()
+    }
+    (out / "labels.json").write_text(json.dumps({"0": None, **labels}, indent=1) + "\n")
+    doc = {
+        "format": VIDEO_FORMAT,
+        "version": 1,
+        "source": ds.manifest.get("provenance", {}).get("rendered", {}).get("source"),
+        "episode": episode,
+        "rgb": "<camera>/rgb.mp4 (mp4v); video frame k is row k of <camera>/frames.csv",
+        "frames": "<camera>/frames.csv: frame_index,t_ns (int64 ns, dataset clock)",
+        "labels": "<camera>/labels/<frame:06d>.png: uint16 panoptic label ids (labels.json; "
+        "0: nothing)",
+        "depth": "<camera>/depth/<frame:06d>.png: uint16 depth along the camera z axis in "
+        "millimetres; 0 = no hit",
+        "normals": "<camera>/normals/<frame:06d>.png (with --normals): 8-bit RGB, "
+        "n * 0.5 + 0.5 of the unit surface normal in the camera frame (OpenCV axes: x right, "
+        "y down, z forward, facing the camera), the rendered splat normals; (0, 0, 0) = none",
+        "boxes": "boxes.csv: 2-D boxes per label, pixel edges, max exclusive",
+        "cameras": cams,
+    }
+    (out / "video.json").write_text(json.dumps(doc, indent=1) + "\n")
+
+
+def _pq_read(path: Path) -> Any:
+    """A Parquet file as a ``pyarrow.Table``."""
+    import pyarrow.parquet as pq
+
+    return pq.read_table(path)
 
 
 def simulate_objects(

@@ -14,7 +14,12 @@ with one label channel per bound target, which gives per frame:
   construction and ``robogs-validate`` checks that end to end;
 * depth: the median depth (m, camera z) where a label is drawn, stored as a 16-bit PNG in mm
   (0: none) in the generic stream ``depth/<cam>``;
-* 2-D boxes of every label (pixel edges, max exclusive).
+* 2-D boxes of every label (pixel edges, max exclusive);
+* optionally (``normals=True``) surface normals in the camera frame (OpenCV axes, facing the
+  camera): the renderer's blended splat normals (``RenderOutput.normals``: a 2DGS surfel's own
+  normal, a 3DGS Gaussian's shortest axis) renormalised, where a label is drawn; stored as
+  8-bit RGB PNGs ``n * 0.5 + 0.5`` (0, 0, 0: none; :func:`encode_normals_png`) in the generic
+  stream ``normals/<cam>``.
 
 The output is a dataset (:func:`render_dataset`) that shares the source's robot, assets,
 physics and cameras (hard links where the file system allows, copies otherwise) and holds one
@@ -54,6 +59,8 @@ __all__ = [
     "parse_edits",
     "orbit_poses",
     "label_boxes",
+    "encode_normals_png",
+    "decode_normals_png",
     "RenderedFrame",
     "TrajectoryRenderer",
     "RenderSummary",
@@ -294,6 +301,35 @@ def label_boxes(labels: np.ndarray) -> list[tuple[int, int, int, int, int]]:
     return out
 
 
+def encode_normals_png(normals: np.ndarray) -> bytes:
+    """[H, W, 3] unit normals (zero: none) -> 8-bit RGB PNG of ``round((n * 0.5 + 0.5) * 255)``;
+    pixels without a normal are (0, 0, 0), which no unit normal encodes to."""
+    import cv2
+
+    n = np.asarray(normals, np.float64)
+    rgb = np.clip(np.round((n * 0.5 + 0.5) * 255.0), 0, 255).astype(np.uint8)
+    rgb[~np.any(n != 0, -1)] = 0
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]))
+    if not ok:
+        raise FormatError("PNG encoding failed")
+    return buf.tobytes()
+
+
+def decode_normals_png(blob: bytes) -> np.ndarray:
+    """Inverse of :func:`encode_normals_png`: [H, W, 3] float32 normals, renormalised, zero where
+    none (the 8-bit encoding is good to about 0.5 degrees)."""
+    import cv2
+
+    img = cv2.imdecode(np.frombuffer(blob, np.uint8), cv2.IMREAD_COLOR)
+    if img is None:
+        raise FormatError("normals image is not a decodable PNG")
+    rgb = img[..., ::-1].astype(np.float64)
+    n = rgb / 255.0 * 2.0 - 1.0
+    norm = np.linalg.norm(n, axis=-1, keepdims=True)
+    n = np.where(rgb.any(-1, keepdims=True), n / np.maximum(norm, 1e-12), 0.0)
+    return n.astype(np.float32)
+
+
 def resolve_backend(name: str, device: str = "cpu") -> str:
     """The render backend ``name`` stands for: ``auto`` is the compiled forward-only ``numba``
     backend on CPU when it is installed (about 1.5x the torch backend's frame rate on a 104k
@@ -320,11 +356,13 @@ class _CommandedBinding(Binding):
 
 @dataclass
 class RenderedFrame:
-    """One rendered frame: RGB uint8 [H, W, 3], labels uint16 [H, W], depth m float32 [H, W]."""
+    """One rendered frame: RGB uint8 [H, W, 3], labels uint16 [H, W], depth m float32 [H, W],
+    unit normals float32 [H, W, 3] (camera frame, OpenCV axes; 0 where no label is drawn)."""
 
     rgb: np.ndarray
     labels: np.ndarray
     depth: np.ndarray
+    normals: np.ndarray
 
 
 class TrajectoryRenderer:
@@ -368,7 +406,11 @@ class TrajectoryRenderer:
         labels = self._ids[p.argmax(-1)]
         rgb = (out.rgb.clamp(0.0, 1.0) * 255.0).round().to(torch.uint8).cpu().numpy()
         depth = out.depth_median.cpu().numpy().astype(np.float32)
-        return RenderedFrame(rgb, labels, np.where(labels > 0, depth, 0.0).astype(np.float32))
+        n = out.normals.double().cpu().numpy()
+        norm = np.linalg.norm(n, axis=-1, keepdims=True)
+        ok = (labels > 0)[..., None] & (norm > 1e-6)
+        n = np.where(ok, n / np.where(ok, norm, 1.0), 0.0).astype(np.float32)
+        return RenderedFrame(rgb, labels, np.where(labels > 0, depth, 0.0).astype(np.float32), n)
 
 
 @dataclass
@@ -453,6 +495,7 @@ def render_dataset(
     object_poses: PoseStreams | None = None,
     objects_source: str | None = None,
     keep_episodes: bool = False,
+    normals: bool = False,
 ) -> RenderSummary:
     """Render ``traj`` into a new dataset at ``out`` (see the module docstring).
 
@@ -479,6 +522,8 @@ def render_dataset(
         objects_source: how ``object_poses`` were made, for the stream and the provenance.
         keep_episodes: also keep the source's episodes (files shared) beside the rendered one,
             so that recorded and rendered episodes can be exported together.
+        normals: also write the rendered surface normals (:class:`RenderedFrame`) as the
+            generic stream ``normals/<cam>`` (``t_ns, frame_index, png``: RGB PNGs).
 
     Returns:
         What was written, with a warning per camera that saw nothing in some frames.
@@ -628,7 +673,7 @@ def render_dataset(
                 src, ep, traj, model, pose_of=pose_of, backend=backend, binding=base_binding
             )
             cdir = f"{e}/cameras/{model.name}"
-            pngs, dpngs, empty = [], [], 0
+            pngs, dpngs, npngs, empty = [], [], [], 0
             with VideoWriter(writer.path(f"{cdir}/rgb.mp4"), model.width, model.height, fps) as vw:
                 for k, t in enumerate(t_f):
                     fr = r.frame(int(t))
@@ -636,6 +681,8 @@ def render_dataset(
                     pngs.append(encode_label_png(fr.labels))
                     mm = np.clip(np.round(fr.depth * 1000.0), 0, 65535).astype(np.uint16)
                     dpngs.append(encode_label_png(mm))
+                    if normals:
+                        npngs.append(encode_normals_png(fr.normals))
                     found = label_boxes(fr.labels)
                     empty += not found
                     boxes += [(int(t), model.name, k, *b) for b in found]
@@ -658,6 +705,22 @@ def render_dataset(
                 pa.table({"t_ns": t_f, "frame_index": idx, "png": pa.array(dpngs, pa.binary())}),
                 kind="generic",
             )
+            if normals:
+                writer.write_table(
+                    f"{cdir}/normals.parquet",
+                    pa.table(
+                        {"t_ns": t_f, "frame_index": idx, "png": pa.array(npngs, pa.binary())}
+                    ),
+                    kind="generic",
+                )
+                streams[f"normals/{model.name}"] = {
+                    "kind": "generic",
+                    "path": f"{cdir}/normals.parquet",
+                    "nominal_rate_hz": _rate(t_f),
+                    "source": "rendered splat normals, camera frame (OpenCV axes), "
+                    "8-bit RGB PNG n*0.5+0.5 (0,0,0: none)",
+                    **derived,
+                }
             cam_stream: dict[str, Any] = {
                 "kind": "camera",
                 "camera": model.name,
