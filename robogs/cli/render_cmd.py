@@ -283,7 +283,12 @@ def _render_video(src: Any, traj: Any, args: argparse.Namespace, kw: dict[str, A
         write_video_folder(tmp / "ds", summary.episode, tmp / "video")
         if out.exists():
             out.rename(tmp / "old")
-        (tmp / "video").rename(out)
+        try:
+            (tmp / "video").rename(out)
+        except OSError:
+            if (tmp / "old").exists():
+                (tmp / "old").rename(out)  # put the replaced folder back
+            raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     summary.out = out
