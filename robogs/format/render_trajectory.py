@@ -357,12 +357,13 @@ class _CommandedBinding(Binding):
 @dataclass
 class RenderedFrame:
     """One rendered frame: RGB uint8 [H, W, 3], labels uint16 [H, W], depth m float32 [H, W],
-    unit normals float32 [H, W, 3] (camera frame, OpenCV axes; 0 where no label is drawn)."""
+    unit normals float32 [H, W, 3] (camera frame, OpenCV axes; 0 where no label is drawn) when
+    asked for, else None."""
 
     rgb: np.ndarray
     labels: np.ndarray
     depth: np.ndarray
-    normals: np.ndarray
+    normals: np.ndarray | None = None
 
 
 class TrajectoryRenderer:
@@ -398,19 +399,22 @@ class TrajectoryRenderer:
         )
         self._ids = np.concatenate([[0], self.channels.label_ids]).astype(np.uint16)
 
-    def frame(self, t_ns: int) -> RenderedFrame:
-        """Render at ``t_ns`` (dataset clock)."""
+    def frame(self, t_ns: int, *, normals: bool = False) -> RenderedFrame:
+        """Render at ``t_ns`` (dataset clock); ``normals``: also the unit splat normals."""
         with torch.no_grad():
             out = self.rr.render(int(t_ns))
         p = self.rr.probabilities(out)
         labels = self._ids[p.argmax(-1)]
         rgb = (out.rgb.clamp(0.0, 1.0) * 255.0).round().to(torch.uint8).cpu().numpy()
         depth = out.depth_median.cpu().numpy().astype(np.float32)
+        depth = np.where(labels > 0, depth, 0.0).astype(np.float32)
+        if not normals:
+            return RenderedFrame(rgb, labels, depth)
         n = out.normals.double().cpu().numpy()
         norm = np.linalg.norm(n, axis=-1, keepdims=True)
         ok = (labels > 0)[..., None] & (norm > 1e-6)
         n = np.where(ok, n / np.where(ok, norm, 1.0), 0.0).astype(np.float32)
-        return RenderedFrame(rgb, labels, np.where(labels > 0, depth, 0.0).astype(np.float32), n)
+        return RenderedFrame(rgb, labels, depth, n)
 
 
 @dataclass
@@ -676,12 +680,13 @@ def render_dataset(
             pngs, dpngs, npngs, empty = [], [], [], 0
             with VideoWriter(writer.path(f"{cdir}/rgb.mp4"), model.width, model.height, fps) as vw:
                 for k, t in enumerate(t_f):
-                    fr = r.frame(int(t))
+                    fr = r.frame(int(t), normals=normals)
                     vw.write(fr.rgb)
                     pngs.append(encode_label_png(fr.labels))
                     mm = np.clip(np.round(fr.depth * 1000.0), 0, 65535).astype(np.uint16)
                     dpngs.append(encode_label_png(mm))
                     if normals:
+                        assert fr.normals is not None
                         npngs.append(encode_normals_png(fr.normals))
                     found = label_boxes(fr.labels)
                     empty += not found
