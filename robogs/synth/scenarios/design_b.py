@@ -41,12 +41,13 @@ from robogs.synth.scenarios.generate import (
     ScenarioRecording,
     ScenarioTrajectory,
     _observe,
+    _path,
     _quat_mul,
     _quat_yaw,
     _small_rot,
 )
 from robogs.synth.scenarios.motions import Motion, grasp_place, push, release_slide
-from robogs.synth.scenarios.sim import EEPath, TruthBox, TruthEffect, simulate_truth
+from robogs.synth.scenarios.sim import TruthBox, TruthEffect, simulate_truth
 
 __all__ = [
     "BOX_B",
@@ -102,20 +103,6 @@ def _motions(box: TruthBox, quasi_static: bool) -> list[Motion]:
             out.append(release_slide(box, FINE_DT, 2.5 + 2.2 * j, v, f"bslide_{j}"))
         out.append(grasp_place(box, FINE_DT, -0.8, 0.03, "bplace_0"))
     return out
-
-
-def _path(motions: list[Motion]) -> EEPath:
-    k = max(len(m.pos) for m in motions)
-
-    def pad(a: np.ndarray) -> np.ndarray:
-        return np.concatenate([a, np.repeat(a[-1:], k - len(a), axis=0)], axis=0)
-
-    return EEPath(
-        dt=FINE_DT,
-        pos=np.stack([pad(m.pos) for m in motions]),
-        yaw=np.stack([pad(m.yaw) for m in motions]),
-        grasp=np.stack([pad(m.grasp) for m in motions]),
-    )
 
 
 @functools.lru_cache(maxsize=32)
