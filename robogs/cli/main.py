@@ -50,7 +50,10 @@ VERBS: dict[str, tuple[str, str]] = {
     "diagnose": ("robogs.cli.physics_cmd", "rank the physical effects the model is missing"),
     "fit": ("robogs.cli.physics_cmd", "add effects, refit and write a new physics revision"),
     "report": ("robogs.cli.physics_cmd", "HTML report with residual plots before and after"),
-    "physics": ("robogs.cli.physics_init_cmd", "physics.json from the data: init, show, set KEY=VALUE"),
+    "physics": (
+        "robogs.cli.physics_init_cmd",
+        "physics.json from the data: init, show, set KEY=VALUE",
+    ),
     "reconstruct": (
         "robogs.cli.reconstruct_cmd",
         "fill splats, meshes and binding from multi-view frames",

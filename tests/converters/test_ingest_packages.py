@@ -14,8 +14,8 @@ import pytest
 
 from robogs.convert.ingest.context import ConvertOptions
 from robogs.convert.ingest.convert import convert_path
-from robogs.format.packages import find_packages, package_uris
 from robogs.format.errors import RobogsError
+from robogs.format.packages import find_packages, package_uris
 
 
 def _stl(path: Path, scale: float) -> bytes:
