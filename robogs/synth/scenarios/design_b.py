@@ -37,6 +37,7 @@ import numpy as np
 
 from robogs.synth.scenarios.generate import (
     FAMILY,
+    FINE_DT,
     TRUE_PARAMS,
     ScenarioRecording,
     ScenarioTrajectory,
@@ -44,7 +45,9 @@ from robogs.synth.scenarios.generate import (
     _path,
     _quat_mul,
     _quat_yaw,
+    _sample,
     _small_rot,
+    observed_with_sigma,
 )
 from robogs.synth.scenarios.motions import Motion, grasp_place, push, release_slide
 from robogs.synth.scenarios.sim import TruthBox, TruthEffect, simulate_truth
@@ -61,7 +64,6 @@ __all__ = [
     "detectable_b",
 ]
 
-FINE_DT = 2.5e-4
 BOX_B = TruthBox(
     size=(0.05, 0.05, 0.04),
     mass=0.25,
@@ -122,13 +124,6 @@ def _truth(effect: str, quasi_static: bool, mu_d: float | None):
     return motions, path, pos, yaw
 
 
-def _sample(arr: np.ndarray, t: np.ndarray) -> np.ndarray:
-    grid = np.arange(arr.shape[0]) * FINE_DT
-    if arr.ndim == 1:
-        return np.interp(t, grid, arr)
-    return np.stack([np.interp(t, grid, arr[:, i]) for i in range(arr.shape[1])], axis=-1)
-
-
 @functools.lru_cache(maxsize=32)
 def expected_delta_bic(effect: str, quasi_static: bool = False) -> float:
     """Expected ΔBIC of adding ``effect`` to the plain model on design B (module docstring)."""
@@ -140,16 +135,7 @@ def expected_delta_bic(effect: str, quasi_static: bool = False) -> float:
     shift = TRUE_PARAMS[effect].get("delta", 0.0) if effect == "time_offset" else 0.0
     keep = 1.0 - NOISE_B["drop"]
 
-    def obs(p: np.ndarray, y: np.ndarray, s: float, eff: str):
-        ps = np.stack([_sample(p[i], t - s) for i in range(p.shape[0])])
-        ys = np.stack([_sample(y[i], t - s) for i in range(p.shape[0])])
-        return _observe(eff, ps, ys)
-
-    pe, ye = obs(pos, yaw, shift, effect)
-    vel = np.gradient(pe, 1 / CAMERA_HZ_B, axis=1)
-    sig = np.sqrt(NOISE_B["pos"] ** 2 + (NOISE_B["jitter"] * vel) ** 2)
-    wv = np.gradient(ye, 1 / CAMERA_HZ_B, axis=1)
-    sig_y = np.sqrt(NOISE_B["rot"] ** 2 + (NOISE_B["jitter"] * wv) ** 2)
+    obs, pe, ye, sig, sig_y = observed_with_sigma(pos, yaw, t, shift, effect, NOISE_B, CAMERA_HZ_B)
 
     def chi2(mu: float) -> float:
         _, _, p0, y0 = _truth("none", quasi_static, round(mu, 6))

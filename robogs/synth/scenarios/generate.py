@@ -16,6 +16,7 @@ aggregated ``z = sqrt(sum (delta / sigma)^2) >= 8``. Cases that fail raise ``Val
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -242,6 +243,35 @@ def detectability(
     return _detectability(effect, noise, tuple(kinds), n_speeds, n_dirs)
 
 
+def observed_with_sigma(
+    pos: np.ndarray,
+    yaw: np.ndarray,
+    t: np.ndarray,
+    shift: float,
+    effect: str,
+    noise: dict[str, float],
+    hz: float,
+) -> tuple[
+    Callable[..., tuple[np.ndarray, np.ndarray]], np.ndarray, np.ndarray, np.ndarray, np.ndarray
+]:
+    """The fine truth ``pos``/``yaw`` [traj, fine step, ...] seen at ``t - shift`` [s] through
+    ``effect``'s sensor model, with per-sample sigmas sqrt(pose^2 + (jitter * speed)^2) at
+    ``hz``; returns ``(obs, p, y, sig_pos, sig_yaw)``, ``obs(p, y, shift, effect)`` the same
+    sampler for other truths."""
+
+    def obs(p: np.ndarray, y: np.ndarray, s: float, eff: str):
+        ps = np.stack([_sample(p[i], t - s) for i in range(p.shape[0])])
+        ys = np.stack([_sample(y[i], t - s) for i in range(p.shape[0])])
+        return _observe(eff, ps, ys)
+
+    pe, ye = obs(pos, yaw, shift, effect)
+    vel = np.gradient(pe, 1 / hz, axis=1)
+    sig = np.sqrt(noise["pos"] ** 2 + (noise["jitter"] * vel) ** 2)
+    wv = np.gradient(ye, 1 / hz, axis=1)
+    sig_y = np.sqrt(noise["rot"] ** 2 + (noise["jitter"] * wv) ** 2)
+    return obs, pe, ye, sig, sig_y
+
+
 @functools.lru_cache(maxsize=64)
 def _detectability(
     effect: str, noise: str, kinds: tuple[str, ...], n_speeds: int, n_dirs: int
@@ -253,16 +283,7 @@ def _detectability(
     t = np.arange(0.0, (pos.shape[1] - 1) * FINE_DT - 0.05, 1 / CAMERA_HZ)
     delta = TRUE_PARAMS[effect].get("delta", 0.0) if effect == "time_offset" else 0.0
 
-    def obs(p: np.ndarray, y: np.ndarray, shift: float, eff: str):
-        ps = np.stack([_sample(p[i], t - shift) for i in range(p.shape[0])])
-        ys = np.stack([_sample(y[i], t - shift) for i in range(p.shape[0])])
-        return _observe(eff, ps, ys)
-
-    p_eff, y_eff = obs(pos, yaw, delta, effect)
-    vel = np.gradient(p_eff, 1 / CAMERA_HZ, axis=1)
-    sig = np.sqrt(nz["pos"] ** 2 + (nz["jitter"] * vel) ** 2)
-    wv = np.gradient(y_eff, 1 / CAMERA_HZ, axis=1)
-    sig_y = np.sqrt(nz["rot"] ** 2 + (nz["jitter"] * wv) ** 2)
+    obs, p_eff, y_eff, sig, sig_y = observed_with_sigma(pos, yaw, t, delta, effect, nz, CAMERA_HZ)
 
     def chi2(mu: float) -> float:
         _, _, _, p0, y0 = _truth("none", kinds, n_speeds, n_dirs, mu)
