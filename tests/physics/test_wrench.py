@@ -113,3 +113,18 @@ def test_without_wrench_mass_stays_unidentifiable():
     res = diagnose_recording(rec, effects=["mass"])
     row = next(r for r in res.rows if r.name == "mass")
     assert row.verdict == "unidentifiable" and not row.reported
+
+
+def test_mujoco_engine_says_it_leaves_the_wrench_out():
+    """MuJoCo predicts no pusher force: the measured wrench is dropped with a warning, never
+    silently; the planar engine uses it and says nothing."""
+    import warnings
+
+    from robogs.physics.engine import Engine
+
+    rec = make_force_push(seed=3)
+    with pytest.warns(UserWarning, match="wrench is not used on the mujoco engine"):
+        Engine(rec, dt=1e-3, backend="mujoco")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        Engine(rec, dt=1e-3, backend="planar")
