@@ -7,7 +7,7 @@ The user-facing functions live in :mod:`robogs.physics.api` (``compare``,
 
 from __future__ import annotations
 
-from typing import Any
+from robogs._lazy import lazy_getattr
 
 __all__ = [
     "register_effect",
@@ -28,10 +28,4 @@ _LAZY = {
 }
 
 
-# PEP 562 lazy names; physics/arm/__init__.py has the same few lines for its own table by design.
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(name)
+__getattr__ = lazy_getattr(__name__, _LAZY)

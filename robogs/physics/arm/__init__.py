@@ -16,7 +16,7 @@ Public entry points (imported lazily):
 
 from __future__ import annotations
 
-from typing import Any
+from robogs._lazy import lazy_getattr
 
 __all__ = [
     "ArmModel",
@@ -45,9 +45,4 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(name)
+__getattr__ = lazy_getattr(__name__, _LAZY)
