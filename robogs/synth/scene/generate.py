@@ -665,22 +665,28 @@ def _physics(robot: RobotAssets, box: BoxDynamics) -> dict[str, Any]:
     }
 
 
-# generate() names every argument again: synth is kept explicit and independent.
 def _ground_truth(
-    seed,
-    size,
-    robot,
-    box,
-    box_start,
-    tl,
-    cam,
-    cam_stamps,
-    q_frames,
-    box_frames,
-    rest,
-    link_label,
-    wall_s,
+    seed: int,
+    size: str,
+    robot: RobotAssets,
+    box: BoxDynamics,
+    box_start: tuple[float, float, float],
+    tl: _Timeline,
+    cam: CameraModel,
+    cam_stamps: np.ndarray,
+    q_frames: np.ndarray,
+    box_frames: np.ndarray,
+    rest: dict[str, Any],
+    link_label: dict[str, int],
+    wall_s: float,
 ) -> dict[str, Any]:
+    """The ``ground_truth.json`` record of a generated scene (the oracle the tests read).
+
+    ``box_start`` is (x [m], y [m], yaw [rad]) in the world frame; ``cam_stamps`` are the camera
+    stamps [s] after the scene's t0, ``q_frames`` [N, joints] (rad) and ``box_frames`` [N, 7]
+    (x, y, z, qw, qx, qy, qz; world frame) the true joints and box pose at those stamps;
+    ``wall_s`` the generation time [s].
+    """
     end = tl.sim_states[-1]
     return {
         "seed": int(seed),
