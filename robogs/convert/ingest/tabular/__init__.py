@@ -36,7 +36,8 @@ and zero ``velocity.<j>`` columns, listed in the stream's ``derived``, and no ef
 Recorded end-effector (TCP) poses, e.g. UR RTDE ``actual_TCP_pose_0..5`` or Franka
 ``O_T_EE_0..15``, become an ``ee_poses`` stream of a declared link with an ``ee_pose`` section
 (:mod:`robogs.convert.ingest.tabular.pose`); a map with only ``ee_pose`` (and ``hold``, ``gap_s``)
-keeps the automatic layouts for the joints. Without one, Franka's ``O_T_EE_0..15`` (libfranka:
+keeps the automatic layouts for the joints. Without one, UR RTDE's ``actual_TCP_pose_0..5`` is read
+as ``tool0`` in UR's ``base`` link, and Franka's ``O_T_EE_0..15`` (libfranka:
 the column-major 4x4 ``T_O_EE``) is read as the pose of the URDF's ``*hand_tcp`` link, or of its
 ``*link8`` flange when the URDF has no hand (:func:`~.mapping.infer_ee_pose`; the provenance
 says which).

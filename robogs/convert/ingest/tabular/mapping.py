@@ -2,7 +2,8 @@
 
 :func:`read_mapping` reads a ``--map`` YAML (format in :mod:`robogs.convert.ingest.tabular`);
 :func:`auto_mapping` recognises UR RTDE, Franka and generic indexed or named columns from the
-header; :func:`infer_ee_pose` picks up Franka's ``O_T_EE_0..15``; :func:`resolve_time` settles
+header; :func:`infer_ee_pose` picks up UR RTDE's ``actual_TCP_pose_0..5`` and Franka's
+``O_T_EE_0..15``; :func:`resolve_time` settles
 a time unit left to be guessed from the values and says how it was chosen.
 """
 
@@ -25,6 +26,7 @@ from .reading import TIME_SCALE, RawLog, guess_time_unit, to_float
 __all__ = [
     "ColumnMap",
     "JointColumns",
+    "EE_POSE_PREFIXES",
     "SEGMENT_COLUMNS",
     "auto_mapping",
     "infer_ee_pose",
@@ -511,28 +513,48 @@ def auto_mapping(columns: list[str], joint_names: list[str], path: Path) -> Colu
 
 #: libfranka ``RobotState.O_T_EE``: the end-effector frame in the base frame ``O``, 4x4 column-major
 _FRANKA_EE = "O_T_EE"
+#: UR RTDE ``actual_TCP_pose``: the TCP in the controller's base frame, ``x y z`` m and the rotation
+#: vector ``rx ry rz`` rad (axis times angle)
+_RTDE_TCP = "actual_TCP_pose"
+#: ur_description's link for the controller's base frame (``base_link`` turned by pi about z)
+_UR_BASE = "base"
+#: ur_description's flange link, the TCP when the controller has no TCP offset configured
+_UR_TOOL = "tool0"
+#: header prefixes :func:`infer_ee_pose` reads
+EE_POSE_PREFIXES = (_FRANKA_EE, _RTDE_TCP)
 
 
 def infer_ee_pose(columns: list[str], link_names: list[str]) -> tuple[EePoseColumns | None, str]:
-    """Franka ``O_T_EE_0..15`` as an ``ee_pose`` spec, with the reason for the link chosen.
+    """UR RTDE ``actual_TCP_pose_0..5`` or Franka ``O_T_EE_0..15`` as an ``ee_pose`` spec, with
+    a sentence saying how it is read (or, when ``spec`` is None, why it is not).
 
-    ``O_T_EE`` is ``T_O_EE`` column by column (libfranka ``RobotState``), ``O`` the robot base
-    (the URDF root link). The link is the URDF's ``*hand_tcp`` (the end effector libfranka
-    reports with a Franka Hand), else, in a URDF without a hand, its ``*link8`` (the flange,
-    the end effector with no hand configured). Other robots' links are not guessed: a map's
-    ``ee_pose`` section names them.
+    * RTDE (Universal Robots, "Real-Time Data Exchange" guide): ``actual_TCP_pose`` is ``x y z``
+      (m) and the rotation vector ``rx ry rz`` (rad) of the TCP in the controller's base frame.
+      ur_description names that frame ``base`` (a fixed child of ``base_link``, turned by pi
+      about z) and the flange ``tool0``; the poses are read as ``tool0`` in ``base`` (in the
+      root link when the URDF has no ``base``). A TCP offset set on the controller moves the
+      recorded point off ``tool0``: a map's ``ee_pose`` then names the right link.
+    * Franka: ``O_T_EE`` is ``T_O_EE`` column by column (libfranka ``RobotState``), ``O`` the
+      robot base (the URDF root link). The link is the URDF's ``*hand_tcp`` (the end effector
+      libfranka reports with a Franka Hand), else, in a URDF without a hand, its ``*link8``
+      (the flange, the end effector with no hand configured).
+
+    Other robots' links are not guessed: a map's ``ee_pose`` section names them.
 
     Args:
         columns: the log's header.
-        link_names: the robot's links.
+        link_names: the robot's links, root first.
 
     Returns:
-        ``(spec, why)``; ``spec`` is None (and ``why`` says why) when the 16 columns are not
-        all there or no link fits.
+        ``(spec, why)``; ``spec`` is None when the columns are not all there or no link fits.
     """
-    cols = _zero_based(_indexed_family(set(columns), _FRANKA_EE))
+    names = set(columns)
+    rtde = _zero_based(_indexed_family(names, _RTDE_TCP))
+    if rtde:
+        return _infer_rtde(rtde, link_names)
+    cols = _zero_based(_indexed_family(names, _FRANKA_EE))
     if sorted(cols) != list(range(16)):
-        return None, f"{_FRANKA_EE} needs 16 columns {_FRANKA_EE}_0..15"
+        return None, f"{_FRANKA_EE}* ignored ({_FRANKA_EE} needs 16 columns {_FRANKA_EE}_0..15"
     tcp = [n for n in link_names if re.search(r"(^|_)hand_tcp$", n)]
     hands = [n for n in link_names if re.search(r"(^|_)hand$", n)]
     flange = [n for n in link_names if re.search(r"(^|_)link8$", n)]
@@ -541,12 +563,38 @@ def infer_ee_pose(columns: list[str], link_names: list[str]) -> tuple[EePoseColu
     elif not hands and len(flange) == 1:
         link, why = flange[0], "the flange link, libfranka's end effector without a hand"
     else:
-        return (
-            None,
-            "the URDF has no Franka end-effector link (one *hand_tcp, or *link8 without a hand)",
+        return None, (
+            f"{_FRANKA_EE}* ignored (the URDF has no Franka end-effector link: one *hand_tcp, "
+            "or *link8 without a hand"
         )
     spec = EePoseColumns(link, "matrix_colmajor", [cols[i] for i in range(16)])
-    return spec, why
+    root = link_names[0] if link_names else "?"
+    return spec, (
+        f"{spec.columns[0]}..{spec.columns[-1]} read as the column-major 4x4 pose of link "
+        f"{link!r} in the root link {root!r} (libfranka O_T_EE; link guessed: {why})"
+    )
+
+
+def _infer_rtde(cols: dict[int, str], link_names: list[str]) -> tuple[EePoseColumns | None, str]:
+    if sorted(cols) != list(range(6)):
+        return None, f"{_RTDE_TCP}* ignored ({_RTDE_TCP} needs 6 columns {_RTDE_TCP}_0..5"
+    if _UR_TOOL not in link_names:
+        return None, (
+            f"{_RTDE_TCP}* ignored (the URDF has no UR flange link {_UR_TOOL!r}, the TCP "
+            "without a controller TCP offset"
+        )
+    frame = _UR_BASE if _UR_BASE in link_names else None
+    spec = EePoseColumns(_UR_TOOL, "axis_angle", [cols[i] for i in range(6)], frame=frame)
+    where = (
+        f"UR's controller base frame, link {_UR_BASE!r}"
+        if frame
+        else f"the root link {link_names[0]!r} (the URDF has no UR {_UR_BASE!r} link)"
+    )
+    return spec, (
+        f"{spec.columns[0]}..{spec.columns[-1]} read as the UR RTDE TCP pose (x y z m, rotation "
+        f"vector rad) of link {_UR_TOOL!r} in {where}; a TCP offset set on the controller "
+        "moves it off tool0"
+    )
 
 
 def resolve_time(path: Path, raw: RawLog, cmap: ColumnMap, prov: Any) -> None:

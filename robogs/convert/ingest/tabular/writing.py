@@ -22,6 +22,7 @@ from robogs.format.urdf import load_urdf
 
 from .cleaning import FileReport, LogSegment, clean_file
 from .mapping import (
+    EE_POSE_PREFIXES,
     SEGMENT_COLUMNS,
     ColumnMap,
     auto_mapping,
@@ -142,7 +143,8 @@ def _file_mapping(
     f: Path, raw: RawLog, fixed_map: ColumnMap | None, logged: list[str], chain: Any, prov: Any
 ) -> ColumnMap:
     """The column map of one file: the user's map (copied), or the automatic layouts with the
-    map's ``hold``/``gap_s``/``ee_pose``; Franka ``O_T_EE`` inferred when no map names a pose."""
+    map's ``hold``/``gap_s``/``ee_pose``; UR RTDE ``actual_TCP_pose`` or Franka ``O_T_EE``
+    inferred when no map names a pose."""
     if fixed_map is not None and fixed_map.joints:
         cmap = dataclasses.replace(fixed_map)
     else:
@@ -153,26 +155,17 @@ def _file_mapping(
     resolve_time(f, raw, cmap, prov)
     if cmap.segment_column is None:
         cmap.segment_column = next((c for c in SEGMENT_COLUMNS if c in raw.data), None)
-    if cmap.ee_pose is None and any(c.startswith("O_T_EE") for c in raw.columns):
+    if cmap.ee_pose is None and any(c.startswith(EE_POSE_PREFIXES) for c in raw.columns):
         spec, why = infer_ee_pose(raw.columns, list(chain.link_names))
         if spec is None:
             prov.note(
-                f"{f.name}: O_T_EE* ignored ({why}; declare its link in the map to import it: "
-                "'ee_pose: {link: panda_hand_tcp, format: matrix_colmajor}')"
+                f"{f.name}: {why}; declare its link in the map to import it: 'ee_pose: "
+                "{link: LINK, format: axis_angle | matrix_colmajor}')"
             )
         else:
             resolve_frame(spec, chain, None)
             cmap.ee_pose = spec
-            prov.note(
-                f"{f.name}: {spec.columns[0]}..{spec.columns[-1]} read as the column-major 4x4 "
-                f"pose of link {spec.link!r} in the root link {chain.link_names[0]!r} "
-                f"(libfranka O_T_EE; link guessed: {why}); a map's 'ee_pose' overrides it"
-            )
-    elif cmap.ee_pose is None and any(c.startswith("actual_TCP_pose_") for c in raw.columns):
-        prov.note(
-            f"{f.name}: actual_TCP_pose_* ignored (declare its link in the map to import it: "
-            "'ee_pose: {link: tool0, format: axis_angle}')"
-        )
+            prov.note(f"{f.name}: {why}; a map's 'ee_pose' overrides it")
     return cmap
 
 
