@@ -19,7 +19,8 @@ from pxr import Usd, UsdGeom, UsdPhysics
 from robogs.cli.main import validate_main
 from robogs.convert.export import export
 from robogs.convert.export.arm_physics import PAYLOAD_RADIUS_M
-from robogs.convert.ingest.tabular import convert_tabular
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.convert import convert_path
 from robogs.format import Dataset
 from robogs.format.frames import quat_to_matrix
 from robogs.format.kinematics import Chain
@@ -43,7 +44,7 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
         )
     )
     generate_armlog(root / "logs", urdf, ArmLogSpec(segments=1, duration_s=1.0, seed=4))
-    convert_tabular(root / "logs", root / "ds", urdf=urdf)
+    convert_path(root / "logs", root / "ds", fmt="tabular", options=ConvertOptions(urdf=urdf))
     ds = Dataset.open(root / "ds")
     doc = ds.physics()
     doc["payload"] = {"link": "tool0", "mass_kg": MASS, "com_m": COM}
@@ -60,7 +61,7 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _g003(root: Path, urdf: Path, name: str, capsys: pytest.CaptureFixture) -> list[dict]:
-    convert_tabular(root / "logs", root / name, urdf=urdf)
+    convert_path(root / "logs", root / name, fmt="tabular", options=ConvertOptions(urdf=urdf))
     capsys.readouterr()
     validate_main([str(root / name), "--select", "G003", "--json", "--no-progress"])
     out = json.loads(capsys.readouterr().out)

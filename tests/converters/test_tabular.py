@@ -5,13 +5,16 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from robogs.convert.ingest.tabular import auto_mapping, convert_tabular, detect_tabular
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.convert import convert_path
+from robogs.convert.ingest.tabular import TabularOptions, auto_mapping, detect_tabular
 from robogs.format.dataset import Dataset
 from robogs.format.errors import InputError
 from robogs.synth.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
@@ -25,6 +28,14 @@ J6 = (
     "wrist_2_joint",
     "wrist_3_joint",
 )
+
+
+def _convert(
+    src: Path, out: Path, urdf: Path, package_roots: dict | None = None, **tabular: Any
+) -> Dataset:
+    """The one driver (``convert_path``) on a tabular log; ``tabular``: TabularOptions fields."""
+    opts = ConvertOptions(urdf=urdf, package_roots=package_roots, source=TabularOptions(**tabular))
+    return convert_path(src, out, fmt="tabular", options=opts)
 
 
 def _chain_urdf(n: int, limit: float = 2.8) -> str:
@@ -93,7 +104,7 @@ def test_rtde_layout_auto_mapped(tmp_path, ur5):
         tmp_path / "logs", ur5, ArmLogSpec(effect="none", segments=2, duration_s=2.0)
     )
     assert detect_tabular(tmp_path / "logs")
-    ds = Dataset.open(convert_tabular(tmp_path / "logs", tmp_path / "out", urdf=ur5))
+    ds = _convert(tmp_path / "logs", tmp_path / "out", ur5)
     assert [e.id for e in ds.episodes] == ["segment_00", "segment_01"]
     ep = ds.episode("segment_00")
     assert ep.segment == "segment_00.csv#0"
@@ -121,7 +132,7 @@ def test_time_gap_inside_a_file_starts_a_segment(tmp_path, ur5):
     generate_armlog(
         tmp_path / "logs", ur5, ArmLogSpec(segments=3, duration_s=1.0, single_file=True, gap_s=5.0)
     )
-    ds = Dataset.open(convert_tabular(tmp_path / "logs" / "log.csv", tmp_path / "out", urdf=ur5))
+    ds = _convert(tmp_path / "logs" / "log.csv", tmp_path / "out", ur5)
     assert [e.segment for e in ds.episodes] == ["log.csv#0", "log.csv#1", "log.csv#2"]
     assert [e.table("joint_states").num_rows for e in ds.episodes] == [125, 125, 125]
     assert any("split the file into 3 segments" in n for n in _provenance(ds)["notes"])
@@ -138,7 +149,7 @@ def test_franka_layout_and_parquet(tmp_path):
         cols[f"dq{i}"] = 0.01 * np.cos(t)
         cols[f"tau_J{i}"] = np.full(n, float(i))
     pq.write_table(pa.table(cols), tmp_path / "franka.parquet")
-    ds = Dataset.open(convert_tabular(tmp_path / "franka.parquet", tmp_path / "out", urdf=urdf))
+    ds = _convert(tmp_path / "franka.parquet", tmp_path / "out", urdf)
     table = ds.episode().table("joint_states")
     assert table.column("t_ns").to_pylist()[:3] == [0, 1_000_000, 2_000_000]
     np.testing.assert_array_equal(table.column("effort.joint5").to_numpy(), np.full(n, 4.0))
@@ -153,7 +164,7 @@ def test_generic_layout_derives_missing_velocity_and_keeps_no_effort(tmp_path, c
     _write_csv(
         tmp_path / "gen.csv", header, [[int(a), *map(float, b)] for a, b in zip(t, q, strict=True)]
     )
-    ds = Dataset.open(convert_tabular(tmp_path / "gen.csv", tmp_path / "out", urdf=chain3))
+    ds = _convert(tmp_path / "gen.csv", tmp_path / "out", chain3)
     ep = ds.episode()
     stream = ep.stream("joint_states")
     assert stream["derived"] == ["velocity.joint1", "velocity.joint2", "velocity.joint3"]
@@ -200,9 +211,7 @@ def test_yaml_map_units_and_motor_current(tmp_path, chain3):
             f"    effort: {{column: i{i}, unit: A, torque_constant: {kt}, gear_ratio: {gear}}}",
         ]
     mp.write_text("\n".join(lines) + "\n")
-    ds = Dataset.open(
-        convert_tabular(tmp_path / "log.csv", tmp_path / "out", urdf=chain3, mapping=mp)
-    )
+    ds = _convert(tmp_path / "log.csv", tmp_path / "out", chain3, mapping=mp)
     table = ds.episode().table("joint_states")
     np.testing.assert_array_equal(table.column("t_ns").to_numpy(), t - t[0] + 1000)
     np.testing.assert_allclose(table.column("position.joint2").to_numpy(), q[:, 1], atol=1e-8)
@@ -224,11 +233,11 @@ def test_bad_mapping_names_the_missing_column(tmp_path, chain3):
         "time: t\njoints:\n  joint1: {position: a}\n  joint2: {position: b}\n  joint3: {position: qq3}\n"
     )
     with pytest.raises(InputError, match="'qq3'") as exc:
-        convert_tabular(tmp_path / "log.csv", tmp_path / "out", urdf=chain3, mapping=mp)
+        _convert(tmp_path / "log.csv", tmp_path / "out", chain3, mapping=mp)
     assert "log.csv" in str(exc.value) and not (tmp_path / "out").exists()
     mp.write_text("time: t\njoints:\n  joint1: {position: a}\n  elbow: {position: b}\n")
     with pytest.raises(InputError, match="not in the URDF"):
-        convert_tabular(tmp_path / "log.csv", tmp_path / "out", urdf=chain3, mapping=mp)
+        _convert(tmp_path / "log.csv", tmp_path / "out", chain3, mapping=mp)
 
 
 def test_joint_name_mismatch_lists_both_sets(tmp_path, chain3):
@@ -239,7 +248,7 @@ def test_joint_name_mismatch_lists_both_sets(tmp_path, chain3):
         [[int(a), *map(float, b)] for a, b in zip(t, q, strict=True)],
     )
     with pytest.raises(InputError) as exc:
-        convert_tabular(tmp_path / "log.csv", tmp_path / "out", urdf=chain3)
+        _convert(tmp_path / "log.csv", tmp_path / "out", chain3)
     msg = str(exc.value)
     assert "q_shoulder" not in msg and "'shoulder'" in msg and "'joint1'" in msg
     with pytest.raises(InputError, match="URDF has"):
@@ -274,7 +283,7 @@ def test_duplicated_and_out_of_order_stamps_are_dropped_and_counted(tmp_path, ch
     rows.insert(10, list(rows[9]))  # exact duplicate
     rows[30], rows[31] = rows[31], rows[30]  # one sample out of order
     _write_csv(tmp_path / "log.csv", header, rows)
-    ds = Dataset.open(convert_tabular(tmp_path / "log.csv", tmp_path / "out", urdf=chain3))
+    ds = _convert(tmp_path / "log.csv", tmp_path / "out", chain3)
     d = _dropped(ds)
     assert d == {"duplicate stamp": 1, "stamp earlier than the previous sample": 1}
     t = ds.episode().table("joint_states").column("t_ns").to_numpy()
@@ -288,7 +297,7 @@ def test_non_monotonic_file_is_an_error_naming_row_and_column(tmp_path, chain3):
     rows[40:60] = rows[40:60][::-1]
     _write_csv(tmp_path / "log.csv", header, rows)
     with pytest.raises(InputError, match="go back in time") as exc:
-        convert_tabular(tmp_path / "log.csv", tmp_path / "out", urdf=chain3)
+        _convert(tmp_path / "log.csv", tmp_path / "out", chain3)
     assert exc.value.where.startswith("line ") and "'t_ns'" in exc.value.where
 
 
@@ -300,7 +309,7 @@ def test_nan_rows_and_garbled_leading_rows(tmp_path, chain3):
     _write_csv(
         tmp_path / "log.csv", header, rows, prefix="# logger v2\x00\x01 started\nvoltage;12.1"
     )
-    ds = Dataset.open(convert_tabular(tmp_path / "log.csv", tmp_path / "out", urdf=chain3))
+    ds = _convert(tmp_path / "log.csv", tmp_path / "out", chain3)
     d = _dropped(ds)
     assert d["lines before the header"] == 2
     assert d["NaN or empty value in column 'velocity.joint1'"] == 1
@@ -318,7 +327,7 @@ def test_degrees_given_as_radians_are_detected(tmp_path, chain3):
         r[2] = float(np.degrees(r[2])) + 40.0  # joint2 logged in degrees around 40 deg
     _write_csv(tmp_path / "log.csv", header, rows)
     with pytest.raises(InputError, match="degrees") as exc:
-        convert_tabular(tmp_path / "log.csv", tmp_path / "out", urdf=chain3)
+        _convert(tmp_path / "log.csv", tmp_path / "out", chain3)
     assert "'position.joint2'" in exc.value.where and "log.csv" in str(exc.value)
 
 
@@ -327,21 +336,21 @@ def test_rows_of_different_lengths(tmp_path, chain3):
     text_rows = [",".join(str(v) for v in r) for r in rows]
     text_rows[-1] = ",".join(text_rows[-1].split(",")[:4])  # truncated last row: dropped
     _write_csv(tmp_path / "log.csv", header, text_rows)
-    ds = Dataset.open(convert_tabular(tmp_path / "log.csv", tmp_path / "out", urdf=chain3))
+    ds = _convert(tmp_path / "log.csv", tmp_path / "out", chain3)
     assert _dropped(ds) == {"truncated rows at the end of the file": 1}
     text_rows[50] = ",".join(text_rows[50].split(",")[:6])  # short row inside the file: error
     _write_csv(tmp_path / "log2.csv", header, text_rows)
     with pytest.raises(InputError, match="different lengths") as exc:
-        convert_tabular(tmp_path / "log2.csv", tmp_path / "out2", urdf=chain3)
+        _convert(tmp_path / "log2.csv", tmp_path / "out2", chain3)
     assert exc.value.where == "line 52, column 'velocity.joint3'"  # the first missing field
 
 
 def test_missing_log_and_wrong_suffix(tmp_path, chain3):
     with pytest.raises(InputError, match="does not exist"):
-        convert_tabular(tmp_path / "nope.csv", tmp_path / "out", urdf=chain3)
+        _convert(tmp_path / "nope.csv", tmp_path / "out", chain3)
     (tmp_path / "x.txt").write_text("a,b\n1,2\n")
     with pytest.raises(InputError, match="not a CSV"):
-        convert_tabular(tmp_path / "x.txt", tmp_path / "out", urdf=chain3)
+        _convert(tmp_path / "x.txt", tmp_path / "out", chain3)
 
 
 # --------------------------------------------------------------------------- real robot
@@ -351,19 +360,17 @@ def test_missing_log_and_wrong_suffix(tmp_path, chain3):
 def test_real_ur5_urdf_with_and_without_meshes(tmp_path, real_data: Path, monkeypatch):
     REAL, UR5_REAL = real_data, real_data / UR5_REL
     generate_armlog(tmp_path / "logs", UR5_REAL, ArmLogSpec(segments=1, duration_s=1.0))
-    ds = Dataset.open(
-        convert_tabular(
-            tmp_path / "logs",
-            tmp_path / "a",
-            urdf=UR5_REAL,
-            package_roots={"example-robot-data": REAL / "ur5"},
-        )
+    ds = _convert(
+        tmp_path / "logs",
+        tmp_path / "a",
+        UR5_REAL,
+        package_roots={"example-robot-data": REAL / "ur5"},
     )
     assert _provenance(ds)["robot"]["meshes"] > 0
     assert len(ds.urdf(load_meshes=True).robogs_mesh_refs) > 0
     assert ds.physics()["joints"]["elbow_joint"] == {"damping": 0.0, "friction": 0.0}
     # without --package: found as yourdfpy does (the ancestor that holds the mesh path)
-    ds1 = Dataset.open(convert_tabular(tmp_path / "logs", tmp_path / "b1", urdf=UR5_REAL))
+    ds1 = _convert(tmp_path / "logs", tmp_path / "b1", UR5_REAL)
     pkg = _provenance(ds1)["robot"]["packages"]["example-robot-data"]
     assert Path(pkg["path"]) == (REAL / "ur5").resolve() and "yourdfpy" in pkg["how"]
     assert _provenance(ds1)["robot"]["meshes"] == _provenance(ds)["robot"]["meshes"]
@@ -372,7 +379,7 @@ def test_real_ur5_urdf_with_and_without_meshes(tmp_path, real_data: Path, monkey
     lone.parent.mkdir()
     lone.write_bytes(UR5_REAL.read_bytes())
     monkeypatch.setenv("ROS_PACKAGE_PATH", "")
-    ds2 = Dataset.open(convert_tabular(tmp_path / "logs", tmp_path / "b", urdf=lone))
+    ds2 = _convert(tmp_path / "logs", tmp_path / "b", lone, meshes_optional=True)
     assert any("meshes not copied" in n for n in _provenance(ds2)["notes"])
     assert ds2.urdf(load_meshes=True).robogs_mesh_refs == []
     table = ds2.episode().table("joint_states")

@@ -16,7 +16,9 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from robogs.convert.ingest.tabular import convert_tabular
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.convert import convert_path
+from robogs.convert.ingest.tabular import TabularOptions
 from robogs.format.dataset import Dataset
 from robogs.format.errors import InputError
 from robogs.format.validate import validate
@@ -90,6 +92,12 @@ def _map(path: Path, text: str) -> Path:
     return path
 
 
+def _convert(log: Path, out: Path, urdf: Path, mapping: Path) -> Path:
+    """The one driver (``convert_path``) on a tabular log with a column map; the dataset folder."""
+    opts = ConvertOptions(urdf=urdf, source=TabularOptions(mapping=mapping))
+    return convert_path(log, out, fmt="tabular", options=opts).root
+
+
 def _ee(ds: Path, episode: str | None = None):
     d = Dataset.open(ds)
     ep = d.episodes[0] if episode is None else next(e for e in d.episodes if e.id == episode)
@@ -100,7 +108,7 @@ def test_rtde_axis_angle_poses_in_the_base_frame(tmp_path, ur5):
     log = tmp_path / "rtde.csv"
     p, R = _rtde_csv(log, ur5, seed=1)
     m = _map(tmp_path / "map.yaml", "ee_pose: {link: tool0, format: axis_angle, frame: base}\n")
-    ds = convert_tabular(log, tmp_path / "ds", urdf=ur5, mapping=m)
+    ds = _convert(log, tmp_path / "ds", ur5, mapping=m)
     d, ee = _ee(ds)
     assert d.manifest["robot"]["ee_link"] == "tool0"
     assert set(ee.column("link").to_pylist()) == {"tool0"}
@@ -133,7 +141,7 @@ def test_franka_column_major_matrix_and_a_bad_cell(tmp_path, ur5):
         "ee_pose:\n  link: wrist_3_link\n  format: matrix_colmajor\n"
         "  columns: 'O_T_EE[{i}]'\n  unit: mm\n",
     )
-    ds = convert_tabular(log, tmp_path / "ds", urdf=ur5, mapping=m)
+    ds = _convert(log, tmp_path / "ds", ur5, mapping=m)
     d, ee = _ee(ds)
     js = d.episodes[0].table("joint_states")
     assert js.num_rows == 200 and ee.num_rows == 199  # the bad pose cell drops the pose only
@@ -158,7 +166,7 @@ def test_hidden_offsets_are_diagnosed_from_a_plain_csv(tmp_path, ur5):
     for s in range(3):
         _rtde_csv(logs / f"run{s}.csv", ur5, seed=10 + s, dtheta=dth, da=da, noise=(0.2, 0.05))
     m = _map(tmp_path / "map.yaml", "ee_pose: {link: tool0, frame: base}\n")
-    ds = convert_tabular(logs, tmp_path / "ds", urdf=ur5, mapping=m)
+    ds = _convert(logs, tmp_path / "ds", ur5, mapping=m)
     assert "G008" in validate(ds, select=["G008"]).codes()
     rep = diagnose_arm(ds, candidates=["kinematic_offsets", "backlash", "joint_elasticity"])
     assert rep["selected"] == ["kinematic_offsets"], [
@@ -188,7 +196,7 @@ def test_malformed_ee_pose_maps(tmp_path, ur5, map_text, where, words):
     _rtde_csv(log, ur5, seed=3)
     m = _map(tmp_path / "map.yaml", map_text + "\n")
     with pytest.raises(InputError) as exc:
-        convert_tabular(log, tmp_path / "ds", urdf=ur5, mapping=m)
+        _convert(log, tmp_path / "ds", ur5, mapping=m)
     assert exc.value.where == where and words in exc.value.message, str(exc.value)
     assert str(m) in str(exc.value)
 
@@ -203,7 +211,7 @@ def test_malformed_pose_values(tmp_path, ur5):
     _write_csv(log, header, np.concatenate([t[:, None], q, T.reshape(len(t), 16)], 1))  # row-major
     m = _map(tmp_path / "map.yaml", "ee_pose: {link: tool0, format: matrix_colmajor}\n")
     with pytest.raises(InputError) as exc:
-        convert_tabular(log, tmp_path / "ds", urdf=ur5, mapping=m)
+        _convert(log, tmp_path / "ds", ur5, mapping=m)
     e = exc.value
     assert "not a rigid transform" in e.message and e.where.startswith("line 2, columns")
     assert "format: matrix_rowmajor" in e.hint and str(log) in str(e)
@@ -217,10 +225,10 @@ def test_malformed_pose_values(tmp_path, ur5):
         "ee_pose: {link: tool0, format: quaternion, columns: [x, y, z, qw, qx, qy, qz]}\n",
     )
     with pytest.raises(InputError) as exc:
-        convert_tabular(log, tmp_path / "ds2", urdf=ur5, mapping=m)
+        _convert(log, tmp_path / "ds2", ur5, mapping=m)
     assert "quaternion norm 2" in exc.value.message and exc.value.where.startswith("line 7")
     # a map column the file lacks
     m = _map(tmp_path / "map.yaml", "ee_pose: {link: tool0, format: axis_angle}\n")
     with pytest.raises(InputError) as exc:
-        convert_tabular(log, tmp_path / "ds3", urdf=ur5, mapping=m)
+        _convert(log, tmp_path / "ds3", ur5, mapping=m)
     assert "'actual_TCP_pose_0'" in exc.value.message and "missing" in exc.value.message

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robogs.convert.ingest.tabular import convert_tabular
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.convert import convert_path
 from robogs.format.dataset import Dataset
 from robogs.physics.arm import compare_arm, diagnose_arm, fit_arm
 from robogs.physics.effects import available_effects, get_effect
@@ -32,7 +33,7 @@ def _dataset(root: Path, urdf: Path, effect: str, seed: int = 3) -> tuple[Path, 
         logs, urdf, ArmLogSpec(effect=effect, seed=seed, segments=4, duration_s=6.0)
     )
     out = root / f"ds_{effect}"
-    convert_tabular(logs, out, urdf=urdf)
+    convert_path(logs, out, fmt="tabular", options=ConvertOptions(urdf=urdf))
     return out, truth
 
 

@@ -9,7 +9,8 @@ import json
 import numpy as np
 
 from robogs.cli.main import main
-from robogs.convert.ingest.tabular import convert_tabular
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.convert import convert_path
 from robogs.format.dataset import Dataset
 from robogs.format.validate import validate
 from robogs.physics.arm import compare_arm, diagnose_arm
@@ -83,7 +84,7 @@ def test_fit_offsets_writes_the_identifiable_ones_and_validates(tmp_path, ur5):
 def test_log_without_ee_poses_skips_the_kinematic_effects_with_the_reason(tmp_path, ur5, capsys):
     generate_armlog(tmp_path / "logs", ur5, ArmLogSpec(segments=2, duration_s=3.0, seed=1))
     ds = tmp_path / "ds"
-    convert_tabular(tmp_path / "logs", ds, urdf=ur5)
+    convert_path(tmp_path / "logs", ds, fmt="tabular", options=ConvertOptions(urdf=ur5))
     rep = diagnose_arm(ds, candidates=["joint_friction", "backlash", "kinematic_offsets"])
     reasons = {s["name"]: s["reason"] for s in rep["skipped"]}
     assert reasons == {

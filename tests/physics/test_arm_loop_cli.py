@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from robogs.cli.main import main
-from robogs.convert.ingest.tabular import convert_tabular
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.convert import convert_path
+from robogs.convert.ingest.tabular import TabularOptions
 from robogs.format.dataset import Dataset
 from robogs.physics.arm import compare_arm
 from robogs.synth.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
@@ -37,7 +39,7 @@ def test_compare_names_velocity_reversals_when_the_residual_sits_there(tmp_path,
         np.savetxt(f, a, delimiter=",", header=",".join(header), comments="", fmt="%.9f")
     assert bumped > 20
     ds = tmp_path / "ds"
-    convert_tabular(tmp_path / "logs", ds, urdf=ur5)
+    convert_path(tmp_path / "logs", ds, fmt="tabular", options=ConvertOptions(urdf=ur5))
     res = compare_arm(ds)
     top = res["worst_phases"][0]
     assert top["phase"] == "reversal" and top["joint"] == "elbow_joint"
@@ -108,12 +110,14 @@ def test_franka_layout_with_a_held_gripper_joint(tmp_path):
         lines[0] = ",".join(names.get(c, c) for c in lines[0].split(","))
         f.write_text("\n".join(lines) + "\n")
     with pytest.raises(Exception, match="hold: {finger_joint1: 0.0}"):
-        convert_tabular(tmp_path / "logs", tmp_path / "x", urdf=full)
-    for held, name in ((v, "ds"), (0.0, "wrong")):
-        (tmp_path / f"{name}.yaml").write_text(f"hold: {{finger_joint1: {held}}}\n")
-        convert_tabular(
-            tmp_path / "logs", tmp_path / name, urdf=full, mapping=tmp_path / f"{name}.yaml"
+        convert_path(
+            tmp_path / "logs", tmp_path / "x", fmt="tabular", options=ConvertOptions(urdf=full)
         )
+    for held, name in ((v, "ds"), (0.0, "wrong")):
+        mapping = tmp_path / f"{name}.yaml"
+        mapping.write_text(f"hold: {{finger_joint1: {held}}}\n")
+        opts = ConvertOptions(urdf=full, source=TabularOptions(mapping=mapping))
+        convert_path(tmp_path / "logs", tmp_path / name, fmt="tabular", options=opts)
     ds = Dataset.open(tmp_path / "ds")
     ep = ds.episodes[0]
     assert ep.stream("joint_states")["derived"] == [

@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robogs.convert.ingest.tabular import convert_tabular
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.convert import convert_path
 from robogs.format.dataset import Dataset
 from robogs.physics.arm import diagnose_arm, fit_arm
 from robogs.synth.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
@@ -51,7 +52,7 @@ def _dataset(root: Path, urdf: Path, d: float, m: float, seed: int, scale: float
     )
     generate_armlog(root / "logs", true_urdf, spec)
     ds = root / "ds"
-    convert_tabular(root / "logs", ds, urdf=urdf)
+    convert_path(root / "logs", ds, fmt="tabular", options=ConvertOptions(urdf=urdf))
     d_ = Dataset.open(ds)
     try:
         doc = dict(d_.physics())
@@ -96,7 +97,7 @@ def test_fit_add_refits_stored_effects_jointly_as_diagnose_scores_them(tmp_path,
         ArmLogSpec(effect="payload+joint_friction", seed=7, segments=4, duration_s=4.0),
     )
     ds = tmp_path / "ds"
-    convert_tabular(tmp_path / "logs", ds, urdf=ur5)
+    convert_path(tmp_path / "logs", ds, fmt="tabular", options=ConvertOptions(urdf=ur5))
     joint = fit_arm(ds, ["payload", "joint_friction"], write=False)
     first = fit_arm(ds, ["payload"])
     second = fit_arm(ds, ["joint_friction"])
@@ -120,7 +121,7 @@ def _log(root: Path, urdf: Path, effect: str, seed: int, scale: float) -> Path:
         effort_noise=tuple(scale * s for s in NOMINAL),
     )
     generate_armlog(root / "logs", urdf, spec)
-    convert_tabular(root / "logs", root / "ds", urdf=urdf)
+    convert_path(root / "logs", root / "ds", fmt="tabular", options=ConvertOptions(urdf=urdf))
     return root / "ds"
 
 

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from robogs.convert.ingest.tabular import convert_tabular
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.convert import convert_path
 from robogs.physics.arm import diagnose_arm
 from robogs.physics.arm.diagnose import _held_sse
 from robogs.synth.armlogs import ArmLogSpec, generate_armlog
@@ -21,7 +22,7 @@ def _diagnose(root: Path, urdf: Path, effect: str, seed: int) -> tuple[dict, dic
     truth = generate_armlog(
         root / "logs", urdf, ArmLogSpec(effect=effect, seed=seed, segments=4, duration_s=4.0)
     )
-    convert_tabular(root / "logs", root / "ds", urdf=urdf)
+    convert_path(root / "logs", root / "ds", fmt="tabular", options=ConvertOptions(urdf=urdf))
     return diagnose_arm(root / "ds"), truth
 
 
