@@ -16,7 +16,8 @@ from pathlib import Path
 
 import torch
 
-from robogs.convert.ingest.tabular import convert_tabular
+from robogs.convert.ingest.context import ConvertOptions
+from robogs.convert.ingest.convert import convert_path
 from robogs.physics.arm import diagnose_arm
 from robogs.synth.armlogs import ArmLogSpec, generate_armlog, ur5_urdf
 
@@ -38,7 +39,7 @@ def main(seeds: int) -> None:
                 effect="none", seed=100 + seed, segments=4, duration_s=4.0, effort_noise=noise
             )
             generate_armlog(d / "logs", urdf, spec)
-            convert_tabular(d / "logs", d / "ds", urdf=urdf)
+            convert_path(d / "logs", d / "ds", fmt="tabular", options=ConvertOptions(urdf=urdf))
             t = time.perf_counter()
             rep = diagnose_arm(d / "ds")
             r = {e["name"]: e for e in rep["effects"]}["effort_time_offset"]

@@ -6,7 +6,7 @@ For each hidden effect (``joint_friction``, ``payload``, ``armature``, ``mass_sc
 independent inverse dynamics of :mod:`robogs.synth.armlogs` (4 trajectories of 6 s at 125 Hz,
 RTDE-style CSV, effort noise 0.05-0.2 N m). Each seed also draws the effect's size: every
 parameter of :data:`robogs.synth.armlogs.DEFAULT_PARAMS` times a factor in [0.6, 1.4] (for
-``mass_scale``, ``s - 1`` is scaled). The log is converted (``convert_tabular``) and diagnosed
+``mass_scale``, ``s - 1`` is scaled). The log is converted (``convert_path``) and diagnosed
 with every arm effect as a candidate (forward selection, :mod:`robogs.physics.arm.diagnose`).
 
 Per effect it prints:
@@ -215,7 +215,8 @@ def _one(args: tuple[str, int, int]) -> dict:
     if effect.startswith("ee:"):
         return _one_kin(effect[3:], seed)
     hidden = [] if effect == "none" else effect.split("+")
-    from robogs.convert.ingest.tabular import convert_tabular
+    from robogs.convert.ingest.context import ConvertOptions
+    from robogs.convert.ingest.convert import convert_path
     from robogs.physics.arm.api import open_arm
     from robogs.physics.arm.diagnose import diagnose_torques
     from robogs.physics.arm.identify import fit_effects
@@ -229,7 +230,7 @@ def _one(args: tuple[str, int, int]) -> dict:
         urdf.write_text(ur5_urdf())
         spec = ArmLogSpec(effect=effect, params=params, seed=seed, segments=4, duration_s=6.0)
         truth = generate_armlog(tmp / "logs", urdf, spec)
-        convert_tabular(tmp / "logs", tmp / "ds", urdf=urdf)
+        convert_path(tmp / "logs", tmp / "ds", fmt="tabular", options=ConvertOptions(urdf=urdf))
         t0 = time.perf_counter()
         s = open_arm(tmp / "ds")
         t_open = time.perf_counter() - t0
