@@ -22,6 +22,14 @@ runner, stopping a check where it stopped in the first view that ended it, so th
 code, the ``X002`` de-duplication and the final sort are exactly those of
 :func:`robogs.format.validate.validate` in one process.
 
+In the sharded layout (:mod:`robogs.format.shards`) a unit names its chunk index and a range
+of it instead of carrying the rows: the worker reads that one ``index.json`` (kept for the next
+unit of the same chunk) and takes ``episodes[lo:hi]``, or ``sorted(files)[lo:hi]``. A task
+then holds one chunk index (at most ``chunk_size`` episodes, ~1 MB on disk for 1000 episodes)
+and one episode's tables. Tasks never span two chunks; the manifest's own episodes and files
+(the URDF, the chunk indexes themselves) travel as rows. Chunk units are used only when every
+index merged cleanly (no ``I011`` problem), so their rows are exactly the driver's merged view.
+
 Splitting needs a schema-valid manifest in which no table is named by two episodes; otherwise
 everything runs on the driver (one process), and :attr:`Plan.reason` says why.
 
@@ -108,13 +116,26 @@ def check_scope(chk: Check) -> str:
 
 @dataclass(frozen=True)
 class Unit:
-    """One task: some episodes (manifest entries) or a slice of the ``files`` section."""
+    """One task: some episodes (manifest entries) or a slice of the ``files`` section.
+
+    With ``chunk`` (a chunk index path) the rows are not carried: the worker reads
+    ``episodes[lo:hi]`` or ``sorted(files.items())[lo:hi]`` of that index itself.
+    """
 
     index: int
     kind: str  # "episodes" or "files"
     episodes: tuple[dict[str, Any], ...] = ()
     files: tuple[tuple[str, Any], ...] = ()
     codes: tuple[str, ...] = ()
+    chunk: str | None = None
+    lo: int = 0
+    hi: int = 0
+
+    def size(self) -> int:
+        """Episodes or files of the unit."""
+        if self.chunk is not None:
+            return self.hi - self.lo
+        return len(self.episodes) if self.kind == "episodes" else len(self.files)
 
 
 @dataclass
@@ -151,15 +172,61 @@ class Plan:
     reason: str | None = None
 
 
-def _view_manifest(base: dict[str, Any], unit: Unit, k: int | None) -> dict[str, Any]:
+def _view_manifest(
+    base: dict[str, Any],
+    kind: str,
+    episodes: Sequence[dict[str, Any]],
+    files: Sequence[tuple[str, Any]],
+    k: int,
+) -> dict[str, Any]:
     view = dict(base)
-    if unit.kind == "episodes":
-        view["episodes"] = [unit.episodes[k if k is not None else 0]]
+    if kind == "episodes":
+        view["episodes"] = [episodes[k]]
         view["files"] = {}
     else:
         view["episodes"] = []
-        view["files"] = dict(unit.files)
+        view["files"] = dict(files)
     return view
+
+
+#: chunk indexes this worker process read: (root, index) -> (stat key, episodes, sorted files)
+_INDEX_CACHE: dict[tuple[str, str], tuple[tuple[int, int], list[Any], list[tuple[str, Any]]]] = {}
+_INDEX_CACHE_MAX = 2  # a task reads one chunk; the next task is most often of the same chunk
+
+
+def _chunk_rows(root: str, rel: str) -> tuple[list[Any], list[tuple[str, Any]]]:
+    """A chunk index's episodes and its sorted files, read once per process while unchanged.
+
+    Raises:
+        FormatError: the index is unreadable or not a chunk index.
+    """
+    from .shards import read_chunk
+
+    path = Path(root) / rel
+    try:
+        st = path.stat()
+        stamp = (st.st_mtime_ns, st.st_size)
+    except OSError:
+        stamp = (-1, -1)
+    hit = _INDEX_CACHE.get((root, rel))
+    if hit is not None and hit[0] == stamp:
+        return hit[1], hit[2]
+    doc = read_chunk(Path(root), {"index": rel}, manifest_path=Path(root) / "manifest.json")
+    rows = (stamp, list(doc["episodes"]), sorted(doc["files"].items()))
+    while len(_INDEX_CACHE) >= _INDEX_CACHE_MAX:
+        _INDEX_CACHE.pop(next(iter(_INDEX_CACHE)))
+    _INDEX_CACHE[(root, rel)] = rows
+    return rows[1], rows[2]
+
+
+def _unit_rows(root: str, unit: Unit) -> tuple[Sequence[dict[str, Any]], Sequence[tuple[str, Any]]]:
+    """The episodes and files a unit covers (read from its chunk index when it names one)."""
+    if unit.chunk is None:
+        return unit.episodes, unit.files
+    episodes, files = _chunk_rows(root, unit.chunk)
+    if unit.kind == "episodes":
+        return episodes[unit.lo : unit.hi], ()
+    return (), files[unit.lo : unit.hi]
 
 
 class _ViewContext(CheckContext):
@@ -255,14 +322,15 @@ def run_unit(
     total: dict[str, _Outcome] = {c.code: _Outcome() for c in checks}
     kept: dict[str, Counter] = {c.code: Counter() for c in checks}
     shared: dict[Any, Any] = {}
-    n_views = len(unit.episodes) if unit.kind == "episodes" else 1
+    episodes, files = _unit_rows(root, unit)
+    n_views = len(episodes) if unit.kind == "episodes" else 1
     for k in range(n_views):
         todo = [c for c in checks if total[c.code].end == "done"]
         if not todo:
             break
         ctx = _ViewContext(
             Path(root),
-            _view_manifest(base, unit, k),
+            _view_manifest(base, unit.kind, episodes, files, k),
             shared,
             quick=bool(settings.get("quick", False)),
             budgets=settings.get("budgets"),
@@ -325,17 +393,92 @@ def plan_units(
             scopes[code] = "dataset"  # they would also read tables that are not listed
     ep_codes = tuple(c.code for c in checks if scopes[c.code] == "episode")
     file_codes = tuple(c.code for c in checks if scopes[c.code] == "file")
+    ept, fpt = max(1, episodes_per_task), max(1, files_per_task)
+    files = sorted(ctx.files.items())
+    layout = _chunk_layout(ctx, entries, files)
     units: list[Unit] = []
+
+    def add(kind: str, codes: tuple[str, ...], src: str | None, rows: list[Any], lo: int) -> None:
+        """Units of at most ``ept`` / ``fpt`` rows for a run of rows (from chunk ``src``)."""
+        step = ept if kind == "episodes" else fpt
+        for a in range(0, len(rows), step):
+            part, n = rows[a : a + step], len(rows[a : a + step])
+            if src is not None:
+                units.append(
+                    Unit(len(units), kind, codes=codes, chunk=src, lo=lo + a, hi=lo + a + n)
+                )
+            elif kind == "episodes":
+                units.append(Unit(len(units), kind, episodes=tuple(part), codes=codes))
+            else:
+                units.append(Unit(len(units), kind, files=tuple(part), codes=codes))
+
     if ep_codes:
-        for lo in range(0, len(entries), max(1, episodes_per_task)):
-            chunk = tuple(entries[lo : lo + max(1, episodes_per_task)])
-            units.append(Unit(len(units), "episodes", episodes=chunk, codes=ep_codes))
+        for src, rows, lo in layout[0] if layout else [(None, entries, 0)]:
+            add("episodes", ep_codes, src, rows, lo)
     if file_codes:
-        files = sorted(ctx.files.items())
-        for lo in range(0, len(files), max(1, files_per_task)):
-            chunk_f = tuple(files[lo : lo + max(1, files_per_task)])
-            units.append(Unit(len(units), "files", files=chunk_f, codes=file_codes))
+        for src, rows, lo in layout[1] if layout else [(None, files, 0)]:
+            add("files", file_codes, src, rows, lo)
     return Plan(units, scopes)
+
+
+_Runs = list[tuple[str | None, list[Any], int]]
+
+
+def _chunk_layout(
+    ctx: CheckContext, entries: list[dict[str, Any]], files: list[tuple[str, Any]]
+) -> tuple[_Runs, _Runs] | None:
+    """The merged episodes and sorted files cut into runs ``(chunk index or None, rows, lo)``:
+    a run from a chunk index holds its rows ``lo .. lo + len(rows)`` (the worker re-reads them);
+    a run with None travels as rows. None when the dataset is not sharded or its merged view is
+    not exactly the manifest's rows followed by each index's (then every unit carries rows)."""
+    from .shards import chunk_dir, chunk_of, is_sharded
+
+    ds = ctx.dataset
+    small = ds.manifest
+    if not is_sharded(small) or ds.shard_problems:
+        return None
+    raw = ctx.manifest.get("episodes")
+    top_eps, top_files = small.get("episodes", []), small.get("files", {})
+    chunks = small.get("shards", {}).get("chunks")
+    if not (
+        isinstance(raw, list)
+        and len(raw) == len(entries)
+        and isinstance(top_eps, list)
+        and isinstance(top_files, dict)
+        and isinstance(chunks, list)
+    ):
+        return None
+    counts: list[tuple[str, int]] = []
+    folder: dict[str, str] = {}
+    for c in chunks:
+        rel, n = (c.get("index"), c.get("episodes")) if isinstance(c, dict) else (None, None)
+        if not isinstance(rel, str) or not isinstance(n, int) or "/" not in rel:
+            return None
+        counts.append((rel, n))
+        if folder.setdefault(rel.rsplit("/", 1)[0] + "/", rel) != rel:
+            return None  # two indexes in one folder
+    if len(top_eps) + sum(n for _, n in counts) != len(entries):
+        return None
+    ep_runs: _Runs = [(None, entries[: len(top_eps)], 0)] if top_eps else []
+    at = len(top_eps)
+    for rel, n in counts:
+        if n:
+            ep_runs.append((rel, entries[at : at + n], 0))
+        at += n
+    file_runs: _Runs = []
+    pos: dict[str, int] = {}
+    for rel, entry in files:
+        k = chunk_of(rel)
+        src = None if rel in top_files else folder.get(f"{chunk_dir(k)}/" if k is not None else "")
+        if src is None and rel not in top_files:
+            return None  # a file from an index outside its folder
+        if file_runs and file_runs[-1][0] == src:
+            file_runs[-1][1].append((rel, entry))
+        else:
+            file_runs.append((src, [(rel, entry)], pos.get(src, 0) if src else 0))
+        if src is not None:
+            pos[src] = pos.get(src, 0) + 1
+    return ep_runs, file_runs
 
 
 class Executor(Protocol):
@@ -533,6 +676,8 @@ class Stats:
     """How a split validation went: units, workers seen, peak RSS per worker (bytes), task CPU."""
 
     units: int = 0
+    #: of those, units that read their rows from a chunk index (the sharded layout)
+    chunk_units: int = 0
     reason: str | None = None
     peak_rss: dict[int, int] = field(default_factory=dict)
     task_seconds: float = 0.0
@@ -587,7 +732,8 @@ def validate_distributed(
             ctx, checks, episodes_per_task=episodes_per_task, files_per_task=files_per_task
         )
         stats.units, stats.reason = len(plan.units), plan.reason
-        # the workers get episodes and files through their units, never the chunk indexes
+        stats.chunk_units = sum(u.chunk is not None for u in plan.units)
+        # the workers get episodes and files through their units, or read their chunk's index
         base = {k: v for k, v in ctx.manifest.items() if k not in ("episodes", "files", "shards")}
         stream = executor.run(str(ctx.root), base, plan.units, settings) if plan.units else iter(())
         state["stream"], state["left"] = stream, len(plan.units)

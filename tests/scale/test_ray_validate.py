@@ -101,7 +101,9 @@ def test_ray_two_workers_on_sharded_layout_equal_single_process(ray_cluster, sha
     split = validate_distributed(
         sharded, executor=RayExecutor(), episodes_per_task=20, files_per_task=70, stats=stats
     )
-    # 100 episodes in tasks of 20; 200 episode files + 3 indexes + the URDF in tasks of 70
-    assert stats.reason is None and stats.units == 5 + 3
+    # chunks of 40, 40, 20 episodes in tasks of 20 (5 units, each reading its chunk's index);
+    # each chunk's 80, 80, 40 files in tasks of 70 (2 + 2 + 1), and the rows between them:
+    # index 0, index 1, index 2 + the URDF (3 units)
+    assert stats.reason is None and stats.units == 5 + 8 and stats.chunk_units == 10
     assert len(stats.peak_rss) == 2, "both workers must have taken tasks"
     assert _facts(split) == _facts(single)

@@ -76,9 +76,64 @@ def test_split_run_equals_single_run_on_sharded(pair):
     stats = Stats()
     split = validate_distributed(sharded, episodes_per_task=6, files_per_task=17, stats=stats)
     assert stats.reason is None and stats.units > 2
+    # chunks of 16, 16, 8 episodes in tasks of 6: 3 + 3 + 2 episode units read their index;
+    # 32 + 32 + 16 files in tasks of 17: 2 + 2 + 1; the 3 indexes and the URDF travel as rows
+    assert stats.chunk_units == 8 + 5 and stats.units == 8 + 5 + 3
     single = validate(sharded)
     assert [f.to_dict() for f in split.findings] == [f.to_dict() for f in single.findings]
     assert dict(split.dropped) == dict(single.dropped)
+
+
+def test_each_chunk_task_reads_only_its_own_index(tmp_path):
+    """Units of chunk 1 give the same outcomes with the other chunks' indexes gone; the plan's
+    chunk units carry no rows."""
+    from robogs.format import distributed as d
+    from robogs.format.checks.context import CheckContext
+    from robogs.format.checks.registry import available_checks
+
+    root = mutated_bulk(tmp_path / "ds", 40, duration_s=0.3, chunk_size=16)
+    ctx = CheckContext(root)
+    plan = d.plan_units(ctx, list(available_checks().values()), episodes_per_task=5)
+    ours = [u for u in plan.units if u.chunk == "episodes/chunk-001/index.json"]
+    assert [(u.kind, u.lo, u.hi) for u in ours] == [
+        *[("episodes", lo, min(lo + 5, 16)) for lo in range(0, 16, 5)],
+        ("files", 0, 32),
+    ]
+    assert all(u.episodes == () and u.files == () for u in plan.units if u.chunk)
+    base = {k: v for k, v in ctx.manifest.items() if k not in ("episodes", "files", "shards")}
+    settings = {"quick": False, "budgets": {}, "options": {}, "max_per_code": 50}
+
+    def outcomes() -> list:
+        d._INDEX_CACHE.clear()
+        return [
+            {
+                c: (o.findings, o.end, dict(o.over))
+                for c, o in d.run_unit(str(root), base, u, settings).outcomes.items()
+            }  # fmt: skip
+            for u in ours
+        ]
+
+    before = outcomes()
+    # chunk 1 holds the mutated ep019 (row count off by one, I005) and ep023 (missing, I001)
+    codes = {f.code for per in before for (fs, _e, _o) in per.values() for f in fs}
+    assert {"I005", "I001"} <= codes
+    for k in (0, 2):
+        (root / f"episodes/chunk-{k:03d}/index.json").rename(root / f"gone-{k}.json")
+    assert outcomes() == before
+
+
+def test_inconsistent_index_falls_back_to_rows_with_identical_findings(tmp_path):
+    root = tmp_path / "ds"
+    write_bulk_dataset(root, n_episodes=16, duration_s=0.1, chunk_size=8)
+    m = json.loads((root / "manifest.json").read_text())
+    m["shards"]["chunks"][1]["episodes"] = 7  # the index holds 8: I011, merged view still 16
+    (root / "manifest.json").write_text(json.dumps(m))
+    stats = Stats()
+    split = validate_distributed(root, episodes_per_task=3, files_per_task=5, stats=stats)
+    assert stats.reason is None and stats.units > 2 and stats.chunk_units == 0
+    single = validate(root)
+    assert "I011" in single.codes()
+    assert [f.to_dict() for f in split.findings] == [f.to_dict() for f in single.findings]
 
 
 @pytest.mark.parametrize(
