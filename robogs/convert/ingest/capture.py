@@ -24,7 +24,7 @@ from .context import IngestContext
 from .sinks import CameraSink
 from .tf_tree import matrix_to_quat_np
 
-__all__ = ["View", "write_static_capture", "world_up_rotation", "UP_AXES"]
+__all__ = ["View", "orient_world", "write_static_capture", "world_up_rotation", "UP_AXES"]
 
 UP_AXES = {
     "+x": (1, 0, 0),
@@ -78,6 +78,20 @@ def world_up_rotation(up: str) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3] = R
     return T
+
+
+def orient_world(ctx: IngestContext, views: list[View], kept: str) -> None:
+    """Apply ``--world-up``: turn every view's ``T_world_cam`` so that the capture's up axis is
+    +z (:func:`world_up_rotation`), or, without it, note ``kept`` (how the source's world frame
+    is kept) in the provenance."""
+    up = ctx.options.world_up
+    if not up:
+        ctx.provenance.note(f"{kept}; pass --world-up to re-orient")
+        return
+    T = world_up_rotation(up)
+    for v in views:
+        v.T_world_cam = T @ v.T_world_cam
+    ctx.provenance.note(f"world rotated so that the capture's {up} axis is +z")
 
 
 def _intrinsics_key(c: CameraModel) -> tuple:

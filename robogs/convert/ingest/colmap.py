@@ -22,7 +22,7 @@ from robogs.format.errors import InputError
 
 from ..registry import register_converter
 from .calibration import check_distortion
-from .capture import View, world_up_rotation, write_static_capture
+from .capture import View, orient_world, write_static_capture
 from .context import IngestContext
 from .tf_tree import quat_to_matrix_np
 
@@ -308,16 +308,11 @@ def convert_colmap(src: Path, ctx: IngestContext) -> None:
         prov.note(f"points3D ({pts} points) not converted: the format has no sparse point cloud")
     if (folder / "rigs.txt").is_file() or (folder / "frames.txt").is_file():
         prov.note("rigs/frames (COLMAP rig model) not converted; per-image poses are used")
-    if ctx.options.world_up:
-        T = world_up_rotation(ctx.options.world_up)
-        for v in views:
-            v.T_world_cam = T @ v.T_world_cam
-        prov.note(f"world rotated so that the capture's {ctx.options.world_up} axis is +z")
-    else:
-        prov.note(
-            "world frame kept as in the COLMAP model (arbitrary origin, orientation and scale); "
-            "pass --world-up to re-orient"
-        )
+    orient_world(
+        ctx,
+        views,
+        "world frame kept as in the COLMAP model (arbitrary origin, orientation and scale)",
+    )
     write_static_capture(ctx, views, source=_images_name(folder))
 
 

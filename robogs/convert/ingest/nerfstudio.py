@@ -26,7 +26,7 @@ from robogs.format.errors import InputError
 
 from ..registry import register_converter
 from .calibration import check_distortion
-from .capture import View, world_up_rotation, write_static_capture
+from .capture import View, orient_world, write_static_capture
 from .context import IngestContext
 
 __all__ = ["convert_nerfstudio", "detect_nerfstudio", "read_transforms", "T_GL_TO_CV"]
@@ -216,16 +216,12 @@ def convert_nerfstudio(src: Path, ctx: IngestContext) -> None:
     views, extra = read_transforms(path, images=ctx.options.images)
     prov = ctx.provenance
     prov.extra.update({"capture": "nerfstudio", **extra})
-    if ctx.options.world_up:
-        T = world_up_rotation(ctx.options.world_up)
-        for v in views:
-            v.T_world_cam = T @ v.T_world_cam
-        prov.note(f"world rotated so that the capture's {ctx.options.world_up} axis is +z")
-    else:
-        prov.note(
-            "world frame kept as in transforms.json (nerfstudio worlds are arbitrary: origin and scale "
-            "come from the capture pipeline, not the robot base); pass --world-up to re-orient"
-        )
+    orient_world(
+        ctx,
+        views,
+        "world frame kept as in transforms.json (nerfstudio worlds are arbitrary: origin and scale "
+        "come from the capture pipeline, not the robot base)",
+    )
     prov.note("camera poses converted from OpenGL (x right, y up, z back) to OpenCV axes")
     write_static_capture(ctx, views, source=path.name)
 
