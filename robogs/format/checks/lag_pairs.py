@@ -5,7 +5,10 @@ camera (the asset mesh's convex hull through the pinhole model of its static ext
 intrinsics), and the centre of the projected box is compared with the centre of the object's
 box in each frame (the ``boxes2d`` rows, or the boxes of its label masks). The lag of the image
 centres behind the projected ones is fitted by :func:`~robogs.format.checks.sync.
-estimate_stream_lag` (in px). The frames are stamped by the camera, whose own offset against
+estimate_stream_lag` (in px), on the projected centres smoothed in time (a local quadratic
+fit: linearly interpolated raw poses pull the lag towards the phases where the box stamps fall
+midway between poses, see :func:`box_centre_lag`); its 95 % interval takes Student's t of the
+jackknife blocks and adds T012's error of the camera offset. The frames are stamped by the camera, whose own offset against
 the robot T012 measures; that offset is removed, so T015 reports how late the *pose stream* is
 on the robot's clock, and a late camera is reported once (by T012).
 
