@@ -46,7 +46,7 @@ import numpy as np
 from robogs.physics import gate as gate_mod
 from robogs.physics.effects import Effect, available_effects, get_effect
 from robogs.physics.engine import Engine, rms_mm
-from robogs.physics.fit import FitOutcome, Problem
+from robogs.physics.fit import FitOutcome, Problem, fit_nested
 from robogs.physics.phases import PHASES
 from robogs.physics.space import ParamSpace
 
@@ -463,21 +463,17 @@ def diagnose_recording(
     space = eng.space(cands)
     base_cols = eng.base_columns(space)
     theta0 = eng.start(space)
-    problems = [Problem(free=list(base_cols), theta0=theta0)]
-    frees = [list(base_cols)]
-    owner: list[int] = [0]
-    for i, e in enumerate(cands, start=1):
-        f = list(base_cols) + space.owner_columns(e.name)
-        frees.append(f)
-        for th in start_points(space, e, theta0):
-            problems.append(Problem(free=f, theta0=th))
-            owner.append(i)
-    fitted = eng.fit(space, problems, progress=progress)
-    # multi-start: keep the best start of every candidate
-    outs = [
-        min((o for o, k in zip(fitted, owner, strict=True) if k == i), key=lambda o: o.cost)
-        for i in range(len(cands) + 1)
-    ]
+    frees = [list(base_cols)] + [list(base_cols) + space.owner_columns(e.name) for e in cands]
+    # each candidate fitted from the base optimum, multi-start; the base refitted when a
+    # candidate switched back to it beats it (fit.fit_nested): a gain is never the optimiser's
+    base_out, cand_outs = fit_nested(
+        lambda probs: eng.fit(space, probs, progress=progress),
+        lambda th, lo: eng.evaluate(space, th, lo),
+        space,
+        Problem(free=list(base_cols), theta0=theta0),
+        [(space.owner_columns(e.name), start_points(space, e, theta0)) for e in cands],
+    )
+    outs = [base_out, *cand_outs]
     base = outs[0]
     n = base.n
     mask = eng.mask

@@ -27,7 +27,16 @@ import torch
 
 from robogs.physics.space import ParamSpace
 
-__all__ = ["Problem", "FitOutcome", "fit_problems", "jacobian_fd", "ResidualFn", "on_bounds"]
+__all__ = [
+    "Problem",
+    "FitOutcome",
+    "fit_problems",
+    "fit_nested",
+    "nested_gap",
+    "jacobian_fd",
+    "ResidualFn",
+    "on_bounds",
+]
 
 ResidualFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 """``fn(theta [M, Q], local [M, T, L]) -> weighted residuals [M, T, K]`` (zero where invalid)."""
@@ -42,12 +51,14 @@ class Problem:
         traj: [T] bool, trajectories in the objective (all by default).
         theta0: [Q] start (default: the space's zero values).
         fit_local: whether the local (per-trajectory) parameters are fitted.
+        local0: [T, L] start of the local parameters (default: zeros).
     """
 
     free: list[int]
     traj: np.ndarray | None = None
     theta0: np.ndarray | None = None
     fit_local: bool = True
+    local0: np.ndarray | None = None
 
 
 @dataclass
@@ -368,7 +379,8 @@ def fit_problems(
     states: list[_State] = []
     for pr in problems:
         th0 = space.zero.copy() if pr.theta0 is None else np.asarray(pr.theta0, float).copy()
-        states.append(_State(pr, th0, np.zeros((n_traj, n_local))))
+        lo0 = np.zeros((n_traj, n_local)) if pr.local0 is None else np.array(pr.local0, float)
+        states.append(_State(pr, th0, lo0))
     masks = [
         np.ones(n_traj, bool) if s.prob.traj is None else np.asarray(s.prob.traj, bool)
         for s in states
@@ -499,3 +511,110 @@ def _finish(
     out.identifiable = bool(ok.all())
     out.why = "; ".join(dict.fromkeys(w for w in why_param if w))
     return out
+
+
+FitFn = Callable[[Sequence[Problem]], list[FitOutcome]]
+"""``fit(problems) -> outcomes`` (e.g. :func:`fit_problems` with its residual function bound)."""
+EvalFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""``evaluate(thetas [M, Q], locals [M, T, L]) -> weighted residuals [M, T, K]``."""
+
+
+def nested_gap(
+    evaluate: EvalFn,
+    space: ParamSpace,
+    base: FitOutcome,
+    nested: Sequence[FitOutcome],
+    extra: Sequence[Sequence[int]],
+    traj: np.ndarray | None = None,
+) -> np.ndarray:
+    """By how much each nested fit, switched back to the base model, beats the base fit [chi^2].
+
+    Nested fit ``i`` at its optimum with its own columns ``extra[i]`` set to their zero values
+    (its base columns and local parameters kept) is a point of the base model. A positive gap
+    means the base fit stopped short of a base-model optimum the nested fit found: that much of
+    the nested model's gain is the optimiser's, not its extra parameters'. One batched rollout.
+    """
+    if not nested:
+        return np.zeros(0)
+    thetas, locs = [], []
+    for out, cols in zip(nested, extra, strict=True):
+        th = out.theta.copy()
+        th[list(cols)] = space.zero[list(cols)]
+        thetas.append(th)
+        locs.append(out.local)
+    r = evaluate(np.stack(thetas), np.stack(locs))
+    mask = np.ones(r.shape[1], bool) if traj is None else np.asarray(traj, bool)
+    return base.cost - np.sum(r[:, mask] ** 2, axis=(1, 2))
+
+
+def fit_nested(
+    fit: FitFn,
+    evaluate: EvalFn,
+    space: ParamSpace,
+    base: Problem,
+    candidates: Sequence[tuple[Sequence[int], Sequence[np.ndarray]]],
+    *,
+    tol: float = 1.0,
+    rounds: int = 3,
+) -> tuple[FitOutcome, list[FitOutcome]]:
+    """Fit a base model and candidate models that nest it, so that gains are the candidates'.
+
+    Each candidate (its own columns, its start vectors [Q] of which only those columns are read;
+    their zero values are always a start) is fitted from the base optimum: its base columns
+    and local parameters start where the base fit ended, so at its zero start it IS the base
+    fit and (least squares never accepts a worse step) its chi^2 is never above the base's.
+    Then every candidate's optimum is switched back to the base model (:func:`nested_gap`); when
+    one beats the base by more than ``tol`` [chi^2] the base fit had stopped short (an iteration
+    cap, a rough objective), so the base is refitted from that point and the candidates worse
+    than the new base, or again beating it, are refitted from it; at most ``rounds`` times.
+
+    Returns:
+        (base outcome, one outcome per candidate: the best of its starts).
+    """
+    (b,) = fit([base])
+    n = len(candidates)
+    outs: list[FitOutcome | None] = [None] * n
+    extra = [list(c) for c, _ in candidates]
+    todo = list(range(n))
+    for rnd in range(rounds + 1):
+        probs, owner, todo_left = [], [], set(todo)
+        for i in todo:
+            zero = space.zero[extra[i]]
+            given = [np.asarray(s, float)[extra[i]] for s in candidates[i][1]]
+            for start in [zero] + [g for g in given if not np.array_equal(g, zero)]:
+                th = b.theta.copy()
+                th[extra[i]] = start
+                probs.append(
+                    Problem(
+                        free=list(base.free) + extra[i],
+                        traj=base.traj,
+                        theta0=th,
+                        fit_local=base.fit_local,
+                        local0=b.local,
+                    )
+                )
+                owner.append(i)
+        for o, i in zip(fit(probs) if probs else [], owner, strict=True):
+            if i in todo_left or o.cost < outs[i].cost:
+                outs[i] = o
+                todo_left.discard(i)
+        done = [o for o in outs if o is not None]
+        proj = b.cost - nested_gap(evaluate, space, b, done, extra, base.traj)
+        j = int(np.argmin(proj)) if n else 0
+        if n == 0 or b.cost - proj[j] <= tol or rnd == rounds:
+            break
+        th = done[j].theta.copy()
+        th[extra[j]] = space.zero[extra[j]]
+        (b,) = fit(
+            [
+                Problem(
+                    free=list(base.free),
+                    traj=base.traj,
+                    theta0=th,
+                    fit_local=base.fit_local,
+                    local0=done[j].local,
+                )
+            ]
+        )
+        todo = [i for i in range(n) if done[i].cost > b.cost or b.cost - proj[i] > tol]
+    return b, [o for o in outs if o is not None]
