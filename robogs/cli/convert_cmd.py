@@ -271,12 +271,7 @@ def run(args: argparse.Namespace) -> int:
         )
         return 0
     if getattr(args, "ray", None) is not None or any(c in str(args.src) for c in "*?["):
-        if split:  # the merge takes one episode per bag (robogs/convert/distributed.py)
-            raise InputError(
-                "works on one source at a time, not on a glob or with --ray",
-                where="--split-at-gaps",
-                hint="convert each bag with --split-at-gaps, or the glob without it",
-            )
+        # one task per bag; with --split-at-gaps each task cuts its own bag
         from robogs.convert.distributed import run_many
 
         return run_many(args, opts)

@@ -1,7 +1,9 @@
 """Convert many bags into one dataset, one task per bag (in this process, or as Ray tasks).
 
 Each bag ``k`` (in sorted order) is converted by :func:`robogs.convert.ingest.convert.convert_path`
-into its own dataset under ``OUT.partial/.parts/k`` with episode id ``ep{k:04d}``. The driver
+into its own dataset under ``OUT.partial/.parts/k`` with episode id ``ep{k:04d}`` (with
+``--split-at-gaps``, the task also cuts it, at its own derived or given gap, into
+``ep{k:04d}_000``, ...; the cut table is kept in ``provenance.bags``). The driver
 then moves each episode's files into ``OUT.partial/episodes/``, takes the files outside the
 episodes (robot, cameras) from the first bag that converted and requires the same bytes from
 the others, and writes the manifest once, at the end (a temporary file renamed over it), before
@@ -54,6 +56,7 @@ class ManyResult:
 
     out: Path
     episodes: list[str] = field(default_factory=list)
+    bags: int = 0  # bags converted (each gives one episode, or several with --split-at-gaps)
     failed: list[dict[str, str]] = field(default_factory=list)
     peak_rss: dict[int, int] = field(default_factory=dict)
     task_seconds: float = 0.0
@@ -226,7 +229,9 @@ def _merge(stage: Path, bags: list[BagResult], result: ManyResult) -> dict[str, 
             result.failed.append({"source": bag.source, "error": bag.error or "not converted"})
             continue
         part = stage / ".parts" / f"{bag.index:04d}"
-        prefix = f"episodes/{bag.episode}/"
+        ids = [str(e.get("id")) for e in m.get("episodes", []) if isinstance(e, dict)]
+        # the bag's episode, or the pieces --split-at-gaps cut it into (epKKKK_000, ...)
+        prefix = tuple(f"episodes/{eid}/" for eid in dict.fromkeys([bag.episode, *ids]))
         own = {r: e for r, e in m.get("files", {}).items() if r.startswith(prefix)}
         common = {r: e for r, e in m.get("files", {}).items() if not r.startswith(prefix)}
         if base is None:
@@ -256,7 +261,8 @@ def _merge(stage: Path, bags: list[BagResult], result: ManyResult) -> dict[str, 
         files.update(own)
         episodes += m.get("episodes", [])
         per_bag[bag.episode] = m.get("provenance", {})
-        result.episodes.append(bag.episode)
+        result.episodes += ids
+        result.bags += 1
     if base is None:
         return None
     files.update(shared)
@@ -309,11 +315,21 @@ def run_many(args: Any, options: Any) -> int:
         if executor is not None:
             executor.shutdown()
     peak = max(res.peak_rss.values(), default=0)
+    each = "one episode each" if len(res.episodes) == res.bags else f"{len(res.episodes)} episodes"
     print(
-        f"wrote {res.out} ({len(res.episodes)} of {len(srcs)} bags, one episode each; "
+        f"wrote {res.out} ({res.bags} of {len(srcs)} bags, {each}; "
         f"{len(res.peak_rss)} worker processes, peak RSS {peak / 2**20:.0f} MiB, "
         f"{res.task_seconds:.1f} task-s in {res.wall_seconds:.1f} s)"
     )
+    if options.split_gaps:
+        bags = read_json(res.out / "manifest.json", what="manifest")["provenance"]["bags"]
+        for prov in bags.values():
+            for rec in prov.get("split_at_gaps") or []:
+                print(
+                    f"  split {rec['episode']} at pauses > {rec['gap_s']:.3g} s "
+                    f"({'derived' if rec['derived'] else 'given'}): "
+                    f"{', '.join(e['id'] for e in rec['episodes'])}"
+                )
     for f in res.failed:
         print(f"  not converted: {f['error']}", file=sys.stderr)
     return 1 if res.failed else 0

@@ -339,6 +339,7 @@ def write_bulk_bags(
     rate_hz: float = 200.0,
     seed: int = 0,
     corrupt: tuple[int, ...] = (),
+    pause_s: float = 0.0,
 ) -> list[Path]:
     """Write ``n_bags`` ROS 2 MCAP files ``bag_KKKK.mcap``, each one ``/joint_states`` episode of
     the planar 3R arm (header stamps on a 1 ms grid; log time 2 ms later).
@@ -350,6 +351,8 @@ def write_bulk_bags(
         rate_hz: JointState rate, Hz.
         seed: motion seed.
         corrupt: indices of bags cut to their first 40 % (no footer, no summary: unreadable).
+        pause_s: a pause (s) added before sample ``round(duration_s * rate_hz) // 2`` of each
+            bag (stamps after it shifted), for ``--split-at-gaps``.
     """
     from mcap_ros2.writer import Writer
     from rosbags.typesys import Stores, get_typestore
@@ -371,6 +374,8 @@ def write_bulk_bags(
             schema = w.register_msgdef("sensor_msgs/msg/JointState", msgdef)
             for c in _chunks(n, rate_hz, motion, t0):
                 for i, t in enumerate(c["t_ns"].tolist()):
+                    if t >= t0 + (n // 2) * period_ns:
+                        t += int(round(pause_s * 1e9))
                     msg = {
                         "header": {
                             "stamp": {"sec": t // 1_000_000_000, "nanosec": t % 1_000_000_000},

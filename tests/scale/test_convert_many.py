@@ -80,3 +80,57 @@ def test_many_bags_into_the_sharded_layout(bags, tmp_path):
     report = validate(out)
     assert report.findings == [], [f.message for f in report.findings]
     assert {"I004", "I011", "T002"} <= {r.code for r in report.runs if r.status == "ran"}
+
+
+@pytest.fixture(scope="module")
+def paused(tmp_path_factory):
+    """4 bags of 0.3 s at 200 Hz with a 0.5 s pause after sample 30; bag 2 cut short."""
+    root = tmp_path_factory.mktemp("paused")
+    write_bulk_bags(root / "bags", n_bags=4, duration_s=0.3, corrupt=(2,), pause_s=0.5)
+    (root / "planar.urdf").write_text(planar_urdf(), encoding="utf-8")
+    return root
+
+
+def _pieces(root: Path) -> list[tuple]:
+    """(id, start_ns, end_ns, joint_states rows) of every episode of a dataset."""
+    from robogs.format.dataset import Dataset
+
+    ds = Dataset.open(root)
+    return [(e.id, e.start_ns, e.end_ns, e.table("joint_states").num_rows) for e in ds.episodes]
+
+
+def test_glob_with_split_at_gaps_cuts_each_bag_in_its_task(paused, tmp_path, capsys):
+    out = tmp_path / "split"
+    assert _convert(paused, out, "--split-at-gaps") == 1  # bag 2 failed, the rest landed
+    text = capsys.readouterr()
+    assert "bag_0002.mcap" in text.err
+    assert "3 of 4 bags, 6 episodes" in text.out
+    assert text.out.count("(derived): ") == 3
+    got = _pieces(out)
+    # oracle 1: each bag converted alone with --split-at-gaps and the same episode id
+    alone = []
+    for k in (0, 1, 3):
+        one = tmp_path / f"alone{k}"
+        bag = str(paused / "bags" / f"bag_{k:04d}.mcap")
+        args = ["convert", bag, str(one), "--urdf", str(paused / "planar.urdf")]
+        assert main([*args, "--episode", f"ep{k:04d}", "--split-at-gaps", "--no-progress"]) == 0
+        alone += _pieces(one)
+    assert got == alone
+    # oracle 2: the generator's grid: 60 samples at 5 ms, the pause before sample 30
+    assert [g[0] for g in got] == [f"ep{k:04d}_{j:03d}" for k in (0, 1, 3) for j in (0, 1)]
+    assert [g[3] for g in got] == [30] * 6
+    for a, b in zip(got[::2], got[1::2], strict=True):
+        assert b[1] - a[2] == 5_000_000 + 500_000_000  # one period plus the pause, ns
+    report = validate(out)
+    assert report.findings == [], [f.message for f in report.findings]
+
+
+@pytest.mark.slow
+def test_ray_glob_with_split_at_gaps_equals_local(ray_cluster, paused, tmp_path, capsys):
+    local, ray = tmp_path / "local", tmp_path / "ray"
+    assert _convert(paused, local, "--split-at-gaps") == 1
+    assert _convert(paused, ray, "--split-at-gaps", "--ray") == 1
+    a = json.loads((local / "manifest.json").read_text())
+    b = json.loads((ray / "manifest.json").read_text())
+    assert a["files"] == b["files"] and a["episodes"] == b["episodes"]
+    assert len(a["episodes"]) == 6
