@@ -16,10 +16,19 @@ T016, wrench vs contact: contact starts when the object starts to move. For ever
 force magnitude out of its floor (the sensor's offset removed), the object's displacement from
 its rest position around it is extrapolated back to zero along its first millimetres of motion,
 and the force back to its floor along its rise; the lag is the mean of ``t_force - t_motion``
-over the pushes (Student's t interval). A rigid pusher touches and loads the object at once, so
-a clean recording gives a lag within the sampling. A force cannot follow the motion it causes,
-so a positive lag (wrench late) is an error; a negative one may be physical (a force-controlled
-push builds up to break the object away) and is a note. At least three pushes are needed.
+over the pushes (Student's t interval). At least three pushes are needed. What a lag means
+depends on how the robot pushes, read from the ``command_kind`` of the episode's ``actions``
+stream (:func:`control_mode`):
+
+* a positive lag (wrench late) is an error under any control: a force cannot follow the motion
+  it causes;
+* position (or velocity) commands: a stiff pusher touches, loads and moves the object at once,
+  so a clean recording gives a lag within the sampling, and a negative one (wrench early) is an
+  error too;
+* effort commands (force control): the force builds up to break the object away, so it leads
+  the motion by a physical amount (tens of ms); a negative lag is a note, reported with its size;
+* no ``command_kind``: the sign of a negative lag is physically ambiguous; it is a note that says
+  both readings.
 """
 
 from __future__ import annotations
@@ -45,6 +54,7 @@ __all__ = [
     "ContactLag",
     "box_centre_lag",
     "contact_lag",
+    "control_mode",
     "projected_centres",
     "smooth_series",
 ]
@@ -539,6 +549,30 @@ def _wrench_series(ctx: CheckContext, rel: str) -> dict[str, tuple[np.ndarray, n
     return out
 
 
+#: an ``actions`` stream's ``command_kind`` (the commanded quantity) -> how the pusher is controlled
+_CONTROL = {"position": "position", "velocity": "position", "effort": "force"}
+
+
+def control_mode(ep) -> tuple[str | None, str]:
+    """How the robot pushes in an episode, from its ``actions`` stream's ``command_kind``:
+    ``"position"`` (position or velocity commands: a stiff pusher that moves the object as the
+    force rises), ``"force"`` (effort commands: the force builds up before the object breaks
+    away), or None when no ``actions`` stream says; and the sentence that says where it was read.
+    """
+    kinds = sorted(
+        {
+            str(st.get("command_kind"))
+            for st in ep.streams.values()
+            if isinstance(st, dict) and st.get("kind") == "actions" and st.get("command_kind")
+        }
+    )
+    modes = {_CONTROL[k] for k in kinds if k in _CONTROL}
+    if len(modes) != 1:
+        why = "mixed command kinds " + ", ".join(kinds) if modes else "no actions command_kind"
+        return None, why
+    return modes.pop(), "actions command_kind " + ", ".join(kinds)
+
+
 @check(
     "T016",
     group="time",
@@ -547,8 +581,9 @@ def _wrench_series(ctx: CheckContext, rel: str) -> dict[str, tuple[np.ndarray, n
     quantity="mean lag of the force rises behind the object's motion onsets",
     unit="ms",
     budget="time.sync_ms",
-    hint="the force-torque stream is stamped late against the poses (a force cannot follow the "
-    "motion it causes): correct its offset_ns by the lag",
+    hint="the force-torque stream is stamped off against the poses (a force cannot follow the "
+    "motion it causes; under position control it rises as the object moves): correct its "
+    "offset_ns by the lag",
 )
 def _wrench_contact_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
     budget = ctx.budget("time.sync_ms")
@@ -562,6 +597,7 @@ def _wrench_contact_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
             objects = _poses(ctx, ep.streams[obj_stream]["path"])
         except InputReported:
             continue
+        mode, mode_why = control_mode(ep)
         for frame, (t_w, f) in sorted(wrenches.items()):
             best: tuple[str, ContactLag] | None = None
             for obj, (t_o, v_o) in sorted(objects.items()):
@@ -575,23 +611,41 @@ def _wrench_contact_lag(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
                 continue
             if est.lo_ms <= 0.0 <= est.hi_ms or abs(est.lag_ms) <= 3.0 * est.stderr_ms:
                 continue
-            where = dict(file=rel, episode=ep.id, stream=name)
-            span = f"(95 % interval {est.lo_ms:.4g} to {est.hi_ms:.4g} ms over {est.pushes} pushes)"
-            if est.lag_ms > 0:  # a force cannot follow the motion it causes: the stamps are off
-                yield chk.finding(
-                    f"wrench {frame!r}: force rises run {est.lag_ms:.3g} ms behind the motion "
-                    f"onsets of {obj!r} {span}",
-                    value=est.lag_ms,
-                    budget=budget,
-                    **where,
-                )
-            else:  # a force may build up before the object breaks away: a note
-                yield chk.finding(
-                    f"wrench {frame!r}: force rises run {-est.lag_ms:.3g} ms ahead of the motion "
-                    f"onsets of {obj!r} {span}: a force that builds up to break the object away "
-                    "does this; with position-controlled pushes the wrench is stamped early",
-                    value=est.lag_ms,
-                    budget=budget,
-                    severity="info",
-                    **where,
-                )
+            msg, severity = _contact_verdict(est, mode, mode_why)
+            yield chk.finding(
+                f"wrench {frame!r}: force rises run {abs(est.lag_ms):.3g} ms "
+                f"{'behind' if est.lag_ms > 0 else 'ahead of'} the motion onsets of {obj!r} "
+                f"(95 % interval {est.lo_ms:.4g} to {est.hi_ms:.4g} ms over {est.pushes} "
+                f"pushes): {msg}",
+                value=est.lag_ms,
+                budget=budget,
+                file=rel,
+                episode=ep.id,
+                stream=name,
+                severity=severity,
+            )
+
+
+def _contact_verdict(est: ContactLag, mode: str | None, why: str) -> tuple[str, str | None]:
+    """What a significant lag means under the control mode: the sentence and a severity
+    (None: the check's, error)."""
+    if est.lag_ms > 0:  # causality holds under any control
+        return "a force cannot follow the motion it causes: the wrench is stamped late", None
+    if mode == "position":
+        return (
+            f"position-controlled pushes ({why}) load and move the object at once: the wrench "
+            "is stamped early",
+            None,
+        )
+    if mode == "force":
+        return (
+            f"expected of force-controlled pushes ({why}): the force builds up to break the "
+            "object away; a clock error within this lead cannot be told from it",
+            "info",
+        )
+    return (
+        f"the sign is ambiguous ({why}): a force-controlled push builds up before the object "
+        "breaks away, while with position-controlled pushes the wrench is stamped early; "
+        "record the actions stream's command_kind to decide",
+        "info",
+    )
