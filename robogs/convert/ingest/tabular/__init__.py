@@ -59,8 +59,10 @@ names that do not match the URDF raise an :class:`~robogs.format.errors.InputErr
 file, the row and the column.
 
 The package is split by job: :mod:`.reading` (files into columns, stamps, time-unit guess),
-:mod:`.mapping` (column maps and the automatic layouts), :mod:`.cleaning` (drops and
-segments), :mod:`.pose` (end-effector poses), :mod:`.writing` (episodes through the dataset
+:mod:`.column_map` (:class:`ColumnMap`, which columns hold what), :mod:`.user_map` (the
+``--map`` YAML), :mod:`.layouts` (columns inferred from the header, one module per layout: UR
+RTDE, Franka, generic), :mod:`.mapping` (the map a file is read with), :mod:`.cleaning` (drops
+and segments), :mod:`.pose` (end-effector poses), :mod:`.writing` (episodes through the dataset
 writer) and :mod:`.options` (:class:`TabularOptions` and its CLI flags). The one driver is
 :func:`robogs.convert.ingest.convert.convert_path`; :func:`convert_tabular` is a deprecated
 alias of it.
@@ -72,9 +74,11 @@ import warnings
 from pathlib import Path
 
 from .cleaning import LogSegment
-from .mapping import ColumnMap, JointColumns, auto_mapping, infer_ee_pose, read_mapping
+from .column_map import ColumnMap, JointColumns
+from .layouts import auto_mapping, infer_ee_pose
 from .options import TabularOptions, add_arguments, options_from_args
 from .reading import detect_tabular, guess_time_unit, read_log_file, to_ns
+from .user_map import read_mapping
 from .writing import convert, write_tabular
 
 __all__ = [

@@ -17,7 +17,7 @@ import numpy as np
 
 from robogs.format.errors import InputError
 
-from .mapping import ColumnMap
+from .column_map import ColumnMap
 from .pose import pose_samples
 from .reading import RawLog, to_float, to_ns
 

@@ -17,7 +17,7 @@ Formats (``n`` values per row; rotations in rad):
   UR RTDE ``actual_TCP_pose``; default columns ``actual_TCP_pose_0..5``.
 * ``matrix_colmajor`` (n = 16): the 4x4 ``T_frame_link`` column by column. Franka
   ``O_T_EE``; default columns ``O_T_EE_0..15`` (read without a map too, see
-  :func:`robogs.convert.ingest.tabular.mapping.infer_ee_pose`).
+  :func:`robogs.convert.ingest.tabular.layouts.infer_ee_pose`).
 * ``matrix_rowmajor`` (n = 16): the same matrix row by row.
 * ``quaternion`` (n = 7): ``x y z qw qx qy qz`` (a unit quaternion within 1 %; normalised).
 

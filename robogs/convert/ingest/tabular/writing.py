@@ -8,7 +8,6 @@ and the provenance lists the files, the mapping of each, every drop and every no
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import re
 from pathlib import Path
@@ -21,17 +20,11 @@ from robogs.format.errors import InputError, RobogsError
 from robogs.format.urdf import load_urdf
 
 from .cleaning import FileReport, LogSegment, clean_file
-from .mapping import (
-    EE_POSE_PREFIXES,
-    SEGMENT_COLUMNS,
-    ColumnMap,
-    auto_mapping,
-    infer_ee_pose,
-    read_mapping,
-    resolve_time,
-)
+from .column_map import ColumnMap
+from .mapping import file_mapping
 from .pose import resolve_frame
 from .reading import RawLog, log_files, read_log_file
+from .user_map import read_mapping
 
 __all__ = ["attach_robot_lenient", "convert", "write_tabular"]
 
@@ -137,36 +130,6 @@ def attach_robot_lenient(
         "(loaded with load_meshes=False)"
     )
     prov.extra["robot"] = {"urdf": urdf_path.name, "meshes": 0, "root_link": root}
-
-
-def _file_mapping(
-    f: Path, raw: RawLog, fixed_map: ColumnMap | None, logged: list[str], chain: Any, prov: Any
-) -> ColumnMap:
-    """The column map of one file: the user's map (copied), or the automatic layouts with the
-    map's ``hold``/``gap_s``/``ee_pose``; UR RTDE ``actual_TCP_pose`` or Franka ``O_T_EE``
-    inferred when no map names a pose."""
-    if fixed_map is not None and fixed_map.joints:
-        cmap = dataclasses.replace(fixed_map)
-    else:
-        cmap = auto_mapping(raw.columns, logged, f)
-        if fixed_map is not None:
-            cmap.hold, cmap.gap_s = dict(fixed_map.hold), fixed_map.gap_s
-            cmap.ee_pose = fixed_map.ee_pose
-    resolve_time(f, raw, cmap, prov)
-    if cmap.segment_column is None:
-        cmap.segment_column = next((c for c in SEGMENT_COLUMNS if c in raw.data), None)
-    if cmap.ee_pose is None and any(c.startswith(EE_POSE_PREFIXES) for c in raw.columns):
-        spec, why = infer_ee_pose(raw.columns, list(chain.link_names))
-        if spec is None:
-            prov.note(
-                f"{f.name}: {why}; declare its link in the map to import it: 'ee_pose: "
-                "{link: LINK, format: axis_angle | matrix_colmajor}')"
-            )
-        else:
-            resolve_frame(spec, chain, None)
-            cmap.ee_pose = spec
-            prov.note(f"{f.name}: {why}; a map's 'ee_pose' overrides it")
-    return cmap
 
 
 def _report_file(f: Path, raw: RawLog, cmap: ColumnMap, rep: FileReport, prov: Any) -> None:
@@ -335,7 +298,7 @@ def write_tabular(
     ee_link: str | None = None
     for f in files:
         raw = read_log_file(f)
-        cmap = _file_mapping(f, raw, fixed_map, logged, chain, prov)
+        cmap = file_mapping(f, raw, fixed_map, logged, chain, prov)
         maps[f.name] = cmap.to_dict()
         segs, rep = clean_file(
             f, raw, cmap, joint_names, lower, upper, gap_s if gap_s is not None else cmap.gap_s
