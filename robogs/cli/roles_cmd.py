@@ -1,7 +1,10 @@
 """``robogs roles DATASET`` lists every stream with its role and the reason recorded at
 conversion; ``robogs roles set DATASET TOPIC_OR_STREAM ROLE`` re-roles a decoded ``generic``
 stream (``ee_pose:<link>``, ``object_pose:<name>``, ``wrench:<frame>`` or ``ignore``) and
-writes a new version of the dataset (:func:`robogs.format.roles.set_role`).
+writes a new version of the dataset (:func:`robogs.format.roles.set_role`). Poses are moved
+into the world through the static frame they are recorded in (``header.frame_id``, or
+``--frame``): the base link, a link fixed to it, or a named frame of ``robot.frames``; an
+``ee_pose`` entity may be a named frame fixed to a link.
 
 Exit codes: 0 listed or changed, 2 usage error, unknown stream, or a role the stream's
 columns do not fit (nothing is written then).
@@ -24,6 +27,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="DATASET (list the roles), or: set DATASET TOPIC_OR_STREAM ROLE",
     )
     parser.add_argument("--episode", help="only this episode (set: default every episode)")
+    parser.add_argument(
+        "--frame",
+        help="set, pose roles: the frame the values are in (default: the table's "
+        "header.frame_id): the world, the base link, a link or a named frame fixed to it",
+    )
     parser.add_argument("--json", action="store_true", help="machine-readable output")
 
 
@@ -31,6 +39,10 @@ def run(args: argparse.Namespace) -> int:
     from robogs.format.errors import RobogsError
 
     words = list(args.words)
+    if words[0] != "set" and args.frame is not None:
+        raise RobogsError(
+            "--frame applies to 'roles set' only", hint="robogs roles set ... --frame F"
+        )
     if words[0] == "set":
         if len(words) != 4:
             raise RobogsError(
@@ -64,7 +76,7 @@ def _list(root: str, args: argparse.Namespace) -> int:
 def _set(root: str, target: str, role: str, args: argparse.Namespace) -> int:
     from robogs.format.roles import set_role
 
-    changes = set_role(root, target, role, episode=args.episode)
+    changes = set_role(root, target, role, episode=args.episode, frame=args.frame)
     if args.json:
         print(json.dumps([{**c.__dict__, "lines": list(c.lines)} for c in changes], indent=2))
         return 0

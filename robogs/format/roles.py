@@ -13,6 +13,13 @@ turns such a stream into the role the user names:
   ``wrenches`` stream (``wrenches/<topic>`` beside an existing one, one stream per topic);
 * ``ignore``: the stream and its table leave the dataset.
 
+Poses are moved into the world (:func:`static_frame`): the frame they are expressed in (the
+table's ``header.frame_id``, or ``frame=``) must be the world, the robot's base link, a link
+fixed to it, or a named frame (``robot.frames``, FORMAT.md §5.2) hung from one of those; its
+``T_world_frame`` is applied. An ``ee_pose`` entity may be a named frame fixed to a link (a
+marker, a pusher tip): its ``T_link_frame`` is removed, and the rows are the link's. So
+``T_world_link = T_world_frame · T_frame_tracked · T_link_tracked^-1``.
+
 The change is a new version of the dataset, written by :class:`~robogs.format.writer.
 DatasetWriter` (atomic, refused when the dataset changed since it was read), and recorded in
 ``provenance.topics[<topic>]`` (role and reason).
@@ -30,8 +37,18 @@ import pyarrow as pa
 
 from .dataset import Dataset, Episode
 from .errors import FormatError
+from .frames import matrix_to_quat_np, quat_to_matrix_np
+from .named_frames import frame_in_link
 
-__all__ = ["StreamRole", "RoleChange", "ROLE_KINDS", "list_roles", "parse_role", "set_role"]
+__all__ = [
+    "StreamRole",
+    "RoleChange",
+    "ROLE_KINDS",
+    "list_roles",
+    "parse_role",
+    "set_role",
+    "static_frame",
+]
 
 #: role prefix -> stream kind it produces (``ignore`` removes the stream)
 ROLE_KINDS: dict[str, str | None] = {
@@ -186,7 +203,12 @@ def _rate_hz(t: np.ndarray) -> float | None:
 
 
 def set_role(
-    root: str | Path, target: str, role: str, *, episode: str | None = None
+    root: str | Path,
+    target: str,
+    role: str,
+    *,
+    episode: str | None = None,
+    frame: str | None = None,
 ) -> list[RoleChange]:
     """Give a ``generic`` stream a role and commit the dataset as a new version.
 
@@ -195,6 +217,8 @@ def set_role(
         target: the stream (``streams/<topic>`` or its name) or the source topic.
         role: ``ee_pose:<link>``, ``object_pose:<name>``, ``wrench:<frame>`` or ``ignore``.
         episode: only this episode (default: every episode holding the stream).
+        frame: the frame the pose values are expressed in (default: the table's
+            ``header.frame_id``; none recorded: the world).
 
     Returns:
         One change per episode.
@@ -225,15 +249,23 @@ def set_role(
                 where=f"episodes/{ep.id}/streams/{name}",
                 hint="only generic streams are re-roled; re-convert to change the others",
             )
+    if frame is not None and kind in (None, "wrenches"):
+        raise FormatError(
+            f"--frame applies to pose roles, not {role!r}",
+            where="--frame",
+            hint="a wrench role names its frame (wrench:<frame>)",
+        )
     if kind == "ee_poses" and ds.manifest.get("robot"):
         links = set(ds.urdf(load_meshes=False).link_map)
-        if entity not in links:
+        named = ds.named_frames
+        if entity not in links and entity not in named:
             raise FormatError(
-                f"link {entity!r} is not in the robot URDF",
+                f"link {entity!r} is not in the robot URDF (nor a named frame)",
                 path=ds.urdf_path,
-                hint=f"links: {', '.join(sorted(links))}",
+                hint=f"links: {', '.join(sorted(links))}"
+                + (f"; named frames: {', '.join(sorted(named))}" if named else ""),
             )
-    plans = [_plan(ds, ep, name, kind, entity, role) for ep, name in hits]  # all checked first
+    plans = [_plan(ds, ep, name, kind, entity, role, frame) for ep, name in hits]  # checked first
     with ds.edit() as w:
         for plan in plans:
             plan.apply(w)
@@ -244,6 +276,8 @@ def set_role(
                 was = rec.get("reason")
                 rec["role"] = role
                 rec["reason"] = "set by robogs roles set" + (f" (was: {was})" if was else "")
+                if plan.frames:
+                    rec["frames"] = plan.frames
         w.commit()
     return [p.change for p in plans]
 
@@ -260,6 +294,7 @@ class _Plan:
     table: pa.Table | None
     change: RoleChange
     new_object: str | None = None
+    frames: str = ""
 
     def apply(self, w: Any) -> None:
         streams = {e["id"]: e for e in w.manifest.get("episodes", []) if isinstance(e, dict)}[
@@ -274,7 +309,15 @@ class _Plan:
             w.set_asset(self.new_object, kind="object")
 
 
-def _plan(ds: Dataset, ep: Episode, name: str, kind: str | None, entity: str, role: str) -> _Plan:
+def _plan(
+    ds: Dataset,
+    ep: Episode,
+    name: str,
+    kind: str | None,
+    entity: str,
+    role: str,
+    frame: str | None = None,
+) -> _Plan:
     st = ep.streams[name]
     source = str(st.get("source", ""))
     where = f"episodes/{ep.id}/streams/{name}"
@@ -309,10 +352,27 @@ def _plan(ds: Dataset, ep: Episode, name: str, kind: str | None, entity: str, ro
     except FormatError as exc:
         raise FormatError(exc.message, path=ep.table_path(name), where=exc.where) from None
     ok = np.all(np.isfinite(v), axis=1)
+    frame_lines: list[str] = []
     if kind != "wrenches":
         qn = np.linalg.norm(v[:, 3:], axis=1)
         ok &= qn > 1e-9
         v[ok, 3:] /= qn[ok, None]
+        parent = frame if frame is not None else _recorded_frame(tab, ep, name, where)
+        T_wp, how = static_frame(ds, parent, where=where)
+        frame_lines.append(
+            f"{ep.id}: values in frame {parent}: {how}" if parent else f"{ep.id}: {how}"
+        )
+        T_lt = np.eye(4)
+        if kind == "ee_poses" and ds.manifest.get("robot") and entity in ds.named_frames:
+            links = set(ds.urdf(load_meshes=False).link_map)
+            if entity not in links:
+                link, T_lt = frame_in_link(ds.named_frames, entity, links)
+                frame_lines.append(
+                    f"{ep.id}: {entity!r} is a named frame on link {link!r}: rows are "
+                    f"{link!r}'s (T_{link}_{entity} removed)"
+                )
+                entity = link
+        v[ok] = _compose(T_wp, v[ok], np.linalg.inv(T_lt))
     order = np.argsort(t[ok], kind="stable")
     t, v = t[ok][order], v[ok][order]
     if t.size == 0:
@@ -384,15 +444,111 @@ def _plan(ds: Dataset, ep: Episode, name: str, kind: str | None, entity: str, ro
     ]
     if dropped:
         lines.append(f"{ep.id}: {dropped} rows with non-finite values or a zero quaternion dropped")
-    if "header.frame_id" in tab.column_names:
-        frames = sorted({str(f) for f in tab.column("header.frame_id").to_pylist() if f})
-        if frames:
-            lines.append(
-                f"{ep.id}: values taken as recorded in frame {', '.join(frames[:3])}: they must "
-                "already be in the dataset's world frame (no /tf is applied here)"
-            )
+    lines.extend(frame_lines)
     new_object = entity if kind == "object_poses" and entity not in ds.assets else None
     if new_object is not None:
         lines.append(f"declared asset {entity!r} (kind object, no mesh yet)")
     change = RoleChange(ep.id, name, role, new_stream, int(t.size), dropped, tuple(lines))
-    return _Plan(ep, name, source, new_stream, entry, table, change, new_object)
+    frames = "; ".join(x.split(": ", 1)[1] for x in frame_lines)
+    return _Plan(ep, name, source, new_stream, entry, table, change, new_object, frames)
+
+
+def _recorded_frame(tab: pa.Table, ep: Episode, name: str, where: str) -> str | None:
+    """The one ``header.frame_id`` of a decoded pose table (None when it records none)."""
+    if "header.frame_id" not in tab.column_names:
+        return None
+    frames = sorted({str(f).lstrip("/") for f in tab.column("header.frame_id").to_pylist() if f})
+    if len(frames) > 1:
+        raise FormatError(
+            f"stream {name!r} records poses in {len(frames)} frames: {', '.join(frames[:5])}",
+            path=ep.table_path(name),
+            where=where,
+            hint="give the frame with --frame, or split the topic",
+        )
+    return frames[0] if frames else None
+
+
+def _fixed_to(urdf: Any, link: str, base: str) -> np.ndarray | None:
+    """``T_base_link`` [4, 4] when only fixed joints lead from ``base`` to ``link``, else None."""
+    by_child = {j.child: j for j in urdf.robot.joints}
+    T = np.eye(4)
+    cur = link
+    while cur != base:
+        j = by_child.get(cur)
+        if j is None or j.type != "fixed":
+            return None
+        T = (np.eye(4) if j.origin is None else np.asarray(j.origin, np.float64)) @ T
+        cur = j.parent
+    return T
+
+
+def static_frame(ds: Dataset, frame: str | None, *, where: str = "") -> tuple[np.ndarray, str]:
+    """``T_world_frame`` [4, 4] (m) of a frame fixed in the world, and how it was found.
+
+    The world is the robot's base link (FORMAT.md §3). A frame is known when it is the world
+    (``conventions.world_frame.name`` or ``world``; None: none recorded, taken as the world),
+    the base link, a URDF link joined to it by fixed joints only, or a named frame
+    (``robot.frames``) hung from one of those.
+
+    Raises:
+        FormatError: an unknown frame, or one a joint moves (a named frame on a moving link).
+    """
+    world = str(((ds.manifest.get("conventions") or {}).get("world_frame") or {}).get("name", ""))
+    if frame is None:
+        return np.eye(
+            4
+        ), "no frame recorded: values taken as in the world (--frame FRAME says otherwise)"
+    if frame in ("world", world):
+        return np.eye(4), "the world"
+    robot = ds.manifest.get("robot") or {}
+    hint = "give --frame: the world, the robot's base link or a named frame fixed to it"
+    if not robot:
+        raise FormatError(
+            f"unknown frame {frame!r} (the dataset has no robot)", where=where, hint=hint
+        )
+    urdf = ds.urdf(load_meshes=False)
+    links = set(urdf.link_map)
+    base = str(robot.get("base_link") or urdf.base_link)
+    named = ds.named_frames
+    if frame in links:
+        link, T_lf, via = frame, np.eye(4), f"link {frame!r}"
+    elif frame in named:
+        link, T_lf = frame_in_link(named, frame, links)
+        src = named[frame].source
+        via = f"named frame {frame!r} on link {link!r}" + (f" (from {src})" if src else "")
+    else:
+        known = sorted(named) + [base]
+        raise FormatError(
+            f"unknown frame {frame!r}: not the world, a robot link or a named frame",
+            path=ds.manifest_path,
+            where=where,
+            hint=f"{hint} (named frames and base: {', '.join(known)}); or add it to robot.frames",
+        )
+    T_bl = _fixed_to(urdf, link, base)
+    if T_bl is None:
+        raise FormatError(
+            f"frame {frame!r} is not fixed in the world: a joint moves link {link!r}",
+            path=ds.manifest_path,
+            where=where,
+            hint="poses must be given in a frame fixed to the robot base; " + hint,
+        )
+    T = T_bl @ T_lf
+    if np.allclose(T, np.eye(4), atol=1e-12):
+        return T, f"{via}, the world"
+    deg = np.degrees(np.arccos(np.clip((np.trace(T[:3, :3]) - 1) / 2, -1, 1)))
+    return T, (
+        f"{via}: T_world_{frame} applied ({np.linalg.norm(T[:3, 3]) * 1e3:.4g} mm, {deg:.4g} deg)"
+    )
+
+
+def _compose(T_left: np.ndarray, v: np.ndarray, T_right: np.ndarray) -> np.ndarray:
+    """[N, 7] poses ``x y z qw qx qy qz`` as ``T_left · T(v) · T_right`` (identity: unchanged)."""
+    if np.array_equal(T_left, np.eye(4)) and np.array_equal(T_right, np.eye(4)):
+        return v
+    T = np.tile(np.eye(4), (v.shape[0], 1, 1))
+    T[:, :3, :3] = quat_to_matrix_np(v[:, 3:7])
+    T[:, :3, 3] = v[:, :3]
+    T = T_left[None] @ T @ T_right[None]
+    q = matrix_to_quat_np(T[:, :3, :3])
+    q *= np.where(q[:, :1] < 0, -1.0, 1.0)
+    return np.concatenate([T[:, :3, 3], q], axis=1)
