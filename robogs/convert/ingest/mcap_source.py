@@ -320,14 +320,7 @@ def _convert_mcap(src: Path, ctx: IngestContext) -> None:
             where = "before the first message"
             size_mb = src.stat().st_size / 1e6
             try:
-                passes = (
-                    (static, "static topics", False),
-                    (ingest.probe_topics, "pose topics against the robot", True),
-                    (main, src.name, False),
-                )
-                for group, label, probing in passes:
-                    if not group:
-                        continue
+                for group, label, probing in ingest.passes(static, main, src.name):
                     total = sum(ingest.counts[t] for t in group)
                     ctx.progress.start(f"reading {label} ({size_mb:.0f} MB)", total)
                     for schema, channel, message in reader.iter_messages(

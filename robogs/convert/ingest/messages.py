@@ -19,6 +19,7 @@ order, and finally calls :meth:`MessageIngest.finish`. Messages are duck-typed: 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Any
 
 from .bag_options import BagOptions
@@ -99,6 +100,19 @@ class MessageIngest:
     def probe_topics(self) -> list[str]:
         """Topics of the probe pass (read after the static ones, before the main pass)."""
         return self._probe.topics
+
+    def passes(
+        self, static: list[str], main: list[str], name: str
+    ) -> Iterator[tuple[list[str], str, bool]]:
+        """The reading passes of :meth:`plan`'s topics, in order, an empty one skipped when its
+        turn comes: ``(topics, label, probing)`` for the static topics, the probe of pose topics
+        against the robot (:meth:`probe`), then the main pass (label ``name``, :meth:`handle`)."""
+        every = (
+            (static, "static topics", False),
+            (self.probe_topics, "pose topics against the robot", True),
+            (main, name, False),
+        )
+        return (p for p in every if p[0])
 
     def plan(self, topics: list[TopicInfo]) -> tuple[list[str], list[str]]:
         """Give every topic a role (:func:`~.topic_plan.plan_topics`).

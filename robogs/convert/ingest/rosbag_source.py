@@ -190,14 +190,7 @@ def _convert(paths: list[Path], src: Path, ctx: IngestContext) -> None:
             static, main = ingest.plan(topics)
             where = "before the first message"
             try:
-                passes = (
-                    (static, "static topics", False),
-                    (ingest.probe_topics, "pose topics against the robot", True),
-                    (main, src.name, False),
-                )
-                for group, label, probing in passes:
-                    if not group:
-                        continue
+                for group, label, probing in ingest.passes(static, main, src.name):
                     conns = [c for c in reader.connections if c.topic in set(group)]
                     total = sum(ingest.counts[t] for t in group)
                     ctx.progress.start(f"reading {label}", total)
