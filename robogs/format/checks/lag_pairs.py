@@ -69,6 +69,8 @@ _BOX_BLOCKS = 8
 #: half-span (ns) and most samples each side of the projected centres' smoothing
 _SMOOTH_NS = 40_000_000
 _SMOOTH_MAX = 5
+#: samples smoothed at once
+_SMOOTH_CHUNK = 32_768
 #: two-sided 97.5 % Student's t quantiles by degrees of freedom (1..10; beyond: 2.0)
 _T975 = (12.71, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228)
 #: window around a force rise searched for the object's rest and motion, ns
@@ -239,15 +241,19 @@ def smooth_series(t: np.ndarray, p: np.ndarray, k: int) -> np.ndarray:
         t: [N] int64 stamps, ns, increasing; p: [N, C] values.
     """
     n = t.size
+    p = np.asarray(p, np.float64)
     if k < 2 or n < 2 * k + 1:
-        return np.asarray(p, np.float64)
-    centre = np.clip(np.arange(n), k, n - 1 - k)
-    idx = centre[:, None] + np.arange(-k, k + 1)[None]  # [N, 2k+1]
-    dt = (t[idx] - t[:, None]).astype(np.float64) * 1e-9  # s from the evaluated sample
-    A = np.stack([np.ones_like(dt), dt, dt * dt], axis=2)  # [N, 2k+1, 3]
-    AtA = np.einsum("nki,nkj->nij", A, A)
-    Atp = np.einsum("nki,nkc->nic", A, np.asarray(p, np.float64)[idx])
-    return np.linalg.solve(AtA, Atp)[:, 0]  # the constant term: the fit at dt = 0
+        return p
+    out = np.empty_like(p)
+    for lo in range(0, n, _SMOOTH_CHUNK):  # bounded memory on long episodes
+        rows = np.arange(lo, min(n, lo + _SMOOTH_CHUNK))
+        idx = np.clip(rows, k, n - 1 - k)[:, None] + np.arange(-k, k + 1)[None]  # [R, 2k+1]
+        dt = (t[idx] - t[rows, None]).astype(np.float64) * 1e-9  # s from the evaluated sample
+        A = np.stack([np.ones_like(dt), dt, dt * dt], axis=2)  # [R, 2k+1, 3]
+        AtA = np.einsum("nki,nkj->nij", A, A)
+        Atp = np.einsum("nki,nkc->nic", A, p[idx])
+        out[rows] = np.linalg.solve(AtA, Atp)[:, 0]  # the constant term: the fit at dt = 0
+    return out
 
 
 def box_centre_lag(
