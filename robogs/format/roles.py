@@ -368,8 +368,8 @@ def _plan(
             if entity not in links:
                 link, T_lt = frame_in_link(ds.named_frames, entity, links)
                 frame_lines.append(
-                    f"{ep.id}: {entity!r} is a named frame on link {link!r}: rows are "
-                    f"{link!r}'s (T_{link}_{entity} removed)"
+                    f"{ep.id}: {entity!r} is a named frame on link {link!r}: T_{link}_{entity} "
+                    f"removed, the rows are the link's poses"
                 )
                 entity = link
         v[ok] = _compose(T_wp, v[ok], np.linalg.inv(T_lt))
