@@ -95,9 +95,16 @@ def test_compare_cli_shows_the_cut(session, tmp_path, capsys):
     for k, why in enumerate(["episode start / gap", "gap / teleport", "teleport / rest"]):
         line = next(ln for ln in out.splitlines() if ln.startswith(f"session#{k} "))
         assert line.endswith(why)
-    assert main([*args, "--split", "none"]) == 0
-    assert "trajectories cut" not in capsys.readouterr().out
     assert main([*args, "--split", "at=oops"]) == 2
+    # --split none keeps an episode whole: shown on one push with a hand reset inside (1.1 s,
+    # which auto cuts in two), since an uncut fit of the 8.7 s session costs 10x the cut one
+    tr = s.trajectories[0]
+    jumped = replace(tr, object_pos=tr.object_pos + (np.arange(len(tr.t_ns)) >= 20)[:, None] * 0.05)
+    reset = write_session(s, [jumped], tmp_path / "reset")
+    assert len(load_recording(reset).trajectories) == 2  # what auto would print as a cut
+    capsys.readouterr()
+    assert main(["compare", str(reset.root), "--mask-frames", "0", "--split", "none"]) == 0
+    assert "trajectories cut" not in capsys.readouterr().out
 
 
 def test_teleport_is_cut_without_a_gap():
