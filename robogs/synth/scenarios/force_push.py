@@ -25,10 +25,11 @@ tool poses at 500 Hz (0.06 mm), wrench at 250 Hz (its own clock phase).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
+
+from robogs.synth.scenarios.generate import ScenarioRecording, ScenarioTrajectory, _quat_yaw
 
 __all__ = ["ForcePushTrajectory", "ForcePushRecording", "ForcePushTruth", "make_force_push"]
 
@@ -56,41 +57,22 @@ class ForcePushTruth:
     sigma_ee: float = 6e-5
 
 
-@dataclass
-class ForcePushTrajectory:
-    """One push, measured (the attribute names of :class:`robogs.physics.recording.Trajectory`).
+@dataclass(kw_only=True)
+class ForcePushTrajectory(ScenarioTrajectory):
+    """One push, measured: a scenario trajectory plus the tool's force sensor.
 
-    ``wrench_force`` is in world axes; ``wrench_tool`` the same samples in the tool frame.
+    ``wrench_force`` is in world axes (N); ``wrench_tool`` the same samples in the tool frame.
     ``ee_pos`` is the pusher's centre (the tool origin).
     """
 
-    name: str
-    t_ns: np.ndarray
-    object_pos: np.ndarray
-    object_quat: np.ndarray
-    ee_t_ns: np.ndarray
-    ee_pos: np.ndarray
-    ee_quat: np.ndarray
-    grasp: np.ndarray
     wrench_t_ns: np.ndarray
     wrench_force: np.ndarray
     wrench_tool: np.ndarray
     kind: str = "force_push"
 
 
-@dataclass
-class ForcePushRecording:
-    """Trajectories, the nominal physics.json the tool starts from, and the truth in ``meta``."""
-
-    trajectories: list[ForcePushTrajectory]
-    physics: dict[str, Any]
-    object_name: str = "box"
-    meta: dict[str, Any] = field(default_factory=dict)
-
-
-def _yaw_quat(yaw: float | np.ndarray) -> np.ndarray:
-    yaw = np.asarray(yaw, dtype=float)
-    return np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], axis=-1)
+ForcePushRecording = ScenarioRecording
+"""Trajectories, the nominal physics.json the tool starts from, and the truth in ``meta``."""
 
 
 def _ramp(t: np.ndarray, dur: float, rise: float = 0.025) -> np.ndarray:
@@ -197,7 +179,7 @@ def make_force_push(
         obj_pos = np.column_stack([box, np.full(len(to), table_z + hz)])
         obj_pos += rng.normal(0.0, truth.sigma_pos, obj_pos.shape)
         rv = rng.normal(0.0, truth.sigma_rot, (len(to), 3))
-        obj_quat = _yaw_quat(box_yaw + rv[:, 2])
+        obj_quat = _quat_yaw(box_yaw + rv[:, 2])
         tilt = 0.5 * rv[:, :2]
         obj_quat[:, 1:3] += tilt * obj_quat[:, :1]
         obj_quat /= np.linalg.norm(obj_quat, axis=1, keepdims=True)
@@ -225,7 +207,7 @@ def make_force_push(
                 object_quat=obj_quat,
                 ee_t_ns=t0 + np.round(te * 1e9).astype(np.int64),
                 ee_pos=ee_pos,
-                ee_quat=np.repeat(_yaw_quat(yaw)[None], len(te), axis=0),
+                ee_quat=np.repeat(_quat_yaw(yaw)[None], len(te), axis=0),
                 grasp=np.zeros(len(te), dtype=bool),
                 wrench_t_ns=t0 + np.round(tw * 1e9).astype(np.int64),
                 wrench_force=world,
