@@ -156,13 +156,15 @@ def phase_throughput(tmp: Path, a: argparse.Namespace) -> None:
 
     ds = _throughput_data(tmp, a)
     facts, base = _baseline(ds)
-    first = None
+    first = first_cpu = None
     for w in a.workers:
+        t_init = time.perf_counter()
         _ray_init(ray, num_cpus=w)
         try:
             ex = RayExecutor()
             ex.connect()
             ray.get([ray.remote(lambda: 0).remote() for _ in range(2 * w)])  # start the workers
+            init_s = time.perf_counter() - t_init  # counted apart from the validation
             st = Stats()
             t, c = time.perf_counter(), time.process_time()
             rep = validate_distributed(
@@ -176,13 +178,19 @@ def phase_throughput(tmp: Path, a: argparse.Namespace) -> None:
         cpu = sorted(st.cpu_seconds.values())
         # load-independent: the task CPU per worker; on W idle cores the tasks need at least
         # max(cpu) seconds, so sum / max bounds the speed-up the split allows
+        first_cpu = first_cpu or sum(cpu)
         say(
             f"ray_{w}",
-            f"ray {w} workers: {wall:.1f} s, x{first / wall:.2f} vs 1 worker, x{base / wall:.2f} "
-            f"vs one process, {st.units} tasks, peak RSS per worker {', '.join(f'{r:.0f}' for r in rss)} "
+            f"ray {w} workers: {wall:.1f} s (ray.init + worker start {init_s:.1f} s apart), "
+            f"x{first / wall:.2f} vs 1 worker, x{base / wall:.2f} "
+            f"vs one process, {st.units} tasks ({st.chunk_units} reading their chunk index), "
+            f"peak RSS per worker {', '.join(f'{r:.0f}' for r in rss)} "
             f"MiB, findings identical: {_facts(rep) == facts}; CPU: driver {driver_cpu:.1f} s, "
             f"tasks {' + '.join(f'{x:.1f}' for x in cpu)} = {sum(cpu):.1f} s (sum / max "
-            f"{sum(cpu) / max(max(cpu, default=1), 1e-9):.2f})",
+            f"{sum(cpu) / max(max(cpu, default=1), 1e-9):.2f}; 1-worker task CPU / max here "
+            f"x{first_cpu / max(max(cpu, default=1), 1e-9):.2f})",
+            init_s=init_s,
+            chunk_units=st.chunk_units,
             driver_cpu_s=driver_cpu,
             task_cpu_s=cpu,
             wall_s=wall,
