@@ -37,8 +37,10 @@ def summary_line(stats: Any, workers: int) -> str:
     """One line: tasks, workers, the largest worker's peak RSS, seconds."""
     peak = max(stats.peak_rss.values(), default=0)
     how = f"; split refused: {stats.reason}" if stats.reason else ""
+    own = getattr(stats, "chunk_units", 0)
+    chunks = f" ({own} reading their chunk index)" if own else ""
     return (
-        f"ray: {stats.units} tasks on {len(stats.peak_rss)} worker processes "
+        f"ray: {stats.units} tasks{chunks} on {len(stats.peak_rss)} worker processes "
         f"({workers} CPUs), peak worker RSS {peak / 2**20:.0f} MiB, "
         f"{stats.task_seconds:.1f} task-s in {stats.wall_seconds:.1f} s{how}"
     )
