@@ -52,6 +52,7 @@ __all__ = [
     "ObjectSlots",
     "apply_body",
     "classify",
+    "principal",
     "restitution_damping_ratio",
     "BOUNCE_SOLIMP",
     "BOUNCE_TIMECONST",
@@ -84,8 +85,12 @@ class ObjectSlots:
     Attributes:
         body: body id; dof: first DOF address of its free joint; table_pairs: contact-pair rows
         object-table; nominal_mass [kg], nominal_inertia [3] kg m^2 (principal, body frame),
-        nominal_ipos [3] m: the compiled values; tilt_inertia_scale: factor on the roll and
-        pitch inertia (see ``robogs.physics.engines.mujoco_fit.MujocoFit``).
+        nominal_ipos [3] m: the compiled values; nominal_iquat [4] (w, x, y, z): the rotation
+        from the principal axes to the body frame (MuJoCo sorts the principal moments, so
+        ``nominal_inertia[2]`` is not the body-z moment in general: a 8 x 6 x 5 cm box compiles
+        to (I_zz, I_yy, I_xx) with a 90 deg ``iquat`` about y); tilt_inertia_scale: factor on the
+        roll and pitch inertia (see ``robogs.physics.engines.mujoco_fit.MujocoFit``);
+        table_torsion: torsional friction radius [m] of each ``table_pairs`` row (0: none).
     """
 
     body: int
@@ -94,7 +99,28 @@ class ObjectSlots:
     nominal_mass: float
     nominal_inertia: np.ndarray
     nominal_ipos: np.ndarray
+    nominal_iquat: np.ndarray | None = None
     tilt_inertia_scale: float = 1.0
+    table_torsion: list[float] | None = None
+
+    def body_tensor(self) -> np.ndarray:
+        """[3, 3] nominal inertia tensor about the CoM in the body frame [kg m^2]."""
+        q = np.array([1.0, 0, 0, 0]) if self.nominal_iquat is None else self.nominal_iquat
+        r = np.empty(9)
+        mujoco.mju_quat2Mat(r, np.asarray(q, dtype=float))
+        r = r.reshape(3, 3)
+        return r @ np.diag(self.nominal_inertia) @ r.T
+
+
+def principal(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(principal moments [3], ``iquat`` (w, x, y, z)) of a symmetric [3, 3] inertia tensor:
+    the body_inertia / body_iquat pair MuJoCo stores."""
+    vals, vecs = np.linalg.eigh(0.5 * (tensor + tensor.T))
+    if np.linalg.det(vecs) < 0:
+        vecs[:, 0] *= -1.0
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(vecs).ravel())
+    return vals, q / np.linalg.norm(q)
 
 
 BOUNCE_TIMECONST = 0.02
@@ -164,18 +190,23 @@ def apply_body(
     model = copy.copy(base)
     b = slots.body
     mass = float(body.mass[m, 0])
-    s = mass / slots.nominal_mass
-    inertia = slots.nominal_inertia * s
-    inertia[2] = float(body.inertia_z[m, 0])
-    inertia[:2] *= slots.tilt_inertia_scale
+    # the tensor in the body frame: scaled with the mass, the yaw moment set, roll and pitch
+    # scaled (congruence diag(k, k, 1)^1/2 keeps it positive definite), re-diagonalised
+    tensor = slots.body_tensor() * (mass / slots.nominal_mass)
+    tensor[2, 2] = float(body.inertia_z[m, 0])
+    k = np.sqrt([slots.tilt_inertia_scale, slots.tilt_inertia_scale, 1.0])
+    tensor = tensor * np.outer(k, k)
     model.body_mass[b] = mass
-    model.body_inertia[b] = inertia
+    model.body_inertia[b], model.body_iquat[b] = principal(tensor)
     model.body_ipos[b, :2] = body.com[m, 0].numpy()
     mu = max(float(body.mu_d[m, 0]), 1e-5)
     e = float(body.restitution[m, 0])
     zeta = restitution_damping_ratio(e)
-    for k in slots.table_pairs:
+    rho = slots.table_torsion or [0.0] * len(slots.table_pairs)
+    for k, r in zip(slots.table_pairs, rho, strict=True):
         model.pair_friction[k, :2] = mu
+        if r > 0:
+            model.pair_friction[k, 2] = mu * r
         if zeta < 1.0:
             model.pair_solref[k] = (max(timeconst, BOUNCE_TIMECONST), zeta)
             model.pair_solimp[k] = BOUNCE_SOLIMP

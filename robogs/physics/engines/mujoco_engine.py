@@ -182,14 +182,16 @@ class MujocoEngine:
             obj, what = parts[1], parts[2]
             if obj == "pusher" and what == "friction_dynamic":
                 for k, (a, b) in enumerate(self.scene.pairs):
-                    if "pusher" in (a, b):
+                    if {"pusher", "pusher_end"} & {a, b}:
                         m.pair_friction[k, :2] = max(v, 1e-5)
             elif obj in self._bid and what == "friction_dynamic":
                 support = set(self.scene.table_pairs.get(obj, []))
                 feet = set(self.scene.feet.get(obj, []))
                 for k, (a, b) in enumerate(self.scene.pairs):
-                    if k in support or (a in feet | {obj} and b not in self._bid and b != "pusher"):
+                    if k in support or (a in feet | {obj} and b not in self._bid and not b.startswith("pusher")):
                         m.pair_friction[k, :2] = max(v, 1e-5)
+                        if self.scene.pair_torsion[k] > 0:  # torsional friction mu * rho
+                            m.pair_friction[k, 2] = max(v, 1e-5) * self.scene.pair_torsion[k]
             elif obj in self._bid and what == "mass_kg" and v > 0:
                 b = self._bid[obj]
                 s = v / float(self.model.body_mass[b])
