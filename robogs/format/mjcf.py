@@ -57,6 +57,7 @@ __all__ = [
     "collision_hull",
     "footprint_points",
     "scene_mjcf",
+    "torsion_radius",
 ]
 
 MAX_HULL_VERTICES = 256
@@ -81,6 +82,8 @@ class ContactSettings:
         cone: ``"elliptic"`` or ``"pyramidal"``.
         impratio: frictional-to-normal impedance ratio (elliptic cones).
         solref: (time constant s, damping ratio) of every contact pair.
+        solreffriction: (time constant s, damping ratio) of the pairs' friction dimensions
+            (elliptic cones; ``(0, 0)``: as ``solref``).
         solimp: (d0, dwidth, width m, midpoint, power) of every contact pair.
         noslip_iterations: post-solve iterations removing residual slip (0: off).
         iterations, tolerance: main solver (Newton) limits.
@@ -88,6 +91,18 @@ class ContactSettings:
         pusher_mass: kg of the pusher body (and kg m^2 x 0.01 of its yaw inertia).
         footprint_grid: a box rests on the support through an n x n grid of small spheres
             on its bottom face (0: through the box geom itself); see :func:`footprint_points`.
+        footprint_spread: factor on the footprint points' distances from the face centre.
+        capsule_ends: a capsule pusher collides through its two end spheres (``pusher`` at
+            -y, ``pusher_end`` at +y), as the planar model and the scenario generator model it;
+            a full capsule makes one or two contacts with a parallel face depending on
+            micrometres, which turned centred pushes by a degree at random.
+        footprint_margin: contact margin and gap [m] of the footprint pairs: a contact is
+            detected up to this distance, but its residual stays the distance itself (MuJoCo's
+            residual is ``distance - (margin - gap)``), so a resting box keeps its contacts over
+            micrometre hops instead of making and breaking them every step.
+        footprint_torsion: footprint contacts get torsional friction (``condim 4``) of radius
+            :func:`torsion_radius`, so that a turning box meets the friction torque of the
+            uniformly loaded face with the footprint drawn in (see that function).
         servo_velocity_gain, servo_position_gain: the pusher servos' gains in units of the
             pusher's mass and the timestep: ``kv = gain_v * m / dt``, ``kp = gain_p * m / dt^2``
             (``gain_v = 1`` is dead-beat velocity tracking with explicit forces).
@@ -97,13 +112,18 @@ class ContactSettings:
     cone: str = "elliptic"
     impratio: float = 10.0
     solref: tuple[float, float] = (0.004, 1.0)
+    solreffriction: tuple[float, float] = (0.0, 0.0)
     solimp: tuple[float, float, float, float, float] = (0.95, 0.99, 0.001, 0.5, 2.0)
     noslip_iterations: int = 0
     iterations: int = 50
     tolerance: float = 1e-10
     integrator: str = "Euler"
     pusher_mass: float = 1000.0
-    footprint_grid: int = 4
+    footprint_grid: int = 5
+    footprint_spread: float = 1.0
+    footprint_margin: float = 0.0
+    capsule_ends: bool = True
+    footprint_torsion: bool = False
     servo_velocity_gain: float = 1.0
     servo_position_gain: float = 0.3
 
@@ -123,6 +143,8 @@ class MjcfScene:
         table_pairs: object name -> rows of its contact pairs with the support (footprint
             spheres and the box geom itself).
         feet: object name -> its footprint sphere geoms.
+        pair_torsion: per contact pair (``pairs`` order), the torsional friction radius [m]
+            (the pair's third friction coefficient is ``mu * radius``; 0: condim 3).
     """
 
     xml: str
@@ -134,6 +156,8 @@ class MjcfScene:
     unmapped: list[str] = field(default_factory=list)
     table_pairs: dict[str, list[int]] = field(default_factory=dict)
     feet: dict[str, list[str]] = field(default_factory=dict)
+    pair_torsion: list[float] = field(default_factory=list)
+    torsion: dict[str, float] = field(default_factory=dict)
 
 
 def _f(v: float) -> str:
@@ -286,11 +310,14 @@ FOOTPRINT_RADIUS = 1e-3
 """Radius [m] of the footprint spheres (their lowest points lie on the box's bottom face)."""
 
 FOOTPRINT_GAP = 2e-4
-"""The box geom touches the support only beyond this penetration [m] (pair ``gap``): a flat box
-rests on its footprint spheres alone, a box landing on an edge or corner on the box geom."""
+"""The bottom face of the collision box of a box with a footprint is raised by this much [m]: a
+flat box rests on its footprint spheres alone, a tilted one (> ~0.4 deg) or one pressed in
+deeper on the box geom. (A pair ``gap`` does not do this: MuJoCo 3.17 clamps a pair's
+``margin - gap`` at 0, so the four box corners carried a fifth of the load and turned the box like
+a corner-supported one.)"""
 
 
-def footprint_points(size: Sequence[float], n: int) -> np.ndarray:
+def footprint_points(size: Sequence[float], n: int, spread: float = 1.0) -> np.ndarray:
     """[n*n, 2] support points (object frame, m) of an ``sx x sy`` bottom face.
 
     Why: MuJoCo collides a box with a plane at its four corners, so a turning box meets
@@ -300,7 +327,7 @@ def footprint_points(size: Sequence[float], n: int) -> np.ndarray:
     face (0.027 m): the corner box turned 5-7 deg less under off-centre pushes. Equal-load
     points on a midpoint grid, spread so their mean distance from the centre equals the
     face's, give the same maximum friction torque ``mu N r_mean``; the soft contacts share
-    the load equally on a flat face.
+    the load equally on a flat face. ``spread`` scales the points towards (< 1) the centre.
     """
     sx, sy = float(size[0]), float(size[1])
     u = (np.arange(n) + 0.5) / n - 0.5
@@ -311,7 +338,33 @@ def footprint_points(size: Sequence[float], n: int) -> np.ndarray:
     r_face = float(np.hypot(fx, fy).mean())
     r_grid = float(np.hypot(gx, gy).mean())
     k = min(r_face / r_grid if r_grid > 0 else 1.0, 1.0 / (1.0 - 1.0 / n))  # stay on the face
-    return np.stack([gx.ravel(), gy.ravel()], -1) * k
+    return np.stack([gx.ravel(), gy.ravel()], -1) * k * float(spread)
+
+
+def torsion_radius(size: Sequence[float], points: np.ndarray) -> float:
+    """Torsional friction radius rho [m] of equal-load footprint ``points`` [P, 2] under an
+    ``sx x sy`` face: the mean of ``sqrt(r_i^2 + rho^2)`` equals the face's mean radius.
+
+    Why: MuJoCo's elliptic cone with ``condim 4`` bounds a contact's tangential force f and
+    torsional torque tau by ``|f|^2/mu^2 + tau^2/(mu rho)^2 <= N^2``: the ellipsoidal limit
+    surface of a patch of radius rho (Howe & Cutkosky 1996, "Practical force-motion models for
+    sliding manipulation"). Points drawn towards the centre with this rho spin the box under the
+    same maximum friction torque ``mu N r_mean`` as the uniformly loaded face, and the closer
+    they are, the closer the summed limit surface is to one ellipsoid (the model of Lynch,
+    Maekawa & Tanie 1992 and of the scenario generator); the outer points keep the box from
+    tipping on them.
+    """
+    sx, sy = float(size[0]), float(size[1])
+    m = 200
+    v = (np.arange(m) + 0.5) / m - 0.5
+    fx, fy = np.meshgrid(v * sx, v * sy, indexing="ij")
+    r_face = float(np.hypot(fx, fy).mean())
+    r = np.hypot(points[:, 0], points[:, 1])
+    lo, hi = 0.0, r_face
+    for _ in range(60):  # mean sqrt(r^2 + rho^2) is increasing in rho: bisection
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if np.sqrt(r * r + mid * mid).mean() < r_face else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 def _shape_geom(
@@ -324,6 +377,8 @@ def _shape_geom(
     asset: ET.Element,
     meshdir: str,
     footprint: int = 0,
+    spread: float = 1.0,
+    torsion: bool = False,
 ) -> None:
     """A box of ``size_m`` (with ``footprint`` x ``footprint`` support spheres) or the
     collision hull of ``mesh`` (object frame)."""
@@ -342,10 +397,18 @@ def _shape_geom(
         ET.SubElement(parent, "geom", type="mesh", mesh=f"{name}_hull", **attrs)
     elif "size_m" in entry:
         half = [0.5 * s for s in _floats(entry, "size_m", 3, where)]
-        ET.SubElement(parent, "geom", type="box", size=_vec(half), **attrs)
+        if footprint > 0:  # the bottom face raised by FOOTPRINT_GAP (see there)
+            hz = half[2] - 0.5 * FOOTPRINT_GAP
+            lift = _vec([0.0, 0.0, 0.5 * FOOTPRINT_GAP])
+            ET.SubElement(parent, "geom", type="box", size=_vec([*half[:2], hz]), pos=lift, **attrs)
+        else:
+            ET.SubElement(parent, "geom", type="box", size=_vec(half), **attrs)
         if footprint > 0:
             z = -half[2] + FOOTPRINT_RADIUS
-            for i, (x, y) in enumerate(footprint_points([2 * half[0], 2 * half[1]], footprint)):
+            face = [2 * half[0], 2 * half[1]]
+            pts = footprint_points(face, footprint, spread)
+            scene.torsion[name] = torsion_radius(face, pts) if torsion else 0.0
+            for i, (x, y) in enumerate(pts):
                 ET.SubElement(
                     parent,
                     "geom",
@@ -381,6 +444,11 @@ def _pusher(
     attrs = {"name": "pusher", "contype": "0", "conaffinity": "0", "group": "1"}
     if shape == "sphere" or (shape == "capsule" and length <= 0):
         ET.SubElement(body, "geom", type="sphere", size=_f(r), **attrs)
+    elif shape == "capsule" and settings.capsule_ends:
+        for name, y in (("pusher", -0.5 * length), ("pusher_end", 0.5 * length)):
+            ET.SubElement(
+                body, "geom", type="sphere", size=_f(r), pos=_vec([0, y, 0]), **{**attrs, "name": name}
+            )
     elif shape == "capsule":
         h = 0.5 * length
         ET.SubElement(
@@ -524,6 +592,8 @@ def scene_mjcf(
                 asset,
                 meshdir,
                 settings.footprint_grid,
+                settings.footprint_spread,
+                settings.footprint_torsion,
             )
             free[name] = _number(entry, "friction_dynamic", 0.4, where)
             for key in ("restitution", "damping_linear", "damping_angular"):
@@ -540,34 +610,48 @@ def scene_mjcf(
         _pusher(world, pusher, settings, actuator)
         scene.pusher = "pusher"
         mu_p = _number(pusher, "friction_dynamic", 0.0, "objects/pusher")
+    pusher_ends = False
+    if isinstance(pusher, Mapping):
+        length = _number(pusher, "length_m", 0.0, "objects/pusher")
+        shape = str(pusher.get("shape") or "capsule")
+        pusher_ends = settings.capsule_ends and length > 0 and shape == "capsule"
     sr, si = _vec(settings.solref), _vec(settings.solimp)
+    srf = _vec(settings.solreffriction)
 
-    def pair(g1: str, g2: str, mu: float, **extra: str) -> None:
-        # condim 3 even without friction, so that a fitted friction can be set on the model
-        fr = _vec([max(mu, 1e-5), max(mu, 1e-5), 0.005, 1e-4, 1e-4])
+    def pair(g1: str, g2: str, mu: float, rho: float = 0.0, **extra: str) -> None:
+        # condim 3 even without friction, so that a fitted friction can be set on the model;
+        # condim 4 with torsional friction mu * rho on torsion footprints
+        mu = max(mu, 1e-5)
+        fr = _vec([mu, mu, mu * rho if rho > 0 else 0.005, 1e-4, 1e-4])
         ET.SubElement(
             contact,
             "pair",
             geom1=g1,
             geom2=g2,
-            condim="3",
+            condim="4" if rho > 0 else "3",
             friction=fr,
             solref=sr,
+            solreffriction=srf,
             solimp=si,
             **extra,
         )
         scene.pairs.append((g1, g2))
+        scene.pair_torsion.append(float(rho))
 
     names = list(free)
     for i, a in enumerate(names):
         feet = scene.feet.get(a, [])
         for g in feet:
             scene.table_pairs.setdefault(a, []).append(len(scene.pairs))
-            pair(g, "table", free[a])
+            fm = settings.footprint_margin
+            margin = {"margin": _f(fm), "gap": _f(fm)} if fm > 0 else {}
+            pair(g, "table", free[a], scene.torsion.get(a, 0.0), **margin)
         scene.table_pairs.setdefault(a, []).append(len(scene.pairs))
-        pair(a, "table", free[a], **({"gap": _f(FOOTPRINT_GAP)} if feet else {}))
+        pair(a, "table", free[a])
         if scene.pusher is not None:
             pair(a, "pusher", mu_p)
+            if pusher_ends:
+                pair(a, "pusher_end", mu_p)
         for b in names[i + 1 :]:
             pair(a, b, max(free[a], free[b]))
         for s in static:
