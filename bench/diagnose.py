@@ -8,7 +8,7 @@ design (``robogs.synth.scenarios.KINDS``, the same for every effect and for null
 (``mass``: poses do not depend on it) are still diagnosed; for them the table counts how often
 the true effect is reported unidentifiable and never reported.
 
-``--noise B`` runs design B instead (:mod:`robogs.synth.scenarios.design_b`: 9 trajectories,
+``--noise B5`` runs design B cut to 5 trajectories (:data:`B5`). ``--noise B`` runs design B instead (:mod:`robogs.synth.scenarios.design_b`: 9 trajectories,
 slides <= 60 mm, a sphere pusher, a smaller lighter box, 60 fps camera with 8 % dropped samples,
 250 Hz encoders, random gaps); its generator decides detectability from the expected ΔBIC. The
 gate is the data-derived one (:mod:`robogs.physics.gate`); each case records the null
@@ -42,6 +42,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
+B5 = (0, 1, 2, 3, 6)
+"""``--noise B5``: design B cut to 5 trajectories (two opposite push pairs and the slower slide),
+the gate's few-trajectory (Webb weights) null."""
+
+
 def _one(args: tuple[str, str, int, str]) -> dict:
     import torch
 
@@ -52,10 +57,10 @@ def _one(args: tuple[str, str, int, str]) -> dict:
 
     effect, noise, seed, backend = args
     undetectable = None
-    if noise == "B":  # design B (robogs.synth.scenarios.design_b): its own noise and rates
+    if noise in ("B", "B5"):  # design B (robogs.synth.scenarios.design_b): own noise and rates
         from robogs.synth.scenarios.design_b import make_design_b
 
-        rec = make_design_b(effect, seed=seed)
+        rec = make_design_b(effect, seed=seed, trajectories=B5 if noise == "B5" else None)
         if effect != "none" and not rec.meta["detectable"]:
             undetectable = f"E[dBIC] {rec.meta['expected_delta_bic']:.1f} > -10"
     else:
@@ -77,10 +82,12 @@ def _one(args: tuple[str, str, int, str]) -> dict:
         "seed": seed,
         "engine": backend,
         "wall_s": wall,
+        "load": os.getloadavg()[0],
         "undetectable": undetectable,
         "z_design": rec.meta.get("detectability_z"),
         "expected_dbic": rec.meta.get("expected_delta_bic"),
         "cal_s": res.gate.get("seconds"),
+        "gate_method": res.gate.get("method"),
         "cal_draws": res.gate.get("draws"),
         "alpha_adj": res.gate.get("alpha_adjusted"),
         "tilt_ok": _tilt_ok(rows),
@@ -154,6 +161,12 @@ def _table(results: list[dict], noise: str) -> tuple[list[str], dict]:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     summary = {}
+    dbic_lines = [
+        "",
+        f"| effect ({noise}) | E[dBIC], generator (nuisance profiled) | observed dBIC, median | "
+        "observed / expected | observed range |",
+        "|---|---|---|---|---|",
+    ]
     effects = sorted({r["effect"] for r in results if r["noise"] == noise})
     for eff in effects:
         rs = [r for r in results if r["noise"] == noise and r["effect"] == eff]
@@ -163,7 +176,7 @@ def _table(results: list[dict], noise: str) -> tuple[list[str], dict]:
         if und:
             unid = np.mean([r.get("true_verdict") == "unidentifiable" for r in und])
             rep = np.mean([r["true_reported"] for r in und])
-            why = "E[dBIC] > -10" if noise == "B" else "z < 8"
+            why = "E[dBIC] > -10" if noise.startswith("B") else "z < 8"
             lines.append(
                 f"| {eff}: not detectable by design ({why}) | {len(und)} | - | "
                 f"reported {100 * rep:.0f} % | - | - | - | - | verdict unidentifiable "
@@ -192,6 +205,16 @@ def _table(results: list[dict], noise: str) -> tuple[list[str], dict]:
         inside = [x for r in ok for x in r.get("params_in_interval", [])]
         off = [r["offset_err_ms"] for r in ok if r.get("offset_err_ms") is not None]
         ratio = [r["rms_after_top"] / r["noise_floor"] for r in ok if r.get("rms_after_top")]
+        if noise.startswith("B"):  # the generator's expected dBIC against the observed one
+            obs = [
+                next((x["dbic"] for x in r["rows"] if x["name"] == eff), float("nan")) for r in ok
+            ]
+            e_dbic = float(np.median([r["expected_dbic"] for r in ok]))
+            o_dbic = float(np.nanmedian(obs))
+            dbic_lines.append(
+                f"| {eff} | {e_dbic:.0f} | {o_dbic:.0f} | {o_dbic / e_dbic:.2f} | "
+                f"{min(obs):.0f} .. {max(obs):.0f} |"
+            )
         lines.append(
             f"| {eff} | {len(ok)} | {100 * fam:.0f} % | {100 * exact:.0f} % | {100 * top3:.0f} % | "
             f"{100 * np.median(perr):.1f} % | {100 * np.mean(inside):.0f} % | "
@@ -204,6 +227,8 @@ def _table(results: list[dict], noise: str) -> tuple[list[str], dict]:
             lines.append(
                 f"| table_tilt reported as anisotropic_friction alone | {bad} of {len(ok)} |"
             )
+    if len(dbic_lines) > 3:
+        lines += dbic_lines
     return lines, summary
 
 
@@ -235,7 +260,8 @@ def main() -> None:
         "--noise",
         nargs="+",
         default=["nominal", "hard"],
-        help="noise levels of design A, and/or B for design B (robogs.synth.scenarios.design_b)",
+        help="noise levels of design A, and/or B for design B (robogs.synth.scenarios.design_b), "
+        "B5 for design B cut to 5 trajectories",
     )
     ap.add_argument("--effects", nargs="+", default=None)
     ap.add_argument("--out", default=str(ROOT / "bench" / "diagnose_results.jsonl"))
@@ -299,7 +325,9 @@ def main() -> None:
         f"Command: `{cmd}` (resumes from `{os.path.relpath(out, ROOT)}`)  ",
         f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs shared "
         f"with other jobs; torch threads 1 per worker, {a.jobs} workers; this run "
-        f"{time.perf_counter() - t0:.0f} s",
+        f"{time.perf_counter() - t0:.0f} s; 1-min load average when each case ended: median "
+        f"{np.median([r.get('load', np.nan) for r in results]) if results else float('nan'):.1f}, "
+        f"max {max((r.get('load', 0.0) for r in results), default=float('nan')):.1f}",
         "",
     ]
     for n in a.noise:

@@ -14,7 +14,8 @@ are linear least squares (nuisance parameters profiled out per trajectory), the 
 Newton steps are exact, and the whole procedure above is repeated on simulated noise ``e``, zero
 where the data have no sample (this dataset's drops, rates, jitter and split). Two noises, and
 each candidate's threshold is the larger of the two (:func:`calibrate`): a wild cluster
-bootstrap, the base fit's residual of each trajectory with a sign per trajectory, so that
+bootstrap, the base fit's residual of each trajectory with a sign per trajectory (Webb's
+six-point weights under 8 trajectories, :func:`wild_weights`), so that
 errors shared by the samples of one trajectory enter the null; and Gaussian white noise at each
 trajectory's scale estimated from first differences of the base residual (a difference-based variance
 estimator, Rice 1984, Ann. Statist. 12, which ignores a smooth misfit). It costs no rollout:
@@ -59,6 +60,8 @@ __all__ = [
     "heldout_statistic",
     "diff_scale",
     "cache_dir",
+    "wild_weights",
+    "WEBB",
 ]
 
 ALPHA = 0.05
@@ -66,7 +69,8 @@ ALPHA = 0.05
 N_DRAWS = 400
 """Null draws (min-P resolution 1/N_DRAWS; 20 draws beyond the 5 % quantile at 400)."""
 MIN_PATTERNS = 128
-"""Fewest distinct sign patterns (``2^(T-1)``) for the wild null (T >= 8 trajectories)."""
+"""Fewest distinct sign patterns (``2^(T-1)``) for a Rademacher wild null (T >= 8 trajectories);
+under it Webb's six-point weights are used (:func:`wild_weights`)."""
 MAX_CELLS = 4.0e8
 """Bound on the calibration's work: draws x residuals x parameters summed over candidates;
 the draw count is cut (never below 100) to stay under it."""
@@ -303,6 +307,41 @@ def _simulate(
     return null
 
 
+WEBB = np.array([-np.sqrt(1.5), -1.0, -np.sqrt(0.5), np.sqrt(0.5), 1.0, np.sqrt(1.5)])
+"""Webb's six-point weights (mean 0, variance 1; Webb 2014, "Reworking wild bootstrap based
+inference for clustered errors", Queen's Economics Department WP 1315)."""
+
+
+def wild_weights(t_n: int, draws: int, rng: np.random.Generator) -> tuple[np.ndarray, str]:
+    """Per-trajectory multipliers [D, T] of the wild cluster bootstrap, and a note.
+
+    From ``T >= 8`` trajectories: Rademacher signs, every one of the ``2^(T-1)`` patterns when
+    they are at most ``max(draws, 1024)`` (``w`` and ``-w`` give the same statistic: the model
+    is linear), else ``draws`` random ones. Under 8 there are fewer than ``MIN_PATTERNS`` sign
+    patterns, too few for a 5 % family-wise level (5 trajectories: 16, the smallest p-value
+    1/16); Webb's six-point weights then give ``6^T / 2`` distinct patterns (3888 at T = 5),
+    which is the remedy for few clusters (MacKinnon & Webb 2017, J. Appl. Econometrics 32):
+    every pattern with a positive first weight when they are at most ``max(draws, 1024)``, else
+    ``draws`` random ones.
+    """
+    n_sign = 2 ** (t_n - 1)
+    if n_sign >= MIN_PATTERNS:
+        if n_sign <= max(draws, 1024):
+            bits = (np.arange(n_sign)[:, None] >> np.arange(t_n - 1)[None]) & 1
+            return np.concatenate([np.ones((n_sign, 1)), 1.0 - 2.0 * bits], axis=1), ""
+        return rng.choice([-1.0, 1.0], size=(draws, t_n)), ""
+    n_webb = 3 * 6 ** (t_n - 1)
+    note = f"{t_n} trajectories: Webb six-point weights ({2 * n_webb} patterns)"
+    if n_webb <= max(draws, 1024):
+        idx = np.arange(n_webb)
+        digits = np.zeros((n_webb, t_n - 1), dtype=int)
+        for i in range(t_n - 1):
+            digits[:, i] = (idx // 6**i) % 6
+        first = WEBB[3 + (idx // 6 ** (t_n - 1))]  # the three positive weights
+        return np.concatenate([first[:, None], WEBB[digits]], axis=1), note
+    return rng.choice(WEBB, size=(draws, t_n)), note
+
+
 def _minp(
     null: np.ndarray, names: Sequence[str], alpha: float
 ) -> tuple[float, dict[str, float], dict[str, float]]:
@@ -349,8 +388,9 @@ def calibrate(
             trajectory (a wild cluster bootstrap of the restricted residuals, Cameron, Gelbach &
             Miller 2008, Rev. Econ. Stat. 90; every one of the ``2^(T-1)`` patterns when they
             are few, an exact randomisation test), which keeps what varies from one trajectory
-            to the next (a release speed off by encoder noise shifts a whole slide); skipped
-            under ``MIN_PATTERNS`` patterns (T < 8), as the report notes. On design-B null data
+            to the next (a release speed off by encoder noise shifts a whole slide); under
+            ``MIN_PATTERNS`` sign patterns (T < 8) Webb's six-point weights instead
+            (:func:`wild_weights`), as the calibration's method says. On design-B null data
             white noise alone let a tilt, quadratic drag or anisotropic friction through in 3
             of 4 seeds. ``"white"``: Gaussian white noise at each trajectory's
             difference-based scale.
@@ -379,26 +419,15 @@ def calibrate(
 
         nulls["white"] = _simulate(cands, valid, folds, draws, lambda n, c: white(n))
     if method in ("both", "wild"):
-        n_pat = 2 ** (t_n - 1)  # w and -w give the same statistic (the model is linear)
-        if n_pat < MIN_PATTERNS:
-            note = (
-                f"{t_n} trajectories: too few sign patterns ({n_pat}) to resample what varies "
-                "between trajectories; white-noise null only"
-            )
-        else:
-            if n_pat <= max(draws, 1024):  # every pattern once (an exact randomisation test)
-                bits = (np.arange(n_pat)[:, None] >> np.arange(t_n - 1)[None]) & 1
-                signs = np.concatenate([np.ones((n_pat, 1)), 1.0 - 2.0 * bits], axis=1)
-            else:
-                signs = rng.choice([-1.0, 1.0], size=(draws, t_n))
-            rw = base_resid * valid
-            pos = [0]
+        weights, note = wild_weights(t_n, draws, rng)
+        rw = base_resid * valid
+        pos = [0]
 
-            def wild(n: int, c: int) -> np.ndarray:
-                w = signs[pos[0] : pos[0] + n]
-                return w[:, :, None] * rw[None]
+        def wild(n: int, c: int) -> np.ndarray:
+            w = weights[pos[0] : pos[0] + n]
+            return w[:, :, None] * rw[None]
 
-            nulls["wild"] = _simulate(cands, valid, folds, len(signs), wild, pos)
+        nulls["wild"] = _simulate(cands, valid, folds, len(weights), wild, pos)
     thr: dict[str, float] = {n: 1e-6 for n in names}
     q95: dict[str, float] = {n: 0.0 for n in names}
     alpha_adj = alpha

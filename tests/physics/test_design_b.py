@@ -18,9 +18,11 @@ from robogs.synth.scenarios.design_b import (
     CAMERA_HZ_B,
     MAX_SLIDE_M,
     NOISE_B,
+    _simulate,
     _truth,
     detectable_b,
     make_design_b,
+    plain_fit,
 )
 
 
@@ -70,6 +72,21 @@ def test_detectability_is_decided_from_the_expected_delta_bic():
     # slow pushes: the box stops at once, how it decelerates is never seen
     assert not detectable_b("viscous_damping", quasi_static=True)
     assert make_design_b("viscous_damping", seed=1).meta["detectable"] is True
+
+
+def test_plain_fit_profiles_out_a_known_start_pose_and_friction():
+    """Oracle for the expected ΔBIC's nuisance profiling: observations of the plain model itself
+    at a known friction and known start-pose errors of each trajectory (two pushes and a
+    slide) are fitted back to chi^2 ~ 0, with the friction and the offsets recovered."""
+    sub = (0, 1, 6)
+    rng = np.random.default_rng(0)
+    off = np.column_stack([rng.uniform(-1.5e-3, 1.5e-3, (3, 2)), rng.uniform(-0.02, 0.02, 3)])
+    pos, yaw = _simulate("none", False, sub, 0.33, off[None])
+    chi2, mu, loc = plain_fit(pos[0], yaw[0], 0.0, "none", subset=sub)
+    assert chi2 < 1.0
+    assert mu == pytest.approx(0.33, rel=0.01)
+    np.testing.assert_allclose(loc[:, :2], off[:, :2], atol=1e-4)  # 0.1 mm of 1.5 mm
+    np.testing.assert_allclose(loc[:, 2], off[:, 2], atol=2e-3)  # 0.1 deg of 1.1 deg
 
 
 @pytest.mark.slow
