@@ -107,7 +107,9 @@ class MujocoFit:
         self.pq = None if self.eng._pusher_q is None else 1 + self.eng._pusher_q[0]
         self.gravity = float(-m.opt.gravity[2])
         self.nbody = m.nbody
-        half = m.geom_size[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, object_name)]
+        gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, object_name)
+        half = np.array(m.geom_size[gid])
+        half[2] += m.geom_pos[gid][2]  # the top face: a footprint box's collision face is raised
         self.z_rest_gap = 1e-3  # [m] above the resting height still counts as on the table
         self.table_z = float(physics.get("objects", {}).get("table", {}).get("plane_z_m", 0.0))
         self.half_z = float(half[2]) if half.shape[0] >= 3 else 0.0
