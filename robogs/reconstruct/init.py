@@ -178,21 +178,26 @@ def _hull_grid(
     known_lut = torch.zeros(1 << 16, dtype=torch.bool)
     if known:
         known_lut[torch.tensor(sorted(known), dtype=torch.long)] = True
+    alive = torch.arange(len(grid))  # voxels still in the hull: only they are projected
     for v in views:
         if v.labels is None:
             continue
-        u, w, z = _project(grid, v)
+        u, w, z = _project(grid[alive], v)
         H, W = v.labels.shape
         inside = (z > 0) & (u >= 0) & (u < W) & (w >= 0) & (w < H)
         iu = u.clamp(0, W - 1).long()
         iw = w.clamp(0, H - 1).long()
         lab = torch.from_numpy(v.labels)[iw, iu]
         fg = lab > 0
-        occ &= ~inside | fg
-        seen += inside.to(torch.int32)
+        seen[alive] += inside.to(torch.int32)
         if known:
             is_known = known_lut[lab.clamp(0, (1 << 16) - 1)]
-            votes += (inside & fg & ~is_known).to(torch.int32) - (inside & is_known).to(torch.int32)
+            votes[alive] += (inside & fg & ~is_known).to(torch.int32) - (inside & is_known).to(
+                torch.int32
+            )
+        keep = ~inside | fg
+        occ[alive[~keep]] = False
+        alive = alive[keep]
     occ &= seen >= min_seen
     if known:
         occ &= votes > 0

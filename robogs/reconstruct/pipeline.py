@@ -317,7 +317,19 @@ def reconstruct(
     if not options.force:
         coverage.raise_if_insufficient()
     t0 = time.perf_counter()
-    ip = initial_points(ds, capture, train_views, options.init)
+    seed_views = train_views
+    if options.scale != 1.0:
+        # the hull and its carving from the full-resolution views: at half size the 2.5 cm
+        # tiles of the sample's table are ~3 px and the carving stopped 2-3 cm above its top;
+        # at full size one voxel above (docs/reconstruct.md)
+        full = load_capture(
+            ds,
+            episode=options.episode,
+            cameras=list(options.cameras) if options.cameras else None,
+            max_views=options.max_views,
+        )
+        seed_views = split_heldout(full.views, options.heldout_every)[0]
+    ip = initial_points(ds, capture, seed_views, options.init)
     init = initial_tensors(
         ip, kind=tcfg.kind, sh_degree=tcfg.sh_degree, seed=options.init.seed, device=device
     )
