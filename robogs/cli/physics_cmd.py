@@ -245,6 +245,7 @@ def _compare(args: argparse.Namespace, model: str) -> int:
         f"object position residual: rms {d['rms_mm']:.2f} mm, orientation {d['rms_deg']:.2f} deg; "
         f"noise floor {d['noise_floor_mm']:.2f} mm (estimated from the data)"
     )
+    _print_force(d.get("force"), d.get("wrench_note"))
     print(
         "per phase [mm]: " + ", ".join(f"{k} {v:.2f}" for k, v in d["phases_mm"].items() if v == v)
     )
@@ -260,6 +261,17 @@ def _compare(args: argparse.Namespace, model: str) -> int:
         )
     _print_masks(d)
     return 0
+
+
+def _print_force(force: dict[str, Any] | None, note: str | None) -> None:
+    """The pusher force residual [N] against the sensor's noise floor, and the wrench note."""
+    if force:
+        print(
+            f"pusher force residual: rms {force['rms_n']:.3f} N, noise floor "
+            f"{force['noise_floor_n']:.3f} N ({force['bins']} bins)"
+        )
+    if note:
+        print(f"  {note}")
 
 
 def _print_masks(d: dict[str, Any]) -> None:
@@ -564,6 +576,8 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
             f"{g.get('seconds', 0.0):.1f} s, {g.get('draws')} draws"
             + (" (cached)" if g.get("cached") else "")
         )
+    if (d.get("design") or {}).get("wrench_note"):
+        print(f"  {d['design']['wrench_note']}")
     for s in d.get("skipped", []):
         print(f"  skipped {s['name']}: {s['reason']}")
     found = [e["name"] for e in d["effects"] if e.get("reported")]
@@ -657,6 +671,14 @@ def _fit(args: argparse.Namespace, model: str) -> int:
                 f"(noise floor {d['noise_floor_mm']:.3f} mm; before: revision "
                 f"{d['from_revision']}, after: {after}, each refitted)"
             )
+            fb, fa = d.get("force_before"), d.get("force_after")
+            if fb and fa:
+                print(
+                    f"pusher force RMS: {fb['rms_n']:.3f} → {fa['rms_n']:.3f} N "
+                    f"(noise floor {fa['noise_floor_n']:.3f} N)"
+                )
+            if d.get("wrench_note"):
+                print(f"  {d['wrench_note']}")
         for c in d["cameras"]:
             b, a = c["before"], c["after"]
             print(

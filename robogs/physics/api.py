@@ -136,7 +136,9 @@ def diagnose(
     rigid = None if names is None else [n for n in names if n not in camera]
     eng = Engine(rec, dt=dt, backend=engine)
     res = diagnose_recording(rec, effects=rigid, progress=progress, dt=dt, engine=eng)
-    res.rms_base = baseline(rec, dt=dt, engine=eng).rms_mm  # the shared "before"
+    bl = baseline(rec, dt=dt, engine=eng)
+    res.rms_base = bl.rms_mm  # the shared "before"
+    res.design["wrench_note"] = bl.result.wrench_note
     if names is None or any(n in camera for n in names):
         from robogs.physics.intrinsics import NAME, diagnose_intrinsics
 
@@ -211,6 +213,9 @@ class FitResult:
             "revision": self.revision,
             "from_revision": self.from_revision,
             "cameras": self.cameras,
+            "force_before": None if self.compare_before is None else self.compare_before.force,
+            "force_after": None if self.compare_after is None else self.compare_after.force,
+            "wrench_note": "" if self.compare_after is None else self.compare_after.wrench_note,
         }
 
 

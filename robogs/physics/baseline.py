@@ -16,16 +16,24 @@ refitted base model.
 
 Results are memoised per process on the recording's samples and the revision's model content
 (``revision``, ``parent_revision``, ``note`` and ``fit`` do not change the model), so the demo's
-compare, diagnose, fit and report fit each revision once.
+compare, diagnose, fit and report fit each revision once; and on disk, so that separate
+commands (``diagnose`` then ``fit`` then ``report``) fit it once too:
+``$ROBOGS_CACHE_DIR/baseline/<key>.npz`` (default ``$XDG_CACHE_HOME/robogs`` or
+``~/.cache/robogs``, as the gate's calibrations), the key also holding a hash of the physics
+package's source, so a changed model never reads an old fit. Only arrays and JSON are stored
+(``allow_pickle=False``); an unreadable entry is refitted and rewritten.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
+import os
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -34,6 +42,7 @@ from robogs.physics.compare import CompareResult, residual_table
 from robogs.physics.diagnose import ParamEstimate
 from robogs.physics.engine import Engine
 from robogs.physics.fit import FitOutcome, Problem
+from robogs.physics.prepare import force_rms
 from robogs.physics.recording import Recording
 from robogs.physics.space import ParamSpace
 
@@ -108,6 +117,53 @@ def _fingerprint(rec: Recording) -> str:
     return h.hexdigest()
 
 
+@functools.lru_cache(maxsize=1)
+def _code_hash() -> str:
+    """Hash of the physics package's Python sources (a changed model invalidates the disk cache)."""
+    h = hashlib.blake2b(digest_size=16)
+    root = Path(__file__).resolve().parent
+    for f in sorted(root.rglob("*.py")):
+        h.update(f.relative_to(root).as_posix().encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def _disk_path(key: tuple[str, str, float, str]) -> Path:
+    from robogs.physics.gate import cache_dir
+
+    h = hashlib.blake2b(digest_size=20)
+    h.update(json.dumps([*key, _code_hash()]).encode())
+    return cache_dir().parent / "baseline" / f"{h.hexdigest()}.npz"
+
+
+_ARRAYS = ("theta", "local", "resid", "jac", "jac_local", "std", "cov", "ok")
+
+
+def _load(path: Path) -> FitOutcome | None:
+    """A cached fit outcome (None when absent or unreadable)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            arrays = {k: np.array(z[k]) for k in _ARRAYS}
+        return FitOutcome(**arrays, **meta)
+    except (OSError, KeyError, ValueError, TypeError):
+        return None
+
+
+def _save(path: Path, out: FitOutcome) -> None:
+    """Write ``out`` atomically (a failure to write only costs a refit next time)."""
+    meta = {f.name: getattr(out, f.name) for f in fields(out) if f.name not in _ARRAYS}
+    meta = {k: (float(v) if isinstance(v, np.floating) else v) for k, v in meta.items()}
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
+        np.savez(tmp, meta=np.array(json.dumps(meta, default=float)),
+                 **{k: getattr(out, k) for k in _ARRAYS})  # fmt: skip
+        os.replace(tmp, path)
+    except OSError:
+        return
+
+
 def fit_baseline(
     eng: Engine, progress: Callable[[int, int], None] | None = None
 ) -> tuple[ParamSpace, list[int], FitOutcome, CompareResult]:
@@ -115,7 +171,17 @@ def fit_baseline(
     space = eng.space([])
     free = eng.base_columns(space)
     (out,) = eng.fit(space, [Problem(free=list(free), theta0=eng.start(space))], progress=progress)
-    return space, free, out, residual_table(eng, eng.raw(out.resid))
+    return space, free, out, _table(eng, out)
+
+
+def _table(eng: Engine, out: FitOutcome) -> CompareResult:
+    """Residual table of a fit: poses (mm, deg) and, where a wrench is used, force (N)."""
+    res = residual_table(eng, eng.raw(out.resid))
+    res.force = force_rms(eng.prep, out.resid)
+    res.wrench_note = eng.prep.wrench_note
+    if res.force is None and eng.prep.wrench is not None:
+        res.wrench_note = f"wrench not used: the {eng.backend} engine predicts no pusher force"
+    return res
 
 
 def baseline(
@@ -156,7 +222,15 @@ def baseline(
         engine = Engine(
             rec if physics is None else replace(rec, physics=doc), dt=dt, backend=backend
         )
-    space, free, out, res = fit_baseline(engine, progress)
+    path = _disk_path(key)
+    out = _load(path)
+    if out is not None:
+        space = engine.space([])
+        free = engine.base_columns(space)
+        res = _table(engine, out)
+    else:
+        space, free, out, res = fit_baseline(engine, progress)
+        _save(path, out)
     bl = Baseline(rev, doc, space, free, out, res)
     _CACHE[key] = bl
     while len(_CACHE) > _CACHE_SIZE:

@@ -65,6 +65,9 @@ class CompareResult:
             ``pos`` [N, 3] m, ``quat`` [N, 4] wxyz (the measured tilt turned by the model's yaw).
         masks: the mask-boundary stream (a :class:`robogs.physics.masks.MaskStream`),
             or None with the reason in ``masks_absent``.
+        force: the pusher force residual where a wrench is used (``rms_n``,
+            ``noise_floor_n`` [N], ``bins``; :func:`robogs.physics.prepare.force_rms`), else
+            None; ``wrench_note``: how the wrench is used, or why not.
     """
 
     streams: list[StreamResidual]
@@ -78,6 +81,8 @@ class CompareResult:
     predicted: list[dict[str, Any]] = field(default_factory=list, repr=False)
     masks: Any = None
     masks_absent: str = "not computed"
+    force: dict[str, Any] | None = None
+    wrench_note: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (without the per-sample series)."""
@@ -91,6 +96,8 @@ class CompareResult:
             "rms_deg": self.rms_deg,
             "noise_floor_mm": self.noise_floor_mm,
             "noise": self.noise,
+            "force": self.force,
+            "wrench_note": self.wrench_note,
         }
 
 

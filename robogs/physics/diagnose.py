@@ -40,7 +40,7 @@ and the experiment that would reveal them.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -564,13 +564,20 @@ def diagnose_recording(
     theta0 = eng.start(space)
     frees = [list(base_cols)] + [list(base_cols) + space.owner_columns(e.name) for e in cands]
     # each candidate fitted from the base optimum, multi-start; the base refitted when a
-    # candidate switched back to it beats it (fit.fit_nested): a gain is never the optimiser's
+    # candidate switched back to it beats it (fit.fit_nested): a gain is never the optimiser's.
+    # The base fit is the shared "before" (baseline, memoised; its space is this one's prefix)
+    from robogs.physics.baseline import baseline
+
+    known = baseline(prep.rec, dt=prep.drive.dt, engine=eng).outcome
+    th_known = theta0.copy()
+    th_known[: len(known.theta)] = known.theta
     base_out, cand_outs = fit_nested(
         lambda probs: eng.fit(space, probs, progress=progress),
         lambda th, lo: eng.evaluate(space, th, lo),
         space,
         Problem(free=list(base_cols), theta0=theta0),
         [(space.owner_columns(e.name), start_points(space, e, theta0)) for e in cands],
+        base_fit=replace(known, theta=th_known),
     )
     outs = [base_out, *cand_outs]
     base = outs[0]

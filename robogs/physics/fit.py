@@ -299,16 +299,16 @@ def _jackknife_cov(st: _State, mask_t: np.ndarray) -> np.ndarray | None:
 
 
 def _step(
-    st: _State, space: ParamSpace, mask_t: np.ndarray, n_local: int
+    st: _State, space: ParamSpace, mask_t: np.ndarray, n_local: int, lam: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Damped Gauss-Newton step; globals pinned at a bound they push against are held there
-    (active set), the rest re-solved, then the step is projected on the bounds."""
+    """Damped Gauss-Newton step (damping ``lam``); globals pinned at a bound they push against
+    are held there (active set), the rest re-solved, then the step is projected on the bounds."""
     a, g, tsel = _normal_equations(st, mask_t, n_local)
     p = len(st.prob.free)
     free = np.asarray(st.prob.free, dtype=int)
     d = np.diag(a).copy()
     d = np.where(d > 0, d, 1.0)
-    lhs = a + st.lam * np.diag(d) + 1e-12 * np.eye(len(d)) * d.max()
+    lhs = a + lam * np.diag(d) + 1e-12 * np.eye(len(d)) * d.max()
     keep = np.ones(len(d), dtype=bool)
     lo, hi = space.lower[free], space.upper[free]
     th = st.theta[free]
@@ -352,6 +352,7 @@ def fit_problems(
     atol: float = 0.05,
     progress: Callable[[int, int], None] | None = None,
     cluster_jackknife: bool = False,
+    damping: Sequence[float] = (1.0,),
 ) -> list[FitOutcome]:
     """Solve all ``problems`` together (see module docstring).
 
@@ -374,6 +375,12 @@ def fit_problems(
         progress: called with (iteration, unfinished problems).
         cluster_jackknife: also raise each variance to the leave-one-trajectory-out jackknife's
             (:func:`_jackknife_cov`, CR3) where that is larger.
+        damping: factors of the current damping tried at once in every iteration, the best
+            trial accepted (``(1.0,)``: plain LM, one trial). Rows of one rollout cost far less
+            than rollouts (a simulation is sequential in time, batched across rows), so trying
+            ``(0.1, 1, 10, 100)`` together replaces the rejected steps of a rough objective,
+            each a whole rollout, by extra rows. A rejected batch counts as one rejected step
+            per trial at or above the current damping, the damping then 10x the largest tried.
     """
     lh = np.asarray(local_h, dtype=float)
     states: list[_State] = []
@@ -385,51 +392,64 @@ def fit_problems(
         np.ones(n_traj, bool) if s.prob.traj is None else np.asarray(s.prob.traj, bool)
         for s in states
     ]
-    # iteration 0: evaluate everything at the start points
-    pending = [(i, s.theta, s.local) for i, s in enumerate(states)]
+    # iteration 0: evaluate everything at the start points; a pending entry is a problem and
+    # its trial points (theta, local, damping)
+    pending = [(i, [(s.theta, s.local, s.lam)]) for i, s in enumerate(states)]
     it = 0
     while pending:
         rows_t: list[np.ndarray] = []
         rows_l: list[np.ndarray] = []
         meta = []
-        for i, th, lo in pending:
-            ts, ls, hs = _rows_for(space, states[i], th, lo, rel_step, lh)
-            meta.append((i, len(rows_t), hs, th, lo))
-            rows_t += ts
-            rows_l += ls
+        for i, trials in pending:
+            for th, lo, lam in trials:
+                ts, ls, hs = _rows_for(space, states[i], th, lo, rel_step, lh)
+                meta.append((i, len(rows_t), hs, th, lo, lam))
+                rows_t += ts
+                rows_l += ls
         out = _run(fn, rows_t, rows_l)
-        nxt = []
-        for i, start, hs, th, lo in meta:
+        best: dict[int, tuple] = {}
+        for i, start, hs, th, lo, lam in meta:
             st = states[i]
             r, jac, jl = _assemble(
                 out, start, len(st.prob.free), hs, lh, st.prob.fit_local, n_local
             )
             c = _cost(r, masks[i])
+            if i not in best or c < best[i][0]:
+                best[i] = (c, th, lo, r, jac, jl, lam)
+        nxt = []
+        for i, trials in pending:
+            st = states[i]
+            c, th, lo, r, jac, jl, lam = best[i]
             first = st.resid is None
             if first or c < st.cost:
                 gain = st.cost - c if not first else np.inf
                 st.theta, st.local, st.resid, st.jac, st.jac_local, st.cost = th, lo, r, jac, jl, c
                 st.rejects, st.last_gain = 0, gain
                 if not first:
-                    st.lam = max(st.lam / 3.0, 1e-9)
+                    st.lam = max(lam / 3.0, 1e-9)
                 if not first and gain < max(ftol * c, atol):
                     st.done, st.converged = True, True
             else:
-                st.lam *= 10.0
-                st.rejects += 1
+                st.rejects += sum(t[2] >= st.lam for t in trials)  # as many as in sequence
+                st.lam = max(t[2] for t in trials) * 10.0
                 if st.lam > 1e6 or (st.rejects >= 3 and st.last_gain < 1.0):
                     st.done, st.converged = True, True
             st.it += 1
             if not st.done and st.it >= max_iter:
                 st.done = True
             if not st.done:
-                nt, nl = _step(st, space, masks[i], n_local)
-                if np.allclose(nt, st.theta, rtol=0, atol=1e-12) and np.allclose(
-                    nl, st.local, rtol=0, atol=1e-12
-                ):
-                    st.done, st.converged = True, True
+                nt = []
+                for f in damping:
+                    th_n, lo_n = _step(st, space, masks[i], n_local, st.lam * f)
+                    if not (
+                        np.allclose(th_n, st.theta, rtol=0, atol=1e-12)
+                        and np.allclose(lo_n, st.local, rtol=0, atol=1e-12)
+                    ):
+                        nt.append((th_n, lo_n, st.lam * f))
+                if nt:
+                    nxt.append((i, nt))
                 else:
-                    nxt.append((i, nt, nl))
+                    st.done, st.converged = True, True
         pending = nxt
         it += 1
         if progress is not None:
@@ -556,6 +576,7 @@ def fit_nested(
     *,
     tol: float = 1.0,
     rounds: int = 3,
+    base_fit: FitOutcome | None = None,
 ) -> tuple[FitOutcome, list[FitOutcome]]:
     """Fit a base model and candidate models that nest it, so that gains are the candidates'.
 
@@ -568,10 +589,12 @@ def fit_nested(
     cap, a rough objective), so the base is refitted from that point and the candidates worse
     than the new base, or again beating it, are refitted from it; at most ``rounds`` times.
 
+    ``base_fit``: the base problem already fitted (e.g. the memoised baseline), not refitted.
+
     Returns:
         (base outcome, one outcome per candidate: the best of its starts).
     """
-    (b,) = fit([base])
+    (b,) = fit([base]) if base_fit is None else (base_fit,)
     n = len(candidates)
     outs: list[FitOutcome | None] = [None] * n
     extra = [list(c) for c, _ in candidates]

@@ -19,7 +19,15 @@ from robogs.physics.recording import Recording, as_recording, yaw_of
 from robogs.physics.scene import scene_from_physics
 from robogs.physics.smoothing import local_polynomial
 
-__all__ = ["Prepared", "WrenchData", "prepare", "build_drive", "excitations", "wrench_data"]
+__all__ = [
+    "Prepared",
+    "WrenchData",
+    "prepare",
+    "build_drive",
+    "excitations",
+    "wrench_data",
+    "force_rms",
+]
 
 REST_MARGIN_M = 0.005
 """A wrench sample counts as out of contact (its offset and noise are estimated from such
@@ -64,8 +72,8 @@ class Prepared:
         sig_pos: [T, N, 3] m; sig_yaw: [T, N] rad - per-sample deviations (jitter included).
         phase: [T, N] phase index (-1 padding).
         excitation: which needs the data meets (``contact``, ``sliding``, ``impact``...).
-        wrench: the measured pusher force (None without one); ``wrench_note`` says why a
-            recorded one is not used.
+        wrench: the measured pusher force (None when not used); ``wrench_note`` says how it
+            is used, or why not.
     """
 
     rec: Recording
@@ -222,12 +230,12 @@ def wrench_data(
     The sensor's offset (tool weight, drift) and noise floor come from the samples at which the
     pusher's surface is more than ``REST_MARGIN_M`` from the box (out of contact, so the true
     contact force is zero): per trajectory the median (pooled over trajectories when one has
-    fewer than ``MIN_REST_SAMPLES``), and the pooled 1.4826 MAD. Returns (None, why) when a
-    recorded wrench cannot be used, (None, "") without one.
+    fewer than ``MIN_REST_SAMPLES``), and the pooled 1.4826 MAD. Returns (data, how it is used)
+    or (None, why not): a note in both cases, for every command to print.
     """
     trs = rec.trajectories
     if not any(t.wrench_t_ns is not None and len(t.wrench_t_ns) for t in trs):
-        return None, ""
+        return None, "no wrench stream in the data: forces are not compared"
     n_t, n_s = drive.n_traj, drive.n_steps
     dt = drive.dt
     k_bin = max(int(round(FORCE_BIN_S / dt)), 1)
@@ -284,7 +292,12 @@ def wrench_data(
         offset=offset,
         n_rest=n_rest,
     )
-    return data, ""
+    note = (
+        f"wrench used: {int(count.sum())} samples in {int(mask.sum())} bins of "
+        f"{k_bin * dt * 1000:.0f} ms enter the residuals in N; the sensor's offset and noise "
+        f"({', '.join(f'{x:.3g}' for x in sigma)} N per sample) from {n_rest} samples out of contact"
+    )
+    return data, note
 
 
 def excitations(rec: Recording, labels: list[PhaseLabels]) -> set[str]:
@@ -369,3 +382,30 @@ def prepare(
         wrench=wrench,
         wrench_note=wrench_note,
     )
+
+
+def force_rms(prep: Prepared, weighted: np.ndarray) -> dict[str, float] | None:
+    """Pusher force residual of weighted residuals ``weighted`` [T, K] (the force block after
+    the pose block, :func:`robogs.physics.residuals.weighted_residuals`), None without a wrench.
+
+    Returns ``rms_n``: RMS over the used bins of the 3-D bin-mean force error [N];
+    ``noise_floor_n``: the RMS the true model would leave (per bin ``sigma / sqrt(count)`` per
+    axis, the sensor's noise floor); ``bins``: bins used.
+    """
+    w = prep.wrench
+    n_pose = prep.mask.shape[1] * 4
+    if w is None or weighted.shape[-1] <= n_pose:
+        return None
+    n_t, n_b = w.mask.shape
+    rf = np.asarray(weighted)[:, n_pose:].reshape(n_t, n_b, 4)[..., :3]
+    sf = w.sigma.numpy()[None, None, :] / np.sqrt(w.count.numpy())[..., None]  # [T, W, 3] N
+    m = w.mask.numpy()
+    if not m.any():
+        return None
+    err2 = np.sum((rf * sf) ** 2, axis=-1)[m]
+    floor2 = np.sum(sf**2, axis=-1)[m]
+    return {
+        "rms_n": float(np.sqrt(err2.mean())),
+        "noise_floor_n": float(np.sqrt(floor2.mean())),
+        "bins": int(m.sum()),
+    }

@@ -22,3 +22,31 @@ def ur5(tmp_path_factory) -> Path:
     p = tmp_path_factory.mktemp("robot") / "ur5.urdf"
     p.write_text(ur5_urdf())
     return p
+
+
+@pytest.fixture(scope="session")
+def push_walkthrough(tmp_path_factory: pytest.TempPathFactory, worker_id: str) -> dict:
+    """docs/physics.md's bag walkthrough run once per test session: ``{"dir": folder, "runs":
+    [...]}`` (see :func:`bag_walkthrough.run_walkthrough`). Under pytest-xdist the workers share one run in
+    the session's base folder through a file lock (pytest-xdist docs, "Making session-scoped
+    fixtures execute only once"); without xdist it runs in a fresh temporary folder."""
+    import json
+
+    from bag_walkthrough import run_walkthrough
+
+    if worker_id == "master":
+        folder = tmp_path_factory.mktemp("push_walkthrough")
+        return {"dir": folder, "runs": run_walkthrough(folder)}
+    from filelock import FileLock
+
+    root = tmp_path_factory.getbasetemp().parent
+    folder, done = root / "push_walkthrough", root / "push_walkthrough.json"
+    with FileLock(str(root / "push_walkthrough.lock")):
+        if not done.is_file():
+            folder.mkdir(exist_ok=True)
+            runs = run_walkthrough(folder)
+            tmp = done.with_suffix(".tmp")
+            tmp.write_text(json.dumps(runs))
+            tmp.replace(done)
+        runs = json.loads(done.read_text())
+    return {"dir": folder, "runs": runs}

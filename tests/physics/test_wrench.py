@@ -128,3 +128,36 @@ def test_mujoco_engine_says_it_leaves_the_wrench_out():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         Engine(rec, dt=1e-3, backend="planar")
+
+
+def test_force_rms_and_the_wrench_note():
+    """force_rms against a known force error: 0.5 N on every used bin gives 0.5 N; the noise
+    floor is the per-bin sigma / sqrt(count) by a plain loop. The note says how the wrench is
+    used, or why not."""
+    from robogs.physics.prepare import force_rms
+
+    rec = make_force_push(seed=3)
+    prep = prepare(rec)
+    w = prep.wrench
+    assert prep.wrench_note.startswith("wrench used:") and "out of contact" in prep.wrench_note
+    n_t, n_b = w.mask.shape
+    n_pose = prep.mask.shape[1] * 4
+    sig, cnt, m = w.sigma.numpy(), w.count.numpy(), w.mask.numpy()
+    err = np.array([0.3, -0.4, 0.0])  # N, |err| = 0.5
+    weighted = np.zeros((n_t, n_pose + n_b * 4))
+    floor2 = []
+    for t in range(n_t):
+        for b in range(n_b):
+            sf = sig / np.sqrt(cnt[t, b])
+            weighted[t, n_pose + 4 * b : n_pose + 4 * b + 3] = err / sf
+            if m[t, b]:
+                floor2.append(np.sum(sf**2))
+    f = force_rms(prep, weighted)
+    assert f["rms_n"] == pytest.approx(0.5, rel=1e-12)
+    assert f["noise_floor_n"] == pytest.approx(np.sqrt(np.mean(floor2)), rel=1e-12)
+    assert f["bins"] == int(m.sum()) > 0
+    assert force_rms(prep, weighted[:, :n_pose]) is None  # no force block: no force RMS
+    for tr in rec.trajectories:
+        tr.wrench_t_ns = tr.wrench_force = None
+    bare = prepare(rec)
+    assert bare.wrench is None and bare.wrench_note.startswith("no wrench stream")
