@@ -447,7 +447,12 @@ def _pusher(
     elif shape == "capsule" and settings.capsule_ends:
         for name, y in (("pusher", -0.5 * length), ("pusher_end", 0.5 * length)):
             ET.SubElement(
-                body, "geom", type="sphere", size=_f(r), pos=_vec([0, y, 0]), **{**attrs, "name": name}
+                body,
+                "geom",
+                type="sphere",
+                size=_f(r),
+                pos=_vec([0, y, 0]),
+                **{**attrs, "name": name},
             )
     elif shape == "capsule":
         h = 0.5 * length

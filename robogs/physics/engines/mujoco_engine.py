@@ -188,7 +188,9 @@ class MujocoEngine:
                 support = set(self.scene.table_pairs.get(obj, []))
                 feet = set(self.scene.feet.get(obj, []))
                 for k, (a, b) in enumerate(self.scene.pairs):
-                    if k in support or (a in feet | {obj} and b not in self._bid and not b.startswith("pusher")):
+                    if k in support or (
+                        a in feet | {obj} and b not in self._bid and not b.startswith("pusher")
+                    ):
                         m.pair_friction[k, :2] = max(v, 1e-5)
                         if self.scene.pair_torsion[k] > 0:  # torsional friction mu * rho
                             m.pair_friction[k, 2] = max(v, 1e-5) * self.scene.pair_torsion[k]
