@@ -97,3 +97,29 @@ def test_nested_never_worse_and_its_gain_is_its_own(seed: int) -> None:
     assert b.cost == pytest.approx(_exact(y, False), abs=1.0)
     assert c.cost == pytest.approx(_exact(y, True), abs=1.0)
     assert b.cost - c.cost == pytest.approx(exact_gain, abs=1.0)
+
+
+def test_damping_trials_reach_the_exact_optimum_in_fewer_rollouts() -> None:
+    """fit_problems(damping=(0.1, 1, 10, 100)): several damping values tried in one rollout
+    reach the same exact optimum (scipy) as plain LM, with no more rollouts."""
+    from robogs.physics import fit as fit_mod
+
+    y = _data(0)
+    space, fn = _space(), _fn(y)
+    theta0 = space.zero.copy()
+    theta0[0] = -2.5
+    calls = []
+
+    def counted(theta: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
+        calls.append(theta.shape[0])
+        return fn(theta, local)
+
+    runs = {}
+    for damping in [(1.0,), (0.1, 1.0, 10.0, 100.0)]:
+        calls.clear()
+        (out,) = fit_mod.fit_problems(counted, space, [Problem([0], theta0=theta0)], n_traj=T,
+                                      n_local=1, max_iter=200, local_h=(1e-4,), ftol=1e-12,
+                                      atol=1e-9, damping=damping)  # fmt: skip
+        assert out.cost == pytest.approx(_exact(y, False), abs=1e-3)
+        runs[damping] = len(calls)
+    assert runs[(0.1, 1.0, 10.0, 100.0)] <= runs[(1.0,)]
