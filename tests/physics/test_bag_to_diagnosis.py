@@ -132,7 +132,8 @@ def _mass_cell(diagnose_text: str) -> tuple[str, float, float, float]:
     (row,) = [ln for ln in diagnose_text.splitlines() if re.search(r"\bmass\b.*\bdm=", ln)]
     m = re.search(rf"dm=({_NUM}) \[({_NUM}), ({_NUM})\]", row)
     assert m is not None, row
-    return row.split()[-1], float(m.group(1)), float(m.group(2)), float(m.group(3))
+    cells = [c.strip() for c in row.split("│") if c.strip()]  # rich's table, one row a line
+    return cells[-1], float(m.group(1)), float(m.group(2)), float(m.group(3))
 
 
 def test_mass_found_as_on_the_scenario_given_directly(push_walkthrough: dict) -> None:
