@@ -28,7 +28,8 @@ Contact settings (:class:`robogs.format.mjcf.ContactSettings`), and why:
 
 * ``cone="elliptic"`` - the exact Coulomb cone; the pyramidal cone is a polyhedral
   approximation whose friction limit depends on the sliding direction relative to its edges,
-  which would masquerade as anisotropic friction.
+  which would masquerade as anisotropic friction (off-centre pushes 3.8-12 deg from the
+  generator against 2.3-2.5 deg elliptic, same grid).
 * ``impratio=10`` - frictional impedance 10x the normal one: stiff friction, so a block
   below the friction angle creeps < 0.5 mm/s (MuJoCo's docs recommend > 1 with elliptic
   cones for the same reason; the incline test bounds the creep).
@@ -36,14 +37,37 @@ Contact settings (:class:`robogs.format.mjcf.ContactSettings`), and why:
   critically damped: a resting penetration of 2 micrometres (0.4 kg box) and little rebound.
   Soft contacts are not fully plastic: a box struck by a 0.3 m/s pusher leaves it at up to
   about 0.35 m/s and the pusher catches up (restitution is a separate effect). Other time
-  constants (3-6 ms, damping ratio 1.5) were not better against the scenario generator.
+  constants (3-6 ms, damping ratio 1.5) were not better against the scenario generator; on the
+  off-centre pushes (4 x 4 grid) 2 ms gave 3.8-4.2 deg, 10 ms 0.6-1.7 deg but 1.4-3.0 deg once
+  the corner load was gone, against 0.9-2.4 deg at 4 ms.
 * ``solimp=(0.95, 0.99, 0.001, 0.5, 2)`` - impedance 0.95 at contact rising to 0.99 within
   1 mm of penetration: hard contacts with a smooth onset.
 * ``timestep=1 ms`` - the planar model's step; a 0.5 m/s push moves 0.5 mm per step, well
-  below the 10 mm pusher radius and the solimp width of the contacts it makes.
+  below the 10 mm pusher radius and the solimp width of the contacts it makes. 0.25 ms did not
+  make the pushes' finite-difference Jacobians smooth (45x planar's instead of 83x).
 * ``integrator="Euler"`` - semi-implicit Euler, actuator forces explicit (see above).
 * ``noslip_iterations=0`` - not used: the elliptic cone with ``impratio`` already keeps the
-  creep within the tolerances, and noslip would add a solver pass per step.
+  creep within the tolerances, and noslip would add a solver pass per step (10 iterations left
+  the generator's off-centre pushes exactly where they were; with soft friction dimensions it
+  did not restore Coulomb friction in sliding: a 0.6 m/s slide ran 164 mm instead of 52).
+* ``solreffriction=(0, 0)`` - the friction dimensions use ``solref``. MuJoCo's convex soft
+  contact couples slip into the normal direction (the dual-cone condition of the elliptic cone
+  gives the normal a push of about mu b |v_t|, b the friction rows' reference damping), so a box
+  sliding at 1.2 m/s hops 0.76 mm; a slower friction reference (20 ms) cut that to 0.27 mm but
+  made the finite-difference Jacobians of the generator's release slides 7-17x planar's (the
+  stick-slip transitions of a softer friction), so it is a setting, not the default.
+* box footprint - a box rests on a 5 x 5 grid of 1 mm spheres spread to the face's mean
+  radius, its collision box's bottom face raised 0.2 mm (``robogs.format.mjcf``): the grid
+  carries the weight, the box geom takes over on edge landings. Against the generator's
+  off-centre pushes (noise-free, nominal friction, seeds 0-2, yaw RMS per push): 4 x 4 grid
+  0.15-2.38 deg, 5 x 5 0.22-1.57 deg, 6 x 6 0.23-1.41 deg, 8 x 8 0.47-1.78 deg, 3 x 3
+  0.72-2.37 deg, 2 x 2 4.2-8.2 deg, the plain box (four corners) 5.4 deg; planar 0.35-0.83 deg.
+  Torsional friction on inward-drawn footprints (condim 4, ``footprint_torsion``: the ellipsoidal
+  limit surface of Howe & Cutkosky 1996) was worse (1.6-2.0 deg at half spread, 3.5-5.2 deg
+  closer in), so it is an option, off.
+* capsule pusher as its two end spheres (``capsule_ends``), as the planar model and the
+  generator model it: a capsule flush with a face makes one or two contacts depending on
+  micrometres.
 * ``solver="Newton"``, 50 iterations, tolerance 1e-10 - converged contact forces, so
   finite-difference Jacobians over parameters are not dominated by solver noise.
 
