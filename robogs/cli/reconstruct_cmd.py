@@ -245,6 +245,13 @@ def _print_reconstruct(rep: Any) -> None:
                 f"  alignment: {n} left out of the fit (below the coverage), median residual "
                 f"{a['per_link_median_mm'][n]:.1f} mm"
             )
+    for name, sp in (rep.support or {}).items():
+        rested = ", ".join(sp["objects_rested"]) or "no object"
+        c.print(
+            f"  support: {name} top flattened onto its plane at z {sp['height_mm']:.1f} mm "
+            f"(free-fit tilt {sp['free_tilt_deg']:.2f} deg, sigma {sp['sigma_mm']:.1f} mm); "
+            f"{rested} rest on it"
+        )
     c.print(f"  binding residual max {rep.binding_max_mm:.2e} mm; wrote {', '.join(rep.written)}")
     c.print(
         f"  time {rep.timings_s.get('total', 0):.1f} s (train {rep.timings_s.get('train', 0):.1f} s)"

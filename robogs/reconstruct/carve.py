@@ -46,7 +46,7 @@ import torch.nn.functional as F
 
 from .views import View
 
-__all__ = ["CarveResult", "carve_photo_hull"]
+__all__ = ["CarveResult", "carve_photo_hull", "refine_along_normals"]
 
 
 @dataclass
@@ -264,3 +264,102 @@ def carve_photo_hull(
     conf = np.zeros_like(occ)
     conf[tuple(idx[(alive & confirmed).numpy()].T)] = True
     return CarveResult(out, conf, carved_total, iterations)
+
+
+def _bilinear(img: torch.Tensor, u: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+    """Colours [N, 3] of ``img`` [H, W, 3] at pixel-edge coordinates (col ``u``, row ``w``)."""
+    H, W = img.shape[:2]
+    x = (u - 0.5).clamp(0, W - 1)
+    y = (w - 0.5).clamp(0, H - 1)
+    x0 = x.floor().long().clamp(max=W - 2) if W > 1 else x.floor().long()
+    y0 = y.floor().long().clamp(max=H - 2) if H > 1 else y.floor().long()
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    x1, y1 = (x0 + 1).clamp(max=W - 1), (y0 + 1).clamp(max=H - 1)
+    im = img.to(torch.float64)
+    top = im[y0, x0] * (1 - fx) + im[y0, x1] * fx
+    bot = im[y1, x0] * (1 - fx) + im[y1, x1] * fx
+    return top * (1 - fy) + bot * fy
+
+
+def refine_along_normals(
+    points: np.ndarray,
+    normals: np.ndarray,
+    views: list[View],
+    voxel: float,
+    *,
+    occluders: np.ndarray | None = None,
+    reach_voxels: float = 1.0,
+    steps: int = 9,
+    min_views: int = 3,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Slide surface seeds along their normals to where the views agree best (sub-voxel).
+
+    The carving keeps a voxel when its footprints agree, so the photo hull's surface voxels lie
+    up to a voxel outside the true surface (measured: the sample's table seeds 9 mm = one voxel
+    above its top). Each seed is moved by the offset in [-reach, +reach] voxels along its
+    normal whose colours, sampled bilinearly in the views that see the seed (frontmost in a
+    z-buffer of the seeds and ``occluders``, facing the camera), have the least variance: a
+    plane sweep per seed (Collins 1996, "A space-sweep approach to true multi-image
+    matching"). Seeds without a normal, seen by fewer than ``min_views`` views, or whose best
+    offset does not lower the variance at the voxel centre by a fifth (a textureless surface)
+    stay.
+
+    Args:
+        points: [N, 3] seeds, m (world).
+        normals: [N, 3] outward unit normals (NaN rows: no normal).
+        views: the views (full resolution is best: the sweep is sub-voxel).
+        voxel: voxel edge of the carving, m.
+        occluders: [K, 3] other seed points that hide seeds (e.g. on the URDF meshes).
+
+    Returns:
+        The moved points [N, 3] and each one's offset along its normal [N], m.
+    """
+    P = torch.as_tensor(points, dtype=torch.float64)
+    Nrm = torch.as_tensor(np.nan_to_num(normals), dtype=torch.float64)
+    has_n = Nrm.norm(dim=1) > 0.5
+    M = len(P)
+    if M == 0 or not views:
+        return np.asarray(points, np.float64).copy(), np.zeros(M)
+    allp = (
+        P
+        if occluders is None or not len(occluders)
+        else torch.cat([P, torch.as_tensor(occluders, dtype=torch.float64)])
+    )
+    offsets = torch.linspace(-reach_voxels, reach_voxels, steps, dtype=torch.float64) * voxel
+    s1 = torch.zeros(steps, M, 3, dtype=torch.float64)
+    s2 = torch.zeros(steps, M, 3, dtype=torch.float64)
+    cnt = torch.zeros(M, dtype=torch.float64)
+    for v in views:
+        u, w, z = _project(allp, v)
+        H, W = v.rgb.shape[:2]
+        inside = (z > v.camera.near) & (u >= 0) & (u < W) & (w >= 0) & (w < H)
+        if not inside[:M].any():
+            continue
+        px_per_voxel = voxel * v.camera.fx / float(z[inside].median())
+        sc = float(np.clip(1.0 / (1.5 * px_per_voxel), 0.01, 1.0))  # buffer pixel: 1.5 voxels
+        Ws, Hs = max(1, int(W * sc)), max(1, int(H * sc))
+        bpix = (w * sc).clamp(0, Hs - 1).long() * Ws + (u * sc).clamp(0, Ws - 1).long()
+        zbuf = torch.full((Hs * Ws,), float("inf"), dtype=torch.float64)
+        zbuf.scatter_reduce_(0, bpix[inside], z[inside], reduce="amin")
+        C = v.camera.T_world_cam[:3, 3].to(torch.float64)
+        seen = inside[:M] & (z[:M] <= zbuf[bpix[:M]] + 1.5 * voxel)
+        seen &= has_n & (((C - P) * Nrm).sum(1) > 0)
+        idx = torch.nonzero(seen)[:, 0]
+        if not len(idx):
+            continue
+        cnt[idx] += 1
+        for k in range(steps):
+            uq, wq, _ = _project(P[idx] + offsets[k] * Nrm[idx], v)
+            col = _bilinear(v.rgb, uq, wq)
+            s1[k, idx] += col
+            s2[k, idx] += col * col
+    n = cnt.clamp(min=1)[None, :, None]
+    var = (s2 / n - (s1 / n) ** 2).sum(2)  # [steps, M]
+    best = var.argmin(0)
+    delta = offsets[best]
+    # a flat score (a textureless surface agrees at every offset) moves nothing: the best
+    # offset must lower the variance at the voxel centre by a fifth
+    flat = var.gather(0, best[None])[0] >= 0.8 * var[steps // 2]
+    delta[(cnt < min_views) | ~has_n | flat] = 0.0
+    moved = P + delta[:, None] * Nrm
+    return moved.numpy(), delta.numpy()

@@ -28,7 +28,7 @@ from robogs.format.dataset import Dataset
 from robogs.format.frames import matrix_to_quat, quat_to_matrix
 from robogs.format.render import rgb_to_sh_dc
 
-from .carve import carve_photo_hull
+from .carve import carve_photo_hull, refine_along_normals
 from .robot_geometry import link_meshes
 from .views import Capture, View
 
@@ -337,6 +337,8 @@ def initial_points(
         if len(hp) and vox < spacing:  # thin hull samples to the target spacing
             keep = np.random.default_rng(cfg.seed).random(len(hp)) < (vox / spacing) ** 2
             hp, hn = hp[keep], hn[keep]
+        if len(hp) and cfg.carve_tau is not None:  # photo-hull voxels: onto the surface
+            hp, _ = refine_along_normals(hp, hn, train_views, vox, occluders=pts)
         pts, nrm = np.concatenate([pts, hp]), np.concatenate([nrm, hn])
     if cfg.mode == "random" or len(pts) == 0:
         rng = np.random.default_rng(cfg.seed)

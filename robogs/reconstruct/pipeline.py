@@ -47,6 +47,7 @@ from .prealign import needs_prealign, prealign_json, prealign_sfm
 from .quality import QualityFloors, assess_quality
 from .robot_geometry import link_meshes
 from .segment import TargetMap, drop_fragments, split_mesh, target_map, vote_targets
+from .support import fit_support_plane, flatten_table, rest_on_plane
 from .train import TrainConfig, TrainResult, train
 from .tsdf import extract_mesh, fuse_tsdf
 from .views import Capture, View, load_capture, split_heldout
@@ -139,6 +140,7 @@ class ReconstructionReport:
     written: list[str]
     coverage: dict[str, Any] = field(default_factory=dict)
     quality: dict[str, Any] = field(default_factory=dict)
+    support: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -420,6 +422,8 @@ def reconstruct(
                 mesh = mesh.copy()
                 mesh.apply_transform(S.matrix())
                 parts = {k: m.copy().apply_transform(S.matrix()) for k, m in parts.items()}
+    # -- support: the reconstructed table is its plane, the objects stand on it ---------------
+    parts, support = _rest_on_support(ds, tmap, parts, options.replace_meshes, vol.voxel_size)
     # -- binding and writing ------------------------------------------------------------------------------
     t0 = time.perf_counter()
 
@@ -456,6 +460,7 @@ def reconstruct(
             written=written,
             coverage=coverage.to_json(),
             quality=quality.to_json(),
+            support=support,
         )
 
     report = _write(
@@ -512,6 +517,55 @@ def _heldout_psnr(model: GaussianModel, held: list[View], cfg: TrainConfig) -> f
     g = model.gaussians()
     vals = [psnr(render(g, v.camera, config=rc).rgb.clamp(0, 1).cpu(), v.rgb) for v in held]
     return float(np.mean(vals))
+
+
+def _rest_on_support(
+    ds: Dataset,
+    tmap: TargetMap,
+    parts: dict[int, trimesh.Trimesh],
+    replace_meshes: bool,
+    voxel_m: float,
+) -> tuple[dict[int, trimesh.Trimesh], dict[str, Any]]:
+    """Flatten each reconstructed ``table`` part onto its support plane and move the
+    reconstructed objects' vertices below it onto it (``support.py``); parts of assets that
+    keep their own mesh are left alone. Returns the parts and, per table, the figures (plane
+    height in mm along world z, free-fit tilt, robust sigma, vertices moved, faces dropped)."""
+    assets = ds.assets
+
+    def reconstructed(k: int) -> bool:
+        entry = assets.get(tmap.names[k - 1], {})
+        return tmap.kinds[k - 1] == "object" and ("mesh" not in entry or replace_meshes)
+
+    def kind(k: int) -> str | None:
+        return assets.get(tmap.names[k - 1], {}).get("kind")
+
+    out = dict(parts)
+    report: dict[str, Any] = {}
+    for k in [k for k in parts if reconstructed(k) and kind(k) == "table"]:
+        m = parts[k]
+        fit = fit_support_plane(np.asarray(m.vertices), np.asarray(m.vertex_normals))
+        if fit is None:
+            continue
+        plane, tilt = fit
+        out[k], moved, dropped = flatten_table(m, plane, min_band_m=0.5 * voxel_m)
+        lo, hi = m.bounds[0, :2], m.bounds[1, :2]
+        rested: dict[str, int] = {}
+        for j in parts:
+            if j == k or not reconstructed(j) or kind(j) == "table":
+                continue
+            c = parts[j].centroid[:2]
+            if (c >= lo).all() and (c <= hi).all():  # stands over this table
+                out[j], rested[tmap.names[j - 1]] = rest_on_plane(parts[j], plane)
+        c = plane.project(np.asarray(m.vertices).mean(0, keepdims=True))[0]
+        report[tmap.names[k - 1]] = {
+            **plane.to_json(),
+            "height_mm": float(c[2] * 1e3),
+            "free_tilt_deg": tilt,
+            "vertices_flattened": moved,
+            "faces_dropped": dropped,
+            "objects_rested": rested,
+        }
+    return out, report
 
 
 def _without_fragments(
