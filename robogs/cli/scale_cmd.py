@@ -74,5 +74,8 @@ def validate_ray(
         )
     finally:
         ex.shutdown()
-    print(summary_line(stats, ex.workers), file=sys.stderr)
+    line = summary_line(stats, ex.workers)
+    if ex.init_seconds:
+        line += f" (of which {ex.init_seconds:.1f} s starting Ray)"
+    print(line, file=sys.stderr)
     return report

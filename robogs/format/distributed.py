@@ -534,6 +534,8 @@ class RayExecutor:
         self.init_kwargs = dict(init_kwargs or {})
         self.started = False
         self.workers = num_cpus or 0
+        #: seconds spent starting or joining the cluster (inside the first ``run``)
+        self.init_seconds = 0.0
 
     def connect(self) -> Any:
         """Start or join the cluster (once); the ``ray`` module."""
@@ -547,6 +549,7 @@ class RayExecutor:
                 hint="pip install 'robogs[scale]'",
             ) from None
         if not ray.is_initialized():
+            t0 = time.perf_counter()
             kw: dict[str, Any] = {
                 "include_dashboard": False,
                 "log_to_driver": False,
@@ -566,6 +569,7 @@ class RayExecutor:
                     "for a local cluster",
                 ) from None
             self.started = True
+            self.init_seconds = time.perf_counter() - t0
         self.workers = int(ray.cluster_resources().get("CPU", 1))
         return ray
 
