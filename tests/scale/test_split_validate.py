@@ -36,6 +36,17 @@ def mutated(tmp_path_factory) -> Path:
     return mutated_bulk(tmp_path_factory.mktemp("split") / "ds", 36)
 
 
+@pytest.fixture(scope="module")
+def mutated_sharded(tmp_path_factory) -> Path:
+    """The same defects in chunks of 12 episodes (tasks read their chunk index)."""
+    return mutated_bulk(tmp_path_factory.mktemp("split-sharded") / "ds", 36, chunk_size=12)
+
+
+@pytest.fixture(params=["flat", "sharded"])
+def either(request, mutated, mutated_sharded) -> Path:
+    return mutated if request.param == "flat" else mutated_sharded
+
+
 def check_scope(code: str) -> str | None:
     """The test checks below split by episode (the hook the distributed runner reads)."""
     return "episode" if code.startswith("Z99") else None
@@ -89,18 +100,22 @@ def test_split_equals_single_on_mutated_episodes(mutated):
         {"select": ["T", "I00"], "ignore": ["I004"]},
     ],
 )
-def test_split_equals_single_with_caps_quick_and_selection(mutated, kw):
-    single = validate(mutated, **kw)
-    split = validate_distributed(mutated, episodes_per_task=4, files_per_task=9, **kw)
+def test_split_equals_single_with_caps_quick_and_selection(either, kw):
+    single = validate(either, **kw)
+    stats = Stats()
+    split = validate_distributed(either, episodes_per_task=4, files_per_task=9, stats=stats, **kw)
     assert _facts(split) == _facts(single)
+    assert (stats.chunk_units > 0) == ("shards" in (either / "manifest.json").read_text())
     if "max_per_code" in kw:
         assert single.dropped, "the cap must drop something for this case to test it"
 
 
-def test_crash_error_and_reported_stop_where_the_single_run_stops(mutated, odd_checks):
-    single = validate(mutated, max_per_code=30)
-    split = validate_distributed(mutated, episodes_per_task=3, max_per_code=30)
+def test_crash_error_and_reported_stop_where_the_single_run_stops(either, odd_checks):
+    single = validate(either, max_per_code=30)
+    stats = Stats()
+    split = validate_distributed(either, episodes_per_task=3, max_per_code=30, stats=stats)
     assert _facts(split) == _facts(single)
+    assert (stats.chunk_units > 0) == ("shards" in (either / "manifest.json").read_text())
     runs = {r.code: r for r in split.runs}
     assert runs["Z990"].status == "crashed" and runs["Z992"].status == "ran"
     z990 = [f for f in split.findings if f.code == "Z990"]
