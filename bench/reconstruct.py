@@ -175,6 +175,18 @@ def sfm_route(args: argparse.Namespace, tmp: Path) -> None:
         f"  URDF alignment RMS {al['rms_mm']:.2f} mm (target <= 5), median {al['median_mm']:.2f} mm, "
         f"scale {al['scale']:.4f}; pre-alignment RMS {pre['rms_mm']:.2f} mm"
     )
+    print(
+        "  per-link median residual (mm): "
+        + ", ".join(f"{k} {v:.1f}" for k, v in al["per_link_median_mm"].items())
+        + (f"; left out of the fit: {', '.join(al['excluded'])}" if al.get("excluded") else "")
+    )
+    for name, sp in rep.support.items():  # the true top of the sample's table is z = 0
+        print(
+            f"  support: {name} plane at z {sp['height_mm']:.1f} mm (true top 0), free-fit tilt "
+            f"{sp['free_tilt_deg']:.2f} deg, sigma {sp['sigma_mm']:.1f} mm; rested: "
+            f"{', '.join(sp['objects_rested']) or 'none'}"
+        )
+    print(f"  load average now {os.getloadavg()[0]:.1f}")
 
 
 def main() -> None:

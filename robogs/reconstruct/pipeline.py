@@ -49,7 +49,7 @@ from .robot_geometry import link_meshes
 from .segment import TargetMap, drop_fragments, split_mesh, target_map, vote_targets
 from .support import fit_support_plane, flatten_table, rest_on_plane
 from .train import TrainConfig, TrainResult, train
-from .tsdf import extract_mesh, fuse_tsdf
+from .tsdf import drop_depth_edges, extract_mesh, fuse_tsdf
 from .views import Capture, View, load_capture, split_heldout
 
 __all__ = [
@@ -176,15 +176,14 @@ def _scaled_lrs(lrs: LearningRates, k: float) -> LearningRates:
 
 @torch.no_grad()
 def _render_depths(model: GaussianModel, views: list[View], cfg: TrainConfig) -> list[torch.Tensor]:
-    """Median depth [H, W] of every view (0 where alpha < 0.5), m."""
+    """Median depth [H, W] of every view (0 where alpha < 0.5 and on depth edges), m."""
     rc = RenderConfig(kind=cfg.kind, background=tuple(cfg.background), validate=False)
     g = model.gaussians()
     out = []
     for v in views:
         r = render(g, v.camera, config=rc)
-        out.append(
-            torch.where(r.alpha >= 0.5, r.depth_median, torch.zeros_like(r.depth_median)).cpu()
-        )
+        d = torch.where(r.alpha >= 0.5, r.depth_median, torch.zeros_like(r.depth_median)).cpu()
+        out.append(drop_depth_edges(d))
     return out
 
 

@@ -16,6 +16,15 @@ marching cubes (``skimage.measure.marching_cubes``).
 ``-1`` just behind the surface) meet unobserved ones. Marching cubes only runs on voxels whose
 whole 3x3x3 neighbourhood was observed (the observed mask eroded by one voxel), which removes it;
 ``mesh_clean.remove_inner_shells`` catches what is left.
+
+**Depth edges.** A rendered depth sample on a depth discontinuity (a silhouette: a thin part in
+front of the table) blends the two surfaces; fused, it grows the near part towards the far one
+(the UR5 pusher tip, 40 mm wide and 5-10 px in the views, came out 1.4-2x its area).
+:func:`drop_depth_edges` leaves out the samples that differ from a 4-neighbour by more than
+``EDGE_JUMP_REL`` (3 %) of their depth, as depth-fusion pipelines drop depth-discontinuity
+pixels; a plane is only cut at grazing angles beyond ~80 deg (a 1-px step of 3 %). Measured on
+the SfM sample at half size: mesh F@5mm 0.22 -> 0.58, Chamfer-L1 10.0 -> 7.4 mm, pusher tip
+median residual 14.7 -> 7.3 mm.
 """
 
 from __future__ import annotations
@@ -30,7 +39,21 @@ import trimesh
 from robogs.format.errors import InputError
 from robogs.format.render import Camera
 
-__all__ = ["TSDFVolume", "fuse_tsdf", "extract_mesh"]
+__all__ = ["TSDFVolume", "fuse_tsdf", "extract_mesh", "drop_depth_edges", "EDGE_JUMP_REL"]
+
+#: a depth sample differing from a 4-neighbour by more than this share of its depth is an edge
+EDGE_JUMP_REL = 0.03
+
+
+def drop_depth_edges(depth: torch.Tensor, rel: float = EDGE_JUMP_REL) -> torch.Tensor:
+    """The depth map [H, W] (m, 0 = none) with 0 where a 4-neighbour (or a missing one, 0)
+    differs by more than ``rel`` of the depth (see the module docstring)."""
+    p = torch.nn.functional.pad(depth[None, None], (1, 1, 1, 1), mode="replicate")[0, 0]
+    H, W = depth.shape
+    jump = torch.zeros_like(depth)
+    for dy, dx in ((0, 1), (2, 1), (1, 0), (1, 2)):
+        jump = torch.maximum(jump, (p[dy : dy + H, dx : dx + W] - depth).abs())
+    return torch.where(jump > rel * depth, torch.zeros_like(depth), depth)
 
 
 @dataclass

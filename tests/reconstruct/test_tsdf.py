@@ -183,3 +183,22 @@ def test_cleaning_drops_small_parts_and_turns_every_face_to_free_space(sphere_vo
     assert _outward(cap) < 0.001
     cleaned, rep = clean_mesh(cap, fill_holes=False, **kw)
     assert rep.flipped == 1 and _outward(cleaned) > 0.999
+
+
+def test_depth_edges_are_dropped_and_planes_kept():
+    from robogs.reconstruct.tsdf import drop_depth_edges
+
+    # a 1 m plate in front of a 2 m wall: the pixels on both sides of the step go, and the
+    # background's border with "no depth" (0) too; a plane sloping 2 % per pixel stays
+    d = torch.full((20, 30), 2.0)
+    d[5:15, 10:20] = 1.0
+    d[:, 27:] = 0.0
+    out = drop_depth_edges(d)
+    edge = torch.zeros_like(d, dtype=torch.bool)
+    edge[[5, 14], 10:20] = edge[5:15, [10, 19]] = True  # the plate's border ring
+    edge[[4, 15], 10:20] = edge[5:15, [9, 20]] = True  # the wall's pixels beside it
+    edge[:, 26] = True  # the wall's last column before "no depth"
+    assert torch.equal(out == 0, edge | (d == 0))
+    assert torch.equal(out[~(out == 0)], d[~(out == 0)])
+    ramp = 1.0 + 0.02 * torch.arange(30.0)[None].expand(20, 30)
+    assert torch.equal(drop_depth_edges(ramp), ramp)
