@@ -485,8 +485,14 @@ def _jitter_max(chk: Check, ctx: CheckContext) -> Iterator[Finding]:
 def t_range(ctx: CheckContext, rel: str) -> tuple[int, int] | None:
     """(min, max) ``t_ns`` of a table from its footer statistics; None if absent or empty.
 
-    Full mode falls back to reading the column when the footer has no statistics.
+    Full mode falls back to reading the column when the footer has no statistics. Kept per
+    table for the next check (T007 and T008 both ask; an unreadable table is asked again).
     """
+    # reported=False: a RobogsError reaches the calling check as it did before the cache
+    return ctx.cached(("t-range", rel), lambda: _t_range(ctx, rel), reported=False)
+
+
+def _t_range(ctx: CheckContext, rel: str) -> tuple[int, int] | None:
     md = ctx.footer(rel)
     schema = md.schema.to_arrow_schema()
     names = schema.names
