@@ -102,7 +102,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         const="local",
         metavar="ADDRESS",
         help="SRC is a quoted glob of bags: one Ray task per bag, all into one dataset "
-        "(episode epKKKK per bag); no ADDRESS starts a local cluster, 'auto' joins the running "
+        "(episode epKKKK per bag, cut into epKKKK_000, ... with --split-at-gaps); no ADDRESS "
+        "starts a local cluster, 'auto' joins the running "
         "one. A glob without --ray converts the bags one after another (docs/scale.md)",
     )
 
