@@ -131,12 +131,15 @@ def test_recipe_recovers_the_cameras_and_rerenders_an_episode(tmp_path: Path):
     truth = json.loads((tmp_path / "scan.ground_truth.json").read_text())
     Tt = np.asarray(truth["T_world_cam"])
     err = np.linalg.norm(p - Tt[:, :3, 3], axis=1)
+    print(f"margins: camera centres {err.max() * 1e3:.1f} mm of {10 * truth['scene_size_m']:.1f}")
     assert err.max() < 0.01 * truth["scene_size_m"], err.max()
     d = np.einsum("nji,njk->nik", quat_to_matrix_np(q), Tt[:, :3, :3])
     ang = np.degrees(np.arccos(np.clip((np.trace(d, axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    print(f"margins: camera rotations {ang.max():.2f} deg of 1")
     assert ang.max() < 1.0
     report = ds.manifest["provenance"]["reconstruction"]["report"]
     align = report["alignment"]
+    print(f"margins: URDF residual {align['rms_mm']:.2f} mm RMS of 5")
     assert align["rms_mm"] <= 5.0, align  # links below the coverage at this size left out
     # the table is written as its support plane, the box rests on it; the plane's height is
     # measured against the true top (a ray cast down onto the true scene mesh)
@@ -144,7 +147,7 @@ def test_recipe_recovers_the_cameras_and_rerenders_an_episode(tmp_path: Path):
     assert sup["objects_rested"].keys() == {"box"}, sup
     true_top = _true_top_z(tmp_path / "scan.ground_truth.ply")
     err_mm = sup["height_mm"] - true_top * 1e3
-    print(f"table plane {sup['height_mm']:.1f} mm, true top {true_top * 1e3:.1f} mm")
+    print(f"margins: table plane {err_mm:+.1f} mm from the true top, of {TABLE_TOP_MM:g}")
     assert abs(err_mm) <= TABLE_TOP_MM, sup
     r = _run(lines[3], tmp_path)
     assert r.returncode == 0 and _errors(r.stdout) == [], r.stdout[-3000:]
@@ -161,4 +164,5 @@ def test_recipe_recovers_the_cameras_and_rerenders_an_episode(tmp_path: Path):
     assert gap_ms < 20.0, gap_ms  # the recording's frames are ~33 ms apart
     inter = (ren & rec[near]).sum()
     iou = inter / (ren | rec[near]).sum()
+    print(f"margins: re-rendered robot IoU {iou:.3f} of > {IOU_MIN}")
     assert iou > IOU_MIN, iou
