@@ -40,7 +40,10 @@ def check_relpath(rel: str, *, source: str | Path | None = None, where: str | No
         raise PathEscapeError(
             f"path {rel!r} is not relative to the dataset root", path=source, where=where, hint=hint
         )
-    parts = PurePosixPath(rel).parts
+    split = rel.split("/")
+    # no empty or "." part: the split is what PurePosixPath gives, and rel its normal form
+    simple = "" not in split and "." not in split
+    parts = tuple(split) if simple else PurePosixPath(rel).parts
     long = [p for p in parts if len(p.encode("utf-8", "surrogatepass")) > NAME_MAX_BYTES]
     if long or len(rel.encode("utf-8", "surrogatepass")) > PATH_MAX_BYTES:
         what = (
@@ -59,7 +62,7 @@ def check_relpath(rel: str, *, source: str | Path | None = None, where: str | No
         raise PathEscapeError(
             f"path {rel!r} escapes the dataset root", path=source, where=where, hint=hint
         )
-    return str(PurePosixPath(*[p for p in parts if p != "."]))
+    return rel if simple else str(PurePosixPath(*[p for p in parts if p != "."]))
 
 
 def resolve_inside(
