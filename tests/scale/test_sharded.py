@@ -122,6 +122,39 @@ def test_each_chunk_task_reads_only_its_own_index(tmp_path):
     assert outcomes() == before
 
 
+def test_manifest_rows_between_chunk_rows_keep_the_order(tmp_path):
+    """An episode and files the manifest lists itself, sorting before, inside and after chunk
+    1's files: the chunk's run is cut around them, and the split equals the single run."""
+    import hashlib
+
+    from robogs.format.checks.context import CheckContext
+    from robogs.format.checks.registry import available_checks
+    from robogs.format.distributed import plan_units
+
+    root = mutated_bulk(tmp_path / "ds", 40, duration_s=0.3, chunk_size=16)
+    m = json.loads((root / "manifest.json").read_text())
+    for rel in ("episodes/chunk-001/aaa.txt", "episodes/chunk-001/ep020/zz.txt", "zzz.txt"):
+        (root / rel).write_text(rel)
+        digest = hashlib.sha256(rel.encode()).hexdigest()
+        m["files"][rel] = {"sha256": digest if rel != "zzz.txt" else "0" * 64, "size": len(rel)}
+    start = 1_700_000_000_000_000_000
+    m["episodes"] = [{"id": "top", "start_ns": start, "end_ns": start + 10, "streams": {}}]
+    (root / "manifest.json").write_text(json.dumps(m))
+    single = validate(root)
+    assert "I004" in single.codes() and "I011" not in single.codes()
+    stats = Stats()
+    split = validate_distributed(root, episodes_per_task=5, files_per_task=9, stats=stats)
+    assert [f.to_dict() for f in split.findings] == [f.to_dict() for f in single.findings]
+    assert [(r.code, r.status, r.findings) for r in split.runs] == [
+        (r.code, r.status, r.findings) for r in single.runs
+    ]
+    assert stats.chunk_units > 0 and stats.reason is None
+    plan = plan_units(CheckContext(root), list(available_checks().values()), files_per_task=9)
+    ours = [(u.lo, u.hi) for u in plan.units if u.chunk == "episodes/chunk-001/index.json"]
+    # files 0-9 are ep016..ep020's tables, then ep020/zz.txt (a manifest row), then 10-31
+    assert ours[-5:] == [(0, 9), (9, 10), (10, 19), (19, 28), (28, 32)]
+
+
 def test_inconsistent_index_falls_back_to_rows_with_identical_findings(tmp_path):
     root = tmp_path / "ds"
     write_bulk_dataset(root, n_episodes=16, duration_s=0.1, chunk_size=8)
