@@ -96,10 +96,6 @@ class ContactSettings:
             -y, ``pusher_end`` at +y), as the planar model and the scenario generator model it;
             a full capsule makes one or two contacts with a parallel face depending on
             micrometres, which turned centred pushes by a degree at random.
-        footprint_margin: contact margin and gap [m] of the footprint pairs: a contact is
-            detected up to this distance, but its residual stays the distance itself (MuJoCo's
-            residual is ``distance - (margin - gap)``), so a resting box keeps its contacts over
-            micrometre hops instead of making and breaking them every step.
         footprint_torsion: footprint contacts get torsional friction (``condim 4``) of radius
             :func:`torsion_radius`, so that a turning box meets the friction torque of the
             uniformly loaded face with the footprint drawn in (see that function).
@@ -121,7 +117,6 @@ class ContactSettings:
     pusher_mass: float = 1000.0
     footprint_grid: int = 5
     footprint_spread: float = 1.0
-    footprint_margin: float = 0.0
     capsule_ends: bool = True
     footprint_torsion: bool = False
     servo_velocity_gain: float = 1.0
@@ -648,9 +643,7 @@ def scene_mjcf(
         feet = scene.feet.get(a, [])
         for g in feet:
             scene.table_pairs.setdefault(a, []).append(len(scene.pairs))
-            fm = settings.footprint_margin
-            margin = {"margin": _f(fm), "gap": _f(fm)} if fm > 0 else {}
-            pair(g, "table", free[a], scene.torsion.get(a, 0.0), **margin)
+            pair(g, "table", free[a], scene.torsion.get(a, 0.0))
         scene.table_pairs.setdefault(a, []).append(len(scene.pairs))
         pair(a, "table", free[a])
         if scene.pusher is not None:

@@ -165,3 +165,25 @@ def test_off_centre_pushes_turn_as_the_generator_within_2_deg(seed: int) -> None
         yaw = float(np.degrees(np.sqrt(np.mean(sel[:, 3] ** 2))))
         pos = float(1e3 * np.sqrt(np.mean(np.sum(sel[:, :3] ** 2, axis=-1))))
         assert yaw <= 2.0 and pos <= 2.0, (seed, t, yaw, pos)
+
+
+def test_torsion_radius_gives_the_face_mean_radius_by_brute_force() -> None:
+    """Footprint points drawn in to 40 % with torsional radius rho: the mean of
+    sqrt(r_i^2 + rho^2) (each point's friction torque per unit load in a pure spin) is the
+    mean distance of the face from its centre, here by a 1000 x 1000 grid."""
+    from robogs.format.mjcf import footprint_points, torsion_radius
+
+    pts = footprint_points(SIZE[:2], 5, spread=0.4)
+    rho = torsion_radius(SIZE[:2], pts)
+    u = (np.arange(1000) + 0.5) / 1000 - 0.5
+    fx, fy = np.meshgrid(u * SIZE[0], u * SIZE[1])
+    r_face = float(np.hypot(fx, fy).mean())
+    got = float(np.sqrt(np.hypot(pts[:, 0], pts[:, 1]) ** 2 + rho**2).mean())
+    assert got == pytest.approx(r_face, rel=1e-3)
+    assert rho > 0.5 * r_face  # drawn in: most of the torque comes from torsion
+    doc = _doc()
+    scene = scene_mjcf(doc, settings=ContactSettings(footprint_torsion=True, footprint_spread=0.4))
+    model = mujoco.MjModel.from_xml_string(scene.xml)
+    feet = [k for k, (a, _) in enumerate(scene.pairs) if "foot" in a]
+    assert all(model.pair_dim[k] == 4 for k in feet)
+    np.testing.assert_allclose(model.pair_friction[feet, 2], MU * rho, rtol=1e-9)
