@@ -775,6 +775,7 @@ def validate_distributed(
         options=options,
         runner=make_runner,
     )
+    _INDEX_CACHE.clear()  # the indexes a LocalExecutor read in this process
     stats.wall_seconds = time.perf_counter() - t0
     report.seconds = stats.wall_seconds
     return report
