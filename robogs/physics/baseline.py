@@ -105,15 +105,28 @@ def model_key(physics: dict[str, Any]) -> str:
     return json.dumps(doc, sort_keys=True, default=float)
 
 
+_SAMPLES = (
+    "t_ns",
+    "object_pos",
+    "object_quat",
+    "ee_t_ns",
+    "ee_pos",
+    "ee_quat",
+    "grasp",
+    "wrench_t_ns",
+    "wrench_force",
+)
+"""Trajectory arrays a baseline depends on (the wrench too: it enters the residuals in N)."""
+
+
 def _fingerprint(rec: Recording) -> str:
     h = hashlib.blake2b(digest_size=16)
     h.update(rec.object_name.encode())
     for tr in rec.trajectories:
         h.update(tr.name.encode())
-        for name in ("t_ns", "object_pos", "object_quat", "ee_t_ns", "ee_pos", "ee_quat", "grasp"):
+        for name in _SAMPLES:
             a = getattr(tr, name, None)
-            if a is not None:
-                h.update(np.ascontiguousarray(a).tobytes())
+            h.update(name.encode() + (b"-" if a is None else np.ascontiguousarray(a).tobytes()))
     return h.hexdigest()
 
 
