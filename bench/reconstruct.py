@@ -135,6 +135,7 @@ def sfm_route(args: argparse.Namespace, tmp: Path) -> None:
         train=TrainConfig(iterations=args.iterations, checkpoint_every=0),
         lr_scale=args.lr_scale,
         tsdf_resolution=args.tsdf_res,
+        drop_depth_edges=args.drop_depth_edges,
         work_dir=tmp / "work",
         align="apply",
         force=True,  # the floors are reported, not enforced
@@ -156,7 +157,8 @@ def sfm_route(args: argparse.Namespace, tmp: Path) -> None:
     t, al = rep.timings_s, rep.alignment
     pre = al["sfm_prealign"]
     print(
-        f"reconstruct --align apply, {args.iterations} steps (lr x{args.lr_scale}): {wall:.1f} s "
+        f"reconstruct --align apply{' --drop-depth-edges' * args.drop_depth_edges}, "
+        f"{args.iterations} steps (lr x{args.lr_scale}): {wall:.1f} s "
         f"(prealign {t.get('prealign', 0):.1f}, init {t['init']:.1f}, train {t['train']:.1f}, "
         f"mesh {t['mesh']:.1f}); {sum(rep.gaussians.values())} Gaussians"
     )
@@ -202,6 +204,9 @@ def main() -> None:
     ap.add_argument("--skip-train", action="store_true")
     ap.add_argument("--sfm", action="store_true", help="the structure-from-motion route only")
     ap.add_argument("--seed", type=int, default=0, help="sample seed of the --sfm route")
+    ap.add_argument(
+        "--drop-depth-edges", action="store_true", help="--sfm: reconstruct --drop-depth-edges"
+    )
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
 

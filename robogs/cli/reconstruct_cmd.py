@@ -91,6 +91,11 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
     p.add_argument("--lambda-normal", type=float, default=0.05, help="normal-consistency weight")
     p.add_argument("--tsdf-resolution", type=int, default=128, help="voxels along the longest edge")
     p.add_argument(
+        "--drop-depth-edges",
+        action="store_true",
+        help="do not fuse depth samples on depth edges (thin parts; see docs/reconstruct.md)",
+    )
+    p.add_argument(
         "--align",
         choices=("report", "apply", "off"),
         default="report",
@@ -181,6 +186,7 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
         ),
         lr_scale=args.lr_scale,
         tsdf_resolution=args.tsdf_resolution,
+        drop_depth_edges=args.drop_depth_edges,
         align=args.align,
         replace_meshes=args.replace_meshes,
         work_dir=args.work_dir,

@@ -79,6 +79,9 @@ class ReconstructOptions:
         lr_scale: multiplies every learning rate (short CPU schedules converge faster with 2-3).
         tsdf_resolution: voxels along the longest edge of the fusion box.
         trunc_voxels: TSDF truncation, voxels.
+        drop_depth_edges: leave the rendered depth samples on depth edges out of the fusion
+            (``tsdf.drop_depth_edges``): thin parts stop growing towards what is behind them,
+            but at low resolution every part loses its silhouette rim (docs/reconstruct.md).
         align: ``report`` (fit and report), ``apply`` (also transform splats, meshes, cameras)
             or ``off``.
         replace_meshes: write the reconstructed object meshes over existing asset meshes.
@@ -103,6 +106,7 @@ class ReconstructOptions:
     lr_scale: float = 1.0
     tsdf_resolution: int = 128
     trunc_voxels: float = 4.0
+    drop_depth_edges: bool = False
     align: str = "report"
     replace_meshes: bool = False
     work_dir: Path | None = None
@@ -175,15 +179,18 @@ def _scaled_lrs(lrs: LearningRates, k: float) -> LearningRates:
 
 
 @torch.no_grad()
-def _render_depths(model: GaussianModel, views: list[View], cfg: TrainConfig) -> list[torch.Tensor]:
-    """Median depth [H, W] of every view (0 where alpha < 0.5 and on depth edges), m."""
+def _render_depths(
+    model: GaussianModel, views: list[View], cfg: TrainConfig, drop_edges: bool = False
+) -> list[torch.Tensor]:
+    """Median depth [H, W] of every view (0 where alpha < 0.5, and on depth edges with
+    ``drop_edges``), m."""
     rc = RenderConfig(kind=cfg.kind, background=tuple(cfg.background), validate=False)
     g = model.gaussians()
     out = []
     for v in views:
         r = render(g, v.camera, config=rc)
         d = torch.where(r.alpha >= 0.5, r.depth_median, torch.zeros_like(r.depth_median)).cpu()
-        out.append(drop_depth_edges(d))
+        out.append(drop_depth_edges(d) if drop_edges else d)
     return out
 
 
@@ -357,7 +364,7 @@ def reconstruct(
     model = result.model
     # -- mesh ---------------------------------------------------------------------------------
     t0 = time.perf_counter()
-    depths = _render_depths(model, train_views, tcfg)
+    depths = _render_depths(model, train_views, tcfg, options.drop_depth_edges)
     means = model.params["means"].detach().cpu().numpy().astype(np.float64)
     flo, fhi = _fusion_box(means, lo, hi)
     vol = fuse_tsdf(
