@@ -15,6 +15,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -206,13 +207,16 @@ _DIAGNOSE = "import sys; from robogs.cli.main import main; sys.exit(main(sys.arg
 
 
 def _together(roots: list[Path], cores: set[int]) -> list[float]:
-    """``robogs diagnose`` on each root at once, pinned to ``cores``, default threads; wall [s]."""
+    """``robogs diagnose`` on each root at once, pinned to ``cores``, default threads; wall [s].
+
+    Each run has its own empty cache folder (``ROBOGS_CACHE_DIR``): no run reuses a baseline or
+    a gate calibration another run computed, so every run does the whole diagnosis."""
     env = {k: v for k, v in os.environ.items() if k not in _THREAD_VARS}
     t0 = time.perf_counter()
     procs = [
         subprocess.Popen(
             [sys.executable, "-W", "ignore", "-c", _DIAGNOSE, "diagnose", str(r), "--json"],
-            env=env,
+            env={**env, "ROBOGS_CACHE_DIR": tempfile.mkdtemp(prefix="cache-", dir=r.parent)},
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             preexec_fn=lambda: os.sched_setaffinity(0, cores),

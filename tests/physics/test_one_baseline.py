@@ -1,17 +1,19 @@
 """One "before" and one "after" everywhere: compare, diagnose, fit, report, HTML, JSON, demo.
 
 The oracle is agreement to the printed digit between outputs that used to disagree (the demo
-printed 4.69 -> 1.72 mm while its HTML said 1.81 -> 1.72 mm). The memoised baselines are
-cleared before each command that computes a number first (compare, diagnose, fit, report), so
-agreement also holds between separate processes; the JSON forms then reuse them. The second
-oracle is the refit itself: the refitted base model cannot be worse than the stored one
-evaluated as is, in the weighted chi^2 the refit minimises.
+printed 4.69 -> 1.72 mm while its HTML said 1.81 -> 1.72 mm). The memoised baselines (in
+memory and on disk) are cleared before each command that computes a number first (compare,
+diagnose, fit, report), so agreement holds between numbers computed independently; the JSON
+forms then reuse them. The second oracle is the refit itself: the refitted base model cannot be
+worse than the stored one evaluated as is, in the weighted chi^2 the refit minimises.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -36,10 +38,18 @@ def _html_rms(path: Path) -> tuple[str, str]:
     return m.group(1), m.group(2)
 
 
+@pytest.fixture(autouse=True)
+def _own_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Baselines and gate calibrations cached on disk in this test's folder, not the user's."""
+    monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path / "cache"))
+
+
 def _cli(capsys: pytest.CaptureFixture[str], *argv: str, fresh: bool = True) -> str:
-    """Run ``robogs ARGV`` in-process (memoised baselines cleared: a fresh process)."""
+    """Run ``robogs ARGV`` in-process; ``fresh``: a fresh process on a fresh machine (memoised
+    and disk-cached baselines cleared), so every number is computed again."""
     if fresh:
         baseline._CACHE.clear()
+        shutil.rmtree(os.environ["ROBOGS_CACHE_DIR"], ignore_errors=True)
     capsys.readouterr()
     assert main(list(argv)) == 0
     return capsys.readouterr().out
