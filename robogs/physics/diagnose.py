@@ -266,7 +266,7 @@ def capped_statistic(
     trajectories. ``held_*``, ``fit_*`` [T] chi^2 per trajectory, ``delta`` [T, K].
 
     A held-out gain above the in-sample one means the fold steps found what the full fit missed
-    (a Stribeck fit short of its optimum gained 38.7 sigma^2 held out, 22.8 in sample, on null
+    (a Stribeck fit short of its optimum gained 38.7 sigma^2 held out, 23.9 in sample, on null
     data of design B), which is no evidence for the effect. Returns (statistic, held-out gain,
     capped).
     """
