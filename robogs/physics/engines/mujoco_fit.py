@@ -50,8 +50,12 @@ A box released at 0.95 m/s 4 mm above the table lands in 3-D: the friction impul
 and it rocks for ~200 ms, chaotically (a 1 % change of a damping coefficient moved its height by
 0.6 mm and its yaw by 0.4 deg), which breaks the finite-difference Jacobians of slide fits.
 A factor of 1e4 keeps the box flat and fixes the slides (null clean, viscous c 1.871 vs planar
-1.857), but off-centre pushes then turn 14-20 deg away from the generator (1e2: 14-17 deg), for
-a reason not found yet; so it stays an option, not the default."""
+1.857), but off-centre pushes then turn 14-20 deg away from the generator (1e2: 14-17 deg). Part
+of that was a bug (MuJoCo sorts the principal moments, and the factor scaled yaw and pitch, not
+roll and pitch; fixed in :func:`~robogs.physics.engines.mujoco_effects.apply_body`); with the
+axes right the pushes still turn 6.3 deg off (against 0.3-1.6 deg at 1: the footprint's normal
+loads shift with micro-tilts), and the slides no longer need it (the landing chaos came from the
+collision box's corners carrying load), so it stays an option, off."""
 
 SETTLE_TOL_M = 3e-3
 """A measured start within this height [m] of the resting height is a box at rest on the
