@@ -29,8 +29,7 @@ null p-value; ``DiagnoseResult.gate`` the calibration's cost (draws, seconds, ca
 ΔBIC and the effect size are reported, not gated, on any number of trajectories (under 8 the
 wild null resamples Webb's six-point weights instead of signs, :func:`gate.wild_weights`).
 A parameter that ends on a bound of its prior range, at the full fit or in a fold's held-out
-step, is named in ``on_bound`` and in the note; held-out evidence counts for no more than the
-in-sample evidence (:func:`capped_statistic`).
+step, is named in ``on_bound`` and in the note, as are fold steps that had to be halved.
 
 Quasi-static data (:func:`quasi_static`): when no object slides more than ``QS_SAMPLES``
 samples after losing contact, the dynamics-level effects (viscous, quadratic drag, Stribeck,
@@ -64,7 +63,6 @@ __all__ = [
     "plot_path",
     "quasi_static",
     "rival_cutoff",
-    "capped_statistic",
     "start_points",
     "DBIC_MAX",
     "RIVAL_COSINE",
@@ -252,27 +250,6 @@ def _gn_step(
         step[live] = sol.x / sc
     th[free] = np.clip(th[free] + step, space.lower[free], space.upper[free])
     return th, on_bounds(space, th, free)
-
-
-def capped_statistic(
-    held_base: np.ndarray,
-    held_eff: np.ndarray,
-    fit_base: np.ndarray,
-    fit_eff: np.ndarray,
-    delta: np.ndarray,
-) -> tuple[float, float, bool]:
-    """The gate's statistic: held-out chi^2 fall [sigma^2] on the trajectories the effect acts
-    on (:func:`gate.heldout_statistic`), counted for no more than the in-sample fall on the same
-    trajectories. ``held_*``, ``fit_*`` [T] chi^2 per trajectory, ``delta`` [T, K].
-
-    A held-out gain above the in-sample one means the fold steps found what the full fit missed
-    (a Stribeck fit short of its optimum gained 38.7 sigma^2 held out, 23.9 in sample, on null
-    data of design B), which is no evidence for the effect. Returns (statistic, held-out gain,
-    capped).
-    """
-    raw = float(gate_mod.heldout_statistic(held_base, held_eff, delta))
-    insample = float(gate_mod.heldout_statistic(fit_base, fit_eff, delta))
-    return min(raw, insample), raw, raw > insample
 
 
 def _heldout_rollouts(
@@ -674,9 +651,7 @@ def diagnose_recording(
         bound = _bound_report(space, out, free, jj, fold_bounds[i])
         ident = bool(out.ok[jj].all()) if len(out.ok) else True
         why = "; ".join(dict.fromkeys(out.why_param[j] for j in jj if out.why_param[j]))
-        stat, raw_stat, capped = capped_statistic(
-            held_t[0], held_t[i], np.sum(base.resid**2, -1), np.sum(out.resid**2, -1), delta
-        )
+        stat = float(gate_mod.heldout_statistic(held_t[0], held_t[i], delta))
         thr = cal.thresholds[e.name]
         gate = stat > thr and ident
         p_own = cal.p_value(e.name, stat)
@@ -724,11 +699,6 @@ def diagnose_recording(
             rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
                 f"held-out step halved in {halved[i]} of {len(folds)} folds (the linearised step "
                 "raised the training chi^2)"
-            )
-        if capped:
-            rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
-                f"held-out gain {raw_stat:.1f} sigma^2 exceeded the in-sample gain: counted as "
-                f"{stat:.1f} (the full fit is short of its optimum)"
             )
     feats = design_features(prep.rec, float(prep.noise.sigma_pos))
     _rivals(rows, deltas, feats)

@@ -120,16 +120,3 @@ def test_parameters_on_a_bound_are_named():
     rep = _bound_report(space, out, [0, 1], [0, 1], [["lower", ""], ["", "upper"], ["", ""]])
     assert rep == {"dmu": "lower (full fit); lower in 1 of 3 folds", "v_s": "upper in 1 of 3 folds"}
     assert pytest.approx(0.0) == out.theta[0]
-
-
-def test_held_out_evidence_never_counts_for_more_than_the_in_sample_evidence():
-    from robogs.physics.diagnose import capped_statistic
-
-    delta = np.zeros((3, 8))
-    delta[0, :] = 2.0  # acts on trajectory 0 only (||delta|| = 5.7 >= 3)
-    held_b, held_e = np.array([100.0, 50.0, 50.0]), np.array([60.0, 80.0, 40.0])
-    fit_b, fit_e = np.array([90.0, 45.0, 45.0]), np.array([70.0, 45.0, 45.0])
-    stat, raw, capped = capped_statistic(held_b, held_e, fit_b, fit_e, delta)
-    assert raw == 40.0 and stat == 20.0 and capped  # trajectory 0: held-out 40, in-sample 20
-    stat, raw, capped = capped_statistic(held_b, held_e, fit_b, fit_e - 30.0, delta)
-    assert stat == raw == 40.0 and not capped
