@@ -15,12 +15,17 @@ of their own. Where the folder is missing, those tests skip with one reason; wit
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import pytest
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # robogs --threads too
     os.environ.setdefault(_var, "1")
+
+# Disk caches (refitted baselines, gate calibrations) go to a fresh folder per worker, never the
+# user's ~/.cache/robogs: a calibration left there by another version must not decide a test.
+os.environ["ROBOGS_CACHE_DIR"] = tempfile.mkdtemp(prefix="robogs-test-cache-")
 
 REALDATA_DIR_ENV = "ROBOGS_REALDATA_DIR"
 REQUIRE_REALDATA_ENV = "ROBOGS_REQUIRE_REALDATA"
