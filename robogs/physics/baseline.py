@@ -26,7 +26,6 @@ package's source, so a changed model never reads an old fit. Only arrays and JSO
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import os
@@ -130,22 +129,11 @@ def _fingerprint(rec: Recording) -> str:
     return h.hexdigest()
 
 
-@functools.lru_cache(maxsize=1)
-def _code_hash() -> str:
-    """Hash of the physics package's Python sources (a changed model invalidates the disk cache)."""
-    h = hashlib.blake2b(digest_size=16)
-    root = Path(__file__).resolve().parent
-    for f in sorted(root.rglob("*.py")):
-        h.update(f.relative_to(root).as_posix().encode())
-        h.update(f.read_bytes())
-    return h.hexdigest()
-
-
 def _disk_path(key: tuple[str, str, float, str]) -> Path:
-    from robogs.physics.gate import cache_dir
+    from robogs.physics.gate import cache_dir, code_hash
 
     h = hashlib.blake2b(digest_size=20)
-    h.update(json.dumps([*key, _code_hash()]).encode())
+    h.update(json.dumps([*key, code_hash()]).encode())
     return cache_dir().parent / "baseline" / f"{h.hexdigest()}.npz"
 
 

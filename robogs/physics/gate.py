@@ -37,6 +37,7 @@ fingerprint, candidate list and draw count: ``$ROBOGS_CACHE_DIR/null/<key>.json`
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -60,6 +61,7 @@ __all__ = [
     "heldout_statistic",
     "diff_scale",
     "cache_dir",
+    "code_hash",
     "wild_weights",
     "WEBB",
 ]
@@ -233,9 +235,21 @@ def heldout_statistic(
     return np.sum((held_base - held_eff) * acts, axis=-1)
 
 
+@functools.lru_cache(maxsize=1)
+def code_hash() -> str:
+    """Hash of the physics package's Python sources: a changed model or gate never reads a
+    calibration or baseline cached by another version."""
+    h = hashlib.blake2b(digest_size=16)
+    root = Path(__file__).resolve().parent
+    for f in sorted(root.rglob("*.py")):
+        h.update(f.relative_to(root).as_posix().encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
 def _key(fingerprint: str, names: Sequence[str], draws: int, seed: int) -> str:
     h = hashlib.sha256(
-        json.dumps([fingerprint, sorted(names), draws, seed, ALPHA]).encode()
+        json.dumps([fingerprint, sorted(names), draws, seed, ALPHA, code_hash()]).encode()
     ).hexdigest()
     return h[:32]
 
