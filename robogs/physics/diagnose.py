@@ -653,7 +653,10 @@ def diagnose_recording(
         why = "; ".join(dict.fromkeys(out.why_param[j] for j in jj if out.why_param[j]))
         stat = float(gate_mod.heldout_statistic(held_t[0], held_t[i], delta))
         thr = cal.thresholds[e.name]
-        gate = stat > thr and ident
+        # under 8 trajectories the default null is white noise only (gate.calibrate): strong
+        # in-sample evidence is required as well
+        few = "white-noise null only" in cal.method
+        gate = stat > thr and ident and (not few or dbic <= DBIC_MAX)
         p_own = cal.p_value(e.name, stat)
         if not ident:
             verdict = "unidentifiable"

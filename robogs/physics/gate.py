@@ -432,7 +432,14 @@ def calibrate(
             return rng.standard_normal((n, *base_resid.shape)) * scale[None, :, None] * valid[None]
 
         nulls["white"] = _simulate(cands, valid, folds, draws, lambda n, c: white(n))
-    if method in ("both", "wild"):
+    few = 2 ** (t_n - 1) < MIN_PATTERNS
+    if method == "both" and few:
+        # Webb's weights keep the size under 8 trajectories but, with the held-out fall not
+        # studentised, a large effect stays under its own threshold (a hidden tilt on 6 pushes:
+        # 786 vs 830 sigma^2); the default keeps the white-noise null there and the diagnosis
+        # asks for strong in-sample evidence as well (issue 17 names the open problem)
+        note = f"{t_n} trajectories: white-noise null only"
+    if method == "wild" or (method == "both" and not few):
         weights, note = wild_weights(t_n, draws, rng)
         rw = base_resid * valid
         pos = [0]
