@@ -195,8 +195,11 @@ def test_contact_lag_needs_a_force_that_rises() -> None:
     assert contact_lag(t_w, flat, t_o, p_o) is None
 
 
-def _contact_dataset(root: Path, t_w, f, t_o, p_o, rates=(120.0, 500.0)) -> Path:
-    """One episode: object poses ``p_o`` at ``t_o`` (no rotation), forces ``f`` at ``t_w``."""
+def _contact_dataset(
+    root: Path, t_w, f, t_o, p_o, rates=(120.0, 500.0), command_kind: str | None = None
+) -> Path:
+    """One episode: object poses ``p_o`` at ``t_o`` (no rotation), forces ``f`` at ``t_w``; with
+    ``command_kind``, also a joint command stream (``actions``) that declares it."""
     ep = "episodes/ep000"
     with Dataset.create(root) as w:
         w.set_asset("box", kind="object")
@@ -219,6 +222,16 @@ def _contact_dataset(root: Path, t_w, f, t_o, p_o, rates=(120.0, 500.0)) -> Path
             }
             for k, hz in zip(("object_poses", "wrenches"), rates, strict=True)
         }
+        if command_kind is not None:
+            act = {"t_ns": pa.array(t_o, pa.int64()), "command.j1": np.zeros(t_o.size)}
+            w.write_table(f"{ep}/actions.parquet", pa.table(act), kind="actions")
+            streams["actions"] = {
+                "kind": "actions",
+                "path": f"{ep}/actions.parquet",
+                "stamp_source": "synthetic",
+                "offset_ns": 0,
+                "command_kind": command_kind,
+            }
         start, end = int(min(t_w[0], t_o[0])), int(max(t_w[-1], t_o[-1]))
         w.add_episode("ep000", start_ns=start, end_ns=end, streams=streams)
         w.commit()

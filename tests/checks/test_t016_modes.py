@@ -17,49 +17,19 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pytest
 
-from robogs.format import Dataset
 from robogs.format.checks.lag_pairs import contact_lag
 from robogs.format.validate import validate
 
-from .test_lag_pairs import _contact_series
+from .test_lag_pairs import _contact_dataset, _contact_series
 
 EP = "episodes/ep000"
 
 
 def _dataset(root: Path, t_w, f, t_o, p_o, command_kind: str | None) -> Path:
     """Object poses, forces and, when ``command_kind`` is given, a joint command stream."""
-    with Dataset.create(root) as w:
-        w.set_asset("box", kind="object")
-        q = np.zeros(t_o.size)
-        poses = {"t_ns": pa.array(t_o, pa.int64()), "object": ["box"] * t_o.size}
-        poses.update({"x": p_o[:, 0], "y": p_o[:, 1], "z": p_o[:, 2], "qw": q + 1, "qx": q})
-        poses.update({"qy": q, "qz": q})
-        w.write_table(f"{EP}/object_poses.parquet", pa.table(poses), kind="object_poses")
-        wr = {"t_ns": pa.array(t_w, pa.int64()), "frame": ["tool0"] * t_w.size}
-        wr.update({c: f[:, i] for i, c in enumerate(("fx", "fy", "fz"))})
-        wr.update({c: np.zeros(t_w.size) for c in ("tx", "ty", "tz")})
-        w.write_table(f"{EP}/wrenches.parquet", pa.table(wr), kind="wrenches")
-        streams = {
-            k: {"kind": k, "path": f"{EP}/{k}.parquet", "stamp_source": "synthetic", "offset_ns": 0}
-            for k in ("object_poses", "wrenches")
-        }
-        if command_kind is not None:
-            act = {"t_ns": pa.array(t_o, pa.int64()), "command.j1": np.zeros(t_o.size)}
-            w.write_table(f"{EP}/actions.parquet", pa.table(act), kind="actions")
-            streams["actions"] = {
-                "kind": "actions",
-                "path": f"{EP}/actions.parquet",
-                "stamp_source": "synthetic",
-                "offset_ns": 0,
-                "command_kind": command_kind,
-            }
-        start, end = int(min(t_w[0], t_o[0])), int(max(t_w[-1], t_o[-1]))
-        w.add_episode("ep000", start_ns=start, end_ns=end, streams=streams)
-        w.commit()
-    return root
+    return _contact_dataset(root, t_w, f, t_o, p_o, rates=(None, None), command_kind=command_kind)
 
 
 def _t016(root: Path) -> list:
