@@ -332,7 +332,7 @@ def footprint_points(size: Sequence[float], n: int, spread: float = 1.0) -> np.n
     fx, fy = np.meshgrid(v * sx, v * sy, indexing="ij")
     r_face = float(np.hypot(fx, fy).mean())
     r_grid = float(np.hypot(gx, gy).mean())
-    k = min(r_face / r_grid if r_grid > 0 else 1.0, 1.0 / (1.0 - 1.0 / n))  # stay on the face
+    k = min(r_face / r_grid if r_grid > 0 else 1.0, 1.0 / (1.0 - 1.0 / n) if n > 1 else 1.0)
     return np.stack([gx.ravel(), gy.ravel()], -1) * k * float(spread)
 
 

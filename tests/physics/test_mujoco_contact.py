@@ -135,7 +135,8 @@ def test_a_box_measured_at_rest_starts_at_rest() -> None:
     doc = _doc()
     doc["objects"]["pusher"] = {"equation": "kinematic", "shape": "sphere", "radius_m": 0.01}
     fit = MujocoFit(doc, "box")
-    assert abs(fit.settled_z - SIZE[2] / 2) < 1e-6
+    # the planar joint set rests on one central contact: 8.5 um equilibrium penetration
+    assert abs(fit.settled_z - SIZE[2] / 2) < 1e-5
     n = 400
     far = np.tile([1.0, 1.0, 0.5], (1, n, 1))
     init = np.array([[0.2, 0.0, SIZE[2] / 2 + 4e-4]])  # 0.4 mm high

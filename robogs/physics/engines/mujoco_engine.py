@@ -65,6 +65,8 @@ Contact settings (:class:`robogs.format.mjcf.ContactSettings`), and why:
   Torsional friction on inward-drawn footprints (condim 4, ``footprint_torsion``: the ellipsoidal
   limit surface of Howe & Cutkosky 1996) was worse (1.6-2.0 deg at half spread, 3.5-5.2 deg
   closer in), so it is an option, off.
+* pusher friction reference ``(2 dt, 1)`` (:data:`PUSHER_SOLREFFRICTION_STEPS`): the
+  stiffest MuJoCo allows, on the object-pusher pairs only (see that constant).
 * capsule pusher as its two end spheres (``capsule_ends``), as the planar model and the
   generator model it: a capsule flush with a face makes one or two contacts depending on
   micrometres.
@@ -81,7 +83,9 @@ from __future__ import annotations
 
 import copy
 import math
+import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import mujoco
@@ -90,10 +94,27 @@ from mujoco import rollout as mj_rollout
 
 from robogs.format.errors import InputError
 from robogs.format.mjcf import PUSHER_ACTUATORS, ContactSettings, MjcfScene, scene_mjcf
-from robogs.physics.engines.base import ObjectState, Predicted, yaw_quat
+from robogs.physics.engines.base import ObjectState, Predicted, quat_yaw, yaw_quat
 from robogs.physics.model import Drive
 
-__all__ = ["MujocoEngine", "SUPPORTED_PARAMS"]
+__all__ = [
+    "JOINTS",
+    "PLANAR_SETTINGS",
+    "JointLayout",
+    "MujocoEngine",
+    "PUSHER_SOLREFFRICTION_STEPS",
+    "SUPPORTED_PARAMS",
+    "planar_joints_fit",
+]
+
+JOINTS = ("auto", "free", "planar")
+"""Joint sets of the objects: ``free`` (6 DOF), ``planar`` (slide x, y, z and a hinge about
+z: no roll or pitch), ``auto`` (planar where :func:`planar_joints_fit` says the scene allows)."""
+
+PLANAR_SETTINGS = ContactSettings(
+    footprint_grid=1, footprint_torsion=True, solreffriction=(0.02, 1.0)
+)
+"""Contact settings of the planar joint set (see the module docstring, "Planar joint set")."""
 
 SUPPORTED_PARAMS = (
     "objects.<obj>.friction_dynamic",
@@ -103,7 +124,152 @@ SUPPORTED_PARAMS = (
 """physics.json keys a parameter set may change (mass scales the inertia with it)."""
 
 _STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
+PUSHER_SOLREFFRICTION_STEPS = 2.0
+"""Friction time constant of the object-pusher pairs in timesteps (damping ratio 1). A soft
+friction reference lets a slowly sliding contact creep below the Coulomb limit: against the
+quasi-static pusher-friction generator (:mod:`robogs.synth.scenarios.pusher_friction`, mu_p
+0.3, 4 pushes turning 28-43 deg) the box turned 2.2-3.2 deg RMS short with the pairs' 20 ms
+(planar joint set), 1.1-1.7 deg at 4 ms and 1.0-1.5 deg at 2 ms (positions 1-2.7 mm ->
+0.1-0.4 mm); the table pairs keep theirs (2-4 ms there made it worse, 1.6-2.7 deg)."""
+
 _CHUNK = 64  # rollouts per mujoco.rollout call: bounds the state buffer (64 x S x nstate)
+
+
+@dataclass(frozen=True)
+class JointLayout:
+    """Where one object's pose and velocity live in a full-physics state row
+    (``mjSTATE_FULLPHYSICS``: time, qpos, qvel, ...).
+
+    Free joint: 7 qpos (position m, quaternion w x y z) and 6 DOFs (linear velocity world m/s,
+    angular velocity body frame rad/s). Planar joint set: 4 qpos (x, y, z m, yaw rad; the
+    body sits at the world origin, so qpos is the pose ``T_world_object``) and 4 DOFs (vx, vy,
+    vz m/s, yaw rate rad/s). Either way the first three qpos are the position and the first
+    three DOFs the linear velocity.
+
+    Attributes:
+        qpos: first qpos address; dof: first DOF address; nq: qpos count of the model;
+        planar: the planar joint set.
+    """
+
+    qpos: int
+    dof: int
+    nq: int
+    planar: bool
+
+    @property
+    def q(self) -> int:
+        """State column of the first qpos."""
+        return 1 + self.qpos
+
+    @property
+    def v(self) -> int:
+        """State column of the first DOF velocity."""
+        return 1 + self.nq + self.dof
+
+    def pos(self, x: np.ndarray) -> np.ndarray:
+        """[..., 3] positions [m] of state rows ``x`` [..., nstate]."""
+        return x[..., self.q : self.q + 3]
+
+    def quat(self, x: np.ndarray) -> np.ndarray:
+        """[..., 4] orientations (w, x, y, z) of state rows ``x``."""
+        if self.planar:
+            return yaw_quat(x[..., self.q + 3])
+        return x[..., self.q + 3 : self.q + 7]
+
+    def pose(self, x: np.ndarray) -> np.ndarray:
+        """[..., 7] poses (position, quaternion w x y z) of state rows ``x``."""
+        return np.concatenate([self.pos(x), self.quat(x)], axis=-1)
+
+    def set_pose(self, x: np.ndarray, pos: Any = None, quat: Any = None) -> None:
+        """Write positions [..., 3] m and/or orientations [..., 4] (w, x, y, z) into ``x``
+        (a planar set keeps the heading of ``quat`` only)."""
+        if pos is not None:
+            x[..., self.q : self.q + 3] = pos
+        if quat is not None:
+            q = np.asarray(quat, dtype=float)
+            if self.planar:
+                x[..., self.q + 3] = quat_yaw(q)
+            else:
+                x[..., self.q + 3 : self.q + 7] = q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+    def omega(self, x: np.ndarray) -> np.ndarray:
+        """[..., 3] angular velocities [rad/s] in the world frame of state rows ``x``."""
+        if self.planar:
+            w = x[..., self.v + 3]
+            z = np.zeros_like(w)
+            return np.stack([z, z, w], axis=-1)
+        return _rotate(self.quat(x), x[..., self.v + 3 : self.v + 6])
+
+    def set_vel(self, x: np.ndarray, vel: Any = None, omega: Any = None) -> None:
+        """Write linear velocities [..., 3] m/s and/or world angular velocities [..., 3] rad/s
+        into ``x`` (call after :meth:`set_pose`: a free joint keeps omega in the body frame; a
+        planar set keeps its z component)."""
+        if vel is not None:
+            x[..., self.v : self.v + 3] = vel
+        if omega is not None:
+            w = np.asarray(omega, dtype=float)
+            if self.planar:
+                x[..., self.v + 3] = w[..., 2]
+            else:
+                q = self.quat(x).copy()
+                q[..., 1:] *= -1.0
+                x[..., self.v + 3 : self.v + 6] = _rotate(q, w)
+
+
+def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors [..., 3] by unit quaternions (w, x, y, z) [..., 4]."""
+    u, w = q[..., 1:], q[..., :1]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def planar_joints_fit(
+    physics: Mapping[str, Any], meshes: Mapping[str, Any] | None = None
+) -> tuple[bool, str]:
+    """Whether the objects can move on the planar joint set: every rigid object is a box
+    (``size_m``, no mesh) on a horizontal support, as in the planar model. Meshes (their hull
+    rests on whichever vertices touch) and tilted support planes keep the free joint."""
+    objects = physics.get("objects") or {}
+    meshes = meshes or {}
+    normal = np.asarray((objects.get("table") or {}).get("normal", [0.0, 0.0, 1.0]), float)
+    if normal.shape != (3,) or np.linalg.norm(normal[:2]) > 1e-9 * np.linalg.norm(normal):
+        return False, "the support plane is not horizontal"
+    if normal[2] <= 0:
+        return False, "the support plane faces down"
+    for name, entry in objects.items():
+        if name in ("table", "pusher") or not isinstance(entry, Mapping):
+            continue
+        if entry.get("equation") == "rigid" and (name in meshes or "size_m" not in entry):
+            return False, f"object {name!r} is a mesh (its hull may rest on any vertices)"
+    return True, "boxes on a horizontal plane"
+
+
+def _planar_xml(xml: str, names: Sequence[str], poses: Mapping[str, Sequence[float]]) -> str:
+    """The scene with each free joint of ``names`` replaced by slide x, y, z + hinge z, the
+    bodies at the world origin (so qpos is the world pose); their start poses become the
+    joints' ``ref``-free qpos0 (set on the compiled model by the caller)."""
+    root = ET.fromstring(xml)
+    world = root.find("worldbody")
+    assert world is not None
+    for body in world.findall("body"):
+        name = body.get("name")
+        if name not in names:
+            continue
+        fj = body.find("freejoint")
+        if fj is None:
+            continue
+        i = list(body).index(fj)
+        body.remove(fj)
+        for attr in ("pos", "quat"):
+            body.attrib.pop(attr, None)
+        axes = (("", "slide", "1 0 0"), ("_y", "slide", "0 1 0"), ("_z", "slide", "0 0 1"))
+        joints = [*axes, ("_yaw", "hinge", "0 0 1")]
+        for k, (suffix, kind, axis) in enumerate(joints):
+            el = ET.Element("joint", name=f"{name}{suffix}", type=kind, axis=axis)
+            el.set("limited", "false")
+            body.insert(i + k, el)
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode") + "\n"
 
 
 class MujocoEngine:
@@ -118,7 +284,13 @@ class MujocoEngine:
             ``object_name`` start there unless ``initial`` says otherwise).
         dt: step [s].
         threads: rollout threads.
-        settings: contact settings (default :class:`~robogs.format.mjcf.ContactSettings`).
+        settings: contact settings (default :data:`PLANAR_SETTINGS` on the planar joint set,
+            else :class:`~robogs.format.mjcf.ContactSettings`).
+        joints: ``auto``, ``free`` or ``planar`` (see :data:`JOINTS`).
+
+    Attributes:
+        planar: the objects move on the planar joint set.
+        layout: object name -> :class:`JointLayout`.
     """
 
     name: ClassVar[str] = "mujoco"
@@ -133,18 +305,40 @@ class MujocoEngine:
         dt: float = 1e-3,
         threads: int = 1,
         settings: ContactSettings | None = None,
+        joints: str = "auto",
     ) -> None:
         ok, why = self.can_represent(physics, meshes)
         if not ok:
             raise InputError(f"the mujoco engine cannot represent this scene: {why}")
-        base = settings or ContactSettings()
+        if joints not in JOINTS:
+            raise InputError(f"joints {joints!r} is not one of {', '.join(JOINTS)}", where="joints")
+        fits, why = planar_joints_fit(physics, meshes)
+        if joints == "planar" and not fits:
+            raise InputError(
+                f"the planar joint set cannot represent this scene: {why}",
+                where="joints",
+                hint="use joints='free' (or 'auto')",
+            )
+        self.planar = joints == "planar" or (joints == "auto" and fits)
+        base = settings or (PLANAR_SETTINGS if self.planar else ContactSettings())
         self.settings = ContactSettings(**{**base.__dict__, "timestep": float(dt)})
         self.physics = physics
         self.scene: MjcfScene = scene_mjcf(
             physics, meshes=meshes, poses=poses, settings=self.settings
         )
-        self.model = mujoco.MjModel.from_xml_string(self.scene.xml, assets=self.scene.assets)
+        xml = self.scene.xml
+        if self.planar:
+            xml = _planar_xml(xml, self.scene.objects, poses or {})
+            self.scene.xml = xml
+            self.scene.notes.append(
+                "objects on the planar joint set (slide x, y, z, hinge z): no roll or pitch, "
+                "as in the planar model"
+            )
+        self.model = mujoco.MjModel.from_xml_string(xml, assets=self.scene.assets)
         self.dt = float(dt)
+        for k, pair in enumerate(self.scene.pairs):  # see PUSHER_SOLREFFRICTION_STEPS
+            if {"pusher", "pusher_end"} & set(pair):
+                self.model.pair_solreffriction[k] = (PUSHER_SOLREFFRICTION_STEPS * self.dt, 1.0)
         self.threads = max(1, int(threads))
         names = self.scene.objects
         self.object_name = object_name or names[0]
@@ -157,6 +351,17 @@ class MujocoEngine:
         jid = [mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in names]
         self._qadr = {n: int(self.model.jnt_qposadr[j]) for n, j in zip(names, jid, strict=True)}
         self._vadr = {n: int(self.model.jnt_dofadr[j]) for n, j in zip(names, jid, strict=True)}
+        self.layout = {
+            n: JointLayout(self._qadr[n], self._vadr[n], int(self.model.nq), self.planar)
+            for n in names
+        }
+        if self.planar:  # start poses as qpos0 (the bodies sit at the origin)
+            for n, pose in (poses or {}).items():
+                if n in self.layout:
+                    row = np.zeros(1 + self.model.nq)
+                    self.layout[n].set_pose(row, pose[:3], pose[3:7])
+                    qa = self._qadr[n]
+                    self.model.qpos0[qa : qa + 4] = row[1 + qa : 1 + qa + 4]
         self._bid = {n: mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, n) for n in names}
         self._pusher_q = None
         if self.scene.pusher is not None:
@@ -249,19 +454,19 @@ class MujocoEngine:
         out = np.empty((n_t, self.nstate))
         for t in range(n_t):
             mujoco.mj_resetData(self.model, data)
+            row = np.empty(self.nstate)
+            mujoco.mj_getState(self.model, data, row, _STATE)
             for name, st in init.items():
                 if name not in self._qadr:
                     raise InputError(f"initial state for unknown object {name!r}", where="initial")
-                qa, va = self._qadr[name], self._vadr[name]
-                data.qpos[qa : qa + 3] = st.pos[t]
-                q = np.asarray(st.quat[t], dtype=float)
-                data.qpos[qa + 3 : qa + 7] = q / np.linalg.norm(q)
-                if st.vel is not None:
-                    data.qvel[va : va + 3] = st.vel[t]
-                if st.omega is not None:  # free joint: angular velocity in the body frame
-                    R = np.empty(9)
-                    mujoco.mju_quat2Mat(R, data.qpos[qa + 3 : qa + 7])
-                    data.qvel[va + 3 : va + 6] = R.reshape(3, 3).T @ np.asarray(st.omega[t])
+                lay = self.layout[name]
+                lay.set_pose(row, st.pos[t], st.quat[t])
+                lay.set_vel(
+                    row,
+                    None if st.vel is None else st.vel[t],
+                    None if st.omega is None else st.omega[t],
+                )
+            mujoco.mj_setState(self.model, data, row, _STATE)
             if self._pusher_q is not None:
                 qa, va = self._pusher_q
                 p = drive.pusher[t].numpy()
@@ -326,8 +531,7 @@ class MujocoEngine:
         batch = [(i, t) for i in range(len(models)) for t in range(n_t)]
         dense = {n: np.empty((len(models), n_t, n_s, 7)) for n in self.scene.objects}
         for n in dense:
-            qa = self._qadr[n]
-            dense[n][:, :, 0] = x0[None, :, 1 + qa : 1 + qa + 7]
+            dense[n][:, :, 0] = self.layout[n].pose(x0)[None]
         pool = self._pool_get()
         datas = [mujoco.MjData(self.model) for _ in range(self.threads)]
         for c in range(0, len(batch), _CHUNK):
@@ -338,8 +542,7 @@ class MujocoEngine:
                 ms, datas, x0[tt], ctrl[tt] if ctrl.shape[-1] else None, nstep=n_s - 1
             )
             for n in dense:
-                qa = self._qadr[n]
-                seg = state[:, :, 1 + qa : 1 + qa + 7]
+                seg = self.layout[n].pose(state)
                 for j, (i, t) in enumerate(part):
                     dense[n][i, t, 1:] = seg[j]
         obs = drive.obs_t.numpy()

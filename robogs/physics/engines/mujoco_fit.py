@@ -15,9 +15,16 @@ From the onset on, the pusher geometry of that trajectory is moved 10 m up (it s
 the grasped object, and after a release it must not strike it: the planar model skips pusher
 contact while grasping, and its pushes never follow a grasp).
 
-Not modelled here: the pusher force (``SimResult.force`` is None, so wrench residuals, and
-with them a mass identifiable from forces, are planar-only); ``friction_static`` (MuJoCo has one
-Coulomb coefficient).
+Pusher force (when the drive carries wrench bins): the force the objects exert on the pusher,
+from the pusher's own dynamics, ``F_c = M (v[k+1] - v[k]) / dt - F_servo[k]`` per step (the
+servo forces are explicit and the pusher is gravity compensated, so the rest of its
+acceleration is contact), averaged over each wrench bin as in the planar model.
+
+Pusher friction: the base slot :data:`PUSHER_FRICTION` (:func:`pusher_friction_param`), an
+engine-only base parameter: a space that holds it sets the Coulomb coefficient of every
+object-pusher pair per parameter set (the planar model has a frictionless pusher and ignores it).
+
+Not modelled here: ``friction_static`` (MuJoCo has one Coulomb coefficient).
 """
 
 from __future__ import annotations
@@ -29,7 +36,7 @@ import mujoco
 import numpy as np
 import torch
 
-from robogs.physics.effects import overrides
+from robogs.physics.effects import Param, overrides
 from robogs.physics.engines.base import quat_yaw
 from robogs.physics.engines.mujoco_effects import (
     NATIVE,
@@ -40,9 +47,27 @@ from robogs.physics.engines.mujoco_effects import (
 )
 from robogs.physics.engines.mujoco_engine import MujocoEngine
 from robogs.physics.model import Drive, SimResult, _base_body, _lift
-from robogs.physics.space import ParamSpace
+from robogs.physics.space import BASE, ParamSpace
 
-__all__ = ["MujocoFit", "PUSHER_PARK_M", "SETTLE_TOL_M", "TILT_INERTIA_SCALE"]
+__all__ = [
+    "MujocoFit",
+    "PUSHER_FRICTION",
+    "PUSHER_PARK_M",
+    "SETTLE_TOL_M",
+    "TILT_INERTIA_SCALE",
+    "pusher_friction_param",
+]
+
+PUSHER_FRICTION = "pusher_friction"
+"""Name of the base slot of the pusher's Coulomb coefficient (MuJoCo engine only)."""
+
+
+def pusher_friction_param(physics: Mapping[str, Any], upper: float = 1.5) -> Param:
+    """The pusher-friction base parameter, its zero at ``objects.pusher.friction_dynamic``
+    (default 0) and bounds [0, ``upper``]: add it to a space's base parameters to fit it."""
+    mu = float(((physics.get("objects") or {}).get("pusher") or {}).get("friction_dynamic") or 0)
+    return Param(PUSHER_FRICTION, "-", 0.0, upper, min(max(mu, 0.0), upper), max(mu, 0.05))
+
 
 TILT_INERTIA_SCALE = 1.0
 """Factor on the fitted object's roll and pitch inertia (default 1: the physical body).
@@ -106,9 +131,19 @@ class MujocoFit:
             table_torsion=[self.eng.scene.pair_torsion[k] for k in pairs],
             tilt_inertia_scale=float(tilt_inertia_scale),
         )
-        self.qa = 1 + self.eng._qadr[object_name]  # state columns of the object's qpos
-        self.va = 1 + self.nq + self.eng._vadr[object_name]
+        self.lay = self.eng.layout[object_name]  # free joint or planar joint set
+        self.qa, self.va = self.lay.q, self.lay.v  # state columns of its qpos and DOFs
         self.pq = None if self.eng._pusher_q is None else 1 + self.eng._pusher_q[0]
+        # state columns of the pusher's x, y, z DOF velocities; object-pusher contact pairs
+        self.pv = None if self.eng._pusher_q is None else 1 + self.nq + self.eng._pusher_q[1]
+        self._pcols = (
+            []
+            if self.pv is None
+            else [self.pq, self.pq + 1, self.pq + 2, self.pv, self.pv + 1, self.pv + 2]
+        )
+        self.pusher_pairs = [
+            k for k, pr in enumerate(self.eng.scene.pairs) if {"pusher", "pusher_end"} & set(pr)
+        ]
         self.gravity = float(-m.opt.gravity[2])
         self.nbody = m.nbody
         gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, object_name)
@@ -132,12 +167,11 @@ class MujocoFit:
         m = self.eng.model
         d = mujoco.MjData(m)
         qa = self.qa - 1
-        d.qpos[qa : qa + 3] = (0.0, 0.0, self.rest_z)
-        d.qpos[qa + 3 : qa + 7] = (1.0, 0.0, 0.0, 0.0)
-        for name, q in self.eng._qadr.items():  # other objects far away
-            if name != self.obj:
-                d.qpos[q : q + 3] = (1e3 * (1 + q), 0.0, self.rest_z)
-                d.qpos[q + 3 : q + 7] = (1.0, 0.0, 0.0, 0.0)
+        row = np.zeros(1 + m.nq)
+        for name, lay in self.eng.layout.items():  # other objects far away
+            far = 0.0 if name == self.obj else 1e3 * (1 + lay.qpos)
+            lay.set_pose(row, (far, 0.0, self.rest_z), (1.0, 0.0, 0.0, 0.0))
+        d.qpos[:] = row[1:]
         if self.pq is not None:
             d.qpos[self.pq - 1 + 2] = self.rest_z + PUSHER_PARK_M
         g = m.opt.gravity.copy()
@@ -165,9 +199,12 @@ class MujocoFit:
         for e in body_fx:
             body = e.body(ths[e.name], body)
         tc = float(self.eng.settings.solref[0])
+        mu_p = space.theta_dict(theta, BASE).get(PUSHER_FRICTION)
         out = []
         for i in range(theta.shape[0]):
             mi = apply_body(self.eng.model, body, i, self.slots, timeconst=tc)
+            if mu_p is not None:
+                mi.pair_friction[self.pusher_pairs, :2] = max(float(mu_p[i, 0]), 1e-5)
             for e in native_fx:
                 NATIVE[e.name](mi, {k: float(v[i, 0]) for k, v in ths[e.name].items()}, self.slots)
             out.append(mi)
@@ -184,7 +221,8 @@ class MujocoFit:
         init_offset: torch.Tensor | None = None,
     ) -> SimResult:
         """Object poses at the measurement stamps for M parameter sets x T trajectories
-        (see :func:`robogs.physics.model.simulate`; ``SimResult.force`` is None)."""
+        (see :func:`robogs.physics.model.simulate`; ``SimResult.force``: the pusher force per
+        wrench bin when the drive has ``wrench_bin``, else None)."""
         theta = torch.as_tensor(theta, dtype=torch.float64)
         m_sets, n_t, n_s, dt = theta.shape[0], drive.n_traj, drive.n_steps, drive.dt
         models, body, force_fx = self.models(theta, space, scene)
@@ -214,8 +252,8 @@ class MujocoFit:
         z0 = np.maximum(ip[:, 2], self.rest_z)
         on = np.abs(ip[:, 2] - self.rest_z) < SETTLE_TOL_M
         x[:, self.qa + 2] = np.where(on, self.settled_z, z0)
-        x[:, self.qa + 3 : self.qa + 7] = _yaw_quat(iy)
-        x[:, self.va : self.va + 6] = 0.0
+        self.lay.set_pose(x, quat=_yaw_quat(iy))
+        self.lay.set_vel(x, np.zeros((n_r, 3)), np.zeros((n_r, 3)))
         if drive.init_vel is not None:
             x[:, self.va : self.va + 3] = np.tile(drive.init_vel.numpy(), (m_sets, 1))
         ctrl = self.eng._controls(drive)  # [T, S-1, nu]
@@ -227,10 +265,45 @@ class MujocoFit:
             if self.pq is not None:
                 ctrl[..., 2] += park[:, :-1]
                 x[:, self.pq + 2] += np.tile(park[:, 0], m_sets)  # grasped from the start
-        dense = self._run(models, x, ctrl, drive, body, force_fx, grasp, park, m_sets)
+        want_force = drive.wrench_bin is not None and self.pv is not None
+        pstate = np.zeros((n_r, n_s, 6)) if want_force else None
+        dense = self._run(models, x, ctrl, drive, body, force_fx, grasp, park, m_sets, pstate)
         dpos = torch.as_tensor(dense[..., :3])
         dyaw = torch.as_tensor(np.unwrap(quat_yaw(dense[..., 3:]), axis=-1))
-        return _observe(dpos, dyaw, drive, sensor_fx, dt)
+        res = _observe(dpos, dyaw, drive, sensor_fx, dt)
+        if pstate is not None:
+            res.force = self._pusher_force(pstate, ctrl, drive, m_sets)
+        return res
+
+    def _pusher_force(
+        self, pstate: np.ndarray, ctrl: np.ndarray, drive: Drive, m_sets: int
+    ) -> torch.Tensor:
+        """Force the objects exert on the pusher [M, T, W, 3] N (world), averaged per wrench
+        bin, from the pusher's dense positions and velocities ``pstate`` [M*T, S, 6]: contact =
+        mass x acceleration - servo force (the servos' gain and bias from the model)."""
+        m = self.eng.model
+        n_t, n_s, dt = drive.n_traj, drive.n_steps, drive.dt
+        t_of = np.tile(np.arange(n_t), m_sets)
+        p, v = pstate[:, :-1, :3], pstate[:, :-1, 3:]
+        f_servo = np.zeros_like(v)
+        dof0 = self.pv - 1 - self.nq  # the x, y, z slides are the pusher's first three DOFs
+        for a in range(m.nu):
+            axis = int(m.jnt_dofadr[m.actuator_trnid[a, 0]]) - dof0
+            if not 0 <= axis < 3:
+                continue
+            g, b = m.actuator_gainprm[a, 0], m.actuator_biasprm[a, :3]
+            u = ctrl[t_of, :, a]
+            f_servo[..., axis] += g * u + b[0] + b[1] * p[..., axis] + b[2] * v[..., axis]
+        mass = float(m.body_mass[m.dof_bodyid[dof0]])
+        f_c = mass * np.diff(pstate[:, :, 3:], axis=1) / dt - f_servo  # [M*T, S-1, 3]
+        f_c = f_c.reshape(m_sets, n_t, n_s - 1, 3)
+        bins = drive.wrench_bin.numpy()[:, : n_s - 1]
+        width = np.maximum(drive.wrench_width.numpy(), dt)
+        out = np.zeros((m_sets, n_t, width.shape[1], 3))
+        for t in range(n_t):
+            ok = bins[t] >= 0
+            np.add.at(out[:, t], (slice(None), bins[t][ok]), f_c[:, t][:, ok] * dt)
+        return torch.as_tensor(out / width[None, :, :, None])
 
     def _run(
         self,
@@ -243,8 +316,10 @@ class MujocoFit:
         grasp: np.ndarray,
         park: np.ndarray,
         m_sets: int,
+        pstate: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Dense object poses [M, T, S, 7] (position, quaternion w x y z)."""
+        """Dense object poses [M, T, S, 7] (position, quaternion w x y z); fills ``pstate``
+        [M*T, S, 6] with the pusher's x, y, z positions and velocities when given."""
         n_t, n_s = drive.n_traj, drive.n_steps
         n_r = m_sets * n_t
         t_of = np.tile(np.arange(n_t), m_sets)
@@ -252,7 +327,9 @@ class MujocoFit:
         pool = self.eng._pool_get()
         datas = [mujoco.MjData(self.eng.model) for _ in range(self.eng.threads)]
         dense = np.empty((n_r, n_s, 7))
-        dense[:, 0] = x[:, self.qa : self.qa + 7]
+        dense[:, 0] = self.lay.pose(x)
+        if pstate is not None:
+            pstate[:, 0] = x[:, self._pcols]
         g_any = grasp.any(0)
         onset = np.zeros_like(grasp)
         onset[:, 1:] = grasp[:, 1:] & ~grasp[:, :-1]
@@ -299,7 +376,9 @@ class MujocoFit:
             state, _ = pool.rollout(
                 models_r, datas, x, c if c.shape[-1] else None, control_spec=spec, nstep=n
             )
-            dense[:, k + 1 : k + 1 + n] = state[:, :, self.qa : self.qa + 7]
+            dense[:, k + 1 : k + 1 + n] = self.lay.pose(state)
+            if pstate is not None:
+                pstate[:, k + 1 : k + 1 + n] = state[:, :, self._pcols]
             x = np.array(state[:, -1])
             k += n
             if self.pq is not None:
@@ -308,7 +387,7 @@ class MujocoFit:
             if g_any[k]:
                 hold = grasp[t_of, k]
                 self._attach(x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q)
-                dense[hold, k] = x[hold, self.qa : self.qa + 7]
+                dense[hold, k] = self.lay.pose(x[hold])
         return dense.reshape(m_sets, n_t, n_s, 7)
 
     def _grasp_rel(self, x, p_ee, yaw_ee, t_of, on_t, rel_p, rel_q):
@@ -321,7 +400,7 @@ class MujocoFit:
         d = x[on, self.qa : self.qa + 3] - p_ee[t_of][on]
         c, s = np.cos(-ey), np.sin(-ey)
         rel_p[on] = np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1], d[:, 2]], -1)
-        rel_q[on] = _qmul(_yaw_quat(-ey), x[on, self.qa + 3 : self.qa + 7])
+        rel_q[on] = _qmul(_yaw_quat(-ey), self.lay.quat(x[on]))
         return rel_p, rel_q
 
     def _attach(self, x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q) -> None:
@@ -334,24 +413,24 @@ class MujocoFit:
         x[hold, self.qa : self.qa + 3] = pusher[tt, k] + np.stack([rx, ry, rp[:, 2]], -1)
         x[hold, self.qa + 2] = np.maximum(x[hold, self.qa + 2], self.rest_z)
         q = _qmul(_yaw_quat(ey), rel_q[hold])
-        x[hold, self.qa + 3 : self.qa + 7] = q
+        xh = x[hold]
+        self.lay.set_pose(xh, quat=q)
         r = rate[tt, k]
         v = cvel[tt, k] + np.stack([-r * ry, r * rx, np.zeros_like(r)], -1)
-        x[hold, self.va : self.va + 3] = v
-        # free-joint angular velocity is in the body frame: R^T (0, 0, rate)
-        x[hold, self.va + 3 : self.va + 6] = _rot_t(q, np.stack([0 * r, 0 * r, r], -1))
+        self.lay.set_vel(xh, v, np.stack([0 * r, 0 * r, r], -1))
+        x[hold] = xh
 
     def _forces(self, x, body, force_fx, m_sets: int, n_t: int) -> np.ndarray:
         """Per-step applied wrench [M*T, 6] of the force effects from the current state."""
-        q = x[:, self.qa + 3 : self.qa + 7]
+        q = self.lay.quat(x)
         v = x[:, self.va : self.va + 3]
-        w_body = x[:, self.va + 3 : self.va + 6]
-        w = _rot(q, w_body)[:, 2]
+        w_world = self.lay.omega(x)
+        w = w_world[:, 2]
         # velocity of the CoM = origin velocity + omega x (R ipos)
         com = _rot(
             q, np.broadcast_to(np.asarray(body.com.numpy())[:, 0], (m_sets, 2)).repeat(n_t, 0)
         )
-        vc = v + np.cross(_rot(q, w_body), com)
+        vc = v + np.cross(w_world, com)
         yaw = quat_yaw(q)
         gap = x[:, self.qa + 2] - (self.table_z + self.half_z)
         f = step_forces(
