@@ -3,11 +3,20 @@
 the diagnosis run unchanged on MuJoCo (:class:`robogs.physics.engine.Engine` with
 ``backend="mujoco"``).
 
-Per call, ``theta [M, Q]`` becomes M compiled models (base friction and every effect with a
-MuJoCo counterpart, :mod:`robogs.physics.engines.mujoco_effects`), and the M x T rollouts run
-on a ``mujoco.rollout`` thread pool. Stretches where nothing has to be changed from Python run as
-one multi-step call; a step is taken alone when an effect applies a state-dependent force
-(``xfrc_applied`` computed from the state) or a trajectory starts, holds or ends a grasp.
+Per call, ``theta [M, Q]`` becomes one model per distinct set of dynamics parameters: a copy of
+the compiled ``MjModel`` with the set's values written into its arrays (base friction and every
+effect with a MuJoCo counterpart, :mod:`robogs.physics.engines.mujoco_effects`; nothing is
+recompiled). Of the M x T rollouts, those that would repeat another exactly (the same dynamics
+columns and the same start in the same trajectory: the finite-difference rows of sensor
+parameters, the trajectories a local-offset column leaves alone, the shared start of several
+fits) are run once. The rollouts run on one ``mujoco.batch.Batch`` of ``threads`` threads, each
+keeping its ``MjData`` state, solver warm start included, between calls. Stretches where nothing
+has to be changed from Python run as one multi-step call; a step is taken alone when an effect
+applies a state-dependent force (``xfrc_applied`` computed from the state) or a trajectory
+starts, holds or ends a grasp. Without ``mujoco.batch`` (MuJoCo before 3.17) the same schedule
+runs on ``mujoco.rollout`` (``stepper="rollout"``), whose calls each start with a cold solver
+warm start, so its single steps and chunk boundaries differ from the batch's within the solver
+tolerance (bounded in ``tests/physics/test_mujoco_speed_equiv.py``).
 
 Grasps: while the drive grasps, the object follows the end effector rigidly (its pose in the
 EE yaw frame is frozen at the onset, as in the planar model; velocity from ``carry_vel``).
@@ -36,6 +45,7 @@ import mujoco
 import numpy as np
 import torch
 
+from robogs.format.errors import InputError
 from robogs.physics.effects import Param, overrides
 from robogs.physics.engines.base import quat_yaw
 from robogs.physics.engines.mujoco_effects import (
@@ -54,6 +64,7 @@ __all__ = [
     "PUSHER_FRICTION",
     "PUSHER_PARK_M",
     "SETTLE_TOL_M",
+    "STEPPERS",
     "TILT_INERTIA_SCALE",
     "pusher_friction_param",
 ]
@@ -93,6 +104,9 @@ PUSHER_PARK_M = 10.0
 
 _MAX_CHUNK = 256  # steps per multi-step rollout call (bounds the state buffer)
 
+STEPPERS = ("batch", "rollout")
+"""Rollout runners: ``mujoco.batch`` (persistent states; MuJoCo >= 3.17) or ``mujoco.rollout``."""
+
 
 class MujocoFit:
     """MuJoCo ``simulate`` for one prepared recording's scene.
@@ -102,6 +116,10 @@ class MujocoFit:
         threads: rollout threads (1: the calling thread).
         engine: an already built :class:`MujocoEngine` of this scene (else one is built).
         tilt_inertia_scale: see :data:`TILT_INERTIA_SCALE`.
+        stepper: one of :data:`STEPPERS` (default ``batch`` where MuJoCo has it).
+
+    Attributes:
+        last_rollouts: distinct rollouts the last :meth:`simulate` call ran (of its M x T).
     """
 
     def __init__(
@@ -113,7 +131,17 @@ class MujocoFit:
         threads: int = 1,
         engine: MujocoEngine | None = None,
         tilt_inertia_scale: float = TILT_INERTIA_SCALE,
+        stepper: str | None = None,
     ) -> None:
+        stepper = stepper or ("batch" if _has_batch() else "rollout")
+        if stepper not in STEPPERS or (stepper == "batch" and not _has_batch()):
+            raise InputError(
+                f"stepper {stepper!r} is not available",
+                where="stepper",
+                hint=f"one of {', '.join(STEPPERS)}; 'batch' needs mujoco >= 3.17",
+            )
+        self.stepper = stepper
+        self.last_rollouts = 0
         self.eng = engine or MujocoEngine(physics, object_name=object_name, dt=dt, threads=threads)
         m = self.eng.model
         self.nq, self.nv = m.nq, m.nv
@@ -159,6 +187,7 @@ class MujocoFit:
         box = m.geom_type[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, object_name)]
         self.rest_z = self.table_z + self.half_z if box == mujoco.mjtGeom.mjGEOM_BOX else -np.inf
         self.settled_z = self._settle() if np.isfinite(self.rest_z) else -np.inf
+        self._full_cols, self._int_cols = _state_map(m)
 
     def _settle(self, seconds: float = 0.3) -> float:
         """Height [m] of the object frame of the box resting flat on a horizontal support: the
@@ -188,8 +217,9 @@ class MujocoFit:
         return z if abs(z - self.rest_z) < 1e-4 else self.rest_z  # a settle that went wrong
 
     # ------------------------------------------------------------------ models per set
-    def models(self, theta: torch.Tensor, space: ParamSpace, scene: Any) -> tuple[list, Any, list]:
-        """(M compiled models, bodies [M, 1], per-step force effects with their parameters)."""
+    def _physics(self, theta: torch.Tensor, space: ParamSpace, scene: Any) -> tuple:
+        """(bodies [M, 1], native model effects, {effect: parameters [M, 1]}, active per-step
+        force effects with their parameters) of ``theta`` [M, Q]."""
         effects = [
             (e, space.theta_dict(theta, e.name)) for e in space.effects if e.model == "rigid"
         ]
@@ -198,6 +228,21 @@ class MujocoFit:
         body = _base_body(scene, theta, space)
         for e in body_fx:
             body = e.body(ths[e.name], body)
+        force = [(e, ths[e.name]) for e in force_fx if _active(e, ths[e.name])]
+        return body, native_fx, ths, force
+
+    @staticmethod
+    def dynamics_columns(space: ParamSpace) -> list[int]:
+        """Columns of ``space`` that enter the dynamics: all but those of sensor effects and of
+        other models' effects (a sensor effect maps the sampled poses and the start; the start
+        is compared on its own)."""
+        skip = {e.name for e in space.effects if e.model != "rigid" or e.family == "sensor"}
+        return [i for i, s in enumerate(space.slots) if s.owner not in skip]
+
+    def models(self, theta: torch.Tensor, space: ParamSpace, scene: Any) -> tuple[list, Any, list]:
+        """(M models: copies of the compiled one with each set's values written in, bodies
+        [M, 1], per-step force effects with their parameters)."""
+        body, native_fx, ths, force = self._physics(theta, space, scene)
         tc = float(self.eng.settings.solref[0])
         mu_p = space.theta_dict(theta, BASE).get(PUSHER_FRICTION)
         out = []
@@ -208,7 +253,6 @@ class MujocoFit:
             for e in native_fx:
                 NATIVE[e.name](mi, {k: float(v[i, 0]) for k, v in ths[e.name].items()}, self.slots)
             out.append(mi)
-        force = [(e, ths[e.name]) for e in force_fx if _active(e, ths[e.name])]
         return out, body, force
 
     # ------------------------------------------------------------------ simulate
@@ -222,10 +266,10 @@ class MujocoFit:
     ) -> SimResult:
         """Object poses at the measurement stamps for M parameter sets x T trajectories
         (see :func:`robogs.physics.model.simulate`; ``SimResult.force``: the pusher force per
-        wrench bin when the drive has ``wrench_bin``, else None)."""
+        wrench bin when the drive has ``wrench_bin``, else None). Rollouts that would repeat
+        another exactly run once (module docstring; :attr:`last_rollouts`)."""
         theta = torch.as_tensor(theta, dtype=torch.float64)
         m_sets, n_t, n_s, dt = theta.shape[0], drive.n_traj, drive.n_steps, drive.dt
-        models, body, force_fx = self.models(theta, space, scene)
         sensor_fx = [
             (e, space.theta_dict(theta, e.name))
             for e in space.effects
@@ -265,9 +309,39 @@ class MujocoFit:
             if self.pq is not None:
                 ctrl[..., 2] += park[:, :-1]
                 x[:, self.pq + 2] += np.tile(park[:, 0], m_sets)  # grasped from the start
+        # distinct rollouts: (dynamics columns, trajectory, start state); a model per distinct
+        # set of dynamics columns, bodies and force parameters per rollout
+        dyn = theta.numpy()[:, self.dynamics_columns(space)]
+        seen: dict[bytes, int] = {}
+        which = np.array(
+            [
+                seen.setdefault(dyn[r // n_t].tobytes() + (r % n_t).to_bytes(8) + x[r].tobytes(), r)
+                for r in range(n_r)
+            ]
+        )
+        rows, which = np.unique(which, return_inverse=True)  # first row of each distinct rollout
+        sets, set_of = np.unique(rows // n_t, return_inverse=True)
+        models, _, _ = self.models(theta[sets], space, scene)
+        body, _, _, force_fx = self._physics(theta[rows // n_t], space, scene)
+        self.last_rollouts = len(rows)
         want_force = drive.wrench_bin is not None and self.pv is not None
-        pstate = np.zeros((n_r, n_s, 6)) if want_force else None
-        dense = self._run(models, x, ctrl, drive, body, force_fx, grasp, park, m_sets, pstate)
+        pstate = np.zeros((len(rows), n_s, 6)) if want_force else None
+        run = self._run_batch if self.stepper == "batch" else self._run
+        dense = run(
+            [models[j] for j in set_of.reshape(-1)],
+            x[rows],
+            ctrl,
+            rows % n_t,
+            drive,
+            body,
+            force_fx,
+            grasp,
+            park,
+            pstate,
+        )
+        which = which.reshape(-1)
+        dense = dense[which].reshape(m_sets, n_t, n_s, 7)
+        pstate = None if pstate is None else pstate[which]
         dpos = torch.as_tensor(dense[..., :3])
         dyaw = torch.as_tensor(np.unwrap(quat_yaw(dense[..., 3:]), axis=-1))
         res = _observe(dpos, dyaw, drive, sensor_fx, dt)
@@ -307,23 +381,23 @@ class MujocoFit:
 
     def _run(
         self,
-        models: list,
+        models_r: list,
         x: np.ndarray,
         ctrl: np.ndarray,
+        t_of: np.ndarray,
         drive: Drive,
         body: Any,
         force_fx: list,
         grasp: np.ndarray,
         park: np.ndarray,
-        m_sets: int,
         pstate: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Dense object poses [M, T, S, 7] (position, quaternion w x y z); fills ``pstate``
-        [M*T, S, 6] with the pusher's x, y, z positions and velocities when given."""
-        n_t, n_s = drive.n_traj, drive.n_steps
-        n_r = m_sets * n_t
-        t_of = np.tile(np.arange(n_t), m_sets)
-        models_r = [models[i] for i in range(m_sets) for _ in range(n_t)]
+        """Dense object poses [R, S, 7] (position, quaternion w x y z) of R rollouts (model
+        ``models_r[r]``, full physics start state ``x[r]``, trajectory ``t_of[r]``; ``body`` and
+        the force effects' parameters one row per rollout) on ``mujoco.rollout``; fills
+        ``pstate`` [R, S, 6] with the pusher's x, y, z positions and velocities when given."""
+        n_s = drive.n_steps
+        n_r = len(t_of)
         pool = self.eng._pool_get()
         datas = [mujoco.MjData(self.eng.model) for _ in range(self.eng.threads)]
         dense = np.empty((n_r, n_s, 7))
@@ -368,7 +442,7 @@ class MujocoFit:
                 )
             c = ctrl[t_of, k : k + n]
             if force_fx:
-                xf = self._forces(x, body, force_fx, m_sets, n_t)
+                xf = self._forces(x, body, force_fx)
                 full = np.zeros((n_r, n, nu + 6 * self.nbody))
                 full[..., :nu] = c
                 full[:, 0, nu + 6 * self.slots.body : nu + 6 * self.slots.body + 6] = xf
@@ -388,7 +462,76 @@ class MujocoFit:
                 hold = grasp[t_of, k]
                 self._attach(x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q)
                 dense[hold, k] = self.lay.pose(x[hold])
-        return dense.reshape(m_sets, n_t, n_s, 7)
+        return dense
+
+    def _run_batch(
+        self,
+        models_r: list,
+        x: np.ndarray,
+        ctrl: np.ndarray,
+        t_of: np.ndarray,
+        drive: Drive,
+        body: Any,
+        force_fx: list,
+        grasp: np.ndarray,
+        park: np.ndarray,
+        pstate: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """:meth:`_run` on one ``mujoco.batch.Batch``: every rollout keeps its state, solver
+        warm start included, from call to call, so it is the same whether its steps are taken
+        in one call or one at a time (bit-identical to an ``mj_step`` loop); the full physics
+        state rows ``x`` are read back only where Python acts (grasps, parking, forces)."""
+        from mujoco import batch as mj_batch
+
+        n_s = drive.n_steps
+        n_r = len(t_of)
+        full = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        b = mj_batch.Batch(self.eng.model, nsim=n_r, nthread=self.eng.threads)
+        b.set_models(models_r)
+        b.state[:] = 0.0
+        b.state[:, self._int_cols] = x[:, self._full_cols]
+        xfrc = b.bind("xfrc_applied") if force_fx else None
+        x = np.array(x)
+        dense = np.empty((n_r, n_s, 7))
+        dense[:, 0] = self.lay.pose(x)
+        if pstate is not None:
+            pstate[:, 0] = x[:, self._pcols]
+        single, onset, g_any = _schedule(grasp, park, bool(force_fx))
+        pusher, ee_yaw, cvel, rate = _drive_arrays(drive)
+        rel_p = np.zeros((n_r, 3))
+        rel_q = np.tile([1.0, 0, 0, 0], (n_r, 1))
+        if onset[:, 0].any():
+            rel_p, rel_q = self._grasp_rel(
+                x, pusher[:, 0], ee_yaw[:, 0], t_of, onset[:, 0], rel_p, rel_q
+            )
+        k = 0
+        while k < n_s - 1:
+            n = _span(single, k, n_s)
+            if onset[:, k + 1].any():
+                rel_p, rel_q = self._grasp_rel(
+                    x, pusher[:, k], ee_yaw[:, k], t_of, onset[:, k + 1], rel_p, rel_q
+                )
+            if xfrc is not None:
+                xfrc[:, self.slots.body] = self._forces(x, body, force_fx)
+            c = ctrl[t_of, k : k + n] if ctrl.shape[-1] else None
+            state = b.rollout(n, control=c, record=(full,))[full]
+            dense[:, k + 1 : k + 1 + n] = self.lay.pose(state)
+            if pstate is not None:
+                pstate[:, k + 1 : k + 1 + n] = state[:, :, self._pcols]
+            x = np.array(state[:, -1])
+            k += n
+            edit = False
+            if self.pq is not None and (park[:, k] != park[:, k - 1]).any():
+                x[:, self.pq + 2] += (park[:, k] - park[:, k - 1])[t_of]
+                edit = True
+            if g_any[k]:
+                hold = grasp[t_of, k]
+                self._attach(x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q)
+                dense[hold, k] = self.lay.pose(x[hold])
+                edit = True
+            if edit:
+                b.state[:, self._int_cols] = x[:, self._full_cols]
+        return dense
 
     def _grasp_rel(self, x, p_ee, yaw_ee, t_of, on_t, rel_p, rel_q):
         """Freeze the object pose in the EE yaw frame for rollouts whose grasp starts now."""
@@ -420,30 +563,89 @@ class MujocoFit:
         self.lay.set_vel(xh, v, np.stack([0 * r, 0 * r, r], -1))
         x[hold] = xh
 
-    def _forces(self, x, body, force_fx, m_sets: int, n_t: int) -> np.ndarray:
-        """Per-step applied wrench [M*T, 6] of the force effects from the current state."""
+    def _forces(self, x, body, force_fx) -> np.ndarray:
+        """Per-step applied wrench [R, 6] of the force effects from the rollouts' current
+        states ``x`` [R, nstate] (``body`` and the effects' parameters one row per rollout)."""
+        n_r = x.shape[0]
         q = self.lay.quat(x)
         v = x[:, self.va : self.va + 3]
         w_world = self.lay.omega(x)
         w = w_world[:, 2]
         # velocity of the CoM = origin velocity + omega x (R ipos)
-        com = _rot(
-            q, np.broadcast_to(np.asarray(body.com.numpy())[:, 0], (m_sets, 2)).repeat(n_t, 0)
-        )
+        com = _rot(q, np.asarray(body.com.numpy())[:, 0])
         vc = v + np.cross(w_world, com)
         yaw = quat_yaw(q)
         gap = x[:, self.qa + 2] - (self.table_z + self.half_z)
         f = step_forces(
             force_fx,
             body,
-            vc.reshape(m_sets, n_t, 3),
-            w.reshape(m_sets, n_t),
-            yaw.reshape(m_sets, n_t),
-            (gap < self.z_rest_gap).reshape(m_sets, n_t),
+            vc.reshape(n_r, 1, 3),
+            w.reshape(n_r, 1),
+            yaw.reshape(n_r, 1),
+            (gap < self.z_rest_gap).reshape(n_r, 1),
             self.gravity,
             self.eng.dt,
         )
-        return f.reshape(m_sets * n_t, 6)
+        return f.reshape(n_r, 6)
+
+
+def _schedule(
+    grasp: np.ndarray, park: np.ndarray, force: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(steps k whose transition k -> k+1 is taken alone [S], grasp onsets [T, S], a grasp at
+    each step [S]): alone where a grasp holds or starts at k+1, the pusher is parked at k+1, or
+    a force effect needs every step's state."""
+    g_any = grasp.any(0)
+    onset = np.zeros_like(grasp)
+    onset[:, 1:] = grasp[:, 1:] & ~grasp[:, :-1]
+    onset[:, 0] = grasp[:, 0]
+    single = np.zeros(grasp.shape[1], bool)
+    single[:-1] = g_any[1:] | (np.diff(park, axis=1) != 0).any(0)
+    if force:
+        single[:] = True
+    return single, onset, g_any
+
+
+def _span(single: np.ndarray, k: int, n_s: int) -> int:
+    """Steps to take in one call from step ``k``: 1 where that step is taken alone, else up to
+    the next such step, at most ``_MAX_CHUNK``."""
+    if single[k]:
+        return 1
+    nxt = np.flatnonzero(single[k:])
+    n = int(nxt[0]) if nxt.size else n_s - 1 - k
+    return max(1, min(n, _MAX_CHUNK, n_s - 1 - k))
+
+
+def _drive_arrays(drive: Drive) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(EE position [T, S, 3] m, EE yaw [T, S] rad, carried velocity [T, S, 3] m/s, EE yaw rate
+    [T, S] rad/s)."""
+    cvel = drive.pusher_vel if drive.carry_vel is None else drive.carry_vel
+    return drive.pusher.numpy(), drive.ee_yaw.numpy(), cvel.numpy(), drive.ee_yaw_rate.numpy()
+
+
+def _has_batch() -> bool:
+    """Whether this MuJoCo has ``mujoco.batch`` (3.17 on)."""
+    try:
+        from mujoco import batch  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _state_map(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
+    """(columns of the full physics state, the same quantities' columns in the integration
+    state a ``mujoco.batch`` row holds), found by writing distinct values with ``mj_setState``."""
+    full, integ = mujoco.mjtState.mjSTATE_FULLPHYSICS, mujoco.mjtState.mjSTATE_INTEGRATION
+    probe = np.arange(1.0, mujoco.mj_stateSize(model, full) + 1.0)
+    d = mujoco.MjData(model)
+    mujoco.mj_setState(model, d, probe, full)
+    out = np.zeros(mujoco.mj_stateSize(model, integ))
+    mujoco.mj_getState(model, d, out, integ)
+    dst = np.flatnonzero(out)
+    src = out[dst].astype(int) - 1
+    if sorted(src.tolist()) != list(range(len(probe))):
+        raise RuntimeError("the full physics state is not part of the integration state")
+    return src, dst
 
 
 def _active(e: Any, th: dict[str, torch.Tensor]) -> bool:
