@@ -14,15 +14,21 @@ import pytest
 from robogs.physics.diagnose import diagnose_recording
 from robogs.synth.scenarios import make_scenario
 from robogs.synth.scenarios.design_b import (
+    ALPHA_FAMILY,
     BOX_B,
     CAMERA_HZ_B,
     MAX_SLIDE_M,
+    N_CANDIDATES,
     NOISE_B,
+    POWER_DETECTABLE,
     _simulate,
     _truth,
+    design_power,
+    detectability,
     detectable_b,
     make_design_b,
     plain_fit,
+    plain_fit_per_trajectory,
 )
 
 
@@ -65,13 +71,38 @@ def test_free_slides_are_at_most_60_mm():
         assert 0.005 < slide <= MAX_SLIDE_M, (m.name, slide)
 
 
-def test_detectability_is_decided_from_the_expected_delta_bic():
-    assert not detectable_b("mass")  # poses do not depend on the mass
+def test_design_power_against_closed_form_and_brute_force():
+    """k = 1: ``P = Phi(sqrt(lam) - z) + Phi(-sqrt(lam) - z)``, ``z = Phi^-1(1 - a/2)``;
+    k = 2: brute force, Gaussian draws with mean of squared norm ``lam``; no signal: the level."""
+    from scipy.stats import norm
+
+    a = ALPHA_FAMILY / N_CANDIDATES
+    z = norm.isf(a / 2)
+    for lam in (4.0, 16.0, 29.3):
+        closed = norm.cdf(np.sqrt(lam) - z) + norm.cdf(-np.sqrt(lam) - z)
+        assert design_power(lam, 1, a) == pytest.approx(closed, rel=1e-6)
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((200_000, 2)) + np.array([np.sqrt(12.0), 0.0])
+    crit = -2.0 * np.log(a)  # chi^2_2 survival function is exp(-c / 2)
+    brute = np.mean(np.sum(x**2, axis=1) > crit)
+    assert design_power(12.0, 2, a) == pytest.approx(brute, abs=4e-3)  # 3.5 binomial sigma
+    assert design_power(0.0, 2, a) == pytest.approx(a)
+
+
+def test_detectability_is_decided_from_the_power_of_the_gate_test():
+    d = detectability("mass")  # poses do not depend on the mass: no signal, power = the level
+    assert not d["detectable"] and d["power"] < 0.05 and d["noncentrality"] < 1.0
     assert not detectable_b("none")
-    assert detectable_b("viscous_damping") and detectable_b("table_tilt")
+    for eff in ("viscous_damping", "table_tilt"):
+        d = detectability(eff)
+        assert d["detectable"] and d["power"] >= POWER_DETECTABLE
+        assert d["power"] == pytest.approx(design_power(d["noncentrality"], d["k"], d["level"]))
+        assert d["expected_delta_bic"] < 0 and 1 <= d["carrying"] <= 9
     # slow pushes: the box stops at once, how it decelerates is never seen
-    assert not detectable_b("viscous_damping", quasi_static=True)
-    assert make_design_b("viscous_damping", seed=1).meta["detectable"] is True
+    qs = detectability("viscous_damping", quasi_static=True)
+    assert not qs["detectable"] and qs["power"] < POWER_DETECTABLE
+    meta = make_design_b("viscous_damping", seed=1).meta
+    assert meta["detectable"] is True and meta["power"] >= POWER_DETECTABLE
 
 
 def test_plain_fit_profiles_out_a_known_start_pose_and_friction():
@@ -84,6 +115,8 @@ def test_plain_fit_profiles_out_a_known_start_pose_and_friction():
     pos, yaw = _simulate("none", False, sub, 0.33, off[None])
     chi2, mu, loc = plain_fit(pos[0], yaw[0], 0.0, "none", subset=sub)
     assert chi2 < 1.0
+    _, _, _, per = plain_fit_per_trajectory(pos[0], yaw[0], 0.0, "none", subset=sub)
+    assert per.shape == (3,) and float(per.sum()) == pytest.approx(chi2, rel=1e-9)
     assert mu == pytest.approx(0.33, rel=0.01)
     np.testing.assert_allclose(loc[:, :2], off[:, :2], atol=1e-4)  # 0.1 mm of 1.5 mm
     np.testing.assert_allclose(loc[:, 2], off[:, 2], atol=2e-3)  # 0.1 deg of 1.1 deg

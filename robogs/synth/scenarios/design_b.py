@@ -15,19 +15,31 @@ encoders                   500 Hz, 1e-4 rad                        250 Hz, 2e-4 
 gaps between trajectories  10 s                                    2-6 s, random
 =========================  ======================================  ===============================
 
-Detectability is decided here, from the expected ΔBIC of adding the true effect. The noiseless
-observations with the effect (``obs_e``) are fitted by the plain model with the parameters the
-diagnosis refits on its own: the dynamic friction and each trajectory's start-pose correction
-(dx, dy, dyaw), the nuisance parameters that absorb part of an effect. The fit is Gauss-Newton
-on this module's own simulator (:func:`profiled_chi2`: forward differences, one stacked rollout
-for the three nuisance columns of every trajectory at once, steps halved until chi^2 falls,
-stopped when the linearised minimum is reached within 5 %). Its minimum ``chi2_0 = sum ((obs_e -
+Detectability is decided here, from the power of the test the gate makes, with the effect's
+noise-level signal as its non-centrality (:func:`detectability`). The noiseless observations
+with the effect (``obs_e``) are fitted by the plain model with the parameters the diagnosis
+refits on its own: the dynamic friction and each trajectory's start-pose correction (dx, dy,
+dyaw), the nuisance parameters that absorb part of an effect. The fit is Gauss-Newton on this
+module's own simulator (:func:`plain_fit`: forward differences, one stacked rollout for the
+three nuisance columns of every trajectory at once, steps halved until chi^2 falls, stopped
+when the linearised minimum is reached within 5 %). Its minimum ``lambda = sum ((obs_e -
 obs_0) / sigma)^2`` over the samples kept (times the kept fraction) is the non-centrality of
-the likelihood-ratio statistic; the expected fall of chi^2 when the effect's ``k`` parameters
-are added is ``chi2_0 + k``, so ``E[ΔBIC] ~= -(chi2_0 + k) + k ln n`` (Schwarz 1978, noise
-variance known, ``n`` the samples kept). A case is detectable when ``E[ΔBIC] <= -10``
-("strong" evidence, Kass & Raftery 1995, J. Am. Stat. Assoc. 90). The generator shares no code
-with ``robogs.physics``.
+the likelihood-ratio statistic of adding the effect's ``k`` parameters: on data with the effect
+it is distributed as a non-central ``chi^2_k(lambda)`` (noise variance known, the model linear
+near the fit; Wilks 1938 and its local alternatives, e.g. Lehmann & Romano 2005, "Testing
+Statistical Hypotheses", ch. 13). The gate tests the ``C`` candidates of the catalogue at a
+family-wise level ``alpha`` = 5 %; the per-candidate level ``alpha / C`` (Bonferroni; the gate's
+min-P level is at least this, 0.0075 measured against 0.005 on design B) gives the critical
+value ``c = chi^2_k.isf(alpha / C)`` and the power ``P[chi^2_k(lambda) > c]``
+(``scipy.stats.ncx2``). An effect is **detectable by design when that power is >= 90 %**
+(:data:`POWER_DETECTABLE`). It is an upper bound on the power of the gate's held-out
+statistic: the held-out fall of whole trajectories sees less than the in-sample fit, and the
+gate's wild-cluster null (a sign per trajectory) cannot reach a p-value below ``2^-(m-1)`` when
+only ``m`` trajectories carry the effect; :func:`detectability` also returns ``m`` (trajectories
+with ``lambda_t >= 9``, i.e. moved by 3 sigma: the gate's ``AFFECTED_Z``) so that a table can
+say so. The expected ΔBIC, ``E[ΔBIC] ~= -(lambda + k) + k ln n`` (Schwarz 1978, ``n`` the samples
+kept), is reported alongside; it no longer decides. The generator shares no code with
+``robogs.physics``.
 
 ``trajectories`` selects a subset of the nine motions (a smaller design, e.g. five pushes and
 slides), for the gate's few-trajectory null.
@@ -73,6 +85,11 @@ __all__ = [
     "profiled_chi2",
     "plain_fit",
     "detectable_b",
+    "detectability",
+    "design_power",
+    "ALPHA_FAMILY",
+    "N_CANDIDATES",
+    "POWER_DETECTABLE",
 ]
 
 BOX_B = TruthBox(
@@ -102,7 +119,15 @@ SLIDE_SPEEDS_B = (0.35, 0.52)
 MAX_SLIDE_M = 0.06
 N_PARAMS = {k: len(v) for k, v in TRUE_PARAMS.items()}
 """Parameters of each effect (the ``k`` of the expected ΔBIC)."""
-DBIC_DETECTABLE = -10.0
+ALPHA_FAMILY = 0.05
+"""Family-wise false-positive rate of the gate (its ``ALPHA``, restated: no code shared)."""
+N_CANDIDATES = len(TRUE_PARAMS) - 1
+"""Candidates the gate tests at once on design B: every effect of the catalogue."""
+POWER_DETECTABLE = 0.9
+"""Detectable by design: power of the gate's test at least this (module docstring)."""
+LAMBDA_ACTS = 9.0
+"""A trajectory carries the effect when its share of the non-centrality is >= 9 sigma^2
+(moved by 3 sigma, the gate's ``AFFECTED_Z``)."""
 
 
 Subset = tuple[int, ...] | None
@@ -172,11 +197,19 @@ def profiled_chi2(
     """Non-centrality of adding ``effect``: chi^2 [sigma^2] of the noiseless observations with
     the effect against the plain model refitted (dynamic friction and every trajectory's
     start pose), times the kept fraction of samples (module docstring)."""
-    if effect == "none":
-        return 0.0
+    return float(np.sum(_profiled_per_trajectory(effect, quasi_static, subset, max_iter)))
+
+
+@functools.lru_cache(maxsize=64)
+def _profiled_per_trajectory(
+    effect: str, quasi_static: bool = False, subset: Subset = None, max_iter: int = 6
+) -> np.ndarray:
+    """Each trajectory's share [T] of :func:`profiled_chi2` (zeros for ``"none"``)."""
     _, _, pos, yaw = _truth(effect, quasi_static, None, subset)
+    if effect == "none":
+        return np.zeros(pos.shape[0])
     shift = TRUE_PARAMS[effect].get("delta", 0.0) if effect == "time_offset" else 0.0
-    return plain_fit(pos, yaw, shift, effect, quasi_static, subset, max_iter)[0]
+    return plain_fit_per_trajectory(pos, yaw, shift, effect, quasi_static, subset, max_iter)[3]
 
 
 def plain_fit(
@@ -188,9 +221,25 @@ def plain_fit(
     subset: Subset = None,
     max_iter: int = 6,
 ) -> tuple[float, float, np.ndarray]:
+    """:func:`plain_fit_per_trajectory` without the per-trajectory chi^2."""
+    chi2, mu, loc, _ = plain_fit_per_trajectory(
+        pos, yaw, shift, effect, quasi_static, subset, max_iter
+    )
+    return chi2, mu, loc
+
+
+def plain_fit_per_trajectory(
+    pos: np.ndarray,
+    yaw: np.ndarray,
+    shift: float,
+    effect: str,
+    quasi_static: bool = False,
+    subset: Subset = None,
+    max_iter: int = 6,
+) -> tuple[float, float, np.ndarray, np.ndarray]:
     """Fit the plain model to the noiseless truth ``pos`` [T, K, 3], ``yaw`` [T, K] seen through
     ``effect``'s sensor model ``shift`` s late: returns (chi^2 times the kept fraction, the
-    dynamic friction, start-pose corrections [T, 3]).
+    dynamic friction, start-pose corrections [T, 3], that chi^2 per trajectory [T]).
 
     Gauss-Newton on this module's simulator: forward differences (:data:`H_FD`), the three
     nuisance columns of every trajectory from one stacked rollout (trajectories do not
@@ -212,6 +261,9 @@ def plain_fit(
     def cost(r: np.ndarray) -> float:
         return keep * float(np.sum(r * r))
 
+    def per_traj(r: np.ndarray) -> np.ndarray:
+        return keep * np.sum(r * r, axis=1)
+
     mu, loc = BOX_B.mu_d, np.zeros((n_t, 3))
     h_mu = H_FD[3] * mu
     best = np.inf
@@ -220,7 +272,8 @@ def plain_fit(
         p, y = _simulate("none", quasi_static, subset, mu, offs)
         pm, ym = _simulate("none", quasi_static, subset, mu + h_mu, loc[None])
         r0 = resid(p[0], y[0])
-        best = min(best, cost(r0))
+        if cost(r0) < best:
+            best, best_t = cost(r0), per_traj(r0)
         # Jacobian of the prediction: friction column and three nuisance columns per trajectory
         j_mu = (r0 - resid(pm[0], ym[0])) / h_mu  # [T, N]
         j_loc = np.stack([(r0 - resid(p[j + 1], y[j + 1])) / H_FD[j] for j in range(3)], -1)
@@ -243,10 +296,10 @@ def plain_fit(
         if c_n >= best:
             break
         mu, loc, gain = mu_n, loc_n, best - c_n
-        best = c_n
+        best, best_t = c_n, per_traj(resid(pn[0], yn[0]))
         if best <= 1.05 * lin + 0.5 or gain <= 1e-3 * best:
             break
-    return float(best), float(mu), loc
+    return float(best), float(mu), loc, best_t
 
 
 @functools.lru_cache(maxsize=64)
@@ -262,9 +315,53 @@ def expected_delta_bic(effect: str, quasi_static: bool = False, subset: Subset =
     return float(-(chi2 + k) + k * np.log(n))
 
 
+def design_power(noncentrality: float, k: int, level: float) -> float:
+    """Power of a chi^2 test of ``k`` parameters at ``level`` when the statistic is a
+    non-central ``chi^2_k(noncentrality)``: ``P[chi^2_k(lambda) > chi^2_k.isf(level)]``."""
+    from scipy.stats import chi2, ncx2
+
+    crit = float(chi2.isf(level, k))
+    if noncentrality <= 0.0:
+        return float(level)
+    return float(ncx2.sf(crit, k, noncentrality))
+
+
+@functools.lru_cache(maxsize=64)
+def detectability(effect: str, quasi_static: bool = False, subset: Subset = None) -> dict[str, Any]:
+    """Whether ``effect`` is detectable by design on design B, and why (module docstring).
+
+    Returns ``expected_delta_bic``, ``noncentrality`` [sigma^2] (nuisances profiled), ``k``,
+    ``level`` (per-candidate, ``ALPHA_FAMILY / N_CANDIDATES``), ``power``, ``detectable``
+    (power >= :data:`POWER_DETECTABLE`), ``carrying`` (trajectories with a share >= 9 sigma^2)
+    and ``sign_flip_floor`` (``2^-(carrying-1)``: the smallest p-value a sign-per-trajectory
+    null can give it).
+    """
+    level = ALPHA_FAMILY / N_CANDIDATES
+    if effect == "none":
+        k, lam, m = 0, 0.0, 0
+        power = level
+    else:
+        k = N_PARAMS[effect]
+        per = _profiled_per_trajectory(effect, quasi_static, subset)
+        lam = float(np.sum(per))
+        m = int(np.sum(per >= LAMBDA_ACTS))
+        power = design_power(lam, k, level)
+    return {
+        "expected_delta_bic": expected_delta_bic(effect, quasi_static, subset),
+        "noncentrality": lam,
+        "k": k,
+        "level": level,
+        "power": power,
+        "detectable": bool(effect != "none" and power >= POWER_DETECTABLE),
+        "carrying": m,
+        "sign_flip_floor": 2.0 ** -(m - 1) if m >= 1 else 1.0,
+    }
+
+
 def detectable_b(effect: str, quasi_static: bool = False, subset: Subset = None) -> bool:
-    """Whether the generator deems ``effect`` detectable on design B (E[ΔBIC] <= -10)."""
-    return effect != "none" and expected_delta_bic(effect, quasi_static, subset) <= DBIC_DETECTABLE
+    """Whether the generator deems ``effect`` detectable on design B: the power of the gate's
+    chi^2 test at its per-candidate level is >= 90 % (:func:`detectability`)."""
+    return bool(detectability(effect, quasi_static, subset)["detectable"])
 
 
 def make_design_b(
@@ -277,7 +374,8 @@ def make_design_b(
     """One design-B scenario with ``effect`` hidden (``"none"``: null data).
 
     ``trajectories``: indices of the motions kept (default all nine: pushes 0-5, slides 6-7,
-    the drop 8). ``meta`` carries the truth, ``expected_delta_bic`` and ``detectable``.
+    the drop 8). ``meta`` carries the truth, ``expected_delta_bic``, the ``noncentrality`` and
+    ``power`` of the gate's test, ``detectable`` and ``carrying_trajectories`` (:func:`detectability`).
     """
     if effect not in TRUE_PARAMS:
         raise ValueError(f"unknown effect {effect!r}; known: {sorted(TRUE_PARAMS)}")
@@ -352,7 +450,7 @@ def make_design_b(
         "effects": [],
         "sensors": {"camera": {"time_offset_ns": 0}},
     }
-    edbic = expected_delta_bic(effect, quasi_static, subset)
+    det = detectability(effect, quasi_static, subset)
     meta = {
         "design": ("B-quasi-static" if quasi_static else "B")
         + ("" if subset is None else f"-{len(subset)}"),
@@ -362,8 +460,11 @@ def make_design_b(
         "true_friction_dynamic": box.mu_d,
         "noise_levels": dict(NOISE_B),
         "seed": seed,
-        "expected_delta_bic": edbic,
-        "detectable": detectable_b(effect, quasi_static, subset),
+        "expected_delta_bic": det["expected_delta_bic"],
+        "noncentrality": det["noncentrality"],
+        "power": det["power"],
+        "detectable": det["detectable"],
+        "carrying_trajectories": det["carrying"],
         "trajectories": None if subset is None else list(subset),
     }
     return ScenarioRecording(trajectories=trajs, physics=physics, object_name="box", meta=meta)
