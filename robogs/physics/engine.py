@@ -15,7 +15,6 @@ the reason in :attr:`Engine.backend_reason`.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -99,14 +98,7 @@ class Engine:
 
             self._mujoco = MujocoFit(
                 self.prep.rec.physics, self.prep.rec.object_name, dt=dt, threads=threads
-            )
-            if self.prep.wrench is not None:  # said, not silently dropped
-                warnings.warn(
-                    "the measured wrench is not used on the mujoco engine (it predicts no "
-                    "pusher force, so mass is not identified from forces); --engine planar "
-                    "fits with it",
-                    stacklevel=2,
-                )
+            )  # it predicts the pusher force: a measured wrench enters as on planar
         self.present: list[tuple[Effect, dict[str, float]]] = []
         for entry in self.prep.rec.physics.get("effects", []) or []:
             eff = get_effect(str(entry["name"]))

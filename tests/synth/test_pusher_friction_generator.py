@@ -1,7 +1,7 @@
 """The pusher-friction generator against closed forms of quasi-static pushing.
 
 Oracles: Mason's centre of rotation for a frictionless point push on the ellipsoidal limit
-surface (at ``-c^2 / y_c`` across the centre; Lynch, Maekawa & Tanie 1992, eq. 7), pure
+surface (at ``-c^2 / y_c`` across the centre; Mason 1986; Lynch, Maekawa & Tanie 1992), pure
 translation at ``mu_t m g`` for a central push, the Coulomb cone at the pusher (inside the
 motion cone the contact sticks; outside it the force sits on the cone edge), every contact
 wrench on the limit surface, and rate independence.

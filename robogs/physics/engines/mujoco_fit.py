@@ -354,7 +354,13 @@ class MujocoFit:
     ) -> torch.Tensor:
         """Force the objects exert on the pusher [M, T, W, 3] N (world), averaged per wrench
         bin, from the pusher's dense positions and velocities ``pstate`` [M*T, S, 6]: contact =
-        mass x acceleration - servo force (the servos' gain and bias from the model)."""
+        mass x acceleration - servo force (the servos' gain and bias from the model).
+
+        The vertical component is left at 0, as in the planar model: with pusher friction it is
+        the share of the object's weight that the sticking vertical friction of the pusher
+        contact carries, statically indeterminate and set by the soft contacts' regularisation
+        (0.13-0.2 N of a 0.4 kg box in the pusher-friction scenario), not a quantity the model
+        predicts."""
         m = self.eng.model
         n_t, n_s, dt = drive.n_traj, drive.n_steps, drive.dt
         t_of = np.tile(np.arange(n_t), m_sets)
@@ -371,6 +377,7 @@ class MujocoFit:
         mass = float(m.body_mass[m.dof_bodyid[dof0]])
         f_c = mass * np.diff(pstate[:, :, 3:], axis=1) / dt - f_servo  # [M*T, S-1, 3]
         f_c = f_c.reshape(m_sets, n_t, n_s - 1, 3)
+        f_c[..., 2] = 0.0  # the planar model's force: in the table plane (see the docstring)
         bins = drive.wrench_bin.numpy()[:, : n_s - 1]
         width = np.maximum(drive.wrench_width.numpy(), dt)
         out = np.zeros((m_sets, n_t, width.shape[1], 3))
