@@ -243,83 +243,95 @@ def _base_body(scene: BoxScene, theta: torch.Tensor, space: ParamSpace) -> Body:
 
 def _pusher_points(
     scene: BoxScene, c: torch.Tensor, cv: torch.Tensor, psi: torch.Tensor, rate: torch.Tensor
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """End-sphere centres [T, J, 3] and velocities of the capsule (J = 1 for a sphere)."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """End-sphere centres and velocities [T, S, J, 3] of the capsule (J = 1 for a sphere).
+
+    Args:
+        c, cv: EE position [m] and velocity [m/s], [T, S, 3], world; psi, rate: EE yaw [rad]
+            and yaw rate [rad/s], [T, S]. Computed once for the whole drive.
+    """
     if scene.pusher_length <= 0.0:
-        return c.unsqueeze(1), cv.unsqueeze(1)
+        return c.unsqueeze(-2).numpy(), cv.unsqueeze(-2).numpy()
     half = 0.5 * scene.pusher_length
     ax, ay = -torch.sin(psi) * half, torch.cos(psi) * half  # EE y axis
-    off = torch.stack([torch.stack([ax, ay, 0 * ax], -1), torch.stack([-ax, -ay, 0 * ax], -1)], 1)
+    zero = 0 * ax
+    off = torch.stack([torch.stack([ax, ay, zero], -1), torch.stack([-ax, -ay, zero], -1)], -2)
     voff = torch.stack(
         [
-            torch.stack([-rate * ay, rate * ax, 0 * ax], -1),
-            torch.stack([rate * ay, -rate * ax, 0 * ax], -1),
+            torch.stack([-rate * ay, rate * ax, zero], -1),
+            torch.stack([rate * ay, -rate * ax, zero], -1),
         ],
-        1,
+        -2,
     )
-    return c.unsqueeze(1) + off, cv.unsqueeze(1) + voff
+    return (c.unsqueeze(-2) + off).numpy(), (cv.unsqueeze(-2) + voff).numpy()
 
 
 def _pusher_impulse(
     scene: BoxScene,
-    p: torch.Tensor,
-    yaw: torch.Tensor,
-    vx: torch.Tensor,
-    vy: torch.Tensor,
-    wf: torch.Tensor,
-    com_x: torch.Tensor,
-    com_y: torch.Tensor,
-    mass: torch.Tensor,
-    inertia: torch.Tensor,
-    c: torch.Tensor,
-    cv: torch.Tensor,
-    psi: torch.Tensor,
-    rate: torch.Tensor,
-    grasping: torch.Tensor,
+    p: np.ndarray,
+    cos_y: np.ndarray,
+    sin_y: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    wf: np.ndarray,
+    com_x: np.ndarray,
+    com_y: np.ndarray,
+    mass: np.ndarray,
+    inertia: np.ndarray,
+    pts: np.ndarray,
+    pv: np.ndarray,
+    grasping: np.ndarray,
     dt: float,
-) -> tuple[torch.Tensor, ...]:
+) -> tuple[np.ndarray, ...]:
     """Frictionless, inelastic, speculative contact of the pusher's end spheres with the box.
 
     With two end spheres the 2x2 linear complementarity problem is solved exactly by
     enumerating its four cases (Cottle, Pang & Stone 1992); one sphere is the scalar case.
+
+    Args:
+        p: CoM [M, T, 3] m; cos_y, sin_y: of the box yaw [M, T]; vx, vy [M, T] m/s and wf
+            [M, T] rad/s: the box's velocities before the contact; com_x, com_y, mass,
+            inertia: [M, 1]; pts, pv: end-sphere centres [m] and velocities [m/s] [T, J, 3];
+            grasping: [T] bool (no pusher contact while grasped).
 
     Returns:
         the box's vx, vy, yaw rate after the contact, and the impulse [N s] the box gives the
         pusher in this step (x, y, world; the reaction of the one the pusher gives the box).
     """
     hx, hy, hz = (0.5 * s for s in scene.size)
-    pts, pv = _pusher_points(scene, c, cv, psi, rate)  # [T, J, 3]
-    pts, pv = pts.unsqueeze(0), pv.unsqueeze(0)  # [1, T, J, 3]
-    yaw_, p_ = yaw.unsqueeze(-1), p.unsqueeze(-2)  # [M, T, 1]
-    offx, offy = yaw_rotate(com_x.unsqueeze(-1), com_y.unsqueeze(-1), yaw_)
-    ox_, oy_ = p_[..., 0] - offx, p_[..., 1] - offy
-    dx, dy, dz = pts[..., 0] - ox_, pts[..., 1] - oy_, pts[..., 2] - p_[..., 2]
-    lx, ly = yaw_rotate(dx, dy, -yaw_)
-    qx, qy = lx.clamp(-hx, hx), ly.clamp(-hy, hy)
+    pts, pv = pts[None], pv[None]  # [1, T, J, 3]
+    c_, s_ = cos_y[..., None], sin_y[..., None]  # [M, T, 1]
+    px, py, pz = p[..., 0:1], p[..., 1:2], p[..., 2:3]
+    cx, cy = com_x[..., None], com_y[..., None]
+    # rotations by +yaw (body -> world) and by -yaw (world -> body) share one cos/sin
+    ox_, oy_ = px - (c_ * cx - s_ * cy), py - (s_ * cx + c_ * cy)
+    dx, dy, dz = pts[..., 0] - ox_, pts[..., 1] - oy_, pts[..., 2] - pz
+    lx, ly = c_ * dx + s_ * dy, c_ * dy - s_ * dx
+    qx, qy = np.clip(lx, -hx, hx), np.clip(ly, -hy, hy)
     ex, ey = lx - qx, ly - qy
-    dist_c = torch.sqrt(ex * ex + ey * ey)
+    dist_c = np.sqrt(ex * ex + ey * ey)
     outside = dist_c > 1e-9
-    pen_x, pen_y = hx - lx.abs(), hy - ly.abs()
+    pen_x, pen_y = hx - np.abs(lx), hy - np.abs(ly)
     use_x = pen_x < pen_y
-    zero = torch.zeros_like(lx)
-    safe = dist_c.clamp(min=1e-12)
-    nlx = torch.where(outside, ex / safe, torch.where(use_x, torch.sign(lx), zero))
-    nly = torch.where(outside, ey / safe, torch.where(use_x, zero, torch.sign(ly)))
-    gap = torch.where(outside, dist_c, -torch.minimum(pen_x, pen_y)) - scene.pusher_radius
-    nx, ny = yaw_rotate(nlx, nly, yaw_)
-    qwx, qwy = yaw_rotate(qx, qy, yaw_)
-    rcx, rcy = ox_ + qwx - p_[..., 0], oy_ + qwy - p_[..., 1]
-    w_ = wf.unsqueeze(-1)
-    vptx, vpty = vx.unsqueeze(-1) - w_ * rcy, vy.unsqueeze(-1) + w_ * rcx
+    safe = np.maximum(dist_c, 1e-12)
+    nlx = np.where(outside, ex / safe, np.where(use_x, np.sign(lx), 0.0))
+    nly = np.where(outside, ey / safe, np.where(use_x, 0.0, np.sign(ly)))
+    gap = np.where(outside, dist_c, -np.minimum(pen_x, pen_y)) - scene.pusher_radius
+    nx, ny = c_ * nlx - s_ * nly, s_ * nlx + c_ * nly
+    qwx, qwy = c_ * qx - s_ * qy, s_ * qx + c_ * qy
+    rcx, rcy = ox_ + qwx - px, oy_ + qwy - py
+    w_ = wf[..., None]
+    vptx, vpty = vx[..., None] - w_ * rcy, vy[..., None] + w_ * rcx
     rate_n = (pv[..., 0] - vptx) * nx + (pv[..., 1] - vpty) * ny
     rxn = rcx * ny - rcy * nx  # [M, T, J]
-    m_, i_ = mass.unsqueeze(-1), inertia.unsqueeze(-1)
-    active = (dz.abs() <= hz) & ~grasping.view(1, -1, 1)
+    active = (np.abs(dz) <= hz) & ~grasping[None, :, None]
     # speculative for open gaps, soft (Baumgarte 0.2) push-out of penetrations
-    target = torch.where(gap > 0, -gap, -0.2 * gap) / dt
-    b = torch.where(active, target - rate_n, torch.full_like(gap, -1.0))
+    target = np.where(gap > 0, -gap, -0.2 * gap) / dt
+    b = np.where(active, target - rate_n, -1.0)
     if b.shape[-1] == 1:
-        lam = (b / (1.0 / m_ + rxn * rxn / i_)).clamp(min=0.0)
+        lam = np.maximum(b / (1.0 / mass[..., None] + rxn * rxn / inertia[..., None]), 0.0)
+        jx, jy = lam[..., 0] * nx[..., 0], lam[..., 0] * ny[..., 0]
+        dw = lam[..., 0] * rxn[..., 0]
     else:
         n1x, n1y, n2x, n2y = nx[..., 0], ny[..., 0], nx[..., 1], ny[..., 1]
         r1, r2 = rxn[..., 0], rxn[..., 1]
@@ -328,29 +340,38 @@ def _pusher_impulse(
         k22 = inv_m + r2 * r2 * inv_i
         k12 = (n1x * n2x + n1y * n2y) * inv_m + r1 * r2 * inv_i
         b1, b2 = b[..., 0], b[..., 1]
-        det = (k11 * k22 - k12 * k12).clamp(min=1e-12)
+        det = np.maximum(k11 * k22 - k12 * k12, 1e-12)
         l1b, l2b = (k22 * b1 - k12 * b2) / det, (k11 * b2 - k12 * b1) / det
         l1s, l2s = b1 / k11, b2 / k22
         only1 = (b1 > 0) & (b2 - k12 * l1s <= 0)
         only2 = (b2 > 0) & (b1 - k12 * l2s <= 0)
         none = (b1 <= 0) & (b2 <= 0)
-        l1 = torch.where(
-            none, zero[..., 0], torch.where(only1, l1s, torch.where(only2, zero[..., 0], l1b))
-        )
-        l2 = torch.where(
-            none, zero[..., 0], torch.where(only1, zero[..., 0], torch.where(only2, l2s, l2b))
-        )
-        lam = torch.stack([l1, l2], -1).clamp(min=0.0)
+        l1 = np.where(none, 0.0, np.where(only1, l1s, np.where(only2, 0.0, l1b)))
+        l2 = np.where(none, 0.0, np.where(only1, 0.0, np.where(only2, l2s, l2b)))
+        l1, l2 = np.maximum(l1, 0.0), np.maximum(l2, 0.0)
         # flush face: both ends within 1 mm and pushing -> the capsule holds the face like a
         # paddle (both rates matched, one end may pull slightly), which stops rigid rocking
         flush = (gap[..., 0] < 1e-3) & (gap[..., 1] < 1e-3) & active[..., 0] & active[..., 1]
-        flush = flush & (l1b + l2b > 0)
-        lam = torch.where(flush.unsqueeze(-1), torch.stack([l1b, l2b], -1), lam)
-    jx, jy = (lam * nx).sum(-1), (lam * ny).sum(-1)
-    vx = vx - jx / mass
-    vy = vy - jy / mass
-    wf = wf - (lam * rxn).sum(-1) / inertia
-    return vx, vy, wf, jx, jy
+        flush &= l1b + l2b > 0
+        l1, l2 = np.where(flush, l1b, l1), np.where(flush, l2b, l2)
+        jx, jy = l1 * n1x + l2 * n2x, l1 * n1y + l2 * n2y
+        dw = l1 * r1 + l2 * r2
+    return vx - jx / mass, vy - jy / mass, wf - dw / inertia, jx, jy
+
+
+def _numpy(x: torch.Tensor) -> np.ndarray:
+    """A CPU float array of ``x`` (a copy; no autograd)."""
+    return x.detach().cpu().numpy().copy()
+
+
+def _state_view(x: np.ndarray) -> torch.Tensor:
+    """The torch view of a state array that effect hooks see."""
+    return torch.from_numpy(x)
+
+
+def _hook_out(x: torch.Tensor | float) -> np.ndarray:
+    """An effect hook's output as an array."""
+    return np.asarray(x.detach() if isinstance(x, torch.Tensor) else x)
 
 
 def simulate(
@@ -361,6 +382,11 @@ def simulate(
     init_offset: torch.Tensor | None = None,
 ) -> SimResult:
     """Roll out M parameter sets over T trajectories and sample the object poses.
+
+    The rollout steps arrays of [M, T] states in numpy on the CPU: with a few hundred states
+    per step the cost is the per-operation overhead, about four times lower than torch's.
+    Effect hooks still see torch tensors (views of the state). There are no gradients: the
+    fitter differentiates by finite differences. Results are tensors on ``theta``'s device.
 
     Args:
         theta: [M, Q] parameter sets over ``space`` (float64 recommended).
@@ -373,7 +399,9 @@ def simulate(
     Returns:
         Object poses at the measurement stamps, as the sensor would report them.
     """
-    dev, dt_ = theta.device, theta.dtype
+    dev = theta.device
+    theta = theta.detach().cpu()
+    dt_ = theta.dtype
     m_sets, n_t, n_s = theta.shape[0], drive.n_traj, drive.n_steps
     dt = drive.dt
     effects: list[tuple[Effect, dict[str, torch.Tensor]]] = [
@@ -390,64 +418,74 @@ def simulate(
     hx, hy, hz = (0.5 * s for s in scene.size)
     z_rest = scene.table_z + hz
     c_r = scene.friction_radius
-    mass, inertia = body.mass, body.inertia_z
+    mass, inertia = _numpy(body.mass), _numpy(body.inertia_z)  # [M, 1]
     kr = mass * c_r**2 / inertia  # [M, 1]
-    com_x, com_y = body.com[..., 0], body.com[..., 1]  # [M, 1]
+    com_x, com_y = _numpy(body.com[..., 0]), _numpy(body.com[..., 1])  # [M, 1]
+    mu_s0, mu_d0 = _numpy(body.mu_s), _numpy(body.mu_d)
+    e_rest, damping = _numpy(body.restitution), _numpy(body.damping)
+    has_damping = bool((damping != 0).any())
 
-    pusher = drive.pusher.to(dev, dt_)
-    pvel = drive.pusher_vel.to(dev, dt_)
-    cvel_all = pvel if drive.carry_vel is None else drive.carry_vel.to(dev, dt_)
-    ee_yaw = drive.ee_yaw.to(dev, dt_)
-    ee_rate = drive.ee_yaw_rate.to(dev, dt_)
-    grasp = drive.grasp.to(dev)
-    grasp_np = grasp.cpu().numpy()
-    grasp_any = grasp_np.any(axis=0)
-    onset_np = np.zeros_like(grasp_np)
-    onset_np[:, 1:] = grasp_np[:, 1:] & ~grasp_np[:, :-1]
-    onset_np[:, 0] = grasp_np[:, 0]
-    onset_any = onset_np.any(axis=0)
-    onset = torch.as_tensor(onset_np, device=dev)
+    def drive_array(x: torch.Tensor) -> torch.Tensor:
+        return x.detach().cpu().to(dt_)
+
+    pusher_t = drive_array(drive.pusher)
+    pusher = pusher_t.numpy()
+    cvel_all = drive_array(drive.pusher_vel if drive.carry_vel is None else drive.carry_vel)
+    cvel_all = cvel_all.numpy()
+    ee_yaw_t, ee_rate_t = drive_array(drive.ee_yaw), drive_array(drive.ee_yaw_rate)
+    ee_yaw, ee_rate = ee_yaw_t.numpy(), ee_rate_t.numpy()
+    pts_all, pv_all = _pusher_points(
+        scene, pusher_t, drive_array(drive.pusher_vel), ee_yaw_t, ee_rate_t
+    )  # [T, S, J, 3]
+    grasp = drive.grasp.detach().cpu().numpy()
+    grasp_any = grasp.any(axis=0)
+    onset = np.zeros_like(grasp)
+    onset[:, 1:] = grasp[:, 1:] & ~grasp[:, :-1]
+    onset[:, 0] = grasp[:, 0]
+    onset_any = onset.any(axis=0)
     # steps where some pusher could touch a box resting on the table or lifted by < 5 box heights
     pz = drive.pusher[..., 2].cpu().numpy()
     pusher_low = (pz < z_rest + 10 * hz + scene.pusher_radius).any(axis=0)
 
     # initial state: measured pose -> world (inverse sensor effects, last first)
-    ipos = drive.init_pos.to(dev, dt_).unsqueeze(0).expand(m_sets, n_t, 3)
-    iyaw = drive.init_yaw.to(dev, dt_).unsqueeze(0).expand(m_sets, n_t)
+    ipos = drive.init_pos.to(theta.device, dt_).unsqueeze(0).expand(m_sets, n_t, 3)
+    iyaw = drive.init_yaw.to(theta.device, dt_).unsqueeze(0).expand(m_sets, n_t)
     if init_offset is not None:
-        off = init_offset.to(dev, dt_)
+        off = init_offset.detach().cpu().to(dt_)
         ipos = ipos + torch.nn.functional.pad(off[..., :2], (0, 1))
         iyaw = iyaw + off[..., 2]
     for e, th in reversed(sensor_fx):
         ipos, iyaw = e.from_sensor(th, ipos, iyaw)
-    ox, oy = yaw_rotate(com_x, com_y, iyaw)
-    p = torch.stack([ipos[..., 0] + ox, ipos[..., 1] + oy, ipos[..., 2]], dim=-1)
-    yaw = iyaw.clone()
-    v = torch.zeros_like(p)
+    ox, oy = yaw_rotate(body.com[..., 0], body.com[..., 1], iyaw)
+    p = _numpy(torch.stack([ipos[..., 0] + ox, ipos[..., 1] + oy, ipos[..., 2]], dim=-1))
+    yaw = _numpy(iyaw)
+    v = np.zeros_like(p)
     if drive.init_vel is not None:
-        v = v + drive.init_vel.to(dev, dt_).unsqueeze(0)
-    w = torch.zeros_like(yaw)
-    rel_p = torch.zeros_like(p)
-    rel_yaw = torch.zeros_like(yaw)
+        v = v + drive_array(drive.init_vel).numpy()[None]
+    w = np.zeros_like(yaw)
+    rel_p = np.zeros_like(p)
+    rel_yaw = np.zeros_like(yaw)
     g = scene.gravity
-    e_rest = body.restitution
-    damping = body.damping
-    has_damping = bool((damping != 0).any())
+
+    def grasp_onset(k: int, on: np.ndarray) -> None:
+        """Relative transform of the object in the EE frame (yaw-only) where a grasp starts."""
+        nonlocal rel_p, rel_yaw
+        d = p - pusher[None, :, k]
+        c, s = np.cos(ee_yaw[None, :, k]), np.sin(ee_yaw[None, :, k])
+        rx, ry = c * d[..., 0] + s * d[..., 1], c * d[..., 1] - s * d[..., 0]
+        rel_p = np.where(on[None, :, None], np.stack([rx, ry, d[..., 2]], axis=-1), rel_p)
+        rel_yaw = np.where(on[None], yaw - ee_yaw[None, :, k], rel_yaw)
 
     if onset_any[0]:
-        on = onset[:, 0].view(1, n_t)
-        d = p - pusher[:, 0].unsqueeze(0)
-        rx, ry = yaw_rotate(d[..., 0], d[..., 1], -ee_yaw[:, 0].unsqueeze(0))
-        rel_p = torch.where(on.unsqueeze(-1), torch.stack([rx, ry, d[..., 2]], dim=-1), rel_p)
-        rel_yaw = torch.where(on, yaw - ee_yaw[:, 0].unsqueeze(0), rel_yaw)
+        grasp_onset(0, onset[:, 0])
 
     # from which step on the drive no longer changes (EE within 0.5 mm of its final position,
     # grasp constant): once every object is also at rest (exact zeros thanks to the
     # velocity-level sticking), the rest of the rollout is constant and is not integrated
-    to_end = (drive.pusher - drive.pusher[:, -1:]).norm(dim=-1).cpu().numpy()  # [T, S]
+    to_end = np.linalg.norm(pusher - pusher[:, -1:], axis=-1)  # [T, S]
     moving_drive = np.flip(np.maximum.accumulate(np.flip(to_end, axis=1), axis=1), axis=1) > 5e-4
     moving_drive = moving_drive.any(axis=0)
-    moving_drive[1:] |= (grasp_np[:, 1:] != grasp_np[:, :-1]).any(axis=0)
+    moving_drive[1:] |= (grasp[:, 1:] != grasp[:, :-1]).any(axis=0)
     idx = np.flatnonzero(moving_drive)
     static_from = int(idx[-1]) + 2 if idx.size else 0
 
@@ -460,58 +498,57 @@ def simulate(
         + 0.01
     )
     near = (drive.pusher[..., :2] - drive.init_pos[:, None, :2]).norm(dim=-1).cpu().numpy() < reach
-    near |= grasp_np
+    near |= grasp
     quiet_until = int(np.argmax(near.any(axis=0))) if near.any() else n_s - 1
     quiet_until = max(quiet_until - 2, 0)
 
     impulse, wbin, bins_any = None, None, None
     if drive.wrench_bin is not None and drive.wrench_width is not None:
-        wbin = drive.wrench_bin.to(dev)
-        bins_any = (wbin >= 0).any(dim=0).cpu().numpy()
-        impulse = torch.zeros(
-            (m_sets, n_t, int(drive.wrench_width.shape[1]), 2), dtype=dt_, device=dev
-        )
+        wbin = drive.wrench_bin.detach().cpu().numpy()
+        bins_any = (wbin >= 0).any(axis=0)
+        impulse = np.zeros((m_sets, n_t, int(drive.wrench_width.shape[1]), 2), dtype=p.dtype)
 
-    traj_p = [p]
-    traj_y = [yaw]
+    def moving() -> bool:
+        return bool(np.abs(v).max() > 0 or np.abs(w).max() > 0)
+
+    dense_p = np.empty((m_sets, n_t, n_s, 3), dtype=p.dtype)  # CoM, world
+    dense_y = np.empty((m_sets, n_t, n_s), dtype=p.dtype)
+    dense_p[:, :, 0], dense_y[:, :, 0] = p, yaw
+    last = 0  # the last step written
     k = -1
     while k < n_s - 2:
         k += 1
-        if k == 1 and quiet_until > 1 and not bool((v.abs().amax() > 0) | (w.abs().amax() > 0)):
-            traj_p.extend([p] * (quiet_until - 1))
-            traj_y.extend([yaw] * (quiet_until - 1))
-            k = quiet_until
-        if (
-            k > static_from
-            and k % 20 == 0
-            and not bool((v.abs().amax() > 0) | (w.abs().amax() > 0))
-        ):
+        if k == 1 and quiet_until > 1 and not moving():
+            dense_p[:, :, 2 : quiet_until + 1] = p[:, :, None]
+            dense_y[:, :, 2 : quiet_until + 1] = yaw[:, :, None]
+            k = last = quiet_until
+        if k > static_from and k % 20 == 0 and not moving():
             break
         if onset_any[k + 1]:
-            # relative transform of the object in the EE frame at grasp onset (yaw-only EE frame)
-            on = onset[:, k + 1].view(1, n_t)
-            d = p - pusher[:, k].unsqueeze(0)
-            rx, ry = yaw_rotate(d[..., 0], d[..., 1], -ee_yaw[:, k].unsqueeze(0))
-            new_rel = torch.stack([rx, ry, d[..., 2]], dim=-1)
-            rel_p = torch.where(on.unsqueeze(-1), new_rel, rel_p)
-            rel_yaw = torch.where(on, yaw - ee_yaw[:, k].unsqueeze(0), rel_yaw)
+            grasp_onset(k, onset[:, k + 1])
 
         # ---- free dynamics: external accelerations --------------------------------------
         gap = p[..., 2] - z_rest
-        acc = torch.zeros_like(v)
-        alpha = torch.zeros_like(w)
+        acc = np.zeros_like(v)
+        alpha = np.zeros_like(w)
         if has_damping:
-            acc = acc - damping.unsqueeze(-1) * v
+            acc = acc - damping[..., None] * v
         if accel_fx:
-            st = FreeState(v=v, w=w, yaw=yaw, on_table=gap < 1e-4, body=body)
+            st = FreeState(
+                v=_state_view(v),
+                w=_state_view(w),
+                yaw=_state_view(yaw),
+                on_table=_state_view(gap < 1e-4),
+                body=body,
+            )
             for e, th in accel_fx:
                 out = e.accel(th, st)
                 if out is not None:
                     a_e, al_e = out
                     if a_e is not None:
-                        acc = acc + a_e
+                        acc = acc + _hook_out(a_e)
                     if al_e is not None:
-                        alpha = alpha + al_e
+                        alpha = alpha + _hook_out(al_e)
         vx = v[..., 0] + dt * acc[..., 0]
         vy = v[..., 1] + dt * acc[..., 1]
         vz = v[..., 2] + dt * (acc[..., 2] - g)
@@ -521,31 +558,37 @@ def simulate(
         approach = -vz
         contact = (gap + dt * vz) <= 0.0
         bounce = approach > scene.bounce_min_speed
-        target = torch.where(bounce, e_rest * approach, -gap.clamp(min=0.0) / dt)
-        lam_n = torch.where(contact, (target - vz).clamp(min=0.0), torch.zeros_like(vz))
+        target = np.where(bounce, e_rest * approach, -np.maximum(gap, 0.0) / dt)
+        lam_n = np.where(contact, np.maximum(target - vz, 0.0), 0.0)
         vz = vz + lam_n
         # a bounce starts at the time of impact inside the step, not at the step's start
         # (otherwise the box would rebound from up to approach * dt above the table)
         rebound = contact & bounce & (lam_n > 0)
-        toi = (gap.clamp(min=0.0) / approach.clamp(min=1e-9)).clamp(max=dt)
 
         # ---- table: friction on the twist (vx, vy, c_r w) --------------------------------
         speed2 = vx * vx + vy * vy
-        speed = torch.sqrt(speed2 + 1e-18)
-        mu_s, mu_d = body.mu_s, body.mu_d
+        speed = np.sqrt(speed2 + 1e-18)
+        mu_s, mu_d = mu_s0, mu_d0
         if fric_fx:
-            slip = Slip(vx=vx, vy=vy, speed=speed, yaw=yaw)
+            slip = Slip(
+                vx=_state_view(vx),
+                vy=_state_view(vy),
+                speed=_state_view(speed),
+                yaw=_state_view(yaw),
+            )
+            mu_s_t, mu_d_t = body.mu_s, body.mu_d
             for e, th in fric_fx:
-                mu_s, mu_d = e.friction(th, mu_s, mu_d, slip)
+                mu_s_t, mu_d_t = e.friction(th, mu_s_t, mu_d_t, slip)
+            mu_s, mu_d = _hook_out(mu_s_t), _hook_out(mu_d_t)
         cw = c_r * wf
-        stop_norm = torch.sqrt(speed2 + (cw / kr) ** 2)
-        xi = torch.sqrt(speed2 + cw * cw) + 1e-15
+        stop_norm = np.sqrt(speed2 + (cw / kr) ** 2)
+        xi = np.sqrt(speed2 + cw * cw) + 1e-15
         stick = stop_norm <= mu_s * lam_n
         budget = mu_d * lam_n
-        f_t = torch.where(stick, torch.zeros_like(xi), (1.0 - budget / xi).clamp(min=0.0))
-        f_r = torch.where(stick, torch.zeros_like(xi), (1.0 - budget * kr / xi).clamp(min=0.0))
-        f_t = torch.where(contact, f_t, torch.ones_like(f_t))
-        f_r = torch.where(contact, f_r, torch.ones_like(f_r))
+        f_t = np.where(stick, 0.0, np.maximum(1.0 - budget / xi, 0.0))
+        f_r = np.where(stick, 0.0, np.maximum(1.0 - budget * kr / xi, 0.0))
+        f_t = np.where(contact, f_t, 1.0)
+        f_r = np.where(contact, f_r, 1.0)
         vx = vx * f_t
         vy = vy * f_t
         wf = wf * f_r
@@ -555,7 +598,8 @@ def simulate(
             vx, vy, wf, jx, jy = _pusher_impulse(
                 scene,
                 p,
-                yaw,
+                np.cos(yaw),
+                np.sin(yaw),
                 vx,
                 vy,
                 wf,
@@ -563,57 +607,61 @@ def simulate(
                 com_y,
                 mass,
                 inertia,
-                pusher[:, k],
-                pvel[:, k],
-                ee_yaw[:, k],
-                ee_rate[:, k],
+                pts_all[:, k],
+                pv_all[:, k],
                 grasp[:, k],
                 dt,
             )
             if impulse is not None and bins_any[k]:
                 b = wbin[:, k]  # [T]
-                ts = torch.nonzero(b >= 0).squeeze(1)
-                impulse[:, ts, b[ts]] += torch.stack([jx, jy], -1)[:, ts]
+                ts = np.flatnonzero(b >= 0)
+                impulse[:, ts, b[ts]] += np.stack([jx, jy], -1)[:, ts]
 
-        v_new = torch.stack([vx, vy, vz], dim=-1)
+        v_new = np.stack([vx, vy, vz], axis=-1)
         p = p + dt * v_new
-        if bool(rebound.any()):
-            z_up = z_rest + vz * (dt - toi)
-            p = torch.cat([p[..., :2], torch.where(rebound, z_up, p[..., 2]).unsqueeze(-1)], -1)
+        if rebound.any():
+            toi = np.minimum(np.maximum(gap, 0.0) / np.maximum(approach, 1e-9), dt)
+            p[..., 2] = np.where(rebound, z_rest + vz * (dt - toi), p[..., 2])
         yaw = yaw + dt * wf
         v, w = v_new, wf
 
         if grasp_any[k + 1]:
-            att = grasp[:, k + 1].view(1, n_t)
-            ey_ = ee_yaw[:, k + 1].unsqueeze(0)
-            rx, ry = yaw_rotate(rel_p[..., 0], rel_p[..., 1], ey_)
-            cp = pusher[:, k + 1].unsqueeze(0)
-            p_att = torch.stack(
-                [cp[..., 0] + rx, cp[..., 1] + ry, cp[..., 2] + rel_p[..., 2]], dim=-1
+            att = grasp[None, :, k + 1]
+            ey_ = ee_yaw[None, :, k + 1]
+            c, s = np.cos(ey_), np.sin(ey_)
+            rx = c * rel_p[..., 0] - s * rel_p[..., 1]
+            ry = s * rel_p[..., 0] + c * rel_p[..., 1]
+            cp = pusher[None, :, k + 1]
+            p_att = np.stack([cp[..., 0] + rx, cp[..., 1] + ry, cp[..., 2] + rel_p[..., 2]], -1)
+            rate_ = ee_rate[None, :, k + 1]
+            cv = cvel_all[None, :, k + 1]
+            v_att = np.stack(
+                [
+                    cv[..., 0] - rate_ * ry,
+                    cv[..., 1] + rate_ * rx,
+                    np.broadcast_to(cv[..., 2], rx.shape),
+                ],
+                -1,
             )
-            rate_ = ee_rate[:, k + 1].unsqueeze(0)
-            cv = cvel_all[:, k + 1].unsqueeze(0)
-            v_att = torch.stack(
-                [cv[..., 0] - rate_ * ry, cv[..., 1] + rate_ * rx, cv[..., 2].expand_as(rx)], dim=-1
-            )
-            p = torch.where(att.unsqueeze(-1), p_att, p)
-            v = torch.where(att.unsqueeze(-1), v_att, v)
-            yaw = torch.where(att, ey_ + rel_yaw, yaw)
-            w = torch.where(att, rate_.expand_as(w), w)
-        traj_p.append(p)
-        traj_y.append(yaw)
+            p = np.where(att[..., None], p_att, p)
+            v = np.where(att[..., None], v_att, v)
+            yaw = np.where(att, ey_ + rel_yaw, yaw)
+            w = np.where(att, rate_, w)
+        last = k + 1
+        dense_p[:, :, last], dense_y[:, :, last] = p, yaw
 
-    dense_p = torch.stack(traj_p, dim=2)  # CoM [M, T, S, 3]
-    dense_y = torch.stack(traj_y, dim=2)
-    if dense_p.shape[2] < n_s:  # stopped early: everything rests from here on
-        pad = n_s - dense_p.shape[2]
-        dense_p = torch.cat([dense_p, dense_p[:, :, -1:].expand(-1, -1, pad, -1)], dim=2)
-        dense_y = torch.cat([dense_y, dense_y[:, :, -1:].expand(-1, -1, pad)], dim=2)
-    offx, offy = yaw_rotate(com_x.unsqueeze(-1), com_y.unsqueeze(-1), dense_y)
-    dense_o = torch.stack([dense_p[..., 0] - offx, dense_p[..., 1] - offy, dense_p[..., 2]], dim=-1)
+    # stopped early: everything rests from here on
+    dense_p[:, :, last + 1 :] = dense_p[:, :, last : last + 1]
+    dense_y[:, :, last + 1 :] = dense_y[:, :, last : last + 1]
+    dense_p_t, dense_y_t = torch.from_numpy(dense_p), torch.from_numpy(dense_y)
+    com_x_t, com_y_t = body.com[..., 0], body.com[..., 1]
+    offx, offy = yaw_rotate(com_x_t.unsqueeze(-1), com_y_t.unsqueeze(-1), dense_y_t)
+    dense_o = torch.stack(
+        [dense_p_t[..., 0] - offx, dense_p_t[..., 1] - offy, dense_p_t[..., 2]], dim=-1
+    )
 
     # ---- observation: sample at (effect-mapped) stamps, then map into the sensor frame --------
-    t_q = drive.obs_t.to(dev, dt_).unsqueeze(0).expand(m_sets, n_t, -1)
+    t_q = drive.obs_t.detach().cpu().to(dt_).unsqueeze(0).expand(m_sets, n_t, -1)
     for e, th in sensor_fx:
         t_q = e.sample_times(_lift(th), t_q)
     fidx = (t_q / dt).clamp(0.0, n_s - 1 - 1e-9)
@@ -625,14 +673,20 @@ def simulate(
     pos = torch.gather(dense_o, 2, idx0) * (1 - frac).unsqueeze(-1) + torch.gather(
         dense_o, 2, idx1
     ) * frac.unsqueeze(-1)
-    yaw_s = torch.gather(dense_y, 2, i0) * (1 - frac) + torch.gather(dense_y, 2, i1) * frac
+    yaw_s = torch.gather(dense_y_t, 2, i0) * (1 - frac) + torch.gather(dense_y_t, 2, i1) * frac
     for e, th in sensor_fx:
         pos, yaw_s = e.to_sensor(_lift(th), pos, yaw_s)
     force = None
     if impulse is not None:
-        width = drive.wrench_width.to(dev, dt_).clamp(min=dt).unsqueeze(0).unsqueeze(-1)
-        force = torch.nn.functional.pad(impulse / width, (0, 1))
-    return SimResult(pos=pos, yaw=yaw_s, dense_pos=dense_o, dense_yaw=dense_y, force=force)
+        width = drive.wrench_width.detach().cpu().to(dt_).clamp(min=dt).unsqueeze(0).unsqueeze(-1)
+        force = torch.nn.functional.pad(torch.from_numpy(impulse) / width, (0, 1)).to(dev)
+    return SimResult(
+        pos=pos.to(dev),
+        yaw=yaw_s.to(dev),
+        dense_pos=dense_o.to(dev),
+        dense_yaw=dense_y_t.to(dev),
+        force=force,
+    )
 
 
 def _lift(th: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
