@@ -39,6 +39,7 @@ Not modelled here: ``friction_static`` (MuJoCo has one Coulomb coefficient).
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import fields
 from typing import Any
 
 import mujoco
@@ -484,29 +485,63 @@ class MujocoFit:
         park: np.ndarray,
         pstate: np.ndarray | None = None,
     ) -> np.ndarray:
-        """:meth:`_run` on one ``mujoco.batch.Batch``: every rollout keeps its state, solver
+        """:meth:`_run` on one ``mujoco.batch.Batch``. Every rollout keeps its state, solver
         warm start included, from call to call, so it is the same whether its steps are taken
-        in one call or one at a time (bit-identical to an ``mj_step`` loop); the full physics
-        state rows ``x`` are read back only where Python acts (grasps, parking, forces)."""
+        in one call or one at a time (bit-identical to an ``mj_step`` loop). That lets each
+        group of rollouts with the same needs run its own schedule: only the rollouts of a
+        grasping trajectory step alone while it grasps, and only those whose set switches a
+        force effect on step alone throughout (a set with every force effect at its zero
+        value gets no applied force, as on the ``rollout`` path, where it is computed as 0)."""
         from mujoco import batch as mj_batch
 
-        n_s = drive.n_steps
         n_r = len(t_of)
-        full = mujoco.mjtState.mjSTATE_FULLPHYSICS
         b = mj_batch.Batch(self.eng.model, nsim=n_r, nthread=self.eng.threads)
         b.set_models(models_r)
         b.state[:] = 0.0
         b.state[:, self._int_cols] = x[:, self._full_cols]
+        dense = np.empty((n_r, drive.n_steps, 7))
+        # rollouts with a force effect step alone throughout (one group); of the others, a
+        # trajectory that grasps or parks its pusher has its own schedule, the rest share one
+        events = grasp.any(1) | (np.diff(park, axis=1) != 0).any(1)
+        force = _active_rows(force_fx, n_r)
+        key = np.where(force, -2, np.where(events[t_of], t_of, -1))
+        for g in np.unique(key):
+            ids = np.flatnonzero(key == g)
+            fx = [(e, {k: v[ids] for k, v in th.items()}) for e, th in force_fx] if g == -2 else []
+            self._batch_group(
+                b,
+                ids,
+                x[ids],
+                ctrl,
+                t_of[ids],
+                drive,
+                _take(body, ids),
+                fx,
+                grasp,
+                park,
+                dense,
+                pstate,
+            )
+        return dense
+
+    def _batch_group(
+        self, b, ids, x, ctrl, t_of, drive, body, force_fx, grasp, park, dense, pstate
+    ):
+        """Run rollouts ``ids`` of batch ``b`` (start states ``x``, trajectories ``t_of``) on
+        their common schedule; fills ``dense`` and ``pstate`` rows ``ids``."""
+        n_s = drive.n_steps
+        full = mujoco.mjtState.mjSTATE_FULLPHYSICS
         xfrc = b.bind("xfrc_applied") if force_fx else None
         x = np.array(x)
-        dense = np.empty((n_r, n_s, 7))
-        dense[:, 0] = self.lay.pose(x)
+        dense[ids, 0] = self.lay.pose(x)
         if pstate is not None:
-            pstate[:, 0] = x[:, self._pcols]
-        single, onset, g_any = _schedule(grasp, park, bool(force_fx))
+            pstate[ids, 0] = x[:, self._pcols]
+        mine = np.unique(t_of)
+        single, _, g_any = _schedule(grasp[mine], park[mine], bool(force_fx))
+        _, onset, _ = _schedule(grasp, park, False)
         pusher, ee_yaw, cvel, rate = _drive_arrays(drive)
-        rel_p = np.zeros((n_r, 3))
-        rel_q = np.tile([1.0, 0, 0, 0], (n_r, 1))
+        rel_p = np.zeros((len(ids), 3))
+        rel_q = np.tile([1.0, 0, 0, 0], (len(ids), 1))
         if onset[:, 0].any():
             rel_p, rel_q = self._grasp_rel(
                 x, pusher[:, 0], ee_yaw[:, 0], t_of, onset[:, 0], rel_p, rel_q
@@ -519,26 +554,25 @@ class MujocoFit:
                     x, pusher[:, k], ee_yaw[:, k], t_of, onset[:, k + 1], rel_p, rel_q
                 )
             if xfrc is not None:
-                xfrc[:, self.slots.body] = self._forces(x, body, force_fx)
+                xfrc[ids, self.slots.body] = self._forces(x, body, force_fx)
             c = ctrl[t_of, k : k + n] if ctrl.shape[-1] else None
-            state = b.rollout(n, control=c, record=(full,))[full]
-            dense[:, k + 1 : k + 1 + n] = self.lay.pose(state)
+            state = b.rollout(n, control=c, record=(full,), ids=ids)[full]
+            dense[ids, k + 1 : k + 1 + n] = self.lay.pose(state)
             if pstate is not None:
-                pstate[:, k + 1 : k + 1 + n] = state[:, :, self._pcols]
+                pstate[ids, k + 1 : k + 1 + n] = state[:, :, self._pcols]
             x = np.array(state[:, -1])
             k += n
             edit = False
-            if self.pq is not None and (park[:, k] != park[:, k - 1]).any():
+            if self.pq is not None and (park[mine, k] != park[mine, k - 1]).any():
                 x[:, self.pq + 2] += (park[:, k] - park[:, k - 1])[t_of]
                 edit = True
             if g_any[k]:
                 hold = grasp[t_of, k]
                 self._attach(x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q)
-                dense[hold, k] = self.lay.pose(x[hold])
+                dense[ids[hold], k] = self.lay.pose(x[hold])
                 edit = True
             if edit:
-                b.state[:, self._int_cols] = x[:, self._full_cols]
-        return dense
+                b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
 
     def _grasp_rel(self, x, p_ee, yaw_ee, t_of, on_t, rel_p, rel_q):
         """Freeze the object pose in the EE yaw frame for rollouts whose grasp starts now."""
@@ -580,7 +614,7 @@ class MujocoFit:
         w = w_world[:, 2]
         # velocity of the CoM = origin velocity + omega x (R ipos)
         com = _rot(q, np.asarray(body.com.numpy())[:, 0])
-        vc = v + np.cross(w_world, com)
+        vc = v + _cross(w_world, com)
         yaw = quat_yaw(q)
         gap = x[:, self.qa + 2] - (self.table_z + self.half_z)
         f = step_forces(
@@ -611,6 +645,24 @@ def _schedule(
     if force:
         single[:] = True
     return single, onset, g_any
+
+
+def _active_rows(force_fx: list, n_r: int) -> np.ndarray:
+    """[R] bool: the row's set moves some force effect off its switched-off values."""
+    out = np.zeros(n_r, bool)
+    for e, th in force_fx:
+        if not e.params:
+            out[:] = True
+        zero = {p.name: p.zero for p in e.params}
+        for k, v in th.items():
+            out |= (v != zero[k]).reshape(n_r, -1).any(1).numpy()
+    return out
+
+
+def _take(body: Any, ids: np.ndarray) -> Any:
+    """Rows ``ids`` of a :class:`~robogs.physics.model.Body` ([M, 1] tensors)."""
+    idx = torch.as_tensor(ids)
+    return type(body)(**{f.name: getattr(body, f.name)[idx] for f in fields(body)})
 
 
 def _span(single: np.ndarray, k: int, n_s: int) -> int:
@@ -707,8 +759,16 @@ def _rot(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     if v.shape[-1] == 2:
         v = np.concatenate([v, np.zeros(v.shape[:-1] + (1,))], -1)
     u, w = q[..., 1:], q[..., :1]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    t = 2.0 * _cross(u, v)
+    return v + w * t + _cross(u, t)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products of [..., 3] vectors (``np.cross``'s values, without its per-call cost:
+    the force effects call it every step)."""
+    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
+    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], -1)
 
 
 def _rot_t(q: np.ndarray, v: np.ndarray) -> np.ndarray:

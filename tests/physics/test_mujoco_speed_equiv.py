@@ -1,0 +1,229 @@
+"""The fast MuJoCo fitting path gives the old path's answers (issue 16, speed).
+
+``MujocoFit`` runs its rollouts on ``mujoco.batch`` (persistent states, per-group schedules,
+each distinct rollout once). Oracles:
+
+* without steps taken alone (no grasp, no force effect) the old ``mujoco.rollout`` path
+  (``stepper="rollout"``) must agree within 1e-9 m;
+* with a per-step force effect (on in one set, off in the other) and a grasp-and-release
+  trajectory beside a push, a plain loop of ``mj_step`` on one ``MjData`` per rollout, the force
+  computed every step for every rollout, must agree within 1e-9 m; the old path, whose single
+  steps restart the solver cold, stays within the stated bound;
+* a rollout repeated in the batch (a sensor-only change, an untouched trajectory) is run once and
+  gives the same poses as its own call.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+import torch
+
+pytest.importorskip("mujoco.batch")
+
+from robogs.format.errors import InputError  # noqa: E402
+from robogs.physics.effects import get_effect  # noqa: E402
+from robogs.physics.engines import mujoco_fit  # noqa: E402
+from robogs.physics.engines.base import make_drive  # noqa: E402
+from robogs.physics.engines.mujoco_fit import MujocoFit  # noqa: E402
+from robogs.physics.scene import base_params, scene_from_physics  # noqa: E402
+from robogs.physics.space import ParamSpace  # noqa: E402
+
+DT = 1e-3
+HZ = 0.025  # box half height [m]
+OLD_PATH_BOUND_M = 1e-5
+"""Bound on |batch - rollout path| with single steps: the rollout path restarts MuJoCo's solver
+cold at every call (each single step), the batch keeps the warm start; the converged contact
+forces differ within the solver tolerance (measured up to 5e-7 m on the 9-push scenario)."""
+
+
+def _physics() -> dict:
+    return {
+        "gravity_mps2": [0.0, 0.0, -9.81],
+        "objects": {
+            "box": {
+                "equation": "rigid",
+                "mass_kg": 0.4,
+                "size_m": [0.08, 0.06, 0.05],
+                "friction_dynamic": 0.3,
+                "friction_static": 0.3,
+            },
+            "table": {"equation": "static", "plane_z_m": 0.0},
+            "pusher": {"equation": "kinematic", "shape": "sphere", "radius_m": 0.01},
+        },
+    }
+
+
+def _ramp(n: int, v: float, start: int = 0, ramp: int = 60) -> np.ndarray:
+    """[n] positions [m] of a smooth start to speed ``v`` [m/s] at step ``start``."""
+    s = np.clip((np.arange(n) - start) / ramp, 0.0, 1.0)
+    vel = v * s * s * (3 - 2 * s)
+    return np.concatenate([[0.0], np.cumsum(vel[:-1]) * DT])
+
+
+def _drive(grasp: bool, n: int = 401):
+    """Trajectory 0: a push along +x, 20 mm off the centre line. Trajectory 1: a box carried
+    along +x from rest (grasped from the start), released at step 200 to slide (``grasp``), or
+    a centred push."""
+    pusher = np.zeros((2, n, 3))
+    pusher[0, :, 0] = -0.058 + _ramp(n, 0.25)
+    pusher[0, :, 1] = 0.02
+    pusher[:, :, 2] = HZ
+    if grasp:
+        pusher[1, :, 0] = _ramp(n, 0.4)
+    else:
+        pusher[1, :, 0] = -0.058 + _ramp(n, 0.3)
+    obs = np.tile(np.linspace(0.0, (n - 1) * DT, 21), (2, 1))
+    drive = make_drive(DT, pusher, np.zeros((2, n)), obs, np.array([[0, 0, HZ]] * 2), np.zeros(2))
+    if grasp:
+        drive.grasp[1, :200] = True
+    return drive
+
+
+def _setup(effects: list[str]):
+    phys = _physics()
+    scene = scene_from_physics(phys, "box", dt=DT)
+    space = ParamSpace(base_params(scene), [get_effect(n) for n in effects])
+    return phys, scene, space
+
+
+def _sets(space: ParamSpace, n: int = 2) -> torch.Tensor:
+    """``n`` parameter sets: the nominal base, the second with 10 % more dynamic friction."""
+    th = np.stack([space.zero] * n)
+    c = space.index("base", "friction_dynamic")
+    th[1, c] = th[0, c] * 1.1
+    return torch.as_tensor(th)
+
+
+def _dense(sim: MujocoFit, th, space, drive, scene, local=None) -> np.ndarray:
+    out = sim.simulate(th, space, drive, scene, init_offset=local)
+    return out.dense_pos.numpy()
+
+
+def test_batch_equals_rollout_path_without_single_steps(monkeypatch):
+    """Two friction values x two pushes: the batch and the old rollout path agree within 1e-9 m
+    when the old path runs each rollout in one call; with its 256-step calls (each restarting
+    the solver cold: 3e-9 m here) within OLD_PATH_BOUND_M."""
+    phys, scene, space = _setup([])
+    drive = _drive(grasp=False)
+    th = _sets(space)
+    a = _dense(MujocoFit(phys, "box", dt=DT, stepper="batch"), th, space, drive, scene)
+    old = MujocoFit(phys, "box", dt=DT, stepper="rollout")
+    b = _dense(old, th, space, drive, scene)
+    assert np.ptp(a[..., 0], axis=-1).min() > 0.02  # the boxes were pushed
+    assert np.abs(a[0] - a[1]).max() > 1e-4  # the friction change shows
+    assert np.abs(a - b).max() <= OLD_PATH_BOUND_M, np.abs(a - b).max()
+    monkeypatch.setattr(mujoco_fit, "_MAX_CHUNK", drive.n_steps)
+    b = _dense(old, th, space, drive, scene)
+    assert np.abs(a - b).max() <= 1e-9, np.abs(a - b).max()
+    c = _dense(MujocoFit(phys, "box", dt=DT, stepper="batch"), th, space, drive, scene)
+    assert np.array_equal(a, c)  # the batch does not depend on its call lengths
+
+
+def _mj_step_loop(sim: MujocoFit, args: dict) -> np.ndarray:
+    """Dense poses [R, S, 7]: one MjData per rollout, one ``mj_step`` per step, the force
+    effects' wrench computed every step for every rollout, grasps applied as the runner does."""
+    full = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    drive, t_of = args["drive"], args["t_of"]
+    n_s = drive.n_steps
+    grasp, park, body, force_fx = args["grasp"], args["park"], args["body"], args["force_fx"]
+    pusher = drive.pusher.numpy()
+    ee_yaw = drive.ee_yaw.numpy()
+    cvel = drive.pusher_vel.numpy()
+    rate = drive.ee_yaw_rate.numpy()
+    onset = grasp & ~np.pad(grasp, ((0, 0), (1, 0)))[:, :-1]
+    out = np.empty((len(t_of), n_s, 7))
+    for r, t in enumerate(t_of):
+        m = args["models_r"][r]
+        d = mujoco.MjData(m)
+        mujoco.mj_setState(m, d, args["x"][r], full)
+        x = np.empty((1, mujoco.mj_stateSize(m, full)))
+        mujoco.mj_getState(m, d, x[0], full)
+        out[r, 0] = sim.lay.pose(x)[0]
+        tt = np.array([t])
+        rel_p, rel_q = np.zeros((1, 3)), np.array([[1.0, 0, 0, 0]])
+        body_r = type(body)(**{k: v[r : r + 1] for k, v in vars(body).items()})
+        fx_r = [(e, {k: v[r : r + 1] for k, v in th.items()}) for e, th in force_fx]
+        if onset[t, 0]:
+            rel_p, rel_q = sim._grasp_rel(
+                x, pusher[:, 0], ee_yaw[:, 0], tt, onset[:, 0], rel_p, rel_q
+            )
+        for k in range(n_s - 1):
+            if onset[t, k + 1]:
+                rel_p, rel_q = sim._grasp_rel(
+                    x, pusher[:, k], ee_yaw[:, k], tt, onset[:, k + 1], rel_p, rel_q
+                )
+            if fx_r:
+                d.xfrc_applied[:] = 0.0
+                d.xfrc_applied[sim.slots.body] = sim._forces(x, body_r, fx_r)[0]
+            d.ctrl[:] = args["ctrl"][t, k]
+            mujoco.mj_step(m, d)
+            mujoco.mj_getState(m, d, x[0], full)
+            if sim.pq is not None:
+                x[0, sim.pq + 2] += park[t, k + 1] - park[t, k]
+            if grasp[t, k + 1]:
+                sim._attach(
+                    x, np.array([True]), tt, k + 1, pusher, ee_yaw, cvel, rate, rel_p, rel_q
+                )
+            mujoco.mj_setState(m, d, x[0], full)
+            out[r, k + 1] = sim.lay.pose(x)[0]
+    return out
+
+
+def test_batch_with_force_effect_and_grasp_equals_mj_step_loop():
+    """Quadratic drag on in set 1 (off in set 0), a push beside a carry-and-release: the batch
+    runner equals a plain mj_step loop (1e-9 m) and the old rollout path within
+    OLD_PATH_BOUND_M."""
+    phys, scene, space = _setup(["quadratic_drag"])
+    drive = _drive(grasp=True)
+    th = _sets(space)
+    th[1, space.owner_columns("quadratic_drag")[0]] = 2.0
+    sim = MujocoFit(phys, "box", dt=DT, stepper="batch")
+    seen = {}
+    run = sim._run_batch
+
+    def spy(models_r, x, ctrl, t_of, drive, body, force_fx, grasp, park, pstate=None):
+        seen.update(models_r=models_r, x=np.array(x), ctrl=ctrl, t_of=t_of, drive=drive)
+        seen.update(body=body, force_fx=force_fx, grasp=grasp, park=park)
+        out = run(models_r, x, ctrl, t_of, drive, body, force_fx, grasp, park, pstate)
+        seen["dense"] = out
+        return out
+
+    sim._run_batch = spy
+    a = _dense(sim, th, space, drive, scene)
+    assert sim.last_rollouts == 4
+    assert np.ptp(a[:, 1, :, 0], axis=-1).min() > 0.05  # carried and slid
+    assert np.abs(a[0] - a[1]).max() > 1e-4  # drag and friction show
+    ref = _mj_step_loop(sim, seen)
+    assert np.abs(seen["dense"] - ref).max() <= 1e-9, np.abs(seen["dense"] - ref).max()
+    b = _dense(MujocoFit(phys, "box", dt=DT, stepper="rollout"), th, space, drive, scene)
+    assert np.abs(a - b).max() <= OLD_PATH_BOUND_M, np.abs(a - b).max()
+
+
+def test_repeated_rollouts_run_once_and_agree_with_their_own_call():
+    """Rows: base, base + time offset (sensor only), more friction, base again; trajectory 1 of
+    the base shifted 0.1 mm in one row. 2 dynamics sets x 2 trajectories + 1 shifted start =
+    5 distinct rollouts of 8, each equal to the same row simulated alone."""
+    phys, scene, space = _setup(["time_offset"])
+    drive = _drive(grasp=False, n=201)
+    th = torch.as_tensor(np.stack([space.zero] * 4))
+    th[1, space.owner_columns("time_offset")[0]] = 2e-3
+    th[2, space.index("base", "friction_dynamic")] *= 1.2
+    local = torch.zeros((4, 2, 3), dtype=torch.float64)
+    local[3, 1, 0] = 1e-4
+    sim = MujocoFit(phys, "box", dt=DT)
+    got = sim.simulate(th, space, drive, scene, init_offset=local)
+    assert sim.last_rollouts == 5
+    for i in range(4):
+        one = sim.simulate(th[i : i + 1], space, drive, scene, init_offset=local[i : i + 1])
+        assert sim.last_rollouts == 2
+        assert torch.equal(one.dense_pos[0], got.dense_pos[i])
+        assert torch.equal(one.pos[0], got.pos[i])
+    assert torch.equal(got.dense_pos[0], got.dense_pos[1])  # a sensor parameter: same motion
+    assert not torch.equal(got.pos[0], got.pos[1])  # ... sampled later
+
+
+def test_unknown_stepper_is_refused():
+    with pytest.raises(InputError, match="stepper"):
+        MujocoFit(_physics(), "box", dt=DT, stepper="gpu")
