@@ -208,35 +208,37 @@ def _face_mean_radius(n: int = 1000) -> float:
 
 
 @pytest.mark.parametrize("joints", ["auto", "free"])
-def test_a_box_sliding_at_half_a_metre_per_second_stays_on_the_table(joints: str) -> None:
-    """Coulomb slide at 0.5 m/s: the box stops after v^2 / (2 mu g) (1 mm) and, on the planar
-    joint set, never leaves the table by more than 0.05 mm. The free joint with the 3-D
-    settings hops (MuJoCo's soft elliptic cone turns slip into a normal push): the bound
-    catches it (0.35 mm measured)."""
+def test_a_sliding_box_stays_on_the_table(joints: str) -> None:
+    """Coulomb slides at 0.3 and 0.5 m/s: the box stops after v^2 / (2 mu g) (1 mm) and, on
+    the planar joint set, leaves the table by at most 0.05 mm at 0.3 m/s and 0.15 mm at
+    0.5 m/s (27 and 105 um measured). MuJoCo's soft elliptic cone turns slip into a normal
+    push of about mu b |v| (b the friction rows' reference damping); the free joint with the
+    3-D settings hops 133 and 297 um: the bounds catch it."""
     from robogs.physics.engines.base import ObjectState
     from robogs.physics.engines.mujoco_engine import MujocoEngine
 
     eng = MujocoEngine(_doc(), joints=joints)
     assert eng.planar == (joints == "auto")
-    v0 = 0.5
-    out = eng.rollout(
-        _dense_drive(2 * v0 / (MU * G) + 0.3),
-        {
-            "box": ObjectState(
-                pos=np.array([[0.0, 0.0, SIZE[2] / 2]]),
-                quat=np.array([[1.0, 0, 0, 0]]),
-                vel=np.array([[v0, 0.0, 0.0]]),
-            )
-        },
-    )
-    p = out.pos["box"][0, 0]
-    assert abs(p[-1, 0] - v0**2 / (2 * MU * G)) < 1e-3
-    hop = float(np.max(p[:, 2] - p[-1, 2]))
+    hops = []
+    for v0, bound in ((0.3, 5e-5), (0.5, 1.5e-4)):
+        out = eng.rollout(
+            _dense_drive(2 * v0 / (MU * G) + 0.3),
+            {
+                "box": ObjectState(
+                    pos=np.array([[0.0, 0.0, SIZE[2] / 2]]),
+                    quat=np.array([[1.0, 0, 0, 0]]),
+                    vel=np.array([[v0, 0.0, 0.0]]),
+                )
+            },
+        )
+        p = out.pos["box"][0, 0]
+        assert abs(p[-1, 0] - v0**2 / (2 * MU * G)) < 1e-3
+        hops.append((float(np.max(p[:, 2] - p[-1, 2])), bound))
     if joints == "auto":
-        assert hop < 5e-5, hop
+        assert all(h < b for h, b in hops), hops
         assert abs(p[-1, 2] - SIZE[2] / 2) < 1e-5  # the central contact's 8.5 um penetration
     else:
-        assert hop > 1e-4, hop
+        assert all(h > b for h, b in hops), hops
 
 
 @pytest.mark.parametrize(("joints", "tol_deg"), [("auto", 0.5), ("free", None)])

@@ -112,7 +112,7 @@ JOINTS = ("auto", "free", "planar")
 z: no roll or pitch), ``auto`` (planar where :func:`planar_joints_fit` says the scene allows)."""
 
 PLANAR_SETTINGS = ContactSettings(
-    footprint_grid=1, footprint_torsion=True, solreffriction=(0.02, 1.0)
+    footprint_grid=1, footprint_torsion=True, solreffriction=(0.01, 1.0)
 )
 """Contact settings of the planar joint set (see the module docstring, "Planar joint set")."""
 
