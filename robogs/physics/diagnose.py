@@ -63,6 +63,7 @@ __all__ = [
     "plot_path",
     "quasi_static",
     "rival_cutoff",
+    "sign_flip_floor",
     "start_points",
     "DBIC_MAX",
     "RIVAL_COSINE",
@@ -703,6 +704,14 @@ def diagnose_recording(
                 f"held-out step halved in {halved[i]} of {len(folds)} folds (the linearised step "
                 "raised the training chi^2)"
             )
+        p_floor = sign_flip_floor(cal.method, int(acts.sum()))
+        if ident and not gate and p_floor is not None and p_floor > cal.alpha_adj:
+            rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
+                f"only {int(acts.sum())} of {prep.n_traj} trajectories carry it: a sign per "
+                f"trajectory cannot give it a null p-value below {p_floor:.4f}, above the "
+                f"family-wise level {cal.alpha_adj:.4f}, so at its linearisation it cannot pass "
+                "whatever its size; more trajectories of the kinds it acts on would let it"
+            )
     feats = design_features(prep.rec, float(prep.noise.sigma_pos))
     _rivals(rows, deltas, feats)
     rows.sort(key=lambda r: (not r.reported, r.delta_bic))
@@ -729,6 +738,17 @@ def diagnose_recording(
             "n_trajectories": prep.n_traj,
         },
     )
+
+
+def sign_flip_floor(method: str, carrying: int) -> float | None:
+    """Smallest null p-value a sign-per-trajectory (Rademacher) wild null can give an effect
+    that ``carrying`` trajectories carry: ``2^-(carrying-1)``, since flipping a trajectory it
+    does not act on leaves its statistic unchanged and ``w``, ``-w`` give the same one (an exact
+    randomisation test's resolution). None when the calibration's ``method`` is not that null
+    (white noise only, or Webb's six-point weights)."""
+    if not method.startswith(("both", "wild")) or "Webb" in method or "white-noise" in method:
+        return None
+    return 2.0 ** -(max(carrying, 1) - 1)
 
 
 def _calibrate(

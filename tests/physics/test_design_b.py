@@ -158,3 +158,26 @@ def test_five_trajectories_gate_is_still_derived_from_the_data(tmp_path, monkeyp
     top = res.reported[0]
     assert top.heldout_gain_sigma2 > top.null_threshold_sigma2
     assert abs(top.params[0].value - rec.meta["true_params"]["delta"]) < 2e-3
+
+
+def test_sign_flip_floor_against_brute_force_enumeration():
+    """A one-parameter linear effect carried by ``m`` of ``T`` trajectories (per-trajectory
+    score ``c_t``, zero where it does not act): over every sign pattern with a fixed first sign,
+    the statistic ``(sum w_t c_t)^2`` reaches the observed (all plus) value at least
+    ``2^(T-m)`` times, so no p-value is below ``2^-(m-1)``, what :func:`sign_flip_floor` says."""
+    from robogs.physics.diagnose import sign_flip_floor
+
+    rng = np.random.default_rng(1)
+    t_n = 9
+    for m in (5, 8, 9):
+        c = np.zeros(t_n)
+        c[:m] = rng.uniform(1.0, 2.0, m)  # the effect pushes every carrying trajectory one way
+        bits = (np.arange(2 ** (t_n - 1))[:, None] >> np.arange(t_n - 1)[None]) & 1
+        w = np.concatenate([np.ones((len(bits), 1)), 1.0 - 2.0 * bits], axis=1)
+        stat = (w @ c) ** 2
+        p = np.mean(stat >= stat[0] - 1e-12)
+        assert p == pytest.approx(sign_flip_floor("both", m))
+    assert (
+        sign_flip_floor("both (5 trajectories: Webb six-point weights (23328 patterns))", 4) is None
+    )
+    assert sign_flip_floor("white", 8) is None
