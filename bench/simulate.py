@@ -1,20 +1,28 @@
 """Rollout throughput of the two engines on the 9-push scene, and of a 64-candidate batch.
 
 The fitter's finite-difference Jacobians and the diagnosis run many parameter sets at once.
-Scenario: 9 pushes (robogs.synth.scenarios), dt = 1 ms. Measured in one run:
+Scenario: 9 pushes (robogs.synth.scenarios), dt = 1 ms. Measured in one run, each figure with
+its wall time, the process's CPU time (all its threads) and the 1-minute load average around it
+(on a shared machine the CPU time is the idle-machine estimate of a one-thread figure):
 
-* planar (torch): a batch of 64 parameter sets in one rollout vs 64 single rollouts, full
-  effect catalogue in the parameter space (its rollouts stop once every box rests and the end
-  effector no longer moves; steps are counted on the full grid);
-* mujoco: steps per second of one rollout of the scene (9 trajectories), and a 64-candidate
-  finite-difference batch (64 friction values x 9 trajectories = 576 MuJoCo rollouts) on
-  ``mujoco.rollout`` with 1 and 2 threads;
-* the fitting path (``Engine.evaluate`` on each backend): 64 parameter sets over the full
-  catalogue, with no effect, a model-parameter effect (viscous damping: MuJoCo DOF damping) and
-  a per-step force effect (Stribeck: one ``mujoco.rollout`` call per step);
-* the ratio of the two engines' 64-candidate times.
+* planar (torch): a batch of 64 parameter sets in one rollout vs 64 single rollouts
+  (``--no-single`` skips the singles), full effect catalogue in the parameter space (its rollouts
+  stop once every box rests and the end effector no longer moves; steps are counted on the full
+  grid);
+* mujoco engine interface (``MujocoEngine.rollout``): steps per second of one rollout of the
+  scene (9 trajectories) and of 64 friction values x 9 trajectories = 576 MuJoCo rollouts on
+  ``mujoco.rollout``, 1 and 2 threads;
+* the fitting path (``Engine.evaluate``): 64 parameter sets over the full catalogue, with no
+  effect, a model-parameter effect (viscous damping: MuJoCo DOF damping), a per-step force
+  effect in every set (Stribeck) and in 16 of the 64 (the diagnosis's joint fits: the other
+  candidates' sets beside them), on the previous runner (``stepper="rollout"``: one
+  ``mujoco.rollout`` call per chunk, and per step for every set once any set applies a force)
+  and on ``mujoco.batch`` (``stepper="batch"``) with 1 and 2 threads;
+* one forward-difference Jacobian over the full catalogue (``robogs.physics.fit.jacobian_fd``:
+  base point, one row per column, three local-offset rows), both runners (the batch runs each
+  distinct rollout once: the sensor columns' rows repeat the base point's motion).
 
-    .venv/bin/python bench/simulate.py [--no-write]
+    .venv/bin/python bench/simulate.py [--no-write] [--no-single]
 """
 
 from __future__ import annotations
@@ -24,6 +32,7 @@ import os
 import platform
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -32,128 +41,186 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-
-def _planar(m: int) -> tuple[dict[str, float], object]:
-    from robogs.physics.effects import available_effects, get_effect
-    from robogs.physics.engine import Engine
-    from robogs.synth.scenarios import make_scenario
-
-    rec = make_scenario("none", seed=0, kinds=("push",))
-    eng = Engine(rec)
-    space = eng.space([get_effect(n) for n in available_effects(model="rigid")])
-    rng = np.random.default_rng(0)
-    th = np.stack([eng.start(space)] * m)
-    th[:, 0] *= 1.0 + 0.05 * rng.standard_normal(m)
-    loc = np.zeros((m, eng.prep.n_traj, 3))
-    eng.evaluate(space, th[:2], loc[:2])  # warm-up
-    t0 = time.perf_counter()
-    eng.evaluate(space, th, loc)
-    batched = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    for i in range(m):
-        eng.evaluate(space, th[i : i + 1], loc[i : i + 1])
-    single = time.perf_counter() - t0
-    return {"batched": batched, "single": single}, (rec, eng.prep)
+M = 64
 
 
-def _mujoco(rec, prep, m: int, threads: int) -> dict[str, float]:
-    from robogs.physics.engines import get_engine
-
-    eng = get_engine("mujoco")(rec.physics, threads=threads)
-    eng.rollout(prep.drive.subset([0]))  # warm-up (pool start)
-    t0 = time.perf_counter()
-    eng.rollout(prep.drive)
-    one = time.perf_counter() - t0
-    mu = rec.physics["objects"]["box"]["friction_dynamic"] * (1 + 1e-3 * np.arange(m))
-    t0 = time.perf_counter()
-    eng.rollout(prep.drive, params={"objects.box.friction_dynamic": mu})
-    batch = time.perf_counter() - t0
-    eng.close()
-    return {"one": one, "batch": batch}
+def _timed(fn: Callable[[], object]) -> dict[str, float]:
+    """Wall and process CPU seconds of ``fn()``, with the load average before and after."""
+    l0 = os.getloadavg()[0]
+    t0, c0 = time.perf_counter(), time.process_time()
+    fn()
+    return {
+        "wall": time.perf_counter() - t0,
+        "cpu": time.process_time() - c0,
+        "load": (l0 + os.getloadavg()[0]) / 2,
+    }
 
 
-def _fit_path(rec, backend: str, threads: int, m: int, active: str | None) -> float:
-    """Seconds of one ``Engine.evaluate`` of ``m`` parameter sets over the full catalogue
-    space on ``backend`` (``active``: that effect at its nominal value in every set, so the
-    MuJoCo path applies per-step forces when it is a force effect)."""
+def _fmt(r: dict[str, float], work: float, unit: str = "steps/s") -> str:
+    return (
+        f"{r['wall']:.2f} s wall ({work / r['wall']:,.0f} {unit}), {r['cpu']:.2f} s CPU "
+        f"({work / r['cpu']:,.0f} {unit} per CPU second), load {r['load']:.1f}"
+    )
+
+
+def _catalogue_engine(rec, backend: str, threads: int = 1, stepper: str | None = None):
     from robogs.physics.effects import available_effects, get_effect
     from robogs.physics.engine import Engine
 
     eng = Engine(rec, backend=backend, threads=threads)
-    space = eng.space([get_effect(n) for n in available_effects(model="rigid")])
-    th = np.stack([eng.start(space)] * m)
-    th[:, 0] *= 1.0 + 1e-3 * np.arange(m)
+    if stepper is not None:
+        eng._mujoco.stepper = stepper
+    return eng, eng.space([get_effect(n) for n in available_effects(model="rigid")])
+
+
+def _sets(eng, space, active: str | None, n_active: int) -> tuple[np.ndarray, np.ndarray]:
+    """``M`` sets: friction 0.1 % apart, ``active`` at its nominal value in the first
+    ``n_active``; zero local offsets."""
+    th = np.stack([eng.start(space)] * M)
+    th[:, 0] *= 1.0 + 1e-3 * np.arange(M)
     if active is not None:
         for c in space.owner_columns(active):
-            th[:, c] = space.slots[c].param.nominal
-    loc = np.zeros((m, eng.prep.n_traj, 3))
+            th[:n_active, c] = space.slots[c].param.nominal
+    return th, np.zeros((M, eng.prep.n_traj, 3))
+
+
+def _planar(rec, single: bool) -> dict[str, dict[str, float]]:
+    eng, space = _catalogue_engine(rec, "planar")
+    rng = np.random.default_rng(0)
+    th = np.stack([eng.start(space)] * M)
+    th[:, 0] *= 1.0 + 0.05 * rng.standard_normal(M)
+    loc = np.zeros((M, eng.prep.n_traj, 3))
+    eng.evaluate(space, th[:2], loc[:2])  # warm-up
+    out = {"batched": _timed(lambda: eng.evaluate(space, th, loc))}
+    if single:
+        out["single"] = _timed(
+            lambda: [eng.evaluate(space, th[i : i + 1], loc[i : i + 1]) for i in range(M)]
+        )
+    return out
+
+
+def _interface(rec, prep, threads: int) -> dict[str, dict[str, float]]:
+    from robogs.physics.engines import get_engine
+
+    eng = get_engine("mujoco")(rec.physics, threads=threads)
+    eng.rollout(prep.drive.subset([0]))  # warm-up (pool start)
+    one = _timed(lambda: eng.rollout(prep.drive))
+    mu = rec.physics["objects"]["box"]["friction_dynamic"] * (1 + 1e-3 * np.arange(M))
+    batch = _timed(lambda: eng.rollout(prep.drive, params={"objects.box.friction_dynamic": mu}))
+    eng.close()
+    return {"one": one, "batch": batch}
+
+
+def _fit_path(rec, backend, threads, stepper, active, n_active) -> dict[str, float]:
+    """One ``Engine.evaluate`` of ``M`` sets over the full catalogue space."""
+    eng, space = _catalogue_engine(rec, backend, threads, stepper)
+    th, loc = _sets(eng, space, active, n_active)
     eng.evaluate(space, th[:1], loc[:1])  # warm-up
-    t0 = time.perf_counter()
-    eng.evaluate(space, th, loc)
-    return time.perf_counter() - t0
+    return _timed(lambda: eng.evaluate(space, th, loc))
+
+
+def _jacobian(rec, stepper: str) -> tuple[dict[str, float], int, int]:
+    """One FD Jacobian over every column of the full catalogue space (effects at zero); the
+    previous runner runs every row (no search for repeated rollouts, as before)."""
+    from robogs.physics.fit import jacobian_fd
+
+    eng, space = _catalogue_engine(rec, "mujoco", 1, stepper)
+    eng._mujoco.distinct = stepper == "batch"
+    th = eng.start(space)
+    loc = np.zeros((eng.prep.n_traj, 3))
+    fn = eng.residual_fn(space)
+    cols = list(range(len(space.slots)))
+    r = _timed(lambda: jacobian_fd(fn, space, th, loc, cols))
+    return r, len(cols) + 4, eng._mujoco.last_rollouts
 
 
 def main() -> None:
     torch.set_num_threads(1)  # small tensors: one thread is fastest (and fair on a shared machine)
     import mujoco
 
-    m = 64
-    planar, (rec, prep) = _planar(m)
+    from robogs.physics.prepare import prepare
+    from robogs.synth.scenarios import make_scenario
+
+    rec = make_scenario("none", seed=0, kinds=("push",))
+    prep = prepare(rec, dt=1e-3)
     n_t, n_s = prep.drive.n_traj, prep.drive.n_steps
     steps = n_t * n_s
-    mj = {k: _mujoco(rec, prep, m, k) for k in (1, 2)}
+    load0 = os.getloadavg()
+    planar = _planar(rec, "--no-single" not in sys.argv)
+    mj = {k: _interface(rec, prep, k) for k in (1, 2)}
     lines = [
         "### rollout throughput, planar and mujoco engines (bench/simulate.py)",
         "",
-        "Command: `.venv/bin/python bench/simulate.py`  ",
-        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs (shared "
-        f"with other jobs during the run), torch {torch.__version__} with 1 thread, "
-        f"mujoco {mujoco.__version__}",
+        f"Command: `.venv/bin/python bench/simulate.py {' '.join(sys.argv[1:])}`  ",
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, load "
+        f"average {load0[0]:.1f} / {load0[1]:.1f} / {load0[2]:.1f} at the start (shared with "
+        f"other jobs unless ~0); torch {torch.__version__} with 1 thread, mujoco "
+        f"{mujoco.__version__}. Wall times scale with the load; CPU times are the process's "
+        "(all its threads): with one thread, the idle-machine estimate.",
         f"Scene: 9 pushes, {n_t} trajectories x {n_s} steps of 1 ms = {steps:,} trajectory-steps "
         "per parameter set",
         "",
-        f"- planar, batch of {m} sets in one rollout: {planar['batched']:.2f} s = "
-        f"{m * steps / planar['batched']:,.0f} trajectory-steps/s "
-        f"({m / planar['batched']:.1f} candidate rollouts/s)",
-        f"- planar, {m} single rollouts (baseline): {planar['single']:.2f} s = "
-        f"{m * steps / planar['single']:,.0f} trajectory-steps/s; batched / single "
-        f"{planar['single'] / planar['batched']:.1f}x",
+        f"- planar, batch of {M} sets in one rollout: {_fmt(planar['batched'], M * steps)}",
     ]
+    if "single" in planar:
+        lines.append(
+            f"- planar, {M} single rollouts (baseline): {_fmt(planar['single'], M * steps)}; "
+            f"batched / single {planar['single']['wall'] / planar['batched']['wall']:.1f}x wall"
+        )
     for k, r in mj.items():
         lines += [
-            f"- mujoco, {k} thread(s), one set: {r['one']:.3f} s = {steps / r['one']:,.0f} steps/s",
-            f"- mujoco, {k} thread(s), {m} sets ({m * n_t} MuJoCo rollouts): {r['batch']:.2f} s = "
-            f"{m * steps / r['batch']:,.0f} steps/s ({m / r['batch']:.1f} candidate rollouts/s)",
+            f"- mujoco interface (`MujocoEngine.rollout`), {k} thread(s), one set: "
+            f"{_fmt(r['one'], steps)}",
+            f"- mujoco interface, {k} thread(s), {M} sets ({M * n_t} rollouts): "
+            f"{_fmt(r['batch'], M * steps)}; {M / r['batch']['wall']:.1f} candidate rollouts/s",
         ]
-    best = min(r["batch"] for r in mj.values())
     lines += [
-        f"- ratio, {m}-candidate batch: planar {planar['batched']:.2f} s / best mujoco "
-        f"{best:.2f} s = {planar['batched'] / best:.2f}x (above 1: mujoco faster)",
-        f"- mujoco 2 threads / 1 thread speed-up: {mj[1]['batch'] / mj[2]['batch']:.2f}x",
-        "- the planar rollouts stop early once every box rests; mujoco integrates every step",
         "",
-        f"Fitting path (`Engine.evaluate`, {m} parameter sets over the full catalogue space, "
-        "effects at zero unless named; residuals included):",
+        f"Fitting path (`Engine.evaluate`, {M} parameter sets over the full catalogue space, "
+        "effects at zero unless named; residuals included). Runners: `rollout` = the previous "
+        "one (`mujoco.rollout`), `batch` = `mujoco.batch`:",
         "",
+        "| effect | engine, runner, threads | wall | CPU | candidate rollouts/s (wall) "
+        "| planar / this (wall) | rollout runner / this (CPU) | load |",
+        "|---|---|---|---|---|---|---|---|",
     ]
-    fit_rows = {}
-    for active in (None, "viscous_damping", "stribeck"):
-        fit_rows[(active, "planar", 1)] = _fit_path(rec, "planar", 1, m, active)
+    cases = [
+        (None, M, "no effect"),
+        ("viscous_damping", M, "viscous damping (model parameter), all sets"),
+        ("stribeck", M, "Stribeck (per-step force), all sets"),
+        ("stribeck", M // 4, f"Stribeck in {M // 4} of {M} sets"),
+    ]
+    for active, n_active, what in cases:
+        ref = _fit_path(rec, "planar", 1, None, active, n_active)
+        rows = [("planar, 1", ref)]
+        old = _fit_path(rec, "mujoco", 1, "rollout", active, n_active)  # no repeats in these
+        rows.append(("mujoco, rollout, 1", old))
         for k in (1, 2):
-            fit_rows[(active, "mujoco", k)] = _fit_path(rec, "mujoco", k, m, active)
-    for (active, backend, k), sec in fit_rows.items():
-        ref = fit_rows[(active, "planar", 1)]
-        what = active or "no effect"
-        how = {None: "", "viscous_damping": " (model parameter)", "stribeck": " (per-step force)"}
-        lines.append(
-            f"- {backend}, {k} thread(s), {what}{how[active] if backend == 'mujoco' else ''}: "
-            f"{sec:.2f} s = {m * steps / sec:,.0f} steps/s, {m / sec:.1f} candidate rollouts/s "
-            f"(planar / this = {ref / sec:.2f}x)"
-        )
+            r = _fit_path(rec, "mujoco", k, "batch", active, n_active)
+            rows.append((f"mujoco, batch, {k}", r))
+        for name, r in rows:
+            lines.append(
+                f"| {what} | {name} | {r['wall']:.2f} s | {r['cpu']:.2f} s | "
+                f"{M / r['wall']:.1f} | {ref['wall'] / r['wall']:.2f}x | "
+                f"{old['cpu'] / r['cpu']:.2f}x | {r['load']:.1f} |"
+            )
+    jac = {s: _jacobian(rec, s) for s in ("rollout", "batch")}
+    (jr, rows_j, _), (jb, _, distinct) = jac["rollout"], jac["batch"]
+    lines += [
+        "",
+        f"FD Jacobian over the full catalogue ({rows_j} parameter sets x {n_t} trajectories; "
+        f"the batch ran {distinct} distinct rollouts of {rows_j * n_t}): rollout runner "
+        f"{jr['wall']:.2f} s wall / {jr['cpu']:.2f} s CPU, batch {jb['wall']:.2f} s / "
+        f"{jb['cpu']:.2f} s CPU = {jr['cpu'] / jb['cpu']:.2f}x (CPU), load {jb['load']:.1f}",
+    ]
     print("\n".join(lines))
     if "--no-write" not in sys.argv:
         with (ROOT / "bench" / "RESULTS.md").open("a") as fh:
-            fh.write(f"## {datetime.date.today().isoformat()}\n\n" + "\n".join(lines) + "\n\n")
+            fh.write(
+                f"## simulate.py: engine throughput ({datetime.date.today().isoformat()})\n\n"
+                + "\n".join(lines)
+                + "\n\n"
+            )
 
 
 if __name__ == "__main__":

@@ -121,6 +121,7 @@ class MujocoFit:
 
     Attributes:
         last_rollouts: distinct rollouts the last :meth:`simulate` call ran (of its M x T).
+        distinct: run a rollout that repeats another once (default; False runs all M x T).
     """
 
     def __init__(
@@ -143,6 +144,7 @@ class MujocoFit:
             )
         self.stepper = stepper
         self.last_rollouts = 0
+        self.distinct = True  # run each distinct rollout once (False: all M x T, for benches)
         self.eng = engine or MujocoEngine(physics, object_name=object_name, dt=dt, threads=threads)
         m = self.eng.model
         self.nq, self.nv = m.nq, m.nv
@@ -319,6 +321,8 @@ class MujocoFit:
                 seen.setdefault(dyn[r // n_t].tobytes() + (r % n_t).to_bytes(8) + x[r].tobytes(), r)
                 for r in range(n_r)
             ]
+            if self.distinct
+            else range(n_r)
         )
         rows, which = np.unique(which, return_inverse=True)  # first row of each distinct rollout
         sets, set_of = np.unique(rows // n_t, return_inverse=True)
