@@ -24,7 +24,37 @@ stiff implicit velocity servo, the constraint solver sees the servo's explicit f
 update then applies; a step in the target velocity became a blow to the object (0.3 m/s pushes launched
 the box at 1 m/s). Semi-implicit Euler keeps the solver's view and the update the same.
 
-Contact settings (:class:`robogs.format.mjcf.ContactSettings`), and why:
+Planar joint set (``joints="auto"``, the default where :func:`planar_joints_fit` allows: boxes
+on a horizontal support). Each object moves on slide x, y, z and a hinge about z, no roll or
+pitch, as in the planar model (whose box "stays flat on one face"), and rests on **one** contact
+sphere at the centre of its bottom face with torsional friction ``mu r_mean`` (``condim 4``,
+``r_mean`` the face's mean radius: the ellipsoidal limit surface of Howe & Cutkosky 1996 that
+the planar model and the generator use), friction reference ``solreffriction = (10 ms, 1)``
+(:data:`PLANAR_SETTINGS`). Why: MuJoCo's soft elliptic cone couples slip into the normal
+(MuJoCo documentation, "Computation": soft contact model and solver; Todorov 2014: in the
+elliptic cone's middle zone, the sliding regime, the cost is zero only where the normal residual
+is ``mu`` times the friction residual ``a_t + b v_t``), so
+
+* a sliding contact is pushed off the table by about ``mu b |v|`` (b the friction rows'
+  reference damping, ``2 / (d_max timeconst)``); on 3-D boxes this made the box hop and, on
+  edge landings, rock: finite-difference Jacobians of pushes 6-83x the planar model's;
+* the normal load of a multi-point footprint goes to the points that slip fastest (the outer
+  ones in a spin): a free spin at 6 rad/s stopped at 6.0 deg against 9.29 deg closed form.
+
+One central contact has no load to shift (spin 9.16 deg), no roll or pitch has nothing to rock,
+and a 10 ms friction reference halves b: a 0.5 m/s slide lifts 105 um (297 um on the 3-D
+box), 0.3 m/s 27 um (133 um). 20 ms would lift 34 um at 0.5 m/s but weakens the friction of a
+landing impact (the stick-zone force is at most ``m b |v_t|``): a release slide dropped from
+4 mm ran 1.76 mm past the generator (10 ms: 0.48 mm; 4 ms: 0.03 mm but 273 um hops). A
+stiffer or direct (negative) normal ``solref``, ``impratio`` 1 or 100 and a softer ``solimp``
+did not reduce the lift (the stiffer normal raised it). Not removed: a pusher striking a
+resting box accelerates it at 100-350 m/s^2 for a few steps, and the coupling raises the table
+normal force to ~12 m g for that step: the box is launched 0.1-0.7 mm and chatters while it
+slides, so the viscous-damping column of centred pushes stays 11x planar's (release slides
+0.99x, off-centre pushes 1.01x). Scenes that need 3-D (meshes, tilted supports) keep the free
+joint and the 3-D settings below (``joints="free"`` forces them).
+
+Contact settings (:class:`robogs.format.mjcf.ContactSettings`) of the free joint, and why:
 
 * ``cone="elliptic"`` - the exact Coulomb cone; the pyramidal cone is a polyhedral
   approximation whose friction limit depends on the sliding direction relative to its edges,
@@ -67,6 +97,8 @@ Contact settings (:class:`robogs.format.mjcf.ContactSettings`), and why:
   closer in), so it is an option, off.
 * pusher friction reference ``(2 dt, 1)`` (:data:`PUSHER_SOLREFFRICTION_STEPS`): the
   stiffest MuJoCo allows, on the object-pusher pairs only (see that constant).
+* object-object pairs overdamped (:data:`OBJECT_PAIR_DAMPRATIO` 2): a pushed box does not
+  bounce off the box it strikes.
 * capsule pusher as its two end spheres (``capsule_ends``), as the planar model and the
   generator model it: a capsule flush with a face makes one or two contacts depending on
   micrometres.
@@ -102,6 +134,7 @@ __all__ = [
     "PLANAR_SETTINGS",
     "JointLayout",
     "MujocoEngine",
+    "OBJECT_PAIR_DAMPRATIO",
     "PUSHER_SOLREFFRICTION_STEPS",
     "SUPPORTED_PARAMS",
     "planar_joints_fit",
@@ -131,6 +164,14 @@ quasi-static pusher-friction generator (:mod:`robogs.synth.scenarios.pusher_fric
 0.3, 4 pushes turning 28-43 deg) the box turned 2.2-3.2 deg RMS short with the pairs' 20 ms
 (planar joint set), 1.1-1.7 deg at 4 ms and 1.0-1.5 deg at 2 ms (positions 1-2.7 mm ->
 0.1-0.4 mm); the table pairs keep theirs (2-4 ms there made it worse, 1.6-2.7 deg)."""
+
+OBJECT_PAIR_DAMPRATIO = 2.0
+"""Damping ratio of object-object contact pairs (time constant as ``solref``). A critically
+damped soft contact gives back part of its compression: box A driven into box B at 0.45 m/s
+launched B at 0.51 m/s, 13 % above A, and B slid 3.6 mm past the plastic-impact generator
+(:mod:`robogs.synth.scenarios.two_objects`, restitution 0); at ratio 2 B leaves at 0.485 m/s
+and both boxes end within 0.8 mm at 0.25-0.45 m/s (ratio 4: A 2.8 mm short; 1 with a 2 ms
+time constant: B 2 mm long)."""
 
 _CHUNK = 64  # rollouts per mujoco.rollout call: bounds the state buffer (64 x S x nstate)
 
@@ -335,10 +376,13 @@ class MujocoEngine:
                 "as in the planar model"
             )
         self.model = mujoco.MjModel.from_xml_string(xml, assets=self.scene.assets)
+        _align_pairs(self.model, self.scene)
         self.dt = float(dt)
         for k, pair in enumerate(self.scene.pairs):  # see PUSHER_SOLREFFRICTION_STEPS
             if {"pusher", "pusher_end"} & set(pair):
                 self.model.pair_solreffriction[k] = (PUSHER_SOLREFFRICTION_STEPS * self.dt, 1.0)
+            elif set(pair) <= set(self.scene.objects):  # see OBJECT_PAIR_DAMPRATIO
+                self.model.pair_solref[k, 1] = OBJECT_PAIR_DAMPRATIO
         self.threads = max(1, int(threads))
         names = self.scene.objects
         self.object_name = object_name or names[0]
@@ -567,6 +611,26 @@ class MujocoEngine:
             self.close()
         except Exception:
             pass
+
+
+def _align_pairs(model: mujoco.MjModel, scene: MjcfScene) -> None:
+    """Put ``scene.pairs``, ``pair_torsion`` and the ``table_pairs`` indices in the compiled
+    model's pair order. MuJoCo sorts explicit contact pairs when it compiles, so with two
+    objects the XML order is not the model's (the XML's third pair, box_a-pusher, compiled as
+    table-box_b_foot0): every ``pair_*`` row set by index went to another pair."""
+
+    def name(g: int) -> str:
+        return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, int(g)) or ""
+
+    xml = [frozenset(p) for p in scene.pairs]
+    order = [
+        xml.index(frozenset((name(model.pair_geom1[j]), name(model.pair_geom2[j]))))
+        for j in range(model.npair)
+    ]
+    new = {old: j for j, old in enumerate(order)}
+    scene.pairs = [scene.pairs[i] for i in order]
+    scene.pair_torsion = [scene.pair_torsion[i] for i in order]
+    scene.table_pairs = {o: [new[i] for i in rows] for o, rows in scene.table_pairs.items()}
 
 
 def _sample(dense: np.ndarray, obs_t: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
