@@ -119,6 +119,8 @@ def test_batch_equals_rollout_path_without_single_steps(monkeypatch):
     assert np.abs(a - b).max() <= 1e-9, np.abs(a - b).max()
     c = _dense(MujocoFit(phys, "box", dt=DT, stepper="batch"), th, space, drive, scene)
     assert np.array_equal(a, c)  # the batch does not depend on its call lengths
+    two = MujocoFit(phys, "box", dt=DT, threads=2, stepper="batch")
+    assert np.array_equal(a, _dense(two, th, space, drive, scene))  # nor on its threads
 
 
 def _mj_step_loop(sim: MujocoFit, args: dict) -> np.ndarray:

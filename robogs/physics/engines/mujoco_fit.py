@@ -12,8 +12,8 @@ parameters, the trajectories a local-offset column leaves alone, the shared star
 fits) are run once. The rollouts run on one ``mujoco.batch.Batch`` of ``threads`` threads, each
 keeping its ``MjData`` state, solver warm start included, between calls. Stretches where nothing
 has to be changed from Python run as one multi-step call; a step is taken alone when an effect
-applies a state-dependent force (``xfrc_applied`` computed from the state) or a trajectory
-starts, holds or ends a grasp. Without ``mujoco.batch`` (MuJoCo before 3.17) the same schedule
+applies a state-dependent force (``xfrc_applied`` computed from the state; only the rollouts of
+sets that switch a force effect on) or a trajectory starts, holds or ends a grasp. Without ``mujoco.batch`` (MuJoCo before 3.17) the same schedule
 runs on ``mujoco.rollout`` (``stepper="rollout"``), whose calls each start with a cold solver
 warm start, so its single steps and chunk boundaries differ from the batch's within the solver
 tolerance (bounded in ``tests/physics/test_mujoco_speed_equiv.py``).
@@ -32,6 +32,8 @@ acceleration is contact), averaged over each wrench bin as in the planar model.
 Pusher friction: the base slot :data:`PUSHER_FRICTION` (:func:`pusher_friction_param`), an
 engine-only base parameter: a space that holds it sets the Coulomb coefficient of every
 object-pusher pair per parameter set (the planar model has a frictionless pusher and ignores it).
+Likewise a base slot ``objects.<name>.friction_dynamic`` (:func:`object_friction_param`) sets the
+table friction of another object of the scene (two boxes, one pushed into the other).
 
 Not modelled here: ``friction_static`` (MuJoCo has one Coulomb coefficient).
 """
@@ -67,11 +69,20 @@ __all__ = [
     "SETTLE_TOL_M",
     "STEPPERS",
     "TILT_INERTIA_SCALE",
+    "object_friction_param",
     "pusher_friction_param",
 ]
 
 PUSHER_FRICTION = "pusher_friction"
 """Name of the base slot of the pusher's Coulomb coefficient (MuJoCo engine only)."""
+
+
+def object_friction_param(physics: Mapping[str, Any], name: str) -> Param:
+    """Base parameter ``objects.<name>.friction_dynamic``: the table friction of another
+    object of the scene than the fitted one (MuJoCo engine only; zero at its physics.json
+    value, bounds 0.02-2)."""
+    mu = float(((physics.get("objects") or {}).get(name) or {}).get("friction_dynamic", 0.4))
+    return Param(f"objects.{name}.friction_dynamic", "-", 0.02, 2.0, min(max(mu, 0.02), 2.0), mu)
 
 
 def pusher_friction_param(physics: Mapping[str, Any], upper: float = 1.5) -> Param:
@@ -247,16 +258,39 @@ class MujocoFit:
         [M, 1], per-step force effects with their parameters)."""
         body, native_fx, ths, force = self._physics(theta, space, scene)
         tc = float(self.eng.settings.solref[0])
-        mu_p = space.theta_dict(theta, BASE).get(PUSHER_FRICTION)
+        base = space.theta_dict(theta, BASE)
+        mu_p = base.get(PUSHER_FRICTION)
+        others = {k: v for k, v in base.items() if k.startswith("objects.")}
+        rows = {k: self._other_rows(k) for k in others}
         out = []
         for i in range(theta.shape[0]):
             mi = apply_body(self.eng.model, body, i, self.slots, timeconst=tc)
             if mu_p is not None:
                 mi.pair_friction[self.pusher_pairs, :2] = max(float(mu_p[i, 0]), 1e-5)
+            for k, v in others.items():  # another object's table friction (and torsion)
+                r, rho = rows[k]
+                mu = max(float(v[i, 0]), 1e-5)
+                mi.pair_friction[r, :2] = mu
+                mi.pair_friction[r, 2] = np.where(rho > 0, mu * rho, mi.pair_friction[r, 2])
             for e in native_fx:
                 NATIVE[e.name](mi, {k: float(v[i, 0]) for k, v in ths[e.name].items()}, self.slots)
             out.append(mi)
         return out, body, force
+
+    def _other_rows(self, key: str) -> tuple[list[int], np.ndarray]:
+        """Table-pair rows and torsion radii [m] of the object named in a base slot
+        ``objects.<name>.friction_dynamic`` (:func:`object_friction_param`)."""
+        parts = key.split(".")
+        name = parts[1] if len(parts) == 3 else ""
+        if parts[-1] != "friction_dynamic" or name == self.obj or name not in self.eng._bid:
+            raise InputError(
+                f"base parameter {key!r} is not another object's table friction",
+                where="space",
+                hint=f"objects.<name>.friction_dynamic, name one of "
+                f"{', '.join(n for n in self.eng._bid if n != self.obj)}",
+            )
+        r = list(self.eng.scene.table_pairs.get(name, []))
+        return r, np.array([self.eng.scene.pair_torsion[k] for k in r])
 
     # ------------------------------------------------------------------ simulate
     def simulate(
@@ -491,11 +525,11 @@ class MujocoFit:
     ) -> np.ndarray:
         """:meth:`_run` on one ``mujoco.batch.Batch``. Every rollout keeps its state, solver
         warm start included, from call to call, so it is the same whether its steps are taken
-        in one call or one at a time (bit-identical to an ``mj_step`` loop). That lets each
-        group of rollouts with the same needs run its own schedule: only the rollouts of a
-        grasping trajectory step alone while it grasps, and only those whose set switches a
-        force effect on step alone throughout (a set with every force effect at its zero
-        value gets no applied force, as on the ``rollout`` path, where it is computed as 0)."""
+        in one call or one at a time (bit-identical to an ``mj_step`` loop). So the rollouts
+        whose set switches a force effect on step alone throughout, and the others run apart,
+        in multi-step calls between the steps their grasps need (a set with every force effect
+        at its zero value gets no applied force; the ``rollout`` path computes it as 0). A call
+        costs Python time whatever its size, so there are two groups, not one per trajectory."""
         from mujoco import batch as mj_batch
 
         n_r = len(t_of)
@@ -504,14 +538,12 @@ class MujocoFit:
         b.state[:] = 0.0
         b.state[:, self._int_cols] = x[:, self._full_cols]
         dense = np.empty((n_r, drive.n_steps, 7))
-        # rollouts with a force effect step alone throughout (one group); of the others, a
-        # trajectory that grasps or parks its pusher has its own schedule, the rest share one
-        events = grasp.any(1) | (np.diff(park, axis=1) != 0).any(1)
         force = _active_rows(force_fx, n_r)
-        key = np.where(force, -2, np.where(events[t_of], t_of, -1))
-        for g in np.unique(key):
-            ids = np.flatnonzero(key == g)
-            fx = [(e, {k: v[ids] for k, v in th.items()}) for e, th in force_fx] if g == -2 else []
+        for on in (True, False):
+            ids = np.flatnonzero(force == on)
+            if not len(ids):
+                continue
+            fx = [(e, {k: v[ids] for k, v in th.items()}) for e, th in force_fx] if on else []
             self._batch_group(
                 b,
                 ids,
