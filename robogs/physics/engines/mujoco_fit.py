@@ -569,7 +569,11 @@ class MujocoFit:
         full = mujoco.mjtState.mjSTATE_FULLPHYSICS
         xfrc = b.bind("xfrc_applied") if force_fx else None
         x = np.array(x)
-        dense[ids, 0] = self.lay.pose(x)
+        # the state columns up to the object's pose, every step; poses from them at the end
+        # (one vectorised conversion instead of one per call)
+        w = min(x.shape[1], self.lay.q + 7)
+        raw = np.empty((len(ids), n_s, w))
+        raw[:, 0] = x[:, :w]
         if pstate is not None:
             pstate[ids, 0] = x[:, self._pcols]
         mine = np.unique(t_of)
@@ -593,7 +597,7 @@ class MujocoFit:
                 xfrc[ids, self.slots.body] = self._forces(x, body, force_fx)
             c = ctrl[t_of, k : k + n] if ctrl.shape[-1] else None
             state = b.rollout(n, control=c, record=(full,), ids=ids)[full]
-            dense[ids, k + 1 : k + 1 + n] = self.lay.pose(state)
+            raw[:, k + 1 : k + 1 + n] = state[:, :, :w]
             if pstate is not None:
                 pstate[ids, k + 1 : k + 1 + n] = state[:, :, self._pcols]
             x = np.array(state[:, -1])
@@ -605,10 +609,11 @@ class MujocoFit:
             if g_any[k]:
                 hold = grasp[t_of, k]
                 self._attach(x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q)
-                dense[ids[hold], k] = self.lay.pose(x[hold])
+                raw[hold, k] = x[hold, :w]
                 edit = True
             if edit:
                 b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
+        dense[ids] = self.lay.pose(raw)
 
     def _grasp_rel(self, x, p_ee, yaw_ee, t_of, on_t, rel_p, rel_q):
         """Freeze the object pose in the EE yaw frame for rollouts whose grasp starts now."""
