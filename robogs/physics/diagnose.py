@@ -653,17 +653,18 @@ def diagnose_recording(
         ident = bool(out.ok[jj].all()) if len(out.ok) else True
         why = "; ".join(dict.fromkeys(out.why_param[j] for j in jj if out.why_param[j]))
         stat = float(gate_mod.heldout_statistic(held_t[0], held_t[i], delta))
-        thr = cal.thresholds[e.name]
+        # thresholds in sigma^2 on this data (under 8 trajectories those of the studentised
+        # held-out fall times its standard error, gate.Calibration.judge)
+        thr, q95, p_own = cal.judge(e.name, held_t[0], held_t[i], delta)
         # under 8 trajectories the default null is white noise only (gate.calibrate): strong
         # in-sample evidence is required as well
         few = "white-noise null only" in cal.method
         gate = stat > thr and ident and (not few or dbic <= DBIC_MAX)
-        p_own = cal.p_value(e.name, stat)
         if not ident:
             verdict = "unidentifiable"
         elif gate:
             verdict = "add"
-        elif stat > cal.q95[e.name]:
+        elif stat > q95:
             verdict = "likely"  # above its own 95 % null quantile, not the family-wise one
         else:
             verdict = "not supported"
@@ -688,8 +689,8 @@ def diagnose_recording(
                 note="" if ident else f"unidentifiable: {why}; to identify it: {e.separate_by}",
                 heldout_gain_sigma2=stat,
                 null_threshold_sigma2=thr,
-                null_q95_sigma2=cal.q95[e.name],
-                null_p=float("nan") if p_own is None else p_own,
+                null_q95_sigma2=q95,
+                null_p=p_own,
                 on_bound=bound,
             )
         )
