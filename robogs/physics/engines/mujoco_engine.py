@@ -287,8 +287,8 @@ def planar_joints_fit(
 
 def _planar_xml(xml: str, names: Sequence[str], poses: Mapping[str, Sequence[float]]) -> str:
     """The scene with each free joint of ``names`` replaced by slide x, y, z + hinge z, the
-    bodies at the world origin (so qpos is the world pose); their start poses become the
-    joints' ``ref``-free qpos0 (set on the compiled model by the caller)."""
+    bodies at the world origin (so qpos is the world pose); their start poses are written
+    into the initial states by the caller (qpos0 stays 0)."""
     root = ET.fromstring(xml)
     world = root.find("worldbody")
     assert world is not None
@@ -399,13 +399,12 @@ class MujocoEngine:
             n: JointLayout(self._qadr[n], self._vadr[n], int(self.model.nq), self.planar)
             for n in names
         }
-        if self.planar:  # start poses as qpos0 (the bodies sit at the origin)
-            for n, pose in (poses or {}).items():
-                if n in self.layout:
-                    row = np.zeros(1 + self.model.nq)
-                    self.layout[n].set_pose(row, pose[:3], pose[3:7])
-                    qa = self._qadr[n]
-                    self.model.qpos0[qa : qa + 4] = row[1 + qa : 1 + qa + 4]
+        # planar joint set: the scene poses are written into every initial state, qpos0 stays
+        # 0 (MuJoCo places a body on slide and hinge joints by qpos - qpos0: a pose kept in
+        # qpos0 left a second box at the origin)
+        self._start = {
+            n: list(pose) for n, pose in (poses or {}).items() if self.planar and n in self.layout
+        }
         self._bid = {n: mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, n) for n in names}
         self._pusher_q = None
         if self.scene.pusher is not None:
@@ -500,6 +499,8 @@ class MujocoEngine:
             mujoco.mj_resetData(self.model, data)
             row = np.empty(self.nstate)
             mujoco.mj_getState(self.model, data, row, _STATE)
+            for name, pose in self._start.items():
+                self.layout[name].set_pose(row, pose[:3], pose[3:7])
             for name, st in init.items():
                 if name not in self._qadr:
                     raise InputError(f"initial state for unknown object {name!r}", where="initial")
