@@ -6,11 +6,10 @@ the table with Coulomb friction (``mu_a``, ``mu_b``; the boxes' faces touch flat
 motion stays on the line and nothing turns). Per fine step (0.1 ms), sequential impulses:
 
 1. table friction slows each sliding box by ``mu g dt`` (never past rest);
-2. box-box contact: a closing A meets B with restitution ``e`` (default 0, perfectly plastic:
-   the two leave the contact at their common momentum-weighted speed);
-3. the pusher is kinematic (infinite mass): a pusher faster than A sets A to its speed, and A,
-   so driven, sets a touching B to its speed as well (``e = 0``); the pusher's impulse is what
-   both took;
+2. the pusher is kinematic (infinite mass): a pusher touching A and faster sets A to its speed;
+3. box-box contact: a closing A meets B with restitution ``e`` (default 0, perfectly plastic).
+   A driven by the pusher is an infinite mass (B leaves at ``v_a + e (v_a - v_b)``), a free
+   A shares momentum with B; the pusher's impulse is what A and, through a driven A, B took;
 
 then positions advance and any overlap is removed by moving the box ahead. The pusher's
 motion: rest out of contact, approach A, accelerate (cosine ramp, :data:`RAMP_S`) to the push
@@ -118,19 +117,21 @@ def push_chain(truth: TwoBoxTruth, speed: float, dist: float, *, dt: float = FIN
         # 1. table friction
         va = max(va - truth.mu_a * G * dt, 0.0)
         vb = max(vb - truth.mu_b * G * dt, 0.0)
-        # 2. box-box contact (closing and touching)
-        touch_ab = sb - sa <= ha + hb + 1e-12
-        if touch_ab and va > vb:
-            vc = (ma * va + mb * vb) / (ma + mb)
-            va, vb = vc - e * mb / (ma + mb) * (va - vb), vc + e * ma / (ma + mb) * (va - vb)
-        # 3. kinematic pusher
+        # 2. kinematic pusher on A
         imp = 0.0
-        if sa - ha - (sp + r) <= 1e-12 and vp > va:
+        driven = sa - ha - (sp + r) <= 1e-12 and vp >= va
+        if driven and vp > va:
             imp += ma * (vp - va)
             va = vp
-            if touch_ab and va > vb:
-                imp += mb * (va - vb)
-                vb = va
+        # 3. box-box contact (closing and touching): a driven A is an infinite mass
+        if sb - sa <= ha + hb + 1e-12 and va > vb:
+            if driven:
+                nb = va + e * (va - vb)
+                imp += mb * (nb - vb)
+                vb = nb
+            else:
+                vc = (ma * va + mb * vb) / (ma + mb)
+                va, vb = vc - e * mb / (ma + mb) * (va - vb), vc + e * ma / (ma + mb) * (va - vb)
         # advance, remove overlaps (the box ahead moves)
         sp += vp * dt
         sa += va * dt
