@@ -83,6 +83,9 @@ DYNAMIC_EFFECTS = ("viscous_damping", "quadratic_drag", "stribeck", "restitution
 data)."""
 _REVEAL = "a push that releases the object at speed (or a release-and-slide), so it slides freely"
 _N_FOLDS = 5
+CARRY_Z = 0.1
+"""A trajectory counts toward :func:`sign_flip_floor` when the effect moves it by more than
+0.1 sigma (``z_t``); flipping one it moves less hardly changes its null statistic."""
 _Z = 1.959963984540054  # two-sided 95 % normal quantile
 
 
@@ -705,13 +708,15 @@ def diagnose_recording(
                 f"held-out step halved in {halved[i]} of {len(folds)} folds (the linearised step "
                 "raised the training chi^2)"
             )
-        p_floor = sign_flip_floor(cal.method, int(acts.sum()))
+        carrying = int(np.sum(z_t > CARRY_Z))
+        p_floor = sign_flip_floor(cal.method, carrying)
         if ident and not gate and p_floor is not None and p_floor > cal.alpha_adj:
             rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
-                f"only {int(acts.sum())} of {prep.n_traj} trajectories carry it: a sign per "
-                f"trajectory cannot give it a null p-value below {p_floor:.4f}, above the "
-                f"family-wise level {cal.alpha_adj:.4f}, so at its linearisation it cannot pass "
-                "whatever its size; more trajectories of the kinds it acts on would let it"
+                f"it moves only {carrying} of {prep.n_traj} trajectories: flipping the sign of "
+                "one it does not move leaves its null statistic (nearly) unchanged, so its null "
+                f"p-value cannot fall much below {p_floor:.4f}, above the family-wise level "
+                f"{cal.alpha_adj:.4f}: at its linearisation it cannot pass whatever its size; "
+                "more trajectories of the kinds it acts on would let it"
             )
     feats = design_features(prep.rec, float(prep.noise.sigma_pos))
     _rivals(rows, deltas, feats)
