@@ -174,7 +174,7 @@ def _table(results: list[dict], noise: str) -> tuple[list[str], dict]:
         "",
         f"| effect ({noise}) | E[dBIC], generator (nuisance profiled) | noncentrality lambda "
         "[sigma^2] | k | power at alpha/C | detectable by design (power >= 90 %) | "
-        "trajectories carrying it (sign-flip floor) | observed dBIC, median (range) | "
+        "trajectories m with lambda_t >= 9 (2^-(m-1)) | observed dBIC, median (range) | "
         "observed / expected | held-out stat / family-wise threshold, median (range) |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
