@@ -13,16 +13,23 @@ no manual pre-alignment. The residual is the point-to-surface distance after ali
 
 from __future__ import annotations
 
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
 from robogs.format.errors import InputError
 
-__all__ = ["Similarity", "umeyama", "AlignmentResult", "align_to_meshes"]
+__all__ = [
+    "Similarity",
+    "umeyama",
+    "AlignmentResult",
+    "align_to_meshes",
+    "closest_points_on_triangles",
+]
 
 
 @dataclass(frozen=True)
@@ -89,12 +96,16 @@ class AlignmentResult:
 
     Attributes:
         transform: reconstruction world -> URDF world.
-        rms_mm, median_mm, p90_mm: point-to-surface distances after alignment.
+        rms_mm, median_mm, p90_mm: point-to-surface distances after alignment (the exact
+            distance to the nearest triangle of the target's mesh, every point of every target
+            fitted; not corrected by the offsets below).
         before_rms_mm: the same before alignment (identity).
-        pairs: matched points used in the last iteration.
-        iterations: ICP iterations run.
+        pairs: matched points used in the last iteration (weight > 0).
+        iterations: iterations run (point-to-point ICP, then the offset-aware refinement).
         per_target_mm: median distance per target after alignment (excluded ones too).
         excluded: targets left out of the fit and of the RMS, median and p90.
+        per_target_offset_mm: each fitted target's surface offset along its normals (positive:
+            the part is fatter than its mesh), fitted with the transform; zeros without it.
     """
 
     transform: Similarity
@@ -106,6 +117,7 @@ class AlignmentResult:
     iterations: int
     per_target_mm: dict[str, float] = field(default_factory=dict)
     excluded: list[str] = field(default_factory=list)
+    per_target_offset_mm: dict[str, float] = field(default_factory=dict)
 
 
 def _initial_guess(src: list[np.ndarray], dst: list[np.ndarray], with_scale: bool) -> Similarity:
@@ -127,6 +139,131 @@ def _initial_guess(src: list[np.ndarray], dst: list[np.ndarray], with_scale: boo
     return Similarity(scale, np.eye(3), mb - scale * ma)
 
 
+def closest_points_on_triangles(
+    p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
+) -> np.ndarray:
+    """Closest point [N, 3] of triangle (a, b, c) [N, 3] to each point p [N, 3] (m).
+
+    Ericson 2005, *Real-Time Collision Detection*, §5.1.5 (Voronoi regions of the vertices,
+    edges and face, from barycentric dot products), vectorised.
+    """
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = (ab * ap).sum(1), (ac * ap).sum(1)
+    bp, cp = p - b, p - c
+    d3, d4 = (ab * bp).sum(1), (ac * bp).sum(1)
+    d5, d6 = (ab * cp).sum(1), (ac * cp).sum(1)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = va + vb + vc
+        v_f, w_f = vb / den, vc / den
+        v_ab = d1 / (d1 - d3)
+        w_ac = d2 / (d2 - d6)
+        w_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+    out = a + v_f[:, None] * ab + w_f[:, None] * ac  # inside the face
+    regions = [  # later entries win: vertex regions over edges over the face
+        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), b + w_bc[:, None] * (c - b)),
+        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + w_ac[:, None] * ac),
+        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + v_ab[:, None] * ab),
+        ((d6 >= 0) & (d5 <= d6), c),
+        ((d3 >= 0) & (d4 <= d3), b),
+        ((d1 <= 0) & (d2 <= 0), a),
+    ]
+    for m, q in regions:
+        out = np.where(m[:, None], q, out)
+    return out
+
+
+class _Surface:
+    """Nearest points on a mesh: candidate faces from the ``k`` nearest of dense area samples,
+    then the closest point on each candidate triangle (:func:`closest_points_on_triangles`).
+
+    Exact whenever the nearest triangle holds one of the ``k`` samples nearest to the point
+    (brute force agrees to 1e-9 m on the tests' meshes); the nearest *sample* alone overstates
+    the distance by up to the sample spacing (3.6 mm on the UR5 upper arm at 20k samples).
+    """
+
+    def __init__(self, mesh: trimesh.Trimesh, samples: int, seed: int, k: int = 8) -> None:
+        p, f = trimesh.sample.sample_surface(mesh, samples, seed=seed)
+        self.points = np.asarray(p)
+        self.tree = cKDTree(self.points)
+        self.face = np.asarray(f)
+        self.tri = np.asarray(mesh.triangles, np.float64)
+        self.normal = np.asarray(mesh.face_normals, np.float64)
+        self.k = min(k, len(self.face))
+
+    def query(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Nearest surface points y [N, 3], distances [N] (m) and unit directions u [N, 3] from y
+        to x, signed to point out of the mesh (the nearest face's normal where x lies on it)."""
+        _, j = self.tree.query(x, k=self.k)
+        cand = self.face[np.asarray(j).reshape(len(x), -1)]  # [N, k] face ids
+        t = self.tri[cand.ravel()]
+        X = np.repeat(x, cand.shape[1], 0)
+        y = closest_points_on_triangles(X, t[:, 0], t[:, 1], t[:, 2]).reshape(len(x), -1, 3)
+        d = np.linalg.norm(y - x[:, None], axis=2)
+        best = d.argmin(1)
+        rows = np.arange(len(x))
+        y, d, n = y[rows, best], d[rows, best], self.normal[cand[rows, best]]
+        diff = x - y
+        u = np.where(d[:, None] > 1e-12, diff / np.maximum(d, 1e-300)[:, None], n)
+        u *= np.where((diff * n).sum(1) < 0, -1.0, 1.0)[:, None]
+        return y, d, u
+
+
+def _bisquare(r: np.ndarray, c: float = 4.685) -> np.ndarray:
+    """Tukey's biweight weights of residuals [N] scaled by 1.4826 MAD (Beaton & Tukey 1974)."""
+    s = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    if s <= 1e-12:
+        return np.ones_like(r)
+    z = r / (c * s)
+    return np.where(np.abs(z) < 1.0, (1.0 - z**2) ** 2, 0.0)
+
+
+def _offset_refine(
+    x: np.ndarray,
+    owner: np.ndarray,
+    n_targets: int,
+    match: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]],
+    with_scale: bool,
+    iterations: int,
+) -> tuple[Similarity, np.ndarray, int, int]:
+    """Point-to-plane Gauss-Newton on ``x`` [N, 3] (already roughly aligned): a similarity and
+    one surface offset per target, residual ``u . (x' - y) - offset[target]``, Tukey weights.
+
+    The point-to-plane step is Chen & Medioni 1992 with the scale added; the per-target offset
+    absorbs a part reconstructed uniformly fatter or thinner than its mesh (a thin link through
+    a coarse TSDF), which point-to-point ICP would otherwise turn into scale. Returns the step
+    taken (composed over the iterations), the offsets [T] (m), iterations and weighted pairs.
+    """
+    total = Similarity.identity()
+    offs = np.zeros(n_targets)
+    pairs = len(x)
+    it = 0
+    E = np.zeros((len(x), n_targets))
+    E[np.arange(len(x)), owner] = -1.0
+    for it in range(1, iterations + 1):  # noqa: B007
+        y, _, u = match(x)
+        r0 = ((x - y) * u).sum(1)  # signed distance, positive outside the mesh
+        c = x.mean(0)
+        q = x - c
+        J = np.concatenate(
+            [(u * q).sum(1, keepdims=True) * with_scale, np.cross(q, u), u, E], axis=1
+        )
+        w = _bisquare(r0 - offs[owner])
+        pairs = int((w > 0).sum())
+        sw = np.sqrt(w)[:, None]
+        theta = np.linalg.lstsq(J * sw, -(r0[:, None] * sw)[:, 0], rcond=None)[0]
+        a, rv, v = theta[0], theta[1:4], theta[4:7]
+        offs = theta[7:]  # r0 + J theta = u . (x' - y) - offset
+        R = Rotation.from_rotvec(rv).as_matrix()
+        sc = 1.0 + a if with_scale else 1.0
+        step = Similarity(sc, R, c + v - sc * R @ c)
+        x = step.apply(x)
+        total = step.compose(total)
+        if abs(sc - 1) < 1e-8 and np.linalg.norm(rv) < 1e-8 and np.linalg.norm(v) < 1e-9:
+            break
+    return total, offs, it, pairs
+
+
 def align_to_meshes(
     points: dict[str, np.ndarray],
     meshes: dict[str, trimesh.Trimesh],
@@ -136,17 +273,26 @@ def align_to_meshes(
     samples: int = 20_000,
     seed: int = 0,
     exclude: Collection[str] = (),
+    offsets: bool = True,
 ) -> AlignmentResult:
     """Fit a similarity taking labelled points onto the meshes of the same names (ICP + Umeyama).
+
+    Each iteration matches every point to the exact nearest point of its target's surface
+    (Besl & McKay 1992) and fits the Umeyama similarity to the pairs within 3x the median
+    distance, so a part reconstructed much fatter than its mesh does not pull the scale. With
+    ``offsets`` and 3 or more targets, a point-to-plane refinement then fits one surface offset
+    per target with the transform (:func:`_offset_refine`): parts reconstructed uniformly
+    fatter or thinner than their meshes (a coarse TSDF) shift their offsets, not the scale.
 
     Args:
         points: target name -> [N, 3] reconstructed points (world frame of the reconstruction).
         meshes: target name -> mesh in the reference world (e.g. URDF links at the joint state).
         with_scale: estimate the scale (else a rigid transform).
-        iterations: maximum ICP iterations.
-        samples: points sampled on each mesh for nearest-neighbour queries.
+        iterations: maximum iterations of each stage.
+        samples: area samples per mesh that propose the candidate faces of a nearest point.
         exclude: targets that do not enter the fit nor the residual figures (their median
             distance after the fit is still reported), e.g. parts the mesh cannot resolve.
+        offsets: refine with per-target surface offsets (needs 3 or more fitted targets).
 
     Raises:
         InputError: no target has both points and a mesh.
@@ -158,31 +304,27 @@ def align_to_meshes(
             "no reconstructed points are labelled as a link with a mesh: nothing to align",
             hint="check the panoptic labels and the segments table",
         )
-    trees, surf = {}, {}
-    for k, n in enumerate(names):
-        p, _ = trimesh.sample.sample_surface(meshes[n], samples, seed=seed + k)
-        trees[n] = cKDTree(p)
-        surf[n] = p
+    surf = {n: _Surface(meshes[n], samples, seed + k) for k, n in enumerate(usable)}
     src = np.concatenate([points[n] for n in names])
     owner = np.concatenate([np.full(len(points[n]), i) for i, n in enumerate(names)])
 
-    def match(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def match(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         d = np.empty(len(x))
         y = np.empty_like(x)
+        u = np.empty_like(x)
         for i, n in enumerate(names):
             m = owner == i
-            dd, j = trees[n].query(x[m], k=1)
-            d[m], y[m] = dd, surf[n][j]
-        return d, y
+            y[m], d[m], u[m] = surf[n].query(x[m])
+        return y, d, u
 
-    d0, _ = match(src)
-    total = _initial_guess([points[n] for n in names], [surf[n] for n in names], with_scale)
+    d0 = match(src)[1]
+    total = _initial_guess([points[n] for n in names], [surf[n].points for n in names], with_scale)
     x = total.apply(src)
     it = 0
     pairs = len(x)
     for k in range(1, iterations + 1):
         it = k
-        d, y = match(x)
+        y, d, _ = match(x)
         keep = d <= 3.0 * max(float(np.median(d)), 1e-9)
         pairs = int(keep.sum())
         if pairs < 3:
@@ -196,12 +338,17 @@ def align_to_meshes(
             and np.linalg.norm(step.t) < 1e-8
         ):
             break
-    d, _ = match(x)
+    offs = np.zeros(len(names))
+    if offsets and len(names) >= 3:
+        step, offs, k2, pairs = _offset_refine(x, owner, len(names), match, with_scale, iterations)
+        x = step.apply(x)
+        total = step.compose(total)
+        it += k2
+    d = match(x)[1]
     per = {n: float(np.median(d[owner == i]) * 1e3) for i, n in enumerate(names)}
-    out = [n for n in usable if n not in names]
-    for k, n in enumerate(out):
-        p, _ = trimesh.sample.sample_surface(meshes[n], samples, seed=seed + len(names) + k)
-        per[n] = float(np.median(cKDTree(p).query(total.apply(points[n]), k=1)[0]) * 1e3)
+    for n in usable:
+        if n not in names:
+            per[n] = float(np.median(surf[n].query(total.apply(points[n]))[1]) * 1e3)
     return AlignmentResult(
         total,
         float(np.sqrt((d**2).mean()) * 1e3),
@@ -211,5 +358,6 @@ def align_to_meshes(
         pairs,
         it,
         per,
-        out,
+        [n for n in usable if n not in names],
+        {n: float(offs[i] * 1e3) for i, n in enumerate(names)},
     )
