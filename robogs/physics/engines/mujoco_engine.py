@@ -31,9 +31,10 @@ sphere at the centre of its bottom face with torsional friction ``mu r_mean`` (`
 ``r_mean`` the face's mean radius: the ellipsoidal limit surface of Howe & Cutkosky 1996 that
 the planar model and the generator use), friction reference ``solreffriction = (10 ms, 1)``
 (:data:`PLANAR_SETTINGS`). Why: MuJoCo's soft elliptic cone couples slip into the normal
-(MuJoCo documentation, "Computation": soft contact model and solver; Todorov 2014: in the
-elliptic cone's middle zone, the sliding regime, the cost is zero only where the normal residual
-is ``mu`` times the friction residual ``a_t + b v_t``), so
+(MuJoCo documentation, "Computation": soft contact model; Todorov 2014; MuJoCo's
+``engine_core_constraint.c``, ``mj_constraintUpdate``: in the elliptic cone's middle zone, the
+sliding regime, the cost ``D (N - mu T)^2 / 2`` vanishes only where the normal residual is
+``mu`` times the friction residual ``a_t + b v_t``), so
 
 * a sliding contact is pushed off the table by about ``mu b |v|`` (b the friction rows'
   reference damping, ``2 / (d_max timeconst)``); on 3-D boxes this made the box hop and, on
