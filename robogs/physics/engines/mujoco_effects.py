@@ -83,7 +83,8 @@ class ObjectSlots:
     """Where the fitted object lives in the compiled model (indices into ``MjModel`` arrays).
 
     Attributes:
-        body: body id; dof: first DOF address of its free joint; table_pairs: contact-pair rows
+        body: body id; dof: first DOF address of its joints (free joint or planar joint set:
+        x, y, z come first either way); table_pairs: contact-pair rows
         object-table; nominal_mass [kg], nominal_inertia [3] kg m^2 (principal, body frame),
         nominal_ipos [3] m: the compiled values; nominal_iquat [4] (w, x, y, z): the rotation
         from the principal axes to the body frame (MuJoCo sorts the principal moments, so
