@@ -146,6 +146,7 @@ class Calibration:
     method: str = "wild"
     null: np.ndarray | None = field(default=None, repr=False)
     statistic: str = "fall"
+    scale: np.ndarray | None = field(default=None, repr=False)
     judged: dict[str, float] = field(default_factory=dict)
 
     def p_value(self, name: str, stat: float) -> float | None:
@@ -166,7 +167,7 @@ class Calibration:
         :func:`heldout_statistic`). Studentised: ``S > thr`` exactly when ``S / se`` exceeds the
         ``t`` threshold, so the thresholds are those of ``t`` times the data's ``se``.
         """
-        s, d = normaliser(held_base, held_eff, delta, self.statistic)
+        s, d = normaliser(held_base, held_eff, delta, self.statistic, self.scale)
         thr, q95 = self.thresholds[name] * float(d), self.q95[name] * float(d)
         x = float(_t(s, d))
         self.judged[name] = thr
@@ -311,19 +312,34 @@ STATISTICS = {
     "fall": "held-out fall S [sigma^2]",
     "t": "studentised held-out fall t = S / se (cluster-robust)",
     "gain": "held-out gain S / D (D: base held-out chi^2 of the trajectories acted on)",
+    "tn": "held-out fall over its noise se, S / (2 sqrt(sum s_t^2 ||delta_t||^2))",
 }
 """The gate's statistics (:func:`normaliser`)."""
 
 
 def normaliser(
-    held_base: np.ndarray, held_eff: np.ndarray, delta: np.ndarray, statistic: str = "fall"
+    held_base: np.ndarray,
+    held_eff: np.ndarray,
+    delta: np.ndarray,
+    statistic: str = "fall",
+    scale: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The held-out fall ``S`` [sigma^2] and the divisor ``D`` of ``statistic`` (both [...]).
 
     ``"fall"``: ``D = 1``; ``"t"``: ``D = se`` (:func:`studentised_statistic`); ``"gain"``:
     ``D`` = the base model's held-out chi^2 on the trajectories acted on (``S / D`` is the
-    held-out gain, a fraction). ``"t"`` and ``"gain"`` are unchanged when the data are scaled.
+    held-out gain, a fraction); ``"tn"``: ``D = 2 sqrt(sum_t s_t^2 ||delta_t||^2)`` over the
+    trajectories acted on, ``s`` [..., T] each trajectory's noise scale (:func:`diff_scale`):
+    the standard error of ``S`` under white noise, ``2 delta . e``, which leaves out how unevenly
+    the effect acts. All but ``"fall"`` are unchanged when the data are scaled.
     """
+    if statistic == "tn":
+        zt2 = np.sum(delta**2, axis=-1)
+        acts = zt2 >= AFFECTED_Z**2
+        acts = np.where(acts.any(axis=-1, keepdims=True), acts, True)
+        sc = np.ones_like(zt2) if scale is None else scale
+        s = heldout_statistic(held_base, held_eff, delta)
+        return s, 2.0 * np.sqrt(np.sum(acts * sc**2 * zt2, axis=-1))
     if statistic == "t":
         return studentised_statistic(held_base, held_eff, delta)
     s = heldout_statistic(held_base, held_eff, delta)
@@ -400,6 +416,22 @@ def _write(path: Path, cal: Calibration) -> None:
         pass
 
 
+def _diff_scales(resid: np.ndarray, valid: np.ndarray, width: int = 4) -> np.ndarray:
+    """:func:`diff_scale` of each draw, ``resid`` [D, T, K] -> [D, T]."""
+    d_n, t_n, _ = resid.shape
+    num = np.zeros((d_n, t_n))
+    den = np.zeros(t_n)
+    for t in range(t_n):
+        for c in range(width):
+            idx = np.flatnonzero(valid[t, c::width]) * width + c
+            if idx.size >= 2:
+                d = np.diff(resid[:, t, idx], axis=-1)
+                num[:, t] += np.sum(d * d, axis=-1)
+                den[t] += idx.size - 1
+    out = np.where(den >= 4, np.sqrt(num / (2.0 * np.maximum(den, 1))), 1.0)
+    return np.maximum(out, 1e-6)
+
+
 def _simulate(
     cands: Sequence[LinearCandidate],
     valid: np.ndarray,
@@ -423,7 +455,8 @@ def _simulate(
             q = _profile(cand.jac_local, valid)
             r_b, h_b = _linear_heldout(jac[..., : cand.n_base], q, shared, folds)
             r_c, h_c = _linear_heldout(jac, q, shared, folds)
-            null[s0 : s0 + n, c] = _t(*normaliser(h_b, h_c, r_b - r_c, statistic))
+            sc = _diff_scales(r_b, valid) if statistic == "tn" else None
+            null[s0 : s0 + n, c] = _t(*normaliser(h_b, h_c, r_b - r_c, statistic, sc))
         if pos is not None:
             pos[0] += n
     return null
@@ -539,6 +572,7 @@ def calibrate(
         path = cache_dir() / f"{_key(tag, names, draws, seed)}.json"
         hit = _read(path)
         if hit is not None and set(hit.thresholds) == set(names):
+            hit.scale = diff_scale(base_resid, valid)
             return hit
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
@@ -593,6 +627,7 @@ def calibrate(
         method=method + (f" ({note})" if note else ""),
         null=null,
         statistic=stat_kind,
+        scale=diff_scale(base_resid, valid),
     )
     if path is not None:
         _write(path, cal)

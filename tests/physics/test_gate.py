@@ -214,9 +214,13 @@ def test_studentised_statistic_and_its_thresholds_in_sigma2():
     # the held-out gain's divisor: the base held-out chi^2 of the trajectories acted on
     s_g, d_g = gate.normaliser(hb[0], hc[0], delta[0], "gain")
     assert s_g == pytest.approx(16.0) and d_g == pytest.approx(31.0)
-    for kind in ("t", "gain"):  # both unchanged when the data are scaled by 2
-        s1, d1 = gate.normaliser(hb, hc, delta, kind)
-        s2, d2 = gate.normaliser(4 * hb, 4 * hc, 2 * delta, kind)
+    # the noise se: 2 sqrt(sum s_t^2 ||delta_t||^2) over the trajectories acted on
+    sc = np.array([1.0, 2.0, 0.5, 3.0])
+    s_n, d_n = gate.normaliser(hb[0], hc[0], delta[0], "tn", sc)
+    assert s_n == pytest.approx(16.0) and d_n == pytest.approx(2 * np.sqrt(25 * (1 + 4 + 0.25)))
+    for kind in ("t", "gain", "tn"):  # unchanged when the data are scaled by 2
+        s1, d1 = gate.normaliser(hb, hc, delta, kind, sc)
+        s2, d2 = gate.normaliser(4 * hb, 4 * hc, 2 * delta, kind, 2 * sc)
         np.testing.assert_allclose(s1 / d1, s2 / d2)
 
 
