@@ -27,7 +27,7 @@ Under 8 trajectories (fewer than ``MIN_PATTERNS`` sign patterns) the default nul
 alone and the diagnosis asks for strong in-sample evidence as well (``DBIC_MAX``). Webb's wild
 null of the fall (``method="wild"``) keeps its size there but has no power: the base residuals
 carry the effect, and a pattern near ``w`` on every trajectory scales it by ``w^2`` (up to 1.5),
-above the observed fall (a hidden tilt on six pushes: 786 against 830 sigma^2). Two
+above the observed fall (a hidden tilt on six pushes: 786 against 830 sigma^2). Three
 scale-free statistics are opt-in (``statistic``, :func:`normaliser`); a constant pattern gives
 back the observed value. ``"t"``: the fall over its cluster-robust standard error from the
 per-trajectory contributions (studentising is what makes the restricted wild cluster
@@ -37,8 +37,13 @@ acts alike on every trajectory, but its ``se`` also holds the effect's own sprea
 trajectories: the six-push tilt reads ``t`` = 2.30 against 2.91. ``"gain"``: the fall over the
 base held-out chi^2 (the held-out gain); the tilt passes (786 against 734 sigma^2), an effect
 alike on every trajectory only 21 of 30 times (``t``: 30 of 30; bench/RESULTS.md, issue 17,
-h21). Neither is the default. Thresholds in sigma^2 are those of the statistic times its
-divisor on the data (:meth:`Calibration.judge`).
+h21). ``"tn"``: the fall over its white-noise standard error, ``2 sqrt(sum s_t^2 ||delta_t||^2)``
+with each trajectory's noise scale ``s_t`` of the data or draw (scale-free, and an effect that
+acts unevenly is not penalised): the tilt passes (786 against 751 sigma^2) and the planted
+effect 30 of 30. None is the default: with any of them the rival rule's cutoffs, which assume
+thresholds that do not depend on the data, no longer pair the tilt with anisotropic friction
+(``tests/physics/test_rivals_from_data.py``). Thresholds in sigma^2 are those of the statistic
+times its divisor on the data (:meth:`Calibration.judge`).
 
 Family-wise level: single-step min-P over the candidates (Westfall & Young 1993, "Resampling-
 Based Multiple Testing", alg. 2.8): every candidate is fitted to the same draws; ``alpha'`` is
@@ -128,8 +133,8 @@ class Calibration:
         alpha_adj: per-candidate level that keeps the family-wise rate at ``alpha``.
         null: [D, C] null statistics (kept in memory only).
         draws, seconds, cells: cost of the calibration (``cached`` when read back).
-        statistic: ``"fall"`` (the held-out fall ``S`` [sigma^2]), ``"t"`` (``S / se``) or
-            ``"gain"`` (``S / D``), see :func:`normaliser`; judge a candidate with
+        statistic: ``"fall"`` (the held-out fall ``S`` [sigma^2]), ``"t"`` (``S / se``),
+            ``"gain"`` or ``"tn"`` (``S / D``), see :func:`normaliser`; judge a candidate with
             :meth:`judge`, which gives its thresholds in sigma^2 on the data.
         judged: candidate -> the threshold [sigma^2] it was judged against (:meth:`judge`).
     """
@@ -550,7 +555,8 @@ def calibrate(
             white noise alone let a tilt, quadratic drag or anisotropic friction through in 3
             of 4 seeds. ``"white"``: Gaussian white noise at each trajectory's
             difference-based scale.
-        statistic: ``"fall"`` (None, the default), ``"t"`` or ``"gain"`` (:func:`normaliser`):
+        statistic: ``"fall"`` (None, the default), ``"t"``, ``"gain"`` or ``"tn"``
+            (:func:`normaliser`):
             the null is of that statistic (with ``method="both"`` under 8 trajectories from
             white noise and Webb's weights); judge candidates with :meth:`Calibration.judge`,
             which gives the thresholds in sigma^2 on the data.
