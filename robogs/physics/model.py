@@ -359,6 +359,41 @@ def _pusher_impulse(
     return vx - jx / mass, vy - jy / mass, wf - dw / inertia, jx, jy
 
 
+def _pusher_apart(
+    scene: BoxScene,
+    p: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    wf: np.ndarray,
+    com_r: np.ndarray,
+    pts: np.ndarray,
+    pts_speed: np.ndarray,
+    grasping: np.ndarray,
+    dt: float,
+) -> bool:
+    """Whether no end sphere can touch its box in this step, so that the contact impulse of
+    :func:`_pusher_impulse` is exactly zero and the step may skip it.
+
+    A sphere cannot touch when it is out of the contact band (above or below the box's half
+    height, or grasping), or when a lower bound of its gap (its planar distance from the CoM,
+    less the CoM offset ``com_r`` [M, 1] m, the box's half diagonal and the radius) exceeds
+    the flush-face band (1 mm) and twice the distance the fastest closing motion covers in one
+    step: the sphere's planar speed ``pts_speed`` [T, J] m/s plus the box point's (CoM speed +
+    yaw rate x lever). Then every speculative target ``-gap / dt`` is below the closing rate
+    and no LCP case gives an impulse.
+    """
+    half_diag = 0.5 * float(np.hypot(scene.size[0], scene.size[1]))
+    lever = half_diag + com_r  # [M, 1]
+    d = pts[None, :, :, :2] - p[:, :, None, :2]  # [M, T, J, 2]
+    gap_lb = np.sqrt((d * d).sum(-1)) - (lever[..., None] + scene.pusher_radius)
+    box_speed = np.sqrt(vx * vx + vy * vy) + np.abs(wf) * lever  # [M, T]
+    reach = 2.0 * dt * (pts_speed[None] + box_speed[..., None])
+    off_band = (np.abs(pts[None, ..., 2] - p[..., 2:3]) > 0.5 * scene.size[2]) | grasping[
+        None, :, None
+    ]
+    return bool((off_band | (gap_lb > np.maximum(reach, 1e-3))).all())
+
+
 def _numpy(x: torch.Tensor) -> np.ndarray:
     """A CPU float array of ``x`` (a copy; no autograd)."""
     return x.detach().cpu().numpy().copy()
@@ -421,6 +456,7 @@ def simulate(
     mass, inertia = _numpy(body.mass), _numpy(body.inertia_z)  # [M, 1]
     kr = mass * c_r**2 / inertia  # [M, 1]
     com_x, com_y = _numpy(body.com[..., 0]), _numpy(body.com[..., 1])  # [M, 1]
+    com_r = np.hypot(com_x, com_y)  # [M, 1]
     mu_s0, mu_d0 = _numpy(body.mu_s), _numpy(body.mu_d)
     e_rest, damping = _numpy(body.restitution), _numpy(body.damping)
     has_damping = bool((damping != 0).any())
@@ -437,6 +473,7 @@ def simulate(
     pts_all, pv_all = _pusher_points(
         scene, pusher_t, drive_array(drive.pusher_vel), ee_yaw_t, ee_rate_t
     )  # [T, S, J, 3]
+    pts_speed = np.hypot(pv_all[..., 0], pv_all[..., 1])  # [T, S, J] planar, m/s
     grasp = drive.grasp.detach().cpu().numpy()
     grasp_any = grasp.any(axis=0)
     onset = np.zeros_like(grasp)
@@ -594,7 +631,9 @@ def simulate(
         wf = wf * f_r
 
         # ---- pusher: frictionless inelastic speculative contact on the box sides ------------
-        if pusher_low[k]:
+        if pusher_low[k] and not _pusher_apart(
+            scene, p, vx, vy, wf, com_r, pts_all[:, k], pts_speed[:, k], grasp[:, k], dt
+        ):
             vx, vy, wf, jx, jy = _pusher_impulse(
                 scene,
                 p,
