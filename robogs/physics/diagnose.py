@@ -710,13 +710,15 @@ def diagnose_recording(
             )
         carrying = int(np.sum(z_t > CARRY_Z))
         p_floor = sign_flip_floor(cal.method, carrying)
-        if ident and not gate and p_floor is not None and p_floor > cal.alpha_adj:
+        # said where it explains a miss: evidence above its own 95 % quantile, not the gate's
+        if verdict == "likely" and p_floor is not None and p_floor > cal.alpha_adj:
             rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
                 f"it moves only {carrying} of {prep.n_traj} trajectories: flipping the sign of "
-                "one it does not move leaves its null statistic (nearly) unchanged, so its null "
-                f"p-value cannot fall much below {p_floor:.4f}, above the family-wise level "
-                f"{cal.alpha_adj:.4f}: at its linearisation it cannot pass whatever its size; "
-                "more trajectories of the kinds it acts on would let it"
+                "one it does not move leaves its null statistic (nearly) unchanged, so its "
+                f"linearised null p-value cannot fall much below {p_floor:.4f}, above the "
+                f"family-wise level {cal.alpha_adj:.4f}; it passes only where its real held-out "
+                "fall exceeds its linearisation. More trajectories of the kinds it acts on "
+                "would let it pass"
             )
     feats = design_features(prep.rec, float(prep.noise.sigma_pos))
     _rivals(rows, deltas, feats)
