@@ -32,8 +32,11 @@ def scene(tmp_path_factory: pytest.TempPathFactory):
     torch.set_num_threads(1)
     root = tmp_path_factory.mktemp("e2e") / "scene"
     truth = synthesize_multiview(root, n_views=40, width=128, height=96)
+    # 150 iterations (was 200, 20 % less CPU): the same scene, stages and thresholds; measured
+    # PSNR 29.5 dB (>= 28), mIoU 0.94 (>= 0.9), F@1 % 0.99 (>= 0.9). Fewer views or smaller
+    # images save nothing (training cost is per iteration) or leave PSNR at 28.4 dB (96x72)
     opts = ReconstructOptions(
-        train=TrainConfig(iterations=200, checkpoint_every=0),
+        train=TrainConfig(iterations=150, checkpoint_every=0),
         lr_scale=3.0,
         work_dir=root.parent / "work",
     )
@@ -93,7 +96,7 @@ def test_binding_and_written_dataset(scene):
         report.gaussians.values()
     )
     prov = ds.manifest["provenance"]["reconstruction"]
-    assert prov["heldout"] == report.views_heldout and prov["report"]["iterations"] == 200
+    assert prov["heldout"] == report.views_heldout and prov["report"]["iterations"] == 150
     # the box mesh is stored in its own frame: posed at its rest pose it lies on the true box
     from robogs.format.frames import quat_to_matrix
 
