@@ -84,12 +84,20 @@ class Engine:
         recording: a Recording or any recording-like object.
         dt: simulation step [s].
         backend: ``planar``, ``mujoco`` or ``auto`` (see the module docstring).
-        threads: MuJoCo rollout threads (the planar model uses torch's threads).
+        threads: MuJoCo rollout threads; None (default): torch's intra-op thread count, which
+            every verb sets deliberately (``--threads``), so one setting sizes both engines.
     """
 
     def __init__(
-        self, recording: object, *, dt: float = 1e-3, backend: str = "planar", threads: int = 1
+        self,
+        recording: object,
+        *,
+        dt: float = 1e-3,
+        backend: str = "planar",
+        threads: int | None = None,
     ) -> None:
+        if threads is None:
+            threads = max(1, torch.get_num_threads())
         self.prep: Prepared = prepare(recording, dt=dt)
         self.backend, self.backend_reason = resolve_backend(self.prep.rec.physics, backend)
         self._mujoco = None
