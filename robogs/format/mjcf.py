@@ -9,7 +9,7 @@ What the document holds (world frame = the dataset world, z up, metres):
 
 * ``table`` - a plane through ``objects.table.point_m`` (default ``(0, 0, plane_z_m)``) with
   normal ``objects.table.normal`` (default +z), so a fitted tilted plane stays tilted;
-* one free body per ``rigid`` object (``mass_kg``, ``com_m``, ``inertia_kgm2`` as an explicit
+* one body per ``rigid`` object (``mass_kg``, ``com_m``, ``inertia_kgm2`` as an explicit
   ``<inertial>``; the geometry is never used for mass): a box of ``size_m`` resting on an
   n x n grid of small spheres on its bottom face (:func:`footprint_points`: the friction
   torque of a uniformly loaded face, not of four corners), or the convex hull
@@ -28,7 +28,16 @@ What the document holds (world frame = the dataset world, z up, metres):
   object-pusher ``objects.pusher.friction_dynamic`` (default 0: the planar model's
   frictionless pusher), object-object the larger of the two objects' coefficients (MuJoCo's own
   rule for geoms without a pair);
-* ``gravity_mps2`` as the gravity vector.
+* ``gravity_mps2`` as the gravity vector;
+* the objects' joint set (``joints``, :data:`JOINTS`): a free joint each, or, for boxes on a
+  horizontal support (:func:`planar_joints_fit`, the ``auto`` default there), the planar joint
+  set - slide x, y, z and a hinge about z, one central footprint contact with torsional friction
+  and a 10 ms friction reference (:data:`PLANAR_SETTINGS`). The ``mujoco`` engine and
+  ``robogs export mjcf`` both take this choice from here, so an exported scene is the model
+  that was fitted (the reasons are in ``robogs.physics.engines.mujoco_engine``, "Planar joint
+  set"). Planar bodies sit at the world origin (qpos is the pose ``T_world_object``: x, y, z m,
+  yaw rad) and start from the ``<keyframe>`` ``start`` (``mj_resetDataKeyframe``); free bodies
+  start at their ``pos``/``quat`` (qpos0), which the same keyframe repeats.
 
 MuJoCo has one Coulomb coefficient per contact: ``friction_dynamic`` is used, also for
 sticking (the planar model's ``friction_static`` has no counterpart). Restitution, damping and
@@ -50,12 +59,17 @@ import numpy as np
 from robogs.format.errors import FormatError
 
 __all__ = [
+    "JOINTS",
     "MAX_HULL_VERTICES",
+    "OBJECT_PAIR_DAMPRATIO",
+    "PLANAR_SETTINGS",
     "PUSHER_ACTUATORS",
+    "PUSHER_SOLREFFRICTION_STEPS",
     "ContactSettings",
     "MjcfScene",
     "collision_hull",
     "footprint_points",
+    "planar_joints_fit",
     "scene_mjcf",
     "torsion_radius",
 ]
@@ -68,6 +82,35 @@ PUSHER_ACTUATORS = ("x", "y", "z", "yaw")
 """Pusher joints, in qpos order; each has a position servo ``pusher_<j>`` (ctrl: target
 position, m or rad) followed, after all four, by a velocity servo ``pusher_v<j>`` (ctrl: target
 velocity, m/s or rad/s)."""
+
+JOINTS = ("auto", "free", "planar")
+"""Joint sets of the objects: ``free`` (6 DOF), ``planar`` (slide x, y, z and a hinge about
+z: no roll or pitch), ``auto`` (planar where :func:`planar_joints_fit` says the scene allows)."""
+
+PLANAR_JOINTS = (
+    ("", "slide", "1 0 0"),
+    ("_y", "slide", "0 1 0"),
+    ("_z", "slide", "0 0 1"),
+    ("_yaw", "hinge", "0 0 1"),
+)
+"""(name suffix, type, axis) of an object's planar joints, in qpos order (the first is named
+as the object, like its free joint)."""
+
+PUSHER_SOLREFFRICTION_STEPS = 2.0
+"""Friction time constant of the object-pusher pairs in timesteps (damping ratio 1). A soft
+friction reference lets a slowly sliding contact creep below the Coulomb limit: against the
+quasi-static pusher-friction generator (:mod:`robogs.synth.scenarios.pusher_friction`, mu_p
+0.3, 4 pushes turning 28-43 deg) the box turned 2.2-3.2 deg RMS short with the pairs' 20 ms
+(planar joint set), 1.1-1.7 deg at 4 ms and 1.0-1.5 deg at 2 ms (positions 1-2.7 mm ->
+0.1-0.4 mm); the table pairs keep theirs (2-4 ms there made it worse, 1.6-2.7 deg)."""
+
+OBJECT_PAIR_DAMPRATIO = 2.0
+"""Damping ratio of object-object contact pairs (time constant as ``solref``). A critically
+damped soft contact gives back part of its compression: box A driven into box B at 0.45 m/s
+launched B at 0.51 m/s, 13 % above A, and B slid 3.6 mm past the plastic-impact generator
+(:mod:`robogs.synth.scenarios.two_objects`, restitution 0); at ratio 2 B leaves at 0.485 m/s
+and both boxes end within 0.8 mm at 0.25-0.45 m/s (ratio 4: A 2.8 mm short; 1 with a 2 ms
+time constant: B 2 mm long)."""
 
 _NAME = re.compile(r"[^A-Za-z0-9_.-]+")
 
@@ -123,6 +166,38 @@ class ContactSettings:
     servo_position_gain: float = 0.3
 
 
+PLANAR_SETTINGS = ContactSettings(
+    footprint_grid=1, footprint_torsion=True, solreffriction=(0.01, 1.0)
+)
+"""Contact settings of the planar joint set (see ``robogs.physics.engines.mujoco_engine``,
+"Planar joint set")."""
+
+
+def planar_joints_fit(
+    physics: Mapping[str, Any], meshes: Mapping[str, Any] | None = None
+) -> tuple[bool, str]:
+    """Whether the objects can move on the planar joint set: every rigid object is a box
+    (``size_m``, no mesh) on a horizontal support, as in the planar model. Meshes (their hull
+    rests on whichever vertices touch) and tilted support planes keep the free joint.
+
+    Returns:
+        ``(fits, why)``: the verdict and one line of reason.
+    """
+    objects = physics.get("objects") or {}
+    meshes = meshes or {}
+    normal = np.asarray((objects.get("table") or {}).get("normal", [0.0, 0.0, 1.0]), float)
+    if normal.shape != (3,) or np.linalg.norm(normal[:2]) > 1e-9 * np.linalg.norm(normal):
+        return False, "the support plane is not horizontal"
+    if normal[2] <= 0:
+        return False, "the support plane faces down"
+    for name, entry in objects.items():
+        if name in ("table", "pusher") or not isinstance(entry, Mapping):
+            continue
+        if entry.get("equation") == "rigid" and (name in meshes or "size_m" not in entry):
+            return False, f"object {name!r} is a mesh (its hull may rest on any vertices)"
+    return True, "boxes on a horizontal plane"
+
+
 @dataclass
 class MjcfScene:
     """An MJCF document and what a caller needs to drive it.
@@ -140,6 +215,9 @@ class MjcfScene:
         feet: object name -> its footprint sphere geoms.
         pair_torsion: per contact pair (``pairs`` order), the torsional friction radius [m]
             (the pair's third friction coefficient is ``mu * radius``; 0: condim 3).
+        torsion: object name -> torsional friction radius [m] of its footprint (0: none).
+        planar: the objects are on the planar joint set (else free joints).
+        settings: the contact settings the document was built with.
     """
 
     xml: str
@@ -153,6 +231,8 @@ class MjcfScene:
     feet: dict[str, list[str]] = field(default_factory=dict)
     pair_torsion: list[float] = field(default_factory=list)
     torsion: dict[str, float] = field(default_factory=dict)
+    planar: bool = False
+    settings: ContactSettings = field(default_factory=ContactSettings)
 
 
 def _f(v: float) -> str:
@@ -505,6 +585,7 @@ def scene_mjcf(
     settings: ContactSettings | None = None,
     model_name: str = "robogs_scene",
     meshdir: str = "",
+    joints: str = "auto",
 ) -> MjcfScene:
     """Build the MJCF of a physics.json document.
 
@@ -514,21 +595,35 @@ def scene_mjcf(
             gets its collision hull instead of a ``size_m`` box.
         poses: object name -> ``T_world_object`` as ``[x, y, z, qw, qx, qy, qz]`` (free bodies'
             initial pose, static objects' pose; default identity).
-        settings: solver and contact settings.
+        settings: solver and contact settings (default :data:`PLANAR_SETTINGS` on the planar
+            joint set, else :class:`ContactSettings`).
         model_name: the ``<mujoco model>`` name.
         meshdir: prefix of mesh file names in the XML (e.g. ``"meshes/"``).
+        joints: the objects' joint set, ``auto``, ``free`` or ``planar`` (:data:`JOINTS`).
 
     Returns:
         The document, its mesh assets, the free objects in qpos order and notes.
 
     Raises:
-        FormatError: a value the scene needs is missing or malformed (the key is named).
+        FormatError: a value the scene needs is missing or malformed (the key is named), an
+            unknown joint set, or ``planar`` for a scene it cannot represent.
     """
-    settings = settings or ContactSettings()
     meshes = dict(meshes or {})
+    if joints not in JOINTS:
+        raise FormatError(f"joints {joints!r} is not one of {', '.join(JOINTS)}", where="joints")
+    fits, why = planar_joints_fit(physics, meshes)
+    if joints == "planar" and not fits:
+        raise FormatError(
+            f"the planar joint set cannot represent this scene: {why}",
+            path="physics.json",
+            where="joints",
+            hint="use joints='free' (or 'auto')",
+        )
+    planar = joints == "planar" or (joints == "auto" and fits)
+    settings = settings or (PLANAR_SETTINGS if planar else ContactSettings())
     poses = dict(poses or {})
     objects = physics.get("objects") or {}
-    scene = MjcfScene(xml="")
+    scene = MjcfScene(xml="", planar=planar, settings=settings)
     root = ET.Element("mujoco", model=model_name)
     ET.SubElement(root, "compiler", angle="radian", inertiafromgeom="false", autolimits="true")
     grav = _floats(physics, "gravity_mps2", 3, "") if "gravity_mps2" in physics else [0, 0, -9.81]
@@ -572,6 +667,7 @@ def scene_mjcf(
     )
     free: dict[str, float] = {}
     static: list[str] = []
+    start: list[float] = []  # keyframe qpos of the objects, in body (= qpos) order
     for name in sorted(objects):
         entry = objects[name]
         if name in ("table", "pusher") or not isinstance(entry, Mapping):
@@ -579,8 +675,20 @@ def scene_mjcf(
         where = f"objects/{name}"
         eq = entry.get("equation")
         if eq == "rigid":
-            body = ET.SubElement(world, "body", name=name, **_pose_attrs(poses.get(name)))
-            ET.SubElement(body, "freejoint", name=name)
+            pose = _pose_attrs(poses.get(name))
+            p = [float(v) for v in poses.get(name, (0, 0, 0, 1, 0, 0, 0))]
+            if planar:  # at the world origin: qpos is the pose (see the module docstring)
+                body = ET.SubElement(world, "body", name=name)
+                for suffix, kind, axis in PLANAR_JOINTS:
+                    ET.SubElement(
+                        body, "joint", name=f"{name}{suffix}", type=kind, axis=axis, limited="false"
+                    )
+                w, x, y, z = p[3:7]
+                start += [*p[:3], math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))]
+            else:
+                body = ET.SubElement(world, "body", name=name, **pose)
+                ET.SubElement(body, "freejoint", name=name)
+                start += p
             _inertial(body, entry, where)
             _shape_geom(
                 body,
@@ -618,7 +726,13 @@ def scene_mjcf(
     sr, si = _vec(settings.solref), _vec(settings.solimp)
     srf = _vec(settings.solreffriction)
 
-    def pair(g1: str, g2: str, mu: float, rho: float = 0.0, **extra: str) -> None:
+    # see PUSHER_SOLREFFRICTION_STEPS and OBJECT_PAIR_DAMPRATIO
+    srf_pusher = _vec([PUSHER_SOLREFFRICTION_STEPS * settings.timestep, 1.0])
+    sr_objects = _vec([settings.solref[0], OBJECT_PAIR_DAMPRATIO])
+
+    def pair(
+        g1: str, g2: str, mu: float, rho: float = 0.0, solref: str = sr, solreffriction: str = srf
+    ) -> None:
         # condim 3 even without friction, so that a fitted friction can be set on the model;
         # condim 4 with torsional friction mu * rho on torsion footprints
         mu = max(mu, 1e-5)
@@ -630,10 +744,9 @@ def scene_mjcf(
             geom2=g2,
             condim="4" if rho > 0 else "3",
             friction=fr,
-            solref=sr,
-            solreffriction=srf,
+            solref=solref,
+            solreffriction=solreffriction,
             solimp=si,
-            **extra,
         )
         scene.pairs.append((g1, g2))
         scene.pair_torsion.append(float(rho))
@@ -647,11 +760,11 @@ def scene_mjcf(
         scene.table_pairs.setdefault(a, []).append(len(scene.pairs))
         pair(a, "table", free[a])
         if scene.pusher is not None:
-            pair(a, "pusher", mu_p)
+            pair(a, "pusher", mu_p, solreffriction=srf_pusher)
             if pusher_ends:
-                pair(a, "pusher_end", mu_p)
+                pair(a, "pusher_end", mu_p, solreffriction=srf_pusher)
         for b in names[i + 1 :]:
-            pair(a, b, max(free[a], free[b]))
+            pair(a, b, max(free[a], free[b]), solref=sr_objects)
         for s in static:
             pair(a, s, free[a])
     if not len(asset):
@@ -660,6 +773,16 @@ def scene_mjcf(
         root.append(contact)
     if len(actuator):
         root.append(actuator)
+    if start:  # the pusher (last body) starts at its qpos0, the world origin
+        keyframe = ET.SubElement(root, "keyframe")
+        ET.SubElement(
+            keyframe, "key", name="start", qpos=_vec(start + [0.0] * 4 * (scene.pusher is not None))
+        )
+    if planar:
+        scene.notes.append(
+            "objects on the planar joint set (slide x, y, z, hinge z): no roll or pitch, "
+            "as in the planar model"
+        )
     for key in ("effects",):
         if physics.get(key):
             scene.unmapped += [f"effects.{e.get('name')}" for e in physics[key]]

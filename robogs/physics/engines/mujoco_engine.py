@@ -116,7 +116,6 @@ from __future__ import annotations
 
 import copy
 import math
-import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -126,7 +125,17 @@ import numpy as np
 from mujoco import rollout as mj_rollout
 
 from robogs.format.errors import InputError
-from robogs.format.mjcf import PUSHER_ACTUATORS, ContactSettings, MjcfScene, scene_mjcf
+from robogs.format.mjcf import (  # one source for the engine and `robogs export mjcf`
+    JOINTS,
+    OBJECT_PAIR_DAMPRATIO,
+    PLANAR_SETTINGS,
+    PUSHER_ACTUATORS,
+    PUSHER_SOLREFFRICTION_STEPS,
+    ContactSettings,
+    MjcfScene,
+    planar_joints_fit,
+    scene_mjcf,
+)
 from robogs.physics.engines.base import ObjectState, Predicted, quat_yaw, yaw_quat
 from robogs.physics.model import Drive
 
@@ -141,15 +150,6 @@ __all__ = [
     "planar_joints_fit",
 ]
 
-JOINTS = ("auto", "free", "planar")
-"""Joint sets of the objects: ``free`` (6 DOF), ``planar`` (slide x, y, z and a hinge about
-z: no roll or pitch), ``auto`` (planar where :func:`planar_joints_fit` says the scene allows)."""
-
-PLANAR_SETTINGS = ContactSettings(
-    footprint_grid=1, footprint_torsion=True, solreffriction=(0.01, 1.0)
-)
-"""Contact settings of the planar joint set (see the module docstring, "Planar joint set")."""
-
 SUPPORTED_PARAMS = (
     "objects.<obj>.friction_dynamic",
     "objects.<obj>.mass_kg",
@@ -158,22 +158,6 @@ SUPPORTED_PARAMS = (
 """physics.json keys a parameter set may change (mass scales the inertia with it)."""
 
 _STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
-PUSHER_SOLREFFRICTION_STEPS = 2.0
-"""Friction time constant of the object-pusher pairs in timesteps (damping ratio 1). A soft
-friction reference lets a slowly sliding contact creep below the Coulomb limit: against the
-quasi-static pusher-friction generator (:mod:`robogs.synth.scenarios.pusher_friction`, mu_p
-0.3, 4 pushes turning 28-43 deg) the box turned 2.2-3.2 deg RMS short with the pairs' 20 ms
-(planar joint set), 1.1-1.7 deg at 4 ms and 1.0-1.5 deg at 2 ms (positions 1-2.7 mm ->
-0.1-0.4 mm); the table pairs keep theirs (2-4 ms there made it worse, 1.6-2.7 deg)."""
-
-OBJECT_PAIR_DAMPRATIO = 2.0
-"""Damping ratio of object-object contact pairs (time constant as ``solref``). A critically
-damped soft contact gives back part of its compression: box A driven into box B at 0.45 m/s
-launched B at 0.51 m/s, 13 % above A, and B slid 3.6 mm past the plastic-impact generator
-(:mod:`robogs.synth.scenarios.two_objects`, restitution 0); at ratio 2 B leaves at 0.485 m/s
-and both boxes end within 0.8 mm at 0.25-0.45 m/s (ratio 4: A 2.8 mm short; 1 with a 2 ms
-time constant: B 2 mm long)."""
-
 _CHUNK = 64  # rollouts per mujoco.rollout call: bounds the state buffer (64 x S x nstate)
 
 
@@ -265,55 +249,6 @@ def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return v + w * t + np.cross(u, t)
 
 
-def planar_joints_fit(
-    physics: Mapping[str, Any], meshes: Mapping[str, Any] | None = None
-) -> tuple[bool, str]:
-    """Whether the objects can move on the planar joint set: every rigid object is a box
-    (``size_m``, no mesh) on a horizontal support, as in the planar model. Meshes (their hull
-    rests on whichever vertices touch) and tilted support planes keep the free joint."""
-    objects = physics.get("objects") or {}
-    meshes = meshes or {}
-    normal = np.asarray((objects.get("table") or {}).get("normal", [0.0, 0.0, 1.0]), float)
-    if normal.shape != (3,) or np.linalg.norm(normal[:2]) > 1e-9 * np.linalg.norm(normal):
-        return False, "the support plane is not horizontal"
-    if normal[2] <= 0:
-        return False, "the support plane faces down"
-    for name, entry in objects.items():
-        if name in ("table", "pusher") or not isinstance(entry, Mapping):
-            continue
-        if entry.get("equation") == "rigid" and (name in meshes or "size_m" not in entry):
-            return False, f"object {name!r} is a mesh (its hull may rest on any vertices)"
-    return True, "boxes on a horizontal plane"
-
-
-def _planar_xml(xml: str, names: Sequence[str], poses: Mapping[str, Sequence[float]]) -> str:
-    """The scene with each free joint of ``names`` replaced by slide x, y, z + hinge z, the
-    bodies at the world origin (so qpos is the world pose); their start poses are written
-    into the initial states by the caller (qpos0 stays 0)."""
-    root = ET.fromstring(xml)
-    world = root.find("worldbody")
-    assert world is not None
-    for body in world.findall("body"):
-        name = body.get("name")
-        if name not in names:
-            continue
-        fj = body.find("freejoint")
-        if fj is None:
-            continue
-        i = list(body).index(fj)
-        body.remove(fj)
-        for attr in ("pos", "quat"):
-            body.attrib.pop(attr, None)
-        axes = (("", "slide", "1 0 0"), ("_y", "slide", "0 1 0"), ("_z", "slide", "0 0 1"))
-        joints = [*axes, ("_yaw", "hinge", "0 0 1")]
-        for k, (suffix, kind, axis) in enumerate(joints):
-            el = ET.Element("joint", name=f"{name}{suffix}", type=kind, axis=axis)
-            el.set("limited", "false")
-            body.insert(i + k, el)
-    ET.indent(root)
-    return ET.tostring(root, encoding="unicode") + "\n"
-
-
 class MujocoEngine:
     """MuJoCo simulation of a physics.json scene (see the module docstring).
 
@@ -365,25 +300,17 @@ class MujocoEngine:
         base = settings or (PLANAR_SETTINGS if self.planar else ContactSettings())
         self.settings = ContactSettings(**{**base.__dict__, "timestep": float(dt)})
         self.physics = physics
+        # the joint set, PUSHER_SOLREFFRICTION_STEPS and OBJECT_PAIR_DAMPRATIO are in the XML
         self.scene: MjcfScene = scene_mjcf(
-            physics, meshes=meshes, poses=poses, settings=self.settings
+            physics,
+            meshes=meshes,
+            poses=poses,
+            settings=self.settings,
+            joints="planar" if self.planar else "free",
         )
-        xml = self.scene.xml
-        if self.planar:
-            xml = _planar_xml(xml, self.scene.objects, poses or {})
-            self.scene.xml = xml
-            self.scene.notes.append(
-                "objects on the planar joint set (slide x, y, z, hinge z): no roll or pitch, "
-                "as in the planar model"
-            )
-        self.model = mujoco.MjModel.from_xml_string(xml, assets=self.scene.assets)
+        self.model = mujoco.MjModel.from_xml_string(self.scene.xml, assets=self.scene.assets)
         _align_pairs(self.model, self.scene)
         self.dt = float(dt)
-        for k, pair in enumerate(self.scene.pairs):  # see PUSHER_SOLREFFRICTION_STEPS
-            if {"pusher", "pusher_end"} & set(pair):
-                self.model.pair_solreffriction[k] = (PUSHER_SOLREFFRICTION_STEPS * self.dt, 1.0)
-            elif set(pair) <= set(self.scene.objects):  # see OBJECT_PAIR_DAMPRATIO
-                self.model.pair_solref[k, 1] = OBJECT_PAIR_DAMPRATIO
         self.threads = max(1, int(threads))
         names = self.scene.objects
         self.object_name = object_name or names[0]
