@@ -56,7 +56,7 @@ from typing import Any
 
 import numpy as np
 
-from robogs.format.errors import FormatError
+from robogs.format.errors import FormatError, RobogsError
 
 __all__ = [
     "JOINTS",
@@ -70,6 +70,7 @@ __all__ = [
     "collision_hull",
     "footprint_points",
     "planar_joints_fit",
+    "use_planar_joints",
     "scene_mjcf",
     "torsion_radius",
 ]
@@ -196,6 +197,30 @@ def planar_joints_fit(
         if entry.get("equation") == "rigid" and (name in meshes or "size_m" not in entry):
             return False, f"object {name!r} is a mesh (its hull may rest on any vertices)"
     return True, "boxes on a horizontal plane"
+
+
+def use_planar_joints(
+    physics: Mapping[str, Any],
+    meshes: Mapping[str, Any],
+    joints: str,
+    error: type[RobogsError] = FormatError,
+) -> bool:
+    """Resolve ``joints`` (one of :data:`JOINTS`) for this scene: True for the planar joint set.
+
+    Raises:
+        error: an unknown joint set, or ``planar`` for a scene it cannot represent.
+    """
+    if joints not in JOINTS:
+        raise error(f"joints {joints!r} is not one of {', '.join(JOINTS)}", where="joints")
+    fits, why = planar_joints_fit(physics, meshes)
+    if joints == "planar" and not fits:
+        raise error(
+            f"the planar joint set cannot represent this scene: {why}",
+            path="physics.json",
+            where="joints",
+            hint="use joints='free' (or 'auto')",
+        )
+    return joints == "planar" or (joints == "auto" and fits)
 
 
 @dataclass
@@ -609,17 +634,7 @@ def scene_mjcf(
             unknown joint set, or ``planar`` for a scene it cannot represent.
     """
     meshes = dict(meshes or {})
-    if joints not in JOINTS:
-        raise FormatError(f"joints {joints!r} is not one of {', '.join(JOINTS)}", where="joints")
-    fits, why = planar_joints_fit(physics, meshes)
-    if joints == "planar" and not fits:
-        raise FormatError(
-            f"the planar joint set cannot represent this scene: {why}",
-            path="physics.json",
-            where="joints",
-            hint="use joints='free' (or 'auto')",
-        )
-    planar = joints == "planar" or (joints == "auto" and fits)
+    planar = use_planar_joints(physics, meshes, joints)
     settings = settings or (PLANAR_SETTINGS if planar else ContactSettings())
     poses = dict(poses or {})
     objects = physics.get("objects") or {}

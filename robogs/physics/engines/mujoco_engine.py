@@ -135,6 +135,7 @@ from robogs.format.mjcf import (  # one source for the engine and `robogs export
     MjcfScene,
     planar_joints_fit,
     scene_mjcf,
+    use_planar_joints,
 )
 from robogs.physics.engines.base import ObjectState, Predicted, quat_yaw, yaw_quat
 from robogs.physics.model import Drive
@@ -287,16 +288,7 @@ class MujocoEngine:
         ok, why = self.can_represent(physics, meshes)
         if not ok:
             raise InputError(f"the mujoco engine cannot represent this scene: {why}")
-        if joints not in JOINTS:
-            raise InputError(f"joints {joints!r} is not one of {', '.join(JOINTS)}", where="joints")
-        fits, why = planar_joints_fit(physics, meshes)
-        if joints == "planar" and not fits:
-            raise InputError(
-                f"the planar joint set cannot represent this scene: {why}",
-                where="joints",
-                hint="use joints='free' (or 'auto')",
-            )
-        self.planar = joints == "planar" or (joints == "auto" and fits)
+        self.planar = use_planar_joints(physics, meshes, joints, error=InputError)
         base = settings or (PLANAR_SETTINGS if self.planar else ContactSettings())
         self.settings = ContactSettings(**{**base.__dict__, "timestep": float(dt)})
         self.physics = physics
