@@ -11,36 +11,19 @@ import numpy as np
 import torch
 
 from robogs.physics.effects import Effect, overrides
-from robogs.physics.model import Body, BoxScene, Drive, FreeState, SimResult, Slip, yaw_rotate
-from robogs.physics.space import BASE, ParamSpace
+from robogs.physics.model import (  # unchanged by the speed-ups: shared, not copied
+    BoxScene,
+    Drive,
+    FreeState,
+    SimResult,
+    Slip,
+    _base_body,
+    _lift,
+    yaw_rotate,
+)
+from robogs.physics.space import ParamSpace
 
 __all__ = ["simulate_reference"]
-
-
-def _base_body(scene: BoxScene, theta: torch.Tensor, space: ParamSpace) -> Body:
-    m = theta.shape[0]
-
-    def const(v: float) -> torch.Tensor:
-        return torch.full((m, 1), float(v), dtype=theta.dtype, device=theta.device)
-
-    base = space.theta_dict(theta, BASE)
-    mu_d = base.get("friction_dynamic", const(scene.friction_dynamic))
-    mu_s = base.get("friction_static", const(scene.friction_static))
-    mu_s = torch.maximum(mu_s, mu_d)
-    com = (
-        torch.tensor(scene.com, dtype=theta.dtype, device=theta.device)
-        .view(1, 1, 2)
-        .expand(m, 1, 2)
-    )
-    return Body(
-        mass=base.get("mass", const(scene.mass)),
-        inertia_z=const(scene.inertia_z),
-        com=com,
-        mu_s=mu_s,
-        mu_d=mu_d,
-        restitution=base.get("restitution", const(scene.restitution)),
-        damping=base.get("damping_linear", const(scene.damping_linear)),
-    )
 
 
 def _pusher_points(
@@ -435,8 +418,3 @@ def simulate_reference(
         width = drive.wrench_width.to(dev, dt_).clamp(min=dt).unsqueeze(0).unsqueeze(-1)
         force = torch.nn.functional.pad(impulse / width, (0, 1))
     return SimResult(pos=pos, yaw=yaw_s, dense_pos=dense_o, dense_yaw=dense_y, force=force)
-
-
-def _lift(th: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """Parameters [M, 1] -> [M, 1, 1] so that they broadcast against [M, T, N] samples."""
-    return {k: v.unsqueeze(-1) for k, v in th.items()}
