@@ -271,7 +271,12 @@ def _fit_engine(
     ob = doc.setdefault("objects", {}).setdefault(obj, {"equation": "rigid"})
     for c in space.owner_columns("base"):
         if np.isfinite(out.std[free.index(c)]):  # an unidentifiable value keeps the stored one
-            ob[space.slots[c].param.name] = float(out.theta[c])
+            key = space.slots[c].param.name
+            if key.startswith("objects."):  # another object's, e.g. objects.box_b.friction_dynamic
+                _, other, key = key.split(".", 2)
+                doc["objects"][other][key] = float(out.theta[c])
+            else:
+                ob[key] = float(out.theta[c])
     bad = set(unident)
     effects = [
         e for e in doc.get("effects", []) if e.get("name") not in {x.name for x in space.effects}

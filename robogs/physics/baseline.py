@@ -43,6 +43,7 @@ from robogs.physics.engine import Engine
 from robogs.physics.fit import FitOutcome, Problem
 from robogs.physics.prepare import force_rms
 from robogs.physics.recording import Recording
+from robogs.physics.residuals import tracked_streams
 from robogs.physics.space import ParamSpace
 
 __all__ = ["Baseline", "baseline", "fit_baseline", "model_key", "NON_MODEL_KEYS"]
@@ -126,6 +127,8 @@ def _fingerprint(rec: Recording) -> str:
         for name in _SAMPLES:
             a = getattr(tr, name, None)
             h.update(name.encode() + (b"-" if a is None else np.ascontiguousarray(a).tobytes()))
+        for name, track in sorted((getattr(tr, "others", None) or {}).items()):
+            h.update(name.encode() + b"".join(np.ascontiguousarray(a).tobytes() for a in track))
     return h.hexdigest()
 
 
@@ -178,6 +181,7 @@ def fit_baseline(
 def _table(eng: Engine, out: FitOutcome) -> CompareResult:
     """Residual table of a fit: poses (mm, deg) and, where a wrench is used, force (N)."""
     res = residual_table(eng, eng.raw(out.resid))
+    res.streams += tracked_streams(eng.prep, out.resid)  # other tracked objects, per trajectory
     res.force = force_rms(eng.prep, out.resid)
     res.wrench_note = eng.prep.wrench_note
     if res.force is None and eng.prep.wrench is not None:

@@ -51,10 +51,12 @@ def resolve_backend(physics: dict, name: str = "planar") -> tuple[str, str]:
         return choose_engine(physics)
     ok, why = get_engine(name).can_represent(physics, None)
     if not ok:
+        try:
+            fix = f"use --engine {choose_engine(physics)[0]} (or auto, which picks it)"
+        except InputError:
+            fix = "no registered engine can represent it (robogs plugins lists them)"
         raise InputError(
-            f"the {name} engine cannot represent this scene: {why}",
-            where="--engine",
-            hint="use --engine auto to pick one that can",
+            f"the {name} engine cannot represent this scene: {why}", where="--engine", hint=fix
         )
     return name, "requested"
 
@@ -105,7 +107,11 @@ class Engine:
             from robogs.physics.engines.mujoco_fit import MujocoFit
 
             self._mujoco = MujocoFit(
-                self.prep.rec.physics, self.prep.rec.object_name, dt=dt, threads=threads
+                self.prep.rec.physics,
+                self.prep.rec.object_name,
+                dt=dt,
+                threads=threads,
+                tracked=self.prep.tracked,
             )  # it predicts the pusher force: a measured wrench enters as on planar
         self.present: list[tuple[Effect, dict[str, float]]] = []
         for entry in self.prep.rec.physics.get("effects", []) or []:
@@ -118,14 +124,16 @@ class Engine:
 
     # ---- spaces ---------------------------------------------------------------------------
     def space(self, candidates: Sequence[Effect]) -> ParamSpace:
-        """Base parameters + present effects + ``candidates`` (each once)."""
+        """Base parameters (on MuJoCo with the other tracked objects' table frictions) +
+        present effects + ``candidates`` (each once)."""
         effs = [e for e, _ in self.present]
         names = {e.name for e in effs}
         for c in candidates:
             if c.name not in names:
                 effs.append(c)
                 names.add(c.name)
-        return ParamSpace(base_params(self.prep.scene), effs)
+        extra = [] if self._mujoco is None else self._mujoco.extra_params()
+        return ParamSpace([*base_params(self.prep.scene), *extra], effs)
 
     def base_columns(self, space: ParamSpace) -> list[int]:
         """Columns always refitted: base parameters and the effects already in physics.json."""
@@ -159,6 +167,7 @@ class Engine:
         out jackknife (``fit_problems(cluster_jackknife=True)``): a release speed off by encoder
         noise shifts a whole slide, and a few fast slides carry most of the drag information."""
         fn = self.residual_fn(space)
+        step = None if self._mujoco is None else self._mujoco.fd_rel_step  # None: the default
         return fit_problems(
             fn,
             space,
@@ -167,6 +176,7 @@ class Engine:
             progress=progress,
             max_iter=max_iter,
             cluster_jackknife=True,
+            **({} if step is None else {"rel_step": step}),
         )
 
     def residual_fn(self, space: ParamSpace) -> ResidualFn:

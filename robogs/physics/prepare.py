@@ -7,7 +7,7 @@ the measured object poses with their per-sample deviations into padded tensors.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
@@ -15,12 +15,13 @@ import torch
 from robogs.physics.model import BoxScene, Drive
 from robogs.physics.noise import NoiseModel, estimate_noise
 from robogs.physics.phases import PHASES, PhaseLabels, runs, segment_phases
-from robogs.physics.recording import Recording, as_recording, yaw_of
+from robogs.physics.recording import Recording, Trajectory, as_recording, yaw_of
 from robogs.physics.scene import scene_from_physics
 from robogs.physics.smoothing import local_polynomial
 
 __all__ = [
     "Prepared",
+    "TrackedObject",
     "WrenchData",
     "prepare",
     "build_drive",
@@ -62,6 +63,40 @@ class WrenchData:
 
 
 @dataclass
+class TrackedObject:
+    """Another tracked object of the scene (not the one the pusher drives), as the residuals
+    use it: its own stamps, poses, noise and start (:attr:`Trajectory.others`).
+
+    Attributes:
+        name: physics.json object name; size: its box edges [m].
+        obs_t: [T, K] s from each trajectory's start (``Prepared.t0_ns``); mask: [T, K] valid.
+        meas_pos: [T, K, 3] m; meas_yaw: [T, K] rad (unwrapped).
+        sig_pos: [T, K, 3] m; sig_yaw: [T, K] rad - per-sample deviations from this object's
+            own noise estimate (:func:`robogs.physics.noise.estimate_noise` on its poses).
+        init_pos: [T, 3] m; init_yaw: [T] rad - start pose (median of the first static samples,
+            snapped onto the table within ``z_snap``).
+        noise: its noise model.
+    """
+
+    name: str
+    size: tuple[float, float, float]
+    obs_t: torch.Tensor
+    mask: torch.Tensor
+    meas_pos: torch.Tensor
+    meas_yaw: torch.Tensor
+    sig_pos: torch.Tensor
+    sig_yaw: torch.Tensor
+    init_pos: np.ndarray
+    init_yaw: np.ndarray
+    noise: NoiseModel
+
+    @property
+    def width(self) -> int:
+        """Columns of its block in the weighted residuals (4 per sample)."""
+        return int(self.mask.shape[1]) * 4
+
+
+@dataclass
 class Prepared:
     """Everything a rollout-vs-measurement comparison needs.
 
@@ -74,6 +109,8 @@ class Prepared:
         excitation: which needs the data meets (``contact``, ``sliding``, ``impact``...).
         wrench: the measured pusher force (None when not used); ``wrench_note`` says how it
             is used, or why not.
+        tracked: the other tracked objects (their pose blocks follow the free object's in the
+            weighted residuals, :mod:`robogs.physics.residuals`).
     """
 
     rec: Recording
@@ -91,16 +128,23 @@ class Prepared:
     excitation: set[str]
     wrench: WrenchData | None = None
     wrench_note: str = ""
+    tracked: list[TrackedObject] = field(default_factory=list)
 
     @property
     def n_traj(self) -> int:
         return len(self.rec.trajectories)
 
     @property
+    def pose_width(self) -> int:
+        """Columns of the pose blocks (free object, then each tracked one) per trajectory."""
+        return int(self.mask.shape[1]) * 4 + sum(o.width for o in self.tracked)
+
+    @property
     def n_residuals(self) -> int:
         """Number of scalar residuals (4 per valid pose sample: x, y, z, yaw; 3 per force)."""
         n_w = 0 if self.wrench is None else int(self.wrench.mask.sum()) * 3
-        return int(self.mask.sum()) * 4 + n_w
+        n_o = sum(int(o.mask.sum()) * 4 for o in self.tracked)
+        return int(self.mask.sum()) * 4 + n_o + n_w
 
 
 def _initial_pose(pos: np.ndarray, yaw: np.ndarray, lab: PhaseLabels) -> tuple[np.ndarray, float]:
@@ -360,6 +404,9 @@ def prepare(
         myaw[i, :n] = np.unwrap(yaw_of(tr.object_quat))
         spos[i, :n], syaw[i, :n] = noise.per_sample(lab.vel, lab.yaw_rate)
         phase[i, :n] = lab.label
+    tracked = [
+        _tracked_object(rec, name, t0, dt, max(0.003, 4 * noise.sigma_z)) for name in rec.tracked
+    ]
     wrench, wrench_note = wrench_data(rec, scene, drive, t0)
     excitation = excitations(rec, labels)
     if wrench is not None:
@@ -381,19 +428,74 @@ def prepare(
         excitation=excitation,
         wrench=wrench,
         wrench_note=wrench_note,
+        tracked=tracked,
+    )
+
+
+def _tracked_object(
+    rec: Recording, name: str, t0: np.ndarray, dt: float, z_snap: float
+) -> TrackedObject:
+    """Residual inputs of the other tracked object ``name``: its phases and noise from its own
+    poses (the recording seen as if it were the free object), stacked like the free object's."""
+    scene = scene_from_physics(rec.physics, name, dt=dt)
+    seg = dict(
+        size=scene.size,
+        table_z=scene.table_z,
+        pusher_radius=scene.pusher_radius,
+        pusher_length=scene.pusher_length,
+    )
+    trs: list[Trajectory] = [
+        replace(tr, t_ns=o.t_ns, object_pos=o.pos, object_quat=o.quat, others={})
+        for tr in rec.trajectories
+        for o in (tr.others[name],)
+    ]
+    view = replace(rec, trajectories=trs, object_name=name)
+    rough = estimate_noise(view, None)
+    labels = [segment_phases(tr, sigma_pos=rough.sigma_pos, **seg) for tr in trs]
+    noise = estimate_noise(view, labels)
+    labels = [segment_phases(tr, sigma_pos=noise.sigma_pos, **seg) for tr in trs]
+    n_t, n_k = len(trs), max(len(tr.t_ns) for tr in trs)
+    obs_t, mask = np.zeros((n_t, n_k)), np.zeros((n_t, n_k), dtype=bool)
+    mpos, myaw = np.zeros((n_t, n_k, 3)), np.zeros((n_t, n_k))
+    spos, syaw = np.ones((n_t, n_k, 3)), np.ones((n_t, n_k))
+    ipos, iyaw = np.zeros((n_t, 3)), np.zeros(n_t)
+    z_rest = scene.table_z + 0.5 * scene.size[2]
+    for i, (tr, lab) in enumerate(zip(trs, labels, strict=True)):
+        n = len(tr.t_ns)
+        yaw = np.unwrap(yaw_of(tr.object_quat))
+        obs_t[i, :n] = (tr.t_ns - t0[i]) * 1e-9
+        mask[i, :n] = True
+        mpos[i, :n], myaw[i, :n] = tr.object_pos, yaw
+        spos[i, :n], syaw[i, :n] = noise.per_sample(lab.vel, lab.yaw_rate)
+        ipos[i], iyaw[i] = _initial_pose(tr.object_pos, yaw, lab)
+        if abs(ipos[i, 2] - z_rest) < z_snap:
+            ipos[i, 2] = z_rest
+    f = torch.float64
+    return TrackedObject(
+        name=name,
+        size=tuple(float(x) for x in scene.size),
+        obs_t=torch.as_tensor(obs_t, dtype=f),
+        mask=torch.as_tensor(mask),
+        meas_pos=torch.as_tensor(mpos, dtype=f),
+        meas_yaw=torch.as_tensor(myaw, dtype=f),
+        sig_pos=torch.as_tensor(spos, dtype=f),
+        sig_yaw=torch.as_tensor(syaw, dtype=f),
+        init_pos=ipos,
+        init_yaw=iyaw,
+        noise=noise,
     )
 
 
 def force_rms(prep: Prepared, weighted: np.ndarray) -> dict[str, float] | None:
     """Pusher force residual of weighted residuals ``weighted`` [T, K] (the force block after
-    the pose block, :func:`robogs.physics.residuals.weighted_residuals`), None without a wrench.
+    the pose blocks, :func:`robogs.physics.residuals.weighted_residuals`), None without a wrench.
 
     Returns ``rms_n``: RMS over the used bins of the 3-D bin-mean force error [N];
     ``noise_floor_n``: the RMS the true model would leave (per bin ``sigma / sqrt(count)`` per
     axis, the sensor's noise floor); ``bins``: bins used.
     """
     w = prep.wrench
-    n_pose = prep.mask.shape[1] * 4
+    n_pose = prep.pose_width
     if w is None or weighted.shape[-1] <= n_pose:
         return None
     n_t, n_b = w.mask.shape

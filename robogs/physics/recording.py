@@ -8,15 +8,16 @@ attribute names (:func:`as_recording`), e.g. the hidden-effect scenario generato
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from robogs.format.errors import FormatError, InputError
 
 __all__ = [
+    "ObjectTrack",
     "Trajectory",
     "Recording",
     "as_recording",
@@ -25,6 +26,15 @@ __all__ = [
     "yaw_of",
     "link_frames",
 ]
+
+
+class ObjectTrack(NamedTuple):
+    """Measured poses of one more tracked object of a trajectory: stamps [K] int64 ns,
+    T_world_object translation [K, 3] m and rotation [K, 4] (w, x, y, z)."""
+
+    t_ns: np.ndarray
+    pos: np.ndarray
+    quat: np.ndarray
 
 
 @dataclass
@@ -45,6 +55,8 @@ class Trajectory:
         wrench_force: optional measured force on the tool [W, 3] N, world axes (the force the
             environment exerts on the sensor, offset included: :mod:`robogs.physics.prepare`
             removes it using the samples out of contact).
+        others: the poses of the other tracked objects of the scene, by physics.json name
+            (e.g. a box the pushed one strikes); empty for a one-object scene.
     """
 
     name: str
@@ -58,6 +70,7 @@ class Trajectory:
     kind: str = ""
     wrench_t_ns: np.ndarray | None = None
     wrench_force: np.ndarray | None = None
+    others: dict[str, ObjectTrack] = field(default_factory=dict)
 
 
 @dataclass
@@ -68,7 +81,7 @@ class Recording:
         trajectories: the measured trajectories.
         physics: physics.json content; ``objects[object_name]`` is the box, ``objects["table"]``
             has ``plane_z_m``, ``objects["pusher"]`` has ``radius_m`` and ``link``.
-        object_name: the free object.
+        object_name: the free object (the one the pusher drives; effects act on it).
         meta: free-form information (e.g. the scenario's hidden effect, for benches only).
     """
 
@@ -76,6 +89,14 @@ class Recording:
     physics: dict[str, Any]
     object_name: str = "box"
     meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def tracked(self) -> list[str]:
+        """Names of the other tracked objects (:attr:`Trajectory.others`), in first-seen order."""
+        out: list[str] = []
+        for tr in self.trajectories:
+            out += [n for n in tr.others if n not in out]
+        return out
 
 
 _TRAJ_FIELDS = ("t_ns", "object_pos", "object_quat", "ee_t_ns", "ee_pos", "ee_quat", "grasp")
@@ -90,10 +111,12 @@ def yaw_of(quat: np.ndarray) -> np.ndarray:
 def check_finite(rec: Recording) -> None:
     """Raise :class:`InputError` naming the stream and the stamp of the first NaN or inf."""
     for tr in rec.trajectories:
-        for stream, stamps, arrays in (
+        checks = [
             ("object_poses", tr.t_ns, (tr.object_pos, tr.object_quat)),
             ("ee_poses", tr.ee_t_ns, (tr.ee_pos, tr.ee_quat)),
-        ):
+        ]
+        checks += [(f"object_poses[{n}]", o.t_ns, (o.pos, o.quat)) for n, o in tr.others.items()]
+        for stream, stamps, arrays in checks:
             for arr in arrays:
                 bad = ~np.isfinite(np.asarray(arr, dtype=float)).all(axis=-1)
                 if bad.any():
@@ -115,6 +138,7 @@ def check_finite(rec: Recording) -> None:
                     hint="drop or repair the samples before comparing with the model",
                 )
         streams = [("object_poses", tr.t_ns), ("ee_poses", tr.ee_t_ns)]
+        streams += [(f"object_poses[{n}]", o.t_ns) for n, o in tr.others.items()]
         if tr.wrench_t_ns is not None and len(tr.wrench_t_ns):
             streams.append(("wrenches", tr.wrench_t_ns))
         for stream, stamps in streams:
@@ -145,6 +169,7 @@ def as_recording(obj: Any) -> Recording:
                     kind=str(getattr(t, "kind", "")),
                     wrench_t_ns=getattr(t, "wrench_t_ns", None),
                     wrench_force=getattr(t, "wrench_force", None),
+                    others=dict(getattr(t, "others", None) or {}),
                 )
             )
         rec = Recording(
@@ -165,8 +190,53 @@ def as_recording(obj: Any) -> Recording:
         if t.wrench_t_ns is not None:
             t.wrench_t_ns = np.asarray(t.wrench_t_ns, dtype=np.int64)
             t.wrench_force = np.asarray(t.wrench_force, dtype=float).reshape(-1, 3)
+        t.others = {str(n): _track(o, t.name, str(n)) for n, o in (t.others or {}).items()}
+    _check_tracked(rec)
     check_finite(rec)
     return rec
+
+
+def _track(obj: Any, episode: str, name: str) -> ObjectTrack:
+    """An :class:`ObjectTrack` from ``(t_ns, pos, quat)``; InputError on mismatched shapes."""
+    t_ns, pos, quat = obj
+    o = ObjectTrack(
+        np.asarray(t_ns, dtype=np.int64),
+        np.asarray(pos, dtype=float).reshape(-1, 3),
+        np.asarray(quat, dtype=float).reshape(-1, 4),
+    )
+    if not len(o.t_ns) == len(o.pos) == len(o.quat):
+        raise InputError(
+            f"object {name!r}: {len(o.t_ns)} stamps, {len(o.pos)} positions, "
+            f"{len(o.quat)} orientations",
+            where=f"episodes/{episode}/object_poses",
+            hint="one pose per stamp",
+        )
+    return o
+
+
+def _check_tracked(rec: Recording) -> None:
+    """Every other tracked object is a rigid object of physics.json (not the free object) and
+    is tracked in every trajectory (its measured start pose places it in the model)."""
+    objects = rec.physics.get("objects") or {}
+    for name in rec.tracked:
+        entry = objects.get(name)
+        if (
+            name == rec.object_name
+            or not isinstance(entry, dict)
+            or entry.get("equation") != ("rigid")
+        ):
+            raise InputError(
+                f"tracked object {name!r} is not another rigid object of physics.json",
+                where=f"objects/{name}",
+                hint="declare it with equation 'rigid', size_m and mass_kg, or drop its poses",
+            )
+        for tr in rec.trajectories:
+            if name not in tr.others or len(tr.others[name].t_ns) < 2:
+                raise InputError(
+                    f"object {name!r} is tracked in some trajectories but not in {tr.name!r}",
+                    where=f"episodes/{tr.name}/object_poses",
+                    hint=f"record {name!r} in every episode (at least 2 poses), or in none",
+                )
 
 
 def _pose_columns(table: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -346,7 +416,10 @@ def load_recording(
 
     Args:
         dataset: a ``robogs.format.dataset.Dataset`` or a dataset folder.
-        object_name: the free object; default the only ``rigid`` object in physics.json.
+        object_name: the free object; default the only ``rigid`` object in physics.json, or,
+            with several, the one the pusher comes closest to in the first episode (horizontal
+            distance of the EE to the tracked centre). The other rigid objects with rows in
+            ``object_poses`` are tracked too (:attr:`Trajectory.others`), in every episode.
         split: ``auto`` (cut at stream gaps, object teleports and rest-motion-rest, see
             :mod:`robogs.physics.split`), ``none`` (one trajectory per episode) or
             ``at=T1,T2,...`` (s from each episode's start); default the mode of the enclosing
@@ -370,16 +443,16 @@ def load_recording(
     ds = dataset if isinstance(dataset, Dataset) else Dataset.open(Path(dataset))
     physics = ds.physics()
     objects = physics.get("objects", {})
-    if object_name is None:
-        rigid = [k for k, v in objects.items() if v.get("equation") == "rigid"]
-        if len(rigid) != 1:
-            raise FormatError(
-                f"physics.json has {len(rigid)} rigid objects; the rigid model needs exactly one",
-                path=ds.resolve("physics.json"),
-                where="objects",
-                hint="pass object_name=...",
-            )
-        object_name = rigid[0]
+    rigid = [k for k, v in objects.items() if isinstance(v, dict) and v.get("equation") == "rigid"]
+    if not rigid or (object_name is not None and object_name not in rigid):
+        raise FormatError(
+            "physics.json has no rigid object"
+            if not rigid
+            else f"object {object_name!r} is not a rigid object of physics.json",
+            path=ds.resolve("physics.json"),
+            where="objects",
+            hint=f"rigid objects: {', '.join(rigid)}" if rigid else "run robogs physics init",
+        )
     pusher = objects.get("pusher", {})
     ee_link = pusher.get("link") or ds.manifest.get("robot", {}).get("ee_link")
     grasp_joint = pusher.get("grasp_joint")
@@ -403,8 +476,7 @@ def load_recording(
             "has no object_poses stream",
             "the rigid model needs tracked object poses",
         )
-        ot = ep.table("object_poses")
-        ot = ot.filter(pc.equal(ot.column("object"), object_name))
+        ot_all = ep.table("object_poses")
         if ep.has("ee_poses"):
             et = ep.table("ee_poses")
             if ee_link is not None:
@@ -418,6 +490,14 @@ def load_recording(
             from robogs.format.frames import quat_to_matrix
 
             epos = epos + np.einsum("nij,j->ni", quat_to_matrix(equat), np.asarray(offset, float))
+        tracks = {}
+        for name in rigid:
+            rows = ot_all.filter(pc.equal(ot_all.column("object"), name))
+            if rows.num_rows:
+                tracks[name] = ObjectTrack(*_pose_columns(rows))
+        if object_name is None:
+            object_name = rigid[0] if len(rigid) == 1 else _pushed_object(tracks, et_ns, epos)
+        ot = ot_all.filter(pc.equal(ot_all.column("object"), object_name))
         if ot.num_rows < 2 or len(et_ns) < 2:
             raise FormatError(
                 f"episode {ep.id!r}: too few rows for object {object_name!r} or link {ee_link!r}",
@@ -433,7 +513,10 @@ def load_recording(
                 jv = js.column(col).to_numpy().astype(float)
                 idx = np.clip(np.searchsorted(jt, et_ns, side="right") - 1, 0, len(jt) - 1)
                 grasp = jv[idx] > thr
-        whole = Trajectory(ep.id, t, pos, quat, et_ns, epos, equat, grasp, kind=ep.segment)
+        others = {n: o for n, o in tracks.items() if n != object_name}
+        whole = Trajectory(
+            ep.id, t, pos, quat, et_ns, epos, equat, grasp, kind=ep.segment, others=others
+        )
         wr = _wrench_world(ds, ep, wrench_frame, ee_link, et_ns, equat)
         if wr is not None:
             whole.wrench_t_ns, whole.wrench_force = wr
@@ -441,7 +524,7 @@ def load_recording(
         parts, rows = split_recording_trajectory(
             whole, mode, at_s, int(start) if isinstance(start, (int, np.integer)) else None
         )
-        trajs += parts
+        trajs += [_clip_others(p) for p in parts]
         pieces += rows
     rec = Recording(
         trajectories=trajs, physics=physics, object_name=object_name, meta={"split": pieces}
@@ -451,3 +534,30 @@ def load_recording(
         log.pieces += pieces
         log.recordings.append(rec)
     return rec
+
+
+def _pushed_object(tracks: dict[str, ObjectTrack], ee_t: np.ndarray, ee_pos: np.ndarray) -> str:
+    """The tracked object the end effector comes closest to (horizontal distance [m] from the
+    EE to the object's tracked centre, the EE interpolated at the object's stamps)."""
+    if not tracks:
+        raise FormatError("no rigid object has rows in object_poses", where="object_poses")
+
+    def closest(o: ObjectTrack) -> float:
+        ex = np.interp(o.t_ns, ee_t, ee_pos[:, 0])
+        ey = np.interp(o.t_ns, ee_t, ee_pos[:, 1])
+        return float(np.min(np.hypot(o.pos[:, 0] - ex, o.pos[:, 1] - ey)))
+
+    return min(tracks, key=lambda n: (closest(tracks[n]), n))
+
+
+def _clip_others(tr: Trajectory) -> Trajectory:
+    """The other tracked objects' poses within a (split) trajectory's time span."""
+    if not tr.others:
+        return tr
+    a = min(int(tr.t_ns[0]), int(tr.ee_t_ns[0]))
+    b = max(int(tr.t_ns[-1]), int(tr.ee_t_ns[-1]))
+    out = {}
+    for n, o in tr.others.items():
+        m = (o.t_ns >= a) & (o.t_ns <= b)
+        out[n] = ObjectTrack(o.t_ns[m], o.pos[m], o.quat[m])
+    return replace(tr, others=out)

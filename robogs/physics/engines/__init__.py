@@ -95,7 +95,8 @@ def choose_engine(
         if name not in engines:
             continue
         ok, reason = engines[name].can_represent(physics, meshes)
-        if ok:
-            return name, reason
+        if ok:  # one line: why the engines tried first cannot, then what this one represents
+            cannot = [w.replace(":", " cannot represent it:", 1) for w in why]
+            return name, "; ".join([*cannot, f"{name}: {reason}"])
         why.append(f"{name}: {reason}")
     raise InputError("no engine can represent this scene", hint="; ".join(why))

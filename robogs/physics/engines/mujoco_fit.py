@@ -35,12 +35,19 @@ object-pusher pair per parameter set (the planar model has a frictionless pusher
 Likewise a base slot ``objects.<name>.friction_dynamic`` (:func:`object_friction_param`) sets the
 table friction of another object of the scene (two boxes, one pushed into the other).
 
+Other tracked objects (``tracked``: :attr:`robogs.physics.prepare.Prepared.tracked`, e.g. a
+box the pushed one strikes): each starts per trajectory at its measured start pose (on the
+support at the contacts' equilibrium when measured within :data:`SETTLE_TOL_M` of resting, as
+the fitted object), its poses are returned at its own stamps
+(:class:`~robogs.physics.residuals.SceneSimResult`, no sensor effects: those model the fitted
+object's tracker), and :meth:`MujocoFit.extra_params` gives its table friction as a base slot.
+
 Not modelled here: ``friction_static`` (MuJoCo has one Coulomb coefficient).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import fields
 from typing import Any
 
@@ -60,6 +67,7 @@ from robogs.physics.engines.mujoco_effects import (
 )
 from robogs.physics.engines.mujoco_engine import MujocoEngine
 from robogs.physics.model import Drive, SimResult, _base_body, _lift
+from robogs.physics.residuals import SceneSimResult
 from robogs.physics.space import BASE, ParamSpace
 
 __all__ = [
@@ -129,6 +137,8 @@ class MujocoFit:
         engine: an already built :class:`MujocoEngine` of this scene (else one is built).
         tilt_inertia_scale: see :data:`TILT_INERTIA_SCALE`.
         stepper: one of :data:`STEPPERS` (default ``batch`` where MuJoCo has it).
+        tracked: other tracked objects (:class:`~robogs.physics.prepare.TrackedObject`: name,
+            ``init_pos`` [T, 3] m, ``init_yaw`` [T] rad, ``obs_t`` [T, K] s), see :meth:`track`.
 
     Attributes:
         last_rollouts: distinct rollouts the last :meth:`simulate` call ran (of its M x T).
@@ -145,6 +155,7 @@ class MujocoFit:
         engine: MujocoEngine | None = None,
         tilt_inertia_scale: float = TILT_INERTIA_SCALE,
         stepper: str | None = None,
+        tracked: Sequence[Any] = (),
     ) -> None:
         stepper = stepper or ("batch" if _has_batch() else "rollout")
         if stepper not in STEPPERS or (stepper == "batch" and not _has_batch()):
@@ -202,21 +213,73 @@ class MujocoFit:
         self.rest_z = self.table_z + self.half_z if box == mujoco.mjtGeom.mjGEOM_BOX else -np.inf
         self.settled_z = self._settle() if np.isfinite(self.rest_z) else -np.inf
         self._full_cols, self._int_cols = _state_map(m)
+        self.physics = physics
+        self.track(tracked)
 
-    def _settle(self, seconds: float = 0.3) -> float:
-        """Height [m] of the object frame of the box resting flat on a horizontal support: the
-        nominal resting height less the soft contacts' equilibrium penetration (under a
-        micrometre with the default settings), from a settle with the pusher parked away."""
+    def track(self, tracked: Sequence[Any]) -> None:
+        """Set the other tracked objects (module docstring): their layouts, starts and resting
+        heights; :meth:`simulate` then also returns their poses.
+
+        Raises:
+            InputError: an object that is not another rigid object of the scene.
+        """
+        self.tracked = list(tracked)
+        self._rest = {}
+        for o in self.tracked:
+            if o.name == self.obj or o.name not in self.eng._bid:
+                raise InputError(
+                    f"tracked object {o.name!r} is not another object of the MuJoCo scene",
+                    where="tracked",
+                    hint=f"objects: {', '.join(n for n in self.eng._bid if n != self.obj)}",
+                )
+            gid = mujoco.mj_name2id(self.eng.model, mujoco.mjtObj.mjOBJ_GEOM, o.name)
+            box = self.eng.model.geom_type[gid] == mujoco.mjtGeom.mjGEOM_BOX
+            hz = float(self.eng.model.geom_size[gid][2] + self.eng.model.geom_pos[gid][2])
+            rest = self.table_z + hz if box else -np.inf
+            self._rest[o.name] = (rest, self._settle(name=o.name, rest_z=rest) if box else rest)
+        lays = [self.lay] + [self.eng.layout[o.name] for o in self.tracked]
+        # state columns up to the last pose the runners record (every object's qpos)
+        self._width = max(ly.q + (4 if ly.planar else 7) for ly in lays)
+
+    @property
+    def fd_rel_step(self) -> float | None:
+        """Finite-difference step (fraction of each slot's scale) the fits of this scene need:
+        0.1 with tracked objects, else None (the fitter's default). Box-on-box impacts make
+        the objective rough at a finer scale: on the two-box scenario (seed 0, from 0.35 / 0.35)
+        1 % steps stopped at mu_a 0.356 (truth 0.45), 10 % at 0.471 / 0.255 (truth 0.25)."""
+        return 0.1 if self.tracked else None
+
+    def extra_params(self) -> list[Param]:
+        """Base parameters of the tracked objects: each one's table friction
+        (:func:`object_friction_param`)."""
+        return [object_friction_param(self.physics, o.name) for o in self.tracked]
+
+    def _poses(self, x: np.ndarray) -> np.ndarray:
+        """[..., 7 (1 + tracked)] poses of the fitted object, then each tracked one."""
+        if not self.tracked:
+            return self.lay.pose(x)
+        lays = [self.lay] + [self.eng.layout[o.name] for o in self.tracked]
+        return np.concatenate([ly.pose(x) for ly in lays], axis=-1)
+
+    def _settle(
+        self, seconds: float = 0.3, name: str | None = None, rest_z: float | None = None
+    ) -> float:
+        """Height [m] of the object frame of the box ``name`` (default the fitted one, resting
+        height ``rest_z``) resting flat on a horizontal support: the nominal resting height
+        less the soft contacts' equilibrium penetration (under a micrometre with the default
+        settings), from a settle with the pusher parked away."""
         m = self.eng.model
         d = mujoco.MjData(m)
-        qa = self.qa - 1
+        name = name or self.obj
+        rest_z = self.rest_z if rest_z is None else rest_z
+        qa = self.eng.layout[name].q - 1
         row = np.zeros(1 + m.nq)
-        for name, lay in self.eng.layout.items():  # other objects far away
-            far = 0.0 if name == self.obj else 1e3 * (1 + lay.qpos)
-            lay.set_pose(row, (far, 0.0, self.rest_z), (1.0, 0.0, 0.0, 0.0))
+        for other, lay in self.eng.layout.items():  # other objects far away
+            far = 0.0 if other == name else 1e3 * (1 + lay.qpos)
+            lay.set_pose(row, (far, 0.0, rest_z), (1.0, 0.0, 0.0, 0.0))
         d.qpos[:] = row[1:]
         if self.pq is not None:
-            d.qpos[self.pq - 1 + 2] = self.rest_z + PUSHER_PARK_M
+            d.qpos[self.pq - 1 + 2] = rest_z + PUSHER_PARK_M
         g = m.opt.gravity.copy()
         m.opt.gravity[:2] = 0.0  # a flat, untilted settle (the model's own copy is restored)
         try:
@@ -228,7 +291,7 @@ class MujocoFit:
         finally:
             m.opt.gravity[:] = g
         z = float(d.qpos[qa + 2])
-        return z if abs(z - self.rest_z) < 1e-4 else self.rest_z  # a settle that went wrong
+        return z if abs(z - rest_z) < 1e-4 else rest_z  # a settle that went wrong
 
     # ------------------------------------------------------------------ models per set
     def _physics(self, theta: torch.Tensor, space: ParamSpace, scene: Any) -> tuple:
@@ -337,6 +400,7 @@ class MujocoFit:
         self.lay.set_vel(x, np.zeros((n_r, 3)), np.zeros((n_r, 3)))
         if drive.init_vel is not None:
             x[:, self.va : self.va + 3] = np.tile(drive.init_vel.numpy(), (m_sets, 1))
+        self._place_tracked(x, m_sets, n_t)
         ctrl = self.eng._controls(drive)  # [T, S-1, nu]
         grasp = drive.grasp.numpy()
         park = np.zeros((n_t, n_s))
@@ -379,14 +443,45 @@ class MujocoFit:
             pstate,
         )
         which = which.reshape(-1)
-        dense = dense[which].reshape(m_sets, n_t, n_s, 7)
+        dense = dense[which].reshape(m_sets, n_t, n_s, -1)
         pstate = None if pstate is None else pstate[which]
         dpos = torch.as_tensor(dense[..., :3])
-        dyaw = torch.as_tensor(np.unwrap(quat_yaw(dense[..., 3:]), axis=-1))
+        dyaw = torch.as_tensor(np.unwrap(quat_yaw(dense[..., 3:7]), axis=-1))
         res = _observe(dpos, dyaw, drive, sensor_fx, dt)
+        if self.tracked:
+            others = {}
+            for j, o in enumerate(self.tracked, start=1):
+                d = dense[..., 7 * j : 7 * j + 7]
+                yaw = np.unwrap(quat_yaw(d[..., 3:]), axis=-1)
+                others[o.name] = _sample_at(d[..., :3], yaw, np.asarray(o.obs_t), dt)
+            res = SceneSimResult(
+                **{f.name: getattr(res, f.name) for f in fields(res)}, others=others
+            )
         if pstate is not None:
             res.force = self._pusher_force(pstate, ctrl, drive, m_sets)
         return res
+
+    def _place_tracked(self, x: np.ndarray, m_sets: int, n_t: int) -> None:
+        """Write the tracked objects' measured start poses (row r: trajectory r % T) into the
+        state rows ``x``, at rest; a box measured within :data:`SETTLE_TOL_M` of its resting
+        height starts settled on the support, and never inside it."""
+        for o in self.tracked:
+            ip, iy = np.asarray(o.init_pos, float), np.asarray(o.init_yaw, float)
+            if len(ip) != n_t:
+                raise InputError(
+                    f"tracked object {o.name!r} has starts for {len(ip)} trajectories, the drive "
+                    f"{n_t}",
+                    where="tracked",
+                    hint="prepare the drive and the tracked objects from one recording",
+                )
+            rest, settled = self._rest[o.name]
+            p = np.tile(ip, (m_sets, 1))
+            p[:, 2] = np.where(
+                np.abs(p[:, 2] - rest) < SETTLE_TOL_M, settled, np.maximum(p[:, 2], rest)
+            )
+            lay = self.eng.layout[o.name]
+            lay.set_pose(x, p, _yaw_quat(np.tile(iy, m_sets)))
+            lay.set_vel(x, np.zeros((len(x), 3)), np.zeros((len(x), 3)))
 
     def _pusher_force(
         self, pstate: np.ndarray, ctrl: np.ndarray, drive: Drive, m_sets: int
@@ -446,8 +541,8 @@ class MujocoFit:
         n_r = len(t_of)
         pool = self.eng._pool_get()
         datas = [mujoco.MjData(self.eng.model) for _ in range(self.eng.threads)]
-        dense = np.empty((n_r, n_s, 7))
-        dense[:, 0] = self.lay.pose(x)
+        dense = np.empty((n_r, n_s, 7 * (1 + len(self.tracked))))
+        dense[:, 0] = self._poses(x)
         if pstate is not None:
             pstate[:, 0] = x[:, self._pcols]
         g_any = grasp.any(0)
@@ -496,7 +591,7 @@ class MujocoFit:
             state, _ = pool.rollout(
                 models_r, datas, x, c if c.shape[-1] else None, control_spec=spec, nstep=n
             )
-            dense[:, k + 1 : k + 1 + n] = self.lay.pose(state)
+            dense[:, k + 1 : k + 1 + n] = self._poses(state)
             if pstate is not None:
                 pstate[:, k + 1 : k + 1 + n] = state[:, :, self._pcols]
             x = np.array(state[:, -1])
@@ -507,7 +602,7 @@ class MujocoFit:
             if g_any[k]:
                 hold = grasp[t_of, k]
                 self._attach(x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q)
-                dense[hold, k] = self.lay.pose(x[hold])
+                dense[hold, k] = self._poses(x[hold])
         return dense
 
     def _run_batch(
@@ -537,7 +632,7 @@ class MujocoFit:
         b.set_models(models_r)
         b.state[:] = 0.0
         b.state[:, self._int_cols] = x[:, self._full_cols]
-        dense = np.empty((n_r, drive.n_steps, 7))
+        dense = np.empty((n_r, drive.n_steps, 7 * (1 + len(self.tracked))))
         force = _active_rows(force_fx, n_r)
         for on in (True, False):
             ids = np.flatnonzero(force == on)
@@ -571,7 +666,7 @@ class MujocoFit:
         x = np.array(x)
         # the state columns up to the object's pose, every step; poses from them at the end
         # (one vectorised conversion instead of one per call)
-        w = min(x.shape[1], self.lay.q + 7)
+        w = min(x.shape[1], self._width)
         raw = np.empty((len(ids), n_s, w))
         raw[:, 0] = x[:, :w]
         if pstate is not None:
@@ -613,7 +708,7 @@ class MujocoFit:
                 edit = True
             if edit:
                 b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
-        dense[ids] = self.lay.pose(raw)
+        dense[ids] = self._poses(raw)
 
     def _grasp_rel(self, x, p_ee, yaw_ee, t_of, on_t, rel_p, rel_q):
         """Freeze the object pose in the EE yaw frame for rollouts whose grasp starts now."""
@@ -772,6 +867,22 @@ def _observe(dpos, dyaw, drive: Drive, sensor_fx, dt: float) -> SimResult:
     for e, th in sensor_fx:
         pos, yaw = e.to_sensor(_lift(th), pos, yaw)
     return SimResult(pos=pos, yaw=yaw, dense_pos=dpos, dense_yaw=dyaw, force=None)
+
+
+def _sample_at(
+    pos: np.ndarray, yaw: np.ndarray, obs_t: np.ndarray, dt: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Dense positions [M, T, S, 3] m and yaws [M, T, S] rad sampled (linearly) at ``obs_t``
+    [T, K] s -> ([M, T, K, 3], [M, T, K])."""
+    n_s = pos.shape[2]
+    f = np.clip(obs_t / dt, 0.0, n_s - 1 - 1e-9)
+    i0 = np.floor(f).astype(int)
+    w = f - i0
+    i1 = np.minimum(i0 + 1, n_s - 1)
+    t = np.arange(obs_t.shape[0])[:, None]
+    p = pos[:, t, i0] * (1 - w[None, ..., None]) + pos[:, t, i1] * w[None, ..., None]
+    y = yaw[:, t, i0] * (1 - w[None]) + yaw[:, t, i1] * w[None]
+    return torch.as_tensor(p), torch.as_tensor(y)
 
 
 def _yaw_quat(yaw: np.ndarray) -> np.ndarray:

@@ -26,7 +26,9 @@ Measurement: both boxes' poses at 30 Hz (one camera clock), tool at 500 Hz, wren
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -40,6 +42,7 @@ __all__ = [
     "TwoObjectTrajectory",
     "make_two_objects",
     "push_chain",
+    "write_two_objects",
 ]
 
 G = 9.81
@@ -156,11 +159,17 @@ def push_chain(truth: TwoBoxTruth, speed: float, dist: float, *, dt: float = FIN
 @dataclass(kw_only=True)
 class TwoObjectTrajectory(ForcePushTrajectory):
     """A push measured like :class:`ForcePushTrajectory` (``object_*``: box A), plus box B's
-    poses at the same camera stamps (``other_pos`` [N, 3] m, ``other_quat`` [N, 4] w x y z)."""
+    poses at the same camera stamps (``other_pos`` [N, 3] m, ``other_quat`` [N, 4] w x y z),
+    also as ``others`` (``{"box_b": (t_ns, pos, quat)}``: the tracked-object form a recording
+    and the scenario writer read)."""
 
     other_pos: np.ndarray
     other_quat: np.ndarray
     kind: str = "two_objects"
+
+    @property
+    def others(self) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        return {"box_b": (self.t_ns, self.other_pos, self.other_quat)}
 
 
 PUSHES = ((0.25, 0.06), (0.35, 0.07), (0.45, 0.08))
@@ -300,3 +309,14 @@ def make_two_objects(
         "seed": seed,
     }
     return ScenarioRecording(trajs, physics, "box_a", meta)
+
+
+def write_two_objects(recording: ScenarioRecording, out_path: str | Path, **kw: Any) -> Any:
+    """Write :func:`make_two_objects`' recording as a dataset a user would have, through
+    :func:`robogs.synth.scenarios.write.write_scenario` (both boxes in ``object_poses``, the
+    pusher in ``ee_poses``; the wrench is not written). The truth beside it keeps ``truth``,
+    ``start`` and ``seed`` (the fine per-step chains are left out); returns the ``Dataset``."""
+    from robogs.synth.scenarios.write import write_scenario
+
+    meta = {k: v for k, v in recording.meta.items() if k != "fine"}
+    return write_scenario(replace(recording, meta=meta), out_path, **kw)

@@ -68,6 +68,9 @@ def write_scenario(recording: ScenarioRecording, out_path: str | Path, *, overwr
     grasp_joint = recording.physics["objects"]["pusher"].get("grasp_joint", "grasp")
     w = Dataset.create(out_path, name="scenario", overwrite=overwrite)  # no hint of the truth
     w.set_asset(recording.object_name, kind="object")  # object_poses name a declared asset (S007)
+    others = sorted({n for tr in recording.trajectories for n in getattr(tr, "others", {})})
+    for name in others:  # more tracked objects (``others``: name -> (t_ns, pos, quat))
+        w.set_asset(name, kind="object")
     sigma_ms = 1e3 * float(recording.meta.get("noise_levels", {}).get("jitter", 0.0))
     if sigma_ms > 0:
         # The camera stamps carry a designed Gaussian jitter of sigma_ms; the dataset declares
@@ -79,11 +82,13 @@ def write_scenario(recording: ScenarioRecording, out_path: str | Path, *, overwr
         }
     for tr in recording.trajectories:
         ep = tr.name
-        w.write_table(
-            f"episodes/{ep}/object_poses.parquet",
-            _pose_table(tr.t_ns, "object", recording.object_name, tr.object_pos, tr.object_quat),
-            kind="object_poses",
-        )
+        poses = [
+            _pose_table(tr.t_ns, "object", recording.object_name, tr.object_pos, tr.object_quat)
+        ]
+        for n, (t_o, p_o, q_o) in getattr(tr, "others", {}).items():
+            poses.append(_pose_table(t_o, "object", n, p_o, q_o))
+        table = poses[0] if len(poses) == 1 else pa.concat_tables(poses).sort_by("t_ns")
+        w.write_table(f"episodes/{ep}/object_poses.parquet", table, kind="object_poses")
         w.write_table(
             f"episodes/{ep}/ee_poses.parquet",
             _pose_table(tr.ee_t_ns, "link", link, tr.ee_pos, tr.ee_quat),
