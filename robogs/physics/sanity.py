@@ -102,13 +102,14 @@ def assess(
     if base is None:
         from robogs.physics.baseline import baseline
 
-        base = baseline(rec, dt=dt).result
+        base = baseline(rec, dt=dt, backend=_backend(rec)).result
     scene = scene_from_physics(rec.physics, rec.object_name, dt=dt)
     sig = float(estimate_noise(rec, None).sigma_pos)
     margin = max(0.010, 10.0 * sig)
     half = 0.5 * min(scene.size[0], scene.size[1])
     floor = float(base.noise_floor_mm)
-    per_traj = {s.trajectory: s.rms_mm for s in base.streams}
+    mine = f"object_poses/{rec.object_name}"  # not the other tracked objects' rows
+    per_traj = {s.trajectory: s.rms_mm for s in base.streams if s.stream == mine}
     findings: list[Finding] = []
     for tr in rec.trajectories:
         lab = segment_phases(
@@ -196,13 +197,21 @@ def assess(
     return Sanity(findings, rms, floor, ratio)
 
 
+def _backend(rec: Any) -> str:
+    """The engine of the sanity baseline: planar where it represents the scene, else the one
+    ``auto`` picks (two objects: mujoco)."""
+    from robogs.physics.engine import resolve_backend
+
+    return resolve_backend(rec.physics, "auto")[0]
+
+
 def bound_notes(rec: Any, dt: float = 1e-3) -> list[str]:
     """One line per refitted base parameter that sits on a bound of its prior (or of the
     model's range): the data pull it outside what the prior allows, so its value is the bound,
     not an estimate (:func:`robogs.physics.fit.on_bounds` on the memoised baseline fit)."""
     from robogs.physics.baseline import baseline
 
-    b = baseline(rec, dt=dt)
+    b = baseline(rec, dt=dt, backend=_backend(rec))
     sources = b.physics.get("sources") or {}
     out = []
     for c, side in zip(b.free, b.outcome.on_bound, strict=False):
