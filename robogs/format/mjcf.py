@@ -66,6 +66,7 @@ __all__ = [
     "PUSHER_ACTUATORS",
     "PUSHER_SOLREFFRICTION_STEPS",
     "ContactSettings",
+    "ballast_contact",
     "MjcfScene",
     "collision_hull",
     "footprint_points",
@@ -146,6 +147,14 @@ class ContactSettings:
         servo_velocity_gain, servo_position_gain: the pusher servos' gains in units of the
             pusher's mass and the timestep: ``kv = gain_v * m / dt``, ``kp = gain_p * m / dt^2``
             (``gain_v = 1`` is dead-beat velocity tracking with explicit forces).
+        z_ballast: planar joint set only: the z slide of an object of mass m carries ``k m`` of
+            added inertia (``armature``) and a constant force ``k m g_z`` (a bias-only actuator
+            ``<obj>_ballast``), so it falls at g with a (1 + k)-fold weight on the support, whose
+            friction coefficients are divided by (1 + k): the friction forces are Coulomb's, the
+            soft cone's slip-normal coupling lifts the box (1 + k) times less (see
+            :func:`ballast_contact` for the impedances). 0: off.
+        pusher_dampratio: damping ratio of the object-pusher pairs' ``solref`` (time constant
+            as ``solref``): above 1 the pusher's strike is plastic, as in the planar model.
     """
 
     timestep: float = 1e-3
@@ -165,13 +174,57 @@ class ContactSettings:
     footprint_torsion: bool = False
     servo_velocity_gain: float = 1.0
     servo_position_gain: float = 0.3
+    z_ballast: float = 0.0
+    pusher_dampratio: float = 1.0
 
 
 PLANAR_SETTINGS = ContactSettings(
-    footprint_grid=1, footprint_torsion=True, solreffriction=(0.01, 1.0)
+    footprint_grid=1,
+    footprint_torsion=True,
+    solreffriction=(0.01, 1.0),
+    z_ballast=9.0,
+    pusher_dampratio=2.0,
 )
 """Contact settings of the planar joint set (see ``robogs.physics.engines.mujoco_engine``,
-"Planar joint set")."""
+"Planar joint set", and "Strike launch")."""
+
+
+def ballast_contact(
+    solref: Sequence[float],
+    solimp: Sequence[float],
+    k: float,
+    vertical: bool,
+    solreffriction: Sequence[float] = (0.0, 0.0),
+) -> tuple[tuple[float, float], tuple[float, ...], tuple[float, float]]:
+    """``(solref, solimp, solreffriction)`` of a contact pair of a ballasted body
+    (``ContactSettings.z_ballast`` ``k``) that give the contact the dynamics of the same pair on
+    the unballasted body (positive ``solref`` only; ``k <= 0`` returns them unchanged).
+
+    MuJoCo regularises a contact row with ``R = (1 - d) / d * A0``, ``A0`` the bodies'
+    ``body_invweight0``: the mean of the translational diagonal of ``J M^-1 J^T`` over x, y, z
+    (MuJoCo's ``engine_setconst.c``), so with the ballast ``A0 = (2 + 1/(1+k)) / (3 m)``, while
+    the true inverse mass is ``1 / ((1+k) m)`` along z (a support contact, ``vertical``) and
+    ``1/m`` horizontally (pusher and object-object contacts). The row's acceleration is
+    ``a = d_eff a_ref + (1 - d_eff) a_0`` with ``d_eff = A / (A + R)`` (MuJoCo documentation,
+    "Computation", soft constraints). So ``(1 - d) / d`` of dmin and dmax is scaled by
+    ``A / A0`` (``d_eff`` as before: rest penetration unchanged), and the time constant and
+    damping ratio by ``q = dmax / dmax'`` and ``1 / sqrt(q)``: ``a_ref``'s damping
+    ``2 / (dmax timeconst)`` and stiffness ``imp / (dmax timeconst dampratio)^2`` then give
+    ``d_eff a_ref`` of the unballasted pair (exactly for a constant impedance, to first order
+    in the impedance ramp otherwise). The friction time constant is scaled by ``q`` too."""
+    lo, hi, *rest = (float(v) for v in solimp)
+    tc, zeta = (float(v) for v in solref)
+    tf, zf = (float(v) for v in solreffriction)
+    if k <= 0:
+        return (tc, zeta), (lo, hi, *rest), (tf, zf)
+    a0 = (2.0 + 1.0 / (1.0 + k)) / 3.0
+    f = (1.0 / (1.0 + k) if vertical else 1.0) / a0
+
+    def d(x: float) -> float:
+        return 1.0 / (1.0 + f * (1.0 - x) / x)
+
+    q = hi / d(hi)
+    return (tc * q, zeta / math.sqrt(q)), (d(lo), d(hi), *rest), (tf * q, zf)
 
 
 def planar_joints_fit(
@@ -243,6 +296,9 @@ class MjcfScene:
         torsion: object name -> torsional friction radius [m] of its footprint (0: none).
         planar: the objects are on the planar joint set (else free joints).
         settings: the contact settings the document was built with.
+        ballast: the z ballast factor k of every object (``ContactSettings.z_ballast`` on the
+            planar joint set, else 0): support-pair friction coefficients in the document are
+            the physics.json ones divided by (1 + k).
     """
 
     xml: str
@@ -258,6 +314,7 @@ class MjcfScene:
     torsion: dict[str, float] = field(default_factory=dict)
     planar: bool = False
     settings: ContactSettings = field(default_factory=ContactSettings)
+    ballast: float = 0.0
 
 
 def _f(v: float) -> str:
@@ -638,7 +695,8 @@ def scene_mjcf(
     settings = settings or (PLANAR_SETTINGS if planar else ContactSettings())
     poses = dict(poses or {})
     objects = physics.get("objects") or {}
-    scene = MjcfScene(xml="", planar=planar, settings=settings)
+    kb = float(settings.z_ballast) if planar else 0.0
+    scene = MjcfScene(xml="", planar=planar, settings=settings, ballast=kb)
     root = ET.Element("mujoco", model=model_name)
     ET.SubElement(root, "compiler", angle="radian", inertiafromgeom="false", autolimits="true")
     grav = _floats(physics, "gravity_mps2", 3, "") if "gravity_mps2" in physics else [0, 0, -9.81]
@@ -681,6 +739,7 @@ def scene_mjcf(
         conaffinity="0",
     )
     free: dict[str, float] = {}
+    masses: dict[str, float] = {}
     static: list[str] = []
     start: list[float] = []  # keyframe qpos of the objects, in body (= qpos) order
     for name in sorted(objects):
@@ -704,7 +763,10 @@ def scene_mjcf(
                 body = ET.SubElement(world, "body", name=name, **pose)
                 ET.SubElement(body, "freejoint", name=name)
                 start += p
-            _inertial(body, entry, where)
+            masses[name] = _inertial(body, entry, where)
+            if kb > 0:  # the z slide's ballast inertia (ContactSettings.z_ballast)
+                zj = body.find(f"joint[@name='{name}_z']")
+                zj.set("armature", _f(kb * masses[name]))
             _shape_geom(
                 body,
                 name,
@@ -738,15 +800,51 @@ def scene_mjcf(
         length = _number(pusher, "length_m", 0.0, "objects/pusher")
         shape = str(pusher.get("shape") or "capsule")
         pusher_ends = settings.capsule_ends and length > 0 and shape == "capsule"
-    sr, si = _vec(settings.solref), _vec(settings.solimp)
-    srf = _vec(settings.solreffriction)
-
-    # see PUSHER_SOLREFFRICTION_STEPS and OBJECT_PAIR_DAMPRATIO
-    srf_pusher = _vec([PUSHER_SOLREFFRICTION_STEPS * settings.timestep, 1.0])
-    sr_objects = _vec([settings.solref[0], OBJECT_PAIR_DAMPRATIO])
+    if kb > 0:  # after the pusher's: its actuators keep their indices
+        for name, mass in masses.items():
+            ET.SubElement(
+                actuator,
+                "general",
+                name=f"{name}_ballast",
+                joint=f"{name}_z",
+                gainprm="0",
+                biastype="affine",
+                biasprm=_vec([kb * mass * grav[2], 0.0, 0.0]),
+                ctrllimited="false",
+            )
+        scene.notes.append(
+            f"z ballast {kb:g}: each object's z slide has armature {kb:g} m and a constant "
+            f"force {kb:g} m g_z (actuator <obj>_ballast, ctrl unused); support friction "
+            f"coefficients are physics.json's / {1 + kb:g}"
+        )
+    # see PUSHER_SOLREFFRICTION_STEPS, ContactSettings.pusher_dampratio, OBJECT_PAIR_DAMPRATIO;
+    # with a z ballast each pair's parameters are corrected by ballast_contact
+    sr, si, srf = (_vec(v) for v in (settings.solref, settings.solimp, settings.solreffriction))
+    sup = [
+        _vec(v)
+        for v in ballast_contact(
+            settings.solref, settings.solimp, kb, True, settings.solreffriction
+        )
+    ]
+    tc = settings.solref[0]
+    f_pusher = (PUSHER_SOLREFFRICTION_STEPS * settings.timestep, 1.0)
+    side = {
+        key: [_vec(v) for v in ballast_contact((tc, ratio), settings.solimp, kb, False, sf)]
+        for key, ratio, sf in (
+            ("pusher", settings.pusher_dampratio, f_pusher),
+            ("object", OBJECT_PAIR_DAMPRATIO, settings.solreffriction),
+            ("static", settings.solref[1], settings.solreffriction),
+        )
+    }
 
     def pair(
-        g1: str, g2: str, mu: float, rho: float = 0.0, solref: str = sr, solreffriction: str = srf
+        g1: str,
+        g2: str,
+        mu: float,
+        rho: float = 0.0,
+        solref: str = sr,
+        solimp: str = si,
+        solreffriction: str = srf,
     ) -> None:
         # condim 3 even without friction, so that a fitted friction can be set on the model;
         # condim 4 with torsional friction mu * rho on torsion footprints
@@ -761,7 +859,7 @@ def scene_mjcf(
             friction=fr,
             solref=solref,
             solreffriction=solreffriction,
-            solimp=si,
+            solimp=solimp,
         )
         scene.pairs.append((g1, g2))
         scene.pair_torsion.append(float(rho))
@@ -769,19 +867,20 @@ def scene_mjcf(
     names = list(free)
     for i, a in enumerate(names):
         feet = scene.feet.get(a, [])
+        mu_t = free[a] / (1.0 + kb)  # the support carries (1 + k) m g (z_ballast)
         for g in feet:
             scene.table_pairs.setdefault(a, []).append(len(scene.pairs))
-            pair(g, "table", free[a], scene.torsion.get(a, 0.0))
+            pair(g, "table", mu_t, scene.torsion.get(a, 0.0), *sup)
         scene.table_pairs.setdefault(a, []).append(len(scene.pairs))
-        pair(a, "table", free[a])
+        pair(a, "table", mu_t, 0.0, *sup)
         if scene.pusher is not None:
-            pair(a, "pusher", mu_p, solreffriction=srf_pusher)
+            pair(a, "pusher", mu_p, 0.0, *side["pusher"])
             if pusher_ends:
-                pair(a, "pusher_end", mu_p, solreffriction=srf_pusher)
+                pair(a, "pusher_end", mu_p, 0.0, *side["pusher"])
         for b in names[i + 1 :]:
-            pair(a, b, max(free[a], free[b]), solref=sr_objects)
+            pair(a, b, max(free[a], free[b]), 0.0, *side["object"])
         for s in static:
-            pair(a, s, free[a])
+            pair(a, s, free[a], 0.0, *side["static"])
     if not len(asset):
         root.remove(asset)
     if len(contact):

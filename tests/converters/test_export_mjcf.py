@@ -26,6 +26,7 @@ from scipy.signal import savgol_filter
 
 from robogs.convert.export import export, get_exporter
 from robogs.format.errors import DatasetExistsError, InputError
+from robogs.format.mjcf import PLANAR_SETTINGS
 
 
 @pytest.fixture(scope="module")
@@ -107,7 +108,10 @@ def test_mjcf_export_loads_carries_the_physics_and_replays_within_the_noise(
         if {model.geom(model.pair_geom1[i]).name, model.geom(model.pair_geom2[i]).name}
         == {"box", "table"}
     )
-    assert model.pair_friction[k, 0] == pytest.approx(box["friction_dynamic"])
+    # the support carries (1 + k) m g on the planar joint set's z ballast (ContactSettings)
+    kb = model.dof_armature[model.joint("box_z").dofadr[0]] / model.body("box").mass[0]
+    assert kb == pytest.approx(PLANAR_SETTINGS.z_ballast)
+    assert model.pair_friction[k, 0] * (1 + kb) == pytest.approx(box["friction_dynamic"])
     assert np.allclose(model.opt.gravity, rec.physics["gravity_mps2"])
 
     hz = 0.5 * box["size_m"][2]

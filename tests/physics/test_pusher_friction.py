@@ -37,16 +37,16 @@ def _space(prep, physics) -> ParamSpace:
     return ParamSpace([*base_params(prep.scene), pusher_friction_param(physics)], [])
 
 
-@pytest.mark.parametrize("mu_p, rel", [(0.0, 0.02), (MU_P, 0.15)])
+@pytest.mark.parametrize("mu_p, rel", [(0.0, 0.02), (MU_P, 0.02)])
 def test_pusher_force_of_a_central_push_is_mu_m_g(mu_p, rel):
     """Oracle for the MuJoCo pusher force (pusher dynamics minus servo force): a central push
     along the face normal translates the box at ``mu_t m g`` (the generator's force too), for
-    two table frictions. Frictionless pusher: within 2 % (measured -0.6 % at both). With pusher
-    friction MuJoCo reads high, more so at higher table friction (measured +6.6 % at mu_t 0.3,
-    +11.9 % at 0.45 with the planar joint set's 10 ms friction reference; +6.6 % and +4.3 %
-    with 20 ms): the sliding table contact's soft friction pushes the box up by about
-    mu b |v_t| (MuJoCo's convex contact couples slip into the normal) and the pusher's sticking
-    vertical friction holds it down, loading the table. Bound 15 %, and high, not low."""
+    two table frictions, within 2 % with and without pusher friction (measured -0.5 % at
+    both). Before the planar joint set's z ballast (``ContactSettings.z_ballast``) MuJoCo read
+    +6.6 % / +11.9 % with pusher friction: the sliding table contact's soft friction pushed the
+    box up by about mu b |v_t| (MuJoCo's convex contact couples slip into the normal) and the
+    pusher's sticking vertical friction held it down, loading the table; the ballast divides
+    that coupling by 1 + k."""
     rec = make_pusher_friction(noise="zero", pushes=((0.0, 0.0),), nominal=(MU_T, mu_p))
     prep = prepare(rec)
     space = _space(prep, rec.physics)
@@ -60,8 +60,6 @@ def test_pusher_force_of_a_central_push_is_mu_m_g(mu_p, rel):
     for i, mu in enumerate((0.3, 0.45)):
         mean = sim.force[i, 0].numpy()[steady, :2].mean(0)
         assert np.linalg.norm(mean) == pytest.approx(mu * m_g, rel=rel)
-        if mu_p > 0:
-            assert np.linalg.norm(mean) > mu * m_g
         along = mean @ meas[steady].mean(0) / np.linalg.norm(meas[steady].mean(0))
         assert along / np.linalg.norm(mean) > np.cos(np.radians(1.0))
         assert abs(float(sim.dense_yaw[i, 0, -1] - sim.dense_yaw[i, 0, 0])) < 1e-6

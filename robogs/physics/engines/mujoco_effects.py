@@ -43,6 +43,7 @@ import mujoco
 import numpy as np
 import torch
 
+from robogs.format.mjcf import ballast_contact
 from robogs.physics.effects import Effect, overrides
 from robogs.physics.model import Body, FreeState, Slip
 
@@ -92,6 +93,9 @@ class ObjectSlots:
         to (I_zz, I_yy, I_xx) with a 90 deg ``iquat`` about y); tilt_inertia_scale: factor on the
         roll and pitch inertia (see ``robogs.physics.engines.mujoco_fit.MujocoFit``);
         table_torsion: torsional friction radius [m] of each ``table_pairs`` row (0: none).
+        ballast: the z ballast factor k (``robogs.format.mjcf.ContactSettings.z_ballast``;
+        0: none) and ballast_actuator its bias actuator's id: the z DOF (``dof + 2``) carries
+        armature k m and the force k m g_z, the support pairs mu_d / (1 + k).
     """
 
     body: int
@@ -103,6 +107,8 @@ class ObjectSlots:
     nominal_iquat: np.ndarray | None = None
     tilt_inertia_scale: float = 1.0
     table_torsion: list[float] | None = None
+    ballast: float = 0.0
+    ballast_actuator: int = -1
 
     def body_tensor(self) -> np.ndarray:
         """[3, 3] nominal inertia tensor about the CoM in the body frame [kg m^2]."""
@@ -151,7 +157,8 @@ def _tilt(model: mujoco.MjModel, th: dict[str, float], slots: ObjectSlots) -> No
 
 
 def _viscous(model: mujoco.MjModel, th: dict[str, float], slots: ObjectSlots) -> None:
-    model.dof_damping[slots.dof : slots.dof + 3] += th["c"] * float(model.body_mass[slots.body])
+    c = th["c"] * float(model.body_mass[slots.body])
+    model.dof_damping[slots.dof : slots.dof + 3] += c * np.array([1.0, 1.0, 1.0 + slots.ballast])
 
 
 NATIVE: dict[str, Callable[[mujoco.MjModel, dict[str, float], ObjectSlots], None]] = {
@@ -187,7 +194,10 @@ def apply_body(
 ) -> mujoco.MjModel:
     """A copy of ``base`` carrying row ``m`` of ``body`` (mass, inertia, CoM, mu_d,
     restitution, linear damping); ``timeconst`` [s] is the contact pairs' solref time constant
-    (a bouncing pair gets :data:`BOUNCE_TIMECONST` and :data:`BOUNCE_SOLIMP`)."""
+    (a bouncing pair gets :data:`BOUNCE_TIMECONST` and :data:`BOUNCE_SOLIMP`). With a z ballast
+    (``slots.ballast``) its armature and weight follow the set's mass, and the support pairs'
+    coefficients are mu_d / (1 + k) (a bouncing pair's solref and
+    solimp corrected by :func:`robogs.format.mjcf.ballast_contact`)."""
     model = copy.copy(base)
     b = slots.body
     mass = float(body.mass[m, 0])
@@ -200,7 +210,8 @@ def apply_body(
     model.body_mass[b] = mass
     model.body_inertia[b], model.body_iquat[b] = principal(tensor)
     model.body_ipos[b, :2] = body.com[m, 0].numpy()
-    mu = max(float(body.mu_d[m, 0]), 1e-5)
+    kb = slots.ballast
+    mu = max(float(body.mu_d[m, 0]), 1e-5) / (1.0 + kb)
     e = float(body.restitution[m, 0])
     zeta = restitution_damping_ratio(e)
     rho = slots.table_torsion or [0.0] * len(slots.table_pairs)
@@ -209,9 +220,15 @@ def apply_body(
         if r > 0:
             model.pair_friction[k, 2] = mu * r
         if zeta < 1.0:
-            model.pair_solref[k] = (max(timeconst, BOUNCE_TIMECONST), zeta)
-            model.pair_solimp[k] = BOUNCE_SOLIMP
-    model.dof_damping[slots.dof : slots.dof + 3] = float(body.damping[m, 0]) * mass
+            sr, si, _ = ballast_contact(
+                (max(timeconst, BOUNCE_TIMECONST), zeta), BOUNCE_SOLIMP, kb, vertical=True
+            )
+            model.pair_solref[k], model.pair_solimp[k] = sr, si
+    z = np.array([1.0, 1.0, 1.0 + kb])  # the z DOF's inertia is (1 + k) m
+    model.dof_damping[slots.dof : slots.dof + 3] = float(body.damping[m, 0]) * mass * z
+    if kb > 0:
+        model.dof_armature[slots.dof + 2] = kb * mass
+        model.actuator_biasprm[slots.ballast_actuator, 0] = kb * mass * model.opt.gravity[2]
     return model
 
 

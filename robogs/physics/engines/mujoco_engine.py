@@ -377,6 +377,7 @@ class MujocoEngine:
                     if {"pusher", "pusher_end"} & {a, b}:
                         m.pair_friction[k, :2] = max(v, 1e-5)
             elif obj in self._bid and what == "friction_dynamic":
+                v /= 1.0 + self.scene.ballast  # the support carries (1 + k) m g (z ballast)
                 support = set(self.scene.table_pairs.get(obj, []))
                 feet = set(self.scene.feet.get(obj, []))
                 for k, (a, b) in enumerate(self.scene.pairs):
@@ -391,6 +392,11 @@ class MujocoEngine:
                 s = v / float(self.model.body_mass[b])
                 m.body_mass[b] = v
                 m.body_inertia[b] = self.model.body_inertia[b] * s
+                if self.scene.ballast > 0:  # the z ballast follows the mass
+                    z = self._vadr[obj] + 2
+                    a = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{obj}_ballast")
+                    m.dof_armature[z] = self.model.dof_armature[z] * s
+                    m.actuator_biasprm[a, 0] = self.model.actuator_biasprm[a, 0] * s
             else:
                 self._bad_param(key, val)
         return m
@@ -451,7 +457,7 @@ class MujocoEngine:
         p = drive.pusher.numpy()
         y = drive.ee_yaw.numpy()
         k = len(PUSHER_ACTUATORS)
-        ctrl = np.empty((n_t, n_s - 1, 2 * k))
+        ctrl = np.zeros((n_t, n_s - 1, self.model.nu))  # z-ballast actuators follow: ctrl 0
         ctrl[..., :3] = p[:, :-1]
         ctrl[..., 3] = y[:, :-1]
         ctrl[..., k : k + 3] = np.diff(p, axis=1) / self.dt

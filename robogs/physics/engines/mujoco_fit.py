@@ -183,6 +183,10 @@ class MujocoFit:
             nominal_iquat=np.array(m.body_iquat[b]),
             table_torsion=[self.eng.scene.pair_torsion[k] for k in pairs],
             tilt_inertia_scale=float(tilt_inertia_scale),
+            ballast=self.eng.scene.ballast,
+            ballast_actuator=mujoco.mj_name2id(
+                m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{object_name}_ballast"
+            ),
         )
         self.lay = self.eng.layout[object_name]  # free joint or planar joint set
         self.qa, self.va = self.lay.q, self.lay.v  # state columns of its qpos and DOFs
@@ -332,7 +336,7 @@ class MujocoFit:
                 mi.pair_friction[self.pusher_pairs, :2] = max(float(mu_p[i, 0]), 1e-5)
             for k, v in others.items():  # another object's table friction (and torsion)
                 r, rho = rows[k]
-                mu = max(float(v[i, 0]), 1e-5)
+                mu = max(float(v[i, 0]), 1e-5) / (1.0 + self.eng.scene.ballast)  # z ballast
                 mi.pair_friction[r, :2] = mu
                 mi.pair_friction[r, 2] = np.where(rho > 0, mu * rho, mi.pair_friction[r, 2])
             for e in native_fx:
