@@ -311,12 +311,15 @@ def make_two_objects(
     return ScenarioRecording(trajs, physics, "box_a", meta)
 
 
-def write_two_objects(recording: ScenarioRecording, out_path: str | Path, **kw: Any) -> Any:
+def write_two_objects(
+    recording: ScenarioRecording, out_path: str | Path, *, wrench: bool = False, **kw: Any
+) -> Any:
     """Write :func:`make_two_objects`' recording as a dataset a user would have, through
     :func:`robogs.synth.scenarios.write.write_scenario` (both boxes in ``object_poses``, the
-    pusher in ``ee_poses``; the wrench is not written). The truth beside it keeps ``truth``,
-    ``start`` and ``seed`` (the fine per-step chains are left out); returns the ``Dataset``."""
+    pusher in ``ee_poses``; with ``wrench`` the pusher's force sensor as ``wrenches``, frame
+    ``world``). The truth beside it keeps ``truth``, ``start`` and ``seed`` (the fine per-step
+    chains are left out); returns the ``Dataset``."""
     from robogs.synth.scenarios.write import write_scenario
 
     meta = {k: v for k, v in recording.meta.items() if k != "fine"}
-    return write_scenario(replace(recording, meta=meta), out_path, **kw)
+    return write_scenario(replace(recording, meta=meta), out_path, wrenches=wrench, **kw)

@@ -59,9 +59,17 @@ def read_truth(out_path: str | Path) -> dict:
     return json.loads(path.read_text())
 
 
-def write_scenario(recording: ScenarioRecording, out_path: str | Path, *, overwrite: bool = False):
+def write_scenario(
+    recording: ScenarioRecording,
+    out_path: str | Path,
+    *,
+    overwrite: bool = False,
+    wrenches: bool = False,
+):
     """Write ``recording`` to ``out_path`` and its truth to :func:`truth_path` (beside it, never
-    inside); return the opened ``Dataset``."""
+    inside); return the opened ``Dataset``. ``wrenches``: also write the trajectories' pusher
+    force (``wrench_t_ns``, ``wrench_force`` [N], world axes) as a ``wrenches`` stream in frame
+    ``world`` (torques 0)."""
     from robogs.format.dataset import Dataset
 
     link = recording.physics["objects"]["pusher"].get("link", "ee")
@@ -128,8 +136,22 @@ def write_scenario(recording: ScenarioRecording, out_path: str | Path, *, overwr
                 "nominal_rate_hz": 500.0,
             },
         }
-        start = int(min(tr.t_ns[0], tr.ee_t_ns[0]))
-        end = int(max(tr.t_ns[-1], tr.ee_t_ns[-1]))
+        wt = getattr(tr, "wrench_t_ns", None)
+        if wrenches and wt is not None and len(wt):
+            f = np.asarray(tr.wrench_force, dtype=float)
+            cols = {"t_ns": pa.array(wt, pa.int64()), "frame": ["world"] * len(wt)}
+            cols.update({c: f[:, i] for i, c in enumerate(("fx", "fy", "fz"))})
+            cols.update({c: np.zeros(len(wt)) for c in ("tx", "ty", "tz")})
+            w.write_table(f"episodes/{ep}/wrenches.parquet", pa.table(cols), kind="wrenches")
+            streams["wrenches"] = {
+                "kind": "wrenches",
+                "path": f"episodes/{ep}/wrenches.parquet",
+                "stamp_source": "synthetic",
+                "offset_ns": 0,
+                "nominal_rate_hz": round(1e9 / float(np.median(np.diff(wt))), 3),
+            }
+        stamps = [tr.t_ns, tr.ee_t_ns] + ([wt] if "wrenches" in streams else [])
+        start, end = int(min(t[0] for t in stamps)), int(max(t[-1] for t in stamps))
         w.add_episode(ep, start_ns=start, end_ns=end, streams=streams, segment=tr.name)
     physics = {k: v for k, v in recording.physics.items() if k != "revision"}
     w.set_physics(physics, note="nominal values of the scenario")
