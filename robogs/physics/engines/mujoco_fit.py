@@ -123,6 +123,10 @@ PUSHER_PARK_M = 10.0
 """How far up [m] a grasping trajectory's pusher geometry is moved from the grasp onset on."""
 
 _MAX_CHUNK = 256  # steps per multi-step rollout call (bounds the state buffer)
+_REST_CHUNK = 50  # steps per call where a rollout may come to rest (the rest check's stride)
+REST_SPEED = 1e-5
+"""Speed [m/s, rad/s] under which every DOF of a resting object counts as still (the batch
+runner's rest cut, :meth:`MujocoFit._still`)."""
 
 STEPPERS = ("batch", "rollout")
 """Rollout runners: ``mujoco.batch`` (persistent states; MuJoCo >= 3.17) or ``mujoco.rollout``."""
@@ -142,6 +146,8 @@ class MujocoFit:
 
     Attributes:
         last_rollouts: distinct rollouts the last :meth:`simulate` call ran (of its M x T).
+        last_steps: MuJoCo steps those rollouts took in all (batch runner; the rest cut
+            leaves out the steps that repeat the rest pose).
         distinct: run a rollout that repeats another once (default; False runs all M x T).
     """
 
@@ -166,6 +172,7 @@ class MujocoFit:
             )
         self.stepper = stepper
         self.last_rollouts = 0
+        self.last_steps = 0
         self.distinct = True  # run each distinct rollout once (False: all M x T, for benches)
         self.eng = engine or MujocoEngine(physics, object_name=object_name, dt=dt, threads=threads)
         m = self.eng.model
@@ -628,18 +635,23 @@ class MujocoFit:
         whose set switches a force effect on step alone throughout, and the others run apart,
         in multi-step calls between the steps their grasps need (a set with every force effect
         at its zero value gets no applied force; the ``rollout`` path computes it as 0). A call
-        costs Python time whatever its size, so there are two groups, not one per trajectory."""
+        costs Python time whatever its size, so there are a few groups, not one per trajectory:
+        force effect on or off, times grasping or not (only a group without grasps takes the
+        rest cut: the steps before the pusher comes within reach of the resting object and
+        after it rests for good repeat the rest pose, :meth:`_still`)."""
         from mujoco import batch as mj_batch
 
         n_r = len(t_of)
+        self.last_steps = 0
         b = mj_batch.Batch(self.eng.model, nsim=n_r, nthread=self.eng.threads)
         b.set_models(models_r)
         b.state[:] = 0.0
         b.state[:, self._int_cols] = x[:, self._full_cols]
         dense = np.empty((n_r, drive.n_steps, 7 * (1 + len(self.tracked))))
         force = _active_rows(force_fx, n_r)
-        for on in (True, False):
-            ids = np.flatnonzero(force == on)
+        held = grasp.any(1)[t_of]  # grasping trajectories apart: they take no rest cut
+        for on, hold in ((True, True), (True, False), (False, True), (False, False)):
+            ids = np.flatnonzero((force == on) & (held == hold))
             if not len(ids):
                 continue
             fx = [(e, {k: v[ids] for k, v in th.items()}) for e, th in force_fx] if on else []
@@ -686,8 +698,19 @@ class MujocoFit:
                 x, pusher[:, 0], ee_yaw[:, 0], t_of, onset[:, 0], rel_p, rel_q
             )
         k = 0
+        # nothing moves while the object rests and the pusher is out of reach: those steps
+        # repeat the rest pose (no grasp, no pusher force wanted; _still)
+        cut = pstate is None and not grasp[mine].any() and self._cut_ok()
+        if cut:
+            k = self._first_reach(x, t_of, pusher, ee_yaw, body, force_fx)
+            if k > 0:
+                raw[:, 1 : k + 1] = x[:, None, :w]
+                self._place_pusher(x, t_of, k, pusher, ee_yaw)
+                b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
         while k < n_s - 1:
             n = _span(single, k, n_s)
+            if cut:
+                n = min(n, _REST_CHUNK)
             if onset[:, k + 1].any():
                 rel_p, rel_q = self._grasp_rel(
                     x, pusher[:, k], ee_yaw[:, k], t_of, onset[:, k + 1], rel_p, rel_q
@@ -696,6 +719,7 @@ class MujocoFit:
                 xfrc[ids, self.slots.body] = self._forces(x, body, force_fx)
             c = ctrl[t_of, k : k + n] if ctrl.shape[-1] else None
             state = b.rollout(n, control=c, record=(full,), ids=ids)[full]
+            self.last_steps += n * len(ids)
             raw[:, k + 1 : k + 1 + n] = state[:, :, :w]
             if pstate is not None:
                 pstate[ids, k + 1 : k + 1 + n] = state[:, :, self._pcols]
@@ -712,7 +736,80 @@ class MujocoFit:
                 edit = True
             if edit:
                 b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
+            if cut and k < n_s - 1 and self._still(x, t_of, k, pusher, ee_yaw, body, force_fx):
+                raw[:, k + 1 :] = x[:, None, :w]  # at rest for good: the rest pose repeats
+                break
         dense[ids] = self._poses(raw)
+
+    # ------------------------------------------------------------------ rest cut
+    def _cut_ok(self) -> bool:
+        """The rest cut applies: one box on a horizontal support (its resting height known) and
+        a pusher; caches the box's half sizes and the pusher geoms' centres (pusher frame) and
+        bounding radii [m] for :meth:`_gaps`."""
+        if self.pq is None or len(self.eng.layout) != 1 or not np.isfinite(self.settled_z):
+            return False
+        if not hasattr(self, "_pgeoms"):
+            m = self.eng.model
+            gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, self.obj)
+            # the collision box (its face raised over the footprint) grown by its offset
+            self._half = np.array(m.geom_size[gid]) + np.abs(m.geom_pos[gid])
+            pb = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "pusher")
+            g = np.flatnonzero(m.geom_bodyid == pb)
+            self._pgeoms = (np.array(m.geom_pos[g]), np.array(m.geom_rbound[g]))
+            self._vcols = self.va + np.arange(4 if self.lay.planar else 6)
+        return True
+
+    def _gaps(self, x, t_of, pusher, ee_yaw, k: int) -> np.ndarray:
+        """[R, S - k] clearance [m] between the pusher's geoms (bounding spheres) and the box
+        of state rows ``x`` at the steps k on, less a 2 mm margin (<= 0: it may touch)."""
+        pos, rad = self._pgeoms
+        c, s = np.cos(ee_yaw[t_of, k:]), np.sin(ee_yaw[t_of, k:])  # pusher frame -> world
+        gx = c[..., None] * pos[:, 0] - s[..., None] * pos[:, 1]
+        gy = s[..., None] * pos[:, 0] + c[..., None] * pos[:, 1]
+        pts = pusher[t_of, k:, None, :] + np.stack(
+            [gx, gy, np.broadcast_to(pos[:, 2], gx.shape)], -1
+        )
+        d = pts - x[:, None, None, self.qa : self.qa + 3]
+        yaw = quat_yaw(self.lay.quat(x))[:, None, None]
+        cy, sy = np.cos(yaw), np.sin(yaw)  # world -> box frame
+        q = np.stack(
+            [cy * d[..., 0] + sy * d[..., 1], -sy * d[..., 0] + cy * d[..., 1], d[..., 2]], -1
+        )
+        out = np.linalg.norm(np.maximum(np.abs(q) - self._half, 0.0), axis=-1) - rad
+        return out.min(-1) - 2e-3
+
+    def _still(self, x, t_of, k, pusher, ee_yaw, body, force_fx) -> bool:
+        """Every rollout's object rests from step ``k`` on: every DOF slower than
+        :data:`REST_SPEED`, on the support (within 20 um of its settled height), no applied
+        force of a force effect at this state, and the pusher out of reach for the steps left.
+        Then the state is an equilibrium the rest of the rollout would keep (friction holds a
+        box below its friction angle; the planar model's box, too, stays)."""
+        if np.abs(x[:, self._vcols]).max() >= REST_SPEED:
+            return False
+        if np.abs(x[:, self.qa + 2] - self.settled_z).max() >= 2e-5:
+            return False
+        if force_fx and np.abs(self._forces(x, body, force_fx)).max() > 1e-12:
+            return False
+        return bool((self._gaps(x, t_of, pusher, ee_yaw, k) > 0).all())
+
+    def _first_reach(self, x, t_of, pusher, ee_yaw, body, force_fx) -> int:
+        """The last step before the pusher first comes within reach of a rollout's object, when
+        every object starts at rest (:meth:`_still`'s conditions at step 0); else 0."""
+        if np.abs(x[:, self._vcols]).max() > 0 or not np.all(x[:, self.qa + 2] == self.settled_z):
+            return 0
+        if force_fx and np.abs(self._forces(x, body, force_fx)).max() > 1e-12:
+            return 0
+        near = self._gaps(x, t_of, pusher, ee_yaw, 0) <= 0
+        first = np.where(near.any(1), np.argmax(near, 1), near.shape[1])
+        return max(int(first.min()) - 1, 0)
+
+    def _place_pusher(self, x, t_of, k, pusher, ee_yaw) -> None:
+        """Put the pusher of state rows ``x`` where the drive has it at step ``k`` (position,
+        yaw, and the velocities its dead-beat servo reaches there)."""
+        x[:, self.pq : self.pq + 3] = pusher[t_of, k]
+        x[:, self.pq + 3] = ee_yaw[t_of, k]
+        x[:, self.pv : self.pv + 3] = (pusher[t_of, k] - pusher[t_of, k - 1]) / self.eng.dt
+        x[:, self.pv + 3] = (ee_yaw[t_of, k] - ee_yaw[t_of, k - 1]) / self.eng.dt
 
     def _grasp_rel(self, x, p_ee, yaw_ee, t_of, on_t, rel_p, rel_q):
         """Freeze the object pose in the EE yaw frame for rollouts whose grasp starts now."""
