@@ -48,12 +48,34 @@ box), 0.3 m/s 27 um (133 um). 20 ms would lift 34 um at 0.5 m/s but weakens the 
 landing impact (the stick-zone force is at most ``m b |v_t|``): a release slide dropped from
 4 mm ran 1.76 mm past the generator (10 ms: 0.48 mm; 4 ms: 0.03 mm but 273 um hops). A
 stiffer or direct (negative) normal ``solref``, ``impratio`` 1 or 100 and a softer ``solimp``
-did not reduce the lift (the stiffer normal raised it). Not removed: a pusher striking a
-resting box accelerates it at 100-350 m/s^2 for a few steps, and the coupling raises the table
-normal force to ~12 m g for that step: the box is launched 0.1-0.7 mm and chatters while it
-slides, so the viscous-damping column of centred pushes stays 11x planar's (release slides
-0.99x, off-centre pushes 1.01x). Scenes that need 3-D (meshes, tilted supports) keep the free
-joint and the 3-D settings below (``joints="free"`` forces them).
+did not reduce the lift (the stiffer normal raised it). Scenes that need 3-D (meshes, tilted
+supports) keep the free joint and the 3-D settings below (``joints="free"`` forces them).
+
+Strike launch (planar joint set). A pusher striking a resting box accelerates it at 100-350
+m/s^2 for a few steps; the coupling above then raised the table normal force to ~12 m g and
+launched the box 0.1-0.45 mm, and the soft pusher contact gave it back 8-14 % more speed than
+the pusher's, so it bounced off, was caught again, and the number of these contacts changed
+with any parameter: finite-difference columns of centred pushes 6-15x planar's and not smooth.
+Two settings (:class:`~robogs.format.mjcf.ContactSettings`) remove it:
+
+* ``z_ballast = 9``: the z slide carries 9 m of added inertia (``armature``) and a constant
+  force 9 m g_z (a bias-only actuator), and the support pairs' friction coefficients are
+  divided by 10. Free fall, the table's normal impulse on landing and the Coulomb friction
+  force are unchanged; the coupling, an acceleration ``mu T`` (``T`` the friction residual),
+  acts with ``mu / 10`` on the heavier z: a 0.45 m/s strike lifts the box 16 um instead of
+  319 um, a 0.5 m/s slide about a tenth of the 105 um above. The contact impedances are
+  corrected for MuJoCo's mass-averaged ``body_invweight0``
+  (:func:`~robogs.format.mjcf.ballast_contact`), so rest penetration and bounces are unchanged
+  (restitution tests). The friction rows become stiffer (their regulariser follows the
+  normal's), which moved nothing measured.
+* ``pusher_dampratio = 2``: an overdamped pusher contact, plastic as the planar model's and the
+  generator's strike (the box leaves at 1.01-1.04x the pusher's speed instead of 1.07-1.14x).
+
+Either alone is not enough (centred pushes, generator seed 1: ballast alone 8.2x / 12.5x on the
+viscous / tilt columns, damping alone 1.1x but rough); together the columns of centred pushes
+are 1.01-1.04x planar's and smooth on four scenarios (``bench/RESULTS.md``, issue 16, h31;
+``tests/physics/test_mujoco_contact.py``). With pusher friction the pusher force of a central
+push is mu m g within 0.5 % (it read +6.6-11.9 % high: the coupling loaded the table).
 
 Contact settings (:class:`robogs.format.mjcf.ContactSettings`) of the free joint, and why:
 
