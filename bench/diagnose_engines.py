@@ -4,8 +4,10 @@
 The scene is ``make_scenario("none", seed=0, kinds=("push",))`` (9 pushes, nothing hidden), so
 every candidate is fitted and scored and nothing is selected. Each engine runs in the same
 process on a fresh cache folder; torch uses 1 thread, MuJoCo's batch runner ``--threads``.
-Prints wall and CPU seconds per engine, the MuJoCo / planar wall ratio (the in-run baseline),
-the machine, the threads and the load. Run it on an otherwise idle machine::
+Prints wall and CPU seconds per engine, the MuJoCo / planar wall and CPU ratios (the in-run
+baseline), MuJoCo's simulate calls, parameter sets, distinct rollouts and steps taken, the
+fitted base friction and residual RMS of both (the results the speed-ups must keep), the
+machine, the threads and the load. Run it on an otherwise idle machine::
 
     OMP_NUM_THREADS=1 .venv/bin/python bench/diagnose_engines.py --threads 2
 """
@@ -28,7 +30,21 @@ def _one(backend: str, threads: int) -> dict:
     rec = make_scenario("none", seed=0, kinds=("push",))
     load0 = os.getloadavg()[0]
     t0, c0 = time.perf_counter(), time.process_time()
-    res = diagnose_recording(rec, engine=Engine(rec, backend=backend, threads=threads))
+    eng = Engine(rec, backend=backend, threads=threads)
+    count = {"calls": 0, "sets": 0, "rollouts": 0, "steps": 0}
+    if eng._mujoco is not None:  # count what MuJoCo runs (the instance's simulate, wrapped)
+        sim, plain = eng._mujoco, eng._mujoco.simulate
+
+        def counted(theta, *args, **kw):
+            out = plain(theta, *args, **kw)
+            count["calls"] += 1
+            count["sets"] += int(theta.shape[0])
+            count["rollouts"] += sim.last_rollouts
+            count["steps"] += getattr(sim, "last_steps", 0)
+            return out
+
+        sim.simulate = counted
+    res = diagnose_recording(rec, engine=eng)
     return {
         "backend": backend,
         "threads": threads,
@@ -37,6 +53,12 @@ def _one(backend: str, threads: int) -> dict:
         "load": [round(load0, 2), round(os.getloadavg()[0], 2)],
         "candidates": len(res.rows),
         "reported": [r.name for r in res.rows if r.reported],
+        "base": {
+            p.name: [round(p.value, 5), round(p.low, 5), round(p.high, 5)] for p in res.base_params
+        },
+        "rms_base_mm": round(res.rms_base, 4),
+        "params": {r.name: {p.name: round(p.value, 5) for p in r.params} for r in res.rows},
+        **({"mujoco": count} if eng._mujoco is not None else {}),
     }
 
 
@@ -57,7 +79,8 @@ def main() -> None:
     mj = _one("mujoco", args.threads)
     print(json.dumps(mj))
     print(
-        f"mujoco / planar wall: {mj['wall_s'] / planar['wall_s']:.1f}x; "
+        f"mujoco / planar wall: {mj['wall_s'] / planar['wall_s']:.1f}x, "
+        f"CPU: {mj['cpu_s'] / planar['cpu_s']:.1f}x; "
         f"target: mujoco <= 60 s on 2 cores, idle ({mj['wall_s']:.0f} s)"
     )
 
