@@ -113,16 +113,17 @@ def _one(args: tuple[str, str, int, str]) -> dict:
     true_row = next((r for r in rows if r.name == effect), None)
     if true_row is not None:
         truth = rec.meta["true_params"]
+        # a parameter with an unbounded interval (partly identified) was not fitted: not counted
+        fitted = [p for p in true_row.params if np.isfinite(p.low) and np.isfinite(p.high)]
         errs = [
-            abs(p.value - truth[p.name]) / abs(truth[p.name])
-            for p in true_row.params
-            if truth.get(p.name)
+            abs(p.value - truth[p.name]) / abs(truth[p.name]) for p in fitted if truth.get(p.name)
         ]
         out["param_rel_errs"] = errs
         out["param_rel_err"] = float(np.median(errs)) if errs else None
         out["params_in_interval"] = [
-            bool(p.low <= truth[p.name] <= p.high) for p in true_row.params if p.name in truth
+            bool(p.low <= truth[p.name] <= p.high) for p in fitted if p.name in truth
         ]
+        out["undetermined_true"] = list(getattr(true_row, "undetermined", []))
         out["true_verdict"] = true_row.verdict
         out["rms_after_true"] = true_row.rms_after
         if effect == "time_offset":
@@ -143,6 +144,7 @@ def _one(args: tuple[str, str, int, str]) -> dict:
             "ident": r.verdict != "unidentifiable",
             "verdict": r.verdict,
             "reported": r.reported,
+            "undetermined": list(getattr(r, "undetermined", [])),
             "note": r.note,
         }
         for r in rows
