@@ -18,6 +18,8 @@ its wall time, the process's CPU time (all its threads) and the 1-minute load av
   candidates' sets beside them), on the previous runner (``stepper="rollout"``: one
   ``mujoco.rollout`` call per chunk, and per step for every set once any set applies a force)
   and on ``mujoco.batch`` (``stepper="batch"``) with 1 and 2 threads;
+* the share of the grid's steps the batch runner takes (its rest cut repeats the rest pose
+  before the pusher comes within reach and after the box rests for good);
 * one forward-difference Jacobian over the full catalogue (``robogs.physics.fit.jacobian_fd``:
   base point, one row per column, three local-offset rows), both runners (the batch runs each
   distinct rollout once: the sensor columns' rows repeat the base point's motion).
@@ -116,7 +118,10 @@ def _fit_path(rec, backend, threads, stepper, active, n_active) -> dict[str, flo
     eng, space = _catalogue_engine(rec, backend, threads, stepper)
     th, loc = _sets(eng, space, active, n_active)
     eng.evaluate(space, th[:1], loc[:1])  # warm-up
-    return _timed(lambda: eng.evaluate(space, th, loc))
+    r = _timed(lambda: eng.evaluate(space, th, loc))
+    if eng._mujoco is not None and eng._mujoco.stepper == "batch":
+        r["steps"] = eng._mujoco.last_steps  # taken (the rest cut leaves out the rest poses)
+    return r
 
 
 def _jacobian(rec, stepper: str) -> tuple[dict[str, float], int, int]:
@@ -181,8 +186,9 @@ def main() -> None:
         "one (`mujoco.rollout`), `batch` = `mujoco.batch`:",
         "",
         "| effect | engine, runner, threads | wall | CPU | candidate rollouts/s (wall) "
-        "| planar / this (wall) | rollout runner / this (CPU) | load |",
-        "|---|---|---|---|---|---|---|---|",
+        "| planar / this (wall) | rollout runner / this (CPU) | MuJoCo steps taken / grid "
+        "| load |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     cases = [
         (None, M, "no effect"),
@@ -202,7 +208,9 @@ def main() -> None:
             lines.append(
                 f"| {what} | {name} | {r['wall']:.2f} s | {r['cpu']:.2f} s | "
                 f"{M / r['wall']:.1f} | {ref['wall'] / r['wall']:.2f}x | "
-                f"{old['cpu'] / r['cpu']:.2f}x | {r['load']:.1f} |"
+                f"{old['cpu'] / r['cpu']:.2f}x | "
+                + (f"{r['steps'] / (M * steps):.1%}" if "steps" in r else "-")
+                + f" | {r['load']:.1f} |"
             )
     jac = {s: _jacobian(rec, s) for s in ("rollout", "batch")}
     (jr, rows_j, _), (jb, _, distinct) = jac["rollout"], jac["batch"]
