@@ -272,11 +272,13 @@ def _fit_engine(
     for c in space.owner_columns("base"):
         if np.isfinite(out.std[free.index(c)]):  # an unidentifiable value keeps the stored one
             key = space.slots[c].param.name
+            entry = ob
             if key.startswith("objects."):  # another object's, e.g. objects.box_b.friction_dynamic
                 _, other, key = key.split(".", 2)
-                doc["objects"][other][key] = float(out.theta[c])
-            else:
-                ob[key] = float(out.theta[c])
+                entry = doc["objects"][other]
+            entry[key] = float(out.theta[c])
+            if key == "friction_dynamic" and float(entry.get("friction_static", 0.0)) < entry[key]:
+                entry["friction_static"] = entry[key]  # the model's max(static, dynamic) (P002)
     bad = set(unident)
     effects = [
         e for e in doc.get("effects", []) if e.get("name") not in {x.name for x in space.effects}
