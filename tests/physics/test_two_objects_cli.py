@@ -76,6 +76,9 @@ def test_fit_two_boxes(two_box_dataset, capsys):
     mu_a, mu_b = objects["box_a"]["friction_dynamic"], objects["box_b"]["friction_dynamic"]
     assert mu_a == pytest.approx(TRUTH.mu_a, rel=0.10)
     assert mu_b == pytest.approx(TRUTH.mu_b, rel=0.10)
+    assert objects["box_a"]["friction_static"] >= mu_a  # still valid Coulomb friction (P002)
+    assert main(["validate", str(ds), "--fail-on", "warning"]) == 0
+    capsys.readouterr()
     rc = main(["--threads", "1", "compare", str(ds), "--engine", "mujoco", "--json"])
     cap = capsys.readouterr()
     assert rc == 0, cap.err
