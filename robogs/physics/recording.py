@@ -220,11 +220,8 @@ def _check_tracked(rec: Recording) -> None:
     objects = rec.physics.get("objects") or {}
     for name in rec.tracked:
         entry = objects.get(name)
-        if (
-            name == rec.object_name
-            or not isinstance(entry, dict)
-            or entry.get("equation") != ("rigid")
-        ):
+        rigid = isinstance(entry, dict) and entry.get("equation") == "rigid"
+        if name == rec.object_name or not rigid:
             raise InputError(
                 f"tracked object {name!r} is not another rigid object of physics.json",
                 where=f"objects/{name}",
