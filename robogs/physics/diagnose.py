@@ -682,6 +682,7 @@ def diagnose_recording(
     progress: Callable[[int, int], None] | None = None,
     dt: float = 1e-3,
     engine: Engine | None = None,
+    partial: bool = True,
 ) -> DiagnoseResult:
     """Fit and rank candidate effects on a recording (see the module docstring).
 
@@ -691,6 +692,7 @@ def diagnose_recording(
         progress: called with (iteration, unfinished fits).
         dt: simulation step [s].
         engine: reuse a prepared engine.
+        partial: report partly identified effects (False: only fully identified ones pass).
     """
     eng = engine or Engine(recording, dt=dt)
     prep = eng.prep
@@ -810,10 +812,12 @@ def diagnose_recording(
         # under 8 trajectories the default null is white noise only (gate.calibrate): strong
         # in-sample evidence is required as well
         few = "white-noise null only" in cal.method
-        verdict, gate, blocked = judge(stat, thr, q95, dbic, few, ident, part is not None)
+        verdict, gate, blocked = judge(
+            stat, thr, q95, dbic, few, ident, partial and part is not None
+        )
         if ident:
             note = ""
-        elif part is None:
+        elif part is None or not partial:
             note = f"unidentifiable: {why}; to identify it: {e.separate_by}"
         else:
             note = (

@@ -175,3 +175,26 @@ def _judged(p_true: float, q_true: float) -> tuple[str, bool, str | None]:
 )
 def test_verdict_rule(stat, thr, q95, dbic, few, ident, partly, want):
     assert judge(stat, thr, q95, dbic, few, ident, partly) == want
+
+
+def test_unbounded_intervals_are_json_null_in_rows_and_auto_steps():
+    """A partly identified effect's unbounded interval (and an auto-loop step that accepted it)
+    serialises as strict JSON: null, never Infinity."""
+    import json
+
+    from robogs.physics.diagnose import AutoStep, EffectRow, ParamEstimate
+
+    prm = [
+        ParamEstimate("dmu", 0.4, -np.inf, np.inf, "-"),
+        ParamEstimate("v_s", 0.2, 0.1, 0.3, "m/s"),
+    ]
+    row = EffectRow(
+        "stribeck", "contact", True, PARTLY, -120.0, 1.0, 0.9, 0.1, 5.0, 4.0, 6.0, 0.5, 0.9,
+        prm, undetermined=["dmu"],
+    )  # fmt: skip
+    d = json.loads(json.dumps(row.to_dict(), allow_nan=False))
+    assert d["params"][0]["low"] is None and d["params"][1]["low"] == 0.1
+    assert d["undetermined"] == ["dmu"] and d["verdict"] == PARTLY
+    step = AutoStep(1, "stribeck", [], 1.0, 0.9, -120.0, 150.0, 100.0, "added", prm)
+    s = json.loads(json.dumps(step.to_dict(), allow_nan=False))
+    assert s["params"][0]["high"] is None and s["params"][1]["high"] == 0.3
