@@ -580,6 +580,12 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
         print(f"  {d['design']['wrench_note']}")
     for s in d.get("skipped", []):
         print(f"  skipped {s['name']}: {s['reason']}")
+    for e in d["effects"]:
+        if e.get("reported") and e.get("undetermined"):
+            print(
+                f"  {e['name']}: partly identified, {', '.join(e['undetermined'])} not "
+                f"determined (interval unbounded); to determine: {e.get('separate_by')}"
+            )
     found = [e["name"] for e in d["effects"] if e.get("reported")]
     print("missing effect(s): " + (", ".join(found) if found else none_found_text()))
     if found:
