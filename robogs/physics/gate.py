@@ -45,6 +45,17 @@ thresholds that do not depend on the data, no longer pair the tilt with anisotro
 (``tests/physics/test_rivals_from_data.py``). Thresholds in sigma^2 are those of the statistic
 times its divisor on the data (:meth:`Calibration.judge`).
 
+``method="wcu"`` (opt-in) resamples each candidate's own fit residual instead of the base
+fit's (the wild cluster bootstrap of the unrestricted residuals, WCU; MacKinnon & Webb 2017, J.
+Appl. Econometrics 32, and 2018, Econometrics J. 21): the restricted residual carries the
+candidate's effect, and an effect that ``m`` of ``T`` trajectories carry ties the
+``2^(T-m)`` sign patterns that flip only the others, so its p-value cannot fall below about
+``2^-(m-1)`` (design B's camera extrinsics, 6 of 9: 1/32 against a level of 0.0075). The
+unrestricted residual does not, but misses the effect's direction where it acts on few
+trajectories, so the held-out fall over it over-rejects; studentised (``statistic="t"``) it
+keeps the size (tests/physics/test_gate.py) and passes a six-trajectory camera offset, and
+never an effect on one trajectory (``t = +-1``).
+
 Family-wise level: single-step min-P over the candidates (Westfall & Young 1993, "Resampling-
 Based Multiple Testing", alg. 2.8): every candidate is fitted to the same draws; ``alpha'`` is
 the ``alpha`` quantile of the smallest per-candidate null p-value over the draws, and each
@@ -77,6 +88,8 @@ __all__ = [
     "N_DRAWS",
     "MAX_CELLS",
     "MIN_PATTERNS",
+    "METHODS",
+    "unrestricted_resid",
     "Calibration",
     "LinearCandidate",
     "calibrate",
@@ -95,6 +108,8 @@ ALPHA = 0.05
 """Family-wise false-positive rate of the gate."""
 N_DRAWS = 400
 """Null draws (min-P resolution 1/N_DRAWS; 20 draws beyond the 5 % quantile at 400)."""
+METHODS = ("both", "wild", "white", "wcu")
+"""The gate's null constructions (:func:`calibrate`)."""
 MIN_PATTERNS = 128
 """Fewest distinct sign patterns (``2^(T-1)``) for a Rademacher wild null (T >= 8 trajectories);
 under it Webb's six-point weights are used (:func:`wild_weights`)."""
@@ -445,21 +460,24 @@ def _simulate(
     noise: Any,
     pos: list[int] | None = None,
     statistic: str = "fall",
+    per_candidate: bool = False,
 ) -> np.ndarray:
     """Null statistics [draws, C]: ``noise(n, c)`` gives the next ``n`` draws [n, T, K] (the
-    same draws for every candidate; ``pos[0]`` is advanced past each chunk); the held-out fall
-    [sigma^2], or ``S / D`` for another ``statistic`` (:func:`normaliser`)."""
+    same draws for every candidate, ``c = -1``; with ``per_candidate`` candidate ``c``'s own,
+    e.g. the same weights on its own residual; ``pos[0]`` is advanced past each chunk); the
+    held-out fall [sigma^2], or ``S / D`` for another ``statistic`` (:func:`normaliser`)."""
     null = np.zeros((draws, len(cands)))
     t_n, k = valid.shape
     chunk = max(1, int(4e6 // max(t_n * k, 1)))
     for s0 in range(0, draws, chunk):
         n = min(chunk, draws - s0)
-        shared = noise(n, -1)
+        shared = None if per_candidate else noise(n, -1)
         for c, cand in enumerate(cands):
+            e = noise(n, c) if per_candidate else shared
             jac = cand.jac * valid[..., None]
             q = _profile(cand.jac_local, valid)
-            r_b, h_b = _linear_heldout(jac[..., : cand.n_base], q, shared, folds)
-            r_c, h_c = _linear_heldout(jac, q, shared, folds)
+            r_b, h_b = _linear_heldout(jac[..., : cand.n_base], q, e, folds)
+            r_c, h_c = _linear_heldout(jac, q, e, folds)
             sc = _diff_scales(r_b, valid) if statistic == "tn" else None
             null[s0 : s0 + n, c] = _t(*normaliser(h_b, h_c, r_b - r_c, statistic, sc))
         if pos is not None:
@@ -500,6 +518,17 @@ def wild_weights(t_n: int, draws: int, rng: np.random.Generator) -> tuple[np.nda
         first = WEBB[3 + (idx // 6 ** (t_n - 1))]  # the three positive weights
         return np.concatenate([first[:, None], WEBB[digits]], axis=1), note
     return rng.choice(WEBB, size=(draws, t_n)), note
+
+
+def unrestricted_resid(cand: LinearCandidate, resid: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """The candidate's own fit residual [T, K], linearised: ``resid`` (the base fit's whitened
+    residual) with the candidate's columns and each trajectory's nuisance columns fitted out by
+    least squares (the residual of ``B + C``, which holds none of the effect ``C``)."""
+    jac = cand.jac * valid[..., None]
+    q = _profile(cand.jac_local, valid)
+    whole = [np.ones(resid.shape[0], bool)]
+    r, _ = _linear_heldout(jac, q, (resid * valid)[None], whole)
+    return r[0] * valid
 
 
 def _minp(
@@ -554,15 +583,25 @@ def calibrate(
             (:func:`wild_weights`), as the calibration's method says. On design-B null data
             white noise alone let a tilt, quadratic drag or anisotropic friction through in 3
             of 4 seeds. ``"white"``: Gaussian white noise at each trajectory's
-            difference-based scale.
+            difference-based scale. ``"wcu"`` (opt-in): white noise and a wild cluster
+            bootstrap of each candidate's *own* fit residual (:func:`unrestricted_resid`, the
+            unrestricted residual; the same sign patterns for every candidate), which holds none
+            of the candidate's effect: an effect carried by ``m`` of ``T`` trajectories no
+            longer ties its own sign patterns (the restricted null's p-value floor
+            ``2^-(m-1)``: a camera offset on 6 of 9 design-B trajectories, p >= 1/32 > 0.0075).
+            With the held-out fall it over-rejects where an effect acts on few trajectories
+            (its direction is missing from the resampled residual: MacKinnon & Webb 2018,
+            "The wild bootstrap for few (treated) clusters", Econometrics J. 21); use it with
+            ``statistic="t"``, whose ``t = +-1`` on one trajectory cannot pass (a drop's
+            restitution is then never reported). Sizes and power: bench/RESULTS.md (h29).
         statistic: ``"fall"`` (None, the default), ``"t"``, ``"gain"`` or ``"tn"``
             (:func:`normaliser`):
             the null is of that statistic (with ``method="both"`` under 8 trajectories from
             white noise and Webb's weights); judge candidates with :meth:`Calibration.judge`,
             which gives the thresholds in sigma^2 on the data.
     """
-    if method not in ("both", "wild", "white"):
-        raise ValueError(f"method must be 'both', 'wild' or 'white', got {method!r}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     names = [c.name for c in cands]
     t_n = base_resid.shape[0]
     few = 2 ** (t_n - 1) < MIN_PATTERNS
@@ -584,7 +623,7 @@ def calibrate(
     rng = np.random.default_rng(seed)
     nulls: dict[str, np.ndarray] = {}
     note = ""
-    if method in ("both", "white"):
+    if method in ("both", "white", "wcu"):
         scale = diff_scale(base_resid, valid)
 
         def white(n: int) -> np.ndarray:
@@ -609,6 +648,18 @@ def calibrate(
             return w[:, :, None] * rw[None]
 
         nulls["wild"] = _simulate(cands, valid, folds, len(weights), wild, pos, stat_kind)
+    if method == "wcu":
+        weights, note = wild_weights(t_n, draws, rng)
+        own = [unrestricted_resid(c, base_resid, valid) for c in cands]
+        note = "wild cluster of each candidate's own residual" + (f"; {note}" if note else "")
+        pos = [0]
+
+        def wcu(n: int, c: int) -> np.ndarray:
+            return weights[pos[0] : pos[0] + n, :, None] * own[c][None]
+
+        nulls["wild"] = _simulate(
+            cands, valid, folds, len(weights), wcu, pos, stat_kind, per_candidate=True
+        )
     thr: dict[str, float] = {n: 1e-6 for n in names}
     q95: dict[str, float] = {n: 0.0 for n in names}
     if stud:

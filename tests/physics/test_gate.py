@@ -261,3 +261,130 @@ def test_cache_round_trip_keyed_by_candidates(tmp_path, monkeypatch):
     d = calibrate(cands, r, v, folds, fingerprint="rev2", draws=200)
     assert not d.cached
     assert len(list((tmp_path / "null").glob("*.json"))) == 3
+
+
+def _clustered(t_n: int = 9, k: int = 120):
+    """Candidates acted on by 1, 5 and all 9 trajectories (an effect carried by few trajectories,
+    like viscous damping or camera extrinsics on design B), 2 base columns and 3 nuisance
+    columns per trajectory."""
+    s = np.linspace(0, 1, k)
+    base = np.stack([np.tile(s, (t_n, 1)), np.tile(s**2, (t_n, 1))], -1)
+    loc = np.stack([np.ones((t_n, k)), np.tile(s, (t_n, 1)), np.tile(np.cos(3 * s), (t_n, 1))], -1)
+    extra = {"one": (23, 1), "five": (17, 5), "all": (13, t_n)}
+    cands = [
+        LinearCandidate(
+            n,
+            np.concatenate(
+                [base, (np.sin(f * s + 0.3)[None] * (np.arange(t_n) < m)[:, None])[..., None]], -1
+            ),
+            loc,
+            2,
+        )
+        for n, (f, m) in extra.items()
+    ]
+    folds = [np.arange(t_n) % 5 == f for f in range(5)]
+    return cands, folds, s
+
+
+def _cluster_hits(freqs, n_sets: int, seed: int, variants: dict, amp: float = 0.0):
+    """Share of ``n_sets`` fresh datasets on which any candidate passes and on which ``five``
+    passes, per gate variant. Each trajectory carries its own error, a random mix (3 sigma per
+    shape) of the smooth shapes ``sin(f s + ph)`` in ``freqs``; ``amp`` plants ``five``."""
+    cands, folds, s = _clustered()
+    t_n, k = 9, s.size
+    shapes = np.stack([np.sin(f * s + ph) for f, ph in freqs])
+    rng = np.random.default_rng(seed)
+    hits = {v: [0, 0] for v in variants}
+    for i in range(n_sets):
+        y = rng.normal(size=(t_n, k)) + 3.0 * rng.normal(size=(t_n, len(freqs))) @ shapes
+        y = y + amp * cands[1].jac[..., 2]
+        obs = _held(cands, folds, y)
+        r_b = _fit_resids(cands, folds, y)[0]
+        for v, kw in variants.items():
+            cal = calibrate(cands, r_b, np.ones((t_n, k), bool), folds, draws=200, seed=i, **kw)
+            ok = [
+                gate.heldout_statistic(*o) > cal.judge(c.name, *o)[0]
+                for c, o in zip(cands, obs, strict=True)
+            ]
+            hits[v][0] += bool(any(ok))
+            hits[v][1] += bool(ok[1])
+    return {v: (h[0] / n_sets, h[1] / n_sets) for v, h in hits.items()}
+
+
+WCU_T = {"method": "wcu", "statistic": "t"}
+
+
+def test_unrestricted_wild_null_studentised_keeps_its_size_and_passes_a_five_of_nine_effect(
+    tmp_path, monkeypatch
+):
+    """``method="wcu"`` (each candidate's own residual, sign per trajectory; MacKinnon & Webb
+    2017) with the studentised fall. Size, brute force over 100 fresh null datasets whose
+    trajectories carry errors along the candidates' own shapes (the hardest case for a null
+    without the effect): the family-wise rate is within the binomial band of 5 %, while the
+    unstudentised fall on the same null (the mutation) lets the one-trajectory candidate
+    through far more often. Power: an effect carried by 5 of 9 trajectories (6x its unit size)
+    ties the default (restricted) null's top sign patterns (p >= 2^-4, above the level of about
+    0.02 of three candidates) and passes it at most by chance; the studentised unrestricted
+    null passes it on >= 90 % of 20 datasets."""
+    monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path))
+    adversarial = ((17, 0.3), (13, 0.3), (23, 0.3), (9, 2.0), (4, 2.5))
+    size = _cluster_hits(adversarial, 100, 7, {"wcu_t": WCU_T, "wcu": {"method": "wcu"}})
+    assert size["wcu_t"][0] <= 0.10, size  # 5 % + 2.3 binomial sd over 100 sets
+    assert size["wcu"][0] >= 0.3, size
+    smooth = ((7, 1.0), (9, 2.0), (11, 0.5), (3, 2.5))
+    power = _cluster_hits(smooth, 20, 8, {"both": {}, "wcu_t": WCU_T}, amp=6.0)
+    assert power["wcu_t"][1] >= 0.9, power
+    assert power["both"][1] <= power["wcu_t"][1] - 0.3, power
+
+
+def test_unrestricted_residual_holds_none_of_the_effect():
+    """The WCU residual is the candidate's fit residual: orthogonal to its columns and each
+    trajectory's nuisance columns, and equal to the base residual where the effect is absent."""
+    cands, folds, s = _clustered()
+    rng = np.random.default_rng(2)
+    y = rng.normal(size=(9, s.size)) + 5.0 * cands[1].jac[..., 2]
+    r_b = _fit_resids(cands, folds, y)[0]
+    v = np.ones(y.shape, bool)
+    u = gate.unrestricted_resid(cands[1], r_b, v)
+    assert abs(np.sum(u * cands[1].jac[..., 2])) < 1e-8 * np.sum(r_b * cands[1].jac[..., 2])
+    assert np.abs(np.einsum("tk,tkl->tl", u, cands[1].jac_local)).max() < 1e-8
+    # oracle: one dense least-squares fit of every global and nuisance column at once
+    t_n, k = y.shape
+    a = np.zeros((t_n * k, 3 + 3 * t_n))
+    a[:, :3] = cands[1].jac.reshape(t_n * k, 3)
+    for t in range(t_n):
+        a[t * k : (t + 1) * k, 3 + 3 * t : 6 + 3 * t] = cands[1].jac_local[t]
+    x = np.linalg.lstsq(a, r_b.reshape(-1), rcond=None)[0]
+    np.testing.assert_allclose(u.reshape(-1), r_b.reshape(-1) - a @ x, atol=1e-8)
+    assert np.sum(u**2) < 0.5 * np.sum(r_b**2)  # the planted effect was in r_b, not in u
+    with pytest.raises(ValueError, match="method"):
+        calibrate(cands, r_b, v, folds, method="nope")
+
+
+def test_sign_flip_needs_against_the_gate_null_by_enumeration(tmp_path, monkeypatch):
+    """A one-parameter effect carried by ``m`` of 9 trajectories, orthogonal to the base and
+    nuisance columns, in noise-free data: the gate's restricted wild null (all 256 sign
+    patterns) ties ``2^(9-m)`` patterns with the data's statistic, and the ``1 - a`` quantile
+    lies below the tie exactly when ``m >= sign_flip_needs(9, a)`` (design B's restated rule)."""
+    from robogs.synth.scenarios.design_b import sign_flip_needs
+
+    monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path))
+    t_n, k = 9, 60
+    s = np.linspace(0, 1, k)
+    base = np.stack([np.tile(s, (t_n, 1)), np.tile(s**2, (t_n, 1))], -1)
+    loc = np.ones((t_n, k, 1))
+    shape = np.sin(11 * s)
+    q = np.linalg.qr(np.stack([np.ones(k), s, s**2], 1))[0]
+    shape = shape - q @ (q.T @ shape)  # orthogonal to every base and nuisance column
+    folds = [np.arange(t_n) % 5 == f for f in range(5)]
+    assert sign_flip_needs(9, 0.005) == sign_flip_needs(9, 0.0075) == 8
+    for m in range(1, t_n + 1):
+        col = shape[None] * (np.arange(t_n) < m)[:, None] * np.linspace(1, 2, t_n)[:, None]
+        c = LinearCandidate("x", np.concatenate([base, col[..., None]], -1), loc, 2)
+        y = 3.0 * col
+        cal = calibrate([c], y, np.ones((t_n, k), bool), folds, method="wild", draws=256)
+        stat = float(_stats([c], folds, y[None])[0, 0])
+        assert cal.null.shape[0] == 256
+        for a in (0.005, 0.0075, 0.02):
+            passes = stat > float(np.quantile(cal.null[:, 0], 1.0 - a)) * (1 + 1e-9)
+            assert passes == (m >= sign_flip_needs(9, a)), (m, a)
