@@ -12,7 +12,8 @@ the true effect is reported unidentifiable and never reported.
 slides <= 60 mm, a sphere pusher, a smaller lighter box, 60 fps camera with 8 % dropped samples,
 250 Hz encoders, random gaps); its generator decides detectability from the power of the gate's
 chi^2 test with the nuisance-profiled noncentrality (``design_b.detectability``), and the table
-shows E[ΔBIC], the noncentrality, the power, the verdict and the observed evidence. The
+shows E[ΔBIC], the noncentrality, the power, the verdict (and whether a sign-flip cluster gate
+can reach its level with the trajectories the effect acts on) and the observed evidence. The
 gate is the data-derived one (:mod:`robogs.physics.gate`); each case records the null
 calibration's cost (``cal_s``, ``cal_draws``) and whether a hidden tilt came out as anisotropic
 friction alone (``tilt_ok``).
@@ -94,6 +95,8 @@ def _one(args: tuple[str, str, int, str]) -> dict:
         "noncentrality": rec.meta.get("noncentrality"),
         "power": rec.meta.get("power"),
         "carrying": rec.meta.get("carrying_trajectories"),
+        "cluster_needs": rec.meta.get("cluster_needs"),
+        "detectable_verdict": rec.meta.get("detectable_verdict"),
         "cal_s": res.gate.get("seconds"),
         "gate_method": res.gate.get("method"),
         "cal_draws": res.gate.get("draws"),
@@ -175,7 +178,8 @@ def _table(results: list[dict], noise: str) -> tuple[list[str], dict]:
     dbic_lines = [
         "",
         f"| effect ({noise}) | E[dBIC], generator (nuisance profiled) | noncentrality lambda "
-        "[sigma^2] | k | power at alpha/C | detectable by design (power >= 90 %) | "
+        "[sigma^2] | k | power at alpha/C | detectable by design: chi^2 power >= 90 % / by the "
+        "sign-flip cluster gate (m >= needs) | "
         "trajectories m with lambda_t >= 9 (2^-(m-1)) | observed dBIC, median (range) | "
         "observed / expected | held-out stat / family-wise threshold, median (range) |",
         "|---|---|---|---|---|---|---|---|---|---|",
@@ -239,8 +243,9 @@ def _table(results: list[dict], noise: str) -> tuple[list[str], dict]:
 
 def _detect_line(eff: str, noise: str, ok: list[dict]) -> str:
     """One row of the design-B detectability table: the generator's E[dBIC], noncentrality,
-    power and verdict (:func:`robogs.synth.scenarios.design_b.detectability`, recomputed for
-    cases recorded before it was stored) against the observed dBIC and gate ratio."""
+    power and verdict, by the chi^2 test's power and by what a sign-flip cluster gate can reach
+    (:func:`robogs.synth.scenarios.design_b.detectability`, recomputed for cases recorded
+    before it was stored) against the observed dBIC and gate ratio."""
     from robogs.synth.scenarios.design_b import detectability
 
     d = detectability(eff, False, B5 if noise == "B5" else None)
@@ -255,7 +260,9 @@ def _detect_line(eff: str, noise: str, ok: list[dict]) -> str:
     o = float(np.nanmedian(obs))
     return (
         f"| {eff} | {d['expected_delta_bic']:.0f} | {d['noncentrality']:.1f} | {d['k']} | "
-        f"{d['power']:.3f} | {'yes' if d['detectable'] else 'no'} | {d['carrying']} "
+        f"{d['power']:.3f} | {'yes' if d['detectable'] else 'no'} / "
+        f"{'yes' if d['cluster_ok'] else 'no'} (needs {d['cluster_needs']} of "
+        f"{d['trajectories']}) | {d['carrying']} "
         f"({d['sign_flip_floor']:.4f}) | {o:.0f} ({np.nanmin(obs):.0f} .. {np.nanmax(obs):.0f}) "
         f"| {o / d['expected_delta_bic']:.2f} | {np.nanmedian(rat):.2f} ({np.nanmin(rat):.2f} .. "
         f"{np.nanmax(rat):.2f}) |"

@@ -36,8 +36,11 @@ value ``c = chi^2_k.isf(alpha / C)`` and the power ``P[chi^2_k(lambda) > c]``
 statistic: the held-out fall of whole trajectories sees less than the in-sample fit, and the
 gate's wild-cluster null (a sign per trajectory) cannot reach a p-value below ``2^-(m-1)`` when
 only ``m`` trajectories carry the effect; :func:`detectability` also returns ``m`` (trajectories
-with ``lambda_t >= 9``, i.e. moved by 3 sigma: the gate's ``AFFECTED_Z``) so that a table can
-say so. The expected ΔBIC, ``E[ΔBIC] ~= -(lambda + k) + k ln n`` (Schwarz 1978, ``n`` the samples
+with ``lambda_t >= 9``, i.e. moved by 3 sigma: the gate's ``AFFECTED_Z``), the fewest ``m`` with
+which that null can pass an effect at the level ``alpha / C`` over its ``2^(T-1)`` patterns
+(:func:`sign_flip_needs`: 8 of 9 on design B) and a verdict that says when the chi^2 test's
+power is there but the cluster-robust gate cannot reach the level (viscous, quadratic drag,
+restitution, Stribeck and camera extrinsics on design B); ``detectable`` stays the power's. The expected ΔBIC, ``E[ΔBIC] ~= -(lambda + k) + k ln n`` (Schwarz 1978, ``n`` the samples
 kept), is reported alongside; it no longer decides. The generator shares no code with
 ``robogs.physics``.
 
@@ -90,6 +93,8 @@ __all__ = [
     "ALPHA_FAMILY",
     "N_CANDIDATES",
     "POWER_DETECTABLE",
+    "MIN_PATTERNS_GATE",
+    "sign_flip_needs",
 ]
 
 BOX_B = TruthBox(
@@ -125,6 +130,9 @@ N_CANDIDATES = len(TRUE_PARAMS) - 1
 """Candidates the gate tests at once on design B: every effect of the catalogue."""
 POWER_DETECTABLE = 0.9
 """Detectable by design: power of the gate's test at least this (module docstring)."""
+MIN_PATTERNS_GATE = 128
+"""Fewest sign patterns (``2^(T-1)``) with which the gate's wild null flips a sign per
+trajectory (its ``MIN_PATTERNS``, restated: T >= 8); under it the gate uses Webb's weights."""
 LAMBDA_ACTS = 9.0
 """A trajectory carries the effect when its share of the non-centrality is >= 9 sigma^2
 (moved by 3 sigma, the gate's ``AFFECTED_Z``)."""
@@ -315,6 +323,27 @@ def expected_delta_bic(effect: str, quasi_static: bool = False, subset: Subset =
     return float(-(chi2 + k) + k * np.log(n))
 
 
+def sign_flip_needs(n_traj: int, level: float) -> int | None:
+    """Fewest trajectories ``m`` carrying an effect with which a sign-per-trajectory wild
+    cluster null over all ``N = 2^(T-1)`` patterns (``T = n_traj``) can pass it at ``level``.
+
+    The null statistic of a pattern that flips only trajectories the effect does not act on
+    equals the data's own (the effect's part, linearised): ``g = 2^(T-m)`` patterns tie at the
+    top. The threshold is the null's ``1 - level`` quantile (linear interpolation between order
+    statistics, as the gate's ``numpy.quantile``), below the tied value exactly when
+    ``g < 1 + level (N - 1)``. With fewer ``m`` the effect passes only where its real held-out
+    fall exceeds its linearisation. None when ``N < MIN_PATTERNS_GATE`` (Webb's weights, no such
+    ties) or when no ``m <= T`` reaches it.
+    """
+    n = 2 ** (n_traj - 1)
+    if n < MIN_PATTERNS_GATE:
+        return None
+    for m in range(1, n_traj + 1):
+        if 2 ** (n_traj - m) < 1.0 + level * (n - 1):
+            return m
+    return None
+
+
 def design_power(noncentrality: float, k: int, level: float) -> float:
     """Power of a chi^2 test of ``k`` parameters at ``level`` when the statistic is a
     non-central ``chi^2_k(noncentrality)``: ``P[chi^2_k(lambda) > chi^2_k.isf(level)]``."""
@@ -332,20 +361,38 @@ def detectability(effect: str, quasi_static: bool = False, subset: Subset = None
 
     Returns ``expected_delta_bic``, ``noncentrality`` [sigma^2] (nuisances profiled), ``k``,
     ``level`` (per-candidate, ``ALPHA_FAMILY / N_CANDIDATES``), ``power``, ``detectable``
-    (power >= :data:`POWER_DETECTABLE`), ``carrying`` (trajectories with a share >= 9 sigma^2)
-    and ``sign_flip_floor`` (``2^-(carrying-1)``: the smallest p-value a sign-per-trajectory
-    null can give it).
+    (power >= :data:`POWER_DETECTABLE`), ``carrying`` (trajectories with a share >= 9 sigma^2),
+    ``sign_flip_floor`` (``2^-(carrying-1)``: the smallest p-value a sign-per-trajectory
+    null can give it), ``trajectories`` ``T``, ``cluster_needs`` (:func:`sign_flip_needs` at
+    ``level``: the gate's family-wise level is at least this Bonferroni level, 0.0075 measured,
+    which needs the same 8 of 9), ``cluster_ok`` (``carrying >= cluster_needs``, True under
+    Webb's weights) and ``verdict``, a line that says both.
     """
     level = ALPHA_FAMILY / N_CANDIDATES
     if effect == "none":
         k, lam, m = 0, 0.0, 0
         power = level
+        n_t = len(_motions(BOX_B, quasi_static, subset))
     else:
         k = N_PARAMS[effect]
         per = _profiled_per_trajectory(effect, quasi_static, subset)
         lam = float(np.sum(per))
         m = int(np.sum(per >= LAMBDA_ACTS))
         power = design_power(lam, k, level)
+        n_t = int(per.size)
+    needs = sign_flip_needs(n_t, level)
+    det = bool(effect != "none" and power >= POWER_DETECTABLE)
+    ok = needs is None or m >= needs
+    if not det:
+        verdict = f"no: power {power:.3f} < {POWER_DETECTABLE:.2f}"
+    elif ok:
+        verdict = f"yes: power {power:.3f}, evidence in {m} of {n_t} trajectories"
+    else:
+        verdict = (
+            f"no for a cluster-robust gate: evidence in {m} of {n_t} trajectories, a sign-flip "
+            f"cluster null ({2 ** (n_t - 1)} patterns, level {level:.4f}) needs >= {needs} "
+            f"(chi^2 power {power:.3f})"
+        )
     return {
         "expected_delta_bic": expected_delta_bic(effect, quasi_static, subset),
         "noncentrality": lam,
@@ -355,6 +402,10 @@ def detectability(effect: str, quasi_static: bool = False, subset: Subset = None
         "detectable": bool(effect != "none" and power >= POWER_DETECTABLE),
         "carrying": m,
         "sign_flip_floor": 2.0 ** -(m - 1) if m >= 1 else 1.0,
+        "trajectories": n_t,
+        "cluster_needs": needs,
+        "cluster_ok": bool(ok),
+        "verdict": verdict,
     }
 
 
@@ -465,6 +516,8 @@ def make_design_b(
         "power": det["power"],
         "detectable": det["detectable"],
         "carrying_trajectories": det["carrying"],
+        "cluster_needs": det["cluster_needs"],
+        "detectable_verdict": det["verdict"],
         "trajectories": None if subset is None else list(subset),
     }
     return ScenarioRecording(trajectories=trajs, physics=physics, object_name="box", meta=meta)
