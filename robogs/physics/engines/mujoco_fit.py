@@ -124,6 +124,7 @@ PUSHER_PARK_M = 10.0
 
 _MAX_CHUNK = 256  # steps per multi-step rollout call (bounds the state buffer)
 _REST_CHUNK = 50  # steps per call where a rollout may come to rest (the rest check's stride)
+_PROBE = 2  # steps taken before the start of the rest cut: a box that starts to move is seen
 REST_SPEED = 1e-5
 """Speed [m/s, rad/s] under which every DOF of a resting object counts as still (the batch
 runner's rest cut, :meth:`MujocoFit._still`)."""
@@ -701,16 +702,17 @@ class MujocoFit:
         # nothing moves while the object rests and the pusher is out of reach: those steps
         # repeat the rest pose (no grasp, no pusher force wanted; _still)
         cut = pstate is None and not grasp[mine].any() and self._cut_ok()
-        if cut:
-            k = self._first_reach(x, t_of, pusher, ee_yaw, body, force_fx)
-            if k > 0:
-                raw[:, 1 : k + 1] = x[:, None, :w]
-                self._place_pusher(x, t_of, k, pusher, ee_yaw)
-                b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
         while k < n_s - 1:
+            if cut and k == _PROBE:  # still at rest: on to the step before the pusher's reach
+                k0 = self._first_reach(x, t_of, k, pusher, ee_yaw, body, force_fx)
+                if k0 > k:
+                    raw[:, k + 1 : k0 + 1] = x[:, None, :w]
+                    self._place_pusher(x, t_of, k0, pusher, ee_yaw)
+                    b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
+                    k = k0
             n = _span(single, k, n_s)
             if cut:
-                n = min(n, _REST_CHUNK)
+                n = min(n, _REST_CHUNK if k >= _PROBE else _PROBE - k)
             if onset[:, k + 1].any():
                 rel_p, rel_q = self._grasp_rel(
                     x, pusher[:, k], ee_yaw[:, k], t_of, onset[:, k + 1], rel_p, rel_q
@@ -792,16 +794,20 @@ class MujocoFit:
             return False
         return bool((self._gaps(x, t_of, pusher, ee_yaw, k) > 0).all())
 
-    def _first_reach(self, x, t_of, pusher, ee_yaw, body, force_fx) -> int:
-        """The last step before the pusher first comes within reach of a rollout's object, when
-        every object starts at rest (:meth:`_still`'s conditions at step 0); else 0."""
-        if np.abs(x[:, self._vcols]).max() > 0 or not np.all(x[:, self.qa + 2] == self.settled_z):
-            return 0
+    def _first_reach(self, x, t_of, k, pusher, ee_yaw, body, force_fx) -> int:
+        """The last step before the pusher first comes within reach of a rollout's object,
+        from step ``k`` on, when every object is still at rest there (:meth:`_still`'s
+        conditions: its first steps show a box that starts to move, e.g. on a table tilted
+        beyond its friction angle); else ``k``."""
+        if np.abs(x[:, self._vcols]).max() >= REST_SPEED:
+            return k
+        if np.abs(x[:, self.qa + 2] - self.settled_z).max() >= 2e-5:
+            return k
         if force_fx and np.abs(self._forces(x, body, force_fx)).max() > 1e-12:
-            return 0
-        near = self._gaps(x, t_of, pusher, ee_yaw, 0) <= 0
+            return k
+        near = self._gaps(x, t_of, pusher, ee_yaw, k) <= 0
         first = np.where(near.any(1), np.argmax(near, 1), near.shape[1])
-        return max(int(first.min()) - 1, 0)
+        return k + max(int(first.min()) - 1, 0)
 
     def _place_pusher(self, x, t_of, k, pusher, ee_yaw) -> None:
         """Put the pusher of state rows ``x`` where the drive has it at step ``k`` (position,
