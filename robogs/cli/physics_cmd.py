@@ -666,6 +666,8 @@ def _fit(args: argparse.Namespace, model: str) -> int:
             mask_frames=args.mask_frames,
             engine=_engine(args),
         )
+        if args.dry_run and (err := res.refusal(args.dataset)) is not None:
+            raise err  # as the written fit: an added effect of which nothing is determined
         d = res.to_dict()
         if args.json:
             _print_json(d)
@@ -685,6 +687,14 @@ def _fit(args: argparse.Namespace, model: str) -> int:
                 )
             if d.get("wrench_note"):
                 print(f"  {d['wrench_note']}")
+            if d.get("heldout_rms_before_mm") is not None:
+                print(
+                    f"held-out position RMS: {d['heldout_rms_before_mm']:.3f} → "
+                    f"{d['heldout_rms_after_mm']:.3f} mm ({d['heldout_split']}; held-out χ² "
+                    f"{d['heldout_chi2_before']:.1f} → {d['heldout_chi2_after']:.1f} σ²)"
+                )
+            for name, text in d.get("notes", {}).items():
+                print(f"  {name}: {text}")
         for c in d["cameras"]:
             b, a = c["before"], c["after"]
             print(

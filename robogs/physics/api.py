@@ -29,12 +29,17 @@ from robogs.physics.diagnose import (
     AutoPath,
     DiagnoseResult,
     ParamEstimate,
+    _folds,
+    _heldout_rollouts,
+    _partial,
     auto_loop,
+    determined_direction,
     diagnose_recording,
     start_points,
 )
-from robogs.physics.engine import Engine, resolve_backend
-from robogs.physics.fit import Problem
+from robogs.physics.effects import get_effect
+from robogs.physics.engine import Engine, resolve_backend, rms_mm
+from robogs.physics.fit import FitOutcome, Problem, fit_nested
 from robogs.physics.masks import MAX_FRAMES
 from robogs.physics.recording import Recording, as_recording, load_recording
 from robogs.physics.report import render_report
@@ -48,6 +53,7 @@ __all__ = [
     "report",
     "report_baselines",
     "revert",
+    "UNDETERMINED",
 ]
 
 
@@ -171,15 +177,27 @@ class FitResult:
     """Outcome of :func:`fit`.
 
     Attributes:
-        params: fitted base and effect parameters with 95 % intervals (``owner.name``).
+        params: fitted base and effect parameters with 95 % intervals (``owner.name``;
+            unbounded where the parameter is not determined).
         rms_before / rms_after: position RMS [mm] of the baseline (:func:`robogs.physics.
             baseline.baseline`) of the revision fitted from and of the document written.
         noise_floor: data-estimated noise floor [mm].
-        unidentifiable: parameters the data do not identify (insensitive, near-collinear or
-            with an interval wider than their bounds); they are not written.
+        unidentifiable: parameters not written: base parameters the data do not determine
+            (they keep their stored values) and the parameters of an effect of which no
+            direction is determined.
         physics: the new physics.json document.
         revision: the revision written (None when nothing was written).
         from_revision: the revision fitted from (None for an unwritten document).
+        heldout_rms_before / heldout_rms_after: held-out position RMS [mm] of the base fit and
+            of the joint fit, by diagnose's procedure (:func:`robogs.physics.diagnose.
+            _heldout_rollouts`: K folds of whole trajectories, one bounded Gauss-Newton step
+            from the full fit on the training ones); with no ``add`` both are the base's.
+        heldout_chi2_before / heldout_chi2_after: the same as whitened chi^2 [sigma^2].
+        heldout_split: how the trajectories were held out.
+        undetermined: per added effect written partly identified, its parameters the data do
+            not determine (written at the estimate; the determined combination is in ``notes``).
+        not_written: per added effect not written, the reason (no direction determined).
+        notes: per added effect, what the fit says of it (partly identified, not written).
     """
 
     params: list[ParamEstimate]
@@ -193,6 +211,28 @@ class FitResult:
     compare_after: CompareResult | None = field(default=None, repr=False)
     cameras: list[dict[str, Any]] = field(default_factory=list)
     from_revision: int | None = None
+    heldout_rms_before: float = float("nan")
+    heldout_rms_after: float = float("nan")
+    heldout_chi2_before: float = float("nan")
+    heldout_chi2_after: float = float("nan")
+    heldout_split: str = ""
+    undetermined: dict[str, list[str]] = field(default_factory=dict)
+    not_written: dict[str, str] = field(default_factory=dict)
+    notes: dict[str, str] = field(default_factory=dict)
+
+    def refusal(self, path: Any = None) -> InputError | None:
+        """The error to raise when an added effect could not be written (no direction of its
+        parameters is determined), None when every added effect was written."""
+        if not self.not_written:
+            return None
+        name, why = next(iter(self.not_written.items()))
+        why, _, how = why.partition("; to identify it: ")
+        return InputError(
+            f"{name} is not written: {why}; nothing written",
+            path=path,
+            where=f"fit --add {name}",
+            hint=f"to identify it: {how}" if how else None,
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -209,7 +249,15 @@ class FitResult:
             "rms_before_mm": _fin(self.rms_before),
             "rms_after_mm": _fin(self.rms_after),
             "noise_floor_mm": _fin(self.noise_floor),
+            "heldout_rms_before_mm": _fin(self.heldout_rms_before),
+            "heldout_rms_after_mm": _fin(self.heldout_rms_after),
+            "heldout_chi2_before": _fin(self.heldout_chi2_before),
+            "heldout_chi2_after": _fin(self.heldout_chi2_after),
+            "heldout_split": self.heldout_split,
             "unidentifiable": self.unidentifiable,
+            "undetermined": self.undetermined,
+            "not_written": self.not_written,
+            "notes": self.notes,
             "revision": self.revision,
             "from_revision": self.from_revision,
             "cameras": self.cameras,
@@ -223,33 +271,112 @@ def _fin(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
+UNDETERMINED = "not determined by this data (interval unbounded); to determine it: "
+"""How :func:`fit` flags an undetermined parameter of an effect it writes partly identified
+(in the revision note and the output), followed by the effect's ``separate_by``."""
+
+
+def _joint_fit(
+    eng: Engine, space: Any, cands: list[Any], before: Baseline, progress: Any
+) -> tuple[FitOutcome, FitOutcome, list[int], list[int]]:
+    """The base model plus ``cands`` fitted jointly as diagnose fits a candidate
+    (:func:`robogs.physics.fit.fit_nested` from the baseline's optimum, each effect's start
+    points, the base refitted when the candidate switched off beats it); one candidate problem
+    with every added effect's columns. Returns (base fit, joint fit, base columns, free)."""
+    base_cols = eng.base_columns(space)
+    extra: list[int] = []
+    for e in cands:
+        extra += [c for c in space.owner_columns(e.name) if c not in base_cols + extra]
+    th0 = eng.start(space)
+    starts = [th0]
+    for e in cands:  # multi-start: each effect's extra start points, the others at zero
+        starts += start_points(space, e, th0)[1:]
+    known = before.outcome
+    th_known = th0.copy()
+    th_known[: len(known.theta)] = known.theta
+    base_out, (out,) = fit_nested(
+        lambda probs: eng.fit(space, probs, progress=progress),
+        lambda th, lo: eng.evaluate(space, th, lo),
+        space,
+        Problem(free=list(base_cols), theta0=th0),
+        [(extra, starts)],
+        base_fit=replace(known, theta=th_known),
+    )
+    return base_out, out, list(base_cols), list(base_cols) + extra
+
+
+def _heldout(
+    eng: Engine, space: Any, outs: list[FitOutcome], frees: list[list[int]]
+) -> tuple[list[float], list[float], str]:
+    """Held-out position RMS [mm] and chi^2 [sigma^2] of each fit, by diagnose's procedure."""
+    folds = _folds(eng.prep.n_traj)
+    held, _, _ = _heldout_rollouts(eng, space, outs, frees, folds)
+    k = len(folds)
+    rms, chi2 = [], []
+    for p in range(len(outs)):
+        r = np.zeros_like(outs[0].resid)
+        for f, fmask in enumerate(folds):
+            r[fmask] = held[p * k + f][fmask]
+        rms.append(rms_mm(eng.raw(r), eng.mask))
+        chi2.append(float(np.sum(r**2)))
+    return rms, chi2, f"{k} folds of whole trajectories"
+
+
 def _fit_engine(
     eng: Engine, add: Sequence[str], progress: Callable[[int, int], None] | None = None
 ) -> FitResult:
     """Refit the engine's revision plus ``add``; before and after are baselines (:func:`baseline`).
 
-    "Before" is the baseline of the engine's revision, "after" the baseline of the document
-    this fit writes (effects with an unidentifiable parameter left out, unidentifiable base
-    values kept at their stored ones), so ``compare`` and ``report`` of the written revision
-    print the same "after". With nothing to add the fit is the baseline fit itself.
+    The added effects are fitted jointly with the base model and the effects present, as
+    diagnose fits a candidate (:func:`_joint_fit`). An added effect is written when all its
+    parameters are determined, or when a direction of them is (diagnose's rule, :func:`robogs.
+    physics.diagnose.determined_direction`): then every parameter is written at the estimate and
+    the undetermined ones are flagged (:data:`UNDETERMINED`); with no direction determined it is
+    not written (``not_written``). A base parameter the data do not determine keeps its stored
+    value, except where the near-singularity is that of a partly identified effect and the
+    parameter's own interval is narrower than its bounds. "Before" is the baseline of the
+    engine's revision, "after" the baseline of the document this fit writes, so ``compare`` and
+    ``report`` of the written revision print the same "after". With nothing to add the fit is
+    the baseline fit itself.
     """
     rec = eng.prep.rec
     cands = eng.check_effects(add)
     before = baseline(rec, dt=eng.prep.drive.dt, engine=eng, progress=progress)
     if cands:
         space = eng.space(cands)
-        free = eng.base_columns(space)
-        for e in cands:
-            free += [c for c in space.owner_columns(e.name) if c not in free]
-        th0 = eng.start(space)
-        starts = [th0]
-        for e in cands:  # multi-start: each effect's extra start points, the others at zero
-            starts += start_points(space, e, th0)[1:]
-        outs = eng.fit(space, [Problem(free=free, theta0=th) for th in starts], progress=progress)
-        out = min(outs, key=lambda o: o.cost)
+        base_out, out, base_cols, free = _joint_fit(eng, space, cands, before, progress)
+        (h_b, h_a), (c_b, c_a), split = _heldout(eng, space, [base_out, out], [base_cols, free])
     else:
         space, free, out = before.space, before.free, before.outcome
+        (h_b,), (c_b,), split = _heldout(eng, space, [out], [free])
+        h_a, c_a = h_b, c_b
+    undetermined: dict[str, list[str]] = {}
+    not_written: dict[str, str] = {}
+    notes: dict[str, str] = {}
+    kept: list[str] = []  # present effects of which nothing is determined: stored values kept
+    added = {e.name for e in cands}
+    for e in space.effects:
+        jj = [free.index(c) for c in space.owner_columns(e.name) if c in free]
+        if not jj or bool(out.ok[jj].all()):
+            continue
+        why = "; ".join(dict.fromkeys(out.why_param[j] for j in jj if out.why_param[j]))
+        part = _partial(space, out, free, jj)
+        if part is None:
+            notes[e.name] = f"unidentifiable: {why}; to identify it: {e.separate_by}"
+            if e.name in added:
+                not_written[e.name] = notes[e.name]
+            else:
+                kept.append(e.name)
+                notes[e.name] += " (its stored values are kept)"
+            continue
+        names = [space.slots[free[j]].param.name for j in jj if not out.ok[j]]
+        undetermined[e.name] = names
+        notes[e.name] = (
+            f"partly identified: {', '.join(f'{e.name}.{n}' for n in names)} "
+            f"{UNDETERMINED}{e.separate_by} ({why}; {part})"
+        )
     params, unident = [], []
+    written = np.zeros(len(free), dtype=bool)
     for j, c in enumerate(free):
         s = space.slots[c]
         sd = float(out.std[j])
@@ -262,7 +389,21 @@ def _fit_engine(
                 s.param.unit,
             )
         )
-        if not np.isfinite(sd):
+        if s.owner == "base":
+            written[j] = np.isfinite(sd)
+            if not written[j] and undetermined and "do not change" not in out.why_param[j]:
+                # near-singular with a partly identified effect: its own interval decides
+                span = space.upper[[c]] - space.lower[[c]]
+                one = out.cov[j : j + 1, j : j + 1]
+                if determined_direction(one, span) is not None:
+                    written[j] = True
+                    half = 1.96 * float(np.sqrt(one[0, 0]))
+                    params[-1] = replace(
+                        params[-1], low=params[-1].value - half, high=params[-1].value + half
+                    )
+        else:
+            written[j] = s.owner not in not_written and s.owner not in kept
+        if not written[j]:
             unident.append(s.key)
     doc = copy.deepcopy(rec.physics)
     for k in ("revision", "parent_revision", "note"):  # the writer sets them
@@ -270,7 +411,7 @@ def _fit_engine(
     obj = rec.object_name
     ob = doc.setdefault("objects", {}).setdefault(obj, {"equation": "rigid"})
     for c in space.owner_columns("base"):
-        if np.isfinite(out.std[free.index(c)]):  # an unidentifiable value keeps the stored one
+        if written[free.index(c)]:  # an undetermined value keeps the stored one
             key = space.slots[c].param.name
             entry = ob
             if key.startswith("objects."):  # another object's, e.g. objects.box_b.friction_dynamic
@@ -279,13 +420,14 @@ def _fit_engine(
             entry[key] = float(out.theta[c])
             if key == "friction_dynamic" and float(entry.get("friction_static", 0.0)) < entry[key]:
                 entry["friction_static"] = entry[key]  # the model's max(static, dynamic) (P002)
-    bad = set(unident)
     effects = [
-        e for e in doc.get("effects", []) if e.get("name") not in {x.name for x in space.effects}
+        e
+        for e in doc.get("effects", [])
+        if e.get("name") not in {x.name for x in space.effects} or e.get("name") in kept
     ]
     for e in space.effects:
-        if any(f"{e.name}.{p.name}" in bad for p in e.params):
-            continue  # an effect with an unidentifiable parameter is not written
+        if e.name in not_written or e.name in kept:
+            continue  # nothing of it determined: an added one is not written
         effects.append(
             {
                 "name": e.name,
@@ -307,6 +449,14 @@ def _fit_engine(
         compare_before=before.result,
         compare_after=after.result,
         from_revision=before.revision,
+        heldout_rms_before=h_b,
+        heldout_rms_after=h_a,
+        heldout_chi2_before=c_b,
+        heldout_chi2_after=c_a,
+        heldout_split=split,
+        undetermined=undetermined,
+        not_written=not_written,
+        notes=notes,
     )
 
 
@@ -324,8 +474,14 @@ def fit(
     """Refit the base model (and the effects already present) plus ``add``.
 
     With a dataset and ``write=True`` the fitted values become a new physics.json revision
-    (the previous one is kept in ``physics/history/``; see :func:`revert`). Parameters found
-    unidentifiable are reported in ``unidentifiable`` and are not written.
+    (the previous one is kept in ``physics/history/``; see :func:`revert`). An added effect of
+    which only some direction of the parameters is determined (diagnose's verdict "add (partly
+    identified)") is written at the estimate, its undetermined parameters flagged in
+    ``undetermined``, ``notes`` and the revision note (:data:`UNDETERMINED`). An added effect of
+    which nothing is determined is not written: with a dataset and ``write=True`` nothing is
+    written and :class:`InputError` says why (the CLI prints one line and exits 2); otherwise it
+    is listed in ``not_written``. Base parameters found unidentifiable are listed in
+    ``unidentifiable`` and keep their stored values.
 
     ``camera_intrinsics`` is fitted from the camera masks instead (``mask_frames`` frames per
     camera stream): the corrected ``cameras/<cam>.json`` is written in the same edit as the
@@ -334,7 +490,8 @@ def fit(
 
     "Before" and "after" are baselines (:mod:`robogs.physics.baseline`) of the revision
     fitted from and of the document written; with no ``add`` the base model is refitted.
-    ``progress(iteration, unfinished fits)`` follows each fit.
+    The held-out error is diagnose's (:func:`_heldout`). ``progress(iteration, unfinished
+    fits)`` follows each fit.
     """
     camera = _camera_effects()
     cam_add = [a for a in add if a in camera]
@@ -347,20 +504,22 @@ def fit(
     else:
         rec, ds = _open(dataset)
         res = _fit_engine(Engine(rec, dt=dt, backend=engine), rigid_add, progress)
+    if ds is not None and write and (err := res.refusal(ds.root)) is not None:
+        raise err
     new_cams = []
     if cam_add:
         new_cams = _fit_cameras(
             _dataset(ds if ds is not None else dataset, cam_add[0]), res, mask_frames
         )
     if ds is not None and write:
+        text = note or (f"fit: added {', '.join(add)}" if add else "fit: refitted the base model")
+        for name, params in res.undetermined.items():
+            text += f"; {', '.join(f'{name}.{n}' for n in params)} {UNDETERMINED}"
+            text += get_effect(name).separate_by
         with ds.edit() as w:
             for cam in new_cams:
                 w.set_camera(cam)
-            res.revision = w.set_physics(
-                res.physics,
-                note=note
-                or (f"fit: added {', '.join(add)}" if add else "fit: refitted the base model"),
-            )
+            res.revision = w.set_physics(res.physics, note=text)
             w.commit()
     return res
 
