@@ -738,6 +738,12 @@ def _report(args: argparse.Namespace, model: str) -> int:
         f"object position RMS: {pair.before.rms_mm:.2f} → {pair.after.rms_mm:.2f} mm "
         f"(before: {pair.before_label}; after: {pair.after_label})"
     )
+    print(
+        f"held-out position RMS: {pair.heldout_rms_before:.2f} → {pair.heldout_rms_after:.2f} mm "
+        "(folds of whole trajectories, as diagnose)"
+    )
+    for name, text in pair.notes.items():
+        print(f"  {name}: {text}")
     print(f"wrote {path}")
     if args.rrd is not None:
         _residuals_rrd({"before": pair.before.series, "after": pair.after.series}, args.rrd)

@@ -322,6 +322,44 @@ def _heldout(
     return rms, chi2, f"{k} folds of whole trajectories"
 
 
+def _identification(
+    space: Any, out: FitOutcome, free: list[int], added: set[str]
+) -> tuple[dict[str, list[str]], dict[str, str], list[str], dict[str, str]]:
+    """What a fit determines of each effect of ``space`` (diagnose's rule: every parameter,
+    or a direction of them, :func:`robogs.physics.diagnose._partial`).
+
+    Returns ``(undetermined, not_written, kept, notes)``: per partly identified effect its
+    undetermined parameters; per effect of ``added`` of which nothing is determined, the
+    reason; the effects already stored of which nothing is determined (their stored values are
+    kept); and per effect not fully determined, the note printed and written.
+    """
+    undetermined: dict[str, list[str]] = {}
+    not_written: dict[str, str] = {}
+    notes: dict[str, str] = {}
+    kept: list[str] = []
+    for e in space.effects:
+        jj = [free.index(c) for c in space.owner_columns(e.name) if c in free]
+        if not jj or bool(out.ok[jj].all()):
+            continue
+        why = "; ".join(dict.fromkeys(out.why_param[j] for j in jj if out.why_param[j]))
+        part = _partial(space, out, free, jj)
+        if part is None:
+            notes[e.name] = f"unidentifiable: {why}; to identify it: {e.separate_by}"
+            if e.name in added:
+                not_written[e.name] = notes[e.name]
+            else:
+                kept.append(e.name)
+                notes[e.name] += " (its stored values are kept)"
+            continue
+        names = [space.slots[free[j]].param.name for j in jj if not out.ok[j]]
+        undetermined[e.name] = names
+        notes[e.name] = (
+            f"partly identified: {', '.join(f'{e.name}.{n}' for n in names)} "
+            f"{UNDETERMINED}{e.separate_by} ({why}; {part})"
+        )
+    return undetermined, not_written, kept, notes
+
+
 def _fit_engine(
     eng: Engine, add: Sequence[str], progress: Callable[[int, int], None] | None = None
 ) -> FitResult:
@@ -350,31 +388,9 @@ def _fit_engine(
         space, free, out = before.space, before.free, before.outcome
         (h_b,), (c_b,), split = _heldout(eng, space, [out], [free])
         h_a, c_a = h_b, c_b
-    undetermined: dict[str, list[str]] = {}
-    not_written: dict[str, str] = {}
-    notes: dict[str, str] = {}
-    kept: list[str] = []  # present effects of which nothing is determined: stored values kept
-    added = {e.name for e in cands}
-    for e in space.effects:
-        jj = [free.index(c) for c in space.owner_columns(e.name) if c in free]
-        if not jj or bool(out.ok[jj].all()):
-            continue
-        why = "; ".join(dict.fromkeys(out.why_param[j] for j in jj if out.why_param[j]))
-        part = _partial(space, out, free, jj)
-        if part is None:
-            notes[e.name] = f"unidentifiable: {why}; to identify it: {e.separate_by}"
-            if e.name in added:
-                not_written[e.name] = notes[e.name]
-            else:
-                kept.append(e.name)
-                notes[e.name] += " (its stored values are kept)"
-            continue
-        names = [space.slots[free[j]].param.name for j in jj if not out.ok[j]]
-        undetermined[e.name] = names
-        notes[e.name] = (
-            f"partly identified: {', '.join(f'{e.name}.{n}' for n in names)} "
-            f"{UNDETERMINED}{e.separate_by} ({why}; {part})"
-        )
+    undetermined, not_written, kept, notes = _identification(
+        space, out, free, {e.name for e in cands}
+    )
     params, unident = [], []
     written = np.zeros(len(free), dtype=bool)
     for j, c in enumerate(free):
@@ -593,6 +609,11 @@ class ReportPair:
         params: the "after" model's fitted parameters with 95 % intervals.
         added: the effects the "after" model adds.
         before_revision / after_revision: revision numbers (None: not written).
+        heldout_rms_before / heldout_rms_after: held-out position RMS [mm] by diagnose's
+            procedure (:func:`_heldout`) of the two models.
+        notes: per effect of the "after" model not fully determined, what is (partly
+            identified: the undetermined parameters, the determined combination, the experiment
+            that would determine the rest; :func:`_identification`).
     """
 
     before: CompareResult
@@ -603,6 +624,9 @@ class ReportPair:
     added: list[str]
     before_revision: int | None = None
     after_revision: int | None = None
+    heldout_rms_before: float = float("nan")
+    heldout_rms_after: float = float("nan")
+    notes: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -610,7 +634,10 @@ class ReportPair:
             "after": {"label": self.after_label, "revision": self.after_revision},
             "rms_before_mm": self.before.rms_mm,
             "rms_after_mm": self.after.rms_mm,
+            "heldout_rms_before_mm": _fin(self.heldout_rms_before),
+            "heldout_rms_after_mm": _fin(self.heldout_rms_after),
             "added": self.added,
+            "notes": self.notes,
         }
 
 
@@ -663,11 +690,16 @@ def _report_pair(
             rigid,
             res.from_revision,
             None,
+            res.heldout_rms_before,
+            res.heldout_rms_after,
+            res.notes,
         )
     after = baseline(rec, dt=dt, backend=backend)
     parent = _fitted_from(rec, ds)
     before = after if parent is None else baseline(rec, parent, dt=dt, backend=backend)
     added = list((rec.physics.get("fit") or {}).get("added") or []) if parent is not None else []
+    held = [_baseline_heldout(rec, after, dt, backend)]
+    held = held * 2 if parent is None else [_baseline_heldout(rec, before, dt, backend), *held]
     return ReportPair(
         before.result,
         after.result,
@@ -677,7 +709,16 @@ def _report_pair(
         added,
         before.revision,
         after.revision,
+        held[0],
+        held[1],
+        _identification(after.space, after.outcome, after.free, set())[3],
     )
+
+
+def _baseline_heldout(rec: Recording, bl: Baseline, dt: float, backend: str) -> float:
+    """Held-out position RMS [mm] of a baseline (:func:`_heldout`, on its own document)."""
+    eng = Engine(replace(rec, physics=bl.physics), dt=dt, backend=backend)
+    return _heldout(eng, bl.space, [bl.outcome], [bl.free])[0][0]
 
 
 def report(
@@ -710,6 +751,8 @@ def report(
         added=pair.added,
         params=rows,
         labels=(pair.before_label, pair.after_label),
+        heldout=(pair.heldout_rms_before, pair.heldout_rms_after),
+        notes=[f"{k}: {v}" for k, v in pair.notes.items()],
     )
 
 
