@@ -679,6 +679,18 @@ def _fit(args: argparse.Namespace, model: str) -> int:
                 f"(noise floor {d['noise_floor_mm']:.3f} mm; before: revision "
                 f"{d['from_revision']}, after: {after}, each refitted)"
             )
+            objects = d.get("objects") or {}
+            for name, o in objects.items() if len(objects) > 1 else ():
+                held = ""
+                if o.get("heldout_rms_before_mm") is not None:
+                    held = (
+                        f"; held-out {o['heldout_rms_before_mm']:.3f} → "
+                        f"{o['heldout_rms_after_mm']:.3f} mm"
+                    )
+                print(
+                    f"  {name}: position RMS {o['rms_before_mm']:.3f} → {o['rms_after_mm']:.3f} mm "
+                    f"(noise floor {o['noise_floor_mm']:.3f} mm{held})"
+                )
             fb, fa = d.get("force_before"), d.get("force_after")
             if fb and fa:
                 print(

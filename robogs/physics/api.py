@@ -43,6 +43,7 @@ from robogs.physics.fit import FitOutcome, Problem, fit_nested
 from robogs.physics.masks import MAX_FRAMES
 from robogs.physics.recording import Recording, as_recording, load_recording
 from robogs.physics.report import render_report
+from robogs.physics.residuals import tracked_rms
 
 __all__ = [
     "compare",
@@ -198,6 +199,10 @@ class FitResult:
             not determine (written at the estimate; the determined combination is in ``notes``).
         not_written: per added effect not written, the reason (no direction determined).
         notes: per added effect, what the fit says of it (partly identified, not written).
+        objects: per object of the recording by dataset name (the free one first, then each
+            tracked one): ``rms_before_mm`` / ``rms_after_mm`` (``compare``'s position RMS of
+            that object), ``noise_floor_mm`` and ``heldout_rms_before_mm`` /
+            ``heldout_rms_after_mm`` (:func:`_object_rms`); empty for a camera-only fit.
     """
 
     params: list[ParamEstimate]
@@ -219,6 +224,7 @@ class FitResult:
     undetermined: dict[str, list[str]] = field(default_factory=dict)
     not_written: dict[str, str] = field(default_factory=dict)
     notes: dict[str, str] = field(default_factory=dict)
+    objects: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def refusal(self, path: Any = None) -> InputError | None:
         """The error to raise when an added effect could not be written (no direction of its
@@ -258,6 +264,7 @@ class FitResult:
             "undetermined": self.undetermined,
             "not_written": self.not_written,
             "notes": self.notes,
+            "objects": {k: {n: _fin(x) for n, x in v.items()} for k, v in self.objects.items()},
             "revision": self.revision,
             "from_revision": self.from_revision,
             "cameras": self.cameras,
@@ -305,21 +312,69 @@ def _joint_fit(
     return base_out, out, list(base_cols), list(base_cols) + extra
 
 
-def _heldout(
+def _heldout_resid(
     eng: Engine, space: Any, outs: list[FitOutcome], frees: list[list[int]]
-) -> tuple[list[float], list[float], str]:
-    """Held-out position RMS [mm] and chi^2 [sigma^2] of each fit, by diagnose's procedure."""
+) -> tuple[list[np.ndarray], str]:
+    """Held-out weighted residuals [T, C] of each fit (every trajectory from the fit of the
+    fold that held it out), by diagnose's procedure, and how they were held out."""
     folds = _folds(eng.prep.n_traj)
     held, _, _ = _heldout_rollouts(eng, space, outs, frees, folds)
     k = len(folds)
-    rms, chi2 = [], []
+    rs = []
     for p in range(len(outs)):
         r = np.zeros_like(outs[0].resid)
         for f, fmask in enumerate(folds):
             r[fmask] = held[p * k + f][fmask]
-        rms.append(rms_mm(eng.raw(r), eng.mask))
-        chi2.append(float(np.sum(r**2)))
-    return rms, chi2, f"{k} folds of whole trajectories"
+        rs.append(r)
+    return rs, f"{k} folds of whole trajectories"
+
+
+def _heldout(
+    eng: Engine, space: Any, outs: list[FitOutcome], frees: list[list[int]]
+) -> tuple[list[float], list[float], str]:
+    """Held-out position RMS [mm] and chi^2 [sigma^2] of each fit, by diagnose's procedure."""
+    rs, split = _heldout_resid(eng, space, outs, frees)
+    rms = [rms_mm(eng.raw(r), eng.mask) for r in rs]
+    return rms, [float(np.sum(r**2)) for r in rs], split
+
+
+def _object_rms(
+    eng: Engine, before: CompareResult, after: CompareResult, held: list[np.ndarray]
+) -> dict[str, dict[str, float]]:
+    """Per object of the recording (the free one first, then each tracked one, by dataset name):
+    position RMS [mm] before -> after as ``compare`` gives them (the free object's overall RMS;
+    a tracked object's ``object_poses/<name>`` rows pooled over trajectories by their sample
+    counts), its noise floor [mm], and the held-out RMS [mm] of the weighted residuals ``held``
+    (before, after; :func:`_heldout_resid`)."""
+    prep = eng.prep
+    obj = prep.rec.object_name
+    out = {
+        obj: {
+            "rms_before_mm": before.rms_mm,
+            "rms_after_mm": after.rms_mm,
+            "noise_floor_mm": after.noise_floor_mm,
+            "heldout_rms_before_mm": rms_mm(eng.raw(held[0]), eng.mask),
+            "heldout_rms_after_mm": rms_mm(eng.raw(held[-1]), eng.mask),
+        }
+    }
+    names = [t.name for t in prep.rec.trajectories]
+    hb, ha = tracked_rms(prep, held[0]), tracked_rms(prep, held[-1])
+    for o in prep.tracked:
+        n = o.mask.numpy().sum(1).astype(float)  # samples per trajectory
+
+        def pooled(res: CompareResult, name: str = o.name, n: np.ndarray = n) -> float:
+            rows = {s.trajectory: s.rms_mm for s in res.streams if s.stream.endswith(f"/{name}")}
+            r = np.array([rows[t] for t in names])
+            return float(np.sqrt(np.sum(n * r**2) / max(n.sum(), 1.0)))
+
+        out[o.name] = {
+            "rms_before_mm": pooled(before),
+            "rms_after_mm": pooled(after),
+            "noise_floor_mm": ha[o.name]["noise_floor_mm"],
+            "heldout_rms_before_mm": hb[o.name]["rms_mm"],
+            "heldout_rms_after_mm": ha[o.name]["rms_mm"],
+        }
+    return out
 
 
 def _identification(
@@ -383,11 +438,12 @@ def _fit_engine(
     if cands:
         space = eng.space(cands)
         base_out, out, base_cols, free = _joint_fit(eng, space, cands, before, progress)
-        (h_b, h_a), (c_b, c_a), split = _heldout(eng, space, [base_out, out], [base_cols, free])
+        held, split = _heldout_resid(eng, space, [base_out, out], [base_cols, free])
     else:
         space, free, out = before.space, before.free, before.outcome
-        (h_b,), (c_b,), split = _heldout(eng, space, [out], [free])
-        h_a, c_a = h_b, c_b
+        held, split = _heldout_resid(eng, space, [out], [free])
+    h_b, h_a = (rms_mm(eng.raw(r), eng.mask) for r in (held[0], held[-1]))
+    c_b, c_a = (float(np.sum(r**2)) for r in (held[0], held[-1]))
     undetermined, not_written, kept, notes = _identification(
         space, out, free, {e.name for e in cands}
     )
@@ -473,6 +529,7 @@ def _fit_engine(
         undetermined=undetermined,
         not_written=not_written,
         notes=notes,
+        objects=_object_rms(eng, before.result, after.result, held),
     )
 
 
