@@ -699,8 +699,12 @@ class MujocoFit:
                 x, pusher[:, 0], ee_yaw[:, 0], t_of, onset[:, 0], rel_p, rel_q
             )
         k = 0
-        # nothing moves while the object rests and the pusher is out of reach: those steps
-        # repeat the rest pose (no grasp, no pusher force wanted; _still)
+        # nothing moves while every object rests, no two are within 2 mm and the pusher is out
+        # of reach of all: those steps repeat the rest pose (_first_reach, _still). Not cut:
+        # grasps (the held object follows the end effector: no rest pose) and a wanted pusher
+        # force (it comes from the pusher's own simulated dynamics, M dv/dt - servo force, at
+        # every step; a cut would leave its states out and re-place the pusher with the
+        # servo's ideal velocity, a jump in the force of the first stepped bin)
         cut = pstate is None and not grasp[mine].any() and self._cut_ok()
         while k < n_s - 1:
             if cut and k == _PROBE:  # still at rest: on to the step before the pusher's reach
@@ -745,25 +749,35 @@ class MujocoFit:
 
     # ------------------------------------------------------------------ rest cut
     def _cut_ok(self) -> bool:
-        """The rest cut applies: one box on a horizontal support (its resting height known) and
-        a pusher; caches the box's half sizes and the pusher geoms' centres (pusher frame) and
-        bounding radii [m] for :meth:`_gaps`."""
-        if self.pq is None or len(self.eng.layout) != 1 or not np.isfinite(self.settled_z):
+        """The rest cut applies: a pusher, and every object of the scene is the fitted one or a
+        tracked one, each a box on a horizontal support (its settled height known). Caches per
+        object (layout, half sizes of the collision box [m], settled height [m], velocity
+        columns) and the pusher geoms' centres (pusher frame) and bounding radii [m] for
+        :meth:`_gaps` and :meth:`_apart`."""
+        if self.pq is None:
             return False
+        names = [self.obj] + [o.name for o in self.tracked]
+        settled = [self.settled_z] + [self._rest[o.name][1] for o in self.tracked]
+        if set(self.eng.layout) != set(names) or not np.isfinite(settled).all():
+            return False  # an untracked object (its state unchecked) or a mesh
+        m = self.eng.model
         if not hasattr(self, "_pgeoms"):
-            m = self.eng.model
-            gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, self.obj)
-            # the collision box (its face raised over the footprint) grown by its offset
-            self._half = np.array(m.geom_size[gid]) + np.abs(m.geom_pos[gid])
             pb = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "pusher")
             g = np.flatnonzero(m.geom_bodyid == pb)
             self._pgeoms = (np.array(m.geom_pos[g]), np.array(m.geom_rbound[g]))
-            self._vcols = self.va + np.arange(4 if self.lay.planar else 6)
+        self._cut_objs = []
+        for name, z in zip(names, settled, strict=True):
+            gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, name)
+            lay = self.eng.layout[name]
+            # the collision box (its face raised over the footprint) grown by its offset
+            half = np.array(m.geom_size[gid]) + np.abs(m.geom_pos[gid])
+            self._cut_objs.append((lay, half, float(z), lay.v + np.arange(4 if lay.planar else 6)))
         return True
 
     def _gaps(self, x, t_of, pusher, ee_yaw, k: int) -> np.ndarray:
-        """[R, S - k] clearance [m] between the pusher's geoms (bounding spheres) and the box
-        of state rows ``x`` at the steps k on, less a 2 mm margin (<= 0: it may touch)."""
+        """[R, S - k] clearance [m] between the pusher's geoms (bounding spheres) and the
+        nearest object (box) of state rows ``x`` at the steps k on, less a 2 mm margin (<= 0:
+        it may touch)."""
         pos, rad = self._pgeoms
         c, s = np.cos(ee_yaw[t_of, k:]), np.sin(ee_yaw[t_of, k:])  # pusher frame -> world
         gx = c[..., None] * pos[:, 0] - s[..., None] * pos[:, 1]
@@ -771,44 +785,69 @@ class MujocoFit:
         pts = pusher[t_of, k:, None, :] + np.stack(
             [gx, gy, np.broadcast_to(pos[:, 2], gx.shape)], -1
         )
-        d = pts - x[:, None, None, self.qa : self.qa + 3]
-        yaw = quat_yaw(self.lay.quat(x))[:, None, None]
-        cy, sy = np.cos(yaw), np.sin(yaw)  # world -> box frame
-        q = np.stack(
-            [cy * d[..., 0] + sy * d[..., 1], -sy * d[..., 0] + cy * d[..., 1], d[..., 2]], -1
-        )
-        out = np.linalg.norm(np.maximum(np.abs(q) - self._half, 0.0), axis=-1) - rad
-        return out.min(-1) - 2e-3
+        best = np.full(pts.shape[:2], np.inf)
+        for lay, half, _, _ in self._cut_objs:
+            d = pts - lay.pos(x)[:, None, None, :]
+            yaw = quat_yaw(lay.quat(x))[:, None, None]
+            cy, sy = np.cos(yaw), np.sin(yaw)  # world -> box frame
+            q = np.stack(
+                [cy * d[..., 0] + sy * d[..., 1], -sy * d[..., 0] + cy * d[..., 1], d[..., 2]], -1
+            )
+            out = np.linalg.norm(np.maximum(np.abs(q) - half, 0.0), axis=-1) - rad
+            best = np.minimum(best, out.min(-1))
+        return best - 2e-3
+
+    def _apart(self, x) -> bool:
+        """Every two objects of every state row ``x`` are more than 2 mm apart, by a lower
+        bound of their distance: the largest gap between their boxes projected on the world z
+        axis and on either box's two horizontal axes (separating axes; each projection's gap
+        is at most the distance; Gottschalk, Lin & Manocha 1996, OBBTree)."""
+        objs = self._cut_objs
+        for i, (la, ha, _, _) in enumerate(objs):
+            for lb, hb, _, _ in objs[i + 1 :]:
+                d = lb.pos(x) - la.pos(x)  # [R, 3]
+                ya, yb = quat_yaw(la.quat(x)), quat_yaw(lb.quat(x))
+                gap = np.abs(d[:, 2]) - ha[2] - hb[2]
+                for yaw in (ya, ya + 0.5 * np.pi, yb, yb + 0.5 * np.pi):
+                    u = np.stack([np.cos(yaw), np.sin(yaw)], -1)  # [R, 2] unit axis
+                    sep = np.abs(np.sum(d[:, :2] * u, -1)) - _reach(ha, ya, u) - _reach(hb, yb, u)
+                    gap = np.maximum(gap, sep)
+                if (gap <= 2e-3).any():
+                    return False
+        return True
+
+    def _resting(self, x, body, force_fx, v_scale_z: float = 1.0) -> bool:
+        """Every object of state rows ``x`` at rest: every DOF slower than :data:`REST_SPEED`
+        (the vertical one than ``v_scale_z`` times it), within 20 um of its settled height, no
+        applied force of a force effect on the fitted object, and no two objects within 2 mm
+        of each other (:meth:`_apart`: no contact between them can start)."""
+        for lay, _, z, vcols in self._cut_objs:
+            v = np.abs(x[:, vcols])
+            v[:, 2] /= v_scale_z
+            if v.max() >= REST_SPEED or np.abs(x[:, lay.q + 2] - z).max() >= 2e-5:
+                return False
+        if force_fx and np.abs(self._forces(x, body, force_fx)).max() > 1e-12:
+            return False
+        return self._apart(x)
 
     def _still(self, x, t_of, k, pusher, ee_yaw, body, force_fx) -> bool:
-        """Every rollout's object rests from step ``k`` on: every DOF slower than
-        :data:`REST_SPEED`, on the support (within 20 um of its settled height), no applied
-        force of a force effect at this state, and the pusher out of reach for the steps left.
-        Then the state is an equilibrium the rest of the rollout would keep (friction holds a
-        box below its friction angle; the planar model's box, too, stays)."""
-        if np.abs(x[:, self._vcols]).max() >= REST_SPEED:
-            return False
-        if np.abs(x[:, self.qa + 2] - self.settled_z).max() >= 2e-5:
-            return False
-        if force_fx and np.abs(self._forces(x, body, force_fx)).max() > 1e-12:
+        """Every rollout's objects rest from step ``k`` on (:meth:`_resting`) and the pusher is
+        out of reach of every object for the steps left. Then the state is an equilibrium the
+        rest of the rollout would keep (friction holds a box below its friction angle; the
+        planar model's box, too, stays)."""
+        if not self._resting(x, body, force_fx):
             return False
         return bool((self._gaps(x, t_of, pusher, ee_yaw, k) > 0).all())
 
     def _first_reach(self, x, t_of, k, pusher, ee_yaw, body, force_fx) -> int:
-        """The last step before the pusher first comes within reach of a rollout's object,
-        from step ``k`` on, when every object is still at rest there (:meth:`_still`'s
-        conditions: its first steps show a box that starts to move, e.g. on a table tilted
-        beyond its friction angle); else ``k``. The vertical speed may reach 100x
+        """The last step before the pusher first comes within reach of any object of a
+        rollout, from step ``k`` on, when every object is still at rest there
+        (:meth:`_resting`: its first steps show a box that starts to move, e.g. on a table
+        tilted beyond its friction angle); else ``k``. The vertical speed may reach 100x
         :data:`REST_SPEED`: a set whose mass differs from the compiled one settles by a few
         micrometres (MuJoCo's contact impedance uses the compiled ``body_invweight0``), which
         the cut leaves to the steps after it."""
-        v = np.abs(x[:, self._vcols])
-        v[:, 2] /= 100.0
-        if v.max() >= REST_SPEED:
-            return k
-        if np.abs(x[:, self.qa + 2] - self.settled_z).max() >= 2e-5:
-            return k
-        if force_fx and np.abs(self._forces(x, body, force_fx)).max() > 1e-12:
+        if not self._resting(x, body, force_fx, v_scale_z=100.0):
             return k
         near = self._gaps(x, t_of, pusher, ee_yaw, k) <= 0
         first = np.where(near.any(1), np.argmax(near, 1), near.shape[1])
@@ -905,6 +944,15 @@ def _active_rows(force_fx: list, n_r: int) -> np.ndarray:
         for k, v in th.items():
             out |= (v != zero[k]).reshape(n_r, -1).any(1).numpy()
     return out
+
+
+def _reach(half: np.ndarray, yaw: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """[R] half extent [m] along the horizontal unit axes ``u`` [R, 2] of boxes of half sizes
+    ``half`` (x, y first) turned by ``yaw`` [R] rad about z."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return half[0] * np.abs(c * u[:, 0] + s * u[:, 1]) + half[1] * np.abs(
+        -s * u[:, 0] + c * u[:, 1]
+    )
 
 
 def _take(body: Any, ids: np.ndarray) -> Any:
