@@ -7,6 +7,8 @@ the measured object poses with their per-sample deviations into padded tensors.
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -25,6 +27,9 @@ __all__ = [
     "WrenchData",
     "CHAIN_FORCE_BIN_S",
     "FORCE_BIN_S",
+    "RING_BIN_RANGE_S",
+    "ring_period",
+    "chain_force_bin",
     "prepare",
     "build_drive",
     "excitations",
@@ -42,12 +47,24 @@ the bin's steps over its duration against the mean of the sensor samples in it. 
 pusher's force is the mass times its acceleration, a second derivative of measured positions:
 per 1 ms step it is noise; over 20 ms it is the force.)"""
 CHAIN_FORCE_BIN_S = 0.1
-"""Force bins [s] of a recording with other tracked objects (one pushed into another). The
-pusher-object-object chain of soft contacts on MuJoCo rings at about 25 Hz (+-0.4 N from one
-20 ms bin to the next): a mean over a window of W passes ``|sinc(W / P)|`` of a ring of period
-P = 40 ms, 64 % at 20 ms, 13 % at 100 ms (2.5 periods). On the two-box scenario (seed 0) the
-fitted force residual is 0.22 N RMS with 20 ms bins, 0.023 N with 100 ms bins (noise floor
-0.011 N); bins stay impulse-preserving through the impacts."""
+"""Force bins [s] of a recording with other tracked objects (one pushed into another) when the
+measured force shows no ring (:func:`chain_force_bin`). The pusher-object-object chain of soft
+contacts on MuJoCo rings at about 25 Hz (+-0.4 N from one 20 ms bin to the next): a mean over a
+window of W passes ``|sinc(W / P)|`` of a ring of period P = 40 ms, 64 % at 20 ms, 13 % at
+100 ms (2.5 periods). On the two-box scenario (seed 0) the fitted force residual is 0.22 N RMS
+with 20 ms bins, 0.023 N with 100 ms bins (noise floor 0.011 N); bins stay impulse-preserving
+through the impacts."""
+RING_BIN_RANGE_S = (0.02, 0.25)
+"""A chain's force bin is one period of the measured ring clamped to this range [s]: no shorter
+than a single object's bins (:data:`FORCE_BIN_S`, the sensor noise per bin), no longer than
+250 ms (a push of the two-box scenario touches for 0.2-0.3 s: a longer bin averages the push
+away)."""
+RING_TROUGH = 0.2
+"""A ring is found when the autocorrelation of the force's increments, after its first zero
+crossing, falls below ``-RING_TROUGH`` within three times that lag (an oscillation swings back;
+a step, a ramp or white noise does not)."""
+
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -273,13 +290,97 @@ def _capsule_box_gap(
     return best
 
 
+def ring_period(
+    segments: Sequence[np.ndarray], h: float, noise_sd: float = 0.0, max_lag_s: float = 0.25
+) -> tuple[float | None, str]:
+    """The dominant ring period [s] of a force measured during contact, or None and why not.
+
+    ``segments``: force samples [N] along one axis, each an uninterrupted contact sampled every
+    ``h`` s; ``noise_sd``: the sensor's noise per sample [N] (white). The increments
+    ``f[k+1] - f[k]`` are used, not the force: a step (an impact, a push that starts or stops)
+    becomes one or two large increments, set to 0 beyond 6 robust deviations (clipping them
+    instead biased 25 Hz rings by up to +10 %), instead of a trend that would dominate the
+    autocorrelation; a ring keeps its period. Their autocovariance R is pooled over the
+    segments; white noise of deviation s adds ``2 s^2`` at lag 0 and ``-s^2`` at lag 1, which
+    are taken out. The first zero crossing of R / R(0) (linearly interpolated) is a quarter
+    period (within 3 % on rings decaying over 2-4 periods, 12-40 Hz, 0.03 N noise; a ring gone
+    within one period reads up to 5 % short). The ring is accepted when R then swings below
+    ``-RING_TROUGH`` R(0) within three times that lag (:data:`RING_TROUGH`), by more than four
+    sampling errors of an autocovariance (``R_total(0) / sqrt(n)``), and its increments carry
+    more than three times the noise's sampling error. Lags up to ``max_lag_s`` are searched.
+    """
+    d = [np.diff(np.asarray(x, float)) for x in segments if len(x) >= 4]
+    n = sum(len(x) for x in d)
+    if n < 20:
+        return None, f"{n} force increments during contact (at least 20 are needed)"
+    pool = np.concatenate(d)
+    med = float(np.median(pool))
+    dev = 1.4826 * float(np.median(np.abs(pool - med)))
+    d = [np.where(np.abs(x - med) > 6.0 * dev, 0.0, x - med) for x in d]  # steps out
+    n_lag = max(int(np.ceil(max_lag_s / h)), 4)
+    r = np.zeros(n_lag + 1)
+    for lag in range(n_lag + 1):
+        num = sum(float(np.dot(x[: len(x) - lag], x[lag:])) for x in d if len(x) > lag)
+        cnt = sum(len(x) - lag for x in d if len(x) > lag)
+        r[lag] = num / cnt if cnt else 0.0
+    se = r[0] / np.sqrt(n)  # sampling error of an autocovariance of these increments
+    r[0] -= 2.0 * noise_sd**2
+    r[1] += noise_sd**2
+    if r[0] <= 3.0 * 2.0 * noise_sd**2 * np.sqrt(2.0 / n):
+        return None, "the force's increments during contact are its sensor noise (no ring)"
+    se /= r[0]
+    r = r / r[0]
+    cross = np.flatnonzero(r[1:] <= 0.0)
+    if not cross.size:
+        return None, f"no zero crossing of the force's autocorrelation within {max_lag_s} s"
+    k = int(cross[0]) + 1
+    tau = (k - 1) + r[k - 1] / (r[k - 1] - r[k])  # lags
+    trough = float(r[k : min(int(np.ceil(3.0 * tau)) + 1, n_lag + 1)].min())
+    if trough > -max(RING_TROUGH, 4.0 * se):
+        return None, (
+            f"the force's autocorrelation does not swing back after its zero crossing at "
+            f"{tau * h * 1e3:.0f} ms (least {trough:.2f} > -{max(RING_TROUGH, 4.0 * se):.2f}): "
+            "no ring"
+        )
+    period = 4.0 * tau * h
+    return period, (
+        f"ring of {period * 1e3:.0f} ms ({1.0 / period:.1f} Hz) in the measured force during "
+        f"contact (autocorrelation of its increments: zero at {tau * h * 1e3:.1f} ms, trough "
+        f"{trough:.2f})"
+    )
+
+
+def chain_force_bin(
+    segments: Sequence[np.ndarray], h: float, noise_sd: float = 0.0
+) -> tuple[float, str]:
+    """Force bin [s] of a recording with a chain of contacts (other tracked objects): one
+    period of the measured ring (:func:`ring_period`), clamped to :data:`RING_BIN_RANGE_S`; a
+    mean over one period passes none of that ring. Without a ring found,
+    :data:`CHAIN_FORCE_BIN_S`, with the reason logged and returned."""
+    period, why = ring_period(segments, h, noise_sd)
+    lo, hi = RING_BIN_RANGE_S
+    if period is None:
+        why = f"{CHAIN_FORCE_BIN_S * 1e3:.0f} ms bins (CHAIN_FORCE_BIN_S): {why}"
+        _log.info("chain force bin: %s", why)
+        return CHAIN_FORCE_BIN_S, why
+    bin_s = float(np.clip(period, lo, hi))
+    if bin_s != period:
+        why += f"; clamped to [{lo * 1e3:.0f}, {hi * 1e3:.0f}] ms"
+    return bin_s, f"one period per bin: {why}"
+
+
 def wrench_data(
-    rec: Recording, scene: BoxScene, drive: Drive, t0: np.ndarray, bin_s: float = FORCE_BIN_S
+    rec: Recording,
+    scene: BoxScene,
+    drive: Drive,
+    t0: np.ndarray,
+    bin_s: float | None = FORCE_BIN_S,
 ) -> tuple[WrenchData | None, str]:
     """Wrench residual inputs; sets ``drive.wrench_bin`` / ``wrench_width`` in place.
 
-    Forces are compared per bin of ``bin_s`` (default :data:`FORCE_BIN_S`) on the simulation
-    grid: the model's contact
+    Forces are compared per bin of ``bin_s`` (default :data:`FORCE_BIN_S`; None: one period
+    of the ring of the measured force during contact, :func:`chain_force_bin`) on the
+    simulation grid: the model's contact
     impulses of the bin's steps over its duration against the mean of the sensor samples in it.
     The sensor's offset (tool weight, drift) and noise floor come from the samples at which the
     pusher's surface is more than ``REST_MARGIN_M`` from the box (out of contact, so the true
@@ -292,19 +393,22 @@ def wrench_data(
         return None, "no wrench stream in the data: forces are not compared"
     n_t, n_s = drive.n_traj, drive.n_steps
     dt = drive.dt
-    k_bin = max(int(round(bin_s / dt)), 1)
-    n_b = int(np.ceil(n_s / k_bin))
+    times: list[np.ndarray] = []
     samples: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+    # samples on the grid's bins (a derived bin is not known yet: on the grid's steps)
+    k_pre = None if bin_s is None else max(int(round(bin_s / dt)), 1)
+    n_pre = int(np.ceil(n_s / k_pre)) if k_pre else 0
     for i, tr in enumerate(trs):
         if tr.wrench_t_ns is None or len(tr.wrench_t_ns) == 0:
-            samples.append((np.zeros(0), np.zeros((0, 3)), np.zeros(0, bool), np.zeros(0, int)))
+            times.append(np.zeros(0))
+            samples.append((np.zeros((0, 3)), np.zeros(0, bool), np.zeros(0, bool), np.zeros(0)))
             continue
         tw = (tr.wrench_t_ns - t0[i]) * 1e-9
         te = (tr.ee_t_ns - t0[i]) * 1e-9
         to = (tr.t_ns - t0[i]) * 1e-9
-        b = np.floor(tw / (k_bin * dt)).astype(np.int64)
         jg = np.clip(np.searchsorted(te, tw, side="right") - 1, 0, len(te) - 1)
-        usable = (tw >= 0.0) & (b < n_b) & ~tr.grasp[jg]
+        on_grid = np.floor(tw / (k_pre * dt)) < n_pre if k_pre else tw < n_s * dt
+        usable = (tw >= 0.0) & on_grid & ~tr.grasp[jg]
         gap = _capsule_box_gap(
             _interp_rows(tw, te, tr.ee_pos),
             np.interp(tw, te, np.unwrap(yaw_of(tr.ee_quat))),
@@ -312,8 +416,8 @@ def wrench_data(
             np.interp(tw, to, np.unwrap(yaw_of(tr.object_quat))),
             scene,
         )
-        rest = usable & (gap > REST_MARGIN_M)
-        samples.append((tr.wrench_force, rest, usable, b))
+        times.append(tw)
+        samples.append((tr.wrench_force, usable & (gap > REST_MARGIN_M), usable, gap))
     n_rest = int(sum(r.sum() for _, r, _, _ in samples))
     if n_rest < MIN_REST_SAMPLES:
         return None, (
@@ -326,9 +430,16 @@ def wrench_data(
         offset[i] = np.median(f[r], axis=0) if r.sum() >= MIN_REST_SAMPLES else pooled
     dev = np.concatenate([f[r] - offset[i] for i, (f, r, _, _) in enumerate(samples)])
     sigma = np.maximum(1.4826 * np.median(np.abs(dev), axis=0), 1e-3)
+    why_bin = ""
+    if bin_s is None:
+        bin_s, why_bin = chain_force_bin(*_contact_segments(times, samples, sigma))
+    k_bin = max(int(round(bin_s / dt)), 1)
+    n_b = int(np.ceil(n_s / k_bin))
     meas = np.zeros((n_t, n_b, 3))
     count = np.zeros((n_t, n_b))
-    for i, (f, _, u, b) in enumerate(samples):
+    for i, (f, _, u, _) in enumerate(samples):
+        b = np.floor(times[i] / (k_bin * dt)).astype(np.int64)
+        u = u & (b < n_b)
         np.add.at(meas[i], b[u], f[u] - offset[i])
         np.add.at(count[i], b[u], 1.0)
     mask = count > 0
@@ -351,7 +462,30 @@ def wrench_data(
         f"{k_bin * dt * 1000:.0f} ms enter the residuals in N; the sensor's offset and noise "
         f"({', '.join(f'{x:.3g}' for x in sigma)} N per sample) from {n_rest} samples out of contact"
     )
+    if why_bin:
+        note += f"; force bins: {why_bin}"
     return data, note
+
+
+def _contact_segments(
+    times: list[np.ndarray], samples: list[tuple], sigma: np.ndarray
+) -> tuple[list[np.ndarray], float, float]:
+    """(the measured force during contact, one array per uninterrupted run of samples within
+    ``REST_MARGIN_M`` of the pushed box, along the principal axis of its horizontal increments;
+    the median sample period [s]; the sensor noise along that axis [N]) for :func:`ring_period`."""
+    runs_f: list[np.ndarray] = []
+    steps: list[np.ndarray] = []
+    for tw, (f, _, usable, gap) in zip(times, samples, strict=True):
+        on = usable & (gap <= REST_MARGIN_M)
+        steps.append(np.diff(tw))
+        runs_f += [f[a:b, :2] for a, b in runs(on) if b - a >= 4]
+    h = float(np.median(np.concatenate(steps))) if sum(map(len, steps)) else FORCE_BIN_S
+    if not runs_f:
+        return [], h, 0.0
+    inc = np.concatenate([np.diff(x, axis=0) for x in runs_f])
+    axis = np.linalg.eigh(inc.T @ inc)[1][:, -1]  # principal axis of the increments
+    noise = float(np.sqrt(np.sum((axis * sigma[:2]) ** 2)))
+    return [x @ axis for x in runs_f], h, noise
 
 
 def excitations(rec: Recording, labels: list[PhaseLabels]) -> set[str]:
@@ -417,7 +551,7 @@ def prepare(
     tracked = [
         _tracked_object(rec, name, t0, dt, max(0.003, 4 * noise.sigma_z)) for name in rec.tracked
     ]
-    bin_s = CHAIN_FORCE_BIN_S if tracked else FORCE_BIN_S  # a chain of contacts rings
+    bin_s = None if tracked else FORCE_BIN_S  # a chain of contacts rings: one ring period
     wrench, wrench_note = wrench_data(rec, scene, drive, t0, bin_s)
     excitation = excitations(rec, labels)
     if wrench is not None:
