@@ -27,6 +27,7 @@ __all__ = [
     "WrenchData",
     "CHAIN_FORCE_BIN_S",
     "FORCE_BIN_S",
+    "RING_BIN_PERIODS",
     "RING_BIN_RANGE_S",
     "ring_period",
     "chain_force_bin",
@@ -54,11 +55,19 @@ window of W passes ``|sinc(W / P)|`` of a ring of period P = 40 ms, 64 % at 20 m
 100 ms (2.5 periods). On the two-box scenario (seed 0) the fitted force residual is 0.22 N RMS
 with 20 ms bins, 0.023 N with 100 ms bins (noise floor 0.011 N); bins stay impulse-preserving
 through the impacts."""
+RING_BIN_PERIODS = 3
+"""A chain's force bin spans this many periods of the measured ring (:func:`chain_force_bin`).
+A mean over whole periods passes none of a steady ring, but the chain's ring starts at an impact
+and decays, at any phase of the bin grid: the part of a period left in a bin passes. On the
+two-box scenario with a 25 Hz ring (0.3 N, decaying over 2 periods) added to the sensor, seeds
+0-5, the largest |error| of mu_a, mu_b was 2.5-35 % (median 3.7 %) with one period (40 ms),
+0.7-3.5 % (1.6 %) with two, 0.8-2.5 % (1.4 %) with three, 1.2-5.7 % (2.0 %) with the fixed
+100 ms (``bench/chain_force_bin.py``; ``bench/RESULTS.md``, issue 16, h36)."""
 RING_BIN_RANGE_S = (0.02, 0.25)
-"""A chain's force bin is one period of the measured ring clamped to this range [s]: no shorter
-than a single object's bins (:data:`FORCE_BIN_S`, the sensor noise per bin), no longer than
-250 ms (a push of the two-box scenario touches for 0.2-0.3 s: a longer bin averages the push
-away)."""
+"""A chain's force bin (:data:`RING_BIN_PERIODS` ring periods) is clamped to this range [s]: no
+shorter than a single object's bins (:data:`FORCE_BIN_S`, the sensor noise per bin), no longer
+than 250 ms (a push of the two-box scenario touches for 0.2-0.3 s: a longer bin averages the
+push away)."""
 RING_TROUGH = 0.2
 """A ring is found when the autocorrelation of the force's increments, after its first zero
 crossing, falls below ``-RING_TROUGH`` within three times that lag (an oscillation swings back;
@@ -353,20 +362,20 @@ def ring_period(
 def chain_force_bin(
     segments: Sequence[np.ndarray], h: float, noise_sd: float = 0.0
 ) -> tuple[float, str]:
-    """Force bin [s] of a recording with a chain of contacts (other tracked objects): one
-    period of the measured ring (:func:`ring_period`), clamped to :data:`RING_BIN_RANGE_S`; a
-    mean over one period passes none of that ring. Without a ring found,
-    :data:`CHAIN_FORCE_BIN_S`, with the reason logged and returned."""
+    """Force bin [s] of a recording with a chain of contacts (other tracked objects):
+    :data:`RING_BIN_PERIODS` periods of the measured ring (:func:`ring_period`), clamped to
+    :data:`RING_BIN_RANGE_S`; a mean over whole periods passes none of a steady ring. Without a
+    ring found, :data:`CHAIN_FORCE_BIN_S`, with the reason logged and returned."""
     period, why = ring_period(segments, h, noise_sd)
     lo, hi = RING_BIN_RANGE_S
     if period is None:
         why = f"{CHAIN_FORCE_BIN_S * 1e3:.0f} ms bins (CHAIN_FORCE_BIN_S): {why}"
         _log.info("chain force bin: %s", why)
         return CHAIN_FORCE_BIN_S, why
-    bin_s = float(np.clip(period, lo, hi))
-    if bin_s != period:
-        why += f"; clamped to [{lo * 1e3:.0f}, {hi * 1e3:.0f}] ms"
-    return bin_s, f"one period per bin: {why}"
+    bin_s = float(np.clip(RING_BIN_PERIODS * period, lo, hi))
+    if bin_s != RING_BIN_PERIODS * period:
+        why += f"; {RING_BIN_PERIODS} periods clamped to [{lo * 1e3:.0f}, {hi * 1e3:.0f}] ms"
+    return bin_s, f"{RING_BIN_PERIODS} ring periods per bin: {why}"
 
 
 def wrench_data(
@@ -378,8 +387,8 @@ def wrench_data(
 ) -> tuple[WrenchData | None, str]:
     """Wrench residual inputs; sets ``drive.wrench_bin`` / ``wrench_width`` in place.
 
-    Forces are compared per bin of ``bin_s`` (default :data:`FORCE_BIN_S`; None: one period
-    of the ring of the measured force during contact, :func:`chain_force_bin`) on the
+    Forces are compared per bin of ``bin_s`` (default :data:`FORCE_BIN_S`; None: periods of
+    the ring of the measured force during contact, :func:`chain_force_bin`) on the
     simulation grid: the model's contact
     impulses of the bin's steps over its duration against the mean of the sensor samples in it.
     The sensor's offset (tool weight, drift) and noise floor come from the samples at which the
@@ -551,7 +560,7 @@ def prepare(
     tracked = [
         _tracked_object(rec, name, t0, dt, max(0.003, 4 * noise.sigma_z)) for name in rec.tracked
     ]
-    bin_s = None if tracked else FORCE_BIN_S  # a chain of contacts rings: one ring period
+    bin_s = None if tracked else FORCE_BIN_S  # a chain of contacts rings: whole ring periods
     wrench, wrench_note = wrench_data(rec, scene, drive, t0, bin_s)
     excitation = excitations(rec, labels)
     if wrench is not None:
