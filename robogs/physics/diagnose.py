@@ -936,14 +936,16 @@ def _calibrate(
 
     rec = eng.prep.rec
     fp = "|".join(
-        [_fingerprint(rec), model_key(rec.physics), f"{eng.prep.scene.dt:g}", type(eng).__name__]
-    )
+        [_fingerprint(rec), model_key(rec.physics), f"{eng.prep.scene.dt:g}", eng.backend]
+    )  # the backend, not the class: planar and MuJoCo are both an Engine
     lin = [
         gate_mod.LinearCandidate(e.name, o.jac, o.jac_local, n_base)
         for e, o in zip(cands, outs[1:], strict=True)
     ]
     valid = (base.resid != 0) | np.any(base.jac != 0, axis=-1)
-    return gate_mod.calibrate(lin, base.resid, valid, folds, fingerprint=fp)
+    # each fit's own chi^2 fall: the null is scaled where it exceeds its linearisation's
+    gain = [base.cost - o.cost for o in outs[1:]]
+    return gate_mod.calibrate(lin, base.resid, valid, folds, fingerprint=fp, fit_gain=gain)
 
 
 @dataclass
