@@ -78,3 +78,26 @@ def test_fit_gain_length_checked_and_other_statistics_untouched():
         [cand], resid, valid, folds, draws=100, method="white", statistic="t", fit_gain=[1e3]
     )
     assert cal.inflation == {}
+
+
+@pytest.mark.slow
+def test_mujoco_null_threshold_near_planar_on_design_b_null_seed_1():
+    """Oracle: the planar engine on the same design-B null recording (one box on a table, both
+    engines represent it). Before the check MuJoCo's tilt threshold was 29.2 sigma^2 against
+    planar's 51.8 (ratio 0.56) and the tilt was reported (held-out 31.2): its fit gains 28.3
+    sigma^2 where its 1 % forward-difference Jacobian accounts for 20.1 (planar: 28.9 / 30.1).
+    With the check: ratio >= 0.7, no report, and planar's nulls unscaled (factor <= 1.1)."""
+    pytest.importorskip("mujoco")
+    from robogs.physics.diagnose import diagnose_recording
+    from robogs.physics.engine import Engine
+    from robogs.synth.scenarios.design_b import make_design_b
+
+    rec = make_design_b("none", seed=1)
+    res = {
+        be: diagnose_recording(rec, engine=Engine(rec, backend=be)) for be in ("planar", "mujoco")
+    }
+    thr = {be: {r.name: r.null_threshold_sigma2 for r in res[be].rows} for be in res}
+    assert thr["mujoco"]["table_tilt"] / thr["planar"]["table_tilt"] >= 0.7
+    assert not [r.name for r in res["mujoco"].rows if r.reported]
+    assert max(res["planar"].gate["inflation"].values()) <= 1.1
+    assert res["mujoco"].gate["inflation"]["table_tilt"] > 1.2
