@@ -60,9 +60,11 @@ RING_BIN_PERIODS = 3
 A mean over whole periods passes none of a steady ring, but the chain's ring starts at an impact
 and decays, at any phase of the bin grid: the part of a period left in a bin passes. On the
 two-box scenario with a 25 Hz ring (0.3 N, decaying over 2 periods) added to the sensor, seeds
-0-5, the largest |error| of mu_a, mu_b was 2.5-35 % (median 3.7 %) with one period (40 ms),
-0.7-3.5 % (1.6 %) with two, 0.8-2.5 % (1.4 %) with three, 1.2-5.7 % (2.0 %) with the fixed
-100 ms (``bench/chain_force_bin.py``; ``bench/RESULTS.md``, issue 16, h36)."""
+0-5, the largest |error| of mu_a, mu_b was 2.5-35 % (median 3.7 %) with bins of one period
+(40 ms), 0.7-3.5 % (1.6 %) of two, 0.8-2.5 % (1.6 %) of three, 1.2-5.7 % (1.9 %) with the fixed
+100 ms; with the derived bins (115-123 ms: three measured periods) 0.3-6.7 % (1.9 %): the fits
+move by a few % with the bin's length (``bench/chain_force_bin.py``; ``bench/RESULTS.md``,
+issue 16, h36)."""
 RING_BIN_RANGE_S = (0.02, 0.25)
 """A chain's force bin (:data:`RING_BIN_PERIODS` ring periods) is clamped to this range [s]: no
 shorter than a single object's bins (:data:`FORCE_BIN_S`, the sensor noise per bin), no longer
