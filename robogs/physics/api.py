@@ -29,17 +29,19 @@ from robogs.physics.diagnose import (
     AutoPath,
     DiagnoseResult,
     ParamEstimate,
-    _folds,
-    _heldout_rollouts,
-    _partial,
     auto_loop,
-    determined_direction,
     diagnose_recording,
     start_points,
 )
 from robogs.physics.effects import get_effect
 from robogs.physics.engine import Engine, resolve_backend, rms_mm
 from robogs.physics.fit import FitOutcome, Problem, fit_nested
+from robogs.physics.heldout import (
+    determined_combination,
+    determined_direction,
+    heldout_rollouts,
+    trajectory_folds,
+)
 from robogs.physics.masks import MAX_FRAMES
 from robogs.physics.recording import Recording, as_recording, load_recording
 from robogs.physics.report import render_report
@@ -190,9 +192,10 @@ class FitResult:
         revision: the revision written (None when nothing was written).
         from_revision: the revision fitted from (None for an unwritten document).
         heldout_rms_before / heldout_rms_after: held-out position RMS [mm] of the base fit and
-            of the joint fit, by diagnose's procedure (:func:`robogs.physics.diagnose.
-            _heldout_rollouts`: K folds of whole trajectories, one bounded Gauss-Newton step
-            from the full fit on the training ones); with no ``add`` both are the base's.
+            of the joint fit, by diagnose's procedure
+            (:func:`robogs.physics.heldout.heldout_rollouts`: K folds of whole trajectories,
+            one bounded Gauss-Newton step from the full fit on the training ones); with no
+            ``add`` both are the base's.
         heldout_chi2_before / heldout_chi2_after: the same as whitened chi^2 [sigma^2].
         heldout_split: how the trajectories were held out.
         undetermined: per added effect written partly identified, its parameters the data do
@@ -317,8 +320,8 @@ def _heldout_resid(
 ) -> tuple[list[np.ndarray], str]:
     """Held-out weighted residuals [T, C] of each fit (every trajectory from the fit of the
     fold that held it out), by diagnose's procedure, and how they were held out."""
-    folds = _folds(eng.prep.n_traj)
-    held, _, _ = _heldout_rollouts(eng, space, outs, frees, folds)
+    folds = trajectory_folds(eng.prep.n_traj)
+    held, _, _ = heldout_rollouts(eng, space, outs, frees, folds)
     k = len(folds)
     rs = []
     for p in range(len(outs)):
@@ -381,7 +384,7 @@ def _identification(
     space: Any, out: FitOutcome, free: list[int], added: set[str]
 ) -> tuple[dict[str, list[str]], dict[str, str], list[str], dict[str, str]]:
     """What a fit determines of each effect of ``space`` (diagnose's rule: every parameter,
-    or a direction of them, :func:`robogs.physics.diagnose._partial`).
+    or a direction of them, :func:`robogs.physics.heldout.determined_combination`).
 
     Returns ``(undetermined, not_written, kept, notes)``: per partly identified effect its
     undetermined parameters; per effect of ``added`` of which nothing is determined, the
@@ -397,7 +400,7 @@ def _identification(
         if not jj or bool(out.ok[jj].all()):
             continue
         why = "; ".join(dict.fromkeys(out.why_param[j] for j in jj if out.why_param[j]))
-        part = _partial(space, out, free, jj)
+        part = determined_combination(space, out, free, jj)
         if part is None:
             notes[e.name] = f"unidentifiable: {why}; to identify it: {e.separate_by}"
             if e.name in added:
@@ -422,15 +425,15 @@ def _fit_engine(
 
     The added effects are fitted jointly with the base model and the effects present, as
     diagnose fits a candidate (:func:`_joint_fit`). An added effect is written when all its
-    parameters are determined, or when a direction of them is (diagnose's rule, :func:`robogs.
-    physics.diagnose.determined_direction`): then every parameter is written at the estimate and
-    the undetermined ones are flagged (:data:`UNDETERMINED`); with no direction determined it is
-    not written (``not_written``). A base parameter the data do not determine keeps its stored
-    value, except where the near-singularity is that of a partly identified effect and the
-    parameter's own interval is narrower than its bounds. "Before" is the baseline of the
-    engine's revision, "after" the baseline of the document this fit writes, so ``compare`` and
-    ``report`` of the written revision print the same "after". With nothing to add the fit is
-    the baseline fit itself.
+    parameters are determined, or when a direction of them is (diagnose's rule,
+    :func:`robogs.physics.heldout.determined_direction`): then every parameter is written at
+    the estimate and the undetermined ones are flagged (:data:`UNDETERMINED`); with no direction
+    determined it is not written (``not_written``). A base parameter the data do not determine
+    keeps its stored value, except where the near-singularity is that of a partly identified
+    effect and the parameter's own interval is narrower than its bounds. "Before" is the
+    baseline of the engine's revision, "after" the baseline of the document this fit writes, so
+    ``compare`` and ``report`` of the written revision print the same "after". With nothing to
+    add the fit is the baseline fit itself.
     """
     rec = eng.prep.rec
     cands = eng.check_effects(add)

@@ -39,25 +39,26 @@ in-sample fall of chi^2 does not pay its ``k ln n`` is not reported, whatever it
 A row the rule blocked says so in its note. Under 8 trajectories the default null is white
 noise only (``gate.calibrate``) and strong in-sample evidence is asked instead (``DBIC_MAX``).
 
-Partial identification: a fit whose parameters are not all determined (:mod:`robogs.physics.fit`:
-a 95 % interval wider than the bounds, or near-collinear parameters) may still determine a
-combination of them, e.g. Stribeck's ``dmu`` and ``v_s`` on short slides, where only about
-``v_s^2 ln(1 + dmu)`` is seen. :func:`determined_direction` takes the best-determined
-eigen-direction of the effect's block of the covariance, with each parameter scaled by its
-prior range. When one is determined and the gate passes, the effect is reported with verdict
+Partial identification: a fit whose parameters are not all determined
+(:mod:`robogs.physics.fit`: a 95 % interval wider than the bounds, or near-collinear parameters)
+may still determine a combination of them, e.g. Stribeck's ``dmu`` and ``v_s`` on short slides,
+where only about ``v_s^2 ln(1 + dmu)`` is seen.
+:func:`~robogs.physics.heldout.determined_direction` takes the best-determined eigen-direction
+of the effect's block of the covariance, with each parameter scaled by its prior range. When one
+is determined and the gate passes, the effect is reported with verdict
 ``"add (partly identified)"``: the undetermined parameters are named in ``undetermined``, their
 intervals are unbounded, and the note gives the determined combination and the experiment that
 would separate the rest (``separate_by``). With no determined direction the verdict stays
 ``"unidentifiable"``. A partly identified effect must also show strong in-sample evidence,
 ``delta_bic <= DBIC_MAX`` (as under 8 trajectories, where the held-out null is not trusted
-alone): its held-out folds step along a ridge the data do not determine, and the step is then
-no longer the linear one the null simulates (on design B null seed 9 a Stribeck fit, ``dmu`` on
-its lower bound in 4 of 5 folds and every fold's step halved, passed the held-out gate with
-38.7 against 17.0 sigma^2 at ΔBIC -6.4; hidden Stribeck on the same design: ΔBIC -40 to -193).
-It does not remove every such case (null seed 19: a partly identified Stribeck at ΔBIC -13.2,
-32.9 against 15.6 sigma^2); ``diagnose_recording(partial=False)`` withholds them all.
-A parameter that ends on a bound of its prior range, at the full fit or in a fold's held-out
-step, is named in ``on_bound`` and in the note, as are fold steps that had to be halved.
+alone): its held-out folds step along a ridge the data do not determine, and the step is then no
+longer the linear one the null simulates (on design B null seed 9 a Stribeck fit, ``dmu`` on its
+lower bound in 4 of 5 folds and every fold's step halved, passed the held-out gate with 38.7
+against 17.0 sigma^2 at ΔBIC -6.4; hidden Stribeck on the same design: ΔBIC -40 to -193). It
+does not remove every such case (null seed 19: a partly identified Stribeck at ΔBIC -13.2, 32.9
+against 15.6 sigma^2); ``diagnose_recording(partial=False)`` withholds them all. A parameter
+that ends on a bound of its prior range, at the full fit or in a fold's held-out step, is named
+in ``on_bound`` and in the note, as are fold steps that had to be halved.
 
 Quasi-static data (:func:`quasi_static`): when no object slides more than ``QS_SAMPLES``
 samples after losing contact, the dynamics-level effects (viscous, quadratic drag, Stribeck,
@@ -77,6 +78,11 @@ from robogs.physics import gate as gate_mod
 from robogs.physics.effects import Effect, available_effects, get_effect
 from robogs.physics.engine import Engine, rms_mm
 from robogs.physics.fit import FitOutcome, Problem, fit_nested, on_bounds
+from robogs.physics.heldout import (
+    determined_combination,
+    heldout_rollouts,
+    trajectory_folds,
+)
 from robogs.physics.phases import PHASES
 from robogs.physics.space import ParamSpace
 
@@ -93,7 +99,6 @@ __all__ = [
     "rival_cutoff",
     "sign_flip_floor",
     "start_points",
-    "determined_direction",
     "judge",
     "PARTLY",
     "DBIC_MAX",
@@ -114,15 +119,10 @@ DYNAMIC_EFFECTS = ("viscous_damping", "quadratic_drag", "stribeck", "restitution
 data)."""
 PARTLY = "add (partly identified)"
 """Verdict of a reported effect of which only some direction of the parameters is determined."""
-_NULL_EIG = 1e-13
-"""Eigenvalues of a covariance block under this fraction of its largest are the null space that
-the pseudo-inverse of the information dropped (infinite variance, not zero)."""
 _REVEAL = "a push that releases the object at speed (or a release-and-slide), so it slides freely"
-_N_FOLDS = 5
 CARRY_Z = 0.1
 """A trajectory counts toward :func:`sign_flip_floor` when the effect moves it by more than
 0.1 sigma (``z_t``); flipping one it moves less hardly changes its null statistic."""
-_Z = 1.959963984540054  # two-sided 95 % normal quantile
 
 
 @dataclass
@@ -253,43 +253,6 @@ def _estimates(
     return res
 
 
-def determined_direction(cov: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """The best-determined direction of a block of parameters, or None when none is determined.
-
-    Each parameter is scaled by its prior range ``span`` [its unit], so that the bounds become
-    a unit box; ``u`` is the eigenvector of the scaled covariance ``cov / (span span^T)`` with
-    the smallest eigenvalue ``lam`` (the combination ``sum_i u_i theta_i / span_i`` with the
-    least variance). It is determined when its 95 % half-width ``1.96 sqrt(lam)`` is under the
-    box's extent along ``u``, ``sum_i |u_i|``: for one parameter, fit's rule that its interval
-    be narrower than its bounds (:mod:`robogs.physics.fit`). Eigenvalues under ``_NULL_EIG`` of
-    the largest are the information's null space, which the pseudo-inverse dropped (variance
-    infinite, not zero), and are never chosen.
-
-    Args:
-        cov: [k, k] covariance of the parameters (others marginalised).
-        span: [k] upper minus lower bound of each.
-
-    Returns:
-        (u [k], ratio): the unit direction in scaled units (sign: largest component positive)
-        and its half-width over the box's extent (< 1), or None.
-    """
-    cov = np.asarray(cov, dtype=float)
-    span = np.asarray(span, dtype=float)
-    if cov.size == 0 or not np.all(np.isfinite(cov)) or not np.all(span > 0):
-        return None
-    c = cov / np.outer(span, span)
-    lam, vec = np.linalg.eigh(0.5 * (c + c.T))
-    if lam[-1] <= 0:
-        return None
-    live = np.nonzero(lam > _NULL_EIG * lam[-1])[0]
-    if live.size == 0:
-        return None
-    i = int(live[0])
-    u = vec[:, i] * np.sign(vec[np.argmax(np.abs(vec[:, i])), i])
-    ratio = float(_Z * np.sqrt(lam[i]) / np.sum(np.abs(u)))
-    return (u, ratio) if ratio < 1.0 else None
-
-
 def judge(
     stat: float,
     threshold: float,
@@ -308,8 +271,8 @@ def judge(
         few: under 8 trajectories (white-noise null only): ``dbic <= DBIC_MAX`` is asked
             instead of ``dbic < 0``.
         identified: every parameter determined; ``partly``: at least one direction of them
-            (:func:`determined_direction`); a partly identified effect is asked
-            ``dbic <= DBIC_MAX`` too.
+            (:func:`~robogs.physics.heldout.determined_direction`); a partly identified effect
+            is asked ``dbic <= DBIC_MAX`` too.
 
     Returns:
         (verdict, reported, blocked): ``blocked`` when the held-out gate passed but ΔBIC did
@@ -329,32 +292,6 @@ def judge(
     return "not supported", False, False
 
 
-def _partial(space: ParamSpace, out: FitOutcome, free: list[int], jj: list[int]) -> str | None:
-    """The determined combination of an effect's parameters (indices ``jj`` into ``free``) as
-    text, or None when no direction is determined (:func:`determined_direction`). Parameters
-    the predictions do not change with are left out: their variance is not defined."""
-    live = [j for j in jj if "do not change" not in out.why_param[j]]
-    if not live or out.cov.shape[0] != len(free):
-        return None
-    cols = [free[j] for j in live]
-    span = space.upper[cols] - space.lower[cols]
-    got = determined_direction(out.cov[np.ix_(live, live)], span)
-    if got is None:
-        return None
-    u, ratio = got
-    names = [space.slots[c].param for c in cols]
-    value = float(np.sum(u * out.theta[cols] / span))
-    half = float(_Z * np.sqrt(u @ (out.cov[np.ix_(live, live)] / np.outer(span, span)) @ u))
-    terms = " + ".join(
-        f"{w:.3g} {p.name}/{s:.3g}{(' ' + p.unit) if p.unit not in ('', '-') else ''}"
-        for w, p, s in zip(u, names, span, strict=True)
-    )
-    return (
-        f"determined: {terms} = {value:.3g} +- {half:.2g} (95 %; each parameter over its prior "
-        f"range, the half-width {100 * ratio:.0f} % of the bounds' extent along it)"
-    )
-
-
 def start_points(space: ParamSpace, effect: Effect, theta0: np.ndarray) -> list[np.ndarray]:
     """Start vectors of one candidate: ``theta0`` (the effect off) and one per ``effect.starts``."""
     out = [theta0]
@@ -364,102 +301,6 @@ def start_points(space: ParamSpace, effect: Effect, theta0: np.ndarray) -> list[
             th[space.index(effect.name, k)] = v
         out.append(th)
     return out
-
-
-def _folds(n_traj: int) -> list[np.ndarray]:
-    k = min(_N_FOLDS, n_traj)
-    return [np.arange(n_traj) % k == f for f in range(k)]
-
-
-def _gn_step(
-    out: FitOutcome, space: ParamSpace, free: list[int], train: np.ndarray
-) -> tuple[np.ndarray, list[str]]:
-    """One bounded Gauss-Newton step of the global parameters using training trajectories only.
-
-    The step minimises the training trajectories' linearised chi^2 within the parameter bounds
-    (bounded-variable least squares, Stark & Parker 1995, Comput. Stat. 10; ``scipy``'s
-    ``lsq_linear``), not the unbounded step clipped afterwards: clipping one parameter at its
-    bound would leave the others with their compensation for it (a Stribeck fit whose ``dmu``
-    was clipped to 0 kept a friction 12 % low and put held-out chi^2 up by 1600 sigma^2).
-    Returns the parameters and, per column of ``free``, ``"lower"``/``"upper"``/``""`` where
-    the step stopped on a bound.
-    """
-    from scipy.optimize import lsq_linear
-
-    th = out.theta.copy()
-    if not free:
-        return th, []
-    j = out.jac[train].reshape(-1, len(free))
-    r = out.resid[train].reshape(-1)
-    lo = space.lower[free] - th[free]
-    hi = space.upper[free] - th[free]
-    norm = np.linalg.norm(j, axis=0)
-    live = (norm > 0) & (hi > lo)  # a column the data do not move takes no step
-    step = np.zeros(len(free))
-    if live.any():
-        sc = norm[live]
-        sol = lsq_linear(j[:, live] / sc, -r, bounds=(lo[live] * sc, hi[live] * sc), method="bvls")
-        step[live] = sol.x / sc
-    th[free] = np.clip(th[free] + step, space.lower[free], space.upper[free])
-    return th, on_bounds(space, th, free)
-
-
-def _heldout_rollouts(
-    eng: Engine,
-    space: ParamSpace,
-    outs: list[FitOutcome],
-    frees: list[list[int]],
-    folds: list[np.ndarray],
-    halvings: int = 3,
-) -> tuple[np.ndarray, list[list[list[str]]], list[int]]:
-    """Residuals [P*K, T, N] at each fit's fold parameters, rolled out in batches.
-
-    A fold's parameters are the bounded Gauss-Newton step of :func:`_gn_step`. Where the step
-    raises the training trajectories' chi^2 above the full fit's (the linearisation does not
-    hold that far: a poorly determined Stribeck pair), it is halved, up to ``halvings`` times
-    (backtracking, Nocedal & Wright 2006, ch. 3), and the point with the lowest training chi^2
-    is kept; the held-out trajectories never take part in the choice. Returns the residuals,
-    the bound hits per fit and fold, and per fit the number of folds whose step was halved.
-    """
-    k_f = len(folds)
-    full, steps, locs, trains, hits = [], [], [], [], []
-    for out, free in zip(outs, frees, strict=True):
-        hit = []
-        for fmask in folds:
-            th, h = _gn_step(out, space, free, ~fmask)
-            full.append(out.theta)
-            steps.append(th)
-            locs.append(out.local)
-            trains.append(~fmask)
-            hit.append(h)
-        hits.append(hit)
-    full_a, step_a, loc_a = np.stack(full), np.stack(steps), np.stack(locs)
-    held = eng.evaluate(space, step_a, loc_a)  # [P*K, T, N*4]
-    ref = np.array(
-        [np.sum(outs[i // k_f].resid[trains[i]] ** 2) for i in range(len(steps))], dtype=float
-    )
-
-    def train_cost(r: np.ndarray, i: int) -> float:
-        return float(np.sum(r[trains[i]] ** 2))
-
-    cost = np.array([train_cost(held[i], i) for i in range(len(steps))])
-    best = cost.copy()
-    halved = np.zeros(len(steps), dtype=bool)
-    for h in range(1, halvings + 1):
-        bad = np.nonzero(cost > ref)[0]
-        if bad.size == 0:
-            break
-        halved[bad] = True
-        frac = 0.5**h
-        trial = full_a[bad] + frac * (step_a[bad] - full_a[bad])
-        res = eng.evaluate(space, trial, loc_a[bad])
-        for j, i in enumerate(bad):
-            cost[i] = train_cost(res[j], i)
-            if cost[i] < best[i]:
-                best[i] = cost[i]
-                held[i] = res[j]
-    per_fit = [int(halved[p * k_f : (p + 1) * k_f].sum()) for p in range(len(outs))]
-    return held, hits, per_fit
 
 
 def _bound_report(
@@ -756,8 +597,8 @@ def diagnose_recording(
     mask = eng.mask
     # held-out by trajectory: one bounded Gauss-Newton step per fold (halved where it fails on
     # the training trajectories), exact rollouts of all folds at once
-    folds = _folds(prep.n_traj)
-    held, fold_bounds, halved = _heldout_rollouts(eng, space, outs, frees, folds)
+    folds = trajectory_folds(prep.n_traj)
+    held, fold_bounds, halved = heldout_rollouts(eng, space, outs, frees, folds)
     k_f = len(folds)
     held_chi2, held_raw, held_t = [], [], []
     for p in range(len(outs)):
@@ -806,7 +647,7 @@ def diagnose_recording(
         ident = bool(out.ok[jj].all()) if len(out.ok) else True
         why = "; ".join(dict.fromkeys(out.why_param[j] for j in jj if out.why_param[j]))
         undetermined = [space.slots[free[j]].param.name for j in jj if not ident and not out.ok[j]]
-        part = None if ident else _partial(space, out, free, jj)
+        part = None if ident else determined_combination(space, out, free, jj)
         stat = float(gate_mod.heldout_statistic(held_t[0], held_t[i], delta))
         # thresholds in sigma^2 on this data (under 8 trajectories those of the studentised
         # held-out fall times its standard error, gate.Calibration.judge)

@@ -1,4 +1,4 @@
-"""The held-out fold steps behind the gate's statistic (robogs.physics.diagnose), on toy models.
+"""The held-out fold steps behind the gate's statistic (robogs.physics.heldout), on toy models.
 
 Oracles: (1) the bounded Gauss-Newton step of a linear model is the bounded least-squares
 minimum found by brute force on a grid, and it beats clipping the unbounded step; (2) where the
@@ -13,8 +13,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from robogs.physics.diagnose import _bound_report, _gn_step, _heldout_rollouts
+from robogs.physics.diagnose import _bound_report
 from robogs.physics.fit import FitOutcome
+from robogs.physics.heldout import gn_step, heldout_rollouts
 
 
 def _space(lower, upper, names=("mu", "dmu")):
@@ -49,7 +50,7 @@ def test_bounded_step_is_the_bounded_least_squares_minimum():
     space = _space([0.0, 0.0], [2.0, 3.0])
     out = _outcome(theta, resid, jac)
     train = np.array([True, True, True, False])
-    th, hit = _gn_step(out, space, [0, 1], train)
+    th, hit = gn_step(out, space, [0, 1], train)
     assert hit[1] == "lower" and th[1] == 0.0
 
     def cost(t):
@@ -92,7 +93,7 @@ def test_failed_fold_steps_are_halved_and_linear_steps_are_not():
     th = np.array([2.0])
     out = _outcome(th, data - lin(th), -fd_jac(lin, th))
     eng = _Engine(data, lin)
-    held, hits, halved = _heldout_rollouts(eng, space, [out], [[0]], folds)
+    held, hits, halved = heldout_rollouts(eng, space, [out], [[0]], folds)
     assert halved == [0]
     # nonlinear model b^2 x linearised at b = 0.2 for data at b = 2: the step to b = 10 (0.2 +
     # 3.96 / 0.4, on the bound) overshoots and raises the training chi^2; halving brings it down
@@ -101,13 +102,13 @@ def test_failed_fold_steps_are_halved_and_linear_steps_are_not():
     th = np.array([0.2])
     out = _outcome(th, data - nl(th), -fd_jac(nl, th))
     eng = _Engine(data, nl)
-    full_step = [_gn_step(out, space, [0], ~f)[0] for f in folds]
+    full_step = [gn_step(out, space, [0], ~f)[0] for f in folds]
     raised = [
         np.sum((data - nl(t))[~f] ** 2) > np.sum(out.resid[~f] ** 2)
         for t, f in zip(full_step, folds, strict=True)
     ]
     assert all(raised)  # the oracle case: every full step fails
-    held, hits, halved = _heldout_rollouts(eng, space, [out], [[0]], folds)
+    held, hits, halved = heldout_rollouts(eng, space, [out], [[0]], folds)
     assert halved == [5]
     for i, f in enumerate(folds):
         assert np.sum(held[i][~f] ** 2) <= np.sum(out.resid[~f] ** 2)
