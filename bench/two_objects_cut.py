@@ -63,7 +63,9 @@ def main() -> None:
             c0, w0 = time.process_time(), time.perf_counter()
             eng = Engine(rec, backend="mujoco", threads=1)
             space = eng.space([])
-            (out,) = eng.fit(space, [Problem(free=eng.base_columns(space), theta0=eng.start(space))])
+            (out,) = eng.fit(
+                space, [Problem(free=eng.base_columns(space), theta0=eng.start(space))]
+            )
             c1, w1 = time.process_time(), time.perf_counter()
             s_fit = total[0]
             baseline_mod._CACHE.clear()
