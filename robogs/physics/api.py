@@ -332,15 +332,6 @@ def _heldout_resid(
     return rs, f"{k} folds of whole trajectories"
 
 
-def _heldout(
-    eng: Engine, space: Any, outs: list[FitOutcome], frees: list[list[int]]
-) -> tuple[list[float], list[float], str]:
-    """Held-out position RMS [mm] and chi^2 [sigma^2] of each fit, by diagnose's procedure."""
-    rs, split = _heldout_resid(eng, space, outs, frees)
-    rms = [rms_mm(eng.raw(r), eng.mask) for r in rs]
-    return rms, [float(np.sum(r**2)) for r in rs], split
-
-
 def _object_rms(
     eng: Engine, before: CompareResult, after: CompareResult, held: list[np.ndarray]
 ) -> dict[str, dict[str, float]]:
@@ -566,7 +557,7 @@ def fit(
 
     "Before" and "after" are baselines (:mod:`robogs.physics.baseline`) of the revision
     fitted from and of the document written; with no ``add`` the base model is refitted.
-    The held-out error is diagnose's (:func:`_heldout`). ``progress(iteration, unfinished
+    The held-out error is diagnose's (:func:`_heldout_resid`). ``progress(iteration, unfinished
     fits)`` follows each fit.
     """
     camera = _camera_effects()
@@ -670,7 +661,7 @@ class ReportPair:
         added: the effects the "after" model adds.
         before_revision / after_revision: revision numbers (None: not written).
         heldout_rms_before / heldout_rms_after: held-out position RMS [mm] by diagnose's
-            procedure (:func:`_heldout`) of the two models.
+            procedure (:func:`_heldout_resid`) of the two models.
         notes: per effect of the "after" model not fully determined, what is (partly
             identified: the undetermined parameters, the determined combination, the experiment
             that would determine the rest; :func:`_identification`).
@@ -776,9 +767,10 @@ def _report_pair(
 
 
 def _baseline_heldout(rec: Recording, bl: Baseline, dt: float, backend: str) -> float:
-    """Held-out position RMS [mm] of a baseline (:func:`_heldout`, on its own document)."""
+    """Held-out position RMS [mm] of a baseline (:func:`_heldout_resid`, on its own document)."""
     eng = Engine(replace(rec, physics=bl.physics), dt=dt, backend=backend)
-    return _heldout(eng, bl.space, [bl.outcome], [bl.free])[0][0]
+    (r,), _ = _heldout_resid(eng, bl.space, [bl.outcome], [bl.free])
+    return rms_mm(eng.raw(r), eng.mask)
 
 
 def report(
