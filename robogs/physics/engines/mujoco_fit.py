@@ -412,7 +412,7 @@ class MujocoFit:
         self.lay.set_vel(x, np.zeros((n_r, 3)), np.zeros((n_r, 3)))
         if drive.init_vel is not None:
             x[:, self.va : self.va + 3] = np.tile(drive.init_vel.numpy(), (m_sets, 1))
-        self._place_tracked(x, m_sets, n_t)
+        self._place_tracked(x, m_sets, n_t, sensor_fx)
         ctrl = self.eng._controls(drive)  # [T, S-1, nu]
         grasp = drive.grasp.numpy()
         park = np.zeros((n_t, n_s))
@@ -459,13 +459,14 @@ class MujocoFit:
         pstate = None if pstate is None else pstate[which]
         dpos = torch.as_tensor(dense[..., :3])
         dyaw = torch.as_tensor(np.unwrap(quat_yaw(dense[..., 3:7]), axis=-1))
-        res = _observe(dpos, dyaw, drive, sensor_fx, dt)
+        res = _observe(dpos, dyaw, drive.obs_t, sensor_fx, dt)
         if self.tracked:
             others = {}
             for j, o in enumerate(self.tracked, start=1):
                 d = dense[..., 7 * j : 7 * j + 7]
-                yaw = np.unwrap(quat_yaw(d[..., 3:]), axis=-1)
-                others[o.name] = _sample_at(d[..., :3], yaw, np.asarray(o.obs_t), dt)
+                yaw = torch.as_tensor(np.unwrap(quat_yaw(d[..., 3:]), axis=-1))
+                o_res = _observe(torch.as_tensor(d[..., :3]), yaw, o.obs_t, sensor_fx, dt)
+                others[o.name] = (o_res.pos, o_res.yaw)  # the same sensor as the fitted object
             res = SceneSimResult(
                 **{f.name: getattr(res, f.name) for f in fields(res)}, others=others
             )
@@ -473,10 +474,14 @@ class MujocoFit:
             res.force = self._pusher_force(pstate, ctrl, drive, m_sets)
         return res
 
-    def _place_tracked(self, x: np.ndarray, m_sets: int, n_t: int) -> None:
-        """Write the tracked objects' measured start poses (row r: trajectory r % T) into the
-        state rows ``x``, at rest; a box measured within :data:`SETTLE_TOL_M` of its resting
-        height starts settled on the support, and never inside it."""
+    def _place_tracked(
+        self, x: np.ndarray, m_sets: int, n_t: int, sensor_fx: Sequence[tuple[Any, Any]] = ()
+    ) -> None:
+        """Write the tracked objects' measured start poses (row r: set r // T, trajectory
+        r % T) into the state rows ``x``, at rest, mapped from the sensor frame to the world by
+        the sensor effects (as the fitted object's start: one camera sees every object); a box
+        measured within :data:`SETTLE_TOL_M` of its resting height starts settled on the
+        support, and never inside it."""
         for o in self.tracked:
             ip, iy = np.asarray(o.init_pos, float), np.asarray(o.init_yaw, float)
             if len(ip) != n_t:
@@ -487,12 +492,17 @@ class MujocoFit:
                     hint="prepare the drive and the tracked objects from one recording",
                 )
             rest, settled = self._rest[o.name]
-            p = np.tile(ip, (m_sets, 1))
+            pos = torch.as_tensor(ip).unsqueeze(0).expand(m_sets, n_t, 3)
+            yaw = torch.as_tensor(iy).unsqueeze(0).expand(m_sets, n_t)
+            for e, th in reversed(sensor_fx):
+                if overrides(e, "from_sensor"):
+                    pos, yaw = e.from_sensor(th, pos, yaw)
+            p = pos.numpy().reshape(m_sets * n_t, 3).copy()
             p[:, 2] = np.where(
                 np.abs(p[:, 2] - rest) < SETTLE_TOL_M, settled, np.maximum(p[:, 2], rest)
             )
             lay = self.eng.layout[o.name]
-            lay.set_pose(x, p, _yaw_quat(np.tile(iy, m_sets)))
+            lay.set_pose(x, p, _yaw_quat(yaw.numpy().reshape(m_sets * n_t)))
             lay.set_vel(x, np.zeros((len(x), 3)), np.zeros((len(x), 3)))
 
     def _pusher_force(
@@ -1009,11 +1019,12 @@ def _active(e: Any, th: dict[str, torch.Tensor]) -> bool:
     return not e.params or any(bool((v != zero[k]).any()) for k, v in th.items())
 
 
-def _observe(dpos, dyaw, drive: Drive, sensor_fx, dt: float) -> SimResult:
-    """Sample the dense poses at the (effect-mapped) stamps and map them into the sensor frame
-    (the same observation as the planar model's)."""
+def _observe(dpos, dyaw, obs_t: torch.Tensor, sensor_fx, dt: float) -> SimResult:
+    """Sample the dense poses [M, T, S, 3] m, [M, T, S] rad at the (effect-mapped) stamps
+    ``obs_t`` [T, K] s and map them into the sensor frame (the same observation as the planar
+    model's)."""
     m_sets, n_t, n_s = dpos.shape[:3]
-    t_q = drive.obs_t.to(torch.float64).unsqueeze(0).expand(m_sets, n_t, -1)
+    t_q = torch.as_tensor(obs_t).to(torch.float64).unsqueeze(0).expand(m_sets, n_t, -1)
     for e, th in sensor_fx:
         t_q = e.sample_times(_lift(th), t_q)
     fidx = (t_q / dt).clamp(0.0, n_s - 1 - 1e-9)
@@ -1027,22 +1038,6 @@ def _observe(dpos, dyaw, drive: Drive, sensor_fx, dt: float) -> SimResult:
     for e, th in sensor_fx:
         pos, yaw = e.to_sensor(_lift(th), pos, yaw)
     return SimResult(pos=pos, yaw=yaw, dense_pos=dpos, dense_yaw=dyaw, force=None)
-
-
-def _sample_at(
-    pos: np.ndarray, yaw: np.ndarray, obs_t: np.ndarray, dt: float
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Dense positions [M, T, S, 3] m and yaws [M, T, S] rad sampled (linearly) at ``obs_t``
-    [T, K] s -> ([M, T, K, 3], [M, T, K])."""
-    n_s = pos.shape[2]
-    f = np.clip(obs_t / dt, 0.0, n_s - 1 - 1e-9)
-    i0 = np.floor(f).astype(int)
-    w = f - i0
-    i1 = np.minimum(i0 + 1, n_s - 1)
-    t = np.arange(obs_t.shape[0])[:, None]
-    p = pos[:, t, i0] * (1 - w[None, ..., None]) + pos[:, t, i1] * w[None, ..., None]
-    y = yaw[:, t, i0] * (1 - w[None]) + yaw[:, t, i1] * w[None]
-    return torch.as_tensor(p), torch.as_tensor(y)
 
 
 def _yaw_quat(yaw: np.ndarray) -> np.ndarray:
