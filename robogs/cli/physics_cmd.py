@@ -196,6 +196,7 @@ def _effects_table(effects: list[dict[str, Any]], title: str) -> None:
             f"{_fmt(e.get('heldout_rms_before'))} → {_fmt(e.get('heldout_rms_after'))}"
             + (f" {e['unit']}" if e.get("unit", "mm") != "mm" else ""),
             f"{_fmt(e.get('heldout_gain_sigma2'))} / {_fmt(e.get('null_threshold_sigma2'))} σ²"
+            + (f" (×{e['null_factor']:.2f})" if (e.get("null_factor") or 1.0) > 1.0 else "")
             if e.get("null_threshold_sigma2") is not None
             else "—",
             _fmt(e.get("explained"), ".0%") if e.get("explained") is not None else "—",
@@ -575,6 +576,15 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
             f"gate: {g.get('method')}, family-wise {g.get('alpha', 0.05):.0%}; calibration "
             f"{g.get('seconds', 0.0):.1f} s, {g.get('draws')} draws"
             + (" (cached)" if g.get("cached") else "")
+        )
+    chk = g.get("linearisation_check") or {}
+    scaled = {n: c["factor"] for n, c in (chk.get("candidates") or {}).items() if c["factor"] > 1}
+    if chk:
+        print(
+            "  linearisation check on null draws: "
+            + (", ".join(f"{n} threshold ×{f:.2f}" for n, f in scaled.items()) or "no change")
+            + f"; {len(chk['candidates'])} candidate(s), {chk['rollouts']} rollouts, "
+            f"{chk['seconds']:.1f} s" + (" (cached)" if chk.get("cached") else "")
         )
     if (d.get("design") or {}).get("wrench_note"):
         print(f"  {d['design']['wrench_note']}")

@@ -171,6 +171,9 @@ class EffectRow:
     of them the effect may still be reported (verdict :data:`PARTLY`)."""
     blocked_by_bic: bool = False
     """The held-out gate passed but Schwarz's criterion did not prefer the effect."""
+    null_factor: float = 1.0
+    """The factor its null was scaled by (the gate's linearisation check on null draws,
+    :func:`robogs.physics.gate.null_draw_factor`; 1 where not checked)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (the documented keys first)."""
@@ -613,7 +616,11 @@ def diagnose_recording(
     rms_base = rms_mm(base_raw, mask)
     held_base = rms_mm(held_raw[0], mask)
     deltas = [(base.resid - o.resid) for o in outs[1:]]
-    cal = _calibrate(eng, cands, outs, base, folds, len(base_cols))
+    stats = [
+        float(gate_mod.heldout_statistic(held_t[0], held_t[i], deltas[i - 1]))
+        for i in range(1, len(outs))
+    ]
+    cal = _calibrate(eng, space, cands, outs, folds, base_cols, theta0, stats)
     phase = prep.phase
     rows: list[EffectRow] = []
     for i, e in enumerate(cands, start=1):
@@ -648,7 +655,7 @@ def diagnose_recording(
         why = "; ".join(dict.fromkeys(out.why_param[j] for j in jj if out.why_param[j]))
         undetermined = [space.slots[free[j]].param.name for j in jj if not ident and not out.ok[j]]
         part = None if ident else determined_combination(space, out, free, jj)
-        stat = float(gate_mod.heldout_statistic(held_t[0], held_t[i], delta))
+        stat = stats[i - 1]
         # thresholds in sigma^2 on this data (under 8 trajectories those of the studentised
         # held-out fall times its standard error, gate.Calibration.judge)
         thr, q95, p_own = cal.judge(e.name, held_t[0], held_t[i], delta)
@@ -700,8 +707,18 @@ def diagnose_recording(
                 on_bound=bound,
                 undetermined=undetermined,
                 blocked_by_bic=blocked,
+                null_factor=cal.inflation.get(e.name, 1.0),
             )
         )
+        chk = cal.checks.get(e.name) if e.name in cal.inflation else None
+        if chk is not None and chk.factor > 1.0:
+            rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
+                f"null threshold scaled x{chk.factor:.2f} ({thr / chk.factor:.1f} -> {thr:.1f} "
+                f"sigma^2): on {len(chk.ratios)} draws (its fitted change scaled "
+                f"x{chk.scale:.2f} to the threshold's size, residual signed per trajectory) its "
+                "fit gained more than its linear model by that median ratio (on the data: "
+                f"{chk.data_ratio:.2f}; the gate's linearisation check)"
+            )
         if bound:
             rows[-1].note = (
                 (rows[-1].note + "; " if rows[-1].note else "")
@@ -766,27 +783,86 @@ def sign_flip_floor(method: str, carrying: int) -> float | None:
 
 def _calibrate(
     eng: Engine,
+    space: ParamSpace,
     cands: list[Effect],
     outs: list[FitOutcome],
-    base: FitOutcome,
     folds: list[np.ndarray],
-    n_base: int,
+    base_cols: list[int],
+    theta0: np.ndarray,
+    stats: list[float],
 ) -> gate_mod.Calibration:
-    """The gate's null for these candidates on this data (cached per revision; see gate)."""
+    """The gate's null for these candidates on this data (cached per revision; see gate), with
+    the linearisation check on null draws of the candidates where it can change a verdict
+    (``stats``: their held-out falls [sigma^2]; :func:`gate.needs_check`)."""
+    import time
+
+    import torch
+
     from robogs.physics.baseline import _fingerprint, model_key
 
     rec = eng.prep.rec
     fp = "|".join(
         [_fingerprint(rec), model_key(rec.physics), f"{eng.prep.scene.dt:g}", eng.backend]
     )  # the backend, not the class: planar and MuJoCo are both an Engine
+    base = outs[0]
+    n_base = len(base_cols)
     lin = [
         gate_mod.LinearCandidate(e.name, o.jac, o.jac_local, n_base)
         for e, o in zip(cands, outs[1:], strict=True)
     ]
     valid = (base.resid != 0) | np.any(base.jac != 0, axis=-1)
-    # each fit's own chi^2 fall: the null is scaled where it exceeds its linearisation's
-    gain = [base.cost - o.cost for o in outs[1:]]
-    return gate_mod.calibrate(lin, base.resid, valid, folds, fingerprint=fp, fit_gain=gain)
+    cal = gate_mod.calibrate(lin, base.resid, valid, folds, fingerprint=fp)
+    if cal.statistic != "fall":
+        return cal
+    fn = eng.residual_fn(space)
+    signs = gate_mod.check_signs(eng.prep.n_traj, fp)
+
+    made = False
+    for e, lc, out, stat in zip(cands, lin, outs[1:], stats, strict=True):
+        k = len(space.owner_columns(e.name))
+        ratio = gate_mod.linear_ratio(
+            base.cost - out.cost, gate_mod.linear_gain(lc, base.resid, valid), k
+        )
+        n = base.n
+        dbic = float(n * np.log(out.cost / base.cost) + k * np.log(n))  # as the rows' ΔBIC
+        if not gate_mod.needs_check(stat, cal.thresholds[e.name], ratio, dbic):
+            continue
+        chk = cal.checks.get(e.name)
+        if chk is None:
+            count = [0]
+
+            def fit_draw(offset: np.ndarray, e: Effect = e, count: list[int] = count):
+                off = torch.as_tensor(offset)
+
+                def fn_d(th: torch.Tensor, lo: torch.Tensor) -> torch.Tensor:
+                    count[0] += 1
+                    return fn(th, lo) + off
+
+                def evaluate(th: np.ndarray, lo: np.ndarray) -> np.ndarray:
+                    with torch.no_grad():
+                        return fn_d(torch.as_tensor(th), torch.as_tensor(lo)).numpy()
+
+                b, (c,) = fit_nested(
+                    lambda probs: eng.fit(space, probs, residual=fn_d),
+                    evaluate,
+                    space,
+                    Problem(free=list(base_cols), theta0=base.theta, local0=base.local),
+                    [(space.owner_columns(e.name), start_points(space, e, theta0))],
+                )
+                lc_d = gate_mod.LinearCandidate(e.name, c.jac, c.jac_local, n_base)
+                return b.cost, c.cost, lc_d, b.resid
+
+            t0 = time.perf_counter()
+            lam = gate_mod.draw_scale(base.cost - out.cost, cal.thresholds[e.name])
+            chk = gate_mod.null_draw_factor(
+                base.resid, out.resid, valid, fit_draw, signs, lam, ratio
+            )
+            chk.rollouts, chk.seconds = count[0], time.perf_counter() - t0
+            made = True
+        cal.apply_check(e.name, chk)
+    if made:
+        gate_mod.store_checks(cal)
+    return cal
 
 
 @dataclass

@@ -162,11 +162,14 @@ class Engine:
         *,
         progress: Callable[[int, int], None] | None = None,
         max_iter: int = 20,
+        residual: ResidualFn | None = None,
     ) -> list[FitOutcome]:
         """Fit problems over ``space`` (all at once); intervals include the leave-one-trajectory-
         out jackknife (``fit_problems(cluster_jackknife=True)``): a release speed off by encoder
-        noise shifts a whole slide, and a few fast slides carry most of the drag information."""
-        fn = self.residual_fn(space)
+        noise shifts a whole slide, and a few fast slides carry most of the drag information.
+        ``residual``: fit this function of :meth:`residual_fn`'s instead (the gate's null
+        draws, :func:`robogs.physics.gate.draw_offset`)."""
+        fn = self.residual_fn(space) if residual is None else residual
         step = None if self._mujoco is None else self._mujoco.fd_rel_step  # None: the default
         return fit_problems(
             fn,
