@@ -102,6 +102,7 @@ def _one(args: tuple[str, str, int, str]) -> dict:
         "cal_draws": res.gate.get("draws"),
         "alpha_adj": res.gate.get("alpha_adjusted"),
         "inflation": res.gate.get("inflation"),  # candidate -> threshold factor (gate)
+        "check": res.gate.get("linearisation_check"),  # its draws, rollouts, seconds
         "tilt_ok": _tilt_ok(rows),
         "reported": [r.name for r in reported],
         "top": top.name if top else None,
