@@ -716,7 +716,7 @@ def diagnose_recording(
                 f"null threshold scaled x{chk.factor:.2f} ({thr / chk.factor:.1f} -> {thr:.1f} "
                 f"sigma^2): on {len(chk.ratios)} draws (its fitted change scaled "
                 f"x{chk.scale:.2f} to the threshold's size, residual signed per trajectory) its "
-                "fit gained more than its linear model by that median ratio (on the data: "
+                "fit gained more than its linear model by up to that ratio (on the data: "
                 f"{chk.data_ratio:.2f}; the gate's linearisation check)"
             )
         if bound:
