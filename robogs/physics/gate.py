@@ -73,7 +73,7 @@ which scales with the linear model, was 29.2 against planar's 51.8 (bench/RESULT
 A candidate's null is then scaled by a factor ``f >= 1``, a first-order correction for the
 extra fitting capacity of the procedure over its linearisation (the "generalized degrees of
 freedom" of a fitting procedure: Ye 1998, J. Amer. Statist. Assoc. 93): the largest over
-``CHECK_DRAWS`` draws of ``(gain' + k) / (linear' + k)``, ``gain'`` the nonlinear fits' chi^2
+``CHECK_DRAWS`` draws (one: the data's own signs) of ``(gain' + k) / (linear' + k)``, ``gain'`` the nonlinear fits' chi^2
 fall from ``B`` to ``B + C`` on the draw (fitted as the diagnosis fits the data), ``linear'``
 :func:`linear_gain` of the draw's base residual with the Jacobian of the draw's candidate fit,
 ``k`` the effect's parameters (the linear gain's mean on white noise, which keeps the ratio
@@ -82,7 +82,7 @@ the size of its null threshold and the candidate fit's own residual signed per t
 ``obs' = pred_B + lambda (pred_C - pred_B) + s * (obs - pred_C)``, in weighted residuals
 ``r'(theta) = r(theta) - (1 - lambda) r_B - lambda r_C + s * r_C`` (:func:`draw_offset`),
 ``lambda = min(1, sqrt(threshold / gain))`` (:func:`draw_scale`), ``s = +1`` in the first
-draw and random signs (seeded from the data fingerprint, :func:`check_signs`) in the others,
+draw (random signs seeded from the data fingerprint in any further one, :func:`check_signs`),
 so that the noise, masks, jitter and roughness are the recording's.
 
 Why scaled to the threshold and not removed: the factor corrects the null's tail, so it is
@@ -168,13 +168,14 @@ MAX_CELLS = 4.0e8
 the draw count is cut (never below 100) to stay under it."""
 AFFECTED_Z = 3.0
 """A trajectory counts as acted on when the effect moves it by ``||delta/sigma|| >= 3``."""
-CHECK_DRAWS = 3
-"""Draws of the linearisation check (:func:`null_draw_factor`): each costs two nonlinear fits
-(base, base + candidate; 55-120 rollouts for three draws on MuJoCo design B), which the
-linearised null does not need, so few. The largest ratio is taken, not the median: the
-sign-flipped draws can miss an exploit that the data's signs hold on a few trajectories (planar
-design A null seed 4, restitution: 11.7 on the data's signs, 1.01 on both flips), and the
-check guards the null's size."""
+CHECK_DRAWS = 1
+"""Draws of the linearisation check (:func:`null_draw_factor`): one, the data's own signs.
+Each draw costs two nonlinear fits (about 20-50 rollouts, 7-28 s on MuJoCo design B). Two more draws
+with random signs per trajectory were measured (bench/RESULTS.md, h38) and do not help: they
+miss an exploit the data's signs hold on a few trajectories (planar design A null seed 4,
+restitution: ratio 11.7 on the data's signs, 1.01 on both flips; their median let it through),
+and their spread on a real effect is noise that only raises its bar (MuJoCo design B tilt seed
+1: 1.67 on the data's signs, 1.62 and 2.28 flipped; with the largest the tilt was lost)."""
 
 
 @dataclass

@@ -151,13 +151,14 @@ def test_draws_are_deterministic_and_flip_whole_trajectories():
     """Signs from the fingerprint (the first draw +1), distinct; each draw's offset removes
     ``1 - lambda`` of the base fit's residual and ``lambda`` of the candidate's, and adds the
     candidate's with one sign per whole trajectory; ``lambda = 1, s = +1`` is the data."""
-    signs = G.check_signs(9, "fingerprint A")
-    assert signs.shape == (G.CHECK_DRAWS, 9)
-    np.testing.assert_array_equal(signs, G.check_signs(9, "fingerprint A"))
-    assert not np.array_equal(signs, G.check_signs(9, "fingerprint B"))
+    assert np.array_equal(G.check_signs(9, "any"), np.ones((G.CHECK_DRAWS, 9)))
+    signs = G.check_signs(9, "fingerprint A", draws=3)
+    assert signs.shape == (3, 9)
+    np.testing.assert_array_equal(signs, G.check_signs(9, "fingerprint A", draws=3))
+    assert not np.array_equal(signs, G.check_signs(9, "fingerprint B", draws=3))
     assert np.all(signs[0] == 1.0) and set(np.unique(signs)) <= {-1.0, 1.0}
     assert len({tuple(r) for r in signs}) == len(signs)
-    assert len(G.check_signs(1, "x")) == G.CHECK_DRAWS
+    assert len(G.check_signs(1, "x", draws=3)) == 3
     cand, r_b, valid = _case(3)
     r_c = np.random.default_rng(4).standard_normal(r_b.shape) * valid
     assert not np.any(G.draw_offset(r_b, r_c, np.ones(9), 1.0))  # the data itself
