@@ -946,6 +946,7 @@ def auto_loop(
     while True:
         res = diagnose_recording(rec, effects=effects, dt=dt, progress=progress)
         cal_s += float(res.gate.get("seconds", 0.0))
+        cal_s += float((res.gate.get("linearisation_check") or {}).get("seconds", 0.0))
         top = next((r for r in res.rows if r.reported), None)
         if top is None or len(steps) >= max_steps:
             best = max(
