@@ -620,13 +620,16 @@ def diagnose_recording(
         float(gate_mod.heldout_statistic(held_t[0], held_t[i], deltas[i - 1]))
         for i in range(1, len(outs))
     ]
-    cal = _calibrate(eng, space, cands, outs, folds, base_cols, theta0, stats)
+    dbics = [
+        float(n * np.log(o.cost / base.cost) + (len(f) - len(base_cols)) * np.log(n))
+        for o, f in zip(outs[1:], frees[1:], strict=True)
+    ]
+    cal = _calibrate(eng, space, cands, outs, folds, base_cols, theta0, stats, dbics)
     phase = prep.phase
     rows: list[EffectRow] = []
     for i, e in enumerate(cands, start=1):
         out, free = outs[i], frees[i]
-        k_extra = len(free) - len(base_cols)
-        dbic = float(n * np.log(out.cost / base.cost) + k_extra * np.log(n))
+        dbic = dbics[i - 1]
         delta = deltas[i - 1]
         z_t = np.sqrt(np.sum(delta**2, axis=-1))
         size = float(z_t.max())
@@ -715,7 +718,7 @@ def diagnose_recording(
             rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
                 f"null threshold scaled x{chk.factor:.2f} ({thr / chk.factor:.1f} -> {thr:.1f} "
                 f"sigma^2): on {len(chk.ratios)} draws (its fitted change scaled "
-                f"x{chk.scale:.2f} to the threshold's size, residual signed per trajectory) its "
+                f"x{chk.scale:.2f} to the threshold's size, on the data's own residual) its "
                 "fit gained more than its linear model by up to that ratio (on the data: "
                 f"{chk.data_ratio:.2f}; the gate's linearisation check)"
             )
@@ -790,6 +793,7 @@ def _calibrate(
     base_cols: list[int],
     theta0: np.ndarray,
     stats: list[float],
+    dbics: list[float],
 ) -> gate_mod.Calibration:
     """The gate's null for these candidates on this data (cached per revision; see gate), with
     the linearisation check on null draws of the candidates where it can change a verdict
@@ -818,13 +822,11 @@ def _calibrate(
     signs = gate_mod.check_signs(eng.prep.n_traj, fp)
 
     made = False
-    for e, lc, out, stat in zip(cands, lin, outs[1:], stats, strict=True):
+    for e, lc, out, stat, dbic in zip(cands, lin, outs[1:], stats, dbics, strict=True):
         k = len(space.owner_columns(e.name))
         ratio = gate_mod.linear_ratio(
             base.cost - out.cost, gate_mod.linear_gain(lc, base.resid, valid), k
         )
-        n = base.n
-        dbic = float(n * np.log(out.cost / base.cost) + k * np.log(n))  # as the rows' ΔBIC
         if not gate_mod.needs_check(stat, cal.thresholds[e.name], ratio, dbic):
             continue
         chk = cal.checks.get(e.name)
