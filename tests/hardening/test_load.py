@@ -4,8 +4,10 @@ Oracles: numpy over the whole array (order statistics), interpolation over the w
 (``SampleWindow``), defects planted at known rows of a long episode written by
 ``robogs.synth.bulk`` (independent of the writer), and a peak RSS measured by ``os.wait4`` for a
 100-episode validation in its own interpreter. The full-size figures (1,000 episodes, a
-30-minute episode) are ``bench/load.py``. Under CPU load: two ``robogs diagnose`` at once on
-two cores, against their solo time (``bench/load.py --diagnose``).
+30-minute episode) are ``bench/load.py``, and so is the figure under CPU load: two ``robogs
+diagnose`` at once on two cores against their solo time (``bench/load.py --diagnose``; a timing
+target lives in ``bench/``, not in the suite). The thread settings that keep that figure near 2x
+are tested without timing in ``tests/qa/test_threads.py``.
 """
 
 from __future__ import annotations
@@ -15,8 +17,6 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -194,65 +194,3 @@ def test_one_hundred_episodes_validate_in_bounded_memory(tmp_path: Path) -> None
     # at fork time, which a busy pytest worker inflates
     peak_kb = int(hwm_kb) if int(hwm_kb) > 0 else usage.ru_maxrss
     assert peak_kb / 1024 < 1024  # MB; about 450 measured, mostly the torch import
-
-
-_THREAD_VARS = (
-    "OMP_NUM_THREADS",
-    "OPENBLAS_NUM_THREADS",
-    "MKL_NUM_THREADS",
-    "NUMBA_NUM_THREADS",
-    "OMP_WAIT_POLICY",
-)
-_DIAGNOSE = "import sys; from robogs.cli.main import main; sys.exit(main(sys.argv[1:]))"
-
-
-def _together(roots: list[Path], cores: set[int]) -> list[float]:
-    """``robogs diagnose`` on each root at once, pinned to ``cores``, default threads; wall [s].
-
-    Each run has its own empty cache folder (``ROBOGS_CACHE_DIR``): no run reuses a baseline or
-    a gate calibration another run computed, so every run does the whole diagnosis."""
-    env = {k: v for k, v in os.environ.items() if k not in _THREAD_VARS}
-    t0 = time.perf_counter()
-    procs = [
-        subprocess.Popen(
-            [sys.executable, "-W", "ignore", "-c", _DIAGNOSE, "diagnose", str(r), "--json"],
-            env={**env, "ROBOGS_CACHE_DIR": tempfile.mkdtemp(prefix="cache-", dir=r.parent)},
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            preexec_fn=lambda: os.sched_setaffinity(0, cores),
-        )
-        for r in roots
-    ]
-    walls = []
-    for p in procs:
-        out, err = p.communicate(timeout=1800)
-        walls.append(time.perf_counter() - t0)
-        assert p.returncode == 0, err.decode()[-2000:]
-        assert [e["name"] for e in json.loads(out)["effects"] if e["reported"]][:1] == [
-            "table_tilt"
-        ]
-    return walls
-
-
-@pytest.mark.slow
-@pytest.mark.skipif(
-    not hasattr(os, "sched_setaffinity") or len(os.sched_getaffinity(0)) < 2,
-    reason="needs two cores and sched_setaffinity",
-)
-def test_two_diagnoses_at_once_on_two_cores_each_take_at_most_2_5x_solo(tmp_path: Path) -> None:
-    """Two ``robogs diagnose`` at once on the same 2 cores, default ``--threads`` (the cores
-    each may use: 2): neither may take more than 2.5x its solo time. Before ``--threads`` the
-    OpenMP and BLAS pools of the two processes spun against each other (issue 13: 40 s solo,
-    584 s beside another torch job). ``bench/load.py --diagnose`` has the figures."""
-    from robogs.synth.scenarios import make_scenario, write_scenario
-
-    rec = make_scenario(
-        "table_tilt", seed=0, noise="nominal", kinds=("push",), n_speeds=2, n_dirs=3, check=False
-    )
-    roots = [tmp_path / "a", tmp_path / "b"]
-    for r in roots:
-        write_scenario(rec, r)
-    cores = set(sorted(os.sched_getaffinity(0))[:2])
-    (solo,) = _together(roots[:1], cores)
-    pair = _together(roots, cores)
-    assert max(pair) <= 2.5 * solo, f"solo {solo:.1f} s, two at once {pair} s"
