@@ -155,6 +155,8 @@ class ContactSettings:
             :func:`ballast_contact` for the impedances). 0: off.
         pusher_dampratio: damping ratio of the object-pusher pairs' ``solref`` (time constant
             as ``solref``): above 1 the pusher's strike is plastic, as in the planar model.
+        pusher_timeconst_steps: time constant of the object-pusher pairs' ``solref`` in
+            timesteps (0: ``solref``'s); sets how fast the strike's compression relaxes.
     """
 
     timestep: float = 1e-3
@@ -176,6 +178,7 @@ class ContactSettings:
     servo_position_gain: float = 0.3
     z_ballast: float = 0.0
     pusher_dampratio: float = 1.0
+    pusher_timeconst_steps: float = 0.0
 
 
 PLANAR_SETTINGS = ContactSettings(
@@ -827,13 +830,14 @@ def scene_mjcf(
         )
     ]
     tc = settings.solref[0]
+    tc_pusher = settings.pusher_timeconst_steps * settings.timestep or tc
     f_pusher = (PUSHER_SOLREFFRICTION_STEPS * settings.timestep, 1.0)
     side = {
-        key: [_vec(v) for v in ballast_contact((tc, ratio), settings.solimp, kb, False, sf)]
-        for key, ratio, sf in (
-            ("pusher", settings.pusher_dampratio, f_pusher),
-            ("object", OBJECT_PAIR_DAMPRATIO, settings.solreffriction),
-            ("static", settings.solref[1], settings.solreffriction),
+        key: [_vec(v) for v in ballast_contact((t, ratio), settings.solimp, kb, False, sf)]
+        for key, t, ratio, sf in (
+            ("pusher", tc_pusher, settings.pusher_dampratio, f_pusher),
+            ("object", tc, OBJECT_PAIR_DAMPRATIO, settings.solreffriction),
+            ("static", tc, settings.solref[1], settings.solreffriction),
         )
     }
 
