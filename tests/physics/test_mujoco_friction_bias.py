@@ -9,10 +9,10 @@ mechanism at a time, on the planar joint set (:data:`~robogs.format.mjcf.PLANAR_
   ``v0^2 / (2 mu g) - v0 dt / 2``;
 * the pusher force of a steady push is mu m g (within 0.4 %);
 * the bias is the strike: the pusher contact (``solref`` 4 ms, damping ratio 2) is overdamped,
-  its slow mode relaxes in ``dmax tc zeta (zeta + sqrt(zeta^2 - 1))`` = 30 ms, so the 0.6-0.9 mm
-  compression of a 0.5 m/s strike is not gone when the pusher brakes 45 mm later: the box leaves
-  0.75 % faster than the pusher and slides 1.5 % further (1.4 % faster and 1 mm further on the
-  scene's 0.55 m/s pushes), which a fit reads as more friction.
+  its slow mode relaxes in ``dmax tc zeta (zeta + sqrt(zeta^2 - 1))`` = 30 ms, so a strike's
+  compression (0.6-0.9 mm at 0.5 m/s) is not gone when the pusher brakes 45 mm later: the box
+  rides 0.40 / 0.86 % faster than the pusher at 0.45 / 0.55 m/s (1.4 % and 1 mm further on the
+  scene's 0.55 m/s pushes) and leaves at that speed, which a fit reads as more friction.
 
 The last test is a strict xfail on the default settings (the bias is there); with the pusher
 pair's time constant at 3 steps and damping ratio 1.7
