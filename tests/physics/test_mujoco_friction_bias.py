@@ -163,7 +163,9 @@ generator) strike is plastic and the box rides on the pusher at its speed. 0.3 %
     [
         pytest.param(
             PLANAR_SETTINGS,
-            marks=pytest.mark.xfail(strict=True, reason="the default pusher pair's slow mode"),
+            marks=pytest.mark.xfail(
+                strict=True, raises=AssertionError, reason="the default pusher pair's slow mode"
+            ),
             id="default",
         ),
         pytest.param(FIXED, id="tc3-zeta1.7"),
