@@ -44,6 +44,7 @@ __all__ = [
 def _register_builtins() -> None:
     register_backend("torch", render_tiled)
     register_backend("dense", lambda g, c, cfg: render_dense(g, c, cfg))
+    _register_triton()
     if importlib.util.find_spec("numba") is None:
         mark_unavailable("numba", "needs the optional package numba (pip install numba)")
         return
@@ -53,6 +54,27 @@ def _register_builtins() -> None:
         mark_unavailable("numba", f"numba failed to load: {exc}")
     else:
         register_backend("numba", render_fused)
+
+
+def _register_triton() -> None:
+    """The fused GPU backend: registered where Triton and a CUDA device are present."""
+    if importlib.util.find_spec("triton") is None:
+        mark_unavailable(
+            "triton",
+            "needs triton and a CUDA GPU (triton ships with the CUDA builds of torch; "
+            "pip install triton)",
+        )
+        return
+    try:
+        from .triton_raster import render_triton, unavailable_reason
+    except Exception as exc:  # triton present but broken (version clash with torch)
+        mark_unavailable("triton", f"triton failed to load: {exc}")
+        return
+    reason = unavailable_reason()
+    if reason is not None:
+        mark_unavailable("triton", reason)
+    else:
+        register_backend("triton", render_triton)
 
 
 _register_builtins()
