@@ -27,8 +27,15 @@ RSS before), measured first, before any larger render has raised the high-water 
 counts everything the step allocates (autograd's saved tensors included) and is what the OS
 must provide.
 
-Usage: python bench/render.py [--threads 2] [--repeats 5] [--only all|speed|novel|fps]
-[--dataset DIR] [--configs 8] [--seed 0] [--spacing M] [--no-append]
+- ``--only gpu`` (issue 23): forward 100k at 640x480 and forward + backward 20k at 320x240, for
+  3DGS and 2DGS, on ``--device`` (cuda) with the ``torch`` and the fused ``triton`` backends, and
+  the same on the CPU (``torch``, ``--threads``) in the same run as the baseline; max |d rgb| of
+  triton against torch on the device; ``--json PATH`` writes the figures; ``--scale`` shrinks
+  counts and images (to try the mode on a CPU under ``TRITON_INTERPRET=1``).
+
+Usage: python bench/render.py [--threads 2] [--repeats 5] [--only all|speed|novel|fps|gpu]
+[--dataset DIR] [--configs 8] [--seed 0] [--spacing M] [--no-append] [--device cuda]
+[--scale 1.0] [--json PATH]
 """
 
 from __future__ import annotations
@@ -333,7 +340,10 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--no-append", action="store_true", help="do not append to bench/RESULTS.md")
-    ap.add_argument("--only", choices=("all", "speed", "novel", "fps"), default="all")
+    ap.add_argument("--only", choices=("all", "speed", "novel", "fps", "gpu"), default="all")
+    ap.add_argument("--device", default="cuda", help="with --only gpu: the device (cuda)")
+    ap.add_argument("--scale", type=float, default=1.0, help="with --only gpu: shrink the scenes")
+    ap.add_argument("--json", help="with --only gpu: write the figures as JSON to this path")
     ap.add_argument("--dataset", help="with --only fps: also time render_dataset on this dataset")
     ap.add_argument("--configs", type=int, default=8, help="novel-pose configurations")
     ap.add_argument("--seed", type=int, default=0, help="novel-pose scene and configuration seed")
@@ -355,6 +365,12 @@ def main() -> None:
         head.append(summary)
         rows += nrows
     if args.only == "novel":
+        _emit(head, rows, args)
+        return
+    if args.only == "gpu":
+        head.append(_device_line(args.device))
+        rows += bench_gpu(args)
+        head.append(f"load avg after: {os.getloadavg()[0]:.1f}")
         _emit(head, rows, args)
         return
     if args.only == "fps":
@@ -485,6 +501,104 @@ def main() -> None:
     else:
         head.append("cuda: not available (no CUDA figures)")
     _emit(head, rows, args)
+
+
+def _device_line(device: str) -> str:
+    if device.startswith("cuda") and torch.cuda.is_available():
+        return f"device: {torch.cuda.get_device_name()} (torch {torch.__version__})"
+    return f"device: {device} (no CUDA; Triton interpreter: {os.environ.get('TRITON_INTERPRET')})"
+
+
+def _time_device(fn, repeats: int, device: str) -> tuple[float, float]:
+    """(min, median) wall seconds of ``fn`` over ``repeats`` runs after two warm-ups."""
+    for _ in range(2):
+        fn()
+    _sync(device)
+    walls = []
+    for _ in range(repeats):
+        _sync(device)
+        t0 = time.perf_counter()
+        fn()
+        _sync(device)
+        walls.append(time.perf_counter() - t0)
+    walls.sort()
+    return walls[0], walls[len(walls) // 2]
+
+
+def _gpu_case(
+    kind: str, n: int, size: tuple[int, int], device: str, backend: str, train: bool, repeats: int
+) -> tuple[float, float, torch.Tensor]:
+    """Time one render (or render + backward) and return (min s, median s, rgb)."""
+    g, f = make_scene(n, size[0], seed=5, kind=kind, device=device)
+    cam = make_camera(size[0], size[1], f, device)
+    cfg = RenderConfig(kind=kind, validate=False, tile_size=8 if device == "cpu" else 16)
+    if backend == "triton":
+        cfg = RenderConfig(kind=kind, validate=False, tile_size=16)
+    leaves = [g.means, g.quats, g.log_scales, g.opacity_logits, g.sh]
+    target = torch.rand(size[1], size[0], 3, generator=torch.Generator().manual_seed(0))
+    target = target.to(device)
+
+    def fwd() -> None:
+        with torch.no_grad():
+            render(g, cam, config=cfg, backend=backend)
+
+    def step() -> None:
+        out = render(g, cam, config=cfg, backend=backend)
+        loss = (out.rgb - target).abs().mean() + 0.1 * out.depth_expected.mean()
+        loss.backward()
+        for p in leaves:
+            p.grad = None
+
+    if train:
+        for p in leaves:
+            p.requires_grad_(True)
+    lo, med = _time_device(step if train else fwd, repeats, device)
+    with torch.no_grad():
+        rgb = render(g, cam, config=cfg, backend=backend).rgb.float().cpu()
+    return lo, med, rgb
+
+
+def bench_gpu(args: argparse.Namespace) -> list[tuple[str, str, str, str]]:
+    """Issue 23's figures: torch and triton on the device against torch on the CPU."""
+    import json
+
+    dev = args.device
+    rows: list[tuple[str, str, str, str]] = []
+    figures: dict[str, float | str] = {"device": _device_line(dev), "threads": args.threads}
+    s = args.scale
+    cases = [
+        ("forward", 100_000, (640, 480), False, 5e-3),
+        ("fwd+bwd", 20_000, (320, 240), True, 5e-3),
+    ]
+    backends = ["torch"] + (["triton"] if "triton" in available_backends() else [])
+    for kind in ("3dgs", "2dgs"):
+        for what, n, (w, h), train, target in cases:
+            n, size = max(int(n * s), 10), (max(int(w * s), 16), max(int(h * s), 16))
+            label = f"{kind} {what} {n // 1000}k @ {size[0]}x{size[1]}"
+            cpu = _gpu_case(kind, n, size, "cpu", "torch", train, max(1, args.repeats // 3))
+            figures[f"{label} | cpu torch"] = cpu[0]
+            ref_rgb = None
+            for b in backends:
+                r = _gpu_case(kind, n, size, dev, b, train, args.repeats)
+                figures[f"{label} | {dev} {b}"] = r[0]
+                if ref_rgb is None:
+                    ref_rgb = r[2]
+                diff = float((r[2] - ref_rgb).abs().max())
+                rows.append(
+                    (
+                        f"{label}, {dev} {b}",
+                        f"{r[0] * 1e3:.2f} ms (median {r[1] * 1e3:.2f}); max |d rgb| vs "
+                        f"{dev} torch {diff:.1e}",
+                        f"CPU torch ({args.threads} threads) {cpu[0] * 1e3:.1f} ms; "
+                        f"target {target * 1e3:.0f} ms",
+                        f"{cpu[0] / r[0]:.1f}x CPU; {r[0] / target:.2f}x target",
+                    )
+                )
+    if "triton" not in backends:
+        rows.append(("triton", "not run", "backend unavailable", "-"))
+    if args.json:
+        Path(args.json).write_text(json.dumps(figures, indent=1))
+    return rows
 
 
 def _emit(head: list[str], rows: list[tuple[str, str, str, str]], args: argparse.Namespace) -> None:
