@@ -46,9 +46,12 @@ from .tiled import finish_output, visible_means2d
 
 __all__ = ["render_triton", "unavailable_reason", "interpreting"]
 
-#: Gaussians per chunk in the forward and backward kernels (tl.dot needs >= 16).
-_K_FWD = 32
+#: Gaussians per chunk in the forward and backward kernels (tl.dot needs >= 16), and warps per
+#: program; ``bench/triton_sweep.py`` times the alternatives on a GPU.
+_K_FWD = 16
 _K_BWD = 16
+_WARPS_FWD = 8
+_WARPS_BWD = 8
 #: default tile edge, px (power of two: a tile's pixels are one Triton block)
 _TILE_SIZE = 16
 #: columns of the per-Gaussian parameter rows (see ``_pack_params``)
@@ -359,7 +362,7 @@ class _Composite(torch.autograd.Function):
         _forward_kernel[(n_tiles,)](
             prm, feats, gids, offsets, outf, outz, outm,
             tiles_x, width, height, near, inv_sq,
-            Q=Q, D=D, DP=DP, TS=ts, K=_K_FWD, SURFEL=surfel, num_warps=4 if ts == 16 else 2,
+            Q=Q, D=D, DP=DP, TS=ts, K=_K_FWD, SURFEL=surfel, num_warps=_WARPS_FWD if ts == 16 else 2,
         )  # fmt: skip
         ctx.save_for_backward(prm, feats, gids, offsets, outf, outz)
         ctx.meta, ctx.surfel = meta, surfel
@@ -378,7 +381,7 @@ class _Composite(torch.autograd.Function):
             gf.float().contiguous(), gz.float().contiguous(), gm.float().contiguous(),
             dprm, dfeat, tiles_x, width, height, near, inv_sq,
             Q=prm.shape[1], D=D, DP=DP, TS=ts, K=_K_BWD, SURFEL=ctx.surfel,
-            num_warps=4 if ts == 16 else 2,
+            num_warps=_WARPS_BWD if ts == 16 else 2,
         )  # fmt: skip
         return dprm, dfeat, None, None, None, None
 

@@ -1,0 +1,89 @@
+"""Chunk size and warps of the fused ``triton`` render kernels, timed on the GPU (issue 23).
+
+For 3DGS and 2DGS: forward 100k Gaussians at 640x480 for each (K, warps) of the forward kernel,
+and forward + backward 20k at 320x240 for each (K, warps) of the backward kernel (forward at the
+module default). The in-run baseline is the module default configuration (first row of each
+block). Prints a table and writes ``--json``. Scenes are ``bench/render.py``'s.
+
+Usage: python bench/triton_sweep.py [--repeats 20] [--json PATH] [--scale 1.0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import render as rb  # noqa: E402  (bench/render.py: scenes and timers)
+
+from robogs.format.render import RenderConfig, render  # noqa: E402
+from robogs.format.render import triton_raster as tr  # noqa: E402
+
+FWD = [(16, 8), (16, 4), (32, 8), (32, 4), (64, 8)]
+BWD = [(16, 8), (16, 4), (16, 16), (32, 8)]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=20)
+    ap.add_argument("--json")
+    ap.add_argument("--scale", type=float, default=1.0)
+    args = ap.parse_args()
+    dev = "cuda" if torch.cuda.is_available() else "cpu"
+    print(rb._device_line(dev), f"threads {torch.get_num_threads()}", f"pid {os.getpid()}")
+    res: dict[str, float] = {}
+    s = args.scale
+    for kind in ("3dgs", "2dgs"):
+        n, w, h = max(int(100_000 * s), 10), max(int(640 * s), 16), max(int(480 * s), 16)
+        g, f = rb.make_scene(n, w, seed=5, kind=kind, device=dev)
+        cam = rb.make_camera(w, h, f, dev)
+        cfg = RenderConfig(kind=kind, validate=False, tile_size=16)
+        base = None
+        for k, warps in FWD:
+            tr._K_FWD, tr._WARPS_FWD = k, warps
+
+            def fwd(g=g, cam=cam, cfg=cfg) -> None:
+                with torch.no_grad():
+                    render(g, cam, config=cfg, backend="triton")
+
+            lo, med = rb._time_device(fwd, args.repeats, dev)
+            base = base or lo
+            res[f"{kind} fwd 100k K={k} warps={warps}"] = lo
+            print(f"{kind} forward {n} @ {w}x{h} K={k} warps={warps}: {lo * 1e3:.2f} ms "
+                  f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
+        tr._K_FWD, tr._WARPS_FWD = FWD[0]
+        n, w, h = max(int(20_000 * s), 10), max(int(320 * s), 16), max(int(240 * s), 16)
+        g, f = rb.make_scene(n, w, seed=6, kind=kind, device=dev)
+        cam = rb.make_camera(w, h, f, dev)
+        leaves = [g.means, g.quats, g.log_scales, g.opacity_logits, g.sh]
+        for p in leaves:
+            p.requires_grad_(True)
+        base = None
+        for k, warps in BWD:
+            tr._K_BWD, tr._WARPS_BWD = k, warps
+
+            def step(g=g, cam=cam, cfg=cfg, leaves=leaves) -> None:
+                out = render(g, cam, config=cfg, backend="triton")
+                (out.rgb.sum() + out.depth_expected.mean()).backward()
+                for p in leaves:
+                    p.grad = None
+
+            lo, med = rb._time_device(step, args.repeats, dev)
+            base = base or lo
+            res[f"{kind} fwd+bwd 20k K={k} warps={warps}"] = lo
+            print(f"{kind} fwd+bwd {n} @ {w}x{h} K={k} warps={warps}: {lo * 1e3:.2f} ms "
+                  f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
+        tr._K_BWD, tr._WARPS_BWD = BWD[0]
+    if args.json:
+        Path(args.json).write_text(json.dumps(res, indent=1))
+
+
+if __name__ == "__main__":
+    main()
