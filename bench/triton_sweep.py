@@ -26,8 +26,8 @@ import render as rb  # noqa: E402  (bench/render.py: scenes and timers)
 from robogs.format.render import RenderConfig, render  # noqa: E402
 from robogs.format.render import triton_raster as tr  # noqa: E402
 
-FWD = [(16, 8), (16, 4), (32, 8), (32, 4), (64, 8)]
-BWD = [(16, 8), (16, 4), (16, 16), (32, 8)]
+FWD = [(16, 8), (16, 4), (32, 8), (32, 16), (64, 8)]
+BWD = [(16, 8), (16, 4), (16, 16), (32, 8), (32, 16)]
 
 
 def main() -> None:

@@ -58,7 +58,11 @@ _TILE_SIZE = 16
 _Q_3DGS = 8
 _Q_2DGS = 17
 #: F.threshold of the torch backend keeps e - exp_min > this (the exact boundary alpha = 1/255)
-_THRESHOLD_EPS = -1e-30
+_THRESHOLD_EPS = tl.constexpr(-1e-30)
+#: the shared constants, as compile-time values (Triton reads no other globals in kernels)
+_MAX_ALPHA = tl.constexpr(MAX_ALPHA)
+_T_MIN = tl.constexpr(TRANSMITTANCE_THRESHOLD)
+_T_MEDIAN = tl.constexpr(MEDIAN_TRANSMITTANCE)
 
 
 def interpreting() -> bool:
@@ -193,10 +197,10 @@ def _forward_kernel(
             )
         else:
             e, ok, z, _, _, _, _, _ = _exponent_3dgs(prm_ptr, g, valid, x, y, Q)
-        alpha = tl.where(ok, tl.minimum(tl.exp(e), MAX_ALPHA), 0.0)
+        alpha = tl.where(ok, tl.minimum(tl.exp(e), _MAX_ALPHA), 0.0)
         Ta = T[:, None] * tl.cumprod(1.0 - alpha, axis=1)
         Tb = Ta / (1.0 - alpha)
-        keep = Ta >= TRANSMITTANCE_THRESHOLD
+        keep = Ta >= _T_MIN
         w = tl.where(keep, Tb * alpha, 0.0)
         f = tl.load(
             feat_ptr + g[:, None] * D + dd[None, :],
@@ -205,10 +209,10 @@ def _forward_kernel(
         )
         acc += tl.dot(w, f, input_precision="ieee")
         accz += tl.sum(w * z, axis=1)
-        cross = keep & (Tb > MEDIAN_TRANSMITTANCE) & (Ta <= MEDIAN_TRANSMITTANCE)
+        cross = keep & (Tb > _T_MEDIAN) & (Ta <= _T_MEDIAN)
         med += tl.sum(tl.where(cross, z, 0.0), axis=1)
         T_last = tl.min(Ta, axis=1)  # cumprod of factors <= 1 never grows: min is the last
-        T = tl.where(T_last < TRANSMITTANCE_THRESHOLD, 0.0, T_last)
+        T = tl.where(T_last < _T_MIN, 0.0, T_last)
         s += K
     row = t * (TS * TS) + p
     tl.store(outf_ptr + row[:, None] * DP + dd[None, :], acc)
@@ -266,10 +270,10 @@ def _backward_kernel(
         else:
             e, ok, z, dx, dy, cA, cB, cC = _exponent_3dgs(prm_ptr, g, valid, x, y, Q)
         a_raw = tl.exp(e)
-        alpha = tl.where(ok, tl.minimum(a_raw, MAX_ALPHA), 0.0)
+        alpha = tl.where(ok, tl.minimum(a_raw, _MAX_ALPHA), 0.0)
         Ta = T[:, None] * tl.cumprod(1.0 - alpha, axis=1)
         Tb = Ta / (1.0 - alpha)
-        keep = Ta >= TRANSMITTANCE_THRESHOLD
+        keep = Ta >= _T_MIN
         w = tl.where(keep, Tb * alpha, 0.0)
         fmask = valid[:, None] & (dd[None, :] < D)
         f = tl.load(feat_ptr + g[:, None] * D + dd[None, :], mask=fmask, other=0.0)
@@ -277,8 +281,8 @@ def _backward_kernel(
         wg = w * gk
         incl = prefix[:, None] + tl.cumsum(wg, axis=1)
         d_alpha = tl.where(keep, Tb * gk - (total[:, None] - incl) / (1.0 - alpha), 0.0)
-        de = tl.where(ok & (a_raw < MAX_ALPHA), d_alpha * alpha, 0.0)
-        cross = keep & (Tb > MEDIAN_TRANSMITTANCE) & (Ta <= MEDIAN_TRANSMITTANCE)
+        de = tl.where(ok & (a_raw < _MAX_ALPHA), d_alpha * alpha, 0.0)
+        cross = keep & (Tb > _T_MEDIAN) & (Ta <= _T_MEDIAN)
         dz = w * gz[:, None] + tl.where(cross, gm[:, None], 0.0)
         d_f = tl.dot(tl.trans(w), Gf, input_precision="ieee")
         tl.atomic_add(dfeat_ptr + g[:, None] * D + dd[None, :], d_f, mask=fmask)
@@ -324,7 +328,7 @@ def _backward_kernel(
             tl.atomic_add(base + 7, tl.sum(dz, axis=0), mask=valid)
         prefix += tl.sum(wg, axis=1)
         T_last = tl.min(Ta, axis=1)
-        T = tl.where(T_last < TRANSMITTANCE_THRESHOLD, 0.0, T_last)
+        T = tl.where(T_last < _T_MIN, 0.0, T_last)
         s += K
 
 
