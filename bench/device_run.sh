@@ -3,7 +3,8 @@
 # Carry .whl (the project's missing dependencies and a robogs wheel for its metadata, built with
 # `pip download ... -d .whl` and `pip wheel --no-deps . -w .whl`); the working tree comes first
 # on PYTHONPATH. Stages: 1 = CUDA render tests, sweep of the Triton kernels, render bench;
-# 2 = reconstruct bench. Usage there: bash bench/device_run.sh 1|2|12
+# p = sweep and
+# profile only; 2 = reconstruct bench. Usage there: bash bench/device_run.sh 1|p|2|12
 set -u
 export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=16
 OUT=${OUT:-/tmp/robogs-device-out}
@@ -22,6 +23,9 @@ if [[ $stage == *1* ]]; then
   timeout 150 python3 bench/triton_sweep.py --repeats 10 --json "$OUT/sweep.json" 2>&1 | tee "$OUT/sweep.log"
   timeout 180 python3 bench/render.py --only gpu --device cuda --threads 16 --repeats 10 --no-append \
     --json "$OUT/render.json" 2>&1 | tee "$OUT/render.log"
+fi
+if [[ $stage == *p* ]]; then
+  timeout 150 python3 bench/triton_sweep.py --repeats 10 --profile --json "$OUT/sweep.json" 2>&1 | tee "$OUT/sweep.log"
 fi
 if [[ $stage == *2* ]] && [[ -f bench/device_reconstruct.sh ]]; then
   timeout 300 bash bench/device_reconstruct.sh "$OUT" 2>&1 | tail -40 | tee "$OUT/reconstruct.log"
