@@ -11,6 +11,17 @@ Scene: the generated UR5 of ``robogs.synth.scene`` over a table with a box, capt
 2. ``reconstruct`` (2DGS, ``--iterations`` steps): wall time, held-out PSNR/SSIM, label mIoU,
    mesh F-score; baseline: the same pipeline with one training step (the seeds alone).
 
+2b. ``--device cuda`` (or ``--cpu-baseline-iterations N`` / ``--same-steps`` on any device): the
+   reconstruction of 2 on the device and, in the same run, the same job on the CPU
+   (``--threads`` torch threads) as the baseline, instead of the seeds-only baseline. The Triton
+   kernels are compiled by a warm-up render first. The CPU job follows the same
+   ``--iterations``-step schedule and is stopped after ``--cpu-baseline-iterations`` steps (so
+   its per-step time is measured on steps the device also ran, and no held-out PSNR exists for
+   it); ``--same-steps`` runs it to the end, for the PSNR comparison. Printed: the card, the CPU
+   threads, the training time of both, ms per step on the common window of steps (after the
+   first ``--log-every`` steps), the speed ratio, held-out PSNR of both, and ``--json PATH``
+   appends the figures as one JSON line.
+
 3. ``--sfm``: the structure-from-motion route of ``docs/reconstruct.md`` instead of 1-2: the
    sample of ``robogs synth OUT --capture static --no-poses`` (``--seed``), posed by
    ``convert --sfm``, reconstructed with ``--align apply`` (``--iterations`` steps, no truth
@@ -20,11 +31,14 @@ Scene: the generated UR5 of ``robogs.synth.scene`` over a table with a box, capt
 
 Usage: ``PYTHONPATH=. .venv/bin/python bench/reconstruct.py [--views 60 --width 320 --height 240]``
 ``[--sfm --iterations 3000]``
+``[--device cuda --skip-tsdf --iterations 3000 --cpu-baseline-iterations 600 --threads 16 --json F]``
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import os
 import platform
 import tempfile
@@ -225,6 +239,268 @@ def sfm_route(args: argparse.Namespace, tmp: Path) -> None:
     print(f"  load average now {os.getloadavg()[0]:.1f}")
 
 
+class _StopAt(Exception):
+    """Raised from ``on_step`` to stop the CPU baseline after its steps."""
+
+
+def _warm_up(device: torch.device, backend: str, width: int, height: int) -> float:
+    """Render and back-propagate random surfels with and without the two depth channels (the
+    variants training compiles), forward-only once; returns the seconds it took."""
+    from robogs.format.render import Camera, Gaussians, RenderConfig, render
+
+    t0 = time.perf_counter()
+    g = torch.Generator().manual_seed(0)
+    n = 4000
+    f = 0.9 * width
+    cam = Camera(
+        width=width,
+        height=height,
+        fx=f,
+        fy=f,
+        cx=width / 2,
+        cy=height / 2,
+        T_world_cam=torch.eye(4, dtype=torch.float64, device=device),
+    )
+    xy = (torch.rand(n, 2, generator=g) - 0.5) * torch.tensor([width / f, height / f]) * 2.0
+    means = torch.cat([xy, torch.full((n, 1), 2.0)], 1) + 0.05 * torch.randn(n, 3, generator=g)
+    params = {
+        "means": means,
+        "quats": torch.randn(n, 4, generator=g),
+        "log_scales": torch.full((n, 2), math.log(0.01)),
+        "opacity_logits": torch.zeros(n),
+        "sh": torch.rand(n, 1, 3, generator=g),
+    }
+    params = {k: v.to(device).requires_grad_(True) for k, v in params.items()}
+    rc = RenderConfig(kind="2dgs", validate=False)
+    for extra in (None, torch.stack([params["means"][:, 2], params["means"][:, 2] ** 2], 1)):
+        out = render(Gaussians(**params, extra=extra), cam, config=rc, backend=backend)
+        loss = out.rgb.sum() + out.normals.sum() + out.depth_expected.sum() + out.alpha.sum()
+        if extra is not None:
+            loss = loss + out.extra.sum()
+        loss.backward()
+    with torch.no_grad():
+        render(Gaussians(**params), cam, config=rc, backend=backend)
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    return time.perf_counter() - t0
+
+
+def _timed_reconstruct(
+    tmp: Path, label: str, device: str, iterations: int, stop_at: int, args: argparse.Namespace
+) -> dict:
+    """One reconstruction of the bench scene on ``device``; ``stop_at`` < ``iterations`` stops
+    training there (same schedule). Returns the figures; the step clock is read at each log
+    point, where the PSNR gather has waited for the device."""
+    import shutil
+
+    from robogs.reconstruct.evaluate import evaluate
+    from robogs.reconstruct.pipeline import ReconstructOptions, reconstruct
+    from robogs.reconstruct.train import TrainConfig
+
+    root = tmp / f"run-{label}"
+    shutil.copytree(tmp / "ur5", root)
+    marks: dict[int, tuple[float, float]] = {}
+
+    def on_step(k: int, info: dict) -> None:
+        marks[k] = (time.perf_counter(), info["n"])
+        if k >= stop_at < iterations:
+            raise _StopAt
+
+    opts = ReconstructOptions(
+        train=TrainConfig(
+            iterations=iterations,
+            checkpoint_every=0,
+            log_every=args.log_every,
+            backend=args.backend,
+        ),
+        lr_scale=args.lr_scale,
+        tsdf_resolution=args.tsdf_res,
+        work_dir=tmp / f"work-{label}",
+        device=device,
+        force=True,
+    )
+    t0 = time.perf_counter()
+    fig: dict = {"device": device, "steps": min(stop_at, iterations)}
+    try:
+        rep = reconstruct(root, opts, on_step=on_step)
+    except _StopAt:
+        fig.update(stopped=True, wall_s=time.perf_counter() - t0, psnr_db=None, gaussians=None)
+    else:
+        fig.update(stopped=False, wall_s=time.perf_counter() - t0)
+        fig["train_s"] = rep.timings_s["train"]
+        fig["ms_per_step"] = 1e3 * rep.timings_s["train"] / iterations
+        fig["gaussians"] = sum(rep.gaussians.values())
+        fig["psnr_db"] = evaluate(root).psnr_db
+        fig["timings_s"] = {k: round(v, 3) for k, v in rep.timings_s.items()}
+    fig["marks"] = {k: v for k, v in sorted(marks.items())}
+    return fig
+
+
+def _window(fig: dict, lo: int, hi: int) -> float | None:
+    """ms per step between the log points ``lo`` and ``hi`` (None if either is missing)."""
+    m = fig["marks"]
+    if lo not in m or hi not in m or hi <= lo:
+        return None
+    return 1e3 * (m[hi][0] - m[lo][0]) / (hi - lo)
+
+
+def device_vs_cpu(args: argparse.Namespace, tmp: Path) -> dict:
+    """Part 2b: the reconstruction on ``--device`` and the same job on the CPU (see the
+    module docstring)."""
+    from robogs.reconstruct.train import resolve_backend
+
+    device = torch.device(args.device)
+    if device.type == "cuda":
+        if not torch.cuda.is_available():
+            raise SystemExit(f"--device {args.device}: CUDA is not available here")
+        card = torch.cuda.get_device_name(device)
+    else:
+        card = f"CPU ({platform.processor() or platform.machine()})"
+    backend = resolve_backend(args.backend, device)
+    every = args.log_every
+    n_cpu = (
+        args.iterations if args.same_steps else (args.cpu_baseline_iterations or args.iterations)
+    )
+    n_cpu = min(args.iterations, every * math.ceil(n_cpu / every))  # end on a log point
+    if n_cpu < 2 * every and n_cpu < args.iterations:
+        raise SystemExit(
+            f"--cpu-baseline-iterations must reach 2 x --log-every ({2 * every}) steps: the "
+            "first logged interval (warm-up) is left out of the per-step window"
+        )
+    print(
+        f"2b. reconstruct on {args.device} ({card}, backend {backend}) vs the CPU "
+        f"({torch.get_num_threads()} torch threads of {os.cpu_count()} cores, backend "
+        f"{resolve_backend(args.backend, 'cpu')}); {args.iterations}-step schedule"
+    )
+    warm = _warm_up(device, backend, args.width, args.height)
+    print(
+        f"  warm-up on {args.device} (kernel compilation, allocator): {warm:.1f} s, not timed below"
+    )
+    dev = _timed_reconstruct(tmp, "device", args.device, args.iterations, args.iterations, args)
+    cpu = _timed_reconstruct(tmp, "cpu", "cpu", args.iterations, n_cpu, args)
+    lo, hi = every, n_cpu
+    w_dev, w_cpu = _window(dev, lo, hi), _window(cpu, lo, hi)
+    print(
+        f"  {args.device}: {args.iterations} steps, training {dev['train_s']:.1f} s = "
+        f"{dev['ms_per_step']:.1f} ms/step ({dev['gaussians']} Gaussians at the end); "
+        f"held-out PSNR {dev['psnr_db']:.2f} dB; whole reconstruction {dev['wall_s']:.1f} s "
+        f"(init {dev['timings_s']['init']:.1f}, mesh {dev['timings_s']['mesh']:.1f})"
+    )
+    if cpu["stopped"]:
+        proj = None if w_cpu is None else w_cpu * args.iterations / 1e3
+        print(
+            f"  cpu: stopped after {n_cpu} of the {args.iterations} steps (--cpu-baseline-"
+            f"iterations); {cpu['wall_s']:.1f} s with loading and initialisation; no held-out "
+            f"PSNR (pass --same-steps to train it to the end)"
+        )
+        if proj is not None:
+            print(
+                f"  cpu per step scaled to {args.iterations} steps: {proj:.1f} s (an estimate: "
+                f"the later steps have more Gaussians after densification)"
+            )
+    else:
+        proj = None
+        print(
+            f"  cpu: {n_cpu} steps, training {cpu['train_s']:.1f} s = {cpu['ms_per_step']:.1f} "
+            f"ms/step ({cpu['gaussians']} Gaussians); held-out PSNR {cpu['psnr_db']:.2f} dB"
+        )
+    ratio = None if not (w_dev and w_cpu) else w_cpu / w_dev
+    if ratio is not None:
+        print(
+            f"  steps {lo + 1}-{hi}, the same on both: {args.device} {w_dev:.2f} ms/step "
+            f"({dev['marks'][hi][1]:.0f} Gaussians at step {hi}), cpu {w_cpu:.2f} ms/step "
+            f"({cpu['marks'][hi][1]:.0f}) -> {args.device} is {ratio:.1f}x faster"
+        )
+    if not cpu["stopped"]:
+        print(
+            f"  whole training: {args.device} {cpu['train_s'] / dev['train_s']:.1f}x faster; "
+            f"held-out PSNR {args.device} - cpu = {dev['psnr_db'] - cpu['psnr_db']:+.2f} dB"
+        )
+    for f in (dev, cpu):
+        f["marks"] = {str(k): [round(t, 4), n] for k, (t, n) in f["marks"].items()}
+    return {
+        "bench": "reconstruct --device",
+        "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "device": args.device,
+        "device_name": card,
+        "backend": backend,
+        "cpu_threads": torch.get_num_threads(),
+        "cpu_count": os.cpu_count(),
+        "torch": torch.__version__,
+        "views": args.views,
+        "size": [args.width, args.height],
+        "iterations": args.iterations,
+        "cpu_iterations": n_cpu,
+        "log_every": every,
+        "warm_up_s": round(warm, 3),
+        "window_steps": [lo + 1, hi],
+        "device_window_ms_per_step": w_dev,
+        "cpu_window_ms_per_step": w_cpu,
+        "speed_ratio_window": ratio,
+        "device_train_s": dev["train_s"],
+        "device_ms_per_step": dev["ms_per_step"],
+        "cpu_train_s": cpu.get("train_s"),
+        "cpu_ms_per_step": cpu.get("ms_per_step"),
+        "cpu_projected_train_s": proj,
+        "speed_ratio_train": None if cpu["stopped"] else cpu["train_s"] / dev["train_s"],
+        "device_psnr_db": dev["psnr_db"],
+        "cpu_psnr_db": cpu["psnr_db"],
+        "runs": {"device": dev, "cpu": cpu},
+    }
+
+
+def _append_json(path: str | None, doc: dict) -> None:
+    if path:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "a") as fh:
+            fh.write(json.dumps(doc, default=float) + "\n")
+        print(f"figures appended to {path}")
+
+
+def seeds_vs_trained(args: argparse.Namespace, tmp: Path, scene, ref, ref_n, tau, taus) -> None:
+    """Part 2: the pipeline with one step (the seeds) and with ``--iterations`` steps, on the CPU."""
+    import shutil
+
+    from robogs.reconstruct.evaluate import evaluate
+    from robogs.reconstruct.pipeline import ReconstructOptions, reconstruct
+    from robogs.reconstruct.train import TrainConfig
+
+    gt = tmp / "truth.ply"
+    scene.export(gt)
+    results = {}
+    for label, iters in (("seeds only (1 step)", 1), (f"{args.iterations} steps", args.iterations)):
+        root = tmp / f"run{iters}"
+        shutil.copytree(tmp / "ur5", root)
+        opts = ReconstructOptions(
+            train=TrainConfig(iterations=iters, checkpoint_every=0),
+            lr_scale=args.lr_scale,
+            tsdf_resolution=args.tsdf_res,
+            work_dir=tmp / f"work{iters}",
+            force=True,  # measure short runs too: the floors are reported, not enforced
+        )
+        t0 = time.perf_counter()
+        rep = reconstruct(root, opts)
+        wall = time.perf_counter() - t0
+        ev = evaluate(root)
+        p, pn = trimesh.load(root / "reconstruction" / "mesh.ply", force="mesh"), None
+        m = _fscore(p, ref, ref_n, taus)
+        results[label] = (wall, rep, ev, m)
+        t = rep.timings_s
+        print(
+            f"reconstruct, {label}: {wall:.1f} s (train {t['train']:.1f}, mesh {t['mesh']:.1f}, init {t['init']:.1f}); "
+            f"{sum(rep.gaussians.values())} Gaussians; held-out PSNR {ev.psnr_db:.2f} dB, SSIM {ev.ssim:.4f}, "
+            f"mIoU {ev.miou:.4f}; mesh F@{tau:.2f}mm {m.fscore[tau]:.4f}, F@5mm {m.fscore[5.0]:.4f}, "
+            f"Chamfer-L1 {m.chamfer_l1_mm:.2f} mm; URDF alignment rms {rep.alignment['rms_mm']:.2f} mm "
+            f"(scale {rep.alignment['scale']:.4f})"
+        )
+        del p, pn
+    (w0, _, e0, m0), (w1, _, e1, m1) = results.values()
+    print(
+        f"training gain over the seeds: PSNR {e1.psnr_db - e0.psnr_db:+.2f} dB, "
+        f"F@1% x{m1.fscore[tau] / max(m0.fscore[tau], 1e-9):.2f}, time x{w1 / w0:.1f}"
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--views", type=int, default=60)
@@ -246,8 +522,31 @@ def main() -> None:
         action="store_true",
         help="--sfm: keep the trained model (work/checkpoint.pt beside the printed output)",
     )
+    ap.add_argument(
+        "--device",
+        default="cpu",
+        help="part 2 on this device (cuda, cuda:1) against the same job on the CPU (2b)",
+    )
+    ap.add_argument(
+        "--cpu-baseline-iterations",
+        type=int,
+        default=None,
+        help="2b: stop the CPU job after N steps of the --iterations schedule (default: all)",
+    )
+    ap.add_argument(
+        "--same-steps",
+        action="store_true",
+        help="2b: train the CPU job to --iterations too (held-out PSNR of both comparable)",
+    )
+    ap.add_argument(
+        "--backend", default="auto", help="render backend of training (auto: triton on CUDA)"
+    )
+    ap.add_argument("--log-every", type=int, default=50, help="steps between PSNR gathers")
+    ap.add_argument("--skip-tsdf", action="store_true", help="leave out part 1 (TSDF fusion)")
+    ap.add_argument("--json", default=None, help="append the figures as one JSON line to this file")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
+    compare = args.device != "cpu" or args.cpu_baseline_iterations is not None or args.same_steps
 
     from robogs.format.render import Camera
     from robogs.reconstruct.mesh_clean import clean_mesh
@@ -277,11 +576,19 @@ def main() -> None:
     diag = float(np.linalg.norm(hi - lo))
     tau = 0.01 * diag * 1e3
     taus = (tau, 5.0)
+    if args.skip_tsdf and compare and not args.skip_train:  # 2b scores no meshes
+        _append_json(args.json, device_vs_cpu(args, tmp))
+        return
     ref, ref_n = truth.visible_surface_points(args.samples)
     print(
         f"scene diagonal {diag:.3f} m -> F-score threshold 1 % = {tau:.2f} mm; "
         f"{len(ref)} visible reference samples"
     )
+    if args.skip_tsdf:
+        if args.skip_train:
+            return
+        seeds_vs_trained(args, tmp, scene, ref, ref_n, tau, taus)
+        return
 
     # -- 1. TSDF fusion of the true depths ----------------------------------------------------
     K = truth.K
@@ -347,48 +654,10 @@ def main() -> None:
         )
     if args.skip_train:
         return
-
-    # -- 2. full reconstruction ---------------------------------------------------------------------
-    import shutil
-
-    from robogs.reconstruct.evaluate import evaluate
-    from robogs.reconstruct.pipeline import ReconstructOptions, reconstruct
-    from robogs.reconstruct.train import TrainConfig
-
-    gt = tmp / "truth.ply"
-    scene.export(gt)
-    results = {}
-    for label, iters in (("seeds only (1 step)", 1), (f"{args.iterations} steps", args.iterations)):
-        root = tmp / f"run{iters}"
-        shutil.copytree(tmp / "ur5", root)
-        opts = ReconstructOptions(
-            train=TrainConfig(iterations=iters, checkpoint_every=0),
-            lr_scale=args.lr_scale,
-            tsdf_resolution=args.tsdf_res,
-            work_dir=tmp / f"work{iters}",
-            force=True,  # measure short runs too: the floors are reported, not enforced
-        )
-        t0 = time.perf_counter()
-        rep = reconstruct(root, opts)
-        wall = time.perf_counter() - t0
-        ev = evaluate(root)
-        p, pn = trimesh.load(root / "reconstruction" / "mesh.ply", force="mesh"), None
-        m = _fscore(p, ref, ref_n, taus)
-        results[label] = (wall, rep, ev, m)
-        t = rep.timings_s
-        print(
-            f"reconstruct, {label}: {wall:.1f} s (train {t['train']:.1f}, mesh {t['mesh']:.1f}, init {t['init']:.1f}); "
-            f"{sum(rep.gaussians.values())} Gaussians; held-out PSNR {ev.psnr_db:.2f} dB, SSIM {ev.ssim:.4f}, "
-            f"mIoU {ev.miou:.4f}; mesh F@{tau:.2f}mm {m.fscore[tau]:.4f}, F@5mm {m.fscore[5.0]:.4f}, "
-            f"Chamfer-L1 {m.chamfer_l1_mm:.2f} mm; URDF alignment rms {rep.alignment['rms_mm']:.2f} mm "
-            f"(scale {rep.alignment['scale']:.4f})"
-        )
-        del p, pn
-    (w0, _, e0, m0), (w1, _, e1, m1) = results.values()
-    print(
-        f"training gain over the seeds: PSNR {e1.psnr_db - e0.psnr_db:+.2f} dB, "
-        f"F@1% x{m1.fscore[tau] / max(m0.fscore[tau], 1e-9):.2f}, time x{w1 / w0:.1f}"
-    )
+    if compare:
+        _append_json(args.json, device_vs_cpu(args, tmp))
+        return
+    seeds_vs_trained(args, tmp, scene, ref, ref_n, tau, taus)
 
 
 if __name__ == "__main__":

@@ -108,6 +108,18 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
         help="checkpoint folder (default: .<dataset>.reconstruct beside it)",
     )
     p.add_argument("--checkpoint-every", type=int, default=500)
+    p.add_argument(
+        "--backend",
+        default="auto",
+        help="render backend of training and meshing: auto (triton on CUDA when available, "
+        "else torch), torch, triton, ... (robogs plugins lists them)",
+    )
+    p.add_argument(
+        "--log-every",
+        type=int,
+        default=50,
+        help="training steps between progress updates (one device-to-host copy each)",
+    )
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint")
     p.add_argument("--keep-checkpoint", action="store_true")
     p.add_argument("--seed", type=int, default=0)
@@ -161,6 +173,8 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
 
     if args.iterations < 1:
         raise InputError(f"--iterations must be >= 1, got {args.iterations}")
+    if args.log_every < 1:
+        raise InputError(f"--log-every must be >= 1, got {args.log_every}", where="--log-every")
     tc = TrainConfig(
         kind=args.kind,
         iterations=args.iterations,
@@ -170,6 +184,8 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
         lambda_dist=args.lambda_dist,
         lambda_normal=args.lambda_normal,
         checkpoint_every=args.checkpoint_every,
+        backend=args.backend,
+        log_every=args.log_every,
     )
     opts = ReconstructOptions(
         episode=args.episode,

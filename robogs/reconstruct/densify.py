@@ -50,9 +50,10 @@ class GradientStats:
     def add(self, means2d_grad: torch.Tensor, radii: torch.Tensor, width: int, height: int) -> None:
         """Accumulate one view: ``means2d_grad`` [N, 2] (px), ``radii`` [N, 2] (0 where culled)."""
         visible = (radii > 0).any(dim=1)
-        g = means2d_grad.detach().to(torch.float64) * torch.tensor(
-            [0.5 * width, 0.5 * height], dtype=torch.float64, device=means2d_grad.device
-        )
+        g = means2d_grad.detach().to(torch.float64)
+        # scaled by Python numbers: a torch.tensor([...], device=cuda) here would be a
+        # host-to-device copy, which waits for the device, in every training step
+        g = torch.stack([g[:, 0] * (0.5 * width), g[:, 1] * (0.5 * height)], dim=1)
         self.grad += torch.where(visible, g.norm(dim=1), 0.0)
         self.count += visible.to(torch.float64)
 
@@ -97,7 +98,13 @@ def refine(
     seed: int = 0,
     densify: bool = True,
 ) -> dict[str, int]:
-    """One refinement: clone, split, prune. Returns counts (cloned, split, pruned, total)."""
+    """One refinement: clone, split, prune. Returns counts (cloned, split, pruned, total).
+
+    Runs on the model's device. It synchronises with the device (``nonzero`` sizes the index
+    lists, the counts are read back): acceptable once per ``densify_every`` training steps. The
+    split samples are drawn on the CPU from a generator seeded by the step (the same on every
+    device) and copied over.
+    """
     n0 = len(model)
     extent = model.extent
     cloned = split = 0

@@ -10,6 +10,7 @@ half-sample symmetric reflection (scipy's ``reflect``), and the mean SSIM leaves
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -34,6 +35,13 @@ def gaussian_window(
     x = torch.arange(-radius, radius + 1, dtype=torch.float64)
     w = torch.exp(-0.5 * (x / sigma) ** 2)
     return (w / w.sum()).to(dtype=dtype, device=device)
+
+
+@functools.lru_cache(maxsize=16)
+def _window_on(dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """:func:`gaussian_window` kept per dtype and device: built on the host and copied once, not
+    in every training step (a host-to-device copy waits for the device)."""
+    return gaussian_window(dtype=dtype, device=device)
 
 
 def _symmetric_pad(x: torch.Tensor, p: int) -> torch.Tensor:
@@ -62,7 +70,7 @@ def _as_bchw(img: torch.Tensor) -> torch.Tensor:
 def ssim_map(a: torch.Tensor, b: torch.Tensor, *, data_range: float = 1.0) -> torch.Tensor:
     """Per-pixel SSIM [B, C, H, W] of two images ([H, W], [H, W, C] or [B, C, H, W]); differentiable."""
     x, y = _as_bchw(a), _as_bchw(b)
-    w = gaussian_window(dtype=x.dtype, device=x.device)
+    w = _window_on(x.dtype, x.device)
     c1, c2 = (_K1 * data_range) ** 2, (_K2 * data_range) ** 2
     mx, my = _blur(x, w), _blur(y, w)
     vx = _blur(x * x, w) - mx * mx

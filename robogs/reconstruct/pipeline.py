@@ -48,7 +48,7 @@ from .quality import QualityFloors, assess_quality
 from .robot_geometry import link_meshes
 from .segment import TargetMap, drop_fragments, split_mesh, target_map, vote_targets
 from .support import fit_support_plane, flatten_table, rest_on_plane
-from .train import TrainConfig, TrainResult, train
+from .train import TrainConfig, TrainResult, resolve_backend, train
 from .tsdf import drop_depth_edges, extract_mesh, fuse_tsdf
 from .views import Capture, View, load_capture, split_heldout
 
@@ -160,7 +160,8 @@ def _fingerprint(ds: Dataset, views: list[View], opts: ReconstructOptions) -> st
     files = ds.files
     rels = sorted({rel for v in views for rel in files if f"/cameras/{v.camera_name}/" in rel})
     doc = {
-        "train": opts.train.to_json(),
+        # log_every changes when the PSNR is read, not what is trained
+        "train": {k: v for k, v in opts.train.to_json().items() if k != "log_every"},
         "init": asdict(opts.init),
         "lr_scale": opts.lr_scale,
         "scale": opts.scale,
@@ -180,7 +181,11 @@ def _scaled_lrs(lrs: LearningRates, k: float) -> LearningRates:
 
 @torch.no_grad()
 def _render_depths(
-    model: GaussianModel, views: list[View], cfg: TrainConfig, drop_edges: bool = False
+    model: GaussianModel,
+    views: list[View],
+    cfg: TrainConfig,
+    drop_edges: bool = False,
+    backend: str = "torch",
 ) -> list[torch.Tensor]:
     """Median depth [H, W] of every view (0 where alpha < 0.5, and on depth edges with
     ``drop_edges``), m."""
@@ -188,7 +193,7 @@ def _render_depths(
     g = model.gaussians()
     out = []
     for v in views:
-        r = render(g, v.camera, config=rc)
+        r = render(g, v.camera, config=rc, backend=backend)
         d = torch.where(r.alpha >= 0.5, r.depth_median, torch.zeros_like(r.depth_median)).cpu()
         out.append(drop_depth_edges(d) if drop_edges else d)
     return out
@@ -219,15 +224,18 @@ def _apply_similarity(model: GaussianModel, S: Similarity) -> None:
     """Move the Gaussians by ``S`` in place: centres, rotations and log-scales."""
     p = model.params
     with torch.no_grad():
-        M = torch.as_tensor(S.matrix(), dtype=p["means"].dtype)
+        dev = p["means"].device
+        M = torch.as_tensor(S.matrix(), dtype=p["means"].dtype, device=dev)
         p["means"].copy_(p["means"] @ M[:3, :3].T + M[:3, 3])
-        qR = torch.as_tensor(matrix_to_quat(torch.as_tensor(S.R)), dtype=p["quats"].dtype)
+        qR = torch.as_tensor(
+            matrix_to_quat(torch.as_tensor(S.R)), dtype=p["quats"].dtype, device=dev
+        )
         p["quats"].copy_(quat_multiply(qR.expand_as(p["quats"]), p["quats"]))
         p["log_scales"].add_(float(np.log(S.scale)))
         if p["sh_rest"].shape[1] > 0:
             from robogs.format.binding import rotate_sh
 
-            R = torch.as_tensor(S.R, dtype=p["sh_rest"].dtype).expand(len(model), 3, 3)
+            R = torch.as_tensor(S.R, dtype=p["sh_rest"].dtype, device=dev).expand(len(model), 3, 3)
             sh = rotate_sh(torch.cat([p["sh_dc"], p["sh_rest"]], 1), R)
             p["sh_rest"].copy_(sh[:, 1:])
 
@@ -304,6 +312,7 @@ def reconstruct(
             hint="lower --heldout-every or add views",
         )
     tcfg = replace(options.train, lrs=_scaled_lrs(options.train.lrs, options.lr_scale))
+    backend = resolve_backend(tcfg.backend, device)  # unknown or unavailable: fails here
     timings["load"] = time.perf_counter() - t_start
     # -- coverage: refuse before spending time ----------------------------------------------
     t0 = time.perf_counter()
@@ -348,7 +357,8 @@ def reconstruct(
     ckpt = work / "checkpoint.pt"
     if options.restart and ckpt.exists():
         ckpt.unlink()
-    fp = _fingerprint(ds, capture.views, replace(options, train=tcfg))
+    # the resolved backend: 'auto' may mean another one where triton is installed later
+    fp = _fingerprint(ds, capture.views, replace(options, train=replace(tcfg, backend=backend)))
     t0 = time.perf_counter()
     result: TrainResult = train(
         train_views,
@@ -364,7 +374,7 @@ def reconstruct(
     model = result.model
     # -- mesh ---------------------------------------------------------------------------------
     t0 = time.perf_counter()
-    depths = _render_depths(model, train_views, tcfg, options.drop_depth_edges)
+    depths = _render_depths(model, train_views, tcfg, options.drop_depth_edges, backend)
     means = model.params["means"].detach().cpu().numpy().astype(np.float64)
     flo, fhi = _fusion_box(means, lo, hi)
     vol = fuse_tsdf(
@@ -390,7 +400,7 @@ def reconstruct(
     spacing = options.init.spacing_m or extent / 110.0  # the seed spacing of init.py
     quality = assess_quality(
         mesh_faces=len(mesh.faces),
-        heldout_psnr_db=_heldout_psnr(model, held, tcfg),
+        heldout_psnr_db=_heldout_psnr(model, held, tcfg, backend),
         link_gaussians={
             n: int((g_target == k).sum())
             for k, n in enumerate(tmap.names, start=1)
@@ -515,13 +525,18 @@ def _target_centres(
 
 
 @torch.no_grad()
-def _heldout_psnr(model: GaussianModel, held: list[View], cfg: TrainConfig) -> float:
+def _heldout_psnr(
+    model: GaussianModel, held: list[View], cfg: TrainConfig, backend: str = "torch"
+) -> float:
     """Mean PSNR of the trained model in the held-out views, dB (nan without any)."""
     if not held:
         return float("nan")
     rc = RenderConfig(kind=cfg.kind, background=tuple(cfg.background), validate=False)
     g = model.gaussians()
-    vals = [psnr(render(g, v.camera, config=rc).rgb.clamp(0, 1).cpu(), v.rgb) for v in held]
+    vals = [
+        psnr(render(g, v.camera, config=rc, backend=backend).rgb.clamp(0, 1).cpu(), v.rgb)
+        for v in held
+    ]
     return float(np.mean(vals))
 
 

@@ -6,28 +6,35 @@ The loss of Huang et al. 2024 (2DGS): ``0.8 L1 + 0.2 D-SSIM + lambda_n L_normal 
 is a permutation per epoch drawn from a generator seeded by (seed, epoch), and every random
 choice is seeded by the step, so a run resumed from a checkpoint ends with the same Gaussians as
 an uninterrupted one (same device and thread count).
+
+The step itself never waits for the device (no ``.item()``, ``float(tensor)``, ``.cpu()``): the
+training PSNR of each step stays a 0-d device tensor, and the buffered values are copied to the
+host in one transfer every ``log_every`` steps (and before a checkpoint and at the end), where the
+progress bar and ``on_step`` are updated. The renderer's own syncs (the torch backend's tile
+binning reads its intersection count) and those of a refinement (every ``densify_every`` steps,
+``densify.refine``) remain; see ``design.md``.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import torch
 
-from robogs.format.render import RenderConfig, render
+from robogs.format.errors import InputError
+from robogs.format.render import RenderConfig, available_backends, render
+from robogs.format.render.backends import get_backend
 
 from .checkpoint import load_checkpoint, save_checkpoint
 from .densify import DensifyConfig, GradientStats, refine
-from .image_metrics import psnr
 from .losses import depth_channels, depth_distortion, normal_consistency, photometric_loss
 from .model import GaussianModel, LearningRates
 from .views import View
 
-__all__ = ["TrainConfig", "TrainResult", "train", "screen_gradient"]
+__all__ = ["TrainConfig", "TrainResult", "train", "screen_gradient", "resolve_backend"]
 
 
 def screen_gradient(grad_means: torch.Tensor, means: torch.Tensor, camera: Any) -> torch.Tensor:
@@ -60,6 +67,10 @@ class TrainConfig:
         background: colour behind the Gaussians, RGB in [0, 1].
         seed: random seed.
         checkpoint_every: steps between checkpoints (0: only when interrupted).
+        log_every: steps between the host copies of the training PSNR (progress bar, ``on_step``;
+            one transfer each); the last step is always logged.
+        backend: render backend; ``auto`` is ``triton`` when the parameters are on a CUDA device
+            and that backend is available, else ``torch`` (see :func:`resolve_backend`).
         lrs: learning rates.
         densify: densification thresholds.
     """
@@ -79,6 +90,8 @@ class TrainConfig:
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     seed: int = 0
     checkpoint_every: int = 500
+    log_every: int = 50
+    backend: str = "auto"
     lrs: LearningRates = field(default_factory=LearningRates)
     densify: DensifyConfig = field(default_factory=DensifyConfig)
 
@@ -105,7 +118,37 @@ class TrainResult:
     refinements: list[dict[str, int]]
 
 
+def resolve_backend(name: str, device: torch.device | str) -> str:
+    """The render backend a run on ``device`` uses for ``name`` (``TrainConfig.backend``).
+
+    ``auto``: ``triton`` on a CUDA device when ``available_backends()`` lists it, else ``torch``.
+    Any other name is returned as given once the registry knows it and it is usable.
+
+    Raises:
+        InputError / PluginError: an unknown or unavailable backend (the message says why).
+    """
+    if name == "auto":
+        cuda = torch.device(device).type == "cuda"
+        return "triton" if cuda and "triton" in available_backends() else "torch"
+    get_backend(name)  # a clear error before any training
+    return name
+
+
+def _psnr_on_device(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """0-d PSNR (dB, float64, on the images' device) of two images in [0, 1]; 99 where it is not
+    finite (equal images, NaN), as ``image_metrics.psnr`` and then ``99.0`` did on the host."""
+    mse = (pred.to(torch.float64) - target.to(torch.float64)).pow(2).mean()
+    p = 10.0 * torch.log10(1.0 / mse)
+    return torch.where(torch.isfinite(p), p, torch.full_like(p, 99.0))
+
+
+def _gather(buf: list[torch.Tensor]) -> list[float]:
+    """The buffered 0-d PSNRs as floats: one device-to-host transfer for all of them."""
+    return torch.stack(buf).tolist()
+
+
 def _view_at(step: int, n: int, seed: int) -> int:
+    """Index of the view of ``step``: CPU generator and CPU tensors only (no device sync)."""
     epoch, k = divmod(step, n)
     gen = torch.Generator().manual_seed(int(seed) * 7919 + epoch)
     return int(torch.randperm(n, generator=gen)[k])
@@ -177,7 +220,8 @@ def train(
         fingerprint: identifies the inputs; a checkpoint with another one is ignored.
         progress: show a progress bar (on stderr, when it is a terminal).
         console: a ``rich.console.Console`` for the progress bar instead of stderr.
-        on_step: called after every completed step with ``(step, {"psnr", "loss", "n"})``.
+        on_step: called with ``(step, {"psnr", "n"})`` after every ``cfg.log_every``-th step
+            and after the last one (``psnr``: that step's training PSNR, dB; ``n``: Gaussians).
 
     Returns:
         The trained model and its history. KeyboardInterrupt propagates after the last
@@ -185,6 +229,11 @@ def train(
         that an interruption in the steps after training (meshing, binding) resumes there.
     """
     device = init["means"].device
+    if cfg.log_every < 1:
+        raise InputError(
+            f"log_every must be >= 1, got {cfg.log_every}", where="TrainConfig.log_every"
+        )
+    backend = resolve_backend(cfg.backend, device)
     start = 0
     history: list[float] = []
     refinements: list[dict[str, int]] = []
@@ -202,6 +251,10 @@ def train(
     resumed_from = start
     rcfg = RenderConfig(kind=cfg.kind, background=tuple(cfg.background), validate=False)
     n_views = len(views)
+    # images and camera poses go to the device once: a copy from the host inside the step would
+    # wait for the device (a pageable host-to-device copy synchronises the stream)
+    cams = [replace(v.camera, T_world_cam=v.camera.T_world_cam.to(device)) for v in views]
+    targets = [v.rgb.to(device) for v in views]
     d_from, d_until = (
         int(cfg.densify_from * cfg.iterations),
         int(cfg.densify_until * cfg.iterations),
@@ -209,9 +262,17 @@ def train(
     bar = _Progress(progress, cfg.iterations, start, console)
     step = start
     done = start
+    pending: list[torch.Tensor] = []  # 0-d device PSNRs of the steps not yet in ``history``
+
+    def flush() -> None:
+        if pending:
+            vals = _gather(pending)  # the one host transfer of the PSNRs
+            history.extend(vals)
+            pending.clear()
 
     def save(at: int) -> None:
         if checkpoint is not None:
+            flush()
             save_checkpoint(
                 checkpoint,
                 fingerprint=fingerprint,
@@ -219,15 +280,14 @@ def train(
                 model_state=model.state(),
                 grad=stats.grad,
                 count=stats.count,
-                psnr_history=history,
+                psnr_history=history[:at],
                 refinements=refinements,
             )
 
     try:
         for step in range(start, cfg.iterations):
-            v = views[_view_at(step, n_views, cfg.seed)]
-            cam = v.camera
-            target = v.rgb.to(device)
+            i = _view_at(step, n_views, cfg.seed)
+            cam, target = cams[i], targets[i]
             model.set_means_lr(step / max(cfg.iterations - 1, 1))
             use_dist = cfg.lambda_dist > 0 and step >= cfg.dist_from * cfg.iterations
             use_normal = (
@@ -236,7 +296,7 @@ def train(
                 and step >= cfg.normal_from * cfg.iterations
             )
             extra = depth_channels(model.params["means"], cam) if use_dist else None
-            out = render(model.gaussians(extra), cam, config=rcfg)
+            out = render(model.gaussians(extra), cam, config=rcfg, backend=backend)
             loss = photometric_loss(out.rgb, target, cfg.lambda_dssim)
             if use_normal:
                 loss = loss + cfg.lambda_normal * normal_consistency(
@@ -246,8 +306,7 @@ def train(
                 loss = loss + cfg.lambda_dist * depth_distortion(out.alpha, out.extra)
             loss.backward()
             with torch.no_grad():
-                p = psnr(out.rgb.detach().clamp(0, 1), target)
-                history.append(p if math.isfinite(p) else 99.0)
+                pending.append(_psnr_on_device(out.rgb.detach().clamp(0, 1), target))
                 g3 = model.params["means"].grad
                 if d_from <= step < d_until and g3 is not None:
                     stats.add(
@@ -260,6 +319,7 @@ def train(
             model.optimizer.zero_grad(set_to_none=True)
             s1 = step + 1
             if d_from <= step < d_until and s1 % cfg.densify_every == 0 and s1 > d_from:
+                # a refinement syncs (index selection sizes its outputs): once per densify_every
                 refinements.append(
                     {"step": s1, **refine(model, stats, cfg.densify, s1, seed=cfg.seed)}
                 )
@@ -267,10 +327,13 @@ def train(
                 model.reset_opacity()
             done = s1
             del out, loss, extra
-            bar.update(s1, history[-1], len(model))
+            log_now = s1 % cfg.log_every == 0 or s1 == cfg.iterations
+            if log_now:
+                flush()
+                bar.update(s1, history[-1], len(model))
             if cfg.checkpoint_every and s1 % cfg.checkpoint_every == 0 and s1 < cfg.iterations:
                 save(s1)
-            if on_step is not None:
+            if log_now and on_step is not None:
                 on_step(s1, {"psnr": history[-1], "n": float(len(model))})
     except KeyboardInterrupt:
         if done == step + 1 and done > start:  # interrupted between steps: the state is whole
@@ -278,6 +341,8 @@ def train(
         raise
     finally:
         bar.close()
+    flush()
+    del history[done:]  # a step cut short by an exception leaves no PSNR behind
     if done > start:
         save(done)  # the steps after training can be interrupted too
     return TrainResult(model, done, resumed_from, history, refinements)

@@ -17,10 +17,12 @@ from robogs.reconstruct.train import TrainConfig
 
 
 def _options(work: Path) -> ReconstructOptions:
-    # densify every 4 steps so the resumed run also depends on the checkpointed gradient sums
+    # densify every 4 steps so the resumed run also depends on the checkpointed gradient sums;
+    # log_every=1: on_step (which interrupts at step 7) is called after every step
     tc = TrainConfig(
         iterations=12,
         checkpoint_every=5,
+        log_every=1,
         densify_from=0.0,
         densify_until=1.0,
         densify_every=4,
