@@ -27,7 +27,7 @@ from robogs.format.render import RenderConfig, render  # noqa: E402
 from robogs.format.render import triton_raster as tr  # noqa: E402
 
 FWD = [(32, 8), (16, 8), (32, 4), (32, 16)]
-BWD = [(32, 8), (16, 8), (32, 16)]
+BWD = [(16, 8, False), (32, 8, True), (16, 16, False), (32, 8, False)]
 
 
 def main() -> None:
@@ -69,8 +69,8 @@ def main() -> None:
         for p in leaves:
             p.requires_grad_(True)
         base = None
-        for k, warps in BWD:
-            tr._K_BWD, tr._WARPS_BWD = k, warps
+        for k, warps, dot in BWD:
+            tr._K_BWD, tr._WARPS_BWD, tr._BWD_DOT = k, warps, dot
 
             def step(g=g, cam=cam, cfg=cfg, leaves=leaves) -> None:
                 out = render(g, cam, config=cfg, backend="triton")
@@ -80,10 +80,10 @@ def main() -> None:
 
             lo, med = rb._time_device(step, args.repeats, dev)
             base = base or lo
-            res[f"{kind} fwd+bwd 20k K={k} warps={warps}"] = lo
-            print(f"{kind} fwd+bwd {n} @ {w}x{h} K={k} warps={warps}: {lo * 1e3:.2f} ms "
+            res[f"{kind} fwd+bwd 20k K={k} warps={warps} dot={dot}"] = lo
+            print(f"{kind} fwd+bwd {n} @ {w}x{h} K={k} warps={warps} dot={dot}: {lo * 1e3:.2f} ms "
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
-        tr._K_BWD, tr._WARPS_BWD = BWD[0]
+        tr._K_BWD, tr._WARPS_BWD, tr._BWD_DOT = BWD[0]
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=1))
     if args.profile:

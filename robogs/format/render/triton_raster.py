@@ -48,11 +48,14 @@ __all__ = ["render_triton", "unavailable_reason", "interpreting"]
 
 #: Gaussians per chunk in the forward and backward kernels (tl.dot needs >= 16), and warps per
 #: program; ``bench/triton_sweep.py`` times the alternatives on a GPU.
-#: (H200, 2026-11-27: K 32 with 8 warps was the fastest or within noise of it in every case)
+#: (H200, 2026-11-27: forward K 32 x 8 warps fastest or within noise in every case; backward
+#: K 16 channel by channel spills almost nothing per ptxas -v, against ~2-17 KB with tl.dot)
 _K_FWD = 32
-_K_BWD = 32
+_K_BWD = 16
 _WARPS_FWD = 8
 _WARPS_BWD = 8
+#: backward: g . f by tl.dot (True) or channel by channel (False); bench/triton_sweep.py times both
+_BWD_DOT = False
 #: default tile edge, px (power of two: a tile's pixels are one Triton block)
 _TILE_SIZE = 16
 #: columns of the per-Gaussian parameter rows (see ``_pack_params``)
@@ -245,6 +248,7 @@ def _backward_kernel(
     TS: tl.constexpr,
     K: tl.constexpr,
     SURFEL: tl.constexpr,
+    DOT: tl.constexpr,
 ):
     t = tl.program_id(0)
     p, x, y, T = _tile_pixels(t, tiles_x, width, height, TS)
@@ -277,16 +281,27 @@ def _backward_kernel(
         keep = Ta >= _T_MIN
         w = tl.where(keep, Tb * alpha, 0.0)
         fmask = valid[:, None] & (dd[None, :] < D)
-        f = tl.load(feat_ptr + g[:, None] * D + dd[None, :], mask=fmask, other=0.0)
-        gk = tl.dot(Gf, tl.trans(f), input_precision="ieee") + gz[:, None] * z
+        if DOT:  # g . f of every pair as one [P, DP] x [DP, K] product
+            f = tl.load(feat_ptr + g[:, None] * D + dd[None, :], mask=fmask, other=0.0)
+            gk = tl.dot(Gf, tl.trans(f), input_precision="ieee") + gz[:, None] * z
+        else:  # channel by channel from L1 (fewer live registers than the product's layouts)
+            gk = gz[:, None] * z
+            for d in tl.static_range(D):
+                fd = tl.load(feat_ptr + g * D + d, mask=valid, other=0.0)
+                gk += tl.load(gf_ptr + row * DP + d)[:, None] * fd[None, :]
         wg = w * gk
         incl = prefix[:, None] + tl.cumsum(wg, axis=1)
         d_alpha = tl.where(keep, Tb * gk - (total[:, None] - incl) / (1.0 - alpha), 0.0)
         de = tl.where(ok & (a_raw < _MAX_ALPHA), d_alpha * alpha, 0.0)
         cross = keep & (Tb > _T_MEDIAN) & (Ta <= _T_MEDIAN)
         dz = w * gz[:, None] + tl.where(cross, gm[:, None], 0.0)
-        d_f = tl.dot(tl.trans(w), Gf, input_precision="ieee")
-        tl.atomic_add(dfeat_ptr + g[:, None] * D + dd[None, :], d_f, mask=fmask)
+        if DOT:
+            d_f = tl.dot(tl.trans(w), Gf, input_precision="ieee")
+            tl.atomic_add(dfeat_ptr + g[:, None] * D + dd[None, :], d_f, mask=fmask)
+        else:
+            for d in tl.static_range(D):
+                gd = tl.load(gf_ptr + row * DP + d)
+                tl.atomic_add(dfeat_ptr + g * D + d, tl.sum(w * gd[:, None], axis=0), mask=valid)
         base = dprm_ptr + g * Q
         if SURFEL:
             tl.atomic_add(base + 2, tl.sum(de, axis=0), mask=valid)
@@ -385,7 +400,7 @@ class _Composite(torch.autograd.Function):
             prm, feats, gids, offsets, outf, outz,
             gf.float().contiguous(), gz.float().contiguous(), gm.float().contiguous(),
             dprm, dfeat, tiles_x, width, height, near, inv_sq,
-            Q=prm.shape[1], D=D, DP=DP, TS=ts, K=_K_BWD, SURFEL=ctx.surfel,
+            Q=prm.shape[1], D=D, DP=DP, TS=ts, K=_K_BWD, SURFEL=ctx.surfel, DOT=_BWD_DOT,
             num_warps=_WARPS_BWD if ts == 16 else 2,
         )  # fmt: skip
         return dprm, dfeat, None, None, None, None
