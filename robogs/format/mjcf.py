@@ -186,10 +186,18 @@ PLANAR_SETTINGS = ContactSettings(
     footprint_torsion=True,
     solreffriction=(0.01, 1.0),
     z_ballast=9.0,
-    pusher_dampratio=2.0,
+    pusher_dampratio=1.7,
+    pusher_timeconst_steps=3.0,
 )
 """Contact settings of the planar joint set (see ``robogs.physics.engines.mujoco_engine``,
-"Planar joint set", and "Strike launch")."""
+"Planar joint set", "Strike launch" and "Friction bias of centred pushes"). The pusher pair
+(3 ms, damping ratio 1.7; it was 4 ms x 2) is overdamped, so a strike stays plastic, with a slow
+mode of 15 ms instead of 30 ms: a strike's compression has relaxed when the pusher brakes, and
+the struck box leaves at the pusher's speed (MuJoCo's table friction read +2.8 % high with the
+old pair, +1.1 % with this one; ``bench/RESULTS.md``, "issue 16 (h42)" and "(h44)"). It became
+the default once ``prepare`` stopped rounding sharp brakes of noise-free drives
+(:func:`robogs.physics.smoothing.drive_windows`), which the old pair's bias had hidden on the
+two-object fit."""
 
 
 def ballast_contact(
