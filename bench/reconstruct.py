@@ -381,8 +381,9 @@ def device_vs_cpu(args: argparse.Namespace, tmp: Path) -> dict:
     lo, hi = every, n_cpu
     w_dev, w_cpu = _window(dev, lo, hi), _window(cpu, lo, hi)
     print(
-        f"  {args.device}: {args.iterations} steps, training {dev['train_s']:.1f} s = "
-        f"{dev['ms_per_step']:.1f} ms/step ({dev['gaussians']} Gaussians at the end); "
+        f"  {args.device} (device run): {args.iterations} steps, training {dev['train_s']:.1f} s = "
+        f"{dev['ms_per_step']:.1f} ms/step (warm-up steps included; {dev['gaussians']} Gaussians "
+        f"written); "
         f"held-out PSNR {dev['psnr_db']:.2f} dB; whole reconstruction {dev['wall_s']:.1f} s "
         f"(init {dev['timings_s']['init']:.1f}, mesh {dev['timings_s']['mesh']:.1f})"
     )
@@ -402,18 +403,18 @@ def device_vs_cpu(args: argparse.Namespace, tmp: Path) -> dict:
         proj = None
         print(
             f"  cpu: {n_cpu} steps, training {cpu['train_s']:.1f} s = {cpu['ms_per_step']:.1f} "
-            f"ms/step ({cpu['gaussians']} Gaussians); held-out PSNR {cpu['psnr_db']:.2f} dB"
+            f"ms/step ({cpu['gaussians']} Gaussians written); held-out PSNR {cpu['psnr_db']:.2f} dB"
         )
     ratio = None if not (w_dev and w_cpu) else w_cpu / w_dev
     if ratio is not None:
         print(
             f"  steps {lo + 1}-{hi}, the same on both: {args.device} {w_dev:.2f} ms/step "
             f"({dev['marks'][hi][1]:.0f} Gaussians at step {hi}), cpu {w_cpu:.2f} ms/step "
-            f"({cpu['marks'][hi][1]:.0f}) -> {args.device} is {ratio:.1f}x faster"
+            f"({cpu['marks'][hi][1]:.0f}) -> speed ratio {ratio:.1f} (cpu time / {args.device} time)"
         )
     if not cpu["stopped"]:
         print(
-            f"  whole training: {args.device} {cpu['train_s'] / dev['train_s']:.1f}x faster; "
+            f"  whole training: speed ratio {cpu['train_s'] / dev['train_s']:.1f} (cpu / {args.device}); "
             f"held-out PSNR {args.device} - cpu = {dev['psnr_db'] - cpu['psnr_db']:+.2f} dB"
         )
     for f in (dev, cpu):
