@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import importlib
+import inspect
 import math
 import sys
 import warnings
@@ -208,13 +209,16 @@ def test_gradient_stats_scale_matches_the_ndc_norm():
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 @pytest.mark.parametrize("backend", ["torch", "triton"])
 def test_on_cuda_the_step_modules_never_wait_for_the_device(backend: str):
-    """CUDA's sync debug mode flags every synchronising call (``.item()``, a pageable
-    host-to-device copy, ``nonzero``); those made from the step's own modules must be the
-    gathers alone. The renderer's syncs (tile binning) are its own and not counted here."""
+    """CUDA's sync debug mode flags every synchronising call (``.item()``, ``.tolist()``, a
+    pageable host-to-device copy, ``nonzero``). From the step's own modules only the gathers
+    (one per ``log_every`` steps) and the moves of the views before the loop (at most two per
+    view) may sync: a sync per step would flag at least ``steps`` more. The renderer's own
+    syncs (tile binning) are not counted here."""
     if backend not in available_backends():
         pytest.skip(f"backend {backend!r} unavailable here")
-    views, init = _scene(device="cuda")
-    steps, every = 8, 4
+    views, init = _scene(device="cuda")  # the views stay on the host: train moves them
+    steps, every = 12, 4
+    train(views, init, _cfg(2, 1, backend=backend), extent=1.0)  # compile kernels, fill caches
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         torch.cuda.set_sync_debug_mode("warn")
@@ -229,9 +233,11 @@ def test_on_cuda_the_step_modules_never_wait_for_the_device(backend: str):
         and w.filename.startswith(_RECONSTRUCT)
         and w.filename.endswith(_STEP_MODULES)
     ]
-    gather_line = [n for n in ours if n[0] == "train.py"]
-    assert len(ours) == steps // every, ours  # the gathers, nothing else
-    assert len(set(gather_line)) == 1
+    src, first = inspect.getsourcelines(train_mod._gather)
+    in_gather = [n for n in ours if n[0] == "train.py" and first <= n[1] < first + len(src)]
+    others = [n for n in ours if n not in in_gather]
+    assert len(in_gather) == steps // every, ours
+    assert len(others) <= 2 * len(views), others
     assert len(res.psnr_history) == steps
     assert res.model.params["means"].device.type == "cuda"
 
