@@ -2,9 +2,9 @@
 # One lent-GPU session for issue 23, prepared and tried on the CPU first (see bench/RESULTS.md).
 # Carry .whl (the project's missing dependencies and a robogs wheel for its metadata, built with
 # `pip download ... -d .whl` and `pip wheel --no-deps . -w .whl`); the working tree comes first
-# on PYTHONPATH. Stages: 1 = CUDA render tests, sweep of the Triton kernels, render bench;
-# p = sweep and
-# profile only; 2 = reconstruct bench. Usage there: bash bench/device_run.sh 1|p|2|12
+# on PYTHONPATH. Stages, run in this order: 1 = CUDA render tests and the render bench; 2 = the reconstruct
+# bench (bench/device_reconstruct.sh); s = sweep of the Triton kernels and a profile.
+# Usage there: bash bench/device_run.sh [12s]
 set -u
 export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=16
 OUT=${OUT:-/tmp/robogs-device-out}
@@ -16,17 +16,17 @@ export PYTHONPATH=$PWD:/tmp/site
   python3 -c "import torch, triton; print(torch.__version__, triton.__version__, torch.cuda.get_device_name())"
   python3 -c "from robogs.format.render.backends import backend_entries as b; [print(e.name, e.status, e.reason) for e in b()]"
 } 2>&1 | tee "$OUT/env.txt"
-stage=${1:-12}
+stage=${1:-12s}
 if [[ $stage == *1* ]]; then
-  timeout 200 python3 -m pytest -q -p no:cacheprovider -n 8 tests/render/test_triton_backend.py \
+  timeout 90 python3 -m pytest -q -p no:cacheprovider -n 8 tests/render/test_triton_backend.py \
     tests/render/test_oracle.py tests/render/test_means2d_grad.py 2>&1 | tail -25 | tee "$OUT/tests.log"
-  timeout 150 python3 bench/triton_sweep.py --repeats 10 --json "$OUT/sweep.json" 2>&1 | tee "$OUT/sweep.log"
-  timeout 180 python3 bench/render.py --only gpu --device cuda --threads 16 --repeats 10 --no-append \
+  timeout 120 python3 bench/render.py --only gpu --device cuda --threads 16 --repeats 5 --no-append \
     --json "$OUT/render.json" 2>&1 | tee "$OUT/render.log"
 fi
-if [[ $stage == *p* ]]; then
-  timeout 150 python3 bench/triton_sweep.py --repeats 10 --profile --json "$OUT/sweep.json" 2>&1 | tee "$OUT/sweep.log"
-fi
 if [[ $stage == *2* ]] && [[ -f bench/device_reconstruct.sh ]]; then
-  timeout 300 bash bench/device_reconstruct.sh "$OUT" 2>&1 | tail -40 | tee "$OUT/reconstruct.log"
+  timeout 220 bash bench/device_reconstruct.sh "$OUT" 2>&1 | tail -40 | tee "$OUT/reconstruct.log"
+fi
+if [[ $stage == *s* ]]; then
+  timeout 120 python3 bench/triton_sweep.py --repeats 5 --profile --json "$OUT/sweep.json" 2>&1 \
+    | tee "$OUT/sweep.log"
 fi
