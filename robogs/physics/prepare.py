@@ -212,8 +212,8 @@ def build_drive(
     says why: the one-sided pusher contact rectifies the noise a smoother lets through, and a
     rounded braking onset releases the box too slowly). None (the default): both from the
     recorded path's own noise and sample rate (:func:`~robogs.physics.smoothing.drive_windows`:
-    80 ms and 60 ms at the scenarios' 60 um and 500 Hz, none on a noise-free path, so that a
-    clean sharp brake is not rounded).
+    80 ms and 60 ms at the scenarios' 60 um and 500 Hz or noisier, shorter on a cleaner path,
+    none on a noise-free one, so that a clean sharp brake is not rounded).
 
     The initial object pose is the median of the first static samples; a start height within
     ``z_snap`` of the resting height is snapped onto the table.
