@@ -5,7 +5,13 @@ and forward + backward 20k at 320x240 for each (K, warps) of the backward kernel
 module default). The in-run baseline is the module default configuration (first row of each
 block). Prints a table and writes ``--json``. Scenes are ``bench/render.py``'s.
 
+``--fused-projection`` adds, for 3DGS, the forward and the forward + backward at the module
+defaults with ``triton_raster._FUSED_PROJECTION`` on (the fused Triton projection of
+``triton_project.py`` instead of the torch ``project()``), against the default row of the same
+run (flag off) as the baseline.
+
 Usage: python bench/triton_sweep.py [--repeats 20] [--json PATH] [--scale 1.0]
+       [--fused-projection] [--profile]
 """
 
 from __future__ import annotations
@@ -38,6 +44,11 @@ def main() -> None:
     ap.add_argument(
         "--profile", action="store_true", help="also print the top kernels of one training step"
     )
+    ap.add_argument(
+        "--fused-projection",
+        action="store_true",
+        help="also time 3DGS with the fused Triton projection (triton_raster._FUSED_PROJECTION)",
+    )
     args = ap.parse_args()
     dev = "cuda" if torch.cuda.is_available() else "cpu"
     print(rb._device_line(dev), f"threads {torch.get_num_threads()}", f"pid {os.getpid()}")
@@ -62,6 +73,13 @@ def main() -> None:
             print(f"{kind} forward {n} @ {w}x{h} K={k} warps={warps}: {lo * 1e3:.2f} ms "
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
         tr._K_FWD, tr._WARPS_FWD = FWD[0]
+        if args.fused_projection and kind == "3dgs":
+            tr._FUSED_PROJECTION = True
+            lo, med = rb._time_device(fwd, args.repeats, dev)
+            tr._FUSED_PROJECTION = False
+            res[f"{kind} fwd 100k fused projection"] = lo
+            print(f"{kind} forward {n} @ {w}x{h} fused projection: {lo * 1e3:.2f} ms "
+                  f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
         n, w, h = max(int(20_000 * s), 10), max(int(320 * s), 16), max(int(240 * s), 16)
         g, f = rb.make_scene(n, w, seed=6, kind=kind, device=dev)
         cam = rb.make_camera(w, h, f, dev)
@@ -84,10 +102,22 @@ def main() -> None:
             print(f"{kind} fwd+bwd {n} @ {w}x{h} K={k} warps={warps} dot={dot}: {lo * 1e3:.2f} ms "
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
         tr._K_BWD, tr._WARPS_BWD, tr._BWD_DOT = BWD[0]
+        if args.fused_projection and kind == "3dgs":
+            tr._FUSED_PROJECTION = True
+            lo, med = rb._time_device(step, args.repeats, dev)
+            tr._FUSED_PROJECTION = False
+            res[f"{kind} fwd+bwd 20k fused projection"] = lo
+            print(f"{kind} fwd+bwd {n} @ {w}x{h} fused projection: {lo * 1e3:.2f} ms "
+                  f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=1))
     if args.profile:
         profile_step(dev, args.scale)
+        if args.fused_projection:
+            tr._FUSED_PROJECTION = True
+            print("-- the same step with the fused projection --")
+            profile_step(dev, args.scale)
+            tr._FUSED_PROJECTION = False
 
 
 def profile_step(dev: str, scale: float) -> None:

@@ -43,6 +43,7 @@ from .gaussians import Gaussians
 from .output import RenderOutput
 from .projection import Projected, project
 from .tiled import finish_output, visible_means2d
+from .triton_project import fused_projection_supports, project_fused
 
 __all__ = ["render_triton", "unavailable_reason", "interpreting"]
 
@@ -63,6 +64,10 @@ _Q_3DGS = 8
 _Q_2DGS = 17
 #: F.threshold of the torch backend keeps e - exp_min > this (the exact boundary alpha = 1/255)
 _THRESHOLD_EPS = tl.constexpr(-1e-30)
+#: use the fused projection of ``triton_project.py`` (3DGS, no camera-pose gradient) instead
+#: of ``project()``; off until timed on a GPU (issue 23: the torch projection's ~400 small ops
+#: and their autograd dominate the training step there)
+_FUSED_PROJECTION = False
 #: the shared constants, as compile-time values (Triton reads no other globals in kernels)
 _MAX_ALPHA = tl.constexpr(MAX_ALPHA)
 _T_MIN = tl.constexpr(TRANSMITTANCE_THRESHOLD)
@@ -437,7 +442,11 @@ def render_triton(gaussians: Gaussians, camera: Camera, config: RenderConfig) ->
         )
     H, W = camera.height, camera.width
     dtype = gaussians.means.dtype
-    proj = project(gaussians, camera, config)
+    proj = None
+    if _FUSED_PROJECTION and fused_projection_supports(gaussians, camera, config):
+        proj = project_fused(gaussians, camera, config)
+    if proj is None:
+        proj = project(gaussians, camera, config)
     proj = replace(proj, means2d=visible_means2d(proj.means2d, proj.visible))
     bins = bin_tiles(proj.bbox, proj.depth, proj.visible, W, H, ts)
     ones = torch.ones_like(proj.depth)[:, None]
