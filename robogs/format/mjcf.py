@@ -186,18 +186,17 @@ PLANAR_SETTINGS = ContactSettings(
     footprint_torsion=True,
     solreffriction=(0.01, 1.0),
     z_ballast=9.0,
-    pusher_dampratio=1.7,
-    pusher_timeconst_steps=3.0,
+    pusher_dampratio=2.0,
 )
 """Contact settings of the planar joint set (see ``robogs.physics.engines.mujoco_engine``,
 "Planar joint set", "Strike launch" and "Friction bias of centred pushes"). The pusher pair
-(3 ms, damping ratio 1.7; it was 4 ms x 2) is overdamped, so a strike stays plastic, with a slow
-mode of 15 ms instead of 30 ms: a strike's compression has relaxed when the pusher brakes, and
-the struck box leaves at the pusher's speed (MuJoCo's table friction read +2.8 % high with the
-old pair, +1.1 % with this one; ``bench/RESULTS.md``, "issue 16 (h42)" and "(h44)"). It became
-the default once ``prepare`` stopped rounding sharp brakes of noise-free drives
-(:func:`robogs.physics.smoothing.drive_windows`), which the old pair's bias had hidden on the
-two-object fit."""
+stays at ``solref``'s 4 ms with damping ratio 2 (slow mode 30 ms). 3 ms x 1.7 (slow mode 15 ms,
+``pusher_timeconst_steps=3.0, pusher_dampratio=1.7``) removes 60 % of MuJoCo's +2.8 % friction
+bias and, with ``prepare`` no longer rounding clean sharp brakes, fits the two-object scene
+within 1 % (the old pair's chain force reads +5.7 %); it is not the default because with it
+``tests/physics/test_gate_linearisation.py``'s engine oracle fails: on design B null seed 1
+MuJoCo's tilt null threshold falls to 0.32x planar's (bound 0.7; nothing reported), and the
+hidden-effect suite has not been run on it (``bench/RESULTS.md``, "issue 16 (h42)", "(h44)")."""
 
 
 def ballast_contact(

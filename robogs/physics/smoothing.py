@@ -126,9 +126,9 @@ def drive_windows(
     (:data:`DRIVE_WINDOW_REF_S`, :data:`CARRY_WINDOW_REF_S`, :data:`PATH_NOISE_REF_M`,
     :data:`PATH_RATE_REF_HZ`), never longer than the reference: a longer window rounds every
     brake further, and nothing longer was validated (design B's 120 um at 250 Hz would get
-    160 ms; on it the planar design-B null seed 16 changed its verdicts and MuJoCo's null seeds
-    3 and 4 reported anisotropic friction and viscous damping, ``bench/RESULTS.md``, "issue 16
-    (h44)"), so a path noisier than the reference keeps the reference windows, as before. A
+    160 ms; with it the planar design-B null seed 16's quadratic drag row moved from 11.5 to
+    -15.9 sigma^2 held-out, ``tests/physics/test_design_b.py``, and ``bench/RESULTS.md``, "issue
+    16 (h44)"), so a path noisier than the reference keeps the reference windows, as before. A
     noise-free path gets a window of 0 (the samples as measured: :func:`local_polynomial`
     returns its input below four sample periods), so a clean sharp brake is not rounded; a
     smoother picks the rounding back up (on a 10 m/s^2 brake the 80 ms drive's speed is 19 mm/s
