@@ -5,7 +5,7 @@ and forward + backward 20k at 320x240 for each (K, warps) of the backward kernel
 module default). The in-run baseline is the module default configuration (first row of each
 block). Prints a table and writes ``--json``. Scenes are ``bench/render.py``'s.
 
-``--fused-projection`` adds, for 3DGS, the forward and the forward + backward at the module
+``--fused-projection`` adds, for each kind, the forward and the forward + backward at the module
 defaults with ``triton_raster._FUSED_PROJECTION`` on (the fused Triton projection of
 ``triton_project.py`` instead of the torch ``project()``), against the default row of the same
 run (flag off) as the baseline.
@@ -47,7 +47,7 @@ def main() -> None:
     ap.add_argument(
         "--fused-projection",
         action="store_true",
-        help="also time 3DGS with the fused Triton projection (triton_raster._FUSED_PROJECTION)",
+        help="also time the fused Triton projection (triton_raster._FUSED_PROJECTION)",
     )
     args = ap.parse_args()
     dev = "cuda" if torch.cuda.is_available() else "cpu"
@@ -73,7 +73,7 @@ def main() -> None:
             print(f"{kind} forward {n} @ {w}x{h} K={k} warps={warps}: {lo * 1e3:.2f} ms "
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
         tr._K_FWD, tr._WARPS_FWD = FWD[0]
-        if args.fused_projection and kind == "3dgs":
+        if args.fused_projection:
             tr._FUSED_PROJECTION = True
             lo, med = rb._time_device(fwd, args.repeats, dev)
             tr._FUSED_PROJECTION = False
@@ -102,7 +102,7 @@ def main() -> None:
             print(f"{kind} fwd+bwd {n} @ {w}x{h} K={k} warps={warps} dot={dot}: {lo * 1e3:.2f} ms "
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
         tr._K_BWD, tr._WARPS_BWD, tr._BWD_DOT = BWD[0]
-        if args.fused_projection and kind == "3dgs":
+        if args.fused_projection:
             tr._FUSED_PROJECTION = True
             lo, med = rb._time_device(step, args.repeats, dev)
             tr._FUSED_PROJECTION = False

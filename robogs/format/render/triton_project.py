@@ -1,10 +1,11 @@
-"""Fused 3DGS projection for the ``triton`` backend: one Triton program per block of Gaussians,
+"""Fused projection for the ``triton`` backend: one Triton program per block of Gaussians,
 forward and a hand-derived backward (CUDA; the CPU interpreter in tests).
 
 The pure-torch :func:`~.projection.project` launches a few hundred small kernels per render and
 as many again in its autograd backward; on a GPU the training step is then bound by the CPU
 issuing them (issue 23, ``bench/RESULTS.md``). Here every per-Gaussian quantity that the
-compositor and ``finish_output`` read is computed by one kernel, elementwise over Gaussians:
+compositor and ``finish_output`` read is computed by one kernel, elementwise over Gaussians.
+3DGS:
 
 - ``p = R_cw m + t``, ``means2d = (fx p0 / z + cx, fy p1 / z + cy)`` (z = 1 outside near/far);
 - EWA splatting (Zwicker et al. 2001, as in Kerbl et al. 2023): ``Sigma2 = J R_c S S R_c^T J^T``
@@ -17,12 +18,18 @@ compositor and ``finish_output`` read is computed by one kernel, elementwise ove
 - colour from real SH up to degree 3 with the 3DGS signs (``sh.py``), direction from the camera
   centre to the mean.
 
+2DGS (Huang et al. 2024): the ray-transform rows ``Px = Tv x Tw, Py = Tw x Tu, Pa = Tu x Tv, Tw``
+of ``Tm = K [R_c s_u t_u, R_c s_v t_v, p]``, the surfel box from the dual conic joined with the
+low-pass circle (unbounded disks get the screen), normals = third axis facing the camera; means2d,
+depth, ln o, exp_min, culling and colour as for 3DGS.
+
 The backward kernel recomputes these and applies the chain rule by hand: conic -> 2D
-covariance -> (J, R_c S) -> (camera-frame mean, quaternion, log-scales); means2d and depth ->
-camera-frame mean; SH colour -> coefficients and (through the view direction) the mean;
-normals -> quaternion. Gradients with respect to the camera pose are not computed: a caller
+covariance -> (J, R_c S) -> (camera-frame mean, quaternion, log-scales), or for 2DGS the ray rows -> (cross products)
+Tm -> (K^T) the scaled axes and the camera-frame mean; means2d and depth -> camera-frame mean;
+SH colour -> coefficients and (through the view direction) the mean; normals -> quaternion.
+Gradients with respect to the camera pose are not computed: a caller
 needing them (``T_world_cam.requires_grad``) must use :func:`~.projection.project`, which
-``render_triton`` does. Only 3DGS is fused; 2DGS stays on the torch projection.
+``render_triton`` does.
 
 Arithmetic is float32, as in the compositor. Constants are the shared ones of ``constants.py``
 and ``sh.py``, passed to the kernels as compile-time values (Triton reads no other globals).
@@ -53,7 +60,7 @@ from .sh import sh_degree_of
 __all__ = ["project_fused", "fused_projection_supports"]
 
 #: Gaussians per program and warps (8 x 32 threads: one Gaussian per thread; ptxas -v for sm_90:
-#: forward 40-46 registers, backward 64-128, no spills)
+#: forward 40-48 registers, backward 64-128, no spills, 3DGS and 2DGS)
 _BLOCK = 256
 _WARPS = 8
 #: compile-time copies of the shared constants (kernels may read only constexpr globals)
@@ -79,8 +86,8 @@ _DET_FLOOR = tl.constexpr(1e-30)
 
 
 def fused_projection_supports(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> bool:
-    """Whether :func:`project_fused` covers this render (3DGS, no camera-pose gradient)."""
-    if config.kind != "3dgs" or gaussians.log_scales.shape[1] != 3:
+    """Whether :func:`project_fused` covers this render (3DGS or 2DGS, no camera-pose gradient)."""
+    if (config.kind, gaussians.log_scales.shape[1]) not in (("3dgs", 3), ("2dgs", 2)):
         return False
     if camera.T_world_cam.requires_grad and torch.is_grad_enabled():
         return False
@@ -143,9 +150,10 @@ def _sh_channel(sh_ptr, i, mask, c: tl.constexpr, basis, KS: tl.constexpr, NB: t
 @triton.jit
 def _core(
     m_ptr, q_ptr, s_ptr, cam_ptr, i, mask,
-    fx, fy, near, far, xn, xp, yn, yp, lowpass,
+    fx, fy, near, far, xn, xp, yn, yp, lowpass, NS: tl.constexpr,
 ):  # fmt: skip
-    """Geometry shared by both kernels: camera-frame mean, rotation, EWA covariance."""
+    """Geometry shared by the kernels: camera-frame mean, rotation, scales (NS of them; the
+    third is 1 for surfels) and the EWA covariance (unused, and compiled away, for surfels)."""
     mx = tl.load(m_ptr + i * 3 + 0, mask=mask, other=0.0)
     my = tl.load(m_ptr + i * 3 + 1, mask=mask, other=0.0)
     mz = tl.load(m_ptr + i * 3 + 2, mask=mask, other=1.0)
@@ -192,9 +200,11 @@ def _core(
     c20 = w20 * r00 + w21 * r10 + w22 * r20
     c21 = w20 * r01 + w21 * r11 + w22 * r21
     c22 = w20 * r02 + w21 * r12 + w22 * r22
-    ls0 = tl.load(s_ptr + i * 3 + 0, mask=mask, other=0.0)
-    ls1 = tl.load(s_ptr + i * 3 + 1, mask=mask, other=0.0)
-    ls2 = tl.load(s_ptr + i * 3 + 2, mask=mask, other=0.0)
+    ls0 = tl.load(s_ptr + i * NS + 0, mask=mask, other=0.0)
+    ls1 = tl.load(s_ptr + i * NS + 1, mask=mask, other=0.0)
+    ls2 = 0.0 * ls0
+    if NS == 3:
+        ls2 = tl.load(s_ptr + i * NS + 2, mask=mask, other=0.0)
     s0 = tl.exp(ls0)
     s1 = tl.exp(ls1)
     s2 = tl.exp(ls2)
@@ -264,7 +274,7 @@ def _project_fwd_kernel(
         c00, c01, c02, c10, c11, c12, c20, c21, c22, ls0, ls1, ls2, s0, s1, s2,
         rx, ry, tx, ty, j00, j02, j11, j12, t00, t01, t02, t10, t11, t12,
         v00, v01, v11, a, c, det, ds,
-    ) = _core(m_ptr, q_ptr, s_ptr, cam_ptr, i, mask, fx, fy, near, far, xn, xp, yn, yp, lowpass)  # fmt: skip
+    ) = _core(m_ptr, q_ptr, s_ptr, cam_ptr, i, mask, fx, fy, near, far, xn, xp, yn, yp, lowpass, 3)  # fmt: skip
     u = fx * rx + cx
     v = fy * ry + cy
     logit = tl.load(o_ptr + i, mask=mask, other=0.0)
@@ -310,126 +320,13 @@ def _project_fwd_kernel(
 
 
 @triton.jit
-def _project_bwd_kernel(
-    m_ptr, q_ptr, s_ptr, o_ptr, sh_ptr, cam_ptr,
-    gm2_ptr, gz_ptr, gconic_ptr, glo_ptr, grgb_ptr, gnrm_ptr,
-    dm_ptr, dq_ptr, ds_ptr, do_ptr, dsh_ptr,
-    n, fx, fy, near, far, xn, xp, yn, yp, lowpass,
-    KS: tl.constexpr, DEG: tl.constexpr, NB: tl.constexpr, AA: tl.constexpr,
-    BLOCK: tl.constexpr,
+def _rot_sh_mean_backward(
+    dc00, dc01, dc02, dc10, dc11, dc12, dc20, dc21, dc22, dp0, dp1, dp2,
+    qw, qx, qy, qz, qn, mx, my, mz, cam_ptr, sh_ptr, grgb_ptr, dq_ptr, dsh_ptr, dm_ptr, i, mask,
+    KS: tl.constexpr, DEG: tl.constexpr, NB: tl.constexpr,
 ):  # fmt: skip
-    i = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
-    mask = i < n
-    (
-        mx, my, mz, p0, p1, p2, in_depth, zs, qw, qx, qy, qz, qn,
-        c00, c01, c02, c10, c11, c12, c20, c21, c22, ls0, ls1, ls2, s0, s1, s2,
-        rx, ry, tx, ty, j00, j02, j11, j12, t00, t01, t02, t10, t11, t12,
-        v00, v01, v11, a, c, det, ds,
-    ) = _core(m_ptr, q_ptr, s_ptr, cam_ptr, i, mask, fx, fy, near, far, xn, xp, yn, yp, lowpass)  # fmt: skip
-    gu = tl.load(gm2_ptr + i * 2 + 0, mask=mask, other=0.0)
-    gv = tl.load(gm2_ptr + i * 2 + 1, mask=mask, other=0.0)
-    gA = tl.load(gconic_ptr + i * 3 + 0, mask=mask, other=0.0)
-    gB = tl.load(gconic_ptr + i * 3 + 1, mask=mask, other=0.0)
-    gC = tl.load(gconic_ptr + i * 3 + 2, mask=mask, other=0.0)
-    glo = tl.load(glo_ptr + i, mask=mask, other=0.0)
-    # opacity: d logsigmoid(x) / dx = sigmoid(-x)
-    logit = tl.load(o_ptr + i, mask=mask, other=0.0)
-    tl.store(do_ptr + i, glo / (1.0 + tl.exp(logit)), mask=mask)
-    # conic = (c, -b, a) / ds, ds = max(det, floor)
-    g_ds = -(gA * c - gB * v01 + gC * a) / (ds * ds)
-    da = gC / ds
-    dc = gA / ds
-    db = -gB / ds
-    dv00 = 0.0 * a
-    dv11 = 0.0 * a
-    if AA:  # ln o += 0.5 ln(max(max(det0, 0) / ds, floor))
-        det0 = v00 * v11 - v01 * v01
-        ratio = tl.maximum(det0, 0.0) / ds
-        g_ratio = tl.where(ratio >= _DET_FLOOR, 0.5 * glo / tl.maximum(ratio, _DET_FLOOR), 0.0)
-        g_det0 = tl.where(det0 >= 0.0, g_ratio / ds, 0.0)
-        g_ds -= g_ratio * ratio / ds
-        dv00 += g_det0 * v11
-        dv11 += g_det0 * v00
-        db -= 2.0 * v01 * g_det0
-    g_det = tl.where(det >= _DET_FLOOR, g_ds, 0.0)
-    da += g_det * c
-    dc += g_det * a
-    db -= 2.0 * v01 * g_det
-    dv00 += da
-    dv11 += dc
-    # cov = T T^T
-    dt00 = 2.0 * dv00 * t00 + db * t10
-    dt01 = 2.0 * dv00 * t01 + db * t11
-    dt02 = 2.0 * dv00 * t02 + db * t12
-    dt10 = 2.0 * dv11 * t10 + db * t00
-    dt11 = 2.0 * dv11 * t11 + db * t01
-    dt12 = 2.0 * dv11 * t12 + db * t02
-    # T = J M, M = R_c diag(s): dM = J^T dT, dJ = dT M^T
-    m00 = c00 * s0
-    m01 = c01 * s1
-    m02 = c02 * s2
-    m10 = c10 * s0
-    m11 = c11 * s1
-    m12 = c12 * s2
-    m20 = c20 * s0
-    m21 = c21 * s1
-    m22 = c22 * s2
-    dj00 = dt00 * m00 + dt01 * m01 + dt02 * m02
-    dj02 = dt00 * m20 + dt01 * m21 + dt02 * m22
-    dj11 = dt10 * m10 + dt11 * m11 + dt12 * m12
-    dj12 = dt10 * m20 + dt11 * m21 + dt12 * m22
-    dm00 = j00 * dt00
-    dm01 = j00 * dt01
-    dm02 = j00 * dt02
-    dm10 = j11 * dt10
-    dm11 = j11 * dt11
-    dm12 = j11 * dt12
-    dm20 = j02 * dt00 + j12 * dt10
-    dm21 = j02 * dt01 + j12 * dt11
-    dm22 = j02 * dt02 + j12 * dt12
-    # J(zs, tx, ty) and means2d
-    izs = 1.0 / zs
-    dtx = -dj02 * fx * izs
-    dty = -dj12 * fy * izs
-    g_zs = -(dj00 * fx + dj11 * fy - dj02 * fx * tx - dj12 * fy * ty) * izs * izs
-    g_rx = gu * fx + tl.where((rx >= -xn) & (rx <= xp), dtx, 0.0)
-    g_ry = gv * fy + tl.where((ry >= -yn) & (ry <= yp), dty, 0.0)
-    dp0 = g_rx * izs
-    dp1 = g_ry * izs
-    g_zs -= (g_rx * rx + g_ry * ry) * izs
-    dp2 = tl.load(gz_ptr + i, mask=mask, other=0.0) + tl.where(in_depth, g_zs, 0.0)
-    # log-scales
-    tl.store(ds_ptr + i * 3 + 0, (dm00 * c00 + dm10 * c10 + dm20 * c20) * s0, mask=mask)
-    tl.store(ds_ptr + i * 3 + 1, (dm01 * c01 + dm11 * c11 + dm21 * c21) * s1, mask=mask)
-    tl.store(ds_ptr + i * 3 + 2, (dm02 * c02 + dm12 * c12 + dm22 * c22) * s2, mask=mask)
-    # dR_c: from M and from the normal (the chosen column, times the facing sign)
-    dc00 = dm00 * s0
-    dc01 = dm01 * s1
-    dc02 = dm02 * s2
-    dc10 = dm10 * s0
-    dc11 = dm11 * s1
-    dc12 = dm12 * s2
-    dc20 = dm20 * s0
-    dc21 = dm21 * s1
-    dc22 = dm22 * s2
-    k1, k2, n0, n1, n2, facing = _normal_axis(
-        ls0, ls1, ls2, c00, c01, c02, c10, c11, c12, c20, c21, c22, p0, p1, p2
-    )
-    gn0 = tl.load(gnrm_ptr + i * 3 + 0, mask=mask, other=0.0) * facing
-    gn1 = tl.load(gnrm_ptr + i * 3 + 1, mask=mask, other=0.0) * facing
-    gn2 = tl.load(gnrm_ptr + i * 3 + 2, mask=mask, other=0.0) * facing
-    sel0 = tl.where(k1 | k2, 0.0, 1.0)
-    sel1 = tl.where(k1 & (k2 == 0), 1.0, 0.0)
-    sel2 = tl.where(k2, 1.0, 0.0)
-    dc00 += gn0 * sel0
-    dc10 += gn1 * sel0
-    dc20 += gn2 * sel0
-    dc01 += gn0 * sel1
-    dc11 += gn1 * sel1
-    dc21 += gn2 * sel1
-    dc02 += gn0 * sel2
-    dc12 += gn1 * sel2
-    dc22 += gn2 * sel2
+    """Shared tail of both backward kernels: dR_c -> quaternion, SH -> coefficients and the
+    view direction, camera-frame mean -> world mean; stores d quats, d sh, d means."""
     # R_c = W R: dR = W^T dR_c
     w00 = tl.load(cam_ptr + 0)
     w01 = tl.load(cam_ptr + 1)
@@ -550,6 +447,309 @@ def _project_bwd_kernel(
     tl.store(dm_ptr + i * 3 + 2, dmz, mask=mask)
 
 
+@triton.jit
+def _project_bwd_kernel(
+    m_ptr, q_ptr, s_ptr, o_ptr, sh_ptr, cam_ptr,
+    gm2_ptr, gz_ptr, gconic_ptr, glo_ptr, grgb_ptr, gnrm_ptr,
+    dm_ptr, dq_ptr, ds_ptr, do_ptr, dsh_ptr,
+    n, fx, fy, near, far, xn, xp, yn, yp, lowpass,
+    KS: tl.constexpr, DEG: tl.constexpr, NB: tl.constexpr, AA: tl.constexpr,
+    BLOCK: tl.constexpr,
+):  # fmt: skip
+    i = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+    mask = i < n
+    (
+        mx, my, mz, p0, p1, p2, in_depth, zs, qw, qx, qy, qz, qn,
+        c00, c01, c02, c10, c11, c12, c20, c21, c22, ls0, ls1, ls2, s0, s1, s2,
+        rx, ry, tx, ty, j00, j02, j11, j12, t00, t01, t02, t10, t11, t12,
+        v00, v01, v11, a, c, det, ds,
+    ) = _core(m_ptr, q_ptr, s_ptr, cam_ptr, i, mask, fx, fy, near, far, xn, xp, yn, yp, lowpass, 3)  # fmt: skip
+    gu = tl.load(gm2_ptr + i * 2 + 0, mask=mask, other=0.0)
+    gv = tl.load(gm2_ptr + i * 2 + 1, mask=mask, other=0.0)
+    gA = tl.load(gconic_ptr + i * 3 + 0, mask=mask, other=0.0)
+    gB = tl.load(gconic_ptr + i * 3 + 1, mask=mask, other=0.0)
+    gC = tl.load(gconic_ptr + i * 3 + 2, mask=mask, other=0.0)
+    glo = tl.load(glo_ptr + i, mask=mask, other=0.0)
+    # opacity: d logsigmoid(x) / dx = sigmoid(-x)
+    logit = tl.load(o_ptr + i, mask=mask, other=0.0)
+    tl.store(do_ptr + i, glo / (1.0 + tl.exp(logit)), mask=mask)
+    # conic = (c, -b, a) / ds, ds = max(det, floor)
+    g_ds = -(gA * c - gB * v01 + gC * a) / (ds * ds)
+    da = gC / ds
+    dc = gA / ds
+    db = -gB / ds
+    dv00 = 0.0 * a
+    dv11 = 0.0 * a
+    if AA:  # ln o += 0.5 ln(max(max(det0, 0) / ds, floor))
+        det0 = v00 * v11 - v01 * v01
+        ratio = tl.maximum(det0, 0.0) / ds
+        g_ratio = tl.where(ratio >= _DET_FLOOR, 0.5 * glo / tl.maximum(ratio, _DET_FLOOR), 0.0)
+        g_det0 = tl.where(det0 >= 0.0, g_ratio / ds, 0.0)
+        g_ds -= g_ratio * ratio / ds
+        dv00 += g_det0 * v11
+        dv11 += g_det0 * v00
+        db -= 2.0 * v01 * g_det0
+    g_det = tl.where(det >= _DET_FLOOR, g_ds, 0.0)
+    da += g_det * c
+    dc += g_det * a
+    db -= 2.0 * v01 * g_det
+    dv00 += da
+    dv11 += dc
+    # cov = T T^T
+    dt00 = 2.0 * dv00 * t00 + db * t10
+    dt01 = 2.0 * dv00 * t01 + db * t11
+    dt02 = 2.0 * dv00 * t02 + db * t12
+    dt10 = 2.0 * dv11 * t10 + db * t00
+    dt11 = 2.0 * dv11 * t11 + db * t01
+    dt12 = 2.0 * dv11 * t12 + db * t02
+    # T = J M, M = R_c diag(s): dM = J^T dT, dJ = dT M^T
+    m00 = c00 * s0
+    m01 = c01 * s1
+    m02 = c02 * s2
+    m10 = c10 * s0
+    m11 = c11 * s1
+    m12 = c12 * s2
+    m20 = c20 * s0
+    m21 = c21 * s1
+    m22 = c22 * s2
+    dj00 = dt00 * m00 + dt01 * m01 + dt02 * m02
+    dj02 = dt00 * m20 + dt01 * m21 + dt02 * m22
+    dj11 = dt10 * m10 + dt11 * m11 + dt12 * m12
+    dj12 = dt10 * m20 + dt11 * m21 + dt12 * m22
+    dm00 = j00 * dt00
+    dm01 = j00 * dt01
+    dm02 = j00 * dt02
+    dm10 = j11 * dt10
+    dm11 = j11 * dt11
+    dm12 = j11 * dt12
+    dm20 = j02 * dt00 + j12 * dt10
+    dm21 = j02 * dt01 + j12 * dt11
+    dm22 = j02 * dt02 + j12 * dt12
+    # J(zs, tx, ty) and means2d
+    izs = 1.0 / zs
+    dtx = -dj02 * fx * izs
+    dty = -dj12 * fy * izs
+    g_zs = -(dj00 * fx + dj11 * fy - dj02 * fx * tx - dj12 * fy * ty) * izs * izs
+    g_rx = gu * fx + tl.where((rx >= -xn) & (rx <= xp), dtx, 0.0)
+    g_ry = gv * fy + tl.where((ry >= -yn) & (ry <= yp), dty, 0.0)
+    dp0 = g_rx * izs
+    dp1 = g_ry * izs
+    g_zs -= (g_rx * rx + g_ry * ry) * izs
+    dp2 = tl.load(gz_ptr + i, mask=mask, other=0.0) + tl.where(in_depth, g_zs, 0.0)
+    # log-scales
+    tl.store(ds_ptr + i * 3 + 0, (dm00 * c00 + dm10 * c10 + dm20 * c20) * s0, mask=mask)
+    tl.store(ds_ptr + i * 3 + 1, (dm01 * c01 + dm11 * c11 + dm21 * c21) * s1, mask=mask)
+    tl.store(ds_ptr + i * 3 + 2, (dm02 * c02 + dm12 * c12 + dm22 * c22) * s2, mask=mask)
+    # dR_c: from M and from the normal (the chosen column, times the facing sign)
+    dc00 = dm00 * s0
+    dc01 = dm01 * s1
+    dc02 = dm02 * s2
+    dc10 = dm10 * s0
+    dc11 = dm11 * s1
+    dc12 = dm12 * s2
+    dc20 = dm20 * s0
+    dc21 = dm21 * s1
+    dc22 = dm22 * s2
+    k1, k2, n0, n1, n2, facing = _normal_axis(
+        ls0, ls1, ls2, c00, c01, c02, c10, c11, c12, c20, c21, c22, p0, p1, p2
+    )
+    gn0 = tl.load(gnrm_ptr + i * 3 + 0, mask=mask, other=0.0) * facing
+    gn1 = tl.load(gnrm_ptr + i * 3 + 1, mask=mask, other=0.0) * facing
+    gn2 = tl.load(gnrm_ptr + i * 3 + 2, mask=mask, other=0.0) * facing
+    sel0 = tl.where(k1 | k2, 0.0, 1.0)
+    sel1 = tl.where(k1 & (k2 == 0), 1.0, 0.0)
+    sel2 = tl.where(k2, 1.0, 0.0)
+    dc00 += gn0 * sel0
+    dc10 += gn1 * sel0
+    dc20 += gn2 * sel0
+    dc01 += gn0 * sel1
+    dc11 += gn1 * sel1
+    dc21 += gn2 * sel1
+    dc02 += gn0 * sel2
+    dc12 += gn1 * sel2
+    dc22 += gn2 * sel2
+    _rot_sh_mean_backward(
+        dc00, dc01, dc02, dc10, dc11, dc12, dc20, dc21, dc22, dp0, dp1, dp2,
+        qw, qx, qy, qz, qn, mx, my, mz, cam_ptr, sh_ptr, grgb_ptr, dq_ptr, dsh_ptr, dm_ptr, i, mask,
+        KS, DEG, NB,
+    )  # fmt: skip
+
+
+@triton.jit
+def _surfel_fwd_kernel(
+    m_ptr, q_ptr, s_ptr, o_ptr, sh_ptr, cam_ptr,
+    m2_ptr, z_ptr, ray_ptr, lo_ptr, emin_ptr, bbox_ptr, vis_ptr, rgb_ptr, nrm_ptr,
+    n, fx, fy, cx, cy, near, far, inv_sq, width, height,
+    KS: tl.constexpr, DEG: tl.constexpr, NB: tl.constexpr, BLOCK: tl.constexpr,
+):  # fmt: skip
+    """2DGS (Huang et al. 2024): ray-transform rows Px, Py, Pa, Tw, the surfel box, normals."""
+    i = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+    mask = i < n
+    (
+        mx, my, mz, p0, p1, p2, in_depth, zs, qw, qx, qy, qz, qn,
+        c00, c01, c02, c10, c11, c12, c20, c21, c22, ls0, ls1, ls2, s0, s1, s2,
+        rx, ry, tx, ty, j00, j02, j11, j12, t00, t01, t02, t10, t11, t12,
+        v00, v01, v11, a, c, det, ds,
+    ) = _core(m_ptr, q_ptr, s_ptr, cam_ptr, i, mask, fx, fy, near, far, 1.0, 1.0, 1.0, 1.0, 0.0, 2)  # fmt: skip
+    u = fx * rx + cx
+    v = fy * ry + cy
+    logit = tl.load(o_ptr + i, mask=mask, other=0.0)
+    lo = tl.minimum(logit, 0.0) - tl.log(1.0 + tl.exp(-tl.abs(logit)))
+    emin = tl.maximum(lo - _MAX_EXP, _LOG_ALPHA_T)
+    rmax = 2.0 * tl.minimum(tl.maximum(lo - _LOG_ALPHA_T, 0.0), _MAX_EXP)
+    # Tm = K [R_c s_u t_u, R_c s_v t_v, p]: rows Tu, Tv, Tw
+    u0 = fx * c00 * s0 + cx * c20 * s0
+    u1 = fx * c01 * s1 + cx * c21 * s1
+    u2 = fx * p0 + cx * p2
+    v0 = fy * c10 * s0 + cy * c20 * s0
+    v1 = fy * c11 * s1 + cy * c21 * s1
+    v2 = fy * p1 + cy * p2
+    w0 = c20 * s0
+    w1 = c21 * s1
+    w2 = p2
+    base = ray_ptr + i * 12
+    tl.store(base + 0, v1 * w2 - v2 * w1, mask=mask)  # Px = Tv x Tw
+    tl.store(base + 1, v2 * w0 - v0 * w2, mask=mask)
+    tl.store(base + 2, v0 * w1 - v1 * w0, mask=mask)
+    tl.store(base + 3, w1 * u2 - w2 * u1, mask=mask)  # Py = Tw x Tu
+    tl.store(base + 4, w2 * u0 - w0 * u2, mask=mask)
+    tl.store(base + 5, w0 * u1 - w1 * u0, mask=mask)
+    tl.store(base + 6, u1 * v2 - u2 * v1, mask=mask)  # Pa = Tu x Tv
+    tl.store(base + 7, u2 * v0 - u0 * v2, mask=mask)
+    tl.store(base + 8, u0 * v1 - u1 * v0, mask=mask)
+    tl.store(base + 9, w0, mask=mask)
+    tl.store(base + 10, w1, mask=mask)
+    tl.store(base + 11, w2, mask=mask)
+    # box of the projected disk from the dual conic D = r^2 (c0 c0^T + c1 c1^T) - c2 c2^T
+    # (columns c_j of Tm), joined with the low-pass circle; unbounded disks get the screen
+    d00 = rmax * (u0 * u0 + u1 * u1) - u2 * u2
+    d11 = rmax * (v0 * v0 + v1 * v1) - v2 * v2
+    d22 = rmax * (w0 * w0 + w1 * w1) - w2 * w2
+    d02 = rmax * (u0 * w0 + u1 * w1) - u2 * w2
+    d12 = rmax * (v0 * w0 + v1 * w1) - v2 * w2
+    bounded = d22 < 0
+    d22s = tl.where(bounded, d22, -1.0)
+    xc = d02 / d22s
+    yc = d12 / d22s
+    hx = tl.sqrt(tl.maximum(xc * xc - d00 / d22s, 0.0))
+    hy = tl.sqrt(tl.maximum(yc * yc - d11 / d22s, 0.0))
+    rl = tl.sqrt(rmax / inv_sq)
+    b0 = tl.where(bounded, tl.minimum(xc - hx, u - rl), 0.0)
+    b1 = tl.where(bounded, tl.maximum(xc + hx, u + rl), width)
+    b2 = tl.where(bounded, tl.minimum(yc - hy, v - rl), 0.0)
+    b3 = tl.where(bounded, tl.maximum(yc + hy, v + rl), height)
+    fin = ((b0 - b0) == 0.0) & ((b1 - b1) == 0.0) & ((b2 - b2) == 0.0) & ((b3 - b3) == 0.0)
+    on = (b1 > 0) & (b0 < width) & (b3 > 0) & (b2 < height)
+    vis = in_depth & (lo >= _VIS_LOG_O) & on & fin
+    facing = tl.where(c02 * p0 + c12 * p1 + c22 * p2 > 0, -1.0, 1.0)
+    ux, uy, uz, dn = _view_dir(mx, my, mz, cam_ptr)
+    basis = _sh_basis(ux, uy, uz, DEG)
+    tl.store(m2_ptr + i * 2 + 0, u, mask=mask)
+    tl.store(m2_ptr + i * 2 + 1, v, mask=mask)
+    tl.store(z_ptr + i, p2, mask=mask)
+    tl.store(lo_ptr + i, lo, mask=mask)
+    tl.store(emin_ptr + i, emin, mask=mask)
+    tl.store(bbox_ptr + i * 4 + 0, b0, mask=mask)
+    tl.store(bbox_ptr + i * 4 + 1, b1, mask=mask)
+    tl.store(bbox_ptr + i * 4 + 2, b2, mask=mask)
+    tl.store(bbox_ptr + i * 4 + 3, b3, mask=mask)
+    tl.store(vis_ptr + i, vis.to(tl.int8), mask=mask)
+    tl.store(nrm_ptr + i * 3 + 0, c02 * facing, mask=mask)
+    tl.store(nrm_ptr + i * 3 + 1, c12 * facing, mask=mask)
+    tl.store(nrm_ptr + i * 3 + 2, c22 * facing, mask=mask)
+    for ch in tl.static_range(3):
+        col = _sh_channel(sh_ptr, i, mask, ch, basis, KS, NB) + 0.5
+        tl.store(rgb_ptr + i * 3 + ch, tl.maximum(col, 0.0), mask=mask)
+
+
+@triton.jit
+def _surfel_bwd_kernel(
+    m_ptr, q_ptr, s_ptr, o_ptr, sh_ptr, cam_ptr,
+    gm2_ptr, gz_ptr, gray_ptr, glo_ptr, grgb_ptr, gnrm_ptr,
+    dm_ptr, dq_ptr, ds_ptr, do_ptr, dsh_ptr,
+    n, fx, fy, cx, cy, near, far,
+    KS: tl.constexpr, DEG: tl.constexpr, NB: tl.constexpr, BLOCK: tl.constexpr,
+):  # fmt: skip
+    i = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+    mask = i < n
+    (
+        mx, my, mz, p0, p1, p2, in_depth, zs, qw, qx, qy, qz, qn,
+        c00, c01, c02, c10, c11, c12, c20, c21, c22, ls0, ls1, ls2, s0, s1, s2,
+        rx, ry, tx, ty, j00, j02, j11, j12, t00, t01, t02, t10, t11, t12,
+        v00, v01, v11, a, c, det, ds,
+    ) = _core(m_ptr, q_ptr, s_ptr, cam_ptr, i, mask, fx, fy, near, far, 1.0, 1.0, 1.0, 1.0, 0.0, 2)  # fmt: skip
+    logit = tl.load(o_ptr + i, mask=mask, other=0.0)
+    tl.store(
+        do_ptr + i, tl.load(glo_ptr + i, mask=mask, other=0.0) / (1.0 + tl.exp(logit)), mask=mask
+    )
+    u0 = fx * c00 * s0 + cx * c20 * s0
+    u1 = fx * c01 * s1 + cx * c21 * s1
+    u2 = fx * p0 + cx * p2
+    v0 = fy * c10 * s0 + cy * c20 * s0
+    v1 = fy * c11 * s1 + cy * c21 * s1
+    v2 = fy * p1 + cy * p2
+    w0 = c20 * s0
+    w1 = c21 * s1
+    w2 = p2
+    gb = gray_ptr + i * 12
+    gx0 = tl.load(gb + 0, mask=mask, other=0.0)
+    gx1 = tl.load(gb + 1, mask=mask, other=0.0)
+    gx2 = tl.load(gb + 2, mask=mask, other=0.0)
+    gy0 = tl.load(gb + 3, mask=mask, other=0.0)
+    gy1 = tl.load(gb + 4, mask=mask, other=0.0)
+    gy2 = tl.load(gb + 5, mask=mask, other=0.0)
+    ga0 = tl.load(gb + 6, mask=mask, other=0.0)
+    ga1 = tl.load(gb + 7, mask=mask, other=0.0)
+    ga2 = tl.load(gb + 8, mask=mask, other=0.0)
+    # d(a x b) with upstream g: da = b x g, db = g x a
+    # Px = Tv x Tw, Py = Tw x Tu, Pa = Tu x Tv
+    du0 = (gy1 * w2 - gy2 * w1) + (v1 * ga2 - v2 * ga1)
+    du1 = (gy2 * w0 - gy0 * w2) + (v2 * ga0 - v0 * ga2)
+    du2 = (gy0 * w1 - gy1 * w0) + (v0 * ga1 - v1 * ga0)
+    dv0 = (w1 * gx2 - w2 * gx1) + (ga1 * u2 - ga2 * u1)
+    dv1 = (w2 * gx0 - w0 * gx2) + (ga2 * u0 - ga0 * u2)
+    dv2 = (w0 * gx1 - w1 * gx0) + (ga0 * u1 - ga1 * u0)
+    dw0 = tl.load(gb + 9, mask=mask, other=0.0) + (gx1 * v2 - gx2 * v1) + (u1 * gy2 - u2 * gy1)
+    dw1 = tl.load(gb + 10, mask=mask, other=0.0) + (gx2 * v0 - gx0 * v2) + (u2 * gy0 - u0 * gy2)
+    dw2 = tl.load(gb + 11, mask=mask, other=0.0) + (gx0 * v1 - gx1 * v0) + (u0 * gy1 - u1 * gy0)
+    # column j of Tm is K col_j: d col_j = K^T d(Tm[:, j])
+    da0 = fx * du0
+    da1 = fy * dv0
+    da2 = cx * du0 + cy * dv0 + dw0
+    db0 = fx * du1
+    db1 = fy * dv1
+    db2 = cx * du1 + cy * dv1 + dw1
+    dp0 = fx * du2
+    dp1 = fy * dv2
+    dp2 = cx * du2 + cy * dv2 + dw2
+    # col_u = R_c[:, 0] s0, col_v = R_c[:, 1] s1
+    tl.store(ds_ptr + i * 2 + 0, (da0 * c00 + da1 * c10 + da2 * c20) * s0, mask=mask)
+    tl.store(ds_ptr + i * 2 + 1, (db0 * c01 + db1 * c11 + db2 * c21) * s1, mask=mask)
+    facing = tl.where(c02 * p0 + c12 * p1 + c22 * p2 > 0, -1.0, 1.0)
+    dc00 = da0 * s0
+    dc10 = da1 * s0
+    dc20 = da2 * s0
+    dc01 = db0 * s1
+    dc11 = db1 * s1
+    dc21 = db2 * s1
+    dc02 = tl.load(gnrm_ptr + i * 3 + 0, mask=mask, other=0.0) * facing
+    dc12 = tl.load(gnrm_ptr + i * 3 + 1, mask=mask, other=0.0) * facing
+    dc22 = tl.load(gnrm_ptr + i * 3 + 2, mask=mask, other=0.0) * facing
+    # means2d and depth
+    gu = tl.load(gm2_ptr + i * 2 + 0, mask=mask, other=0.0)
+    gv = tl.load(gm2_ptr + i * 2 + 1, mask=mask, other=0.0)
+    izs = 1.0 / zs
+    dp0 += gu * fx * izs
+    dp1 += gv * fy * izs
+    g_zs = -(gu * fx * rx + gv * fy * ry) * izs
+    dp2 += tl.load(gz_ptr + i, mask=mask, other=0.0) + tl.where(in_depth, g_zs, 0.0)
+    _rot_sh_mean_backward(
+        dc00, dc01, dc02, dc10, dc11, dc12, dc20, dc21, dc22, dp0, dp1, dp2,
+        qw, qx, qy, qz, qn, mx, my, mz, cam_ptr, sh_ptr, grgb_ptr, dq_ptr, dsh_ptr, dm_ptr, i, mask,
+        KS, DEG, NB,
+    )  # fmt: skip
+
+
 def _camera_args(camera: Camera) -> tuple[float, ...]:
     """(fx, fy, cx, cy, near, far, xn, xp, yn, yp) as in ``projection._fov_limits``."""
     tan_x = 0.5 * camera.width / camera.fx
@@ -582,7 +782,17 @@ class _Project(torch.autograd.Function):
         rgb = means.new_empty((n, 3))
         nrm = means.new_empty((n, 3))
         grid = (triton.cdiv(n, _BLOCK),)
-        if n:
+        surfel = log_scales.shape[1] == 2
+        if surfel:
+            conic = means.new_empty((n, 4, 3))  # the ray rows Px, Py, Pa, Tw
+        if n and surfel:
+            _surfel_fwd_kernel[grid](
+                means, quats, log_scales, logits, sh, cam,
+                m2, z, conic, lo, emin, bbox, vis, rgb, nrm,
+                n, fx, fy, cx, cy, near, far, lowpass, float(W), float(H),
+                KS=ks, DEG=deg, NB=(deg + 1) ** 2, BLOCK=_BLOCK, num_warps=_WARPS,
+            )  # fmt: skip
+        elif n:
             _project_fwd_kernel[grid](
                 means, quats, log_scales, logits, sh, cam,
                 m2, z, conic, lo, emin, bbox, vis, rgb, nrm,
@@ -607,11 +817,16 @@ class _Project(torch.autograd.Function):
         dop = torch.empty_like(logits)
         nb = (deg + 1) ** 2
         dsh = torch.empty_like(sh) if nb == ks else torch.zeros_like(sh)
-        if n:
+        grads = [t.float().contiguous() for t in (gm2, gz, gconic, glo, grgb, gnrm)]
+        if n and log_scales.shape[1] == 2:
+            _surfel_bwd_kernel[(triton.cdiv(n, _BLOCK),)](
+                means, quats, log_scales, logits, sh, cam, *grads, dm, dq, dls, dop, dsh,
+                n, fx, fy, cx, cy, near, far,
+                KS=ks, DEG=deg, NB=nb, BLOCK=_BLOCK, num_warps=_WARPS,
+            )  # fmt: skip
+        elif n:
             _project_bwd_kernel[(triton.cdiv(n, _BLOCK),)](
-                means, quats, log_scales, logits, sh, cam,
-                *(t.float().contiguous() for t in (gm2, gz, gconic, glo, grgb, gnrm)),
-                dm, dq, dls, dop, dsh,
+                means, quats, log_scales, logits, sh, cam, *grads, dm, dq, dls, dop, dsh,
                 n, fx, fy, near, far, xn, xp, yn, yp, lowpass,
                 KS=ks, DEG=deg, NB=nb, AA=aa, BLOCK=_BLOCK, num_warps=_WARPS,
             )  # fmt: skip
@@ -619,19 +834,22 @@ class _Project(torch.autograd.Function):
 
 
 def project_fused(gaussians: Gaussians, camera: Camera, config: RenderConfig) -> Projected:
-    """:func:`~.projection.project` for 3DGS by the fused kernels (float32).
+    """:func:`~.projection.project` by the fused kernels (float32; 3DGS and 2DGS).
 
     Args:
-        gaussians: N 3DGS Gaussians on a CUDA device (any device under ``TRITON_INTERPRET=1``).
+        gaussians: N Gaussians (3 or 2 log-scales per ``config.kind``) on a CUDA device (any device under ``TRITON_INTERPRET=1``).
         camera: pinhole camera (distortion ignored; its pose gets no gradient).
-        config: render options (``kind`` must be "3dgs").
+        config: render options (kind, SH degree, anti-aliasing, low-pass scale).
 
     Returns:
         The same fields as ``project``, float32, differentiable w.r.t. means, quats,
         log_scales, opacity_logits and sh; ``extra`` is passed through.
     """
     if not fused_projection_supports(gaussians, camera, config):
-        raise ValueError("project_fused covers 3DGS without camera-pose gradients only")
+        raise ValueError(
+            "project_fused covers 3DGS/2DGS Gaussians of the configured kind without camera-pose "
+            "gradients only; use projection.project"
+        )
     g = gaussians
     dev = g.means.device
     full = sh_degree_of(g.sh.shape[1])
@@ -639,7 +857,9 @@ def project_fused(gaussians: Gaussians, camera: Camera, config: RenderConfig) ->
     with torch.no_grad():
         R_cw, t_cw, centre = camera.world_to_cam(torch.float32, dev)
         cam = torch.cat([R_cw.reshape(-1), t_cw, centre]).contiguous()
-    lowpass = LOWPASS_3DGS_PX2 * config.lowpass_scale**2
+    surfel = config.kind == "2dgs"
+    # 3DGS: the low-pass added to the 2D covariance; 2DGS: the screen filter coefficient
+    lowpass = lowpass_inv_sq(config) if surfel else LOWPASS_3DGS_PX2 * config.lowpass_scale**2
     meta = (*_camera_args(camera), float(lowpass), camera.width, camera.height, int(deg))
     meta = (*meta, bool(config.antialiased))
     ins = [t.float().contiguous() for t in (g.means, g.quats, g.log_scales, g.opacity_logits)]
@@ -647,14 +867,14 @@ def project_fused(gaussians: Gaussians, camera: Camera, config: RenderConfig) ->
     m2, z, conic, lo, rgb, nrm, emin, bbox, visible = _Project.apply(*ins, sh, cam, meta)
     extra = g.extra if g.extra is not None else g.means.new_zeros((len(g), 0))
     return Projected(
-        kind="3dgs",
+        kind=config.kind,
         lowpass_inv_sq=lowpass_inv_sq(config),
         means2d=m2,
         depth=z,
         log_opacity=lo,
         exp_min=emin,
-        conic=conic,
-        ray=None,
+        conic=None if surfel else conic,
+        ray=conic if surfel else None,
         bbox=bbox,
         visible=visible,
         rgb=rgb,

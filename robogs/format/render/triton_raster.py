@@ -64,7 +64,7 @@ _Q_3DGS = 8
 _Q_2DGS = 17
 #: F.threshold of the torch backend keeps e - exp_min > this (the exact boundary alpha = 1/255)
 _THRESHOLD_EPS = tl.constexpr(-1e-30)
-#: use the fused projection of ``triton_project.py`` (3DGS, no camera-pose gradient) instead
+#: use the fused projection of ``triton_project.py`` (no camera-pose gradient) instead
 #: of ``project()``; off until timed on a GPU (issue 23: the torch projection's ~400 small ops
 #: and their autograd dominate the training step there)
 _FUSED_PROJECTION = False
