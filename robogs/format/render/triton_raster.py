@@ -166,6 +166,25 @@ def _tile_pixels(t, tiles_x, width, height, TS: tl.constexpr):
 
 
 @triton.jit
+def _blend_chunk(e, ok, T):
+    """Front-to-back blending of one [P, K] chunk from the pixels' transmittance T [P].
+
+    Returns exp(e), alpha, T after and before each pair, the stop-rule mask (a pair counts while
+    T after it stays >= 1e-4; T only falls, so the kept pairs are a prefix), the weights, the
+    median crossing (T before > 0.5 >= T after), and the pixels' T after the chunk (0 once ended).
+    """
+    a_raw = tl.exp(e)
+    alpha = tl.where(ok, tl.minimum(a_raw, _MAX_ALPHA), 0.0)
+    Ta = T[:, None] * tl.cumprod(1.0 - alpha, axis=1)
+    Tb = Ta / (1.0 - alpha)
+    keep = Ta >= _T_MIN
+    w = tl.where(keep, Tb * alpha, 0.0)
+    cross = keep & (Tb > _T_MEDIAN) & (Ta <= _T_MEDIAN)
+    T_last = tl.min(Ta, axis=1)  # a cumprod of factors <= 1 never grows: the min is the last
+    return a_raw, alpha, Ta, Tb, keep, w, cross, tl.where(T_last < _T_MIN, 0.0, T_last)
+
+
+@triton.jit
 def _forward_kernel(
     prm_ptr,
     feat_ptr,
@@ -206,11 +225,7 @@ def _forward_kernel(
             )
         else:
             e, ok, z, _, _, _, _, _ = _exponent_3dgs(prm_ptr, g, valid, x, y, Q)
-        alpha = tl.where(ok, tl.minimum(tl.exp(e), _MAX_ALPHA), 0.0)
-        Ta = T[:, None] * tl.cumprod(1.0 - alpha, axis=1)
-        Tb = Ta / (1.0 - alpha)
-        keep = Ta >= _T_MIN
-        w = tl.where(keep, Tb * alpha, 0.0)
+        _, _, _, _, _, w, cross, T = _blend_chunk(e, ok, T)
         f = tl.load(
             feat_ptr + g[:, None] * D + dd[None, :],
             mask=valid[:, None] & (dd[None, :] < D),
@@ -218,10 +233,7 @@ def _forward_kernel(
         )
         acc += tl.dot(w, f, input_precision="ieee")
         accz += tl.sum(w * z, axis=1)
-        cross = keep & (Tb > _T_MEDIAN) & (Ta <= _T_MEDIAN)
         med += tl.sum(tl.where(cross, z, 0.0), axis=1)
-        T_last = tl.min(Ta, axis=1)  # cumprod of factors <= 1 never grows: min is the last
-        T = tl.where(T_last < _T_MIN, 0.0, T_last)
         s += K
     row = t * (TS * TS) + p
     tl.store(outf_ptr + row[:, None] * DP + dd[None, :], acc)
@@ -279,12 +291,7 @@ def _backward_kernel(
             )
         else:
             e, ok, z, dx, dy, cA, cB, cC = _exponent_3dgs(prm_ptr, g, valid, x, y, Q)
-        a_raw = tl.exp(e)
-        alpha = tl.where(ok, tl.minimum(a_raw, _MAX_ALPHA), 0.0)
-        Ta = T[:, None] * tl.cumprod(1.0 - alpha, axis=1)
-        Tb = Ta / (1.0 - alpha)
-        keep = Ta >= _T_MIN
-        w = tl.where(keep, Tb * alpha, 0.0)
+        a_raw, alpha, _, Tb, keep, w, cross, T = _blend_chunk(e, ok, T)
         fmask = valid[:, None] & (dd[None, :] < D)
         if DOT:  # g . f of every pair as one [P, DP] x [DP, K] product
             f = tl.load(feat_ptr + g[:, None] * D + dd[None, :], mask=fmask, other=0.0)
@@ -298,7 +305,6 @@ def _backward_kernel(
         incl = prefix[:, None] + tl.cumsum(wg, axis=1)
         d_alpha = tl.where(keep, Tb * gk - (total[:, None] - incl) / (1.0 - alpha), 0.0)
         de = tl.where(ok & (a_raw < _MAX_ALPHA), d_alpha * alpha, 0.0)
-        cross = keep & (Tb > _T_MEDIAN) & (Ta <= _T_MEDIAN)
         dz = w * gz[:, None] + tl.where(cross, gm[:, None], 0.0)
         if DOT:
             d_f = tl.dot(tl.trans(w), Gf, input_precision="ieee")
@@ -348,8 +354,6 @@ def _backward_kernel(
             tl.atomic_add(base + 5, tl.sum(de, axis=0), mask=valid)
             tl.atomic_add(base + 7, tl.sum(dz, axis=0), mask=valid)
         prefix += tl.sum(wg, axis=1)
-        T_last = tl.min(Ta, axis=1)
-        T = tl.where(T_last < _T_MIN, 0.0, T_last)
         s += K
 
 
