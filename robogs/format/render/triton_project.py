@@ -260,6 +260,26 @@ def _view_dir(mx, my, mz, cam_ptr):
 
 
 @triton.jit
+def _store_support(lo_ptr, emin_ptr, bbox_ptr, vis_ptr, i, mask, lo, emin, b0, b1, b2, b3, vis):
+    """Store ln o, the smallest admissible exponent, the support box and the visibility."""
+    tl.store(lo_ptr + i, lo, mask=mask)
+    tl.store(emin_ptr + i, emin, mask=mask)
+    tl.store(bbox_ptr + i * 4 + 0, b0, mask=mask)
+    tl.store(bbox_ptr + i * 4 + 1, b1, mask=mask)
+    tl.store(bbox_ptr + i * 4 + 2, b2, mask=mask)
+    tl.store(bbox_ptr + i * 4 + 3, b3, mask=mask)
+    tl.store(vis_ptr + i, vis.to(tl.int8), mask=mask)
+
+
+@triton.jit
+def _store_rgb(sh_ptr, rgb_ptr, i, mask, basis, KS: tl.constexpr, NB: tl.constexpr):
+    """Store max(SH . basis + 0.5, 0) for the three colour channels."""
+    for ch in tl.static_range(3):
+        col = _sh_channel(sh_ptr, i, mask, ch, basis, KS, NB) + 0.5
+        tl.store(rgb_ptr + i * 3 + ch, tl.maximum(col, 0.0), mask=mask)
+
+
+@triton.jit
 def _project_fwd_kernel(
     m_ptr, q_ptr, s_ptr, o_ptr, sh_ptr, cam_ptr,
     m2_ptr, z_ptr, conic_ptr, lo_ptr, emin_ptr, bbox_ptr, vis_ptr, rgb_ptr, nrm_ptr,
@@ -304,19 +324,11 @@ def _project_fwd_kernel(
     tl.store(conic_ptr + i * 3 + 0, c / ds, mask=mask)
     tl.store(conic_ptr + i * 3 + 1, -v01 / ds, mask=mask)
     tl.store(conic_ptr + i * 3 + 2, a / ds, mask=mask)
-    tl.store(lo_ptr + i, lo, mask=mask)
-    tl.store(emin_ptr + i, emin, mask=mask)
-    tl.store(bbox_ptr + i * 4 + 0, b0, mask=mask)
-    tl.store(bbox_ptr + i * 4 + 1, b1, mask=mask)
-    tl.store(bbox_ptr + i * 4 + 2, b2, mask=mask)
-    tl.store(bbox_ptr + i * 4 + 3, b3, mask=mask)
-    tl.store(vis_ptr + i, vis.to(tl.int8), mask=mask)
+    _store_support(lo_ptr, emin_ptr, bbox_ptr, vis_ptr, i, mask, lo, emin, b0, b1, b2, b3, vis)
     tl.store(nrm_ptr + i * 3 + 0, n0 * facing, mask=mask)
     tl.store(nrm_ptr + i * 3 + 1, n1 * facing, mask=mask)
     tl.store(nrm_ptr + i * 3 + 2, n2 * facing, mask=mask)
-    for ch in tl.static_range(3):
-        col = _sh_channel(sh_ptr, i, mask, ch, basis, KS, NB) + 0.5
-        tl.store(rgb_ptr + i * 3 + ch, tl.maximum(col, 0.0), mask=mask)
+    _store_rgb(sh_ptr, rgb_ptr, i, mask, basis, KS, NB)
 
 
 @triton.jit
@@ -647,19 +659,11 @@ def _surfel_fwd_kernel(
     tl.store(m2_ptr + i * 2 + 0, u, mask=mask)
     tl.store(m2_ptr + i * 2 + 1, v, mask=mask)
     tl.store(z_ptr + i, p2, mask=mask)
-    tl.store(lo_ptr + i, lo, mask=mask)
-    tl.store(emin_ptr + i, emin, mask=mask)
-    tl.store(bbox_ptr + i * 4 + 0, b0, mask=mask)
-    tl.store(bbox_ptr + i * 4 + 1, b1, mask=mask)
-    tl.store(bbox_ptr + i * 4 + 2, b2, mask=mask)
-    tl.store(bbox_ptr + i * 4 + 3, b3, mask=mask)
-    tl.store(vis_ptr + i, vis.to(tl.int8), mask=mask)
+    _store_support(lo_ptr, emin_ptr, bbox_ptr, vis_ptr, i, mask, lo, emin, b0, b1, b2, b3, vis)
     tl.store(nrm_ptr + i * 3 + 0, c02 * facing, mask=mask)
     tl.store(nrm_ptr + i * 3 + 1, c12 * facing, mask=mask)
     tl.store(nrm_ptr + i * 3 + 2, c22 * facing, mask=mask)
-    for ch in tl.static_range(3):
-        col = _sh_channel(sh_ptr, i, mask, ch, basis, KS, NB) + 0.5
-        tl.store(rgb_ptr + i * 3 + ch, tl.maximum(col, 0.0), mask=mask)
+    _store_rgb(sh_ptr, rgb_ptr, i, mask, basis, KS, NB)
 
 
 @triton.jit
