@@ -3,8 +3,10 @@
 # Carry .whl (the project's missing dependencies and a robogs wheel for its metadata, built with
 # `pip download ... -d .whl` and `pip wheel --no-deps . -w .whl`); the working tree comes first
 # on PYTHONPATH. Stages, run in this order: 1 = CUDA render tests and the render bench; 2 = the reconstruct
-# bench (bench/device_reconstruct.sh); s = sweep of the Triton kernels and a profile.
-# Usage there: bash bench/device_run.sh [12s]
+# bench (bench/device_reconstruct.sh; PROJ=fused|torch picks the triton projection); s = sweep of
+# the Triton kernels and a profile; f = the fused projection: the triton tests with it switched on,
+# then the sweep's fused-projection rows and profile.
+# Usage there: bash bench/device_run.sh [12s|f2]
 set -u
 export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=16
 OUT=${OUT:-/tmp/robogs-device-out}
@@ -29,4 +31,12 @@ fi
 if [[ $stage == *s* ]]; then
   timeout 120 python3 bench/triton_sweep.py --repeats 5 --profile --json "$OUT/sweep.json" 2>&1 \
     | tee "$OUT/sweep.log"
+fi
+if [[ $stage == *f* ]]; then
+  timeout 150 python3 bench/pytest_fused_projection.py -q -p no:cacheprovider \
+    tests/render/test_triton_backend.py tests/render/test_triton_project.py \
+    tests/reconstruct/test_train_sync.py tests/reconstruct/test_model_adam.py 2>&1 | tail -25 \
+    | tee "$OUT/tests_fused.log"
+  timeout 150 python3 bench/triton_sweep.py --fused-projection --repeats 20 --profile \
+    --json "$OUT/sweep_fused.json" 2>&1 | tee "$OUT/sweep_fused.log"
 fi

@@ -425,6 +425,7 @@ def device_vs_cpu(args: argparse.Namespace, tmp: Path) -> dict:
         "device": args.device,
         "device_name": card,
         "backend": backend,
+        "triton_projection": args.triton_projection,
         "cpu_threads": torch.get_num_threads(),
         "cpu_count": os.cpu_count(),
         "torch": torch.__version__,
@@ -543,10 +544,23 @@ def main() -> None:
         "--backend", default="auto", help="render backend of training (auto: triton on CUDA)"
     )
     ap.add_argument("--log-every", type=int, default=50, help="steps between PSNR gathers")
+    ap.add_argument(
+        "--triton-projection",
+        choices=("default", "fused", "torch"),
+        default="default",
+        help="the triton backend's projection: the module default, the fused Triton kernels "
+        "(triton_project.py) or torch's project()",
+    )
     ap.add_argument("--skip-tsdf", action="store_true", help="leave out part 1 (TSDF fusion)")
     ap.add_argument("--json", default=None, help="append the figures as one JSON line to this file")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
+    if args.triton_projection != "default":
+        try:
+            from robogs.format.render import triton_raster
+        except ImportError as e:
+            raise SystemExit(f"--triton-projection needs triton: {e}") from None
+        triton_raster._FUSED_PROJECTION = args.triton_projection == "fused"
     compare = args.device != "cpu" or args.cpu_baseline_iterations is not None or args.same_steps
 
     from robogs.format.render import Camera

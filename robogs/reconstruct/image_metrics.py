@@ -72,10 +72,13 @@ def ssim_map(a: torch.Tensor, b: torch.Tensor, *, data_range: float = 1.0) -> to
     x, y = _as_bchw(a), _as_bchw(b)
     w = _window_on(x.dtype, x.device)
     c1, c2 = (_K1 * data_range) ** 2, (_K2 * data_range) ** 2
-    mx, my = _blur(x, w), _blur(y, w)
-    vx = _blur(x * x, w) - mx * mx
-    vy = _blur(y * y, w) - my * my
-    cxy = _blur(x * y, w) - mx * my
+    # the five moments blurred in one grouped convolution (one launch instead of five on a GPU)
+    c = x.shape[1]
+    blurred = _blur(torch.cat([x, y, x * x, y * y, x * y], dim=1), w)
+    mx, my, sxx, syy, sxy = blurred.split(c, dim=1)
+    vx = sxx - mx * mx
+    vy = syy - my * my
+    cxy = sxy - mx * my
     return ((2 * mx * my + c1) * (2 * cxy + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2))
 
 
