@@ -2,11 +2,11 @@
 # One lent-GPU session for issue 23, prepared and tried on the CPU first (see bench/RESULTS.md).
 # Carry .whl (the project's missing dependencies and a robogs wheel for its metadata, built with
 # `pip download ... -d .whl` and `pip wheel --no-deps . -w .whl`); the working tree comes first
-# on PYTHONPATH. Stages, run in this order: 1 = CUDA render tests and the render bench; 2 = the reconstruct
-# bench (bench/device_reconstruct.sh; PROJ=fused|torch picks the triton projection); s = sweep of
-# the Triton kernels and a profile; f = the fused projection: the triton tests with it switched on,
-# then the sweep's fused-projection rows and profile.
-# Usage there: bash bench/device_run.sh [12s|f2]
+# on PYTHONPATH. Stages, run in this order: 1 = CUDA render and training-step tests; 2 = the reconstruct
+# bench (bench/device_reconstruct.sh; PROJ=fused|torch picks the triton projection); r = the render
+# bench against the CPU; s = sweep of
+# the Triton kernels (and the other projection than the default) and a profile.
+# Usage there: bash bench/device_run.sh [12rs]
 set -u
 export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=16
 OUT=${OUT:-/tmp/robogs-device-out}
@@ -18,25 +18,22 @@ export PYTHONPATH=$PWD:/tmp/site
   python3 -c "import torch, triton; print(torch.__version__, triton.__version__, torch.cuda.get_device_name())"
   python3 -c "from robogs.format.render.backends import backend_entries as b; [print(e.name, e.status, e.reason) for e in b()]"
 } 2>&1 | tee "$OUT/env.txt"
-stage=${1:-12s}
+stage=${1:-12rs}
 if [[ $stage == *1* ]]; then
-  timeout 90 python3 -m pytest -q -p no:cacheprovider -n 8 tests/render/test_triton_backend.py \
-    tests/render/test_oracle.py tests/render/test_means2d_grad.py 2>&1 | tail -25 | tee "$OUT/tests.log"
-  timeout 120 python3 bench/render.py --only gpu --device cuda --threads 16 --repeats 5 --no-append \
-    --json "$OUT/render.json" 2>&1 | tee "$OUT/render.log"
+  timeout 150 python3 -m pytest -q -p no:cacheprovider -n 8 tests/render/test_triton_backend.py \
+    tests/render/test_triton_project.py tests/render/test_oracle.py tests/render/test_means2d_grad.py \
+    tests/reconstruct/test_step_loss.py tests/reconstruct/test_model_adam.py 2>&1 | tail -25 \
+    | tee "$OUT/tests.log"
 fi
 if [[ $stage == *2* ]] && [[ -f bench/device_reconstruct.sh ]]; then
   timeout 220 bash bench/device_reconstruct.sh "$OUT" 2>&1 | tail -40 | tee "$OUT/reconstruct.log"
 fi
-if [[ $stage == *s* ]]; then
-  timeout 120 python3 bench/triton_sweep.py --repeats 5 --profile --json "$OUT/sweep.json" 2>&1 \
-    | tee "$OUT/sweep.log"
+if [[ $stage == *r* ]]; then
+  timeout 120 python3 bench/render.py --only gpu --device cuda --threads 16 --repeats 5 --no-append \
+    --json "$OUT/render.json" 2>&1 | tee "$OUT/render.log"
 fi
-if [[ $stage == *f* ]]; then
-  timeout 150 python3 bench/pytest_fused_projection.py -q -p no:cacheprovider \
-    tests/render/test_triton_backend.py tests/render/test_triton_project.py \
-    tests/reconstruct/test_train_sync.py tests/reconstruct/test_model_adam.py 2>&1 | tail -25 \
-    | tee "$OUT/tests_fused.log"
-  timeout 150 python3 bench/triton_sweep.py --fused-projection --repeats 20 --profile \
-    --json "$OUT/sweep_fused.json" 2>&1 | tee "$OUT/sweep_fused.log"
+if [[ $stage == *s* ]]; then
+  timeout 150 python3 bench/triton_sweep.py --repeats 20 --fused-projection --profile \
+    --json "$OUT/sweep.json" 2>&1 \
+    | tee "$OUT/sweep.log"
 fi

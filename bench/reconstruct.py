@@ -312,6 +312,7 @@ def _timed_reconstruct(
             checkpoint_every=0,
             log_every=args.log_every,
             backend=args.backend,
+            cuda_graphs=not args.no_cuda_graphs,
         ),
         lr_scale=args.lr_scale,
         tsdf_resolution=args.tsdf_res,
@@ -426,6 +427,7 @@ def device_vs_cpu(args: argparse.Namespace, tmp: Path) -> dict:
         "device_name": card,
         "backend": backend,
         "triton_projection": args.triton_projection,
+        "cuda_graphs": not args.no_cuda_graphs,
         "cpu_threads": torch.get_num_threads(),
         "cpu_count": os.cpu_count(),
         "torch": torch.__version__,
@@ -544,6 +546,11 @@ def main() -> None:
         "--backend", default="auto", help="render backend of training (auto: triton on CUDA)"
     )
     ap.add_argument("--log-every", type=int, default=50, help="steps between PSNR gathers")
+    ap.add_argument(
+        "--no-cuda-graphs",
+        action="store_true",
+        help="train without capturing the step loss as CUDA graphs (TrainConfig.cuda_graphs)",
+    )
     ap.add_argument(
         "--triton-projection",
         choices=("default", "fused", "torch"),

@@ -6,9 +6,9 @@ module default). The in-run baseline is the module default configuration (first 
 block). Prints a table and writes ``--json``. Scenes are ``bench/render.py``'s.
 
 ``--fused-projection`` adds, for each kind, the forward and the forward + backward at the module
-defaults with ``triton_raster._FUSED_PROJECTION`` on (the fused Triton projection of
-``triton_project.py`` instead of the torch ``project()``), against the default row of the same
-run (flag off) as the baseline.
+defaults with the other projection than the module's default (``triton_raster._FUSED_PROJECTION``:
+the fused Triton projection of ``triton_project.py`` or the torch ``project()``), against the
+default row of the same run as the baseline.
 
 Usage: python bench/triton_sweep.py [--repeats 20] [--json PATH] [--scale 1.0]
        [--fused-projection] [--profile]
@@ -47,10 +47,12 @@ def main() -> None:
     ap.add_argument(
         "--fused-projection",
         action="store_true",
-        help="also time the fused Triton projection (triton_raster._FUSED_PROJECTION)",
+        help="also time the other projection (fused Triton or torch; triton_raster._FUSED_PROJECTION)",
     )
     args = ap.parse_args()
     dev = "cuda" if torch.cuda.is_available() else "cpu"
+    default_fused = tr._FUSED_PROJECTION
+    other = "torch projection" if default_fused else "fused projection"
     print(rb._device_line(dev), f"threads {torch.get_num_threads()}", f"pid {os.getpid()}")
     res: dict[str, float] = {}
     s = args.scale
@@ -74,11 +76,11 @@ def main() -> None:
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
         tr._K_FWD, tr._WARPS_FWD = FWD[0]
         if args.fused_projection:
-            tr._FUSED_PROJECTION = True
+            tr._FUSED_PROJECTION = not default_fused
             lo, med = rb._time_device(fwd, args.repeats, dev)
-            tr._FUSED_PROJECTION = False
-            res[f"{kind} fwd 100k fused projection"] = lo
-            print(f"{kind} forward {n} @ {w}x{h} fused projection: {lo * 1e3:.2f} ms "
+            tr._FUSED_PROJECTION = default_fused
+            res[f"{kind} fwd 100k {other}"] = lo
+            print(f"{kind} forward {n} @ {w}x{h} {other}: {lo * 1e3:.2f} ms "
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
         n, w, h = max(int(20_000 * s), 10), max(int(320 * s), 16), max(int(240 * s), 16)
         g, f = rb.make_scene(n, w, seed=6, kind=kind, device=dev)
@@ -103,21 +105,21 @@ def main() -> None:
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
         tr._K_BWD, tr._WARPS_BWD, tr._BWD_DOT = BWD[0]
         if args.fused_projection:
-            tr._FUSED_PROJECTION = True
+            tr._FUSED_PROJECTION = not default_fused
             lo, med = rb._time_device(step, args.repeats, dev)
-            tr._FUSED_PROJECTION = False
-            res[f"{kind} fwd+bwd 20k fused projection"] = lo
-            print(f"{kind} fwd+bwd {n} @ {w}x{h} fused projection: {lo * 1e3:.2f} ms "
+            tr._FUSED_PROJECTION = default_fused
+            res[f"{kind} fwd+bwd 20k {other}"] = lo
+            print(f"{kind} fwd+bwd {n} @ {w}x{h} {other}: {lo * 1e3:.2f} ms "
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=1))
     if args.profile:
         profile_step(dev, args.scale)
         if args.fused_projection:
-            tr._FUSED_PROJECTION = True
-            print("-- the same step with the fused projection --")
+            tr._FUSED_PROJECTION = not default_fused
+            print(f"-- the same step with the {other} --")
             profile_step(dev, args.scale)
-            tr._FUSED_PROJECTION = False
+            tr._FUSED_PROJECTION = default_fused
 
 
 def profile_step(dev: str, scale: float) -> None:

@@ -23,6 +23,7 @@ from .image_metrics import ssim
 __all__ = [
     "photometric_loss",
     "depth_normals",
+    "pixel_rays",
     "normal_consistency",
     "depth_distortion",
     "depth_channels",
@@ -39,6 +40,33 @@ def photometric_loss(
     return (1.0 - lambda_dssim) * l1 + lambda_dssim * (1.0 - ssim(pred, target, crop=False))
 
 
+def pixel_rays(camera: Camera, dtype: torch.dtype, device: torch.device | str) -> torch.Tensor:
+    """[H, W, 2] (u, v) of each pixel centre on the z = 1 plane of the camera frame (pinhole).
+
+    A tensor rather than the camera's numbers, so that a loss built on it can be captured once
+    (CUDA graph) and replayed for every view.
+    """
+    H, W = camera.height, camera.width
+    u = (torch.arange(W, dtype=torch.float64) + 0.5 - camera.cx) / camera.fx
+    v = (torch.arange(H, dtype=torch.float64) + 0.5 - camera.cy) / camera.fy
+    uv = torch.stack([u[None, :].expand(H, W), v[:, None].expand(H, W)], dim=-1)
+    return uv.to(dtype=dtype, device=device)
+
+
+def _interior_normals(depth: torch.Tensor, rays: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Normals [H-2, W-2, 3] and valid mask of the pixels that have all four neighbours."""
+    P = torch.cat([rays * depth[..., None], depth[..., None]], dim=-1)
+    dx = P[1:-1, 2:] - P[1:-1, :-2]
+    dy = P[2:, 1:-1] - P[:-2, 1:-1]
+    n = torch.cross(dx, dy, dim=-1)
+    n = n / n.norm(dim=-1, keepdim=True).clamp(min=1e-12)
+    # face the camera: n . P < 0
+    n = torch.where(((n * P[1:-1, 1:-1]).sum(-1, keepdim=True) > 0), -n, n)
+    pos = depth > 0
+    ok = pos[1:-1, 2:] & pos[1:-1, :-2] & pos[2:, 1:-1] & pos[:-2, 1:-1]
+    return n, ok
+
+
 def depth_normals(depth: torch.Tensor, camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
     """Normals [H, W, 3] of the surface through a depth map (camera frame, facing the camera).
 
@@ -50,23 +78,8 @@ def depth_normals(depth: torch.Tensor, camera: Camera) -> tuple[torch.Tensor, to
         normals (zero on the border and where a neighbour has no depth) and the valid mask [H, W].
     """
     H, W = depth.shape
-    dt = depth.dtype
-    u = (torch.arange(W, dtype=dt, device=depth.device) + 0.5 - camera.cx) / camera.fx
-    v = (torch.arange(H, dtype=dt, device=depth.device) + 0.5 - camera.cy) / camera.fy
-    P = torch.stack([u[None, :] * depth, v[:, None] * depth, depth], dim=-1)
-    dx = P[1:-1, 2:] - P[1:-1, :-2]
-    dy = P[2:, 1:-1] - P[:-2, 1:-1]
-    n = torch.cross(dx, dy, dim=-1)
-    n = n / n.norm(dim=-1, keepdim=True).clamp(min=1e-12)
-    # face the camera: n . P < 0
-    n = torch.where(((n * P[1:-1, 1:-1]).sum(-1, keepdim=True) > 0), -n, n)
-    ok = (
-        (depth[1:-1, 2:] > 0)
-        & (depth[1:-1, :-2] > 0)
-        & (depth[2:, 1:-1] > 0)
-        & (depth[:-2, 1:-1] > 0)
-    )
-    full = torch.zeros(H, W, 3, dtype=dt, device=depth.device)
+    n, ok = _interior_normals(depth, pixel_rays(camera, depth.dtype, depth.device))
+    full = torch.zeros(H, W, 3, dtype=depth.dtype, device=depth.device)
     mask = torch.zeros(H, W, dtype=torch.bool, device=depth.device)
     full[1:-1, 1:-1] = torch.where(ok[..., None], n, 0.0)
     mask[1:-1, 1:-1] = ok
@@ -74,22 +87,22 @@ def depth_normals(depth: torch.Tensor, camera: Camera) -> tuple[torch.Tensor, to
 
 
 def normal_consistency(
-    rendered_normals: torch.Tensor, alpha: torch.Tensor, depth: torch.Tensor, camera: Camera
+    rendered_normals: torch.Tensor, alpha: torch.Tensor, depth: torch.Tensor, rays: torch.Tensor
 ) -> torch.Tensor:
     """``mean(alpha (1 - n . N))`` over pixels with a depth normal; the depth normal is detached
-    from neither side (both the surfels' orientation and their depths are pulled together)."""
-    N, ok = depth_normals(depth, camera)
-    n = rendered_normals
-    err = alpha * (1.0 - (n * N).sum(-1))
+    from neither side (both the surfels' orientation and their depths are pulled together).
+
+    Args:
+        rendered_normals: [H, W, 3] blended surfel normals, camera frame.
+        alpha: [H, W] accumulated opacity.
+        depth: [H, W] rendered depth, m.
+        rays: [H, W, 2] :func:`pixel_rays` of the render's camera.
+    """
+    N, ok = _interior_normals(depth, rays)
+    n = rendered_normals[1:-1, 1:-1]
+    err = alpha[1:-1, 1:-1] * (1.0 - (n * N).sum(-1))
     okf = ok.to(err.dtype)
     return (err * okf).sum() / okf.sum().clamp(min=1.0)
-
-
-def depth_channels(means: torch.Tensor, camera: Camera) -> torch.Tensor:
-    """[N, 2] per-Gaussian extra channels (z, z^2) of the centres in ``camera``, m and m^2."""
-    T = camera.T_world_cam.to(dtype=means.dtype, device=means.device)
-    z = (means - T[:3, 3]) @ T[:3, 2]
-    return torch.stack([z, z * z], dim=1)
 
 
 def depth_distortion(alpha: torch.Tensor, extra: torch.Tensor) -> torch.Tensor:
@@ -100,3 +113,10 @@ def depth_distortion(alpha: torch.Tensor, extra: torch.Tensor) -> torch.Tensor:
         extra: [H, W, 2] the blended :func:`depth_channels` (``S1``, ``S2``).
     """
     return (alpha * extra[..., 1] - extra[..., 0] ** 2).clamp(min=0.0).mean()
+
+
+def depth_channels(means: torch.Tensor, camera: Camera) -> torch.Tensor:
+    """[N, 2] per-Gaussian extra channels (z, z^2) of the centres in ``camera``, m and m^2."""
+    T = camera.T_world_cam.to(dtype=means.dtype, device=means.device)
+    z = (means - T[:3, 3]) @ T[:3, 2]
+    return torch.stack([z, z * z], dim=1)

@@ -30,8 +30,9 @@ from robogs.format.render.backends import get_backend
 
 from .checkpoint import load_checkpoint, save_checkpoint
 from .densify import DensifyConfig, GradientStats, refine
-from .losses import depth_channels, depth_distortion, normal_consistency, photometric_loss
+from .losses import depth_channels, pixel_rays
 from .model import GaussianModel, LearningRates
+from .step_loss import StepLoss
 from .views import View
 
 __all__ = ["TrainConfig", "TrainResult", "train", "screen_gradient", "resolve_backend"]
@@ -71,6 +72,8 @@ class TrainConfig:
             one transfer each); the last step is always logged.
         backend: render backend; ``auto`` is ``triton`` when the parameters are on a CUDA device
             and that backend is available, else ``torch`` (see :func:`resolve_backend`).
+        cuda_graphs: on a CUDA device, capture the step's loss as CUDA graphs (see
+            ``step_loss.py``; same values, two launches instead of a few hundred).
         lrs: learning rates.
         densify: densification thresholds.
     """
@@ -92,6 +95,7 @@ class TrainConfig:
     checkpoint_every: int = 500
     log_every: int = 50
     backend: str = "auto"
+    cuda_graphs: bool = True
     lrs: LearningRates = field(default_factory=LearningRates)
     densify: DensifyConfig = field(default_factory=DensifyConfig)
 
@@ -255,6 +259,14 @@ def train(
     # wait for the device (a pageable host-to-device copy synchronises the stream)
     cams = [replace(v.camera, T_world_cam=v.camera.T_world_cam.to(device)) for v in views]
     targets = [v.rgb.to(device) for v in views]
+    dtype = model.params["means"].dtype
+    # per-view pixel rays for the normal-consistency term, on the device once (see StepLoss)
+    rays = (
+        [pixel_rays(c, dtype, device) for c in cams]
+        if cfg.kind == "2dgs" and cfg.lambda_normal > 0
+        else None
+    )
+    step_loss = StepLoss(cfg.lambda_dssim, graphs=cfg.cuda_graphs)
     d_from, d_until = (
         int(cfg.densify_from * cfg.iterations),
         int(cfg.densify_until * cfg.iterations),
@@ -297,13 +309,18 @@ def train(
             )
             extra = depth_channels(model.params["means"], cam) if use_dist else None
             out = render(model.gaussians(extra), cam, config=rcfg, backend=backend)
-            loss = photometric_loss(out.rgb, target, cfg.lambda_dssim)
+            terms: list[torch.Tensor] = []
             if use_normal:
-                loss = loss + cfg.lambda_normal * normal_consistency(
-                    out.normals, out.alpha, out.depth_expected, cam
-                )
+                terms += [out.normals, out.alpha, out.depth_expected, rays[i]]  # type: ignore[index]
             if use_dist:
-                loss = loss + cfg.lambda_dist * depth_distortion(out.alpha, out.extra)
+                terms += [out.alpha, out.extra]
+            loss = step_loss(
+                out.rgb,
+                target,
+                *terms,
+                lambda_normal=cfg.lambda_normal if use_normal else 0.0,
+                lambda_dist=cfg.lambda_dist if use_dist else 0.0,
+            )
             loss.backward()
             with torch.no_grad():
                 pending.append(_psnr_on_device(out.rgb.detach().clamp(0, 1), target))

@@ -23,7 +23,14 @@ from robogs.reconstruct.views import View
 # the module, not the function ``robogs.reconstruct.train`` that the package exports
 train_mod = importlib.import_module("robogs.reconstruct.train")
 #: the modules of the training step; a host copy made from one of them is counted
-_STEP_MODULES = ("train.py", "losses.py", "densify.py", "model.py", "image_metrics.py")
+_STEP_MODULES = (
+    "train.py",
+    "losses.py",
+    "densify.py",
+    "model.py",
+    "image_metrics.py",
+    "step_loss.py",
+)
 _RECONSTRUCT = str(Path(train_mod.__file__).parent)
 #: Tensor methods that copy a value to the host (and so wait for the device)
 _HOST_COPIES = ("item", "tolist", "cpu", "numpy", "__float__", "__int__", "__bool__", "__index__")

@@ -64,10 +64,11 @@ _Q_3DGS = 8
 _Q_2DGS = 17
 #: F.threshold of the torch backend keeps e - exp_min > this (the exact boundary alpha = 1/255)
 _THRESHOLD_EPS = tl.constexpr(-1e-30)
-#: use the fused projection of ``triton_project.py`` (no camera-pose gradient) instead
-#: of ``project()``; off until timed on a GPU (issue 23: the torch projection's ~400 small ops
-#: and their autograd dominate the training step there)
-_FUSED_PROJECTION = False
+#: use the fused projection of ``triton_project.py`` instead of ``project()`` where it covers the
+#: render (``fused_projection_supports``: no camera-pose gradient). On by default since it was
+#: timed on an H200 (issue 23, bench/RESULTS.md 2026-11-27): the torch projection's ~600 small ops
+#: and their autograd bound the step there (fwd + bwd 20k at 320x240: 12.0 -> 3.95 ms)
+_FUSED_PROJECTION = True
 #: the shared constants, as compile-time values (Triton reads no other globals in kernels)
 _MAX_ALPHA = tl.constexpr(MAX_ALPHA)
 _T_MIN = tl.constexpr(TRANSMITTANCE_THRESHOLD)
