@@ -13,7 +13,7 @@ THREADS=${THREADS:-16}
 export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=$THREADS
 mkdir -p "$OUT"
 timeout 90 python3 -m pytest -q -p no:cacheprovider tests/reconstruct/test_train_sync.py 2>&1 \
-  | tail -8 | tee "$OUT/reconstruct_tests.log"
+  | tail -40 | tee "$OUT/reconstruct_tests.log"
 same=()
 [[ ${SAME_STEPS:-0} == 1 ]] && same=(--same-steps)
 python3 bench/reconstruct.py --device cuda --skip-tsdf --iterations "$ITER" \

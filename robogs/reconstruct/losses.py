@@ -44,11 +44,12 @@ def pixel_rays(camera: Camera, dtype: torch.dtype, device: torch.device | str) -
     """[H, W, 2] (u, v) of each pixel centre on the z = 1 plane of the camera frame (pinhole).
 
     A tensor rather than the camera's numbers, so that a loss built on it can be captured once
-    (CUDA graph) and replayed for every view.
+    (CUDA graph) and replayed for every view. Built on ``device`` (no host-to-device copy, which
+    would wait for the device).
     """
     H, W = camera.height, camera.width
-    u = (torch.arange(W, dtype=torch.float64) + 0.5 - camera.cx) / camera.fx
-    v = (torch.arange(H, dtype=torch.float64) + 0.5 - camera.cy) / camera.fy
+    u = (torch.arange(W, dtype=torch.float64, device=device) + 0.5 - camera.cx) / camera.fx
+    v = (torch.arange(H, dtype=torch.float64, device=device) + 0.5 - camera.cy) / camera.fy
     uv = torch.stack([u[None, :].expand(H, W), v[:, None].expand(H, W)], dim=-1)
     return uv.to(dtype=dtype, device=device)
 
