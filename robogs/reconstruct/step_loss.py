@@ -64,14 +64,20 @@ def _sample(t: torch.Tensor) -> torch.Tensor:
 class StepLoss:
     """The step loss, through one CUDA graph per (active terms, image size) where allowed.
 
+    Each graph keeps its own memory pool (about the loss's peak memory at that image size), so
+    at most ``max_graphs`` are captured; further combinations run eagerly. A training run needs
+    at most three per image size (the terms switch on at ``dist_from`` and ``normal_from``).
+
     Args:
         lambda_dssim: weight of D-SSIM.
         graphs: capture on CUDA (False: always eager).
+        max_graphs: most graphs captured.
     """
 
-    def __init__(self, lambda_dssim: float, graphs: bool = True) -> None:
+    def __init__(self, lambda_dssim: float, graphs: bool = True, max_graphs: int = 12) -> None:
         self.lambda_dssim = float(lambda_dssim)
         self.graphs = graphs
+        self.max_graphs = max_graphs
         self._graphed: dict[tuple, Callable[..., torch.Tensor]] = {}
         #: why capture was given up (None: it was not); training then runs eagerly
         self.fallback_reason: str | None = None
@@ -106,6 +112,8 @@ class StepLoss:
             tuple((tuple(a.shape), a.dtype, a.requires_grad, a.device) for a in args),
         )
         graphed = self._graphed.get(key)
+        if graphed is None and len(self._graphed) >= self.max_graphs:
+            return fn(*args)
         if graphed is None:
             try:
                 graphed = torch.cuda.make_graphed_callables(

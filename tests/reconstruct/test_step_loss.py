@@ -178,3 +178,17 @@ def test_cuda_training_with_graphs_matches_training_without():
         torch.testing.assert_close(
             with_g.model.params[k], without.model.params[k], rtol=1e-4, atol=1e-5, msg=k
         )
+
+
+@cuda
+def test_beyond_max_graphs_the_loss_runs_eagerly():
+    sl = StepLoss(LD, max_graphs=1)
+    eager = lambda *a, **kw: step_loss(*a, lambda_dssim=LD, **kw)  # noqa: E731
+    cam = _camera(0)
+    x = _images(0, dtype=torch.float32, device="cuda")
+    rays = pixel_rays(cam, torch.float32, "cuda")
+    for normal, dist in [(False, False), (True, True), (False, False), (True, True)]:
+        v_g, _ = _grads(sl, x, rays, normal, dist)
+        v_e, _ = _grads(eager, x, rays, normal, dist)
+        assert v_g == pytest.approx(v_e, rel=1e-5, abs=1e-7)
+    assert len(sl._graphed) == 1 and sl.fallback_reason is None
