@@ -43,6 +43,7 @@ from .gaussians import Gaussians
 from .output import RenderOutput
 from .projection import Projected, project
 from .tiled import finish_output, visible_means2d
+from .triton_binning import bin_tiles_triton
 from .triton_project import fused_projection_supports, project_fused
 
 __all__ = ["render_triton", "unavailable_reason", "interpreting"]
@@ -69,6 +70,9 @@ _THRESHOLD_EPS = tl.constexpr(-1e-30)
 #: timed on an H200 (issue 23, bench/RESULTS.md 2026-11-27): the torch projection's ~600 small ops
 #: and their autograd bound the step there (fwd + bwd 20k at 320x240: 12.0 -> 3.95 ms)
 _FUSED_PROJECTION = True
+#: bin with the two Triton kernels of ``triton_binning.py`` (the same lists as ``bin_tiles`` in
+#: about 14 launches instead of about 70); off until timed on a GPU
+_TRITON_BINNING = False
 #: the shared constants, as compile-time values (Triton reads no other globals in kernels)
 _MAX_ALPHA = tl.constexpr(MAX_ALPHA)
 _T_MIN = tl.constexpr(TRANSMITTANCE_THRESHOLD)
@@ -453,7 +457,8 @@ def render_triton(gaussians: Gaussians, camera: Camera, config: RenderConfig) ->
     if proj is None:
         proj = project(gaussians, camera, config)
     proj = replace(proj, means2d=visible_means2d(proj.means2d, proj.visible))
-    bins = bin_tiles(proj.bbox, proj.depth, proj.visible, W, H, ts)
+    binner = bin_tiles_triton if _TRITON_BINNING else bin_tiles
+    bins = binner(proj.bbox, proj.depth, proj.visible, W, H, ts)
     ones = torch.ones_like(proj.depth)[:, None]
     feats = torch.cat([proj.rgb, ones, proj.normals, proj.extra], dim=1).float().contiguous()
     D = feats.shape[1]
