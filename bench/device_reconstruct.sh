@@ -4,7 +4,8 @@
 # The figures go to OUT/reconstruct.json (one JSON line). Usage: bash bench/device_reconstruct.sh OUT
 # ITER (default 3000) steps on the GPU; the CPU follows the same schedule for CPU_ITER (default
 # 600) steps on THREADS (default 16) torch threads; SAME_STEPS=1 trains the CPU to ITER too;
-# PROJ (default, fused or torch) picks the triton backend's projection.
+# PROJ (default, fused or torch) picks the triton backend's projection, BIN (default, triton or
+# torch) its tile binning.
 set -u
 OUT=${1:?usage: bash bench/device_reconstruct.sh OUT}
 ITER=${ITER:-3000}
@@ -18,5 +19,5 @@ same=()
 [[ ${SAME_STEPS:-0} == 1 ]] && same=(--same-steps)
 python3 bench/reconstruct.py --device cuda --skip-tsdf --iterations "$ITER" \
   --cpu-baseline-iterations "$CPU_ITER" "${same[@]}" --threads "$THREADS" \
-  --triton-projection "${PROJ:-default}" \
+  --triton-projection "${PROJ:-default}" --triton-binning "${BIN:-default}" \
   --json "$OUT/reconstruct.json" 2>&1 | grep -v "^\s*$"

@@ -427,6 +427,7 @@ def device_vs_cpu(args: argparse.Namespace, tmp: Path) -> dict:
         "device_name": card,
         "backend": backend,
         "triton_projection": args.triton_projection,
+        "triton_binning": args.triton_binning,
         "cuda_graphs": not args.no_cuda_graphs,
         "cpu_threads": torch.get_num_threads(),
         "cpu_count": os.cpu_count(),
@@ -552,6 +553,13 @@ def main() -> None:
         help="train without capturing the step loss as CUDA graphs (TrainConfig.cuda_graphs)",
     )
     ap.add_argument(
+        "--triton-binning",
+        choices=("default", "triton", "torch"),
+        default="default",
+        help="the triton backend's tile binning: the module default, the Triton kernels "
+        "(triton_binning.py) or torch's bin_tiles()",
+    )
+    ap.add_argument(
         "--triton-projection",
         choices=("default", "fused", "torch"),
         default="default",
@@ -562,12 +570,15 @@ def main() -> None:
     ap.add_argument("--json", default=None, help="append the figures as one JSON line to this file")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    if args.triton_projection != "default":
+    if args.triton_projection != "default" or args.triton_binning != "default":
         try:
             from robogs.format.render import triton_raster
         except ImportError as e:
-            raise SystemExit(f"--triton-projection needs triton: {e}") from None
-        triton_raster._FUSED_PROJECTION = args.triton_projection == "fused"
+            raise SystemExit(f"--triton-projection/--triton-binning need triton: {e}") from None
+        if args.triton_projection != "default":
+            triton_raster._FUSED_PROJECTION = args.triton_projection == "fused"
+        if args.triton_binning != "default":
+            triton_raster._TRITON_BINNING = args.triton_binning == "triton"
     compare = args.device != "cpu" or args.cpu_baseline_iterations is not None or args.same_steps
 
     from robogs.format.render import Camera

@@ -10,8 +10,11 @@ defaults with the other projection than the module's default (``triton_raster._F
 the fused Triton projection of ``triton_project.py`` or the torch ``project()``), against the
 default row of the same run as the baseline.
 
+``--triton-binning`` does the same with ``triton_raster._TRITON_BINNING`` (the Triton kernels of
+``triton_binning.py`` or torch's ``bin_tiles``); ``--defaults-only`` skips the chunk and warps rows.
+
 Usage: python bench/triton_sweep.py [--repeats 20] [--json PATH] [--scale 1.0]
-       [--fused-projection] [--profile]
+       [--fused-projection] [--triton-binning] [--defaults-only] [--profile]
 """
 
 from __future__ import annotations
@@ -49,10 +52,28 @@ def main() -> None:
         action="store_true",
         help="also time the other projection (fused Triton or torch; triton_raster._FUSED_PROJECTION)",
     )
+    ap.add_argument(
+        "--triton-binning",
+        action="store_true",
+        help="also time the other binning (Triton kernels or torch; triton_raster._TRITON_BINNING)",
+    )
+    ap.add_argument(
+        "--defaults-only",
+        action="store_true",
+        help="time the module's chunk and warps only (no sweep of them)",
+    )
     args = ap.parse_args()
     dev = "cuda" if torch.cuda.is_available() else "cpu"
-    default_fused = tr._FUSED_PROJECTION
-    other = "torch projection" if default_fused else "fused projection"
+    # (module flag, label of the flipped setting): each flipped against the default row
+    variants = []
+    if args.fused_projection:
+        flip = "torch projection" if tr._FUSED_PROJECTION else "fused projection"
+        variants.append(("_FUSED_PROJECTION", flip))
+    if args.triton_binning:
+        flip = "torch binning" if tr._TRITON_BINNING else "triton binning"
+        variants.append(("_TRITON_BINNING", flip))
+    fwd_cfgs = FWD[:1] if args.defaults_only else FWD
+    bwd_cfgs = BWD[:1] if args.defaults_only else BWD
     print(rb._device_line(dev), f"threads {torch.get_num_threads()}", f"pid {os.getpid()}")
     res: dict[str, float] = {}
     s = args.scale
@@ -62,7 +83,7 @@ def main() -> None:
         cam = rb.make_camera(w, h, f, dev)
         cfg = RenderConfig(kind=kind, validate=False, tile_size=16)
         base = None
-        for k, warps in FWD:
+        for k, warps in fwd_cfgs:
             tr._K_FWD, tr._WARPS_FWD = k, warps
 
             def fwd(g=g, cam=cam, cfg=cfg) -> None:
@@ -75,12 +96,10 @@ def main() -> None:
             print(f"{kind} forward {n} @ {w}x{h} K={k} warps={warps}: {lo * 1e3:.2f} ms "
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
         tr._K_FWD, tr._WARPS_FWD = FWD[0]
-        if args.fused_projection:
-            tr._FUSED_PROJECTION = not default_fused
-            lo, med = rb._time_device(fwd, args.repeats, dev)
-            tr._FUSED_PROJECTION = default_fused
-            res[f"{kind} fwd 100k {other}"] = lo
-            print(f"{kind} forward {n} @ {w}x{h} {other}: {lo * 1e3:.2f} ms "
+        for attr, label in variants:
+            lo, med = _flipped(attr, fwd, args.repeats, dev)
+            res[f"{kind} fwd 100k {label}"] = lo
+            print(f"{kind} forward {n} @ {w}x{h} {label}: {lo * 1e3:.2f} ms "
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
         n, w, h = max(int(20_000 * s), 10), max(int(320 * s), 16), max(int(240 * s), 16)
         g, f = rb.make_scene(n, w, seed=6, kind=kind, device=dev)
@@ -89,7 +108,7 @@ def main() -> None:
         for p in leaves:
             p.requires_grad_(True)
         base = None
-        for k, warps, dot in BWD:
+        for k, warps, dot in bwd_cfgs:
             tr._K_BWD, tr._WARPS_BWD, tr._BWD_DOT = k, warps, dot
 
             def step(g=g, cam=cam, cfg=cfg, leaves=leaves) -> None:
@@ -104,22 +123,28 @@ def main() -> None:
             print(f"{kind} fwd+bwd {n} @ {w}x{h} K={k} warps={warps} dot={dot}: {lo * 1e3:.2f} ms "
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
         tr._K_BWD, tr._WARPS_BWD, tr._BWD_DOT = BWD[0]
-        if args.fused_projection:
-            tr._FUSED_PROJECTION = not default_fused
-            lo, med = rb._time_device(step, args.repeats, dev)
-            tr._FUSED_PROJECTION = default_fused
-            res[f"{kind} fwd+bwd 20k {other}"] = lo
-            print(f"{kind} fwd+bwd {n} @ {w}x{h} {other}: {lo * 1e3:.2f} ms "
+        for attr, label in variants:
+            lo, med = _flipped(attr, step, args.repeats, dev)
+            res[f"{kind} fwd+bwd 20k {label}"] = lo
+            print(f"{kind} fwd+bwd {n} @ {w}x{h} {label}: {lo * 1e3:.2f} ms "
                   f"(median {med * 1e3:.2f}); {base / lo:.2f}x the default")  # fmt: skip
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=1))
     if args.profile:
         profile_step(dev, args.scale)
-        if args.fused_projection:
-            tr._FUSED_PROJECTION = not default_fused
-            print(f"-- the same step with the {other} --")
-            profile_step(dev, args.scale)
-            tr._FUSED_PROJECTION = default_fused
+        for attr, label in variants:
+            print(f"-- the same step with the {label} --")
+            _flipped(attr, lambda: profile_step(dev, args.scale), 0, None)
+
+
+def _flipped(attr: str, fn, repeats: int, dev: str | None):
+    """``fn`` timed (or, with ``dev`` None, run) with the module flag ``attr`` flipped."""
+    before = getattr(tr, attr)
+    setattr(tr, attr, not before)
+    try:
+        return fn() if dev is None else rb._time_device(fn, repeats, dev)
+    finally:
+        setattr(tr, attr, before)
 
 
 def profile_step(dev: str, scale: float) -> None:
