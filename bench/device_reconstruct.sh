@@ -5,7 +5,7 @@
 # ITER (default 3000) steps on the GPU; the CPU follows the same schedule for CPU_ITER (default
 # 600) steps on THREADS (default 16) torch threads; SAME_STEPS=1 trains the CPU to ITER too;
 # PROJ (default, fused or torch) picks the triton backend's projection, BIN (default, triton or
-# torch) its tile binning.
+# torch) its tile binning, FIN (default, triton or torch) its output finish.
 set -u
 OUT=${1:?usage: bash bench/device_reconstruct.sh OUT}
 ITER=${ITER:-3000}
@@ -20,4 +20,5 @@ same=()
 python3 bench/reconstruct.py --device cuda --skip-tsdf --iterations "$ITER" \
   --cpu-baseline-iterations "$CPU_ITER" "${same[@]}" --threads "$THREADS" \
   --triton-projection "${PROJ:-default}" --triton-binning "${BIN:-default}" \
+  --fused-finish "${FIN:-default}" \
   --json "$OUT/reconstruct.json" 2>&1 | grep -v "^\s*$"

@@ -21,7 +21,8 @@ export PYTHONPATH=$PWD:/tmp/site
 stage=${1:-12rs}
 if [[ $stage == *1* ]]; then
   timeout 150 python3 -m pytest -q -p no:cacheprovider -n 8 tests/render/test_triton_backend.py \
-    tests/render/test_triton_project.py tests/render/test_triton_binning.py tests/render/test_oracle.py \
+    tests/render/test_triton_project.py tests/render/test_triton_binning.py \
+    tests/render/test_triton_finish.py tests/render/test_oracle.py \
     tests/render/test_means2d_grad.py \
     tests/reconstruct/test_step_loss.py tests/reconstruct/test_model_adam.py 2>&1 | tail -25 \
     | tee "$OUT/tests.log"
@@ -34,7 +35,7 @@ if [[ $stage == *r* ]]; then
     --json "$OUT/render.json" 2>&1 | tee "$OUT/render.log"
 fi
 if [[ $stage == *s* ]]; then
-  timeout 150 python3 bench/triton_sweep.py --repeats 20 --fused-projection --triton-binning \
+  timeout 150 python3 bench/triton_sweep.py --repeats 20 --fused-projection --triton-binning --fused-finish \
     --defaults-only --profile \
     --json "$OUT/sweep.json" 2>&1 \
     | tee "$OUT/sweep.log"

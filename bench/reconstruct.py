@@ -428,6 +428,7 @@ def device_vs_cpu(args: argparse.Namespace, tmp: Path) -> dict:
         "backend": backend,
         "triton_projection": args.triton_projection,
         "triton_binning": args.triton_binning,
+        "fused_finish": args.fused_finish,
         "cuda_graphs": not args.no_cuda_graphs,
         "cpu_threads": torch.get_num_threads(),
         "cpu_count": os.cpu_count(),
@@ -560,6 +561,13 @@ def main() -> None:
         "(triton_binning.py) or torch's bin_tiles()",
     )
     ap.add_argument(
+        "--fused-finish",
+        choices=("default", "triton", "torch"),
+        default="default",
+        help="the triton backend's output finish: the module default, one Triton kernel "
+        "(triton_finish.py) or torch's finish_output()",
+    )
+    ap.add_argument(
         "--triton-projection",
         choices=("default", "fused", "torch"),
         default="default",
@@ -570,15 +578,20 @@ def main() -> None:
     ap.add_argument("--json", default=None, help="append the figures as one JSON line to this file")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    if args.triton_projection != "default" or args.triton_binning != "default":
+    flags = (args.triton_projection, args.triton_binning, args.fused_finish)
+    if any(f != "default" for f in flags):
         try:
             from robogs.format.render import triton_raster
         except ImportError as e:
-            raise SystemExit(f"--triton-projection/--triton-binning need triton: {e}") from None
+            raise SystemExit(
+                f"--triton-projection/-binning, --fused-finish need triton: {e}"
+            ) from None
         if args.triton_projection != "default":
             triton_raster._FUSED_PROJECTION = args.triton_projection == "fused"
         if args.triton_binning != "default":
             triton_raster._TRITON_BINNING = args.triton_binning == "triton"
+        if args.fused_finish != "default":
+            triton_raster._FUSED_FINISH = args.fused_finish == "triton"
     compare = args.device != "cpu" or args.cpu_baseline_iterations is not None or args.same_steps
 
     from robogs.format.render import Camera

@@ -11,10 +11,13 @@ the fused Triton projection of ``triton_project.py`` or the torch ``project()``)
 default row of the same run as the baseline.
 
 ``--triton-binning`` does the same with ``triton_raster._TRITON_BINNING`` (the Triton kernels of
-``triton_binning.py`` or torch's ``bin_tiles``); ``--defaults-only`` skips the chunk and warps rows.
+``triton_binning.py`` or torch's ``bin_tiles``), ``--fused-finish`` with ``_FUSED_FINISH``
+(``triton_finish.py`` or ``finish_output``); with several, a last row flips them all together.
+``--defaults-only`` skips the chunk and warps rows.
 
 Usage: python bench/triton_sweep.py [--repeats 20] [--json PATH] [--scale 1.0]
-       [--fused-projection] [--triton-binning] [--defaults-only] [--profile]
+       [--fused-projection] [--triton-binning] [--fused-finish] [--defaults-only]
+       [--profile]
 """
 
 from __future__ import annotations
@@ -58,6 +61,11 @@ def main() -> None:
         help="also time the other binning (Triton kernels or torch; triton_raster._TRITON_BINNING)",
     )
     ap.add_argument(
+        "--fused-finish",
+        action="store_true",
+        help="also time the other finish (one Triton kernel or torch ops; triton_raster._FUSED_FINISH)",
+    )
+    ap.add_argument(
         "--defaults-only",
         action="store_true",
         help="time the module's chunk and warps only (no sweep of them)",
@@ -72,6 +80,11 @@ def main() -> None:
     if args.triton_binning:
         flip = "torch binning" if tr._TRITON_BINNING else "triton binning"
         variants.append(("_TRITON_BINNING", flip))
+    if args.fused_finish:
+        flip = "torch finish" if tr._FUSED_FINISH else "fused finish"
+        variants.append(("_FUSED_FINISH", flip))
+    if len(variants) > 1:  # and all of them flipped together
+        variants.append((tuple(a for a, _ in variants), " + ".join(lab for _, lab in variants)))
     fwd_cfgs = FWD[:1] if args.defaults_only else FWD
     bwd_cfgs = BWD[:1] if args.defaults_only else BWD
     print(rb._device_line(dev), f"threads {torch.get_num_threads()}", f"pid {os.getpid()}")
@@ -137,14 +150,17 @@ def main() -> None:
             _flipped(attr, lambda: profile_step(dev, args.scale), 0, None)
 
 
-def _flipped(attr: str, fn, repeats: int, dev: str | None):
-    """``fn`` timed (or, with ``dev`` None, run) with the module flag ``attr`` flipped."""
-    before = getattr(tr, attr)
-    setattr(tr, attr, not before)
+def _flipped(attr, fn, repeats: int, dev: str | None):
+    """``fn`` timed (or, with ``dev`` None, run) with the module flag(s) ``attr`` flipped."""
+    attrs = (attr,) if isinstance(attr, str) else attr
+    before = {a: getattr(tr, a) for a in attrs}
+    for a, v in before.items():
+        setattr(tr, a, not v)
     try:
         return fn() if dev is None else rb._time_device(fn, repeats, dev)
     finally:
-        setattr(tr, attr, before)
+        for a, v in before.items():
+            setattr(tr, a, v)
 
 
 def profile_step(dev: str, scale: float) -> None:

@@ -92,8 +92,6 @@ def finish_output(
     has = alpha > 0
     inv = 1.0 / torch.where(has, alpha, torch.ones_like(alpha))
     bg = torch.tensor(config.background, dtype=features.dtype, device=features.device)
-    radii = torch.stack([bbox[:, 1] - bbox[:, 0], bbox[:, 3] - bbox[:, 2]], dim=-1) * 0.5
-    vis = visible[:, None]
     return RenderOutput(
         rgb=rgb + (1.0 - alpha)[..., None] * bg,
         alpha=alpha,
@@ -102,5 +100,11 @@ def finish_output(
         normals=torch.where(has[..., None], normals * inv[..., None], 0.0),
         extra=extra,
         means2d=means2d,
-        radii=torch.where(vis, radii, 0.0),
+        radii=support_radii(bbox, visible),
     )
+
+
+def support_radii(bbox: torch.Tensor, visible: torch.Tensor) -> torch.Tensor:
+    """[N, 2] half extents (px) of the support boxes [N, 4]; 0 for culled Gaussians."""
+    radii = torch.stack([bbox[:, 1] - bbox[:, 0], bbox[:, 3] - bbox[:, 2]], dim=-1) * 0.5
+    return torch.where(visible[:, None], radii, 0.0)

@@ -42,8 +42,9 @@ from .constants import MAX_ALPHA, MEDIAN_TRANSMITTANCE, TRANSMITTANCE_THRESHOLD
 from .gaussians import Gaussians
 from .output import RenderOutput
 from .projection import Projected, project
-from .tiled import finish_output, visible_means2d
+from .tiled import finish_output, support_radii, visible_means2d
 from .triton_binning import bin_tiles_triton
+from .triton_finish import FinishImages
 from .triton_project import fused_projection_supports, project_fused
 
 __all__ = ["render_triton", "unavailable_reason", "interpreting"]
@@ -73,6 +74,9 @@ _FUSED_PROJECTION = True
 #: bin with the two Triton kernels of ``triton_binning.py`` (the same lists as ``bin_tiles`` in
 #: about 14 launches instead of about 70); off until timed on a GPU
 _TRITON_BINNING = False
+#: turn the tile rows into the output images with ``triton_finish.FinishImages`` (one kernel each
+#: way instead of about 35 torch ops each way); off until timed on a GPU
+_FUSED_FINISH = False
 #: the shared constants, as compile-time values (Triton reads no other globals in kernels)
 _MAX_ALPHA = tl.constexpr(MAX_ALPHA)
 _T_MIN = tl.constexpr(TRANSMITTANCE_THRESHOLD)
@@ -468,6 +472,13 @@ def render_triton(gaussians: Gaussians, camera: Camera, config: RenderConfig) ->
         meta, proj.kind == "2dgs",
     )  # fmt: skip
     ty, tx = bins.tiles_y, bins.tiles_x
+    if _FUSED_FINISH:
+        imgs = FinishImages.apply(outf, outz, outm, (tx, ty, ts, W, H), config.background, D - 7)
+        rgb, alpha, depth, median, normals, extra = (t.to(dtype) for t in imgs)
+        return RenderOutput(
+            rgb=rgb, alpha=alpha, depth_expected=depth, depth_median=median, normals=normals,
+            extra=extra, means2d=proj.means2d, radii=support_radii(proj.bbox, proj.visible),
+        )  # fmt: skip
     img = torch.cat([outf[:, :D], outz[:, None], outm[:, None]], dim=1).to(dtype)
     img = img.reshape(ty, tx, ts, ts, D + 2).permute(0, 2, 1, 3, 4).reshape(ty * ts, tx * ts, -1)
     img = img[:H, :W]
