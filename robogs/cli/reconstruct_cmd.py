@@ -30,7 +30,11 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
     p.add_argument("dataset", type=Path, help="dataset folder")
     p.add_argument("--episode", help="episode with the static views (default: the only one)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
-    p.add_argument("--device", default="cpu", help="torch device (cpu, cuda, cuda:1, ...)")
+    p.add_argument(
+        "--device",
+        default="auto",
+        help="torch device: auto (cuda when torch sees a GPU, else cpu), cpu, cuda, cuda:1, ...",
+    )
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     if verb == "evaluate":
         p.add_argument(
@@ -148,6 +152,15 @@ def _fmt(x: float, unit: str = "") -> str:
     )
 
 
+def resolve_device(name: str) -> str:
+    """``auto``: ``cuda`` when torch sees a GPU, else ``cpu``; any other name as given."""
+    import torch
+
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return name
+
+
 def run(args: argparse.Namespace) -> int:
     import torch
 
@@ -155,6 +168,7 @@ def run(args: argparse.Namespace) -> int:
         if args.threads < 1:
             raise InputError(f"--threads must be >= 1, got {args.threads}")
         torch.set_num_threads(args.threads)
+    args.device = resolve_device(args.device)
     if args.device.startswith("cuda") and not torch.cuda.is_available():
         raise InputError(
             f"device {args.device!r} requested but CUDA is not available", where="--device"
