@@ -714,7 +714,22 @@ def diagnose_recording(
             )
         )
         chk = cal.checks.get(e.name) if e.name in cal.inflation else None
-        if chk is not None and chk.factor > 1.0:
+        if chk is not None and chk.factor > 1.0 and chk.rule == "antithetic":
+            how = {
+                "data": "its fitted change is no larger than the threshold: the data's own "
+                "ratio of fit gain to linear gain",
+                "plus": f"its fitted change, shrunk x{chk.scale:.2f} along the model's path, "
+                "is absorbed by the base: the fit gain over the linear gain on the data's "
+                "own residual",
+                "antithetic": f"the noise share of three draws on the model's path (change "
+                f"x{chk.scale:.2f}) over its linear model, floored at the fits' precision "
+                f"{chk.precision:.2f} sigma^2",
+            }[chk.branch]
+            rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
+                f"null threshold scaled x{chk.factor:.2f} ({thr / chk.factor:.1f} -> {thr:.1f} "
+                f"sigma^2): {how} (the gate's linearisation check)"
+            )
+        elif chk is not None and chk.factor > 1.0:
             rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
                 f"null threshold scaled x{chk.factor:.2f} ({thr / chk.factor:.1f} -> {thr:.1f} "
                 f"sigma^2): on {len(chk.ratios)} draws (its fitted change scaled "
@@ -830,11 +845,20 @@ def _calibrate(
         if not gate_mod.needs_check(stat, cal.thresholds[e.name], ratio, dbic):
             continue
         chk = cal.checks.get(e.name)
-        if chk is None:
+        if chk is None or chk.rule != gate_mod.CHECK_RULE:
             count = [0]
 
-            def fit_draw(offset: np.ndarray, e: Effect = e, count: list[int] = count):
+            def fit_draw(
+                offset: np.ndarray,
+                mu: float | None = None,
+                e: Effect = e,
+                out: FitOutcome = out,
+                count: list[int] = count,
+            ):
                 off = torch.as_tensor(offset)
+                starts = start_points(space, e, theta0)
+                if mu is not None:  # h46: also start where the draw's change was made
+                    starts = [*starts, (1.0 - mu) * base.theta + mu * out.theta]
 
                 def fn_d(th: torch.Tensor, lo: torch.Tensor) -> torch.Tensor:
                     count[0] += 1
@@ -849,16 +873,39 @@ def _calibrate(
                     evaluate,
                     space,
                     Problem(free=list(base_cols), theta0=base.theta, local0=base.local),
-                    [(space.owner_columns(e.name), start_points(space, e, theta0))],
+                    [(space.owner_columns(e.name), starts)],
                 )
                 lc_d = gate_mod.LinearCandidate(e.name, c.jac, c.jac_local, n_base)
                 return b.cost, c.cost, lc_d, b.resid
 
+            def path(mus: np.ndarray, out: FitOutcome = out, count: list[int] = count):
+                m = np.asarray(mus, float)
+                th = (1.0 - m)[:, None] * base.theta[None] + m[:, None] * out.theta[None]
+                lo = (1.0 - m)[:, None, None] * base.local[None] + m[:, None, None] * out.local
+                count[0] += 1
+                with torch.no_grad():
+                    return fn(torch.as_tensor(th), torch.as_tensor(lo)).numpy()
+
             t0 = time.perf_counter()
             lam = gate_mod.draw_scale(base.cost - out.cost, cal.thresholds[e.name])
-            chk = gate_mod.null_draw_factor(
-                base.resid, out.resid, valid, fit_draw, signs, lam, ratio
-            )
+            if gate_mod.CHECK_RULE == "antithetic":
+                lb = gate_mod.LinearCandidate("base", base.jac, base.jac_local, n_base)
+                chk = gate_mod.antithetic_factor(
+                    base.resid,
+                    out.resid,
+                    valid,
+                    fit_draw,
+                    path,
+                    lb,
+                    lam,
+                    cal.thresholds[e.name],
+                    ratio,
+                    k,
+                )
+            else:
+                chk = gate_mod.null_draw_factor(
+                    base.resid, out.resid, valid, lambda o: fit_draw(o), signs, lam, ratio
+                )
             chk.rollouts, chk.seconds = count[0], time.perf_counter() - t0
             made = True
         cal.apply_check(e.name, chk)

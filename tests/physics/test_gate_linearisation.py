@@ -308,3 +308,180 @@ def test_mujoco_null_threshold_near_planar_on_design_b_null_seed_1():
     chk = res["mujoco"].gate["linearisation_check"]["candidates"]["table_tilt"]
     assert chk["factor"] > 1.2 and chk["scale"] == 1.0
     assert chk["draw_ratios"][0] == pytest.approx(chk["data_ratio"], rel=1e-3)
+
+
+# ---- h46: the antithetic check (gate.antithetic_factor, behind gate.CHECK_RULE) ------------
+_BASE_TOY = G.LinearCandidate("base", X[..., None], np.ones((T_N, K_N, 1)), 1)
+
+
+def _anti_toy(amp: float, seed: int, rough: bool = False) -> tuple[float, G.LinearisationCheck]:
+    """(the data's own ratio, h46's check) for a planted effect ``amp`` of the toy above."""
+    grid = np.linspace(-0.4, 0.4, 801) if rough else np.linspace(-2.0, 2.0, 801)
+    obs = _effect(amp, False) + 0.3 * X + np.random.default_rng(seed).standard_normal(X.shape)
+    c_b, c_c, a_hat, r_b = _fit(np.zeros_like(obs), obs, rough, grid)
+    r_c = _profile(_effect(a_hat, rough) - obs)
+    data = G.linear_ratio(c_b - c_c, G.linear_gain(_linear(a_hat, rough), r_b, VALID), 1)
+    lin_b, lin_c = r_b + obs, r_c + obs - _effect(a_hat, rough)  # the fitted base parts
+
+    def path(mus: np.ndarray) -> np.ndarray:
+        return np.stack(
+            [_effect(m * a_hat, rough) + (1 - m) * lin_b + m * lin_c - obs for m in mus]
+        )
+
+    def fit(off: np.ndarray, mu: float):
+        cb, cc, a, rb = _fit(off, obs, rough, grid)
+        return cb, cc, _linear(a, rough), rb
+
+    lam = G.draw_scale(c_b - c_c, THR)
+    return data, G.antithetic_factor(r_b, r_c, VALID, fit, path, _BASE_TOY, lam, THR, data, 1)
+
+
+def _linear_problem(amp: float, seed: int = 5):
+    """A linear model (``_case``'s columns) with an effect of size ``amp`` planted: its exact
+    least-squares fits as the check's ``fit`` and the straight path between them."""
+    cand, _, valid = _case(seed)
+    t_n, k, p = cand.jac.shape
+    rng = np.random.default_rng(seed + 100)
+    y = (cand.jac[..., 1:] @ np.array([amp, -0.5 * amp]) + rng.standard_normal((t_n, k))) * valid
+    m = valid.reshape(-1)
+    loc = np.zeros((t_n * k, 3 * t_n))
+    for t in range(t_n):
+        loc[t * k : (t + 1) * k, 3 * t : 3 * t + 3] = cand.jac_local[t]
+
+    def lsq(target: np.ndarray, cols: int) -> tuple[np.ndarray, np.ndarray]:
+        """(parameters: globals then locals, residual [T, K]) of ``target - A x``."""
+        a = np.concatenate([cand.jac[..., :cols].reshape(t_n * k, cols), loc], 1)
+        x, *_ = np.linalg.lstsq(a[m], target.reshape(-1)[m], rcond=None)
+        r = (target.reshape(-1) - a @ x).reshape(t_n, k) * valid
+        return x, r
+
+    x_b, r_b = lsq(y, 1)
+    x_c, r_c = lsq(y, p)
+    x_b = np.concatenate([x_b[:1], np.zeros(p - 1), x_b[1:]])
+    a_all = np.concatenate([cand.jac.reshape(t_n * k, p), loc], 1)
+
+    def path(mus: np.ndarray) -> np.ndarray:
+        return np.stack(
+            [
+                (y.reshape(-1) - a_all @ ((1 - u) * x_b + u * x_c)).reshape(t_n, k) * valid
+                for u in mus
+            ]
+        )
+
+    def fit(off: np.ndarray, mu: float):
+        _, rb = lsq(y + off, 1)
+        _, rc = lsq(y + off, p)
+        return float(np.sum(rb**2)), float(np.sum(rc**2)), cand, rb
+
+    base = G.LinearCandidate("base", cand.jac[..., :1], cand.jac_local, 1)
+    return cand, valid, r_b, r_c, fit, path, base
+
+
+def test_antithetic_share_is_the_linear_gain_on_a_linear_model():
+    """On a linear model the three draws' share ``(gain(+) + gain(-))/2 - gain(0)`` is
+    ``||P e||^2``, the linear gain of the candidate's residual, to 1e-9 whatever the size of
+    the change (the cross terms cancel), so the factor is exactly 1; the path's shrink gives
+    ``mu = lambda`` (a straight path) and the noise-free draw gains ``lambda^2`` of the fit."""
+    for amp in (1.0, 30.0):
+        cand, valid, r_b, r_c, fit, path, base = _linear_problem(amp)
+        gain = float(np.sum(r_b**2) - np.sum(r_c**2))
+        thr = 0.2 * gain
+        lam = G.draw_scale(gain, thr)
+        chk = G.antithetic_factor(r_b, r_c, valid, fit, path, base, lam, thr, 3.0, 2)
+        assert chk.branch == "antithetic" and chk.mu == pytest.approx(lam, rel=1e-9)
+        assert chk.gains[0] == pytest.approx(lam**2 * gain, rel=1e-9)
+        assert chk.share == pytest.approx(G.linear_gain(cand, r_c, valid), abs=1e-9)
+        assert chk.share == pytest.approx(chk.linears[0], abs=1e-9)  # ||P_0 e||^2
+        assert chk.factor == 1.0
+
+
+def test_antithetic_fall_backs_to_the_data_s_selection():
+    """``lambda = 1``: the data's own ratio, no fit; a noise-free draw that gains under half the
+    threshold: the ``+`` draw's ratio (h38's formula) on one more fit; else three fits, and the
+    factor is the share over ``max(||P_0 e||^2, precision)`` with the precision the six fits'
+    stopping tolerances (:func:`gate.fit_precision`, weighted as in the share)."""
+    cand, r_b, valid = _case(3)
+    r_c = np.random.default_rng(4).standard_normal(r_b.shape) * valid
+    calls: list[np.ndarray] = []
+
+    def path(mus: np.ndarray) -> np.ndarray:
+        return np.stack([r_b + u * (r_c - r_b) for u in mus])
+
+    def stub(gains: list[float]):
+        def fit(off: np.ndarray, mu: float):
+            g = gains[len(calls)]
+            calls.append(off)
+            return 5000.0, 5000.0 - g, cand, r_b + off
+
+        return fit
+
+    chk = G.antithetic_factor(r_b, r_c, valid, stub([]), path, cand, 1.0, 10.0, 3.7, 2)
+    assert (chk.branch, chk.factor, len(calls)) == ("data", 3.7, 0)
+    chk = G.antithetic_factor(r_b, r_c, valid, stub([4.0, 30.0]), path, cand, 0.5, 10.0, 3.7, 2)
+    lin = G.linear_gain(cand, r_b + calls[1], valid)
+    assert chk.branch == "plus" and len(calls) == 2
+    assert chk.factor == pytest.approx(max(1.0, (30.0 + 2) / (max(lin, 0.0) + 2)))
+    calls.clear()
+    chk = G.antithetic_factor(
+        r_b, r_c, valid, stub([6.0, 40.0, 20.0]), path, cand, 0.5, 10.0, 3.7, 2
+    )
+    assert chk.branch == "antithetic" and len(calls) == 3
+    r_mu = path(np.array([chk.mu]))[0]
+    np.testing.assert_allclose(calls[0], -r_mu)  # noise-free, then +e, then -e
+    np.testing.assert_allclose(calls[1], -r_mu + r_c)
+    np.testing.assert_allclose(calls[2], -r_mu - r_c)
+    assert chk.share == pytest.approx(0.5 * (40.0 + 20.0) - 6.0)
+    fp = G.fit_precision
+    prec = fp(5000.0) + fp(4994.0) + 0.5 * (fp(5000.0) + fp(4960.0) + fp(5000.0) + fp(4980.0))
+    assert chk.precision == pytest.approx(prec)
+    lin0 = G.linear_gain(cand, r_c, valid)
+    assert chk.linears[0] == pytest.approx(lin0)
+    assert chk.factor == pytest.approx(max(1.0, (24.0 + 2) / (max(lin0, prec) + 2)))
+
+
+def test_fit_precision_is_the_fitter_s_stopping_rule():
+    """The share's precision comes from :func:`robogs.physics.fit.fit_problems`'s own stopping
+    rule (an accepted step gaining less than ``max(ftol chi^2, atol)`` ends a fit)."""
+    import inspect
+
+    from robogs.physics.fit import fit_problems
+
+    par = inspect.signature(fit_problems).parameters
+    ftol, atol = par["ftol"].default, par["atol"].default
+    for c in (0.0, 10.0, 1e4, 1e7):
+        assert G.fit_precision(c) == pytest.approx(max(ftol * c, atol))
+
+
+def test_antithetic_check_on_the_closed_form_toys():
+    """Smooth model: the factor stays 1 (+-2 %) at every amplitude, where the data's own ratio
+    exceeds 10 at 1 rad. Rough model, null data (gains at the noise level, ``lambda = 1``):
+    the data's own ratio decides, median over six seeds >= 1.2 as h38's check; smooth null
+    seeds stay at 1."""
+    for amp in (0.25, 0.5, 1.0):
+        data, chk = _anti_toy(amp, seed=1)
+        assert chk.factor <= 1.02, (amp, chk.factor, data)
+    assert _anti_toy(1.0, seed=1)[0] > 10.0
+    rough = [_anti_toy(0.0, seed=s, rough=True)[1] for s in range(6)]
+    assert np.median([c.factor for c in rough]) >= 1.2, [c.factor for c in rough]
+    assert max(_anti_toy(0.0, seed=s)[1].factor for s in range(6)) <= 1.02
+
+
+def test_check_record_round_trips_with_its_rule():
+    chk = G.LinearisationCheck(
+        1.4,
+        2.0,
+        [1.0, 1.4, 0.9],
+        [9.0, 12.0, 7.0],
+        [0.5, 3.0, 2.0],
+        scale=0.6,
+        rule="antithetic",
+        branch="antithetic",
+        mu=0.8,
+        share=1.5,
+        precision=0.4,
+    )
+    back = G.LinearisationCheck.from_dict(chk.to_dict())
+    assert back == chk
+    old = G.LinearisationCheck(1.2, 1.3, [1.2], [5.0], [3.0]).to_dict()
+    old.pop("rule")  # a check cached before h46
+    assert G.LinearisationCheck.from_dict(old).rule == "draw"
