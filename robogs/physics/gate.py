@@ -848,7 +848,7 @@ CHECK_RULE = "draw"
 (h38: one draw, :func:`null_draw_factor`) or ``"antithetic"`` (h46: :func:`antithetic_factor`).
 Kept on ``"draw"``: the antithetic check finds design A restitution on every seed run (8 of 8,
 h38's draw 4 of 8) and holds planar design A null seeds 4 and 20-23, but lets MuJoCo design
-B's null seed 6 tilt back (its share 0.41 against 0.47: factor 1) and loses its time offset
+B's null seeds 4 (restitution) and 6 (tilt) back (factor 1 on both) and loses its time offset
 seed 0 (a share of 9.87 sigma^2 on gains of about 680, where the fitter's stopping rule
 promises 0.2: factor 8.5; bench/RESULTS.md, issue 17, h46)."""
 
