@@ -243,6 +243,14 @@ class _StopAt(Exception):
     """Raised from ``on_step`` to stop the CPU baseline after its steps."""
 
 
+#: bench option -> (triton_raster flag, the choice that sets it, what it switches)
+_TRITON_SWITCHES = {
+    "triton-projection": ("_FUSED_PROJECTION", "fused", "projection (triton_project.py)"),
+    "triton-binning": ("_TRITON_BINNING", "triton", "tile binning (triton_binning.py)"),
+    "fused-finish": ("_FUSED_FINISH", "triton", "output finish (triton_finish.py)"),
+}
+
+
 def _warm_up(device: torch.device, backend: str, width: int, height: int) -> float:
     """Render and back-propagate random surfels with and without the two depth channels (the
     variants training compiles), forward-only once; returns the seconds it took."""
@@ -553,45 +561,28 @@ def main() -> None:
         action="store_true",
         help="train without capturing the step loss as CUDA graphs (TrainConfig.cuda_graphs)",
     )
-    ap.add_argument(
-        "--triton-binning",
-        choices=("default", "triton", "torch"),
-        default="default",
-        help="the triton backend's tile binning: the module default, the Triton kernels "
-        "(triton_binning.py) or torch's bin_tiles()",
-    )
-    ap.add_argument(
-        "--fused-finish",
-        choices=("default", "triton", "torch"),
-        default="default",
-        help="the triton backend's output finish: the module default, one Triton kernel "
-        "(triton_finish.py) or torch's finish_output()",
-    )
-    ap.add_argument(
-        "--triton-projection",
-        choices=("default", "fused", "torch"),
-        default="default",
-        help="the triton backend's projection: the module default, the fused Triton kernels "
-        "(triton_project.py) or torch's project()",
-    )
+    for opt, (_, on, what) in _TRITON_SWITCHES.items():
+        ap.add_argument(
+            f"--{opt}",
+            choices=("default", on, "torch"),
+            default="default",
+            help=f"the triton backend's {what} (triton_raster module flag): the module default, "
+            f"{on} or the torch path",
+        )
     ap.add_argument("--skip-tsdf", action="store_true", help="leave out part 1 (TSDF fusion)")
     ap.add_argument("--json", default=None, help="append the figures as one JSON line to this file")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    flags = (args.triton_projection, args.triton_binning, args.fused_finish)
-    if any(f != "default" for f in flags):
+    chosen = {o: getattr(args, o.replace("-", "_")) for o in _TRITON_SWITCHES}
+    if any(v != "default" for v in chosen.values()):
         try:
             from robogs.format.render import triton_raster
         except ImportError as e:
-            raise SystemExit(
-                f"--triton-projection/-binning, --fused-finish need triton: {e}"
-            ) from None
-        if args.triton_projection != "default":
-            triton_raster._FUSED_PROJECTION = args.triton_projection == "fused"
-        if args.triton_binning != "default":
-            triton_raster._TRITON_BINNING = args.triton_binning == "triton"
-        if args.fused_finish != "default":
-            triton_raster._FUSED_FINISH = args.fused_finish == "triton"
+            raise SystemExit(f"--{'/--'.join(_TRITON_SWITCHES)} need triton: {e}") from None
+        for opt, value in chosen.items():
+            flag, on, _ = _TRITON_SWITCHES[opt]
+            if value != "default":
+                setattr(triton_raster, flag, value == on)
     compare = args.device != "cpu" or args.cpu_baseline_iterations is not None or args.same_steps
 
     from robogs.format.render import Camera

@@ -976,20 +976,26 @@ def antithetic_factor(
     mu, _ = path_scale(path, lam, base_resid, cand_resid, base, valid)
     r_mu = path(np.array([mu]))[0]
     e = cand_resid * valid
-    gains, lins, ratios, prec = [], [], [], []
+    gains, lins, ratios = [], [], []
     c_b0, c_c0, cand0, _ = fit(-r_mu, mu)
     g0 = float(c_b0 - c_c0)
     lin0 = linear_gain(cand0, e, valid)
     gains.append(g0)
     lins.append(lin0)
     ratios.append(linear_ratio(g0, lin0, k))
-    if g0 < 0.5 * threshold:
-        c_b, c_c, cand, r_b = fit(-r_mu + cand_resid, mu)
+
+    def draw(sign: float) -> tuple[float, float, float]:
+        """Fit the draw ``pred(mu) + sign e``; record its gain, linear gain and ratio."""
+        c_b, c_c, cand, r_b = fit(-r_mu + sign * cand_resid, mu)
         g = float(c_b - c_c)
         lin = linear_gain(cand, r_b, valid)
         gains.append(g)
         lins.append(lin)
         ratios.append(linear_ratio(g, lin, k))
+        return g, c_b, c_c
+
+    if g0 < 0.5 * threshold:
+        draw(1.0)
         f = max(1.0, ratios[-1])
         return LinearisationCheck(
             f,
@@ -1005,12 +1011,7 @@ def antithetic_factor(
     prec = fit_precision(c_b0) + fit_precision(c_c0)
     side = []
     for s in (1.0, -1.0):
-        c_b, c_c, cand, r_b = fit(-r_mu + s * cand_resid, mu)
-        g = float(c_b - c_c)
-        lin = linear_gain(cand, r_b, valid)
-        gains.append(g)
-        lins.append(lin)
-        ratios.append(linear_ratio(g, lin, k))
+        g, c_b, c_c = draw(s)
         side.append(g)
         prec += 0.5 * (fit_precision(c_b) + fit_precision(c_c))
     share = 0.5 * (side[0] + side[1]) - g0
