@@ -5,8 +5,10 @@
 # on PYTHONPATH. Stages, run in this order: 1 = CUDA render and training-step tests; 2 = the reconstruct
 # bench (bench/device_reconstruct.sh; PROJ=fused|torch picks the triton projection); r = the render
 # bench against the CPU; s = sweep of
-# the Triton kernels (and the other projection than the default) and a profile.
-# Usage there: bash bench/device_run.sh [12rs]
+# the Triton kernels (and the other projection than the default) and a profile; g = gsplat side by
+# side (bench/gsplat_side.py), with gsplat unpacked from the tarball bench/gsplat_aot.sh leaves in
+# .whl (the image has no nvcc to JIT it).
+# Usage there: bash bench/device_run.sh [12rsg]
 set -u
 export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=16
 OUT=${OUT:-/tmp/robogs-device-out}
@@ -39,4 +41,9 @@ if [[ $stage == *s* ]]; then
     --defaults-only --profile \
     --json "$OUT/sweep.json" 2>&1 \
     | tee "$OUT/sweep.log"
+fi
+if [[ $stage == *g* ]]; then
+  for tgz in .whl/gsplat-*-aot-*.tar.gz; do [[ -f $tgz ]] && tar -xzf "$tgz" -C /tmp/site; done
+  timeout 150 python3 bench/gsplat_side.py --repeats 20 --json "$OUT/gsplat.json" 2>&1 \
+    | tee "$OUT/gsplat.log"
 fi
