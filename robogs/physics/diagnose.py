@@ -75,6 +75,7 @@ from typing import Any
 import numpy as np
 
 from robogs.physics import gate as gate_mod
+from robogs.physics import roughness as rough_mod
 from robogs.physics.effects import Effect, available_effects, get_effect
 from robogs.physics.engine import Engine, rms_mm
 from robogs.physics.fit import FitOutcome, Problem, fit_nested, on_bounds
@@ -624,7 +625,10 @@ def diagnose_recording(
         float(n * np.log(o.cost / base.cost) + (len(f) - len(base_cols)) * np.log(n))
         for o, f in zip(outs[1:], frees[1:], strict=True)
     ]
-    cal = _calibrate(eng, space, cands, outs, folds, base_cols, theta0, stats, dbics)
+    nuis_rec: dict[str, Any] = {}  # h48: the gate's start-pose columns (roughness module)
+    cal = _calibrate(
+        eng, space, cands, outs, folds, base_cols, theta0, stats, dbics, record=nuis_rec
+    )
     phase = prep.phase
     rows: list[EffectRow] = []
     for i, e in enumerate(cands, start=1):
@@ -778,7 +782,7 @@ def diagnose_recording(
             "source": prep.noise.source,
         },
         n_residuals=n,
-        gate=cal.to_dict(),
+        gate={**cal.to_dict(), **({"nuisance_columns": nuis_rec} if nuis_rec else {})},
         design={
             **feats,
             "quasi_static": qs,
@@ -809,10 +813,16 @@ def _calibrate(
     theta0: np.ndarray,
     stats: list[float],
     dbics: list[float],
+    record: dict[str, Any] | None = None,
 ) -> gate_mod.Calibration:
     """The gate's null for these candidates on this data (cached per revision; see gate), with
     the linearisation check on null draws of the candidates where it can change a verdict
-    (``stats``: their held-out falls [sigma^2]; :func:`gate.needs_check`)."""
+    (``stats``: their held-out falls [sigma^2]; :func:`gate.needs_check`).
+
+    With :data:`roughness.SMOOTH_NUISANCE` every linearised candidate (the base, the null
+    draws' fits) takes its start-pose columns from :func:`roughness.smooth_nuisance` (one
+    rollout each) instead of the fitter's 0.1 mm forward differences, and ``record`` (when
+    given) gets the stencils chosen and the fitter's roughness per candidate."""
     import time
 
     import torch
@@ -825,15 +835,27 @@ def _calibrate(
     )  # the backend, not the class: planar and MuJoCo are both an Engine
     base = outs[0]
     n_base = len(base_cols)
+    valid = (base.resid != 0) | np.any(base.jac != 0, axis=-1)
+    fn = eng.residual_fn(space)
+    smooth = rough_mod.SMOOTH_NUISANCE
+    fp += "|smooth-nuisance" if smooth else ""
+
+    def nuisance(o: FitOutcome, resid: np.ndarray, name: str = "", f=fn) -> np.ndarray:
+        """The start-pose columns the gate profiles out for fit ``o`` (h48)."""
+        if not smooth:
+            return o.jac_local
+        cols, rc = rough_mod.smooth_nuisance(f, o.theta, o.local, o.jac_local, resid, valid)
+        if name and record is not None:
+            record[name] = rc.to_dict()
+        return cols
+
     lin = [
-        gate_mod.LinearCandidate(e.name, o.jac, o.jac_local, n_base)
+        gate_mod.LinearCandidate(e.name, o.jac, nuisance(o, base.resid, e.name), n_base)
         for e, o in zip(cands, outs[1:], strict=True)
     ]
-    valid = (base.resid != 0) | np.any(base.jac != 0, axis=-1)
     cal = gate_mod.calibrate(lin, base.resid, valid, folds, fingerprint=fp)
     if cal.statistic != "fall":
         return cal
-    fn = eng.residual_fn(space)
     signs = gate_mod.check_signs(eng.prep.n_traj, fp)
 
     made = False
@@ -875,7 +897,7 @@ def _calibrate(
                     Problem(free=list(base_cols), theta0=base.theta, local0=base.local),
                     [(space.owner_columns(e.name), starts)],
                 )
-                lc_d = gate_mod.LinearCandidate(e.name, c.jac, c.jac_local, n_base)
+                lc_d = gate_mod.LinearCandidate(e.name, c.jac, nuisance(c, b.resid, f=fn_d), n_base)
                 return b.cost, c.cost, lc_d, b.resid
 
             def path(mus: np.ndarray, out: FitOutcome = out, count: list[int] = count):
@@ -889,7 +911,7 @@ def _calibrate(
             t0 = time.perf_counter()
             lam = gate_mod.draw_scale(base.cost - out.cost, cal.thresholds[e.name])
             if gate_mod.CHECK_RULE == "antithetic":
-                lb = gate_mod.LinearCandidate("base", base.jac, base.jac_local, n_base)
+                lb = gate_mod.LinearCandidate("base", base.jac, nuisance(base, base.resid), n_base)
                 chk = gate_mod.antithetic_factor(
                     base.resid,
                     out.resid,

@@ -1,0 +1,250 @@
+"""Smooth start-pose (nuisance) columns for the gate, the stencil chosen from the data.
+
+The fitter differentiates each trajectory's start pose forward by one small step
+(:func:`robogs.physics.fit.fit_problems`' ``local_h``: 0.1 mm, 0.1 mm, 1 mrad). On MuJoCo a
+shift that small moves a contact onset by a fraction of a 1 ms step, so the forward difference
+lands on the onset's jump or misses it: the column is rough. The gate profiles these columns out
+of every trajectory's residual (:mod:`robogs.physics.gate`), and a rough column removes an
+arbitrary part of it, the effect-aligned part included (design-B null seed 1, pusher pair
+3 x 1.7: the tilt's wild-null threshold 16.8 sigma^2 with the fitter's columns, 30.5 with
+central differences over 30 steps, planar 51.8; bench/RESULTS.md, issue 16, h47). The fits keep
+the fitter's step (a wider one moved them: h47, "2. A fix?"); only the gate's linearisation
+takes the columns from here.
+
+Columns (:func:`stencil_columns`, one batched rollout of ``2 L S`` rows): the fitter's forward
+column ``F``, then central differences ``C_m = (r(a + m h) - r(a - m h)) / (2 m h)`` at the
+stencils ``m`` of :data:`STENCILS` (multiples of the fitter's step ``h``), per trajectory and
+nuisance dimension.
+
+Rule (:func:`choose_columns`): along the chain ``F, C_1, C_3, C_10, C_30`` take the first
+column that agrees with the next one *and* the next one with the one after (the last pair needs
+only itself); when no column does, take the widest. Agreement is measured as the angle ``theta``
+between the two columns, because the gate uses a column only through the projection that
+profiles it out, which its scale does not change. Two columns agree when
+``sin(theta) ||r_t|| <= 1``, ``r_t`` the base fit's whitened residual of that trajectory: the
+projections ``I - q q^T`` of two unit columns differ by exactly ``sin(theta)`` in operator norm,
+so the trajectory's profiled residual moves by at most ``sin(theta) ||r_t||``, and a change of
+at most one sigma (a chi^2 change of 1, one parameter's worth of evidence) is one the data
+cannot resolve. The tolerance is the data's: about 0.05 on design B's 400-sample trajectories,
+tighter with more samples, and any angle where ``||r_t|| <= 1``. Two agreements in a row, not
+one: on a staircase (a contact onset every ``D`` of the step) ``F`` and ``C_1`` agree whenever
+no onset falls within one step of the start pose, and both miss the onsets' average slope; the
+column of the next stencil, which spans an onset, tells.
+
+Roughness (:class:`NuisanceColumns`): the fitter's column against the one chosen, as the sine
+of their angle and as h47's ``||F - C|| / ||C||``, per trajectory and dimension; diagnose puts
+them in the gate's record (``DiagnoseResult.gate["nuisance_columns"]``).
+
+Central differences of a staircase converge to its mean slope as the stencil widens
+(the smoothing of a noisy function's derivative by a wider difference: Moré & Wild 2012,
+"Estimating derivatives of noisy simulations", ACM TOMS 38).
+
+Behind :data:`SMOOTH_NUISANCE` (off by default until measured: bench/RESULTS.md, h48).
+"""
+
+from __future__ import annotations
+
+import inspect
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from robogs.physics.fit import ResidualFn, fit_problems
+
+__all__ = [
+    "SMOOTH_NUISANCE",
+    "STENCILS",
+    "NuisanceColumns",
+    "fitter_local_h",
+    "stencil_columns",
+    "choose_columns",
+    "smooth_nuisance",
+    "sin_angle",
+]
+
+SMOOTH_NUISANCE = False
+"""Whether :func:`robogs.physics.diagnose.diagnose_recording`'s gate linearises each
+candidate's start-pose columns with :func:`smooth_nuisance` instead of the fitter's."""
+
+STENCILS = (1, 3, 10, 30)
+"""Central-difference stencils, multiples of the fitter's nuisance step (0.1 mm to 3 mm in
+position, 1 to 30 mrad in yaw)."""
+
+
+def fitter_local_h() -> np.ndarray:
+    """The fitter's nuisance steps ``local_h`` (read from :func:`fit_problems`, not copied)."""
+    return np.asarray(inspect.signature(fit_problems).parameters["local_h"].default, float)
+
+
+@dataclass
+class NuisanceColumns:
+    """The stencil chosen per trajectory and nuisance dimension, and the fitter's roughness.
+
+    Attributes:
+        stencil: [T, L] multiple of the fitter's step chosen; 0: the fitter's forward column.
+        sin_fwd: [T, L] sine of the angle between the fitter's column and the one chosen.
+        rel_fwd: [T, L] ``||F - C|| / ||C||`` (h47's measure), C the column chosen.
+        tol: [T] the sine two columns may differ by (``1 / ||r_t||``; inf: any).
+        unresolved: [T, L] no two stencils agreed; the widest was taken.
+        rows, seconds: the rollout's rows and its wall time.
+    """
+
+    stencil: np.ndarray
+    sin_fwd: np.ndarray
+    rel_fwd: np.ndarray
+    tol: np.ndarray
+    unresolved: np.ndarray
+    rows: int = 0
+    seconds: float = 0.0
+    stencils: tuple[int, ...] = field(default=STENCILS)
+
+    def to_dict(self) -> dict[str, Any]:
+        labels = [0, *self.stencils]
+        count = {
+            ("fitter" if m == 0 else f"central {m}"): int(np.sum(self.stencil == m)) for m in labels
+        }
+        return {
+            "stencil_counts": count,
+            "unresolved": int(np.sum(self.unresolved)),
+            "max_sin_fwd": float(np.max(self.sin_fwd, initial=0.0)),
+            "max_rel_fwd": float(np.max(self.rel_fwd, initial=0.0)),
+            "stencil": self.stencil.astype(int).tolist(),
+            "rel_fwd": np.round(self.rel_fwd, 4).tolist(),
+            "sin_fwd": np.round(self.sin_fwd, 4).tolist(),
+            "rows": self.rows,
+            "seconds": self.seconds,
+        }
+
+
+def sin_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Sine of the angle between columns ``a`` and ``b`` [..., K] -> [...] (0 where either is 0)."""
+    na = np.linalg.norm(a, axis=-1)
+    nb = np.linalg.norm(b, axis=-1)
+    den = na * nb
+    cos = np.divide(np.sum(a * b, axis=-1), den, out=np.ones_like(den), where=den > 0)
+    return np.sqrt(np.clip(1.0 - cos**2, 0.0, 1.0))
+
+
+def stencil_columns(
+    fn: ResidualFn,
+    theta: np.ndarray,
+    local: np.ndarray,
+    *,
+    local_h: Sequence[float] | None = None,
+    stencils: Sequence[int] = STENCILS,
+) -> np.ndarray:
+    """Central-difference nuisance columns at each stencil from ONE batched rollout.
+
+    Args:
+        fn: weighted residual function ``fn(theta [M, Q], local [M, T, L]) -> [M, T, K]``.
+        theta: [Q] the fit's global parameters.
+        local: [T, L] its nuisance parameters.
+        local_h: the base steps (default: the fitter's, :func:`fitter_local_h`).
+        stencils: multiples of the step.
+
+    Returns:
+        [S, T, K, L]: ``(r(a + m h e_d) - r(a - m h e_d)) / (2 m h_d)``, every trajectory's
+        dimension ``d`` shifted in the same row (trajectories do not interact).
+    """
+    h = fitter_local_h() if local_h is None else np.asarray(local_h, float)
+    n_l = local.shape[1]
+    if h.shape != (n_l,):
+        raise ValueError(f"local_h has {h.shape[0]} steps for {n_l} nuisance dimensions")
+    locs = []
+    for m in stencils:
+        for d in range(n_l):
+            for sgn in (1.0, -1.0):
+                lo = np.array(local, float)
+                lo[:, d] += sgn * m * h[d]
+                locs.append(lo)
+    th = torch.as_tensor(np.repeat(np.asarray(theta, float)[None], len(locs), 0))
+    with torch.no_grad():
+        out = fn(th, torch.as_tensor(np.stack(locs))).cpu().numpy()
+    out = out.reshape(len(stencils), n_l, 2, *out.shape[1:])  # [S, L, 2, T, K]
+    steps = 2.0 * np.asarray(stencils, float)[:, None] * h[None, :]  # [S, L]
+    cols = (out[:, :, 0] - out[:, :, 1]) / steps[:, :, None, None]  # [S, L, T, K]
+    return np.moveaxis(cols, 1, -1)
+
+
+def choose_columns(
+    fwd: np.ndarray,
+    central: np.ndarray,
+    resid: np.ndarray,
+    valid: np.ndarray,
+    stencils: Sequence[int] = STENCILS,
+) -> tuple[np.ndarray, NuisanceColumns]:
+    """The rule of the module docstring.
+
+    Args:
+        fwd: [T, K, L] the fitter's forward columns.
+        central: [S, T, K, L] central columns at ``stencils`` (:func:`stencil_columns`).
+        resid: [T, K] the base fit's whitened residual (sets each trajectory's tolerance).
+        valid: [T, K] entries that are samples.
+
+    Returns:
+        (columns [T, K, L], the record).
+    """
+    if central.shape[0] != len(stencils) or central.shape[1:] != fwd.shape:
+        raise ValueError(
+            f"central columns {central.shape} do not match {len(stencils)} stencils of "
+            f"the forward columns {fwd.shape}"
+        )
+    v = np.asarray(valid, bool)[..., None]
+    chain = np.concatenate([fwd[None], central], 0) * v[None]  # [S+1, T, K, L]
+    t_n, _, n_l = fwd.shape
+    norm_r = np.sqrt(np.sum((resid * valid) ** 2, axis=-1))  # [T]
+    tol = np.divide(1.0, norm_r, out=np.full(t_n, np.inf), where=norm_r > 1.0)
+    # agree[i]: chain i and i+1 within the tolerance, [S, T, L]
+    sins = sin_angle(np.moveaxis(chain[:-1], -1, -2), np.moveaxis(chain[1:], -1, -2))
+    agree = sins <= tol[None, :, None]
+    n_c = chain.shape[0]
+    pick = np.full((t_n, n_l), n_c - 1)
+    unresolved = np.ones((t_n, n_l), bool)
+    for i in range(n_c - 2, -1, -1):  # the first i that qualifies wins: go from the end
+        ok = agree[i] & (agree[i + 1] if i + 1 < n_c - 1 else True)
+        pick = np.where(ok, i, pick)
+        unresolved &= ~ok
+    zero = ~np.any(chain[0] != 0, axis=1)  # a dimension the trajectory does not feel: keep F
+    pick = np.where(zero, 0, pick)
+    unresolved &= ~zero
+    out = np.take_along_axis(chain, pick[None, :, None, :], axis=0)[0]
+    f = np.moveaxis(chain[0], -1, -2)  # [T, L, K]
+    c = np.moveaxis(out, -1, -2)
+    nc = np.linalg.norm(c, axis=-1)
+    rel = np.divide(np.linalg.norm(f - c, axis=-1), nc, out=np.zeros_like(nc), where=nc > 0)
+    labels = np.asarray([0, *stencils])
+    rec = NuisanceColumns(
+        stencil=labels[pick],
+        sin_fwd=np.where(pick == 0, 0.0, sin_angle(f, c)),
+        rel_fwd=rel,
+        tol=tol,
+        unresolved=unresolved,
+        stencils=tuple(int(m) for m in stencils),
+    )
+    return np.where(pick[:, None, :] == 0, fwd, out), rec
+
+
+def smooth_nuisance(
+    fn: ResidualFn,
+    theta: np.ndarray,
+    local: np.ndarray,
+    fwd: np.ndarray,
+    resid: np.ndarray,
+    valid: np.ndarray,
+    *,
+    stencils: Sequence[int] = STENCILS,
+) -> tuple[np.ndarray, NuisanceColumns]:
+    """The gate's nuisance columns [T, K, L] of a fit at ``(theta, local)`` whose forward
+    columns are ``fwd`` (the fitter's ``jac_local``): :func:`stencil_columns` then
+    :func:`choose_columns` (``resid``, ``valid``: the base fit's whitened residual and its
+    samples). Where the fitter's column is chosen it is returned bit for bit."""
+    t0 = time.perf_counter()
+    central = stencil_columns(fn, theta, local, stencils=stencils)
+    cols, rec = choose_columns(fwd, central, resid, valid, stencils)
+    rec.rows = 2 * local.shape[1] * len(stencils)
+    rec.seconds = time.perf_counter() - t0
+    return cols, rec

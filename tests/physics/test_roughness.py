@@ -1,0 +1,223 @@
+"""Oracle tests of the gate's smooth start-pose columns (robogs.physics.roughness, h48).
+
+A toy residual with a staircase (a quantised contact onset: the residual jumps by ``s`` every
+``D`` of the nuisance parameter) has the closed-form smooth slope ``A + s / D``; the fitter's
+forward column is ``A`` or ``A + s / h`` depending on where the onsets fall. A smooth residual
+keeps the fitter's column bit for bit. A mutant rule (always the fitter's column, or one
+agreement instead of two) is caught by the same assertions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from robogs.physics import roughness as R
+
+T_N, K_N, L_N = 4, 60, 3
+H = R.fitter_local_h()  # 1e-4, 1e-4, 1e-3
+RESID = np.full((T_N, K_N), 20.0 / np.sqrt(K_N))  # ||r_t|| = 20: tolerance sin 0.05
+VALID = np.ones((T_N, K_N), bool)
+
+
+def _toy(period: float, phase: np.ndarray, seed: int = 0):
+    """Residual ``r_tk(a) = A_tk . a + s_tk floor((a_0 - phase_t) / (period h_0))`` (the
+    staircase on the first nuisance dimension), its closed-form smooth columns and the fitter's
+    forward columns at ``a = 0``."""
+    rng = np.random.default_rng(seed)
+    a_mat = rng.standard_normal((T_N, K_N, L_N))
+    d = period * H[0]
+    # jumps as large as the smooth slope over one period, in another direction
+    s = rng.standard_normal((T_N, K_N))
+    s *= d * np.linalg.norm(a_mat[..., 0], axis=1)[:, None] / np.linalg.norm(s, axis=1)[:, None]
+
+    def fn(theta: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
+        lo = local.numpy()  # [M, T, L]
+        lin = np.einsum("tkl,mtl->mtk", a_mat, lo)
+        steps = np.floor((lo[..., 0] - phase[None]) / d)  # [M, T]
+        return torch.as_tensor(lin + s[None] * steps[..., None])
+
+    smooth = a_mat.copy()
+    smooth[..., 0] += s / d
+    zero = torch.zeros((1, T_N, L_N), dtype=torch.float64)
+    r0 = fn(torch.zeros((1, 1)), zero).numpy()[0]
+    fwd = np.stack(
+        [
+            (fn(torch.zeros((1, 1)), zero + torch.as_tensor(H[j] * np.eye(L_N)[j])).numpy()[0] - r0)
+            / H[j]
+            for j in range(L_N)
+        ],
+        axis=-1,
+    )
+    return fn, smooth, fwd
+
+
+def _err(cols: np.ndarray, smooth: np.ndarray) -> np.ndarray:
+    """Sine of the angle between each trajectory's chosen and closed-form first column [T]."""
+    return R.sin_angle(cols[..., 0], smooth[..., 0])
+
+
+# phases: trajectory 0 has an onset within the fitter's forward step, 1 within the backward one,
+# 2 and 3 none within one step (there the forward and central-1 columns agree by accident)
+PHASES = np.array([0.5, -0.5, 1.5, 2.5]) * H[0]
+
+
+def test_staircase_closed_form_slope_recovered():
+    fn, smooth, fwd = _toy(4.0, PHASES)
+    assert np.all(_err(fwd, smooth) > 0.3)  # the fitter's column is wrong on every trajectory
+    cols, rec = R.smooth_nuisance(fn, np.zeros(1), np.zeros((T_N, L_N)), fwd, RESID, VALID)
+    # 20 and 60 steps hold exactly 5 and 15 onsets: the central columns at 10 and 30 are the
+    # closed-form slope, so they agree and 10 is the first of two agreements in a row
+    assert rec.stencil[:, 0].tolist() == [10] * T_N
+    np.testing.assert_allclose(cols[..., 0], smooth[..., 0], rtol=1e-9, atol=1e-9)
+    # the smooth dimensions keep the fitter's column bit for bit
+    assert rec.stencil[:, 1:].tolist() == [[0, 0]] * T_N
+    assert np.array_equal(cols[..., 1:], fwd[..., 1:])
+    # the record: the fitter's roughness against the column chosen
+    want = np.linalg.norm(fwd[..., 0] - smooth[..., 0], axis=1) / np.linalg.norm(
+        smooth[..., 0], axis=1
+    )
+    np.testing.assert_allclose(rec.rel_fwd[:, 0], want, rtol=1e-9)
+    assert rec.rows == 2 * L_N * len(R.STENCILS)
+    d = rec.to_dict()
+    assert d["stencil_counts"]["central 10"] == T_N and d["unresolved"] == 0
+
+
+def test_staircase_off_grid_period_within_one_onset():
+    """A period that does not divide the stencils: the chosen column is the closed form within
+    one onset over its window (``||s|| / (2 m h)`` against ``||s|| / D``). The period is under
+    the central-3 window (6 steps), which then always spans an onset (the rule's premise; a
+    sparser staircase whose onsets all miss that window keeps the fitter's column)."""
+    period = 5.3
+    fn, smooth, fwd = _toy(period, PHASES * 1.3, seed=3)
+    cols, rec = R.smooth_nuisance(fn, np.zeros(1), np.zeros((T_N, L_N)), fwd, RESID, VALID)
+    m = rec.stencil[:, 0]
+    assert np.all(m >= 10)
+    rel = np.linalg.norm(cols[..., 0] - smooth[..., 0], axis=1) / np.linalg.norm(
+        smooth[..., 0], axis=1
+    )
+    bound = period / (2.0 * m)  # one onset in the window, relative to s / D ~ the column
+    assert np.all(rel <= bound)
+    assert np.all(_err(cols, smooth) < _err(fwd, smooth))
+
+
+def _smooth_toy(seed: int = 1):
+    """A smooth nonlinear residual ``B sin(a / ell + phi)`` with ``ell`` = 5 mm / 50 mrad."""
+    rng = np.random.default_rng(seed)
+    b = rng.standard_normal((T_N, K_N, L_N))
+    phi = rng.uniform(0, 2 * np.pi, (T_N, K_N, L_N))
+    ell = np.array([5e-3, 5e-3, 5e-2])
+
+    def fn(theta: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
+        lo = local.numpy()[:, :, None, :]
+        return torch.as_tensor(np.sum(b * np.sin(lo / ell + phi), axis=-1))
+
+    fwd = np.stack(
+        [
+            (np.sin(H[j] / ell[j] + phi[..., j]) - np.sin(phi[..., j])) / H[j] * b[..., j]
+            for j in range(L_N)
+        ],
+        axis=-1,
+    )
+    exact = b * np.cos(phi) / ell
+    return fn, fwd, exact
+
+
+def test_smooth_residual_keeps_the_fitters_columns():
+    fn, fwd, exact = _smooth_toy()
+    cols, rec = R.smooth_nuisance(fn, np.zeros(1), np.zeros((T_N, L_N)), fwd, RESID, VALID)
+    assert np.all(rec.stencil == 0)
+    assert np.array_equal(cols, fwd)
+    assert np.all(rec.sin_fwd == 0.0) and np.all(rec.rel_fwd == 0.0)
+    # the central columns themselves converge on the exact derivative as the stencil narrows
+    central = R.stencil_columns(fn, np.zeros(1), np.zeros((T_N, L_N)))
+    err = [np.max(np.abs(central[i] - exact)) for i in range(len(R.STENCILS))]
+    assert err == sorted(err) and err[0] < 1e-3 * np.max(np.abs(exact))
+
+
+def test_tolerance_is_the_datas():
+    """A trajectory whose residual norm is at most 1 cannot tell two columns apart (any angle
+    moves its profiled residual by under one sigma): the fitter's column stays; the staircase's
+    other trajectories, at ``||r_t|| = 20``, still get the smooth one."""
+    fn, smooth, fwd = _toy(4.0, PHASES)
+    resid = RESID.copy()
+    resid[1] *= 0.9 / 20.0
+    cols, rec = R.smooth_nuisance(fn, np.zeros(1), np.zeros((T_N, L_N)), fwd, resid, VALID)
+    assert rec.stencil[1, 0] == 0 and np.isinf(rec.tol[1])
+    assert np.array_equal(cols[1], fwd[1])
+    assert rec.stencil[[0, 2, 3], 0].tolist() == [10, 10, 10]
+    np.testing.assert_allclose(rec.tol[0], 1.0 / 20.0)
+
+
+def test_projection_bound_behind_the_tolerance():
+    """The rule's premise: two unit columns at angle theta give profiled residuals that differ
+    by at most ``sin(theta) ||r||`` (brute force over random columns and residuals)."""
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        a, b, r = rng.standard_normal((3, 30))
+        qa, qb = a / np.linalg.norm(a), b / np.linalg.norm(b)
+        diff = (r - qa * (qa @ r)) - (r - qb * (qb @ r))
+        assert np.linalg.norm(diff) <= R.sin_angle(a, b) * np.linalg.norm(r) + 1e-12
+
+
+@pytest.mark.parametrize("mutant", ["fitter", "one_agreement"])
+def test_mutants_caught(monkeypatch, mutant):
+    """The staircase assertion fails for a rule that keeps the fitter's column, and for one
+    that stops at the first agreement (F and C_1 agree where no onset is within one step)."""
+    fn, smooth, fwd = _toy(4.0, PHASES)
+    real = R.choose_columns
+
+    def keep_fitter(fwd_, central, resid, valid, stencils=R.STENCILS):
+        cols, rec = real(fwd_, central, resid, valid, stencils)
+        return fwd_.copy(), rec
+
+    def one_agreement(fwd_, central, resid, valid, stencils=R.STENCILS):
+        chain = np.concatenate([fwd_[None], central], 0)
+        sins = R.sin_angle(np.moveaxis(chain[:-1], -1, -2), np.moveaxis(chain[1:], -1, -2))
+        tol = 1.0 / np.linalg.norm(resid, axis=-1)
+        ok = sins <= tol[None, :, None]
+        pick = np.where(ok.any(0), np.argmax(ok, 0), chain.shape[0] - 1)
+        cols = np.take_along_axis(chain, pick[None, :, None, :], axis=0)[0]
+        return cols, real(fwd_, central, resid, valid, stencils)[1]
+
+    monkeypatch.setattr(R, "choose_columns", keep_fitter if mutant == "fitter" else one_agreement)
+    cols, _ = R.smooth_nuisance(fn, np.zeros(1), np.zeros((T_N, L_N)), fwd, RESID, VALID)
+    assert not np.allclose(cols[..., 0], smooth[..., 0], rtol=1e-6, atol=1e-6)
+    assert np.max(_err(cols, smooth)) > 0.05
+
+
+def test_bad_input_named():
+    fn, smooth, fwd = _toy(4.0, PHASES)
+    with pytest.raises(ValueError, match="local_h has 2 steps for 3 nuisance dimensions"):
+        R.stencil_columns(fn, np.zeros(1), np.zeros((T_N, L_N)), local_h=(1e-4, 1e-4))
+    with pytest.raises(ValueError, match="do not match"):
+        R.choose_columns(fwd, np.zeros((2, T_N, K_N, L_N)), RESID, VALID)
+
+
+def test_planar_gate_unchanged_with_smooth_columns(monkeypatch, tmp_path):
+    """Design B on the planar engine is smooth at the fitter's step (h47: ``||F - C_30|| /
+    ||C_30|| <= 0.04`` there): with the flag on every candidate keeps the fitter's columns (the
+    record says so) and every threshold is the flag-off one. (Not every planar design is: on the
+    6-push scenario of test_diagnose the planar columns of 8 of 18 start-pose dimensions turn by
+    0.1-0.3 rad within 10 steps, and the rule smooths them: bench/RESULTS.md, h48.)"""
+    from robogs.physics.diagnose import diagnose_recording
+    from robogs.synth.scenarios.design_b import make_design_b
+
+    monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path))
+    rec = make_design_b("none", seed=1)
+    cands = ["table_tilt", "anisotropic_friction", "time_offset"]
+    res = {}
+    for flag in (False, True):
+        monkeypatch.setattr(R, "SMOOTH_NUISANCE", flag)
+        res[flag] = diagnose_recording(rec, effects=cands)
+    assert "nuisance_columns" not in res[False].gate
+    cols = res[True].gate["nuisance_columns"]
+    assert sorted(cols) == sorted(cands)
+    for name, d in cols.items():
+        assert d["stencil_counts"]["fitter"] == sum(d["stencil_counts"].values()), name
+        assert d["max_rel_fwd"] == 0.0 and d["rows"] == 2 * 3 * len(R.STENCILS)
+    thr = {f: {r.name: r.null_threshold_sigma2 for r in res[f].rows} for f in res}
+    for name in cands:
+        assert thr[True][name] == pytest.approx(thr[False][name], rel=1e-3), name
+    assert res[True].gate["key"] != res[False].gate["key"]  # cached apart
