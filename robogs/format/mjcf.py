@@ -64,6 +64,7 @@ __all__ = [
     "OBJECT_PAIR_DAMPRATIO",
     "PLANAR_SETTINGS",
     "PUSHER_ACTUATORS",
+    "PUSHER_ONSET_D0",
     "PUSHER_SOLREFFRICTION_STEPS",
     "ContactSettings",
     "ballast_contact",
@@ -71,6 +72,7 @@ __all__ = [
     "collision_hull",
     "footprint_points",
     "planar_joints_fit",
+    "pusher_onset_solimp",
     "use_planar_joints",
     "scene_mjcf",
     "torsion_radius",
@@ -157,6 +159,14 @@ class ContactSettings:
             as ``solref``): above 1 the pusher's strike is plastic, as in the planar model.
         pusher_timeconst_steps: time constant of the object-pusher pairs' ``solref`` in
             timesteps (0: ``solref``'s); sets how fast the strike's compression relaxes.
+        pusher_onset_steps: ``c`` of the object-pusher pairs' impedance ramp (0: off, the pairs
+            take ``solimp``): their ``solimp`` becomes :func:`pusher_onset_solimp`, rising
+            linearly from MuJoCo's least impedance at contact to ``solimp``'s dmax over
+            ``c * pusher_speed * timestep`` of penetration, so the strike's force grows with
+            penetration instead of starting at 0.95 of its full value on whichever step the
+            onset falls (see ``robogs.physics.engines.mujoco_engine``, "Pusher onset ramp").
+        pusher_speed: m/s, the drive's fastest pusher speed, which sizes the ramp (set by the
+            engine from the drive it rolls out; 0 with ``pusher_onset_steps > 0`` is an error).
     """
 
     timestep: float = 1e-3
@@ -179,6 +189,8 @@ class ContactSettings:
     z_ballast: float = 0.0
     pusher_dampratio: float = 1.0
     pusher_timeconst_steps: float = 0.0
+    pusher_onset_steps: float = 0.0
+    pusher_speed: float = 0.0
 
 
 PLANAR_SETTINGS = ContactSettings(
@@ -203,6 +215,33 @@ with smooth columns, 16.8 with the fitter's). The rest of the gap to planar's 51
 noise cancelling MuJoCo's strike error on the fast pushes, which both pairs share (4 ms x 2
 unscaled: 0.56x). The old pair met the bound only through the linearisation check's factor
 (x1.37, from its own near false positive)."""
+
+
+PUSHER_ONSET_D0 = 1e-4
+"""Impedance of the object-pusher pairs at zero penetration with the onset ramp on
+(``ContactSettings.pusher_onset_steps``): MuJoCo's least (``mjMINIMP``)."""
+
+
+def pusher_onset_solimp(settings: ContactSettings) -> tuple[float, float, float, float, float]:
+    """``solimp`` of the object-pusher pairs (before :func:`ballast_contact`): ``settings.solimp``
+    with the ramp off, else a linear ramp (power 1) from :data:`PUSHER_ONSET_D0` at contact to
+    ``solimp``'s dmax at ``width = pusher_onset_steps * pusher_speed * timestep`` [m].
+
+    Raises:
+        FormatError: the ramp is on but ``pusher_speed`` is not a positive number.
+    """
+    lo, hi, width, mid, power = (float(v) for v in settings.solimp)
+    c = float(settings.pusher_onset_steps)
+    if c <= 0:
+        return lo, hi, width, mid, power
+    v = float(settings.pusher_speed)
+    if not (math.isfinite(v) and v > 0):
+        raise FormatError(
+            f"the pusher onset ramp needs the drive's fastest pusher speed, got {v!r} m/s",
+            where="ContactSettings.pusher_speed",
+            hint="set pusher_speed (m/s) from the drive, or pusher_onset_steps=0",
+        )
+    return PUSHER_ONSET_D0, hi, c * v * float(settings.timestep), mid, 1.0
 
 
 def ballast_contact(
@@ -845,12 +884,14 @@ def scene_mjcf(
     tc = settings.solref[0]
     tc_pusher = settings.pusher_timeconst_steps * settings.timestep or tc
     f_pusher = (PUSHER_SOLREFFRICTION_STEPS * settings.timestep, 1.0)
+    # the onset ramp (ContactSettings.pusher_onset_steps) where the scene has a pusher
+    imp_pusher = settings.solimp if scene.pusher is None else pusher_onset_solimp(settings)
     side = {
-        key: [_vec(v) for v in ballast_contact((t, ratio), settings.solimp, kb, False, sf)]
-        for key, t, ratio, sf in (
-            ("pusher", tc_pusher, settings.pusher_dampratio, f_pusher),
-            ("object", tc, OBJECT_PAIR_DAMPRATIO, settings.solreffriction),
-            ("static", tc, settings.solref[1], settings.solreffriction),
+        key: [_vec(v) for v in ballast_contact((t, ratio), imp, kb, False, sf)]
+        for key, t, ratio, sf, imp in (
+            ("pusher", tc_pusher, settings.pusher_dampratio, f_pusher, imp_pusher),
+            ("object", tc, OBJECT_PAIR_DAMPRATIO, settings.solreffriction, settings.solimp),
+            ("static", tc, settings.solref[1], settings.solreffriction, settings.solimp),
         )
     }
 

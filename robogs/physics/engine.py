@@ -104,6 +104,7 @@ class Engine:
         self.backend, self.backend_reason = resolve_backend(self.prep.rec.physics, backend)
         self._mujoco = None
         if self.backend == "mujoco":
+            from robogs.physics.engines.mujoco_engine import drive_pusher_speed
             from robogs.physics.engines.mujoco_fit import MujocoFit
 
             self._mujoco = MujocoFit(
@@ -112,6 +113,7 @@ class Engine:
                 dt=dt,
                 threads=threads,
                 tracked=self.prep.tracked,
+                pusher_speed=drive_pusher_speed(self.prep.drive),  # sizes the onset ramp
             )  # it predicts the pusher force: a measured wrench enters as on planar
         self.present: list[tuple[Effect, dict[str, float]]] = []
         for entry in self.prep.rec.physics.get("effects", []) or []:

@@ -103,6 +103,43 @@ stays off the default because with it the engine oracle of
 threshold 0.32x planar's, bound 0.7) and the hidden-effect suite has not been run on it
 (``bench/RESULTS.md``, "issue 16 (h42)" and "(h44)").
 
+Pusher onset ramp (h50; ``tests/physics/test_mujoco_pusher_onset.py``; off by default).
+With ``solimp`` (0.95, 0.99, 1 mm) a pusher contact is almost fully stiff on its first step:
+the reference acceleration's damping ``-b v`` acts at 0.95 of its full weight on whichever step
+the onset falls, so the strike is a staircase in the start pose (period about ``v dt``, 0.45 mm
+at 0.45 m/s and 1 ms), and the fitter's 0.1 mm start-pose differences straddle its steps (h47).
+``ContactSettings.pusher_onset_steps`` ``c`` gives the object-pusher pairs
+:func:`~robogs.format.mjcf.pusher_onset_solimp`: impedance from MuJoCo's least at contact,
+linear (power 1) to ``solimp``'s dmax at ``width = c v_max dt``, ``v_max`` the recording's
+fastest pusher speed (:func:`drive_pusher_speed`, which :class:`~robogs.physics.engine.Engine`
+passes in from the prepared drive; ``pusher_speed``). The rule: the first penetrating step
+reaches at most ``v_max dt``, so with ``c = 1`` the whole first step lies on the ramp and its
+force grows from zero with the penetration, whatever the onset's phase; a wider ramp only
+softens the strike (peak compression at 0.45 m/s: 0.725 mm without, 0.756 / 0.914 / 1.217 mm at
+c = 1 / 2 / 4). Measured (``bench/RESULTS.md``, "issue 16 (h50)"):
+
+* frictionless table (only pusher onsets): the box's end position in the start offset has a
+  3.2 mm jump without the ramp and is Lipschitz with it (16-fold refinement of the worst 10 um
+  step shrinks it 13.9x at c = 1);
+* design B nulls 0-4, the fitter's start-pose columns at h47's fits, ``||J_fwd1 - J_ctr30|| /
+  ||J_ctr30||`` over 60 (push, dx/dy) columns: median 0.064 -> 0.009 (c = 1), columns above 0.3
+  8 -> 1. What is left is the support contact: the slip-normal coupling makes a sliding box hop
+  about 10 um every few steps and each landing is an onset of the stiff table pair (the
+  residual jumps start with a 1-3 um z difference);
+* noise-free 9-push scene, best friction +2.79 % -> +2.43 % (c = 1); struck box over pusher
+  speed at the brake +0.40 / +0.86 % -> +0.02 / +0.37 % (0.45 / 0.55 m/s);
+* design B null seed 1: MuJoCo's tilt null threshold 29.2 (x1.37 by the check: 40.0) -> 35.1
+  unchecked at c = 1 (36.5 at c = 2), against planar's 51.8 (ratio 0.68 / 0.70; the engine
+  oracle of ``tests/physics/test_gate_linearisation.py`` needs 0.7 and a checked tilt); the
+  tilt's held-out fall 31.2 -> 34.4 / 23.2 (not reported); base friction 0.3067 -> 0.3037 /
+  0.3033 (truth 0.30);
+* the softer onset lets the pusher sink deeper before the pair stiffens, so a strike throws
+  the box a little harder: peak speed over the pusher's 1.025 / 1.034 -> 1.050 / 1.049 at
+  0.30 / 0.45 m/s (c = 1; ``test_mujoco_contact.py``'s plastic-strike bound 1.05), and a
+  steady 0.3 m/s push at mu 0.6 leaves the box 0.41 % faster than the pusher (bound 0.1 %).
+
+It stays off: the engine oracle and those two closed-form bounds fail with it.
+
 Contact settings (:class:`robogs.format.mjcf.ContactSettings`) of the free joint, and why:
 
 * ``cone="elliptic"`` - the exact Coulomb cone; the pyramidal cone is a polyhedral
@@ -196,6 +233,7 @@ __all__ = [
     "OBJECT_PAIR_DAMPRATIO",
     "PUSHER_SOLREFFRICTION_STEPS",
     "SUPPORTED_PARAMS",
+    "drive_pusher_speed",
     "planar_joints_fit",
 ]
 
@@ -313,6 +351,10 @@ class MujocoEngine:
         settings: contact settings (default :data:`PLANAR_SETTINGS` on the planar joint set,
             else :class:`~robogs.format.mjcf.ContactSettings`).
         joints: ``auto``, ``free`` or ``planar`` (see :data:`JOINTS`).
+        pusher_speed: m/s, the fastest pusher speed of the drives this engine will roll out
+            (:func:`drive_pusher_speed`); it sizes the pusher onset ramp where the settings
+            turn it on (``pusher_onset_steps``; module docstring, "Pusher onset ramp"). None:
+            the settings' ``pusher_speed``.
 
     Attributes:
         planar: the objects move on the planar joint set.
@@ -332,13 +374,17 @@ class MujocoEngine:
         threads: int = 1,
         settings: ContactSettings | None = None,
         joints: str = "auto",
+        pusher_speed: float | None = None,
     ) -> None:
         ok, why = self.can_represent(physics, meshes)
         if not ok:
             raise InputError(f"the mujoco engine cannot represent this scene: {why}")
         self.planar = use_planar_joints(physics, meshes, joints, error=InputError)
         base = settings or (PLANAR_SETTINGS if self.planar else ContactSettings())
-        self.settings = ContactSettings(**{**base.__dict__, "timestep": float(dt)})
+        over: dict[str, float] = {"timestep": float(dt)}
+        if pusher_speed is not None:
+            over["pusher_speed"] = float(pusher_speed)
+        self.settings = ContactSettings(**{**base.__dict__, **over})
         self.physics = physics
         # the joint set, PUSHER_SOLREFFRICTION_STEPS and OBJECT_PAIR_DAMPRATIO are in the XML
         self.scene: MjcfScene = scene_mjcf(
@@ -586,6 +632,14 @@ class MujocoEngine:
             self.close()
         except Exception:
             pass
+
+
+def drive_pusher_speed(drive: Drive) -> float:
+    """The fastest pusher speed of ``drive`` [m/s]: the largest norm of its step velocities
+    (``pusher_vel``) over every trajectory and step; it sizes the pusher onset ramp
+    (``ContactSettings.pusher_onset_steps``)."""
+    vel = drive.pusher_vel.detach().cpu().numpy()
+    return float(np.linalg.norm(vel, axis=-1).max()) if vel.size else 0.0
 
 
 def _align_pairs(model: mujoco.MjModel, scene: MjcfScene) -> None:

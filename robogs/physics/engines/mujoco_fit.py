@@ -144,6 +144,8 @@ class MujocoFit:
         stepper: one of :data:`STEPPERS` (default ``batch`` where MuJoCo has it).
         tracked: other tracked objects (:class:`~robogs.physics.prepare.TrackedObject`: name,
             ``init_pos`` [T, 3] m, ``init_yaw`` [T] rad, ``obs_t`` [T, K] s), see :meth:`track`.
+        pusher_speed: m/s, the recording's fastest pusher speed, given to the engine it builds
+            (sizes the pusher onset ramp where the settings turn it on; None: not known).
 
     Attributes:
         last_rollouts: distinct rollouts the last :meth:`simulate` call ran (of its M x T).
@@ -163,6 +165,7 @@ class MujocoFit:
         tilt_inertia_scale: float = TILT_INERTIA_SCALE,
         stepper: str | None = None,
         tracked: Sequence[Any] = (),
+        pusher_speed: float | None = None,
     ) -> None:
         stepper = stepper or ("batch" if _has_batch() else "rollout")
         if stepper not in STEPPERS or (stepper == "batch" and not _has_batch()):
@@ -175,7 +178,9 @@ class MujocoFit:
         self.last_rollouts = 0
         self.last_steps = 0
         self.distinct = True  # run each distinct rollout once (False: all M x T, for benches)
-        self.eng = engine or MujocoEngine(physics, object_name=object_name, dt=dt, threads=threads)
+        self.eng = engine or MujocoEngine(
+            physics, object_name=object_name, dt=dt, threads=threads, pusher_speed=pusher_speed
+        )
         m = self.eng.model
         self.nq, self.nv = m.nq, m.nv
         b = self.eng._bid[object_name]
