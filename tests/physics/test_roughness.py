@@ -17,7 +17,7 @@ from robogs.physics import roughness as R
 
 T_N, K_N, L_N = 4, 60, 3
 H = R.fitter_local_h()  # 1e-4, 1e-4, 1e-3
-RESID = np.full((T_N, K_N), 20.0 / np.sqrt(K_N))  # ||r_t|| = 20: tolerance sin 0.05
+RESID = np.full((T_N, K_N), 20.0 / np.sqrt(K_N))  # chi2_t = 400: tolerance sin 1/800
 VALID = np.ones((T_N, K_N), bool)
 
 
@@ -84,30 +84,44 @@ def test_staircase_closed_form_slope_recovered():
     assert d["stencil_counts"]["central 10"] == T_N and d["unresolved"] == 0
 
 
-def test_staircase_off_grid_period_within_one_onset():
-    """A period that does not divide the stencils: the chosen column is the closed form within
-    one onset over its window (``||s|| / (2 m h)`` against ``||s|| / D``). The period is under
-    the central-3 window (6 steps), which then always spans an onset (the rule's premise; a
-    sparser staircase whose onsets all miss that window keeps the fitter's column)."""
-    period = 5.3
-    fn, smooth, fwd = _toy(period, PHASES * 1.3, seed=3)
-    cols, rec = R.smooth_nuisance(fn, np.zeros(1), np.zeros((T_N, L_N)), fwd, RESID, VALID)
-    m = rec.stencil[:, 0]
-    assert np.all(m >= 10)
+def _sparse_case():
+    """A staircase sparser than the central-3 window (6 steps): onsets every 8.3 steps, with
+    trajectories 2 and 3 placed so that none falls within 3 steps of the start pose (there the
+    fitter's, central-1 and central-3 columns all agree, and all miss the onsets)."""
+    period = 8.3
+    phases = np.array([0.5, -0.5, 3.6, -3.4]) * H[0]
+    return period, _toy(period, phases, seed=3)
+
+
+def _sparse_ok(cols: np.ndarray, smooth: np.ndarray, m: np.ndarray) -> bool:
+    """The chosen column is the closed form within one onset over its window
+    (``||s|| / (2 m h)`` against the slope ``~ ||s|| / D``)."""
+    period = _sparse_case()[0]
     rel = np.linalg.norm(cols[..., 0] - smooth[..., 0], axis=1) / np.linalg.norm(
         smooth[..., 0], axis=1
     )
-    bound = period / (2.0 * m)  # one onset in the window, relative to s / D ~ the column
-    assert np.all(rel <= bound)
+    return bool(np.all(m >= 10) and np.all(rel <= period / (2.0 * np.maximum(m, 1))))
+
+
+def test_sparse_staircase_within_one_onset():
+    _, (fn, smooth, fwd) = _sparse_case()
+    central = R.stencil_columns(fn, np.zeros(1), np.zeros((T_N, L_N)))
+    # the premise: on trajectories 2 and 3 the three narrow columns agree exactly
+    for t in (2, 3):
+        np.testing.assert_allclose(fwd[t, :, 0], central[0, t, :, 0], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(fwd[t, :, 0], central[1, t, :, 0], rtol=1e-9, atol=1e-12)
+    cols, rec = R.smooth_nuisance(fn, np.zeros(1), np.zeros((T_N, L_N)), fwd, RESID, VALID)
+    assert _sparse_ok(cols, smooth, rec.stencil[:, 0])
     assert np.all(_err(cols, smooth) < _err(fwd, smooth))
 
 
 def _smooth_toy(seed: int = 1):
-    """A smooth nonlinear residual ``B sin(a / ell + phi)`` with ``ell`` = 5 mm / 50 mrad."""
+    """A smooth nonlinear residual ``B sin(a / ell + phi)`` with ``ell`` = 10 cm / 1 rad (nearly
+    linear over the widest stencil, 3 mm / 30 mrad)."""
     rng = np.random.default_rng(seed)
     b = rng.standard_normal((T_N, K_N, L_N))
     phi = rng.uniform(0, 2 * np.pi, (T_N, K_N, L_N))
-    ell = np.array([5e-3, 5e-3, 5e-2])
+    ell = np.array([0.1, 0.1, 1.0])
 
     def fn(theta: torch.Tensor, local: torch.Tensor) -> torch.Tensor:
         lo = local.numpy()[:, :, None, :]
@@ -137,54 +151,76 @@ def test_smooth_residual_keeps_the_fitters_columns():
 
 
 def test_tolerance_is_the_datas():
-    """A trajectory whose residual norm is at most 1 cannot tell two columns apart (any angle
-    moves its profiled residual by under one sigma): the fitter's column stays; the staircase's
-    other trajectories, at ``||r_t|| = 20``, still get the smooth one."""
+    """A trajectory whose chi^2 is at most 1/2 cannot tell two columns apart (any angle moves
+    its profiled chi^2 by under one sigma^2): the fitter's column stays; the staircase's other
+    trajectories, at ``chi2_t = 400``, still get the smooth one."""
     fn, smooth, fwd = _toy(4.0, PHASES)
     resid = RESID.copy()
-    resid[1] *= 0.9 / 20.0
+    resid[1] *= 0.7 / 20.0  # chi2 0.49
     cols, rec = R.smooth_nuisance(fn, np.zeros(1), np.zeros((T_N, L_N)), fwd, resid, VALID)
     assert rec.stencil[1, 0] == 0 and np.isinf(rec.tol[1])
     assert np.array_equal(cols[1], fwd[1])
     assert rec.stencil[[0, 2, 3], 0].tolist() == [10, 10, 10]
-    np.testing.assert_allclose(rec.tol[0], 1.0 / 20.0)
+    np.testing.assert_allclose(rec.tol[0], 1.0 / 800.0)
 
 
 def test_projection_bound_behind_the_tolerance():
     """The rule's premise: two unit columns at angle theta give profiled residuals that differ
-    by at most ``sin(theta) ||r||`` (brute force over random columns and residuals)."""
+    by at most ``sin(theta) ||r||``, and profiled chi^2 by at most ``2 sin(theta) ||r||^2``
+    (brute force over random columns and residuals, and the bound reached)."""
     rng = np.random.default_rng(7)
     for _ in range(200):
         a, b, r = rng.standard_normal((3, 30))
         qa, qb = a / np.linalg.norm(a), b / np.linalg.norm(b)
-        diff = (r - qa * (qa @ r)) - (r - qb * (qb @ r))
-        assert np.linalg.norm(diff) <= R.sin_angle(a, b) * np.linalg.norm(r) + 1e-12
+        pa, pb = r - qa * (qa @ r), r - qb * (qb @ r)
+        sin = R.sin_angle(a, b)
+        assert np.linalg.norm(pa - pb) <= sin * np.linalg.norm(r) + 1e-12
+        assert abs(pa @ pa - pb @ pb) <= 2.0 * sin * (r @ r) + 1e-12
+    # the residual bound is attained: r in the plane of a and b, along their bisector's normal
+    a, b = np.eye(30)[0], np.cos(0.3) * np.eye(30)[0] + np.sin(0.3) * np.eye(30)[1]
+    r = (a + b) / np.linalg.norm(a + b)
+    pa, pb = r - a * (a @ r), r - b * (b @ r)
+    assert np.linalg.norm(pa - pb) == pytest.approx(np.sin(0.3) * np.linalg.norm(r), rel=1e-9)
 
 
-@pytest.mark.parametrize("mutant", ["fitter", "one_agreement"])
+def _first_agreeing(fwd, central, resid, valid, run: int):
+    """Mutant rules: the first column agreeing with the next ``run`` ones within the residual's
+    one-sigma bound ``sin <= 1 / ||r_t||`` (run 1: one agreement; run 2: h48's first rule)."""
+    chain = np.concatenate([fwd[None], central], 0)
+    sins = R.sin_angle(np.moveaxis(chain[:-1], -1, -2), np.moveaxis(chain[1:], -1, -2))
+    ok = sins <= (1.0 / np.linalg.norm(resid, axis=-1))[None, :, None]
+    n = chain.shape[0]
+    pick = np.full(ok.shape[1:], n - 1)
+    for i in range(n - 2, -1, -1):
+        good = np.all(ok[i : min(i + run, n - 1)], axis=0)
+        pick = np.where(good, i, pick)
+    return np.take_along_axis(chain, pick[None, :, None, :], axis=0)[0], pick
+
+
+@pytest.mark.parametrize("mutant", ["fitter", "one_agreement", "first_rule"])
 def test_mutants_caught(monkeypatch, mutant):
-    """The staircase assertion fails for a rule that keeps the fitter's column, and for one
-    that stops at the first agreement (F and C_1 agree where no onset is within one step)."""
-    fn, smooth, fwd = _toy(4.0, PHASES)
+    """The staircase assertions fail for a rule that keeps the fitter's column, one that stops
+    at the first agreement (F and C_1 agree where no onset is within one step), and h48's first
+    rule (the next two columns within ``sin <= 1/||r_t||``: fooled by the sparse staircase)."""
     real = R.choose_columns
 
-    def keep_fitter(fwd_, central, resid, valid, stencils=R.STENCILS):
-        cols, rec = real(fwd_, central, resid, valid, stencils)
-        return fwd_.copy(), rec
+    def mutated(fwd_, central, resid, valid, stencils=R.STENCILS):
+        rec = real(fwd_, central, resid, valid, stencils)[1]
+        if mutant == "fitter":
+            return fwd_.copy(), rec
+        cols, pick = _first_agreeing(
+            fwd_, central, resid, valid, 1 if mutant == "one_agreement" else 2
+        )
+        rec.stencil = np.asarray([0, *stencils])[pick]
+        return cols, rec
 
-    def one_agreement(fwd_, central, resid, valid, stencils=R.STENCILS):
-        chain = np.concatenate([fwd_[None], central], 0)
-        sins = R.sin_angle(np.moveaxis(chain[:-1], -1, -2), np.moveaxis(chain[1:], -1, -2))
-        tol = 1.0 / np.linalg.norm(resid, axis=-1)
-        ok = sins <= tol[None, :, None]
-        pick = np.where(ok.any(0), np.argmax(ok, 0), chain.shape[0] - 1)
-        cols = np.take_along_axis(chain, pick[None, :, None, :], axis=0)[0]
-        return cols, real(fwd_, central, resid, valid, stencils)[1]
-
-    monkeypatch.setattr(R, "choose_columns", keep_fitter if mutant == "fitter" else one_agreement)
+    monkeypatch.setattr(R, "choose_columns", mutated)
+    fn, smooth, fwd = _toy(4.0, PHASES)
     cols, _ = R.smooth_nuisance(fn, np.zeros(1), np.zeros((T_N, L_N)), fwd, RESID, VALID)
-    assert not np.allclose(cols[..., 0], smooth[..., 0], rtol=1e-6, atol=1e-6)
-    assert np.max(_err(cols, smooth)) > 0.05
+    dense_ok = np.allclose(cols[..., 0], smooth[..., 0], rtol=1e-9, atol=1e-9)
+    _, (fn, smooth, fwd) = _sparse_case()
+    cols, rec = R.smooth_nuisance(fn, np.zeros(1), np.zeros((T_N, L_N)), fwd, RESID, VALID)
+    assert not (dense_ok and _sparse_ok(cols, smooth, rec.stencil[:, 0]))
 
 
 def test_bad_input_named():
@@ -196,11 +232,11 @@ def test_bad_input_named():
 
 
 def test_planar_gate_unchanged_with_smooth_columns(monkeypatch, tmp_path):
-    """Design B on the planar engine is smooth at the fitter's step (h47: ``||F - C_30|| /
-    ||C_30|| <= 0.04`` there): with the flag on every candidate keeps the fitter's columns (the
-    record says so) and every threshold is the flag-off one. (Not every planar design is: on the
-    6-push scenario of test_diagnose the planar columns of 8 of 18 start-pose dimensions turn by
-    0.1-0.3 rad within 10 steps, and the rule smooths them: bench/RESULTS.md, h48.)"""
+    """Design B on the planar engine: its 0.1 mm columns are nearly smooth (h47: ``||F - C_30||
+    / ||C_30|| <= 0.04``), not to the chi^2 precision of the rule, so some are replaced; the
+    thresholds stay within 1 % of the flag-off ones (seed 1 offline: tilt 51.82 -> 51.62) and
+    the record says which stencils were taken. (Not every planar design is that smooth: on
+    design A the planar columns of a 6-push scenario turn by 0.1-0.3 rad within 10 steps.)"""
     from robogs.physics.diagnose import diagnose_recording
     from robogs.synth.scenarios.design_b import make_design_b
 
@@ -215,9 +251,10 @@ def test_planar_gate_unchanged_with_smooth_columns(monkeypatch, tmp_path):
     cols = res[True].gate["nuisance_columns"]
     assert sorted(cols) == sorted(cands)
     for name, d in cols.items():
-        assert d["stencil_counts"]["fitter"] == sum(d["stencil_counts"].values()), name
-        assert d["max_rel_fwd"] == 0.0 and d["rows"] == 2 * 3 * len(R.STENCILS)
+        assert sum(d["stencil_counts"].values()) == 9 * 3, name
+        assert d["max_rel_fwd"] < 0.1 and d["rows"] == 2 * 3 * len(R.STENCILS)
     thr = {f: {r.name: r.null_threshold_sigma2 for r in res[f].rows} for f in res}
     for name in cands:
-        assert thr[True][name] == pytest.approx(thr[False][name], rel=1e-3), name
+        assert thr[True][name] == pytest.approx(thr[False][name], rel=1e-2), name
+    assert [r.name for r in res[True].rows if r.reported] == []
     assert res[True].gate["key"] != res[False].gate["key"]  # cached apart
