@@ -111,6 +111,10 @@ with the denominator floored at the share's precision (:func:`fit_precision`, th
 stopping rule); where the change is no larger than the threshold (``lambda = 1``) or vanishes
 once shrunk (the noise-free draw gains under half the threshold) it falls back to the data's
 own selection, which the antithetic draws cancel (bench/RESULTS.md, issue 17, h40 and h46).
+A third, ``"auto"`` (h49, :func:`auto_factor`), picks between the two from this dataset's
+objective: the antithetic pair's odd part, against the envelope theorem's slope, measures the
+fitted chi^2 values' roughness at no extra fit, and where the share's standard error
+(``sqrt(3)`` times it) exceeds the factor's denominator h38's draw decides instead.
 
 The calibration is cached on disk per revision (``model_key`` of physics.json), data
 fingerprint, candidate list and draw count, with the linearisation checks made on it
@@ -160,6 +164,8 @@ __all__ = [
     "CHECK_RULE",
     "CHECK_RULES",
     "antithetic_factor",
+    "auto_factor",
+    "envelope_slope",
     "fit_precision",
     "path_scale",
     "store_checks",
@@ -193,6 +199,11 @@ and their spread on a real effect is noise that only raises its bar (MuJoCo desi
 1: 1.67 on the data's signs, 1.62 and 2.28 flipped; with the largest the tilt was lost)."""
 
 
+_NOT_MEASURED = float("nan")
+"""One nan object for the fields a check may leave unmeasured, so that records compare equal
+after a round trip (tuple equality tests identity before ``==``)."""
+
+
 @dataclass
 class LinearisationCheck:
     """One candidate's linearisation check on null draws (:func:`null_draw_factor`).
@@ -205,6 +216,12 @@ class LinearisationCheck:
             chi^2 fall ``gain'`` and the linear model's ``linear'`` [sigma^2].
         scale: ``lambda``, the fitted change's scale in the draws (:func:`draw_scale`).
         rollouts, seconds: what the draws' fits cost (0 when read from the cache).
+        rule: the check that made it (:data:`CHECK_RULES`); branch, mu, share, precision:
+            :func:`antithetic_factor`'s (``"antithetic"`` and ``"auto"``).
+        roughness, chosen, other: ``"auto"`` only (:func:`auto_factor`): the objective's
+            roughness measured on the ``+-`` draws [sigma^2] (nan where they were not
+            fitted), the rule it chose (``"antithetic"`` or ``"draw"``) and the factor of the
+            rule not chosen (nan where that was not run).
     """
 
     factor: float
@@ -220,6 +237,9 @@ class LinearisationCheck:
     mu: float = float("nan")
     share: float = float("nan")
     precision: float = float("nan")
+    roughness: float = _NOT_MEASURED
+    chosen: str = ""
+    other: float = _NOT_MEASURED
 
     def to_dict(self) -> dict[str, Any]:
         d = {
@@ -233,10 +253,16 @@ class LinearisationCheck:
             "seconds": self.seconds,
             "rule": self.rule,
         }
-        if self.rule == "antithetic":  # the share only where the three draws were fitted
+        if self.rule in ("antithetic", "auto"):  # the share only where the draws were fitted
             d |= {"branch": self.branch, "mu": self.mu}
             if np.isfinite(self.share):
                 d |= {"share_sigma2": self.share, "precision_sigma2": self.precision}
+        if self.rule == "auto":  # h49: the roughness measured and the rule it chose
+            d |= {"chosen_rule": self.chosen}
+            if np.isfinite(self.roughness):
+                d |= {"roughness_sigma2": self.roughness}
+            if np.isfinite(self.other):
+                d |= {"other_factor": self.other}
         return d
 
     @classmethod
@@ -253,6 +279,9 @@ class LinearisationCheck:
             mu=float(d.get("mu", float("nan"))),
             share=float(d.get("share_sigma2", float("nan"))),
             precision=float(d.get("precision_sigma2", float("nan"))),
+            roughness=float(d.get("roughness_sigma2", _NOT_MEASURED)),
+            chosen=str(d.get("chosen_rule", "")),
+            other=float(d.get("other_factor", _NOT_MEASURED)),
         )
 
 
@@ -373,7 +402,13 @@ class Calibration:
                 "(the data, its fitted change shrunk to the threshold's scale), largest"
                 if CHECK_RULE == "draw"
                 else "antithetic noise share over its linearisation, floored at the fits' "
-                "precision (draws on the model's path at the threshold's scale)",
+                "precision (draws on the model's path at the threshold's scale)"
+                + (
+                    "; h38's draw instead where the objective's measured roughness makes the "
+                    "share's standard error exceed its linear model"
+                    if CHECK_RULE == "auto"
+                    else ""
+                ),
                 "candidates": {n: c.to_dict() for n, c in applied.items()},
                 "rollouts": int(sum(c.rollouts for c in applied.values())),
                 "seconds": float(sum(c.seconds for c in applied.values())),
@@ -842,15 +877,22 @@ def null_draw_factor(
     return LinearisationCheck(f, float(data_ratio), ratios, gains, lins, scale=float(lam))
 
 
-CHECK_RULES = ("draw", "antithetic")
+CHECK_RULES = ("draw", "antithetic", "auto")
 CHECK_RULE = "draw"
 """The linearisation check the diagnosis runs (:mod:`robogs.physics.diagnose`): ``"draw"``
-(h38: one draw, :func:`null_draw_factor`) or ``"antithetic"`` (h46: :func:`antithetic_factor`).
-Kept on ``"draw"``: the antithetic check finds design A restitution on every seed run (8 of 8,
-h38's draw 4 of 8) and holds planar design A null seeds 4 and 20-23, but lets MuJoCo design
-B's null seeds 4 (restitution) and 6 (tilt) back (factor 1 on both) and loses its time offset
-seed 0 (a share of 9.87 sigma^2 on gains of about 680, where the fitter's stopping rule
-promises 0.2: factor 8.5; bench/RESULTS.md, issue 17, h46)."""
+(h38: one draw, :func:`null_draw_factor`), ``"antithetic"`` (h46: :func:`antithetic_factor`) or
+``"auto"`` (h49: :func:`auto_factor`, the antithetic share where the objective's measured
+roughness lets it resolve the factor, else the draw). Kept on ``"draw"``: the antithetic check
+finds design A restitution on every seed run (8 of 8, h38's draw 4 of 8) and holds planar
+design A null seeds 4 and 20-23, but lets MuJoCo design B's null seeds 4 (restitution) and 6
+(tilt) back (factor 1 on both) and loses its time offset seed 0 (a share of 9.87 sigma^2 on
+gains of about 680, where the fitter's stopping rule promises 0.2: factor 8.5; bench/RESULTS.md,
+issue 17, h46). ``"auto"`` measures that roughness (5.8 sigma^2: the draw decides, x1.12, the
+time offset is found again) and keeps the antithetic share on planar restitution (roughness
+0.2-1.4), but the two MuJoCo null false positives stay: null 6's pair is smooth (roughness
+0.22; its false positive is the data's own selection, which any antithetic share cancels) and
+null 4's is just under the bar (sqrt(3) x 7.22 = 12.5 against 13.5; bench/RESULTS.md, issue 17,
+h49)."""
 
 
 def fit_precision(cost: float) -> float:
@@ -1174,3 +1216,111 @@ def calibrate(
     if path is not None:
         _write(path, cal)
     return cal
+
+
+AutoFit = Callable[
+    [np.ndarray, float | None], tuple[float, float, LinearCandidate, np.ndarray, np.ndarray]
+]
+"""``fit(offset [T, K], mu) -> (chi2 of the base fit, chi2 of the base + candidate fit, the
+candidate linearised at its fit, the base fit's residual, the candidate fit's residual)``, both
+residuals [T, K] of ``r(theta) + offset`` at the fits' optima (offset included); ``mu`` as
+:data:`AntiFit`, None: no start on the path (h38's draw)."""
+
+
+def envelope_slope(
+    base_resid: np.ndarray, cand_resid: np.ndarray, e: np.ndarray, valid: np.ndarray
+) -> float:
+    """``d gain / d s`` at ``s = 0`` of the draws ``r(theta) + offset + s e`` [sigma^2]: by the
+    envelope theorem each fitted chi^2 moves as ``2 <rho, e>`` with ``rho`` its residual at the
+    optimum (the optimum's own shift is second order), so the gain (base minus candidate)
+    moves as ``2 <rho_B - rho_C, e>``; exact on any model smooth at the two optima, whatever
+    the parameters' curvature (``base_resid``, ``cand_resid``: the fits' residuals [T, K])."""
+    m = np.asarray(valid, bool)
+    return float(2.0 * np.sum(((base_resid - cand_resid) * e)[m]))
+
+
+def auto_factor(
+    base_resid: np.ndarray,
+    cand_resid: np.ndarray,
+    valid: np.ndarray,
+    fit: AutoFit,
+    path: PathFn,
+    base: LinearCandidate,
+    lam: float,
+    threshold: float,
+    data_ratio: float,
+    k: int,
+    signs: np.ndarray,
+    both: bool = False,
+) -> LinearisationCheck:
+    """The linearisation check that picks its rule from this dataset's measured roughness (h49).
+
+    :func:`antithetic_factor` runs first. Where it fits its ``+-`` pair (branch
+    ``"antithetic"``) the pair also measures how rough the objective is, at no extra fit:
+
+    - By the envelope theorem (:func:`envelope_slope`) the gain of the draw ``pred(mu) + s e``
+      is ``g(s) = g(0) + s a + s^2 b + O(s^3)`` with ``a = 2 <rho_B0 - rho_C0, e>`` known from
+      the noise-free draw's two fitted residuals; the share is ``b`` (the even part), and on an
+      objective smooth at the optima the *odd* part of the pair, ``(g(+) - g(-))/2``, equals
+      ``a`` up to third order (exactly on a linear model).
+    - On a rough objective each fitted chi^2 is off its smooth value by an error ``eps`` of
+      some spread ``sigma`` (a fit that finds or misses a contact jump). The odd residual
+      ``u = (g(+) - g(-))/2 - a`` holds four of them, ``(eps_B+ - eps_C+ - eps_B- +
+      eps_C-)/2``, spread ``sigma``; the share holds six, ``(eps_B+ - eps_C+ + eps_B- -
+      eps_C-)/2 - (eps_B0 - eps_C0)``, spread ``sqrt(3) sigma``. The odd residual is the same
+      errors' antisymmetric combination and has no part of ``b``, so ``|u|`` (the
+      ``roughness``, sigma^2) estimates ``sigma`` from the pair itself and the share's
+      standard error is ``sqrt(3) |u|``.
+    - The factor is ``(share + k) / (D + k)``, ``D = max(||P_0 e||^2, precision)``, so its
+      standard error is ``sqrt(3) |u| / (D + k)`` and the scaled threshold's error is that
+      times the linearised threshold. The share is used where that error is at most the
+      linearised threshold itself (the factor's standard error at most 1, the size of the
+      null it corrects): ``sqrt(3) |u| <= D + k``. Beyond it the antithetic share measures the
+      roughness rather than the fit's capacity on the noise, and h38's one draw
+      (:func:`null_draw_factor`, one more fit; it keeps the data's own selection, which the
+      antithetic pair cancels) decides instead.
+
+    The fall-backs of :func:`antithetic_factor` (``"data"``: ``lam >= 1``; ``"plus"``: the
+    shrunk change absorbed by the base) keep its result: neither cancels the data's selection.
+
+    Args: as :func:`antithetic_factor`, with ``fit`` an :data:`AutoFit` and ``signs`` the
+    draw rule's rows (:func:`check_signs`); ``both``: also run the draw rule where the
+    antithetic share is chosen (a measurement: ``other`` then holds its factor, the verdict is
+    unchanged).
+
+    Returns:
+        The check, ``rule = "auto"``, ``chosen`` the rule whose factor it carries,
+        ``roughness = |u|`` and ``other`` the factor of the rule not chosen (where run);
+        ``gains`` / ``linears`` / ``ratios`` are the antithetic draws' (``0, +, -``) followed by
+        the draw rule's where it ran.
+    """
+    resids: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def fit4(offset: np.ndarray, mu: float) -> tuple[float, float, LinearCandidate, np.ndarray]:
+        c_b, c_c, cand, r_b, r_c = fit(offset, mu)
+        resids.append((r_b, r_c))
+        return c_b, c_c, cand, r_b
+
+    chk = antithetic_factor(
+        base_resid, cand_resid, valid, fit4, path, base, lam, threshold, data_ratio, k
+    )
+    chk.rule, chk.chosen = "auto", "antithetic"
+    if chk.branch != "antithetic":
+        return chk
+    e = cand_resid * valid
+    slope = envelope_slope(resids[0][0], resids[0][1], e, valid)
+    chk.roughness = abs(0.5 * (chk.gains[1] - chk.gains[2]) - slope)
+    smooth = k <= 0 or np.sqrt(3.0) * chk.roughness <= max(chk.linears[0], chk.precision) + k
+    if smooth and not both:
+        return chk
+    drew = null_draw_factor(
+        base_resid, cand_resid, valid, lambda o: fit(o, None)[:4], signs, lam, data_ratio
+    )
+    if smooth:
+        chk.other = drew.factor
+    else:
+        chk.other, chk.factor, chk.chosen = chk.factor, drew.factor, "draw"
+    chk.ratios += drew.ratios
+    chk.gains += drew.gains
+    chk.linears += drew.linears
+    return chk
