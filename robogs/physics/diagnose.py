@@ -718,7 +718,15 @@ def diagnose_recording(
             )
         )
         chk = cal.checks.get(e.name) if e.name in cal.inflation else None
-        if chk is not None and chk.factor > 1.0 and chk.rule == "antithetic":
+        if chk is not None and chk.factor > 1.0 and chk.rule == "auto" and chk.chosen == "draw":
+            rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
+                f"null threshold scaled x{chk.factor:.2f} ({thr / chk.factor:.1f} -> {thr:.1f} "
+                f"sigma^2): the objective is rough here (roughness {chk.roughness:.2f} sigma^2 "
+                f"on the antithetic pair, share {chk.share:.2f} +- "
+                f"{np.sqrt(3.0) * chk.roughness:.2f}), so one draw decides: its fit gained more "
+                "than its linear model by that ratio (the gate's linearisation check)"
+            )
+        elif chk is not None and chk.factor > 1.0 and chk.rule in ("antithetic", "auto"):
             how = {
                 "data": "its fitted change is no larger than the threshold: the data's own "
                 "ratio of fit gain to linear gain",
@@ -898,7 +906,7 @@ def _calibrate(
                     [(space.owner_columns(e.name), starts)],
                 )
                 lc_d = gate_mod.LinearCandidate(e.name, c.jac, nuisance(c, b.resid, f=fn_d), n_base)
-                return b.cost, c.cost, lc_d, b.resid
+                return b.cost, c.cost, lc_d, b.resid, c.resid
 
             def path(mus: np.ndarray, out: FitOutcome = out, count: list[int] = count):
                 m = np.asarray(mus, float)
@@ -910,23 +918,17 @@ def _calibrate(
 
             t0 = time.perf_counter()
             lam = gate_mod.draw_scale(base.cost - out.cost, cal.thresholds[e.name])
-            if gate_mod.CHECK_RULE == "antithetic":
+            if gate_mod.CHECK_RULE in ("antithetic", "auto"):
                 lb = gate_mod.LinearCandidate("base", base.jac, nuisance(base, base.resid), n_base)
-                chk = gate_mod.antithetic_factor(
-                    base.resid,
-                    out.resid,
-                    valid,
-                    fit_draw,
-                    path,
-                    lb,
-                    lam,
-                    cal.thresholds[e.name],
-                    ratio,
-                    k,
-                )
+                args = (base.resid, out.resid, valid)
+                rest = (path, lb, lam, cal.thresholds[e.name], ratio, k)
+                if gate_mod.CHECK_RULE == "auto":  # h49: the rule from the measured roughness
+                    chk = gate_mod.auto_factor(*args, fit_draw, *rest, signs)
+                else:
+                    chk = gate_mod.antithetic_factor(*args, lambda o, m: fit_draw(o, m)[:4], *rest)
             else:
                 chk = gate_mod.null_draw_factor(
-                    base.resid, out.resid, valid, lambda o: fit_draw(o), signs, lam, ratio
+                    base.resid, out.resid, valid, lambda o: fit_draw(o)[:4], signs, lam, ratio
                 )
             chk.rollouts, chk.seconds = count[0], time.perf_counter() - t0
             made = True
