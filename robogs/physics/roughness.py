@@ -48,7 +48,10 @@ Central differences of a staircase converge to its mean slope as the stencil wid
 (the smoothing of a noisy function's derivative by a wider difference: Moré & Wild 2012,
 "Estimating derivatives of noisy simulations", ACM TOMS 38).
 
-Behind :data:`SMOOTH_NUISANCE` (off by default until measured: bench/RESULTS.md, h48).
+Behind :data:`SMOOTH_NUISANCE`, off: measured end to end on MuJoCo it lost a found effect
+(design A table tilt seed 0: the unscaled tilt null 2246 -> 4148 sigma^2) and made a design-B
+null report restitution (seed 4), while design A's Stribeck and anisotropic-friction false
+positives stayed (bench/RESULTS.md, issue 16/17, h48).
 """
 
 from __future__ import annotations
