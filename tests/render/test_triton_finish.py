@@ -63,7 +63,10 @@ def test_fused_finish_outputs_equal_finish_output(
         a, b = getattr(got, name), getattr(want, name)
         assert a.shape == b.shape and a.dtype == b.dtype, name
         torch.testing.assert_close(a, b, rtol=2e-6, atol=1e-7, msg=name)
-    assert float(want.alpha.detach().max()) > 0.5 and float((want.alpha.detach() == 0).float().mean()) > 0.02
+    assert (
+        float(want.alpha.detach().max()) > 0.5
+        and float((want.alpha.detach() == 0).float().mean()) > 0.02
+    )
 
 
 @pytest.mark.parametrize("kind", ["3dgs", "2dgs"])
