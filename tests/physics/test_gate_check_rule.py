@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rough_toy import K_N, T_N, make_toy
 
 from robogs.physics import gate as G
 
@@ -224,30 +225,12 @@ def test_auto_record_round_trips():
 # pred = beta x + l_t + S sin(a z) (+ jumps of 1 sigma in norm every 0.4 % of ``a``), unit noise;
 # beta and l_t by linear least squares, ``a`` by a dense grid (the fit finds what a rough
 # residual offers), the effect's column by a 1 % forward difference as the engines'.
-T_N, K_N, S_AMP = 9, 40, 4.0
-_R = np.random.default_rng(11)
-X = np.sort(_R.uniform(0.0, 1.0, (T_N, K_N)), axis=1)
-Z = _R.uniform(0.0, 2.0, (T_N, K_N))
-XC = X - X.mean(axis=1, keepdims=True)
+_TOY = make_toy(11)
+X, Z, XC, TAU, JUMPS = _TOY.x, _TOY.z, _TOY.xc, _TOY.tau, _TOY.jumps
 VALID = np.ones((T_N, K_N), bool)
-TAU = np.arange(-0.3, 0.3001, 0.004)
-JUMPS = _R.standard_normal((len(TAU), T_N, K_N))
-JUMPS /= np.linalg.norm(JUMPS, axis=(1, 2), keepdims=True)
 THR = 10.0
 BASE = G.LinearCandidate("base", X[..., None], np.ones((T_N, K_N, 1)), 1)
-
-
-def _effect(a: float, rough: bool) -> np.ndarray:
-    out = S_AMP * np.sin(a * Z)
-    if rough:
-        on = (a > TAU).astype(float) - (0.0 > TAU).astype(float)
-        out = out + np.einsum("j,jtk->tk", on, JUMPS)
-    return out
-
-
-def _profile(r: np.ndarray) -> np.ndarray:
-    rc = r - r.mean(axis=1, keepdims=True)
-    return rc - np.sum(rc * XC) / np.sum(XC * XC) * XC
+_effect, _profile = _TOY.effect, _TOY.profile
 
 
 def _toy(amp: float, seed: int, rough: bool) -> G.LinearisationCheck:
