@@ -242,6 +242,8 @@ def main() -> None:
             print(f"{kind}: gsplat failed ({type(exc).__name__}: {exc})")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
+    if not rows:  # gsplat imported but measured nothing: no figure to read
+        sys.exit("gsplat_side: no row measured (see the failures above)")
 
 
 if __name__ == "__main__":
