@@ -12,6 +12,13 @@ at the speed the strike gave it. Its position at the end, as a function of the s
 0..1 mm in 10 um, is refined 16-fold on the interval of its largest 10 um step: a jump keeps
 its size under refinement, a Lipschitz function's step shrinks 16-fold. Without the ramp the
 largest step survives refinement (a staircase); with it the step shrinks at least 4-fold.
+
+Why the ramp still fails two closed-form bounds (h52), each against its own closed form: a
+strike with the ramp overshoots as a linear spring-damper of the pair's damping ratio does
+(``test_mujoco_contact.py``'s plastic bound 1.05 sits just above damping ratio 2's 4.78 %),
+and a steady push sits inside the ramp where MuJoCo's soft-constraint balance puts it, at an
+impedance of 0.49 that passes half the support's hop-cycle friction through to the box
+(``test_mujoco_friction_bias.py``'s steady mu 0.6 push).
 """
 
 from __future__ import annotations
@@ -61,9 +68,10 @@ def _doc() -> dict:
     }
 
 
-def _drive(offsets: np.ndarray):
+def _drive(offsets: np.ndarray, every_step: bool = False):
     """One trajectory per start offset [m] along +x: the pusher arrives at ``V`` from 10 mm
-    behind the face, pushes 60 steps, brakes at 12 m/s^2 (the box leaves it), then 250 ms."""
+    behind the face, pushes 60 steps, brakes at 12 m/s^2 (the box leaves it), then 250 ms.
+    The pose is wanted at the end only, or at every step (``every_step``)."""
     n_brake = int(math.ceil(V / 12.0 / DT))
     vel = np.concatenate(
         [np.zeros(5), np.full(60, V), np.linspace(V, 0.0, n_brake + 1)[1:], np.zeros(250)]
@@ -72,7 +80,10 @@ def _drive(offsets: np.ndarray):
     n, t = len(x), len(offsets)
     path = np.repeat(np.stack([x, np.zeros(n), np.full(n, SIZE[2] / 2)], -1)[None], t, 0)
     init = np.stack([offsets, np.zeros(t), np.full(t, SIZE[2] / 2)], -1)
-    return make_drive(DT, path, np.zeros((t, n)), np.full((t, 1), (n - 1) * DT), init, np.zeros(t))
+    stamps = (
+        np.repeat((np.arange(n) * DT)[None], t, 0) if every_step else np.full((t, 1), (n - 1) * DT)
+    )
+    return make_drive(DT, path, np.zeros((t, n)), stamps, init, np.zeros(t))
 
 
 def _ends(eng: MujocoEngine, offsets: np.ndarray) -> np.ndarray:
@@ -173,3 +184,141 @@ def test_the_engine_sizes_the_ramp_from_the_recordings_drive(monkeypatch) -> Non
     for k in pusher:
         assert model.pair_solimp[k][2] == pytest.approx(v * 1e-3, rel=1e-9)
         assert model.pair_solimp[k][4] == 1.0
+
+
+# ------------------------------------------------------------- the strike's overshoot (h52)
+def _overshoot_closed_form(zeta: float) -> float:
+    """Peak speed over the pusher's, minus 1, of a free mass struck through a linear
+    spring-damper of damping ratio ``zeta > 1`` by a pusher moving at a constant speed.
+
+    The penetration obeys ``r'' + 2 zeta w r' + w^2 r = 0``, ``r(0) = 0``, ``r'(0) = V``, and
+    the mass moves at ``V - r'``; with ``s1,2 = -w (zeta -+ sqrt(zeta^2 - 1))``,
+    ``r' = V (s1 e^(s1 t) - s2 e^(s2 t)) / (s1 - s2)`` is most negative at
+    ``t* = 2 ln(s2 / s1) / (s1 - s2)`` (``w = 1``: the overshoot is independent of the
+    stiffness ``w^2`` and of ``V``)."""
+    root = math.sqrt(zeta * zeta - 1.0)
+    s1, s2 = -(zeta - root), -(zeta + root)
+    t = 2.0 * math.log(s2 / s1) / (s1 - s2)
+    return -(s1 * math.exp(s1 * t) - s2 * math.exp(s2 * t)) / (s1 - s2)
+
+
+def _peak_speeds(settings: ContactSettings, offsets: np.ndarray) -> np.ndarray:
+    """The box's peak speed over the pusher's, minus 1, in :func:`_drive`'s strike, per start
+    offset [m] (every step stamped)."""
+    drive = _drive(offsets, every_step=True)
+    x = MujocoEngine(_doc(), settings=settings, pusher_speed=V).rollout(drive).pos["box"][0, ..., 0]
+    return np.diff(x, axis=1).max(axis=1) / (V * DT) - 1.0
+
+
+@pytest.mark.parametrize(("steps", "zeta"), [(0.0, 2.0), (3.0, 2.5)])
+def test_with_the_ramp_a_strike_overshoots_as_a_linear_damped_contact(
+    steps: float, zeta: float
+) -> None:
+    """With the ramp the strike starts from zero force, so the box's peak speed is that of a
+    mass struck through a linear spring-damper of the pair's damping ratio (closed form
+    :func:`_overshoot_closed_form`: 4.78 % at 2, 3.27 % at 2.5), whatever the onset's phase:
+    measured 4.40-5.03 % and 2.92-3.47 % over nine phases (the impedance ramp makes the
+    contact slightly nonlinear; bound 0.6 points). This is why the ramp with the default
+    pusher pair (4 ms, damping ratio 2) meets ``test_mujoco_contact.py``'s plastic-strike bound
+    of 5 % only just (1.0503 there): without the ramp the first step's full-impedance impulse
+    makes the overshoot phase-dependent (2.8-5.0 %), and that test's phase sits low. A pusher
+    pair of 3 steps and damping ratio 2.5 (``pusher_timeconst_steps``, ``pusher_dampratio``)
+    brings it to 3.3 % (``bench/RESULTS.md``, "issue 16 (h52)")."""
+    settings = dataclasses.replace(
+        PLANAR_SETTINGS,
+        pusher_onset_steps=1.0,
+        pusher_timeconst_steps=steps,
+        pusher_dampratio=zeta,
+    )
+    over = _peak_speeds(settings, np.arange(9) * 5e-5)
+    expected = _overshoot_closed_form(zeta)
+    assert np.all(np.abs(over - expected) < 6e-3), (over, expected)
+
+
+# ------------------------------------------------------------- the steady push's operating point
+def _impedance(solimp: np.ndarray, r: float) -> float:
+    """MuJoCo's impedance ``d(r)`` of a constraint at violation ``r`` [m] (``solimp`` = dmin,
+    dmax, width, midpoint, power; MuJoCo documentation, "Modeling", solimp)."""
+    lo, hi, width, mid, power = (float(v) for v in solimp)
+    x = min(r / width, 1.0)
+    if power == 1.0:
+        y = x
+    elif x <= mid:
+        y = x**power / mid ** (power - 1.0)
+    else:
+        y = 1.0 - (1.0 - x) ** power / (1.0 - mid) ** (power - 1.0)
+    return lo + y * (hi - lo)
+
+
+def _steady_push(settings: ContactSettings, mu: float) -> dict[str, float]:
+    """The box on a table of friction ``mu`` pushed at 0.3 m/s (gentle 60 ms start, 0.4 s of
+    push): mean penetration of the pusher contacts over the last 200 steps [m], their number,
+    and the compiled pair's impedance, ``K = 1 / (dmax tc zeta)^2`` and ``A0`` (the sum of the
+    two bodies' ``body_invweight0``)."""
+    import mujoco
+
+    doc = _doc()
+    doc["objects"]["box"]["friction_dynamic"] = mu
+    v, n_up, n_push = 0.3, 60, 400
+    ramp = v * 0.5 * (1 - np.cos(np.pi * np.arange(1, n_up + 1) / n_up))
+    vel = np.concatenate([np.zeros(20), ramp, np.full(n_push, v)])
+    x = -(HX + R + 2e-4) + np.concatenate([[0.0], np.cumsum(vel) * DT])
+    n = len(x)
+    path = np.stack([x, np.zeros(n), np.full(n, SIZE[2] / 2)], -1)[None]
+    init = np.array([[0.0, 0.0, SIZE[2] / 2]])
+    drive = make_drive(DT, path, np.zeros((1, n)), np.zeros((1, 1)), init, np.zeros(1))
+    eng = MujocoEngine(doc, settings=settings)
+    m, d = eng.model, mujoco.MjData(eng.model)
+    state = eng._initial_states(drive, None, 1)[0]
+    mujoco.mj_setState(m, d, state, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    ctrl = eng._controls(drive)[0]
+    pusher = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, g) for g in ("pusher", "pusher_end")}
+    pens, count = [], 0
+    for k in range(n - 1):
+        d.ctrl[:] = ctrl[k]
+        mujoco.mj_step(m, d)
+        if k >= n - 201:
+            rows = [
+                -d.contact[i].dist
+                for i in range(d.ncon)
+                if {d.contact[i].geom1, d.contact[i].geom2} & pusher
+            ]
+            pens.append(np.mean(rows))
+            count = len(rows)
+    k = next(i for i, pair in enumerate(eng.scene.pairs) if "pusher" in pair[1])
+    (tc, zeta), solimp = m.pair_solref[k], m.pair_solimp[k]
+    b_box, b_pusher = (mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b) for b in ("box", "pusher"))
+    return {
+        "r": float(np.mean(pens)),
+        "contacts": count,
+        "solimp": solimp.copy(),
+        "K": 1.0 / (solimp[1] * tc * zeta) ** 2,
+        "A0": float(m.body_invweight0[b_box, 0] + m.body_invweight0[b_pusher, 0]),
+    }
+
+
+def test_a_steady_push_sits_inside_the_ramp_where_the_closed_form_puts_it() -> None:
+    """Why the ramp makes a steady push chatter (``test_mujoco_friction_bias.py``'s mu 0.6
+    push: the box 0.41 % off the pusher's speed at the brake, RMS 0.26 %, mean -0.001 %).
+
+    Closed form (MuJoCo documentation, "Computation", soft constraints: a row's force is
+    ``f = (a_ref - a0) / (A + R)`` with ``R = (1 - d) / d A0`` and ``a_ref = -b v - K d r``):
+    at rest relative to the pusher (``v = 0``, the row's own force balancing the share ``F``
+    of the friction ``mu m g`` each of the capsule's two end contacts carries), ``R F = K d r``,
+    so ``d(r)^2 r / (1 - d(r)) = A0 F / K``: the same load puts both pairs where this holds.
+    Default pair: 10.4 um, ``d`` 0.93. Ramp over 0.55 mm: 274 um, ``d`` 0.49 -- and a contact
+    of impedance ``d`` passes ``1 - d`` of an unconstrained acceleration through, so the
+    support's hop cycle (its friction swinging over 14 steps) reaches the box 7x as much.
+    The relation holds within 1 % (measured 0.03 / 0.15 %) for both pairs."""
+    mu = 0.6
+    ramp = dataclasses.replace(PLANAR_SETTINGS, pusher_onset_steps=1.0, pusher_speed=0.55)
+    imps = []
+    for settings in (PLANAR_SETTINGS, ramp):
+        out = _steady_push(settings, mu)
+        assert out["contacts"] == 2, out  # the capsule's two end spheres (capsule_ends)
+        r = out["r"]
+        imp = _impedance(out["solimp"], r)
+        force = mu * MASS * G / out["contacts"]
+        assert imp**2 * r / (1 - imp) == pytest.approx(out["A0"] * force / out["K"], rel=1e-2)
+        imps.append(imp)
+    assert imps[0] > 0.9 and imps[1] < 0.6, imps
