@@ -2,7 +2,12 @@
 
 The accuracy acceptance on the 60-view 320x240 static capture: every image registers (>= 95 %)
 and, after the best similarity onto the true centres (the oracle; Umeyama 1991), the camera
-centres are within 1 % of the scene size and the rotations within 1 degree.
+centres are within 1 % of the scene size and the rotations within 1 degree. It runs from the
+inputs that sent the mapper's one run into its depth-reversed basin before the focal starts
+(fx ~146, fy ~128 px for 343 true, every rotation ~180 deg off; bench/RESULTS.md, h51): other
+views (seed 5) from COLMAP's guess, and other views with another focal length (seed 11, 40 deg)
+from half the true focal; neither was used to choose the starts. (The test's own capture from
+half the true focal is in the same table; it is left out here for time, ~100 s.)
 """
 
 from __future__ import annotations
@@ -58,35 +63,143 @@ def _rotation_deg(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip((np.trace(d, axis1=1, axis2=2) - 1) / 2, -1, 1)))
 
 
-@pytest.mark.slow
-def test_sfm_recovers_the_static_capture(tmp_path: Path):
-    """~30 s on 2 threads: 60 images, 2000 SIFT features each, exhaustive matching."""
-    pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
-    import json
+def test_the_kept_run_has_most_images_then_lowest_reprojection_error():
+    """Oracle: sorting every order of five runs by (registered desc, error asc, index asc)."""
+    from itertools import permutations
 
-    from robogs.convert.ingest.sfm import run_sfm
-    from robogs.reconstruct.align import umeyama
-    from robogs.synth.multiview import synthesize_multiview
+    from robogs.convert.ingest.sfm import SfmStart, _choose
 
-    truth = synthesize_multiview(
-        tmp_path / "cap", robot="ur5", n_views=60, width=320, height=240, seed=3, poses=False
+    rows = [  # (registered, reprojection px): the depth-reversed and the true model of h51 first
+        (60, 1.325),
+        (60, 0.394),
+        (59, 0.20),
+        (60, 0.394),
+        (0, float("inf")),
+    ]
+    for order in permutations(range(len(rows))):
+        starts = [
+            SfmStart(100.0, i, 1.0, 1.0, rows[k][0], 10, rows[k][1]) for i, k in enumerate(order)
+        ]
+        want = sorted(
+            range(len(starts)), key=lambda i: (-starts[i].registered, starts[i].reprojection_px, i)
+        )[0]
+        assert _choose(starts) == want
+        assert [s.chosen for s in starts] == [i == want for i in range(len(starts))]
+        assert rows[order[want]] == (60, 0.394)
+
+
+def test_starts_in_different_basins_warn_naming_both_and_the_kept_one():
+    from robogs.convert.ingest.sfm import (
+        BASIN_TOL,
+        SfmBasinWarning,
+        SfmStart,
+        _choose,
+        _warn_basins,
     )
+
+    rev = SfmStart(384.0, 0, 146.8, 146.8, 60, 3638, 1.325)
+    true = SfmStart(614.4, 1, 343.3, 343.3, 60, 3129, 0.394)
+    _choose([rev, true])
+    with pytest.warns(
+        SfmBasinWarning, match=r"384 px -> 146\.8 px.*614 px -> 343\.3 px.*kept 343\.3 px"
+    ):
+        _warn_basins([rev, true], Path("img"))
+    near = SfmStart(614.4, 1, 146.8 * (1 + 0.9 * BASIN_TOL), 146.8, 60, 3638, 1.3)
+    failed = SfmStart(614.4, 2, float("nan"), float("nan"), 0, 0, float("inf"))
+    _choose([rev, near, failed])
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _warn_basins([rev, near, failed], Path("img"))  # one basin; a run with no model is no basin
+
+
+def test_focal_starts_must_be_positive(tmp_path: Path):
+    pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
+    from robogs.convert.ingest.sfm import run_sfm
+    from robogs.format.errors import InputError
+
     img = tmp_path / "img"
     img.mkdir()
-    for i, im in enumerate(truth.images):
-        cv2.imwrite(str(img / f"{i:03d}.png"), cv2.cvtColor(im, cv2.COLOR_RGB2BGR))
-    res = run_sfm(img, tmp_path / "work", threads=2)
-    assert res.registered >= 57 and res.total == 60
+    cv2.imwrite(str(img / "000.png"), _texture(6))
+    for bad in [(), (1.0, 0.0), (1.0, float("nan"))]:
+        with pytest.raises(InputError, match="focal_starts must be positive"):
+            run_sfm(img, tmp_path / "work", focal_starts=bad)
+
+
+@pytest.fixture(scope="module")
+def _captures(tmp_path_factory):
+    """(seed, hfov) -> (truth, image folder), each capture made once per module."""
+    from robogs.synth.multiview import synthesize_multiview
+
+    made = {}
+
+    def get(seed: int, hfov: float):
+        if (seed, hfov) not in made:
+            root = tmp_path_factory.mktemp(f"cap{seed}_{int(hfov)}")
+            truth = synthesize_multiview(
+                root / "cap",
+                robot="ur5",
+                n_views=60,
+                width=320,
+                height=240,
+                seed=seed,
+                hfov_deg=hfov,
+                poses=False,
+            )
+            img = root / "img"
+            img.mkdir()
+            for i, im in enumerate(truth.images):
+                cv2.imwrite(str(img / f"{i:03d}.png"), cv2.cvtColor(im, cv2.COLOR_RGB2BGR))
+            made[seed, hfov] = truth, img
+        return made[seed, hfov]
+
+    return get
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("seed", "hfov", "focal"),
+    [
+        # the test's capture from COLMAP's guess: 147.7 px on CI and on the shared machine once
+        pytest.param(3, 50.0, None, id="seed3-guess"),
+        # other views from COLMAP's guess: fx 144.6, fy 128.9 px before
+        pytest.param(5, 50.0, None, id="seed5-guess"),
+        # other views and another focal length (440 px), not used to choose the starts:
+        # fx 183.1, fy 165.4 px before
+        pytest.param(11, 40.0, 0.5, id="seed11-40deg-half-focal"),
+    ],
+)
+def test_sfm_recovers_the_static_capture(_captures, tmp_path: Path, seed, hfov, focal):
+    """38-63 s each at load 3-4 on 2 cores (2026-11-27): 60 images, 2000 SIFT features each,
+    exhaustive matching, two mapper runs (one in the reversed basin costs ~50 s more)."""
+    pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
+    import json
+    import warnings
+
+    from robogs.convert.ingest.sfm import FOCAL_STARTS, SfmBasinWarning, run_sfm
+    from robogs.reconstruct.align import umeyama
+
+    truth, img = _captures(seed, hfov)
+    K = truth.K
+    intr = None if focal is None else (focal * K[0, 0], focal * K[1, 1], K[0, 2], K[1, 2])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SfmBasinWarning)  # the choice is what is tested here
+        res = run_sfm(img, tmp_path / "work", intrinsics=intr, threads=2)
+    starts = json.dumps([vars(s) for s in res.starts])
+    assert res.registered >= 57 and res.total == 60, starts
     assert res.size == (320, 240)
-    assert np.allclose(res.K[[0, 1], [2, 2]], truth.K[[0, 1], [2, 2]])
-    assert abs(res.K[0, 0] / truth.K[0, 0] - 1) < 0.01  # focal length refined from a guess
+    assert np.allclose(res.K[[0, 1], [2, 2]], K[[0, 1], [2, 2]])
+    assert abs(res.K[0, 0] / K[0, 0] - 1) < 0.01, starts  # focal length refined from a start
+    assert res.K[1, 1] == res.K[0, 0]  # square pixels: one focal length
+    assert sum(s.chosen for s in res.starts) == 1 and len(res.starts) == len(FOCAL_STARTS)
     Tt = truth.T_world_cam[[int(n[:3]) for n in res.names]]
     S = umeyama(res.T_world_cam[:, :3, 3], Tt[:, :3, 3])
     size = float(np.linalg.norm(np.ptp(truth.scene_mesh.vertices, axis=0)))
     err = np.linalg.norm(S.apply(res.T_world_cam[:, :3, 3]) - Tt[:, :3, 3], axis=1)
     assert err.max() < 0.01 * size, json.dumps({"max_m": err.max(), "size_m": size})
     ang = _rotation_deg(np.einsum("ij,njk->nik", S.R, res.T_world_cam[:, :3, :3]), Tt[:, :3, :3])
-    assert ang.max() < 1.0
+    assert ang.max() < 1.0, starts
 
 
 def test_convert_sfm_on_duplicate_frames_is_one_line_naming_the_count(tmp_path: Path, capsys):

@@ -13,12 +13,28 @@ difference of the grey images ≥ ``min_change``, a cheap baseline proxy).
 
 Failure (too few registered images: blurred or duplicate frames, no parallax) raises
 :class:`SfmError` naming how many images registered.
+
+Two basins. On an inward-looking orbit (the synthetic static capture: 60 views of a table-top
+scene at 50 deg field of view) the incremental mapper has a second, wrong solution: the scene
+depth-reversed (every rotation off by ~180 deg after the best similarity) with the focal length
+at ~0.4x the truth (fx 146, fy 128 px for 343 true), 60 of 60 images registered and a mean
+reprojection error of 1.3 px instead of 0.35 px. Which one a run reaches depends on the focal
+start, the RANSAC seed and the thread timing (bench/RESULTS.md, h51), not on the images: the
+true start (fx = fy = 343 px, seed 0) reached it with 1 thread, with 2 threads it did not;
+one shared focal (square pixels) and mapping with the focal held at the start both still
+reached it. So the mapper is run from ``FOCAL_STARTS`` (two focal starts, two RANSAC seeds) on
+the same features and matches, and the model is chosen by the data: most registered images,
+then lowest mean reprojection error (the depth-reversed model fits the same tracks ~4x worse).
+Starts that end in different focal lengths are reported (:attr:`SfmResult.starts`, the
+provenance, and a :class:`SfmBasinWarning`), never resolved silently.
 """
 
 from __future__ import annotations
 
 import shutil
-from dataclasses import dataclass, replace
+import warnings
+from contextlib import closing
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -29,8 +45,11 @@ from robogs.format.errors import InputError
 
 __all__ = [
     "SfmError",
+    "SfmBasinWarning",
     "SfmResult",
+    "SfmStart",
     "EXHAUSTIVE_MAX",
+    "FOCAL_STARTS",
     "sharpness",
     "select_keyframes",
     "run_sfm",
@@ -40,9 +59,22 @@ __all__ = [
 #: match every pair up to this many images; sequential (overlap 10) beyond
 EXHAUSTIVE_MAX = 60
 
+#: focal starts of the mapper, as factors of the first start (the given intrinsics, else
+#: COLMAP's guess 1.2 x the larger image side); start i uses RANSAC seed ``seed + i``. The wrong
+#: basin lies below the true focal (~0.4x), and starts below the truth reached it most often
+#: (bench/RESULTS.md, h51), so the second start is above the first.
+FOCAL_STARTS = (1.0, 1.6)
+
+#: two starts whose focal lengths differ by more than this fraction ended in different models
+BASIN_TOL = 0.05
+
 
 class SfmError(InputError):
     """Structure from motion registered too few images."""
+
+
+class SfmBasinWarning(UserWarning):
+    """The mapper's starts ended in different models; the one that fits the data best was kept."""
 
 
 @dataclass
@@ -59,6 +91,7 @@ class SfmResult:
         points: 3D points of the model.
         reprojection_px: mean reprojection error, px.
         model_dir: the largest model, written as a COLMAP binary model.
+        starts: every start of the mapper and where it ended (the chosen one has ``chosen``).
     """
 
     names: list[str]
@@ -70,6 +103,35 @@ class SfmResult:
     points: int
     reprojection_px: float
     model_dir: Path | None = None
+    starts: list[SfmStart] = field(default_factory=list)
+
+
+@dataclass
+class SfmStart:
+    """One run of the incremental mapper on the shared features and matches.
+
+    Attributes:
+        start_px: focal length the run started from, px.
+        seed: its RANSAC seed.
+        fx, fy: focal lengths it ended with, px (nan: no model).
+        registered: images in its largest model.
+        points: 3D points of that model.
+        reprojection_px: its mean reprojection error, px (inf: no model).
+        chosen: this run's model is the result.
+    """
+
+    start_px: float
+    seed: int
+    fx: float
+    fy: float
+    registered: int
+    points: int
+    reprojection_px: float
+    chosen: bool = False
+
+    def key(self) -> tuple[int, float]:
+        """Choice order (higher is better): registered images, then lower reprojection error."""
+        return (self.registered, -self.reprojection_px)
 
 
 def sharpness(gray: np.ndarray) -> float:
@@ -125,29 +187,41 @@ def run_sfm(
     threads: int = 1,
     seed: int = 0,
     max_features: int = 2000,
+    focal_starts: tuple[float, ...] = FOCAL_STARTS,
     verbose: bool = False,
 ) -> SfmResult:
     """Recover the poses of the images in ``image_dir`` (one shared pinhole camera).
 
+    Features and matches are computed once; the incremental mapper then runs once per focal
+    start (``focal_starts``, with seeds ``seed``, ``seed + 1``, ...) and the model with the most
+    registered images, then the lowest mean reprojection error, is kept (module docstring: the
+    mapper has a depth-reversed basin at ~0.4x the focal length). Pixels are square (one focal
+    length, COLMAP ``SIMPLE_PINHOLE``) unless ``intrinsics`` gives fx != fy.
+
     Args:
         image_dir: folder of images (one camera).
         work: scratch folder (database, models), replaced.
-        intrinsics: (fx, fy, cx, cy) px with pixel centres at +0.5 if known (refined anyway);
-            None: guessed from EXIF or the image size, then refined. On the synthetic static
-            sample the true values as a start led the mapper to a wrong model (fx 146 instead
-            of 343 px, bench/RESULTS.md) while the size-based guess converged; ``convert
-            --sfm`` uses the guess.
+        intrinsics: (fx, fy, cx, cy) px with pixel centres at +0.5 if known: the first focal
+            start and a prior for matching (calibrated two-view geometry); refined anyway.
+            None: the first start is COLMAP's guess (EXIF focal, else 1.2 x the larger side).
         sequential: match neighbours only (video); None: when more than ``EXHAUSTIVE_MAX`` images.
         min_registered: fewer registered images raise :class:`SfmError`.
         threads: CPU threads for COLMAP.
-        seed: COLMAP's random seed (RANSAC), for repeatable runs.
+        seed: COLMAP's random seed (RANSAC) of the first start; runs repeat exactly only with
+            ``threads=1`` (with more, thread timing changes the RANSAC draws).
         max_features: SIFT features kept per image (caps matching work: exhaustive matching
             of N images costs N(N-1)/2 pairs of ``max_features``^2 descriptor distances).
+        focal_starts: focal starts as factors of the first start (each a mapper run, ~15 s on
+            the 60-image sample); ``(1.0,)`` runs the mapper once.
         verbose: keep COLMAP's own log (glog, on stderr); else nothing but fatal errors.
 
     Raises:
         SfmError: fewer than ``min_registered`` images registered (or none in the largest model).
-        InputError: pycolmap missing, no images.
+        InputError: pycolmap missing, no images, a focal start not positive.
+
+    Warns:
+        SfmBasinWarning: the starts ended in different focal lengths (by more than
+            ``BASIN_TOL``); the message names them and the one kept.
     """
     pc = _pycolmap()
     if not verbose:  # COLMAP logs every step through glog; the result and errors are ours
@@ -156,15 +230,23 @@ def run_sfm(
     names = sorted(p.name for p in image_dir.iterdir() if p.is_file())
     if not names:
         raise InputError("no images to reconstruct from", path=image_dir)
+    factors = [float(f) for f in focal_starts]
+    if not factors or not all(np.isfinite(f) and f > 0 for f in factors):
+        raise InputError(
+            f"focal_starts must be positive factors, got {tuple(focal_starts)}",
+            hint="e.g. (1.0, 1.6): the first start, then 1.6 x its focal length",
+        )
     shutil.rmtree(work, ignore_errors=True)
-    (work / "sparse").mkdir(parents=True)
+    work.mkdir(parents=True)
     db = work / "database.db"
     pc.set_random_seed(seed)
     ro = pc.ImageReaderOptions()
-    ro.camera_model = "PINHOLE"
+    square = intrinsics is None or abs(intrinsics[0] - intrinsics[1]) <= 1e-6 * abs(intrinsics[0])
+    ro.camera_model = "SIMPLE_PINHOLE" if square else "PINHOLE"
     if intrinsics is not None:
         fx, fy, cx, cy = intrinsics
-        ro.camera_params = f"{fx},{fy},{cx},{cy}"  # COLMAP: pixel centres at +0.5 too
+        # COLMAP: pixel centres at +0.5 too; giving them marks the focal length as a prior
+        ro.camera_params = f"{fx},{cx},{cy}" if square else f"{fx},{fy},{cx},{cy}"
     eo = pc.FeatureExtractionOptions()
     eo.num_threads = threads
     eo.sift.max_num_features = max_features
@@ -184,11 +266,29 @@ def run_sfm(
         pc.match_sequential(db, matching_options=mo, device=pc.Device.cpu)
     else:
         pc.match_exhaustive(db, matching_options=mo, device=pc.Device.cpu)
-    opts = pc.IncrementalPipelineOptions()
-    opts.num_threads = threads
-    models = pc.incremental_mapping(db, image_dir, work / "sparse", options=opts)
-    best = max(models.values(), key=lambda r: r.num_reg_images(), default=None)
-    n = 0 if best is None else int(best.num_reg_images())
+    with closing(pc.Database.open(db)) as d:
+        cam0 = d.read_all_cameras()[0]
+    base = np.array(cam0.params, np.float64)
+    runs: list[tuple[SfmStart, object]] = []
+    for i, factor in enumerate(factors):
+        params = base.copy()
+        params[cam0.focal_length_idxs()] *= factor
+        cam0.params = params.tolist()  # the prior flag stays as extraction set it
+        with closing(pc.Database.open(db)) as d:
+            d.update_camera(cam0)
+        out = work / f"start{i}"
+        out.mkdir()
+        opts = pc.IncrementalPipelineOptions()
+        opts.num_threads = threads
+        opts.random_seed = seed + i
+        pc.set_random_seed(seed + i)
+        models = pc.incremental_mapping(db, image_dir, out, options=opts)
+        rec = max(models.values(), key=lambda r: r.num_reg_images(), default=None)
+        runs.append((_start(rec, float(params[cam0.focal_length_idxs()[0]]), seed + i), rec))
+    starts = [r for r, _ in runs]
+    best_i = _choose(starts)
+    best = runs[best_i][1]
+    n = starts[best_i].registered
     if n < min_registered:
         raise SfmError(
             f"structure from motion registered {n} of {len(names)} images "
@@ -197,17 +297,62 @@ def run_sfm(
             hint="the images need overlap and parallax: move the camera around the scene "
             "(not only turn it), avoid blurred and duplicate frames",
         )
+    _warn_basins(starts, image_dir)
     res = _result(best, len(names))
+    res.starts = starts
     res.model_dir = work / "model"
     res.model_dir.mkdir()
     best.write(res.model_dir)
     return res
 
 
+def _start(rec, start_px: float, seed: int) -> SfmStart:
+    if rec is None or rec.num_reg_images() == 0:
+        return SfmStart(start_px, seed, float("nan"), float("nan"), 0, 0, float("inf"))
+    cam = next(iter(rec.cameras.values()))
+    return SfmStart(
+        start_px,
+        seed,
+        float(cam.focal_length_x),
+        float(cam.focal_length_y),
+        int(rec.num_reg_images()),
+        int(rec.num_points3D()),
+        float(rec.compute_mean_reprojection_error()),
+    )
+
+
+def _choose(starts: list[SfmStart]) -> int:
+    """Mark and return the index of the kept run: most registered images, then the lowest mean
+    reprojection error; a tie keeps the earlier start."""
+    best = max(range(len(starts)), key=lambda i: starts[i].key())
+    starts[best].chosen = True
+    return best
+
+
+def _warn_basins(starts: list[SfmStart], image_dir: Path) -> None:
+    """Warn when the starts that registered images ended in different focal lengths."""
+    done = [s for s in starts if s.registered > 0]
+    f = np.array([s.fx for s in done])
+    if len(done) < 2 or f.max() <= (1 + BASIN_TOL) * f.min():
+        return
+    kept = next(s for s in starts if s.chosen)
+    ends = ", ".join(
+        f"{s.start_px:.0f} px -> {s.fx:.1f} px ({s.registered} images, {s.reprojection_px:.2f} px)"
+        for s in done
+    )
+    warnings.warn(
+        f"{image_dir}: structure from motion ended in different models from its focal starts "
+        f"({ends}); kept {kept.fx:.1f} px: most registered images, then lowest reprojection "
+        "error. Pass the camera's intrinsics if they are known.",
+        SfmBasinWarning,
+        stacklevel=3,
+    )
+
+
 def _result(rec, total: int) -> SfmResult:
-    cams = list(rec.cameras.values())
-    cam = cams[0]
-    fx, fy, cx, cy = (float(x) for x in cam.params[:4])
+    cam = next(iter(rec.cameras.values()))
+    fx, fy = float(cam.focal_length_x), float(cam.focal_length_y)
+    cx, cy = float(cam.principal_point_x), float(cam.principal_point_y)
     K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])  # same pixel convention
     names, Ts = [], []
     for im in sorted(rec.images.values(), key=lambda im: im.name):
@@ -343,9 +488,25 @@ def _sfm_json(res: SfmResult, frame: str) -> dict:
         "images": res.total,
         "points": res.points,
         "reprojection_px": round(res.reprojection_px, 4),
+        "starts": [
+            {
+                "start_px": round(s.start_px, 2),
+                "seed": s.seed,
+                "focal_px": [_finite(s.fx, 2), _finite(s.fy, 2)],
+                "registered": s.registered,
+                "reprojection_px": _finite(s.reprojection_px, 4),
+                "chosen": s.chosen,
+            }
+            for s in res.starts
+        ],
         "frame": frame,
         "tool": "pycolmap",
     }
+
+
+def _finite(x: float, digits: int) -> float | None:
+    """``x`` rounded, or None (JSON null) for a run that made no model (nan or inf)."""
+    return round(x, digits) if np.isfinite(x) else None
 
 
 def convert_sfm(
