@@ -12,6 +12,8 @@ import torch
 
 pytest.importorskip("mujoco")
 
+from box_scene import box_on_table
+
 from robogs.physics.effects import Effect, Param, get_effect  # noqa: E402
 from robogs.physics.engines.base import make_drive  # noqa: E402
 from robogs.physics.engines.mujoco_effects import (  # noqa: E402
@@ -31,25 +33,7 @@ HZ = 0.025
 
 
 def _physics() -> dict:
-    return {
-        "gravity_mps2": [0.0, 0.0, -G],
-        "objects": {
-            "box": {
-                "equation": "rigid",
-                "mass_kg": 0.4,
-                "size_m": [0.08, 0.06, 0.05],
-                "friction_dynamic": MU,
-                "friction_static": MU,
-            },
-            "table": {"equation": "static", "plane_z_m": 0.0},
-            "pusher": {
-                "equation": "kinematic",
-                "shape": "capsule",
-                "radius_m": 0.01,
-                "length_m": 0.04,
-            },
-        },
-    }
+    return box_on_table(MU)
 
 
 def _slide(seconds: float = 0.8, n_obs: int = 9):

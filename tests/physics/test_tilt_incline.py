@@ -26,6 +26,7 @@ import math
 import numpy as np
 import pytest
 import torch
+from box_scene import box_on_table
 
 from robogs.physics.effects import get_effect
 from robogs.physics.engines.base import make_drive
@@ -40,25 +41,7 @@ STAMPS = np.arange(0.0, SECONDS + 1e-9, 2e-3)  # 2 ms samples
 
 
 def _physics() -> dict:
-    return {
-        "gravity_mps2": [0.0, 0.0, -G],
-        "objects": {
-            "box": {
-                "equation": "rigid",
-                "mass_kg": 0.4,
-                "size_m": [0.08, 0.06, 0.05],
-                "friction_dynamic": MU,
-                "friction_static": MU,
-            },
-            "table": {"equation": "static", "plane_z_m": 0.0},
-            "pusher": {
-                "equation": "kinematic",
-                "shape": "capsule",
-                "radius_m": 0.01,
-                "length_m": 0.04,
-            },
-        },
-    }
+    return box_on_table(MU)
 
 
 def _run(g: tuple[float, float], headings: list[float], backend: str) -> np.ndarray:
