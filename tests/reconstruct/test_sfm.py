@@ -127,34 +127,25 @@ def test_focal_starts_must_be_positive(tmp_path: Path):
             run_sfm(img, tmp_path / "work", focal_starts=bad)
 
 
-@pytest.fixture(scope="module")
-def _captures(tmp_path_factory):
-    """(seed, hfov) -> (truth, image folder), each capture made once per module."""
+def _capture(root: Path, seed: int, hfov: float):
+    """(truth, image folder) of the 60-view 320x240 static capture of ``seed`` at ``hfov`` deg."""
     from robogs.synth.multiview import synthesize_multiview
 
-    made = {}
-
-    def get(seed: int, hfov: float):
-        if (seed, hfov) not in made:
-            root = tmp_path_factory.mktemp(f"cap{seed}_{int(hfov)}")
-            truth = synthesize_multiview(
-                root / "cap",
-                robot="ur5",
-                n_views=60,
-                width=320,
-                height=240,
-                seed=seed,
-                hfov_deg=hfov,
-                poses=False,
-            )
-            img = root / "img"
-            img.mkdir()
-            for i, im in enumerate(truth.images):
-                cv2.imwrite(str(img / f"{i:03d}.png"), cv2.cvtColor(im, cv2.COLOR_RGB2BGR))
-            made[seed, hfov] = truth, img
-        return made[seed, hfov]
-
-    return get
+    truth = synthesize_multiview(
+        root / "cap",
+        robot="ur5",
+        n_views=60,
+        width=320,
+        height=240,
+        seed=seed,
+        hfov_deg=hfov,
+        poses=False,
+    )
+    img = root / "img"
+    img.mkdir()
+    for i, im in enumerate(truth.images):
+        cv2.imwrite(str(img / f"{i:03d}.png"), cv2.cvtColor(im, cv2.COLOR_RGB2BGR))
+    return truth, img
 
 
 @pytest.mark.slow
@@ -170,7 +161,7 @@ def _captures(tmp_path_factory):
         pytest.param(11, 40.0, 0.5, id="seed11-40deg-half-focal"),
     ],
 )
-def test_sfm_recovers_the_static_capture(_captures, tmp_path: Path, seed, hfov, focal):
+def test_sfm_recovers_the_static_capture(tmp_path: Path, seed, hfov, focal):
     """38-63 s each at load 3-4 on 2 cores (2026-11-27): 60 images, 2000 SIFT features each,
     exhaustive matching, two mapper runs (one in the reversed basin costs ~50 s more)."""
     pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
@@ -180,7 +171,7 @@ def test_sfm_recovers_the_static_capture(_captures, tmp_path: Path, seed, hfov, 
     from robogs.convert.ingest.sfm import FOCAL_STARTS, SfmBasinWarning, run_sfm
     from robogs.reconstruct.align import umeyama
 
-    truth, img = _captures(seed, hfov)
+    truth, img = _capture(tmp_path, seed, hfov)
     K = truth.K
     intr = None if focal is None else (focal * K[0, 0], focal * K[1, 1], K[0, 2], K[1, 2])
     with warnings.catch_warnings():
