@@ -163,28 +163,59 @@ def test_pusher_friction_drags_the_block_sideways() -> None:
     assert (side[1] - side[0]) * 1e3 > 2.0, side
 
 
+def _follow(eng, drive) -> tuple[float, int]:
+    """Stepping ``drive``: (the pusher's largest distance from its path [m], the number of
+    steps with a contact on the pusher's geom)."""
+    path = drive.pusher[0].numpy()
+    qa = eng.model.joint("pusher_x").qposadr[0]
+    worst, touched, pid = 0.0, 0, eng.model.geom("pusher").id
+    for k, _, d in eng.step_states(drive):
+        worst = max(worst, float(np.linalg.norm(d.qpos[qa : qa + 3] - path[k + 1])))
+        touched += bool(np.any(d.contact.geom[: d.ncon] == pid))
+    return worst, touched
+
+
 def test_the_pusher_follows_the_measured_path() -> None:
     """The servo-driven pusher is where the drive says, also while pushing (0.05 mm)."""
     eng = get_engine("mujoco")(
         _physics(0.4, pusher={"shape": "capsule", "radius_m": 0.01, "length_m": 0.04})
     )
     start = np.array([-SIZE[0] / 2 - 0.01 - 0.01, 0.0, HZ])
-    drive = _push_drive(start, np.array([1.0, 0, 0]), 0.1, 0.06)
-    m, d = eng.model, mujoco.MjData(eng.model)
-    mujoco.mj_setState(
-        m, d, eng._initial_states(drive, None, 1)[0], mujoco.mjtState.mjSTATE_FULLPHYSICS
-    )
-    ctrl = eng._controls(drive)[0]
-    path = drive.pusher[0].numpy()
-    qa = eng._pusher_q[0]
-    worst, touched, pid = 0.0, 0, m.geom("pusher").id
-    for k in range(len(ctrl)):
-        d.ctrl[:] = ctrl[k]
-        mujoco.mj_step(m, d)
-        worst = max(worst, float(np.linalg.norm(d.qpos[qa : qa + 3] - path[k + 1])))
-        touched += bool(np.any(d.contact.geom[: d.ncon] == pid))
+    worst, touched = _follow(eng, _push_drive(start, np.array([1.0, 0, 0]), 0.1, 0.06))
     assert touched > 50  # the pusher was in contact with the box for a while
     assert worst * 1e3 < 0.05
+
+
+def test_stepping_is_the_rollout() -> None:
+    """``step_states`` starts where ``rollout`` does and applies its servo targets: the second
+    trajectory of a two-push drive (a 10 cm/s push at y = 0 and y = 15 mm, the box started
+    with 0.1 / 0.2 m/s along y) gives the rollout's poses at every step, to 1e-12 m / rad (the
+    first trajectory's are millimetres away)."""
+    eng = get_engine("mujoco")(_physics(0.4, pusher={"shape": "sphere", "radius_m": 0.005}))
+    one = [
+        _push_drive(np.array([-0.05, y, HZ]), np.array([1.0, 0, 0]), 0.1, 0.03) for y in (0, 0.015)
+    ]
+    n = one[0].n_steps
+    obs = np.tile(np.arange(n) * 1e-3, (2, 1))
+    pusher = np.stack([d.pusher[0].numpy() for d in one])
+    drive = make_drive(
+        1e-3, pusher, np.zeros((2, n)), obs, np.tile([0, 0, HZ], (2, 1)), np.zeros(2)
+    )
+    start = ObjectState(
+        pos=np.tile([0.0, 0, HZ], (2, 1)), quat=np.tile([1.0, 0, 0, 0], (2, 1)),
+        vel=np.array([[0.0, 0.1, 0], [0.0, 0.2, 0]]),
+    )  # fmt: skip
+    out = eng.rollout(drive, {"box": start})
+    lay = eng.layout["box"]
+    steps = [
+        (k, d.qpos[lay.qpos : lay.qpos + 4].copy())
+        for k, _, d in eng.step_states(drive, {"box": start}, traj=1)
+    ]
+    assert [k for k, _ in steps] == list(range(n - 1))
+    q = np.array([x for _, x in steps])
+    assert np.abs(q[:, :3] - out.pos["box"][0, 1, 1:]).max() < 1e-12
+    assert np.abs(q[:, 3] - out.yaw("box")[0, 1, 1:]).max() < 1e-12
+    assert np.abs(q[:, :3] - out.pos["box"][0, 0, 1:]).max() > 1e-3  # not the first trajectory
 
 
 # --------------------------------------------------------------------------- (d) two objects
@@ -270,6 +301,10 @@ def test_bad_parameters_and_grasps_are_refused() -> None:
     drive.grasp[:] = True
     with pytest.raises(InputError, match="grasp"):
         eng.rollout(drive)
+    with pytest.raises(InputError, match="grasp"):
+        eng.step_states(drive)
+    with pytest.raises(InputError, match="trajectory 1"):
+        eng.step_states(_still_drive(1, 0.01), traj=1)
 
 
 # --------------------------------------------------------------------------- meshes

@@ -24,11 +24,11 @@ pusher's speed within the same bound, but these settings are not the default: se
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import mujoco
 import numpy as np
 import pytest
+from mujoco_push import brake, push_x, pusher_contacts, ramp_up
 
 from robogs.format.mjcf import PLANAR_SETTINGS, ContactSettings
 from robogs.physics.engines.base import ObjectState, make_drive
@@ -82,42 +82,21 @@ def _push(mu: float, v: float, settings: ContactSettings, strike: bool) -> dict[
     pusher over the last 0.25 s before the brake [N], the box's speed over the pusher's at
     the brake, and the box's slide from the brake to rest [m]."""
     gap, n_up = (0.02, 1) if strike else (2e-4, 60)
-    ramp = v * 0.5 * (1 - np.cos(np.pi * np.arange(1, n_up + 1) / n_up))
-    n_brake = int(math.ceil(v / 12.0 / DT))
+    ramp = ramp_up(v, n_up)
     n_cruise = (
         int(round((gap + 0.045 - v * v / 24.0 - ramp.sum() * DT) / (v * DT)))
         if strike
         else int(round(0.4 / DT))
     )
-    vel = np.concatenate(
-        [
-            np.zeros(20),
-            ramp,
-            np.full(n_cruise, v),
-            np.linspace(v, 0.0, n_brake + 1)[1:],
-            np.zeros(int((v / (mu * G) + 0.1) / DT)),
-        ]
-    )
-    x = -(HX + R + gap) + np.concatenate([[0.0], np.cumsum(vel) * DT])
-    n = len(x)
-    path = np.stack([x, np.zeros(n), np.full(n, SIZE[2] / 2)], -1)[None]
-    init = np.array([[0.0, 0.0, SIZE[2] / 2]])
-    drive = make_drive(DT, path, np.zeros((1, n)), (np.arange(n) * DT)[None], init, np.zeros(1))
+    tail = np.zeros(int((v / (mu * G) + 0.1) / DT))
+    vel = np.concatenate([np.zeros(20), ramp, np.full(n_cruise, v), brake(v, DT), tail])
+    drive = push_x(vel, -(HX + R + gap), SIZE[2] / 2, DT)
     eng = MujocoEngine(_doc(mu, True), settings=settings)
-    m, d = eng.model, mujoco.MjData(eng.model)
-    mujoco.mj_setState(
-        m, d, eng._initial_states(drive, None, 1)[0], mujoco.mjtState.mjSTATE_FULLPHYSICS
-    )
-    ctrl = eng._controls(drive)[0]
-    pusher = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, g) for g in ("pusher", "pusher_end")}
-    box_x, force, f6 = np.empty(n - 1), np.zeros(n - 1), np.zeros(6)
-    for k in range(n - 1):
-        d.ctrl[:] = ctrl[k]
-        mujoco.mj_step(m, d)
+    box_x, force, f6 = np.empty(len(vel)), np.zeros(len(vel)), np.zeros(6)
+    for k, m, d in eng.step_states(drive):
         box_x[k] = d.qpos[eng.layout["box"].qpos]
-        for i in range(d.ncon):
-            c = d.contact[i]
-            if c.efc_address >= 0 and {int(c.geom1), int(c.geom2)} & pusher:
+        for i in pusher_contacts(m, d):
+            if d.contact[i].efc_address >= 0:
                 mujoco.mj_contactForce(m, d, i, f6)
                 force[k] += f6[0]
     i_brake = 20 + n_up + n_cruise  # box_x[k] is the state after step k + 1

@@ -29,6 +29,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+from mujoco_push import brake, push_x, pusher_contacts, ramp_up
 
 from robogs.format.errors import FormatError
 from robogs.format.mjcf import (
@@ -72,18 +73,8 @@ def _drive(offsets: np.ndarray, every_step: bool = False):
     """One trajectory per start offset [m] along +x: the pusher arrives at ``V`` from 10 mm
     behind the face, pushes 60 steps, brakes at 12 m/s^2 (the box leaves it), then 250 ms.
     The pose is wanted at the end only, or at every step (``every_step``)."""
-    n_brake = int(math.ceil(V / 12.0 / DT))
-    vel = np.concatenate(
-        [np.zeros(5), np.full(60, V), np.linspace(V, 0.0, n_brake + 1)[1:], np.zeros(250)]
-    )
-    x = -(HX + R + 0.01) + np.concatenate([[0.0], np.cumsum(vel) * DT])
-    n, t = len(x), len(offsets)
-    path = np.repeat(np.stack([x, np.zeros(n), np.full(n, SIZE[2] / 2)], -1)[None], t, 0)
-    init = np.stack([offsets, np.zeros(t), np.full(t, SIZE[2] / 2)], -1)
-    stamps = (
-        np.repeat((np.arange(n) * DT)[None], t, 0) if every_step else np.full((t, 1), (n - 1) * DT)
-    )
-    return make_drive(DT, path, np.zeros((t, n)), stamps, init, np.zeros(t))
+    vel = np.concatenate([np.zeros(5), np.full(60, V), brake(V, DT), np.zeros(250)])
+    return push_x(vel, -(HX + R + 0.01), SIZE[2] / 2, DT, offsets, every_step)
 
 
 def _ends(eng: MujocoEngine, offsets: np.ndarray) -> np.ndarray:
@@ -255,39 +246,22 @@ def _steady_push(settings: ContactSettings, mu: float) -> dict[str, float]:
     push): mean penetration of the pusher contacts over the last 200 steps [m], their number,
     and the compiled pair's impedance, ``K = 1 / (dmax tc zeta)^2`` and ``A0`` (the sum of the
     two bodies' ``body_invweight0``)."""
-    import mujoco
-
     doc = _doc()
     doc["objects"]["box"]["friction_dynamic"] = mu
-    v, n_up, n_push = 0.3, 60, 400
-    ramp = v * 0.5 * (1 - np.cos(np.pi * np.arange(1, n_up + 1) / n_up))
-    vel = np.concatenate([np.zeros(20), ramp, np.full(n_push, v)])
-    x = -(HX + R + 2e-4) + np.concatenate([[0.0], np.cumsum(vel) * DT])
-    n = len(x)
-    path = np.stack([x, np.zeros(n), np.full(n, SIZE[2] / 2)], -1)[None]
-    init = np.array([[0.0, 0.0, SIZE[2] / 2]])
-    drive = make_drive(DT, path, np.zeros((1, n)), np.zeros((1, 1)), init, np.zeros(1))
+    v, n_push = 0.3, 400
+    vel = np.concatenate([np.zeros(20), ramp_up(v, 60), np.full(n_push, v)])
+    drive = push_x(vel, -(HX + R + 2e-4), SIZE[2] / 2, DT)
     eng = MujocoEngine(doc, settings=settings)
-    m, d = eng.model, mujoco.MjData(eng.model)
-    state = eng._initial_states(drive, None, 1)[0]
-    mujoco.mj_setState(m, d, state, mujoco.mjtState.mjSTATE_FULLPHYSICS)
-    ctrl = eng._controls(drive)[0]
-    pusher = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, g) for g in ("pusher", "pusher_end")}
     pens, count = [], 0
-    for k in range(n - 1):
-        d.ctrl[:] = ctrl[k]
-        mujoco.mj_step(m, d)
-        if k >= n - 201:
-            rows = [
-                -d.contact[i].dist
-                for i in range(d.ncon)
-                if {d.contact[i].geom1, d.contact[i].geom2} & pusher
-            ]
+    for k, m, d in eng.step_states(drive):
+        if k >= len(vel) - 200:
+            rows = [-d.contact[i].dist for i in pusher_contacts(m, d)]
             pens.append(np.mean(rows))
             count = len(rows)
+    m = eng.model
     k = next(i for i, pair in enumerate(eng.scene.pairs) if "pusher" in pair[1])
     (tc, zeta), solimp = m.pair_solref[k], m.pair_solimp[k]
-    b_box, b_pusher = (mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b) for b in ("box", "pusher"))
+    b_box, b_pusher = m.body("box").id, m.body("pusher").id
     return {
         "r": float(np.mean(pens)),
         "contacts": count,

@@ -228,7 +228,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -585,6 +585,59 @@ class MujocoEngine:
         ctrl[..., k + 3] = np.diff(y, axis=1) / self.dt
         return ctrl
 
+    def step_states(
+        self, drive: Drive, initial: Mapping[str, ObjectState] | None = None, *, traj: int = 0
+    ) -> Iterator[tuple[int, mujoco.MjModel, mujoco.MjData]]:
+        """Trajectory ``traj`` of ``drive`` one ``mj_step`` at a time, from the initial state
+        and with the servo targets :meth:`rollout` uses: for reading what a rollout does not
+        return (contacts, contact forces, the pusher's joints).
+
+        Args:
+            drive: the drive; its step must be the engine's.
+            initial: as in :meth:`rollout` (row ``traj`` of each state is used).
+            traj: which trajectory of the drive.
+
+        Returns:
+            An iterator of ``(k, model, data)`` after step ``k`` = 0 .. S-2: ``data`` is at
+            ``t = (k + 1) dt`` [s], world frame, SI units (an object's position is
+            ``data.qpos[layout[name].qpos :][:3]`` m, see :class:`JointLayout`). The same
+            ``MjData`` comes every step (copy what you keep); ``model`` is :attr:`model`.
+
+        Raises:
+            InputError: as :meth:`rollout`, when called (not at the first step), or ``traj``
+                is not a trajectory of the drive.
+        """
+        self._check_drive(drive)
+        if not 0 <= traj < drive.n_traj:
+            raise InputError(
+                f"trajectory {traj} is not in the drive's {drive.n_traj}", where="traj"
+            )
+        x0 = self._initial_states(drive, initial, drive.n_traj)[traj]
+        ctrl = self._controls(drive)[traj]
+        return self._steps(x0, ctrl)
+
+    def _steps(
+        self, x0: np.ndarray, ctrl: np.ndarray
+    ) -> Iterator[tuple[int, mujoco.MjModel, mujoco.MjData]]:
+        m, d = self.model, mujoco.MjData(self.model)
+        mujoco.mj_setState(m, d, x0, _STATE)
+        for k in range(len(ctrl)):
+            d.ctrl[:] = ctrl[k]
+            mujoco.mj_step(m, d)
+            yield k, m, d
+
+    def _check_drive(self, drive: Drive) -> None:
+        if bool(drive.grasp.any()):
+            raise InputError(
+                "the drive grasps the object; the mujoco engine models pushing only so far",
+                where="drive.grasp",
+                hint="use the planar engine for grasp-and-place episodes",
+            )
+        if abs(drive.dt - self.dt) > 1e-12:
+            raise InputError(
+                f"drive step {drive.dt} s differs from the engine's {self.dt} s", where="drive.dt"
+            )
+
     def _param_sets(self, params: Mapping[str, Sequence[float]] | None) -> list[mujoco.MjModel]:
         if not params:
             return [self.model]
@@ -606,16 +659,7 @@ class MujocoEngine:
             InputError: the drive grasps (not modelled by this engine yet), its step differs
                 from the engine's, or a parameter cannot be set.
         """
-        if bool(drive.grasp.any()):
-            raise InputError(
-                "the drive grasps the object; the mujoco engine models pushing only so far",
-                where="drive.grasp",
-                hint="use the planar engine for grasp-and-place episodes",
-            )
-        if abs(drive.dt - self.dt) > 1e-12:
-            raise InputError(
-                f"drive step {drive.dt} s differs from the engine's {self.dt} s", where="drive.dt"
-            )
+        self._check_drive(drive)
         n_t, n_s = drive.n_traj, drive.n_steps
         models = self._param_sets(params)
         x0 = self._initial_states(drive, initial, n_t)
