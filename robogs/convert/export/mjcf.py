@@ -1,7 +1,9 @@
 """``robogs export mjcf DATASET OUT``: the physics scene as MJCF (MuJoCo's XML), a folder::
 
-    OUT/scene.xml        plane, objects, pusher, contact pairs, solver options
-    OUT/meshes/*.stl     collision hulls of the objects that have a mesh asset
+    OUT/scene.xml                 plane, objects, pusher, contact pairs, solver options, robot
+    OUT/meshes/*.stl              collision hulls of the objects that have a mesh asset
+    OUT/meshes/robot/*.stl|obj    the robot's meshes (STL copied, DAE/PLY/GLB/OBJ as OBJ)
+    OUT/robot_trajectory.npz      the recorded joint trajectory of every episode
 
 The document is built by :func:`robogs.format.mjcf.scene_mjcf`, the same builder the
 ``mujoco`` physics engine compiles, from the dataset's current physics.json revision (its
@@ -12,9 +14,20 @@ position servo ``pusher_<j>`` and a velocity servo ``pusher_v<j>`` per joint: re
 recorded pusher path means setting, at each step ``k``, the position servos to ``p[k]`` and
 the velocity servos to ``(p[k+1] - p[k]) / dt`` (see ``docs/exports.md``).
 
-The robot is not part of this document yet (``robogs export urdf`` writes it); meshes
-replaced by their convex hulls and physics.json keys MuJoCo does not represent are listed in
-the report notes and in a ``<custom>`` text element of the document.
+When the dataset has a robot, its URDF is in the document too (:mod:`robogs.format.mjcf_robot`:
+MuJoCo's URDF compiler reads it, every link a body, written at full precision), after the scene's
+bodies and actuators (the scene's qpos and ctrl indices are those of the engine's model). The
+robot is kinematic: it collides with nothing (the pusher stays the end effector's contact
+proxy), gravity is compensated, and each actuated joint has a position servo ``robot_<joint>``
+and a velocity servo ``robot_v_<joint>`` on a heavy armature. The ``start`` keyframe puts it at
+the first ``joint_states`` row of the first episode. The recorded trajectory goes to the
+companion ``robot_trajectory.npz`` rather than to keyframes (an episode has thousands of
+samples; a keyframe holds the whole scene's state): ``joint_names`` [J] (the servos' joints,
+URDF order), ``episodes`` [E], and per episode ``k`` ``t_ns_<k>`` [N] int64 (dataset clock) and
+``q_<k>`` [N, J] float64 (rad or m; NaN where ``joint_states`` has no column for a joint).
+
+Meshes replaced by their convex hulls and physics.json keys MuJoCo does not represent are listed
+in the report notes and in a ``<custom>`` text element of the document.
 
 Dependency note: this module imports only ``robogs.format`` (the builder is format-level), so
 the rule that ``robogs.convert`` never imports ``robogs.physics`` holds without an exception.
@@ -22,16 +35,65 @@ the rule that ``robogs.convert`` never imports ``robogs.physics`` holds without 
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from robogs.format import Dataset
-from robogs.format.errors import InputError
+from robogs.format.errors import InputError, PathEscapeError
 from robogs.format.mjcf import scene_mjcf
 
 from . import ExportReport, register_exporter
 from .urdf_scene import scene_state
 
-__all__ = ["export_mjcf"]
+__all__ = ["TRAJECTORY_FILE", "export_mjcf"]
+
+TRAJECTORY_FILE = "robot_trajectory.npz"
+"""The companion file of the recorded joint trajectory (see the module docstring)."""
+
+
+def _trajectory(ds: Dataset, joints: list[str]) -> tuple[bytes, dict[str, Any], list[str]]:
+    """``robot_trajectory.npz`` bytes, its facts, and notes (joints without a column)."""
+    arrays: dict[str, np.ndarray] = {"joint_names": np.array(joints, dtype=str)}
+    ids, counts, missing = [], [], set()
+    for ep in ds.episodes:
+        if not ep.has("joint_states"):
+            continue
+        tab = ep.table("joint_states").sort_by("t_ns")
+        k = len(ids)
+        arrays[f"t_ns_{k}"] = np.asarray(tab.column("t_ns").to_numpy(), dtype=np.int64)
+        q = np.full((tab.num_rows, len(joints)), np.nan)
+        for i, j in enumerate(joints):
+            if f"position.{j}" in tab.column_names:
+                q[:, i] = np.asarray(tab.column(f"position.{j}").to_numpy(), dtype=np.float64)
+            else:
+                missing.add(j)
+        arrays[f"q_{k}"] = q
+        ids.append(ep.id)
+        counts.append(tab.num_rows)
+    arrays["episodes"] = np.array(ids, dtype=str)
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    notes = []
+    if missing:
+        notes.append(
+            f"joint_states has no column for {', '.join(sorted(missing))}: NaN in "
+            f"{TRAJECTORY_FILE}, 0 in the start keyframe"
+        )
+    if not ids:
+        notes.append(f"no episode has joint_states: {TRAJECTORY_FILE} holds no episode")
+    return buf.getvalue(), {"episodes": ids, "samples": counts}, notes
+
+
+def _write_inside(out: Path, rel: str, data: bytes) -> None:
+    """Write ``out/rel``, refusing a path that leaves ``out``."""
+    target = (out / rel).resolve()
+    if not target.is_relative_to(out.resolve()):
+        raise PathEscapeError("output file escapes the export folder", path=out, where=rel)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_bytes(data)
 
 
 def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
@@ -68,7 +130,57 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
         physics, meshes=meshes, poses=poses, model_name=f"{ds.name}_scene", meshdir="meshes/"
     )
     xml = scene.xml
-    remarks = [*scene.notes, *(f"not represented: {k}" for k in scene.unmapped)]
+    robot_notes: list[str] = []
+    robot_facts: dict[str, Any] = {}
+    robot_files: dict[str, bytes] = {}
+    if (ds.manifest.get("robot") or {}).get("urdf"):
+        from robogs.format.mjcf_robot import add_robot, document_names, robot_mjcf
+
+        tree = ds.urdf(load_meshes=False).robot
+        urdf_names = {lk.name for lk in tree.links} | {j.name for j in tree.joints}
+        clash = sorted(urdf_names & document_names(xml))
+        prefix = "robot/" if clash else ""
+        rob = robot_mjcf(ds.urdf_path, root=ds.root, meshdir="meshes/robot/", prefix=prefix)
+        if clash:
+            robot_notes.append(
+                f"robot names prefixed 'robot/' (the scene already has {', '.join(clash[:5])})"
+            )
+        q_first = state.joint_positions
+        q0 = [float(q_first.get(j, 0.0)) for j in rob.actuated]
+        xml, servos = add_robot(xml, rob, q0)
+        traj, traj_facts, traj_notes = _trajectory(ds, rob.actuated)
+        robot_files = {**rob.files, TRAJECTORY_FILE: traj}
+        robot_notes += [
+            f"robot {rob.name!r}: {len(rob.links)} links, {len(rob.joints)} joints, kinematic "
+            "(no contact, gravity compensated, servos robot_JOINT / robot_v_JOINT)",
+            *rob.notes,
+            *traj_notes,
+        ]
+        robot_facts = {
+            "robot": {
+                "name": rob.name,
+                "prefix": rob.prefix,
+                "links": dict(rob.links),
+                "joints": list(rob.joints),
+                "actuated": list(rob.actuated),
+                "servos": servos,
+                "start_q": dict(zip(rob.actuated, q0, strict=True)),
+                "start_q_t_ns": state.joint_positions_t_ns,
+                "meshes": [
+                    {
+                        "source": c.source.name,
+                        "file": c.file,
+                        "action": c.action,
+                        "vertices_in": c.vertices_in,
+                        "vertices_out": c.vertices_out,
+                        **({"why": c.why} if c.why else {}),
+                    }
+                    for c in rob.conversions
+                ],
+                "trajectory": {"file": TRAJECTORY_FILE, **traj_facts},
+            }
+        }
+    remarks = [*scene.notes, *robot_notes, *(f"not represented: {k}" for k in scene.unmapped)]
     remarks.append(f"physics revision {physics.get('revision')} of dataset {ds.name!r}")
     text = "; ".join(remarks).replace('"', "'").replace("&", "and").replace("<", "(")
     xml = xml.replace(
@@ -81,7 +193,12 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
         for fname, data in sorted(scene.assets.items()):
             (out / "meshes" / fname).write_bytes(data)
             files.append(f"meshes/{fname}")
-    notes = [*scene.notes, "robot not included (use `robogs export urdf` for it)"]
+    for rel, data in sorted(robot_files.items()):
+        _write_inside(out, rel, data)
+        files.append(rel)
+    if not robot_facts:
+        robot_notes = ["dataset has no robot: none in the document"]
+    notes = [*scene.notes, *robot_notes]
     if scene.unmapped:
         notes.append(f"not represented in MuJoCo: {', '.join(scene.unmapped)}")
     return ExportReport(
@@ -95,6 +212,7 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
             "hulled_meshes": sorted(meshes),
             "unmapped": scene.unmapped,
             "physics_revision": physics.get("revision"),
+            **robot_facts,
         },
     )
 
@@ -103,5 +221,6 @@ register_exporter(
     "mjcf",
     export_mjcf,
     output="folder",
-    help="MuJoCo MJCF scene: plane, objects, servo-driven pusher, fitted contact parameters",
+    help="MuJoCo MJCF scene: plane, objects, servo-driven pusher, fitted contact parameters, "
+    "the kinematic robot and its recorded joint trajectory",
 )
