@@ -55,13 +55,24 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
             help="camera frames per stream re-rendered for the mask-boundary stream and "
             "camera_intrinsics (default 30; 0: none)",
         )
-    if verb in ("diagnose", "fit"):
-        p.add_argument(
+    if verb in ("compare", "diagnose", "fit"):
+        hold = p.add_mutually_exclusive_group()
+        hold.add_argument(
             "--holdout",
             default=None,
             metavar="TRAJ[,TRAJ...]",
-            help="trajectories held out for the held-out error (arm model; default: leave one "
-            "trajectory out, 5 groups above five trajectories)",
+            help="trajectories held out together as one fold for the held-out error (and, in "
+            "diagnose, the gate's statistic and null); an episode cut into <episode>#<k> holds "
+            "out all its pieces (default folds: object model 5 of whole trajectories; arm: "
+            "leave one trajectory out, 5 groups above five)",
+        )
+        hold.add_argument(
+            "--holdout-column",
+            default=None,
+            metavar="segment[=V1,...]",
+            help="hold out the episodes whose segment (a tabular log's segment/episode/"
+            "trajectory column) is V1, V2...; without values, those of the last episode's "
+            "segment (the data recorded last)",
         )
     if verb == "compare":
         p.add_argument(
@@ -216,6 +227,15 @@ def _compare(args: argparse.Namespace, model: str) -> int:
     if model == "arm":
         from robogs.physics.arm.api import compare_arm
 
+        if _holdout(args, "arm") is not None:
+            raise InputError(
+                "compare --holdout is for the object model; the arm model's held-out error "
+                "is fit's",
+                path=args.dataset,
+                where="--holdout",
+                hint="robogs fit DATASET --model arm --add EFFECT --holdout TRAJ --dry-run",
+            )
+
         res = compare_arm(args.dataset)
         if args.json:
             _print_json(res)
@@ -227,17 +247,21 @@ def _compare(args: argparse.Namespace, model: str) -> int:
         for n in res.get("notes", []):
             print(f"  note: {n}")
         return 0
-    from robogs.physics.api import compare
+    from robogs.physics.api import compare, heldout_error
 
+    holdout = _holdout(args)
+    engine = _engine(args)
     res = compare(
         args.dataset,
         mask_frames=args.mask_frames,
         mask_poses=args.mask_poses,
-        engine=_engine(args),
+        engine=engine,
     )
     d = res.to_dict()
     rev = _revision(args.dataset)
     d["baseline"] = {"revision": rev, "refitted": _REFITTED}
+    if holdout is not None:
+        d["heldout"] = heldout_error(args.dataset, holdout, engine=engine)
     if args.json:
         _print_json(d)
         return 0
@@ -247,6 +271,12 @@ def _compare(args: argparse.Namespace, model: str) -> int:
         f"noise floor {d['noise_floor_mm']:.2f} mm (estimated from the data)"
     )
     _print_force(d.get("force"), d.get("wrench_note"))
+    if "heldout" in d:
+        h = d["heldout"]
+        print(
+            f"held-out position RMS: {h['heldout_rms_mm']:.3f} mm ({h['split']}; held-out χ² "
+            f"{h['heldout_chi2']:.1f} σ²)"
+        )
     print(
         "per phase [mm]: " + ", ".join(f"{k} {v:.2f}" for k, v in d["phases_mm"].items() if v == v)
     )
@@ -392,21 +422,38 @@ def _arm_table(d: dict[str, Any]) -> None:
         print(f"next: robogs fit DATASET --add {found[0]}")
 
 
-def _holdout(args: argparse.Namespace) -> list[str] | None:
-    """``--holdout`` as a list of trajectory names (None: the default folds)."""
+def _holdout(args: argparse.Namespace, model: str = "object") -> list[str] | None:
+    """``--holdout`` or ``--holdout-column`` as trajectory names (None: the default folds).
+
+    ``--holdout-column`` selects episodes (:func:`robogs.physics.heldout.holdout_from_column`);
+    they become the object model's names as they are (an episode cut into ``<episode>#<k>``
+    holds out all its pieces) and the arm model's trajectory names (``<episode>``, or
+    ``<episode>/<segment>`` where the two differ). What was selected is printed once (stderr
+    with ``--json``)."""
     raw = getattr(args, "holdout", None)
-    if not raw:
+    spec = getattr(args, "holdout_column", None)
+    if raw is not None:
+        names = [n.strip() for n in raw.split(",") if n.strip()]
+        if not names:
+            raise InputError(
+                "--holdout names no trajectory",
+                hint="--holdout TRAJ[,TRAJ...], or leave it out for the default folds",
+            )
+        return names
+    if spec is None:
         return None
-    return [n.strip() for n in raw.split(",") if n.strip()]
+    from robogs.format import Dataset
+    from robogs.physics.heldout import holdout_from_column
 
-
-def _no_object_holdout(args: argparse.Namespace) -> None:
-    if _holdout(args):
-        raise InputError(
-            "--holdout is implemented for the arm model only",
-            path=args.dataset,
-            hint="leave it out: the object model holds out 5 folds of whole trajectories",
-        )
+    eps = Dataset.open(args.dataset).episodes
+    ids, what = holdout_from_column([(e.id, e.segment) for e in eps], spec)
+    if not getattr(args, "_holdout_said", False):
+        print(f"--holdout-column {what}", file=sys.stderr if args.json else sys.stdout)
+        args._holdout_said = True
+    if model == "arm":
+        seg = {e.id: e.segment for e in eps}
+        return [i if seg[i] == i else f"{i}/{seg[i]}" for i in ids]
+    return ids
 
 
 def _auto_path(d: dict[str, Any]) -> list[dict[str, Any]]:
@@ -480,13 +527,15 @@ def _print_path(path: list[dict[str, Any]]) -> None:
     print(f"loop stopped after {steps} step(s)")
 
 
-def _object_auto(args: argparse.Namespace, effects: list[str] | None) -> int:
+def _object_auto(
+    args: argparse.Namespace, effects: list[str] | None, holdout: list[str] | None = None
+) -> int:
     """``diagnose --auto`` for the object model: the loop to its end, its path as a table and
     a PNG (``--plot``, default ``<dataset>.diagnose-auto.png``)."""
     from robogs.physics.api import diagnose_auto
     from robogs.physics.diagnose import plot_path
 
-    p = diagnose_auto(args.dataset, effects=effects)
+    p = diagnose_auto(args.dataset, effects=effects, holdout=holdout)
     rows = [
         {
             "step": s.step if s.verdict.startswith("added") else None,
@@ -528,7 +577,7 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
     if model == "arm":
         from robogs.physics.arm.api import diagnose_arm
 
-        d = diagnose_arm(args.dataset, candidates=effects, holdout=_holdout(args))
+        d = diagnose_arm(args.dataset, candidates=effects, holdout=_holdout(args, "arm"))
         if getattr(args, "auto", False):
             d["path"] = _auto_path(d)
         if not args.json:
@@ -539,13 +588,17 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
     else:
         from robogs.physics.api import diagnose
 
-        _no_object_holdout(args)
+        holdout = _holdout(args)
         if getattr(args, "auto", False):
-            return _object_auto(args, effects)
+            return _object_auto(args, effects, holdout)
 
         if args.no_progress or args.json:
             d = diagnose(
-                args.dataset, effects=effects, mask_frames=args.mask_frames, engine=_engine(args)
+                args.dataset,
+                effects=effects,
+                mask_frames=args.mask_frames,
+                engine=_engine(args),
+                holdout=holdout,
             ).to_dict()
         else:
             from rich.progress import Progress
@@ -558,6 +611,7 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
                     progress=lambda i, n: bar.update(task, completed=i, total=n),
                     mask_frames=args.mask_frames,
                     engine=_engine(args),
+                    holdout=holdout,
                 ).to_dict()
     note_diagnosis(d)
     if args.json:
@@ -570,6 +624,8 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
         f"base model (physics revision {_revision(args.dataset)}, refitted): object position "
         f"rms {d['rms_base_mm']:.2f} mm, noise floor {d['noise_floor_mm']:.2f} mm"
     )
+    if (d.get("design") or {}).get("split"):
+        print(f"held-out error and gate: {d['design']['split']}")
     g = d.get("gate") or {}
     if "draws" in g:
         print(
@@ -618,7 +674,11 @@ def _fit(args: argparse.Namespace, model: str) -> int:
         from robogs.physics.arm.api import fit_arm
 
         d = fit_arm(
-            args.dataset, args.add, write=not args.dry_run, note=args.note, holdout=_holdout(args)
+            args.dataset,
+            args.add,
+            write=not args.dry_run,
+            note=args.note,
+            holdout=_holdout(args, "arm"),
         )
         if args.json:
             _print_json(d)
@@ -667,7 +727,6 @@ def _fit(args: argparse.Namespace, model: str) -> int:
     else:
         from robogs.physics.api import fit
 
-        _no_object_holdout(args)
         res = fit(
             args.dataset,
             args.add,
@@ -675,6 +734,7 @@ def _fit(args: argparse.Namespace, model: str) -> int:
             note=args.note,
             mask_frames=args.mask_frames,
             engine=_engine(args),
+            holdout=_holdout(args),
         )
         if args.dry_run and (err := res.refusal(args.dataset)) is not None:
             raise err  # as the written fit: an added effect of which nothing is determined

@@ -39,8 +39,10 @@ from robogs.physics.fit import FitOutcome, Problem, fit_nested
 from robogs.physics.heldout import (
     determined_combination,
     determined_direction,
+    held_mask,
     heldout_rollouts,
-    trajectory_folds,
+    holdout_folds,
+    split_label,
 )
 from robogs.physics.masks import MAX_FRAMES
 from robogs.physics.recording import Recording, as_recording, load_recording
@@ -49,6 +51,7 @@ from robogs.physics.residuals import tracked_rms
 
 __all__ = [
     "compare",
+    "heldout_error",
     "diagnose",
     "diagnose_auto",
     "fit",
@@ -125,6 +128,31 @@ def compare(
     return res
 
 
+def heldout_error(
+    dataset: Any,
+    holdout: Sequence[str] | None = None,
+    *,
+    dt: float = 1e-3,
+    engine: str = "planar",
+) -> dict[str, Any]:
+    """Held-out error of the current revision's baseline (the model ``compare`` shows), by
+    diagnose's procedure (:func:`_heldout_resid`) on the default folds or on the trajectories
+    ``holdout`` names: ``heldout_rms_mm`` [mm] over the held-out samples, ``heldout_chi2``
+    [sigma^2], ``split`` (how they were held out) and ``holdout`` (the trajectories held out)."""
+    rec, _ = _open(dataset)
+    names = [t.name for t in rec.trajectories]
+    folds = holdout_folds(names, holdout)  # a bad choice fails before fitting
+    eng = Engine(rec, dt=dt, backend=engine)
+    bl = baseline(rec, dt=dt, engine=eng)
+    (r,), split, hm = _heldout_resid(eng, bl.space, [bl.outcome], [bl.free], holdout)
+    return {
+        "heldout_rms_mm": rms_mm(eng.raw(r), hm),
+        "heldout_chi2": float(np.sum(r**2)),
+        "split": split,
+        "holdout": [n for n, m in zip(names, held_mask(folds, len(names)), strict=True) if m],
+    }
+
+
 def diagnose(
     dataset: Any,
     *,
@@ -133,18 +161,24 @@ def diagnose(
     dt: float = 1e-3,
     mask_frames: int = MAX_FRAMES,
     engine: str = "planar",
+    holdout: Sequence[str] | None = None,
 ) -> DiagnoseResult:
     """Rank candidate effects (see :mod:`robogs.physics.diagnose`).
 
     ``camera_intrinsics`` is judged from the camera masks (:mod:`robogs.physics.
-    intrinsics`), skipped with the reason when the dataset has none.
+    intrinsics`), skipped with the reason when the dataset has none. ``holdout``: trajectories
+    (or episodes cut into ``<episode>#<k>``) held out as one fold instead of the default folds;
+    the held-out errors, the gate's statistic and its simulated null use it
+    (:func:`robogs.physics.diagnose.diagnose_recording`).
     """
     rec, ds = _open(dataset)
     names = None if effects is None else list(effects)
     camera = _camera_effects()
     rigid = None if names is None else [n for n in names if n not in camera]
     eng = Engine(rec, dt=dt, backend=engine)
-    res = diagnose_recording(rec, effects=rigid, progress=progress, dt=dt, engine=eng)
+    res = diagnose_recording(
+        rec, effects=rigid, progress=progress, dt=dt, engine=eng, holdout=holdout
+    )
     bl = baseline(rec, dt=dt, engine=eng)
     res.rms_base = bl.rms_mm  # the shared "before"
     res.design["wrench_note"] = bl.result.wrench_note
@@ -166,13 +200,17 @@ def diagnose_auto(
     dt: float = 1e-3,
     max_steps: int = 5,
     progress: Callable[[int, int], None] | None = None,
+    holdout: Sequence[str] | None = None,
 ) -> AutoPath:
     """The object model's selection loop to its end (:func:`robogs.physics.diagnose.auto_loop`);
-    camera-mask effects are left out (they are not part of the rigid-object model)."""
+    camera-mask effects are left out (they are not part of the rigid-object model).
+    ``holdout``: as :func:`diagnose`, for every step."""
     rec, _ = _open(dataset)
     camera = _camera_effects()
     rigid = None if effects is None else [n for n in effects if n not in camera]
-    return auto_loop(rec, effects=rigid, dt=dt, max_steps=max_steps, progress=progress)
+    return auto_loop(
+        rec, effects=rigid, dt=dt, max_steps=max_steps, progress=progress, holdout=holdout
+    )
 
 
 @dataclass
@@ -316,11 +354,20 @@ def _joint_fit(
 
 
 def _heldout_resid(
-    eng: Engine, space: Any, outs: list[FitOutcome], frees: list[list[int]]
-) -> tuple[list[np.ndarray], str]:
-    """Held-out weighted residuals [T, C] of each fit (every trajectory from the fit of the
-    fold that held it out), by diagnose's procedure, and how they were held out."""
-    folds = trajectory_folds(eng.prep.n_traj)
+    eng: Engine,
+    space: Any,
+    outs: list[FitOutcome],
+    frees: list[list[int]],
+    holdout: Sequence[str] | None = None,
+) -> tuple[list[np.ndarray], str, np.ndarray]:
+    """Held-out weighted residuals [T, C] of each fit (every held-out trajectory from the fit
+    of the fold that held it out; zero for a trajectory no fold holds out), by diagnose's
+    procedure; how they were held out; and the [T, N] pose samples held out (valid samples of
+    held-out trajectories), over which held-out RMS values are taken. ``holdout``: the
+    trajectories held out as one fold (:func:`robogs.physics.heldout.holdout_folds`; None: the
+    default folds)."""
+    names = [t.name for t in eng.prep.rec.trajectories]
+    folds = holdout_folds(names, holdout)
     held, _, _ = heldout_rollouts(eng, space, outs, frees, folds)
     k = len(folds)
     rs = []
@@ -329,26 +376,34 @@ def _heldout_resid(
         for f, fmask in enumerate(folds):
             r[fmask] = held[p * k + f][fmask]
         rs.append(r)
-    return rs, f"{k} folds of whole trajectories"
+    hm = eng.mask & held_mask(folds, eng.prep.n_traj)[:, None]
+    return rs, split_label(names, folds), hm
 
 
 def _object_rms(
-    eng: Engine, before: CompareResult, after: CompareResult, held: list[np.ndarray]
+    eng: Engine,
+    before: CompareResult,
+    after: CompareResult,
+    held: list[np.ndarray],
+    hm: np.ndarray | None = None,
 ) -> dict[str, dict[str, float]]:
     """Per object of the recording (the free one first, then each tracked one, by dataset name):
     position RMS [mm] before -> after as ``compare`` gives them (the free object's overall RMS;
     a tracked object's ``object_poses/<name>`` rows pooled over trajectories by their sample
     counts), its noise floor [mm], and the held-out RMS [mm] of the weighted residuals ``held``
-    (before, after; :func:`_heldout_resid`)."""
+    (before, after; :func:`_heldout_resid`) over the held-out samples ``hm`` [T, N] (default:
+    every valid sample)."""
     prep = eng.prep
     obj = prep.rec.object_name
+    hm = eng.mask if hm is None else hm
+    held_t = hm.any(axis=1)  # trajectories held out
     out = {
         obj: {
             "rms_before_mm": before.rms_mm,
             "rms_after_mm": after.rms_mm,
             "noise_floor_mm": after.noise_floor_mm,
-            "heldout_rms_before_mm": rms_mm(eng.raw(held[0]), eng.mask),
-            "heldout_rms_after_mm": rms_mm(eng.raw(held[-1]), eng.mask),
+            "heldout_rms_before_mm": rms_mm(eng.raw(held[0]), hm),
+            "heldout_rms_after_mm": rms_mm(eng.raw(held[-1]), hm),
         }
     }
     names = [t.name for t in prep.rec.trajectories]
@@ -361,12 +416,18 @@ def _object_rms(
             r = np.array([rows[t] for t in names])
             return float(np.sqrt(np.sum(n * r**2) / max(n.sum(), 1.0)))
 
+        def held_rms(h: dict[str, Any], n: np.ndarray = n) -> float:
+            """Per-trajectory RMS pooled over the held-out trajectories by sample count."""
+            r = np.asarray(h["per_trajectory_mm"], dtype=float)[held_t]
+            w = n[held_t]
+            return float(np.sqrt(np.sum(w * r**2) / max(w.sum(), 1.0)))
+
         out[o.name] = {
             "rms_before_mm": pooled(before),
             "rms_after_mm": pooled(after),
             "noise_floor_mm": ha[o.name]["noise_floor_mm"],
-            "heldout_rms_before_mm": hb[o.name]["rms_mm"],
-            "heldout_rms_after_mm": ha[o.name]["rms_mm"],
+            "heldout_rms_before_mm": held_rms(hb[o.name]),
+            "heldout_rms_after_mm": held_rms(ha[o.name]),
         }
     return out
 
@@ -410,7 +471,10 @@ def _identification(
 
 
 def _fit_engine(
-    eng: Engine, add: Sequence[str], progress: Callable[[int, int], None] | None = None
+    eng: Engine,
+    add: Sequence[str],
+    progress: Callable[[int, int], None] | None = None,
+    holdout: Sequence[str] | None = None,
 ) -> FitResult:
     """Refit the engine's revision plus ``add``; before and after are baselines (:func:`baseline`).
 
@@ -424,19 +488,21 @@ def _fit_engine(
     effect and the parameter's own interval is narrower than its bounds. "Before" is the
     baseline of the engine's revision, "after" the baseline of the document this fit writes, so
     ``compare`` and ``report`` of the written revision print the same "after". With nothing to
-    add the fit is the baseline fit itself.
+    add the fit is the baseline fit itself. ``holdout``: the trajectories the held-out error is
+    measured on (one fold, :func:`robogs.physics.heldout.holdout_folds`; None: the default folds).
     """
     rec = eng.prep.rec
+    holdout_folds([t.name for t in rec.trajectories], holdout)  # a bad choice fails before fitting
     cands = eng.check_effects(add)
     before = baseline(rec, dt=eng.prep.drive.dt, engine=eng, progress=progress)
     if cands:
         space = eng.space(cands)
         base_out, out, base_cols, free = _joint_fit(eng, space, cands, before, progress)
-        held, split = _heldout_resid(eng, space, [base_out, out], [base_cols, free])
+        held, split, hm = _heldout_resid(eng, space, [base_out, out], [base_cols, free], holdout)
     else:
         space, free, out = before.space, before.free, before.outcome
-        held, split = _heldout_resid(eng, space, [out], [free])
-    h_b, h_a = (rms_mm(eng.raw(r), eng.mask) for r in (held[0], held[-1]))
+        held, split, hm = _heldout_resid(eng, space, [out], [free], holdout)
+    h_b, h_a = (rms_mm(eng.raw(r), hm) for r in (held[0], held[-1]))
     c_b, c_a = (float(np.sum(r**2)) for r in (held[0], held[-1]))
     undetermined, not_written, kept, notes = _identification(
         space, out, free, {e.name for e in cands}
@@ -523,7 +589,7 @@ def _fit_engine(
         undetermined=undetermined,
         not_written=not_written,
         notes=notes,
-        objects=_object_rms(eng, before.result, after.result, held),
+        objects=_object_rms(eng, before.result, after.result, held, hm),
     )
 
 
@@ -537,6 +603,7 @@ def fit(
     mask_frames: int = MAX_FRAMES,
     progress: Callable[[int, int], None] | None = None,
     engine: str = "planar",
+    holdout: Sequence[str] | None = None,
 ) -> FitResult:
     """Refit the base model (and the effects already present) plus ``add``.
 
@@ -557,8 +624,9 @@ def fit(
 
     "Before" and "after" are baselines (:mod:`robogs.physics.baseline`) of the revision
     fitted from and of the document written; with no ``add`` the base model is refitted.
-    The held-out error is diagnose's (:func:`_heldout_resid`). ``progress(iteration, unfinished
-    fits)`` follows each fit.
+    The held-out error is diagnose's (:func:`_heldout_resid`): on the default folds, or on the
+    trajectories ``holdout`` names, held out as one fold (the others train it; ``heldout_split``
+    says which). ``progress(iteration, unfinished fits)`` follows each fit.
     """
     camera = _camera_effects()
     cam_add = [a for a in add if a in camera]
@@ -570,7 +638,7 @@ def fit(
         )
     else:
         rec, ds = _open(dataset)
-        res = _fit_engine(Engine(rec, dt=dt, backend=engine), rigid_add, progress)
+        res = _fit_engine(Engine(rec, dt=dt, backend=engine), rigid_add, progress, holdout)
     if ds is not None and write and (err := res.refusal(ds.root)) is not None:
         raise err
     new_cams = []
@@ -769,8 +837,8 @@ def _report_pair(
 def _baseline_heldout(rec: Recording, bl: Baseline, dt: float, backend: str) -> float:
     """Held-out position RMS [mm] of a baseline (:func:`_heldout_resid`, on its own document)."""
     eng = Engine(replace(rec, physics=bl.physics), dt=dt, backend=backend)
-    (r,), _ = _heldout_resid(eng, bl.space, [bl.outcome], [bl.free])
-    return rms_mm(eng.raw(r), eng.mask)
+    (r,), _, hm = _heldout_resid(eng, bl.space, [bl.outcome], [bl.free])
+    return rms_mm(eng.raw(r), hm)
 
 
 def report(

@@ -81,8 +81,11 @@ from robogs.physics.engine import Engine, rms_mm
 from robogs.physics.fit import FitOutcome, Problem, fit_nested, on_bounds
 from robogs.physics.heldout import (
     determined_combination,
+    held_mask,
     heldout_rollouts,
-    trajectory_folds,
+    holdout_folds,
+    split_label,
+    split_tag,
 )
 from robogs.physics.phases import PHASES
 from robogs.physics.space import ParamSpace
@@ -99,6 +102,7 @@ __all__ = [
     "quasi_static",
     "rival_cutoff",
     "sign_flip_floor",
+    "unjudged_on_holdout",
     "start_points",
     "judge",
     "PARTLY",
@@ -530,6 +534,7 @@ def diagnose_recording(
     dt: float = 1e-3,
     engine: Engine | None = None,
     partial: bool = True,
+    holdout: Sequence[str] | None = None,
 ) -> DiagnoseResult:
     """Fit and rank candidate effects on a recording (see the module docstring).
 
@@ -540,10 +545,20 @@ def diagnose_recording(
         dt: simulation step [s].
         engine: reuse a prepared engine.
         partial: report partly identified effects (False: only fully identified ones pass).
+        holdout: trajectories (or split episodes) held out as one fold instead of the default
+            folds (:func:`~robogs.physics.heldout.holdout_folds`); the held-out errors, the
+            gate's statistic and its simulated null all use that fold, and
+            ``DiagnoseResult.design["split"]`` says which.
+
+    Raises:
+        InputError: a bad ``holdout`` (:func:`~robogs.physics.heldout.holdout_folds`), or one
+            too small for the gate (:func:`unjudged_on_holdout`).
     """
     eng = engine or Engine(recording, dt=dt)
     prep = eng.prep
     names = list(effects) if effects is not None else available_effects(model="rigid")
+    traj_names = [t.name for t in prep.rec.trajectories]
+    folds = holdout_folds(traj_names, holdout)  # checked before any fit
     present = {e.name for e, _ in eng.present}
     qs, slide_run = quasi_static(prep)
     cands: list[Effect] = []
@@ -601,8 +616,8 @@ def diagnose_recording(
     mask = eng.mask
     # held-out by trajectory: one bounded Gauss-Newton step per fold (halved where it fails on
     # the training trajectories), exact rollouts of all folds at once
-    folds = trajectory_folds(prep.n_traj)
     held, fold_bounds, halved = heldout_rollouts(eng, space, outs, frees, folds)
+    held_m = mask & held_mask(folds, prep.n_traj)[:, None]  # RMS over held-out samples only
     k_f = len(folds)
     held_chi2, held_raw, held_t = [], [], []
     for p in range(len(outs)):
@@ -615,7 +630,7 @@ def diagnose_recording(
     floor = float(np.sqrt(np.mean(np.sum(prep.sig_pos.numpy()[mask] ** 2, axis=-1))) * 1000.0)
     base_raw = eng.raw(base.resid)
     rms_base = rms_mm(base_raw, mask)
-    held_base = rms_mm(held_raw[0], mask)
+    held_base = rms_mm(held_raw[0], held_m)
     deltas = [(base.resid - o.resid) for o in outs[1:]]
     stats = [
         float(gate_mod.heldout_statistic(held_t[0], held_t[i], deltas[i - 1]))
@@ -629,8 +644,10 @@ def diagnose_recording(
     cal = _calibrate(
         eng, space, cands, outs, folds, base_cols, theta0, stats, dbics, record=nuis_rec
     )
+    held_tr = held_mask(folds, prep.n_traj)
     phase = prep.phase
     rows: list[EffectRow] = []
+    too_small: list[str] = []
     for i, e in enumerate(cands, start=1):
         out, free = outs[i], frees[i]
         dbic = dbics[i - 1]
@@ -672,6 +689,13 @@ def diagnose_recording(
         verdict, gate, blocked = judge(
             stat, thr, q95, dbic, few, ident, partial and part is not None
         )
+        miss = unjudged_on_holdout(z_t, held_tr) if holdout else None
+        if miss is not None and (ident or part is not None):
+            n_acts, z_max = miss
+            too_small.append(
+                f"{e.name} moves {n_acts} trajectories by >= {gate_mod.AFFECTED_Z:g} sigma (up to "
+                f"{z_max:.1f}), none of them held out"
+            )
         if ident:
             note = ""
         elif part is None or not partial:
@@ -696,7 +720,7 @@ def diagnose_recording(
                 verdict=verdict,
                 delta_bic=dbic,
                 heldout_rms_before=held_base,
-                heldout_rms_after=rms_mm(held_raw[i], mask),
+                heldout_rms_after=rms_mm(held_raw[i], held_m),
                 heldout_gain=float(gain),
                 heldout_dchi2=float(held_chi2[0] - held_chi2[i]),
                 effect_size=size,
@@ -772,6 +796,19 @@ def diagnose_recording(
                 "fall exceeds its linearisation. More trajectories of the kinds it acts on "
                 "would let it pass"
             )
+    if too_small:
+        from robogs.format.errors import InputError
+
+        raise InputError(
+            f"held-out set {', '.join(holdout or [])} is too small for the gate: "
+            + "; ".join(too_small)
+            + ". The gate's statistic is the held-out fall on the held-out trajectories an effect "
+            "acts on: with none of them held out it is 0 by construction, and the effect could "
+            "never pass",
+            where="--holdout",
+            hint="hold out trajectories these effects act on (e.g. a drop for restitution), "
+            "leave them out with --effects, or use the default folds",
+        )
     feats = design_features(prep.rec, float(prep.noise.sigma_pos))
     _rivals(rows, deltas, feats)
     rows.sort(key=lambda r: (not r.reported, r.delta_bic))
@@ -796,8 +833,29 @@ def diagnose_recording(
             "quasi_static": qs,
             "longest_free_slide_samples": slide_run,
             "n_trajectories": prep.n_traj,
+            "split": split_label(traj_names, folds),
+            "holdout": [n for n, m in zip(traj_names, folds[0], strict=True) if m]
+            if holdout
+            else None,
         },
     )
+
+
+def unjudged_on_holdout(z_t: np.ndarray, held: np.ndarray) -> tuple[int, float] | None:
+    """Whether a held-out choice leaves a candidate's gate unable to pass: (how many
+    trajectories it acts on, its largest ``z_t``) when it acts on some (``z_t >=
+    gate.AFFECTED_Z``, the gate's rule) and on none of the ``held`` [T] ones, else None.
+
+    The gate's statistic sums the held-out chi^2 fall over the trajectories an effect acts on
+    (:func:`robogs.physics.gate.heldout_statistic`), and a trajectory no fold holds out adds 0:
+    such an effect's statistic is exactly 0 on the data, whatever its size, while its null is
+    simulated as usual, so it is never reported (a gate that looks calibrated and cannot pass).
+    The default folds hold out every trajectory once, so this never happens there.
+    """
+    acts = np.asarray(z_t) >= gate_mod.AFFECTED_Z
+    if not acts.any() or (acts & np.asarray(held, dtype=bool)).any():
+        return None
+    return int(acts.sum()), float(np.max(z_t))
 
 
 def sign_flip_floor(method: str, carrying: int) -> float | None:
@@ -841,6 +899,7 @@ def _calibrate(
     fp = "|".join(
         [_fingerprint(rec), model_key(rec.physics), f"{eng.prep.scene.dt:g}", eng.backend]
     )  # the backend, not the class: planar and MuJoCo are both an Engine
+    fp += split_tag(folds)  # a --holdout split's null is its own (never the default folds')
     base = outs[0]
     n_base = len(base_cols)
     valid = (base.resid != 0) | np.any(base.jac != 0, axis=-1)
@@ -1000,12 +1059,14 @@ def auto_loop(
     max_steps: int = 5,
     dt: float = 1e-3,
     progress: Callable[[int, int], None] | None = None,
+    holdout: Sequence[str] | None = None,
 ) -> AutoPath:
     """Forward selection to its end (Efroymson 1960): diagnose, accept the reported effect with
     the lowest ΔBIC into the base model (stored at its fitted values, refitted jointly with the
     base at the next step), repeat until no candidate passes the gate or ``max_steps``.
 
-    Each step's gate is calibrated afresh on its own base model (the accepted effects included).
+    Each step's gate is calibrated afresh on its own base model (the accepted effects included),
+    for the split ``holdout`` gives (:func:`diagnose_recording`).
     Nothing is written: ``AutoPath.physics`` is the document with the accepted effects.
     """
     import copy
@@ -1017,7 +1078,7 @@ def auto_loop(
     cal_s = 0.0
     given: list[str] = [str(e.get("name")) for e in doc.get("effects", []) or []]
     while True:
-        res = diagnose_recording(rec, effects=effects, dt=dt, progress=progress)
+        res = diagnose_recording(rec, effects=effects, dt=dt, progress=progress, holdout=holdout)
         cal_s += float(res.gate.get("seconds", 0.0))
         cal_s += float((res.gate.get("linearisation_check") or {}).get("seconds", 0.0))
         top = next((r for r in res.rows if r.reported), None)

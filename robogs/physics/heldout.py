@@ -16,6 +16,11 @@ Used by :mod:`robogs.physics.diagnose` (ranking candidate effects) and :mod:`rob
   held it out. The *held-out fall* of a candidate effect is the base model's held-out chi^2 minus
   the candidate's, in sigma^2; the gate (:mod:`robogs.physics.gate`) sums it over the
   trajectories the effect acts on.
+* A *held-out choice* (``--holdout T1,T2``, :func:`holdout_folds`) replaces the K folds by one
+  fold: the named trajectories are held out together, the others train. The held-out chi^2 is
+  then that of the named trajectories only, and the gate's null (:mod:`robogs.physics.gate`)
+  is simulated for that same fold (the folds reach ``gate.calibrate`` unchanged); held-out
+  RMS values are taken over the held-out trajectories' samples only (:func:`held_mask`).
 * Partial identification: a fit whose parameters are not all determined may still determine a
   combination of them; :func:`determined_direction` finds the best-determined direction with
   each parameter scaled by its prior range, and :func:`determined_combination` writes it as
@@ -24,14 +29,23 @@ Used by :mod:`robogs.physics.diagnose` (ranking candidate effects) and :mod:`rob
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
+from robogs.format.errors import InputError
 from robogs.physics.engine import Engine
 from robogs.physics.fit import FitOutcome, on_bounds
 from robogs.physics.space import ParamSpace
 
 __all__ = [
     "N_FOLDS",
+    "holdout_folds",
+    "holdout_from_column",
+    "HOLDOUT_COLUMNS",
+    "held_mask",
+    "split_label",
+    "split_tag",
     "NULL_EIG",
     "trajectory_folds",
     "gn_step",
@@ -118,6 +132,139 @@ def trajectory_folds(n_traj: int) -> list[np.ndarray]:
     out the trajectories ``t`` with ``t mod K == f`` (whole trajectories, never samples)."""
     k = min(N_FOLDS, n_traj)
     return [np.arange(n_traj) % k == f for f in range(k)]
+
+
+def holdout_folds(names: Sequence[str], holdout: Sequence[str] | None) -> list[np.ndarray]:
+    """The held-out folds of trajectories ``names``: the default :func:`trajectory_folds`
+    when ``holdout`` is None or empty, else one fold holding out the named ones.
+
+    A name is a trajectory's name, or an episode's id that the split cut into trajectories
+    ``<episode>#<k>`` (:mod:`robogs.physics.split`): then all of them are held out.
+
+    Raises:
+        InputError: a name that is no trajectory (the message lists the valid ones), a
+            recording of one trajectory, or a choice that holds out every trajectory (nothing
+            is left to fit the fold on).
+    """
+    names = [str(n) for n in names]
+    if holdout is None or len(holdout) == 0:
+        return trajectory_folds(len(names))
+    asked = [str(h).strip() for h in holdout if str(h).strip()]
+    if not asked:
+        raise InputError(
+            "--holdout names no trajectory",
+            hint="name one or more trajectories (TRAJ[,TRAJ...]), or leave --holdout out for "
+            "the default folds",
+        )
+    valid = ", ".join(names[:40]) + (f", ... ({len(names)} in all)" if len(names) > 40 else "")
+    if len(names) < 2:
+        raise InputError(
+            f"--holdout needs at least two trajectories; the data hold {len(names)}",
+            hint="record more trajectories, or leave --holdout out",
+        )
+    mask = np.zeros(len(names), dtype=bool)
+    bad = []
+    for h in asked:
+        hit = [i for i, n in enumerate(names) if n == h or n.startswith(h + "#")]
+        if not hit:
+            bad.append(h)
+        mask[hit] = True
+    if bad:
+        raise InputError(
+            f"--holdout: no trajectory named {', '.join(repr(b) for b in bad)}",
+            hint=f"valid trajectory names: {valid}",
+        )
+    if mask.all():
+        raise InputError(
+            f"--holdout holds out all {len(names)} trajectories: none is left to fit on",
+            hint=f"name fewer trajectories (valid names: {valid})",
+        )
+    return [mask]
+
+
+HOLDOUT_COLUMNS = ("segment",)
+"""Per-trajectory columns ``--holdout-column`` reads: ``segment``, each episode's segment in the
+manifest, which the tabular log import fills from the log's ``segment``, ``episode`` or
+``trajectory`` column (one episode, or several cut at time gaps, per value) and other
+converters with the source's name (a file, a bag's session)."""
+
+
+def holdout_from_column(episodes: Sequence[tuple[str, str]], spec: str) -> tuple[list[str], str]:
+    """The episodes ``--holdout-column`` selects, and what it selected (for people).
+
+    ``spec`` is ``COLUMN=V1,V2,...`` (every episode whose column value is one of the values) or
+    ``COLUMN`` alone (every episode with the value of the last episode in the manifest's order:
+    a log's last segment, so the model is tested on the data recorded last). ``COLUMN`` is one
+    of :data:`HOLDOUT_COLUMNS`.
+
+    Args:
+        episodes: (episode id, segment) in the manifest's order.
+
+    Raises:
+        InputError: an unknown column, a value no episode has (the valid values are listed),
+            or no episode at all.
+    """
+    col, eq, raw = str(spec).partition("=")
+    col = col.strip()
+    if col not in HOLDOUT_COLUMNS:
+        raise InputError(
+            f"no per-trajectory column {col!r}",
+            where="--holdout-column",
+            hint="use segment=V1,V2 (each episode's segment: the tabular import stores the log's "
+            "segment, episode or trajectory column there), or --holdout TRAJ[,TRAJ...]",
+        )
+    if not episodes:
+        raise InputError("the dataset has no episode", where="--holdout-column")
+    values = list(dict.fromkeys(seg for _, seg in episodes))
+    shown = ", ".join(values[:40]) + (f", ... ({len(values)} in all)" if len(values) > 40 else "")
+    if eq:
+        asked = [v.strip() for v in raw.split(",") if v.strip()]
+        if not asked:
+            raise InputError(
+                f"--holdout-column {spec!r} names no value",
+                where="--holdout-column",
+                hint=f"{col}=V1,V2,...; values: {shown}",
+            )
+        bad = [v for v in asked if v not in values]
+        if bad:
+            raise InputError(
+                f"no episode has {col} {', '.join(repr(b) for b in bad)}",
+                where="--holdout-column",
+                hint=f"values of {col}: {shown}",
+            )
+    else:
+        asked = [episodes[-1][1]]
+    ids = [eid for eid, seg in episodes if seg in asked]
+    return ids, f"{col} in {{{', '.join(asked)}}}: episodes {', '.join(ids)}"
+
+
+def held_mask(folds: list[np.ndarray], n_traj: int) -> np.ndarray:
+    """[T] trajectories held out by some fold (all of them for the default folds)."""
+    out = np.zeros(n_traj, dtype=bool)
+    for f in folds:
+        out |= np.asarray(f, dtype=bool)
+    return out
+
+
+def split_label(names: Sequence[str], folds: list[np.ndarray]) -> str:
+    """How the trajectories were held out, for people: ``"5 folds of whole trajectories"`` or
+    ``"held out: a, b (2 of 9 trajectories)"``."""
+    if len(folds) == 1 and not folds[0].all():
+        held = [n for n, m in zip(names, folds[0], strict=True) if m]
+        return f"held out: {', '.join(held)} ({len(held)} of {len(names)} trajectories)"
+    return f"{len(folds)} folds of whole trajectories"
+
+
+def split_tag(folds: list[np.ndarray]) -> str:
+    """The split for cache keys: ``""`` for the default folds, else the held-out mask (so a
+    calibration simulated for one split is never read back for another)."""
+    n = len(folds[0]) if folds else 0
+    default = trajectory_folds(n)
+    if len(folds) == len(default) and all(
+        np.array_equal(a, b) for a, b in zip(folds, default, strict=True)
+    ):
+        return ""
+    return "|holdout:" + ";".join("".join("1" if x else "0" for x in f) for f in folds)
 
 
 def gn_step(
