@@ -840,11 +840,12 @@ def _engine(args: argparse.Namespace) -> str:
     """The object-model engine of ``--engine`` (``auto`` resolved; the choice and the reason
     printed, on stderr with ``--json``)."""
     name = getattr(args, "engine", "planar")
-    if name == "auto":
+    if name == "auto":  # the scene and the recorded motion, as the fitting engine resolves it
         from robogs.format import Dataset
-        from robogs.physics.engine import resolve_backend
+        from robogs.physics.engine import recording_backend
+        from robogs.physics.recording import load_recording
 
-        name, why = resolve_backend(Dataset.open(args.dataset).physics(), "auto")
+        name, why = recording_backend(load_recording(Dataset.open(args.dataset)), "auto")
         print(f"engine: {name} (auto: {why})", file=sys.stderr if args.json else sys.stdout)
     return name
 

@@ -34,7 +34,7 @@ from robogs.physics.diagnose import (
     start_points,
 )
 from robogs.physics.effects import get_effect
-from robogs.physics.engine import Engine, resolve_backend, rms_mm
+from robogs.physics.engine import Engine, recording_backend, rms_mm
 from robogs.physics.fit import FitOutcome, Problem, fit_nested
 from robogs.physics.heldout import (
     determined_combination,
@@ -116,12 +116,12 @@ def compare(
     forward kinematics of the measured joints, the free object at the model's predicted poses
     (``mask_poses="model"``) or at its recorded poses (``"recorded"``), ``mask_frames`` frames
     per camera stream (0: none). ``progress(iteration, unfinished fits)`` follows the refit.
-    ``engine``: ``planar``, ``mujoco`` or ``auto`` (:func:`robogs.physics.engine.resolve_backend`).
+    ``engine``: ``planar``, ``mujoco`` or ``auto`` (:func:`robogs.physics.engine.recording_backend`).
     """
     rec, ds = _open(dataset)
     res = copy.copy(
         baseline(
-            rec, dt=dt, progress=progress, backend=resolve_backend(rec.physics, engine)[0]
+            rec, dt=dt, progress=progress, backend=recording_backend(rec, engine)[0]
         ).result
     )  # the memoised table stays without masks
     _attach_masks(res, ds, mask_frames, mask_poses)
@@ -794,7 +794,7 @@ def _report_pair(
     rec: Recording, ds: Any, add: Sequence[str], dt: float, engine: str = "planar"
 ) -> ReportPair:
     rigid = [a for a in add if a not in _camera_effects()]
-    backend = resolve_backend(rec.physics, engine)[0]
+    backend = recording_backend(rec, engine)[0]
     if rigid:
         res = _fit_engine(Engine(rec, dt=dt, backend=backend), rigid)
         if res.compare_before is None or res.compare_after is None:  # pragma: no cover

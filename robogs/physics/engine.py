@@ -24,19 +24,27 @@ import torch
 from robogs.format.errors import InputError
 from robogs.physics.effects import Effect, get_effect
 from robogs.physics.fit import FitOutcome, Problem, ResidualFn, fit_problems
-from robogs.physics.prepare import Prepared, prepare
+from robogs.physics.planarity import out_of_plane
+from robogs.physics.prepare import Prepared, phase_labels, prepare
+from robogs.physics.recording import as_recording
 from robogs.physics.residuals import residual_fn, weighted_residuals
-from robogs.physics.scene import base_params
+from robogs.physics.scene import base_params, scene_from_physics
 from robogs.physics.space import ParamSpace
 
-__all__ = ["BACKENDS", "Engine", "FitSummary", "rms_mm", "resolve_backend"]
+__all__ = ["BACKENDS", "Engine", "FitSummary", "recording_backend", "rms_mm", "resolve_backend"]
 
 BACKENDS = ("auto", "planar", "mujoco")
 """Values of ``engine=`` / ``--engine``."""
 
 
-def resolve_backend(physics: dict, name: str = "planar") -> tuple[str, str]:
+def resolve_backend(
+    physics: dict, name: str = "planar", *, out_of_plane: str | None = None
+) -> tuple[str, str]:
     """``(backend, reason)`` for ``name`` in :data:`BACKENDS` (``auto``: choose_engine).
+
+    ``out_of_plane``: why the recorded object leaves the plane (:mod:`robogs.physics.planarity`),
+    None when it stays flat. Only MuJoCo's free joint can follow it: ``auto`` then picks
+    ``mujoco`` and ``planar`` is refused.
 
     Raises:
         InputError: an unknown name, or a named engine that cannot represent the scene.
@@ -47,6 +55,15 @@ def resolve_backend(physics: dict, name: str = "planar") -> tuple[str, str]:
         raise InputError(
             f"unknown engine {name!r}", where="--engine", hint=f"one of {', '.join(BACKENDS)}"
         )
+    if out_of_plane is not None:
+        if name == "planar":
+            raise InputError(
+                f"the planar engine cannot represent this recording: {out_of_plane}",
+                where="--engine",
+                hint="use --engine mujoco (or auto, which picks it): its free joint tips and rolls",
+            )
+        if name == "auto":
+            return "mujoco", f"planar cannot represent it: {out_of_plane}; mujoco: free joint"
     if name == "auto":
         return choose_engine(physics)
     ok, why = get_engine(name).can_represent(physics, None)
@@ -59,6 +76,15 @@ def resolve_backend(physics: dict, name: str = "planar") -> tuple[str, str]:
             f"the {name} engine cannot represent this scene: {why}", where="--engine", hint=fix
         )
     return name, "requested"
+
+
+def recording_backend(recording: object, name: str = "auto") -> tuple[str, str]:
+    """:func:`resolve_backend` for a recording: its scene and its recorded motion (an object
+    that tips out of the plane, :func:`robogs.physics.planarity.out_of_plane`), as
+    :class:`Engine` resolves it. Every caller that holds the recording uses this."""
+    rec = as_recording(recording)
+    labels, _ = phase_labels(rec, scene_from_physics(rec.physics, rec.object_name))
+    return resolve_backend(rec.physics, name, out_of_plane=out_of_plane(rec, labels).reason())
 
 
 def rms_mm(raw: np.ndarray, mask: np.ndarray) -> float:
@@ -101,7 +127,11 @@ class Engine:
         if threads is None:
             threads = max(1, torch.get_num_threads())
         self.prep: Prepared = prepare(recording, dt=dt)
-        self.backend, self.backend_reason = resolve_backend(self.prep.rec.physics, backend)
+        self.tilt = out_of_plane(self.prep.rec, self.prep.labels)  # roll/pitch from the data
+        tipped = self.tilt.reason()
+        self.backend, self.backend_reason = resolve_backend(
+            self.prep.rec.physics, backend, out_of_plane=tipped
+        )
         self._mujoco = None
         if self.backend == "mujoco":
             from robogs.physics.engines.mujoco_engine import drive_pusher_speed
@@ -114,6 +144,7 @@ class Engine:
                 threads=threads,
                 tracked=self.prep.tracked,
                 pusher_speed=drive_pusher_speed(self.prep.drive),  # sizes the onset ramp
+                joints="auto" if tipped is None else "free",
             )  # it predicts the pusher force: a measured wrench enters as on planar
         self.present: list[tuple[Effect, dict[str, float]]] = []
         for entry in self.prep.rec.physics.get("effects", []) or []:

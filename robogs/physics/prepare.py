@@ -23,6 +23,7 @@ from robogs.physics.smoothing import drive_windows, local_polynomial
 
 __all__ = [
     "Prepared",
+    "phase_labels",
     "TrackedObject",
     "WrenchData",
     "CHAIN_FORCE_BIN_S",
@@ -539,6 +540,25 @@ def excitations(rec: Recording, labels: list[PhaseLabels]) -> set[str]:
     return have
 
 
+def phase_labels(
+    rec: Recording, scene: BoxScene, noise: NoiseModel | None = None
+) -> tuple[list[PhaseLabels], NoiseModel]:
+    """Per-trajectory phases and the pose noise model (estimated from the rest phases unless
+    ``noise`` is given): a first pass with the high-frequency noise sets the thresholds."""
+    seg = dict(
+        size=scene.size,
+        table_z=scene.table_z,
+        pusher_radius=scene.pusher_radius,
+        pusher_length=scene.pusher_length,
+    )
+    rough = estimate_noise(rec, None)
+    labels = [segment_phases(tr, sigma_pos=rough.sigma_pos, **seg) for tr in rec.trajectories]
+    if noise is None:
+        noise = estimate_noise(rec, labels)
+        labels = [segment_phases(tr, sigma_pos=noise.sigma_pos, **seg) for tr in rec.trajectories]
+    return labels, noise
+
+
 def prepare(
     recording: object,
     *,
@@ -552,18 +572,7 @@ def prepare(
     and the drive's position window, from the recorded path's noise (:func:`build_drive`)."""
     rec = as_recording(recording)
     scene = scene_from_physics(rec.physics, rec.object_name, dt=dt)
-    seg = dict(
-        size=scene.size,
-        table_z=scene.table_z,
-        pusher_radius=scene.pusher_radius,
-        pusher_length=scene.pusher_length,
-    )
-    # first pass: rough noise from high frequencies, to set phase thresholds
-    rough = estimate_noise(rec, None)
-    labels = [segment_phases(tr, sigma_pos=rough.sigma_pos, **seg) for tr in rec.trajectories]
-    if noise is None:
-        noise = estimate_noise(rec, labels)
-        labels = [segment_phases(tr, sigma_pos=noise.sigma_pos, **seg) for tr in rec.trajectories]
+    labels, noise = phase_labels(rec, scene, noise)
     drive, t0 = build_drive(
         rec, scene, labels, dt, z_snap=max(0.003, 4 * noise.sigma_z), ee_window=ee_window
     )

@@ -200,9 +200,9 @@ def assess(
 def _backend(rec: Any) -> str:
     """The engine of the sanity baseline: planar where it represents the scene, else the one
     ``auto`` picks (two objects: mujoco)."""
-    from robogs.physics.engine import resolve_backend
+    from robogs.physics.engine import recording_backend
 
-    return resolve_backend(rec.physics, "auto")[0]
+    return recording_backend(rec, "auto")[0]
 
 
 def bound_notes(rec: Any, dt: float = 1e-3) -> list[str]:

@@ -146,6 +146,8 @@ class MujocoFit:
             ``init_pos`` [T, 3] m, ``init_yaw`` [T] rad, ``obs_t`` [T, K] s), see :meth:`track`.
         pusher_speed: m/s, the recording's fastest pusher speed, given to the engine it builds
             (sizes the pusher onset ramp where the settings turn it on; None: not known).
+        joints: the engine's joint set (``auto``, ``free``, ``planar``): ``free`` where the
+            recorded object leaves the plane (:mod:`robogs.physics.planarity`).
 
     Attributes:
         last_rollouts: distinct rollouts the last :meth:`simulate` call ran (of its M x T).
@@ -166,6 +168,7 @@ class MujocoFit:
         stepper: str | None = None,
         tracked: Sequence[Any] = (),
         pusher_speed: float | None = None,
+        joints: str = "auto",
     ) -> None:
         stepper = stepper or ("batch" if _has_batch() else "rollout")
         if stepper not in STEPPERS or (stepper == "batch" and not _has_batch()):
@@ -179,7 +182,12 @@ class MujocoFit:
         self.last_steps = 0
         self.distinct = True  # run each distinct rollout once (False: all M x T, for benches)
         self.eng = engine or MujocoEngine(
-            physics, object_name=object_name, dt=dt, threads=threads, pusher_speed=pusher_speed
+            physics,
+            object_name=object_name,
+            dt=dt,
+            threads=threads,
+            pusher_speed=pusher_speed,
+            joints=joints,
         )
         m = self.eng.model
         self.nq, self.nv = m.nq, m.nv
