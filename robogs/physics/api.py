@@ -120,9 +120,7 @@ def compare(
     """
     rec, ds = _open(dataset)
     res = copy.copy(
-        baseline(
-            rec, dt=dt, progress=progress, backend=recording_backend(rec, engine)[0]
-        ).result
+        baseline(rec, dt=dt, progress=progress, backend=recording_backend(rec, engine)[0]).result
     )  # the memoised table stays without masks
     _attach_masks(res, ds, mask_frames, mask_poses)
     return res
