@@ -141,6 +141,39 @@ def test_off_centre_push_turns_the_block_by_the_quasi_static_rate() -> None:
     assert 0.8 * lo <= -turn <= 1.2 * hi, (math.degrees(turn), math.degrees(lo), math.degrees(hi))
     # the block moved forward about as far as the pusher travelled in contact, less the turn
     assert 0.5 * push < out.pos["box"][0, 0, -1, 0] < push + 1e-3
+    # in mm: the quasi-static push integrated (the planar joint set's limit surface is the
+    # ellipsoid with c = the face's mean radius; the corner-loaded one, c = half diagonal, is
+    # the counterfactual and must miss)
+    pos, yaw = out.pos["box"][0, 0, -1, :2], turn
+    for c, hits in ((c_uniform, True), (c_corner, False)):
+        q_pos, q_yaw = _quasi_static_push(start[:2], r, 0.05, gap + push, c)
+        pos_mm = float(np.linalg.norm(pos - q_pos)) * 1e3
+        corner_mm = abs(yaw - q_yaw) * c_corner * 1e3  # a corner's displacement from the turn
+        assert (pos_mm < 1.0 and corner_mm < 1.0) == hits, (c, pos_mm, corner_mm)
+
+
+def _quasi_static_push(
+    start: np.ndarray, r: float, v: float, travel: float, c: float, n: int = 20000
+) -> tuple[np.ndarray, float]:
+    """Final (x, y) [m] and yaw [rad] of the block under a frictionless sphere pusher moving
+    along +x from ``start`` (its centre, world frame) at ``v`` for ``travel`` m, quasi-static on
+    an ellipsoidal limit surface of characteristic length ``c`` [m] (Lynch, Maekawa & Tanie
+    1992; Howe & Cutkosky 1996): the body twist is proportional to ``(F_x, F_y, M / c^2)``,
+    with the contact force along the face normal (+x body) at the pusher's body-frame ``y``,
+    scaled so the face keeps up with the pusher. Explicit Euler over ``n`` steps."""
+    hx = SIZE[0] / 2
+    dt = travel / v / n
+    xb, th = np.zeros(2), 0.0
+    for i in range(n):
+        d = start + np.array([v * i * dt, 0.0]) - xb
+        ct, st = math.cos(th), math.sin(th)
+        px, py = ct * d[0] + st * d[1], -st * d[0] + ct * d[1]
+        if px < -hx - r:  # not yet touching the face
+            continue
+        k = v * ct / (1.0 + py * py / c**2)  # body-x speed: the face moves with the pusher
+        xb = xb + dt * k * np.array([ct, st])
+        th -= dt * k * py / c**2
+    return xb, th
 
 
 def test_pusher_friction_drags_the_block_sideways() -> None:
