@@ -640,14 +640,14 @@ def diagnose_recording(
         float(n * np.log(o.cost / base.cost) + (len(f) - len(base_cols)) * np.log(n))
         for o, f in zip(outs[1:], frees[1:], strict=True)
     ]
+    if holdout:  # refused before the null is simulated
+        _check_holdout(space, cands, outs[1:], frees[1:], deltas, held_mask(folds, prep.n_traj))
     nuis_rec: dict[str, Any] = {}  # h48: the gate's start-pose columns (roughness module)
     cal = _calibrate(
         eng, space, cands, outs, folds, base_cols, theta0, stats, dbics, record=nuis_rec
     )
-    held_tr = held_mask(folds, prep.n_traj)
     phase = prep.phase
     rows: list[EffectRow] = []
-    too_small: list[str] = []
     for i, e in enumerate(cands, start=1):
         out, free = outs[i], frees[i]
         dbic = dbics[i - 1]
@@ -689,13 +689,6 @@ def diagnose_recording(
         verdict, gate, blocked = judge(
             stat, thr, q95, dbic, few, ident, partial and part is not None
         )
-        miss = unjudged_on_holdout(z_t, held_tr) if holdout else None
-        if miss is not None and (ident or part is not None):
-            n_acts, z_max = miss
-            too_small.append(
-                f"{e.name} moves {n_acts} trajectories by >= {gate_mod.AFFECTED_Z:g} sigma (up to "
-                f"{z_max:.1f}), none of them held out"
-            )
         if ident:
             note = ""
         elif part is None or not partial:
@@ -796,19 +789,6 @@ def diagnose_recording(
                 "fall exceeds its linearisation. More trajectories of the kinds it acts on "
                 "would let it pass"
             )
-    if too_small:
-        from robogs.format.errors import InputError
-
-        raise InputError(
-            f"held-out set {', '.join(holdout or [])} is too small for the gate: "
-            + "; ".join(too_small)
-            + ". The gate's statistic is the held-out fall on the held-out trajectories an effect "
-            "acts on: with none of them held out it is 0 by construction, and the effect could "
-            "never pass",
-            where="--holdout",
-            hint="hold out trajectories these effects act on (e.g. a drop for restitution), "
-            "leave them out with --effects, or use the default folds",
-        )
     feats = design_features(prep.rec, float(prep.noise.sigma_pos))
     _rivals(rows, deltas, feats)
     rows.sort(key=lambda r: (not r.reported, r.delta_bic))
@@ -856,6 +836,44 @@ def unjudged_on_holdout(z_t: np.ndarray, held: np.ndarray) -> tuple[int, float] 
     if not acts.any() or (acts & np.asarray(held, dtype=bool)).any():
         return None
     return int(acts.sum()), float(np.max(z_t))
+
+
+def _check_holdout(
+    space: ParamSpace,
+    cands: list[Effect],
+    outs: list[FitOutcome],
+    frees: list[list[int]],
+    deltas: list[np.ndarray],
+    held: np.ndarray,
+) -> None:
+    """Refuse a held-out choice on which a candidate the data determine (every parameter, or
+    a direction of them) cannot pass the gate (:func:`unjudged_on_holdout`)."""
+    from robogs.format.errors import InputError
+
+    bad = []
+    for e, out, free, delta in zip(cands, outs, frees, deltas, strict=True):
+        miss = unjudged_on_holdout(np.sqrt(np.sum(delta**2, axis=-1)), held)
+        if miss is None:
+            continue
+        jj = [free.index(c) for c in space.owner_columns(e.name)]
+        ident = bool(out.ok[jj].all()) if len(out.ok) else True
+        if not ident and determined_combination(space, out, free, jj) is None:
+            continue  # nothing of it determined: never reported, whatever the split
+        bad.append(
+            f"{e.name} moves {miss[0]} trajectories by >= {gate_mod.AFFECTED_Z:g} sigma (up to "
+            f"{miss[1]:.1f}), none of them held out"
+        )
+    if bad:
+        raise InputError(
+            "the held-out set is too small for the gate: "
+            + "; ".join(bad)
+            + ". The gate's statistic is the held-out fall on the held-out trajectories an effect "
+            "acts on: with none of them held out it is 0 by construction, and the effect could "
+            "never pass",
+            where="--holdout",
+            hint="hold out trajectories these effects act on (e.g. a drop for restitution), "
+            "leave them out with --effects, or use the default folds",
+        )
 
 
 def sign_flip_floor(method: str, carrying: int) -> float | None:

@@ -15,6 +15,7 @@ held-out set on which an effect moves nothing leaves its gate uncalibrated and i
 from __future__ import annotations
 
 import json
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -298,6 +299,42 @@ def test_diagnose_holdout_calibrates_the_gate_on_that_split(tilt_ds, capsys, mon
     cmp = json.loads(out)["heldout"]
     base = {e["heldout_rms_before"] for e in held["effects"]}
     assert len(base) == 1 and cmp["heldout_rms_mm"] == pytest.approx(base.pop(), abs=1e-9)
+
+
+def test_a_holdout_the_effect_does_not_act_on_exits_2_before_the_null(
+    tilt_ds, capsys, monkeypatch, tmp_path
+):
+    """Wiring of :func:`unjudged_on_holdout` on real fits, with the gate's "acts on" level
+    raised from 3 to 5 sigma (a mutated constant): the tilt then acts on 5 of the 6 pushes (its
+    whitened change per push is 4.2 sigma on push_d1_v0 and 6-14 on the others); holding out
+    push_d1_v0 is refused before any null is simulated, holding out push_d0_v0 is not."""
+    monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(gate, "AFFECTED_Z", 5.0)
+    calls = []
+
+    class Reached(Exception):
+        pass
+
+    def stub(*a, **k):
+        calls.append(1)
+        raise Reached
+
+    monkeypatch.setattr(gate, "calibrate", stub)
+    rc, _, err = _cli(
+        capsys, "diagnose", str(tilt_ds), "--effects", "table_tilt", "--no-progress",
+        "--mask-frames", "0", "--holdout", "push_d1_v0",
+    )  # fmt: skip
+    assert rc == 2 and not calls, err
+    assert re.search(
+        r"too small for the gate: table_tilt moves 5 trajectories by >= 5 sigma \(up to "
+        r"[\d.]+\), none of them held out",
+        err,
+    ), err
+    with pytest.raises(Reached):  # passes the check, reaches the (stubbed) calibration
+        from robogs.physics.api import diagnose
+
+        diagnose(tilt_ds, effects=["table_tilt"], mask_frames=0, holdout=["push_d0_v0"])
+    assert calls == [1]
 
 
 def test_bad_holdout_names_exit_2_with_the_valid_names(tilt_ds, capsys):
