@@ -559,6 +559,8 @@ def _object_auto(
         return 0
     _effects_table(d["last"]["effects"], f"candidate effects left for {args.dataset}")
     _print_path(rows)
+    if (d["last"].get("design") or {}).get("split"):
+        print(f"held-out error and gate: {d['last']['design']['split']}")
     g = d["last"]["gate"]
     print(
         f"null calibration (linearised held-out null, family-wise 5 %): {p.calibration_seconds:.1f} s "
