@@ -50,3 +50,19 @@ def push_walkthrough(tmp_path_factory: pytest.TempPathFactory, worker_id: str) -
             tmp.replace(done)
         runs = json.loads(done.read_text())
     return {"dir": folder, "runs": runs}
+
+
+@pytest.fixture(scope="module")
+def _fit_store() -> dict:
+    """One module's memo of diagnose's candidate fits and held-out rollouts (fit_memo)."""
+    return {}
+
+
+@pytest.fixture
+def shared_fits(monkeypatch: pytest.MonkeyPatch, _fit_store: dict) -> dict[str, int]:
+    """``diagnose_recording`` reuses candidate fits and held-out rollouts that an earlier call
+    in this module (same worker) computed on identical inputs (:mod:`fit_memo`); returns the
+    hit/miss counter."""
+    from fit_memo import memoise_fits
+
+    return memoise_fits(monkeypatch, _fit_store)

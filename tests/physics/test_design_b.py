@@ -187,7 +187,7 @@ def test_sign_flip_floor_against_brute_force_enumeration():
 
 @pytest.mark.slow
 def test_positive_bic_blocks_a_heldout_pass_and_a_stribeck_is_partly_identified(
-    tmp_path, monkeypatch
+    tmp_path, monkeypatch, shared_fits
 ):
     """Two design-B cases of the pooled bench (issue 17). Null seed 16: quadratic drag passes
     the held-out test alone (11.5 against 6.9 sigma^2) at ΔBIC +1.2, so Schwarz's criterion
@@ -211,7 +211,7 @@ def test_positive_bic_blocks_a_heldout_pass_and_a_stribeck_is_partly_identified(
     assert "determined: " in row.note and row.separate_by in row.note
     d = row.to_dict()
     assert all(p["low"] is None for p in d["params"] if p["name"] in row.undetermined)
-    # without partial identification it is withheld as before
+    # without partial identification it is withheld as before (the same fits: shared_fits)
     res = diagnose_recording(make_design_b("stribeck", seed=15), partial=False)
     row = next(r for r in res.rows if r.name == "stribeck")
     assert not row.reported and row.verdict == "unidentifiable"

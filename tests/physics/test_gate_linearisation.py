@@ -266,7 +266,7 @@ def test_report_shows_the_factor_on_screen(tmp_path, capsys, monkeypatch):
 
 
 @pytest.mark.slow
-def test_mujoco_null_threshold_near_planar_on_design_b_null_seed_1():
+def test_mujoco_null_threshold_near_planar_on_design_b_null_seed_1(shared_fits):
     """Oracle: the planar engine on the same design-B null recording (one box on a table, both
     engines represent it). Before any check MuJoCo's tilt threshold was 29.2 sigma^2 against
     planar's 51.8 (ratio 0.56) and the tilt was reported (held-out 31.2): its fit gains 28.3
@@ -293,7 +293,9 @@ def test_mujoco_null_threshold_near_planar_on_design_b_null_seed_1():
 
 
 @pytest.mark.slow
-def test_mujoco_linearisation_agrees_with_planar_with_smooth_columns(monkeypatch, tmp_path):
+def test_mujoco_linearisation_agrees_with_planar_with_smooth_columns(
+    monkeypatch, tmp_path, shared_fits
+):
     """Oracle (h48, with the gate's smooth start-pose columns, roughness.SMOOTH_NUISANCE): the
     planar engine on the same design-B null recording, compared where the engines must agree
     and not on one seed's wild tail (h47: that tail is set by the one or two pushes with the
