@@ -840,15 +840,28 @@ _REFITTED = "base parameters, present effects and each trajectory's initial pose
 
 def _engine(args: argparse.Namespace) -> str:
     """The object-model engine of ``--engine`` (``auto`` resolved; the choice and the reason
-    printed, on stderr with ``--json``)."""
+    printed, on stderr with ``--json``, and the objects simulated as their mesh's convex hull
+    with the hull substitutions, :mod:`robogs.physics.shapes`)."""
+    from robogs.format import Dataset
+
     name = getattr(args, "engine", "planar")
+    out = sys.stderr if args.json else sys.stdout
     if name == "auto":  # the scene and the recorded motion, as the fitting engine resolves it
-        from robogs.format import Dataset
         from robogs.physics.engine import recording_backend
         from robogs.physics.recording import load_recording
 
-        name, why = recording_backend(load_recording(Dataset.open(args.dataset)), "auto")
-        print(f"engine: {name} (auto: {why})", file=sys.stderr if args.json else sys.stdout)
+        rec = load_recording(Dataset.open(args.dataset))
+        name, why = recording_backend(rec, "auto")
+        print(f"engine: {name} (auto: {why})", file=out)
+        notes = rec.shapes().notes
+    else:
+        from robogs.physics.shapes import BOX_BUDGET, load_object_meshes, object_shapes
+
+        ds = Dataset.open(args.dataset)
+        meshes = load_object_meshes(ds)
+        notes = object_shapes(ds.physics(), meshes, ds.budgets[BOX_BUDGET]).notes if meshes else []
+    for line in notes:  # objects simulated as their mesh's hull (robogs.physics.shapes)
+        print(f"  shape: {line}", file=out)
     return name
 
 

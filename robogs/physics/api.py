@@ -242,6 +242,9 @@ class FitResult:
             tracked one): ``rms_before_mm`` / ``rms_after_mm`` (``compare``'s position RMS of
             that object), ``noise_floor_mm`` and ``heldout_rms_before_mm`` /
             ``heldout_rms_after_mm`` (:func:`_object_rms`); empty for a camera-only fit.
+        shape_notes: the objects simulated as their mesh's convex hull instead of a box, and
+            the hull substitutions (:class:`robogs.physics.shapes.Shapes`); appended to the
+            revision note.
     """
 
     params: list[ParamEstimate]
@@ -264,6 +267,7 @@ class FitResult:
     not_written: dict[str, str] = field(default_factory=dict)
     notes: dict[str, str] = field(default_factory=dict)
     objects: dict[str, dict[str, float]] = field(default_factory=dict)
+    shape_notes: list[str] = field(default_factory=list)
 
     def refusal(self, path: Any = None) -> InputError | None:
         """The error to raise when an added effect could not be written (no direction of its
@@ -304,6 +308,7 @@ class FitResult:
             "not_written": self.not_written,
             "notes": self.notes,
             "objects": {k: {n: _fin(x) for n, x in v.items()} for k, v in self.objects.items()},
+            "shape_notes": self.shape_notes,
             "revision": self.revision,
             "from_revision": self.from_revision,
             "cameras": self.cameras,
@@ -613,7 +618,8 @@ def fit(
     which nothing is determined is not written: with a dataset and ``write=True`` nothing is
     written and :class:`InputError` says why (the CLI prints one line and exits 2); otherwise it
     is listed in ``not_written``. Base parameters found unidentifiable are listed in
-    ``unidentifiable`` and keep their stored values.
+    ``unidentifiable`` and keep their stored values. Objects simulated as their mesh's convex
+    hull (:mod:`robogs.physics.shapes`) are said so in ``shape_notes`` and in the revision note.
 
     ``camera_intrinsics`` is fitted from the camera masks instead (``mask_frames`` frames per
     camera stream): the corrected ``cameras/<cam>.json`` is written in the same edit as the
@@ -636,7 +642,9 @@ def fit(
         )
     else:
         rec, ds = _open(dataset)
-        res = _fit_engine(Engine(rec, dt=dt, backend=engine), rigid_add, progress, holdout)
+        eng = Engine(rec, dt=dt, backend=engine)
+        res = _fit_engine(eng, rigid_add, progress, holdout)
+        res.shape_notes = list(eng.shapes.notes)
     if ds is not None and write and (err := res.refusal(ds.root)) is not None:
         raise err
     new_cams = []
@@ -649,6 +657,8 @@ def fit(
         for name, params in res.undetermined.items():
             text += f"; {', '.join(f'{name}.{n}' for n in params)} {UNDETERMINED}"
             text += get_effect(name).separate_by
+        if res.shape_notes:  # what the engine simulated instead of the dataset's meshes
+            text += "; " + "; ".join(res.shape_notes)
         with ds.edit() as w:
             for cam in new_cams:
                 w.set_camera(cam)

@@ -10,13 +10,15 @@ Rollouts come from one of two backends (``backend``): ``planar``, the batched to
 (:mod:`robogs.physics.engines.mujoco_fit`; every catalogue effect is mapped, see
 :mod:`robogs.physics.engines.mujoco_effects`). ``auto`` picks with
 :func:`robogs.physics.engines.choose_engine` (planar when it can represent the scene) and keeps
-the reason in :attr:`Engine.backend_reason`.
+the reason in :attr:`Engine.backend_reason`. Object meshes of the dataset that are not their
+``size_m`` box (:mod:`robogs.physics.shapes`) are passed to ``can_represent`` and to MuJoCo.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -38,13 +40,18 @@ BACKENDS = ("auto", "planar", "mujoco")
 
 
 def resolve_backend(
-    physics: dict, name: str = "planar", *, out_of_plane: str | None = None
+    physics: dict,
+    name: str = "planar",
+    *,
+    out_of_plane: str | None = None,
+    meshes: Mapping[str, Any] | None = None,
 ) -> tuple[str, str]:
     """``(backend, reason)`` for ``name`` in :data:`BACKENDS` (``auto``: choose_engine).
 
     ``out_of_plane``: why the recorded object leaves the plane (:mod:`robogs.physics.planarity`),
     None when it stays flat. Only MuJoCo's free joint can follow it: ``auto`` then picks
-    ``mujoco`` and ``planar`` is refused.
+    ``mujoco`` and ``planar`` is refused. ``meshes``: the objects with a mesh shape (not their
+    box, :meth:`robogs.physics.recording.Recording.shapes`), given to ``can_represent``.
 
     Raises:
         InputError: an unknown name, or a named engine that cannot represent the scene.
@@ -65,11 +72,11 @@ def resolve_backend(
         if name == "auto":
             return "mujoco", f"planar cannot represent it: {out_of_plane}; mujoco: free joint"
     if name == "auto":
-        return choose_engine(physics)
-    ok, why = get_engine(name).can_represent(physics, None)
+        return choose_engine(physics, meshes)
+    ok, why = get_engine(name).can_represent(physics, meshes)
     if not ok:
         try:
-            fix = f"use --engine {choose_engine(physics)[0]} (or auto, which picks it)"
+            fix = f"use --engine {choose_engine(physics, meshes)[0]} (or auto, which picks it)"
         except InputError:
             fix = "no registered engine can represent it (robogs plugins lists them)"
         raise InputError(
@@ -84,7 +91,8 @@ def recording_backend(recording: object, name: str = "auto") -> tuple[str, str]:
     :class:`Engine` resolves it. Every caller that holds the recording uses this."""
     rec = as_recording(recording)
     labels, _ = phase_labels(rec, scene_from_physics(rec.physics, rec.object_name))
-    return resolve_backend(rec.physics, name, out_of_plane=out_of_plane(rec, labels).reason())
+    tilt = out_of_plane(rec, labels).reason()
+    return resolve_backend(rec.physics, name, out_of_plane=tilt, meshes=rec.shapes().meshes)
 
 
 def rms_mm(raw: np.ndarray, mask: np.ndarray) -> float:
@@ -114,6 +122,11 @@ class Engine:
         backend: ``planar``, ``mujoco`` or ``auto`` (see the module docstring).
         threads: MuJoCo rollout threads; None (default): torch's intra-op thread count, which
             every verb sets deliberately (``--threads``), so one setting sizes both engines.
+
+    Attributes:
+        shapes: the recording's object meshes that are not their ``size_m`` box
+            (:class:`robogs.physics.shapes.Shapes`): they make the planar engine refuse the
+            scene and reach MuJoCo as convex hulls; ``shapes.notes`` says so, one line each.
     """
 
     def __init__(
@@ -129,8 +142,9 @@ class Engine:
         self.prep: Prepared = prepare(recording, dt=dt)
         self.tilt = out_of_plane(self.prep.rec, self.prep.labels)  # roll/pitch from the data
         tipped = self.tilt.reason()
+        self.shapes = self.prep.rec.shapes()  # object meshes that are not their box
         self.backend, self.backend_reason = resolve_backend(
-            self.prep.rec.physics, backend, out_of_plane=tipped
+            self.prep.rec.physics, backend, out_of_plane=tipped, meshes=self.shapes.meshes
         )
         self._mujoco = None
         if self.backend == "mujoco":
@@ -143,6 +157,7 @@ class Engine:
                 dt=dt,
                 threads=threads,
                 tracked=self.prep.tracked,
+                meshes=self.shapes.meshes,
                 pusher_speed=drive_pusher_speed(self.prep.drive),  # sizes the onset ramp
                 joints="auto" if tipped is None else "free",
             )  # it predicts the pusher force: a measured wrench enters as on planar

@@ -14,6 +14,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from robogs.format.budgets import DEFAULT_BUDGETS
 from robogs.format.errors import FormatError, InputError
 
 __all__ = [
@@ -83,12 +84,25 @@ class Recording:
             has ``plane_z_m``, ``objects["pusher"]`` has ``radius_m`` and ``link``.
         object_name: the free object (the one the pusher drives; effects act on it).
         meta: free-form information (e.g. the scenario's hidden effect, for benches only).
+        meshes: rigid object name -> ``trimesh.Trimesh`` (object frame, m) from the dataset's
+            assets (:func:`robogs.physics.shapes.load_object_meshes`); empty for recordings
+            without assets. Which of them reach the engines: :meth:`shapes`.
+        box_budget_mm: the dataset's ``geometry.box3d_mm``, within which a mesh is its box.
     """
 
     trajectories: list[Trajectory]
     physics: dict[str, Any]
     object_name: str = "box"
     meta: dict[str, Any] = field(default_factory=dict)
+    meshes: dict[str, Any] = field(default_factory=dict)
+    box_budget_mm: float = DEFAULT_BUDGETS["geometry.box3d_mm"].value
+
+    def shapes(self) -> Any:
+        """The object meshes that are not their ``size_m`` box, with the notes to print
+        (:func:`robogs.physics.shapes.object_shapes`)."""
+        from robogs.physics.shapes import object_shapes
+
+        return object_shapes(self.physics, self.meshes, self.box_budget_mm)
 
     @property
     def tracked(self) -> list[str]:
@@ -177,6 +191,10 @@ def as_recording(obj: Any) -> Recording:
             physics=dict(obj.physics),
             object_name=str(getattr(obj, "object_name", "box")),
             meta=dict(getattr(obj, "meta", {}) or {}),
+            meshes=dict(getattr(obj, "meshes", None) or {}),
+            box_budget_mm=float(
+                getattr(obj, "box_budget_mm", DEFAULT_BUDGETS["geometry.box3d_mm"].value)
+            ),
         )
     for t in rec.trajectories:
         t.t_ns = np.asarray(t.t_ns, dtype=np.int64)
@@ -431,7 +449,8 @@ def load_recording(
     frame there), the force on the tool, are rotated into world axes. Grasp flags come from the
     joint named ``objects.pusher.grasp_joint``
     in ``joint_states`` (grasping while its position exceeds ``grasp_threshold``); without it
-    the object is never attached.
+    the object is never attached. The rigid objects' mesh assets are loaded into
+    :attr:`Recording.meshes` (with the dataset's ``geometry.box3d_mm`` budget).
     """
     import pyarrow.compute as pc
 
@@ -523,8 +542,15 @@ def load_recording(
         )
         trajs += [_clip_others(p) for p in parts]
         pieces += rows
+    from robogs.physics.shapes import BOX_BUDGET, load_object_meshes
+
     rec = Recording(
-        trajectories=trajs, physics=physics, object_name=object_name, meta={"split": pieces}
+        trajectories=trajs,
+        physics=physics,
+        object_name=object_name,
+        meta={"split": pieces},
+        meshes=load_object_meshes(ds),
+        box_budget_mm=float(ds.budgets[BOX_BUDGET]),
     )
     rec = as_recording(rec)
     if log is not None:

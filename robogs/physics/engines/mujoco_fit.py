@@ -148,6 +148,9 @@ class MujocoFit:
             (sizes the pusher onset ramp where the settings turn it on; None: not known).
         joints: the engine's joint set (``auto``, ``free``, ``planar``): ``free`` where the
             recorded object leaves the plane (:mod:`robogs.physics.planarity`).
+        meshes: object name -> mesh (object frame, m) of the objects with a mesh shape
+            (:meth:`robogs.physics.recording.Recording.shapes`), given to the engine it builds
+            (collided as convex hulls, on the free joint).
 
     Attributes:
         last_rollouts: distinct rollouts the last :meth:`simulate` call ran (of its M x T).
@@ -169,6 +172,7 @@ class MujocoFit:
         tracked: Sequence[Any] = (),
         pusher_speed: float | None = None,
         joints: str = "auto",
+        meshes: Mapping[str, Any] | None = None,
     ) -> None:
         stepper = stepper or ("batch" if _has_batch() else "rollout")
         if stepper not in STEPPERS or (stepper == "batch" and not _has_batch()):
@@ -184,6 +188,7 @@ class MujocoFit:
         self.eng = engine or MujocoEngine(
             physics,
             object_name=object_name,
+            meshes=meshes,
             dt=dt,
             threads=threads,
             pusher_speed=pusher_speed,
@@ -233,9 +238,11 @@ class MujocoFit:
         # lowest height of the object frame that does not penetrate a horizontal table: a
         # measured start or carried pose a fraction of a millimetre into the table would make
         # the stiff soft contact throw the box up at the release (a chaotic hop that broke the
-        # finite-difference Jacobians of fast slides); -inf where unknown (meshes)
+        # finite-difference Jacobians of fast slides); a mesh hull's from its lowest vertex
         box = m.geom_type[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, object_name)]
-        self.rest_z = self.table_z + self.half_z if box == mujoco.mjtGeom.mjGEOM_BOX else -np.inf
+        if box != mujoco.mjtGeom.mjGEOM_BOX:
+            self.half_z = _below(m, gid)  # -inf where unknown
+        self.rest_z = self.table_z + self.half_z
         self.settled_z = self._settle() if np.isfinite(self.rest_z) else -np.inf
         self._full_cols, self._int_cols = _state_map(m)
         self.physics = physics
@@ -260,8 +267,9 @@ class MujocoFit:
             gid = mujoco.mj_name2id(self.eng.model, mujoco.mjtObj.mjOBJ_GEOM, o.name)
             box = self.eng.model.geom_type[gid] == mujoco.mjtGeom.mjGEOM_BOX
             hz = float(self.eng.model.geom_size[gid][2] + self.eng.model.geom_pos[gid][2])
-            rest = self.table_z + hz if box else -np.inf
-            self._rest[o.name] = (rest, self._settle(name=o.name, rest_z=rest) if box else rest)
+            rest = self.table_z + (hz if box else _below(self.eng.model, gid))
+            known = np.isfinite(rest)
+            self._rest[o.name] = (rest, self._settle(name=o.name, rest_z=rest) if known else rest)
         lays = [self.lay] + [self.eng.layout[o.name] for o in self.tracked]
         # state columns up to the last pose the runners record (every object's qpos)
         self._width = max(ly.q + (4 if ly.planar else 7) for ly in lays)
@@ -781,9 +789,14 @@ class MujocoFit:
             return False
         names = [self.obj] + [o.name for o in self.tracked]
         settled = [self.settled_z] + [self._rest[o.name][1] for o in self.tracked]
-        if set(self.eng.layout) != set(names) or not np.isfinite(settled).all():
-            return False  # an untracked object (its state unchecked) or a mesh
         m = self.eng.model
+        boxes = [
+            m.geom_type[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n)]
+            == mujoco.mjtGeom.mjGEOM_BOX
+            for n in names
+        ]
+        if set(self.eng.layout) != set(names) or not np.isfinite(settled).all() or not all(boxes):
+            return False  # an untracked object (its state unchecked) or a mesh
         if not hasattr(self, "_pgeoms"):
             pb = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "pusher")
             g = np.flatnonzero(m.geom_bodyid == pb)
@@ -938,6 +951,20 @@ class MujocoFit:
             self.eng.dt,
         )
         return f.reshape(n_r, 6)
+
+
+def _below(m: mujoco.MjModel, gid: int) -> float:
+    """How far [m] a mesh geom reaches below its body frame's origin along the body's z (its
+    lowest compiled vertex: the resting height above a horizontal support of a body turned
+    about z only, as every start is); -inf for other geom types (unknown)."""
+    if m.geom_type[gid] != mujoco.mjtGeom.mjGEOM_MESH:
+        return -np.inf
+    k = int(m.geom_dataid[gid])
+    v0, nv = int(m.mesh_vertadr[k]), int(m.mesh_vertnum[k])
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, m.geom_quat[gid])
+    z = m.geom_pos[gid][2] + m.mesh_vert[v0 : v0 + nv] @ rot.reshape(3, 3)[2]
+    return float(-np.min(z))
 
 
 def _schedule(
