@@ -451,9 +451,12 @@ def simulate_objects(
             f"--simulate starts {obj!r} from its recorded pose; episode {ep.id!r} has none",
             where=f"episodes/{ep.id}",
         )
+    from robogs.physics.shapes import BOX_BUDGET, load_object_meshes, object_shapes
+
+    shapes = object_shapes(physics, load_object_meshes(src), float(src.budgets[BOX_BUDGET]))
     name = engine
-    if engine == "auto":
-        name, _ = choose_engine(physics)
+    if engine == "auto":  # the shapes as the fit sees them (a box-shaped mesh is its box)
+        name, _ = choose_engine(physics, shapes.meshes)
     with torch.no_grad():
         T = chain.forward(torch.as_tensor(traj.q, dtype=torch.float64))
         base = (src.manifest.get("robot") or {}).get("base_link")
@@ -482,7 +485,7 @@ def simulate_objects(
         outside="clamp",
     )
     drive = make_drive(dt, p_grid[None], yaw_grid[None], t_s[None], p0, quat_yaw(q0))
-    sim = get_engine(name)(physics, object_name=obj, dt=dt, threads=1)
+    sim = get_engine(name)(physics, object_name=obj, meshes=shapes.meshes, dt=dt, threads=1)
     pred = sim.rollout(drive, {obj: ObjectState(p0, q0)})
     out = {obj: (traj.t_ns.copy(), pred.pos[obj][0, 0], pred.quat[obj][0, 0])}
     rev = physics.get("revision")
@@ -490,4 +493,4 @@ def simulate_objects(
         f"simulated by the {name} engine from the commanded pusher motion ({link}; physics "
         f"revision {rev}, dt {dt:g} s, start at rest at the recorded pose)"
     )
-    return out, desc, list(pred.notes)
+    return out, desc, [*shapes.notes, *pred.notes]

@@ -129,6 +129,10 @@ def _fingerprint(rec: Recording) -> str:
             h.update(name.encode() + (b"-" if a is None else np.ascontiguousarray(a).tobytes()))
         for name, track in sorted((getattr(tr, "others", None) or {}).items()):
             h.update(name.encode() + b"".join(np.ascontiguousarray(a).tobytes() for a in track))
+    for name, mesh in sorted((getattr(rec, "meshes", None) or {}).items()):  # shapes MuJoCo gets
+        h.update(name.encode())
+        for a in (mesh.vertices, mesh.faces):
+            h.update(np.ascontiguousarray(a).tobytes())
     return h.hexdigest()
 
 

@@ -166,3 +166,22 @@ def test_mesh_path_escaping_the_dataset_is_refused(scene: Path, tmp_path: Path) 
     (root / "manifest.json").write_text(json.dumps(m))
     with pytest.raises(PathEscapeError, match="assets/box/mesh: path '../../outside.ply' escapes"):
         load_recording(root)
+
+
+def test_the_baseline_cache_key_sees_the_mesh():
+    """Two recordings with the same samples but different object meshes must not share a
+    memoised baseline (the MuJoCo fit simulates the hull)."""
+    import dataclasses
+
+    import trimesh
+
+    from robogs.physics.baseline import _fingerprint
+    from robogs.physics.recording import as_recording
+    from robogs.synth.scenarios.generate import make_scenario
+
+    rec = as_recording(make_scenario("none", seed=0, kinds=("release_slide",)))
+    cyl = dataclasses.replace(rec, meshes={"box": trimesh.creation.cylinder(0.045, 0.06)})
+    wider = dataclasses.replace(rec, meshes={"box": trimesh.creation.cylinder(0.046, 0.06)})
+    keys = {_fingerprint(r) for r in (rec, cyl, wider)}
+    assert len(keys) == 3
+    assert _fingerprint(dataclasses.replace(cyl)) == _fingerprint(cyl)
