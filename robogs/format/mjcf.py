@@ -41,7 +41,12 @@ What the document holds (world frame = the dataset world, z up, metres):
 
 MuJoCo has one Coulomb coefficient per contact: ``friction_dynamic`` is used, also for
 sticking (the planar model's ``friction_static`` has no counterpart). Restitution, damping and
-effects are not mapped here; :attr:`MjcfScene.unmapped` lists the keys that were present.
+effects are not mapped by :func:`scene_mjcf`; :attr:`MjcfScene.unmapped` lists the keys that
+were present. Fitted effects with an MJCF-native form are applied to the *compiled* model by
+:data:`NATIVE_EFFECTS` (``table_tilt`` -> gravity, ``viscous_damping`` -> DOF damping), the one
+map both the ``mujoco`` engine and ``robogs export mjcf`` use (the exporter writes the changed
+fields, :data:`NATIVE_FIELDS`, back into the document); these functions take an ``MjModel`` but
+need no MuJoCo import here.
 """
 
 from __future__ import annotations
@@ -67,6 +72,9 @@ __all__ = [
     "PUSHER_ONSET_D0",
     "PUSHER_SOLREFFRICTION_STEPS",
     "ContactSettings",
+    "EffectSlots",
+    "NATIVE_EFFECTS",
+    "NATIVE_FIELDS",
     "ballast_contact",
     "MjcfScene",
     "collision_hull",
@@ -280,6 +288,47 @@ def ballast_contact(
 
     q = hi / d(hi)
     return (tc * q, zeta / math.sqrt(q)), (d(lo), d(hi), *rest), (tf * q, zf)
+
+
+@dataclass(frozen=True)
+class EffectSlots:
+    """Where an effect's object lives in a compiled ``MjModel``: ``body`` its body id, ``dof``
+    the first DOF address of its joints (free joint or planar joint set: x, y, z first) and
+    ``ballast`` its z ballast factor k (:attr:`ContactSettings.z_ballast`; 0: none).
+    ``robogs.physics.engines.mujoco_effects.ObjectSlots`` has the same three attributes."""
+
+    body: int
+    dof: int
+    ballast: float = 0.0
+
+
+def _native_tilt(model: Any, th: Mapping[str, float], slots: Any) -> None:
+    """``table_tilt``: gravity ``(g_x, g_y, -g)`` (the pusher is gravity compensated)."""
+    model.opt.gravity[0] += float(th["g_x"])
+    model.opt.gravity[1] += float(th["g_y"])
+
+
+def _native_viscous(model: Any, th: Mapping[str, float], slots: Any) -> None:
+    """``viscous_damping``: DOF damping ``c m`` of the x, y, z DOFs (``c m (1 + k)`` on a
+    ballasted z, whose inertia is ``(1 + k) m``: the same decay rate ``c``)."""
+    c = float(th["c"]) * float(model.body_mass[slots.body])
+    z = np.array([1.0, 1.0, 1.0 + float(slots.ballast)])
+    model.dof_damping[slots.dof : slots.dof + 3] += c * z
+
+
+NATIVE_EFFECTS: dict[str, Any] = {
+    "table_tilt": _native_tilt,
+    "viscous_damping": _native_viscous,
+}
+"""Catalogue effects with an MJCF-native form -> ``f(model, params, slots)``, which writes the
+fitted ``params`` (name -> value) into a compiled ``MjModel`` (``slots``: :class:`EffectSlots`).
+The ``mujoco`` engine applies them to each parameter set's model
+(``robogs.physics.engines.mujoco_effects.NATIVE`` is this table) and ``robogs export mjcf``
+to the exported scene's, writing back the fields of :data:`NATIVE_FIELDS`: one mapping."""
+
+NATIVE_FIELDS = ("opt.gravity", "dof_damping")
+"""The ``MjModel`` fields that :data:`NATIVE_EFFECTS` change (the exporter writes these back as
+``<option gravity>`` and per-joint ``damping``; it refuses to export a change of any other)."""
 
 
 def planar_joints_fit(

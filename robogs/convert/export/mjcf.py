@@ -29,6 +29,18 @@ URDF order), ``episodes`` [E], and per episode ``k`` ``t_ns_<k>`` [N] int64 (dat
 Meshes replaced by their convex hulls and physics.json keys MuJoCo does not represent are listed
 in the report notes and in a ``<custom>`` text element of the document.
 
+Fitted effects (physics.json ``effects``): those with an MJCF-native form are in the model as
+the ``mujoco`` engine compiles them - the one map :data:`robogs.format.mjcf.NATIVE_EFFECTS` (the
+engine's ``mujoco_effects.NATIVE``) is applied to the compiled scene and the fields it changed
+(:data:`robogs.format.mjcf.NATIVE_FIELDS`: gravity for ``table_tilt``, the slide joints' damping
+for ``viscous_damping`` on the planar joint set) are written back at full precision; any other
+change refuses the export. Every other effect (per-step forces on the engine: quadratic drag,
+Stribeck, anisotropic friction, user effects; body changes: mass, CoM offset, restitution;
+sensor effects; viscous damping on a free joint, whose MJCF damping would also damp rotation)
+is a ``<numeric name="robogs_effect/<effect>/<param>">`` per fitted parameter, and a note
+(:data:`FORCE_NOTE` for the force effects) in the report and the ``<text>``: a plain MuJoCo
+load does not simulate it. ``facts["effects"]``: name, target, params, ``written``.
+
 Dependency note: this module imports only ``robogs.format`` (the builder is format-level), so
 the rule that ``robogs.convert`` never imports ``robogs.physics`` holds without an exception.
 """
@@ -38,17 +50,18 @@ from __future__ import annotations
 import io
 from pathlib import Path
 from typing import Any
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
 from robogs.format import Dataset
-from robogs.format.errors import InputError, PathEscapeError
-from robogs.format.mjcf import scene_mjcf
+from robogs.format.errors import FormatError, InputError, PathEscapeError
+from robogs.format.mjcf import NATIVE_EFFECTS, NATIVE_FIELDS, EffectSlots, MjcfScene, scene_mjcf
 
 from . import ExportReport, register_exporter
 from .urdf_scene import scene_state
 
-__all__ = ["TRAJECTORY_FILE", "export_mjcf"]
+__all__ = ["FORCE_NOTE", "TRAJECTORY_FILE", "export_mjcf"]
 
 TRAJECTORY_FILE = "robot_trajectory.npz"
 """The companion file of the recorded joint trajectory (see the module docstring)."""
@@ -85,6 +98,144 @@ def _trajectory(ds: Dataset, joints: list[str]) -> tuple[bytes, dict[str, Any], 
     if not ids:
         notes.append(f"no episode has joint_states: {TRAJECTORY_FILE} holds no episode")
     return buf.getvalue(), {"episodes": ids, "samples": counts}, notes
+
+
+FORCE_NOTE = "applied by robogs as per-step forces; not simulated by a plain MuJoCo load"
+"""What the notes and the document say of a fitted effect without an MJCF-native form."""
+
+_NOT_NATIVE = {
+    "force": FORCE_NOTE,
+    "free": "viscous damping on a free joint: MJCF joint damping is one value for all six "
+    "DOFs, the engine damps x, y, z only; not simulated by a plain MuJoCo load",
+    "body": "applied by robogs as a change of the object's body (mass, CoM or contact); not "
+    "written into the model, not simulated by a plain MuJoCo load",
+    "sensor": "a sensor effect (applied by robogs to the sampled poses, not to the dynamics)",
+}
+_BODY = ("mass", "com_offset", "restitution")
+_SENSOR = ("time_offset", "camera_extrinsics")
+
+
+def _kind(name: str) -> str:
+    """How a plain MuJoCo load sees a fitted effect: ``native`` (in the model), ``body``,
+    ``sensor`` or ``force`` (every other, built-in or a user's, runs as per-step forces)."""
+    if name in NATIVE_EFFECTS:
+        return "native"
+    return "body" if name in _BODY else "sensor" if name in _SENSOR else "force"
+
+
+def _effects(
+    xml: str, scene: MjcfScene, physics: dict[str, Any], where: Path
+) -> tuple[str, list[dict[str, Any]]]:
+    """The document with every fitted effect of ``physics["effects"]`` that has an MJCF-native
+    form (:data:`robogs.format.mjcf.NATIVE_EFFECTS`, the map the ``mujoco`` engine applies),
+    and one record per effect (name, target, params, how it is written).
+
+    The map is applied to the compiled scene (the engine's own path) and the fields it changed
+    (:data:`NATIVE_FIELDS`) are written back at full precision: ``<option gravity>`` and the
+    ``damping`` of each slide joint of the object's planar joint set."""
+    import xml.etree.ElementTree as ET
+
+    import mujoco
+
+    entries = [e for e in physics.get("effects") or [] if isinstance(e, dict)]
+    if not entries:
+        return xml, []
+    model = mujoco.MjModel.from_xml_string(xml, assets=scene.assets)
+    grav0, damp0 = model.opt.gravity.copy(), model.dof_damping.copy()
+    watched = {f: np.array(getattr(model, f)).copy() for f in _other_fields(model)}
+    records = []
+    for i, entry in enumerate(entries):
+        name = str(entry.get("name"))
+        target = str(entry.get("target") or (scene.objects[0] if scene.objects else ""))
+        params = entry.get("params") or {}
+        if not isinstance(params, dict) or not all(
+            isinstance(v, (int, float)) and np.isfinite(v) for v in params.values()
+        ):
+            raise FormatError(
+                f"effect {name!r} has parameters that are not finite numbers",
+                path=where,
+                where=f"effects[{i}].params",
+                hint="refit the effect (robogs fit --add) or revert the revision",
+            )
+        kind = _kind(name)
+        if kind == "native" and target not in scene.objects:
+            raise FormatError(
+                f"effect {name!r} targets {target!r}, not a rigid object of the scene",
+                path=where,
+                where=f"effects[{i}].target",
+                hint=f"rigid objects: {', '.join(scene.objects)}",
+            )
+        if kind == "native":
+            jid = model.joint(target).id
+            if name == "viscous_damping" and model.jnt_type[jid] == mujoco.mjtJoint.mjJNT_FREE:
+                kind = "free"
+            else:
+                slots = EffectSlots(
+                    body=model.body(target).id,
+                    dof=int(model.jnt_dofadr[jid]),
+                    ballast=float(scene.ballast),
+                )
+                NATIVE_EFFECTS[name](model, {k: float(v) for k, v in params.items()}, slots)
+        records.append(
+            {
+                "name": name,
+                "target": target,
+                "params": {k: float(v) for k, v in params.items()},
+                "written": kind == "native",
+                **({"why": _NOT_NATIVE[kind]} if kind != "native" else {}),
+            }
+        )
+    for f, before in watched.items():  # the map may change NATIVE_FIELDS only
+        if not np.array_equal(np.array(getattr(model, f)), before):
+            raise FormatError(
+                f"an effect map changed MjModel.{f}, which the export cannot write",
+                path=where,
+                where="effects",
+                hint=f"robogs.format.mjcf.NATIVE_EFFECTS may change {', '.join(NATIVE_FIELDS)}",
+            )
+    root = ET.fromstring(xml)
+    if not np.array_equal(model.opt.gravity, grav0):
+        root.find("option").set("gravity", " ".join(repr(float(g)) for g in model.opt.gravity))
+    for d in np.flatnonzero(model.dof_damping != damp0):
+        jname = model.joint(int(model.dof_jntid[d])).name
+        joint = root.find(f".//joint[@name='{jname}']")
+        joint.set("damping", repr(float(model.dof_damping[d])))
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode") + "\n", records
+
+
+def _other_fields(model: Any) -> list[str]:
+    """Model arrays an effect map could plausibly touch besides :data:`NATIVE_FIELDS`."""
+    return [
+        f
+        for f in (
+            "body_mass",
+            "body_inertia",
+            "body_ipos",
+            "dof_armature",
+            "pair_friction",
+            "pair_solref",
+            "pair_solimp",
+            "actuator_biasprm",
+            "geom_friction",
+        )
+        if hasattr(model, f)
+    ]
+
+
+def _custom(records: list[dict[str, Any]]) -> tuple[str, list[str]]:
+    """``<numeric>`` elements of the effects not in the model (``robogs_effect/<name>/<param>``,
+    full precision) and one note per effect."""
+    lines, notes = [], []
+    for r in records:
+        if r["written"]:
+            continue
+        for k, v in r["params"].items():
+            name = quoteattr(f"robogs_effect/{r['name']}/{k}")  # names come from physics.json
+            lines.append(f'    <numeric name={name} data="{float(v)!r}" />')
+        vals = ", ".join(f"{k}={v:.6g}" for k, v in r["params"].items())
+        notes.append(f"fitted effect {r['name']} on {r['target']} ({vals}): {r['why']}")
+    return "\n".join(lines), notes
 
 
 def _write_inside(out: Path, rel: str, data: bytes) -> None:
@@ -129,7 +280,15 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
     scene = scene_mjcf(
         physics, meshes=meshes, poses=poses, model_name=f"{ds.name}_scene", meshdir="meshes/"
     )
-    xml = scene.xml
+    xml, effects = _effects(scene.xml, scene, physics, ds.resolve("physics.json"))
+    numeric, effect_notes = _custom(effects)
+    written = [f"{r['name']} on {r['target']}" for r in effects if r["written"]]
+    if written:
+        effect_notes.insert(
+            0,
+            f"fitted effects in the model as the mujoco engine compiles them: {', '.join(written)}",
+        )
+    unmapped = [k for k in scene.unmapped if not k.startswith("effects.")]
     robot_notes: list[str] = []
     robot_facts: dict[str, Any] = {}
     robot_files: dict[str, bytes] = {}
@@ -180,12 +339,16 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
                 "trajectory": {"file": TRAJECTORY_FILE, **traj_facts},
             }
         }
-    remarks = [*scene.notes, *robot_notes, *(f"not represented: {k}" for k in scene.unmapped)]
+    remarks = [
+        *scene.notes,
+        *robot_notes,
+        *effect_notes,
+        *(f"not represented: {k}" for k in unmapped),
+    ]
     remarks.append(f"physics revision {physics.get('revision')} of dataset {ds.name!r}")
     text = "; ".join(remarks).replace('"', "'").replace("&", "and").replace("<", "(")
-    xml = xml.replace(
-        "</mujoco>", f'  <custom>\n    <text name="robogs" data="{text}" />\n  </custom>\n</mujoco>'
-    )
+    custom = f'    <text name="robogs" data="{text}" />' + (f"\n{numeric}" if numeric else "")
+    xml = xml.replace("</mujoco>", f"  <custom>\n{custom}\n  </custom>\n</mujoco>")
     (out / "scene.xml").write_text(xml, encoding="utf-8")
     files = ["scene.xml"]
     if scene.assets:
@@ -198,9 +361,9 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
         files.append(rel)
     if not robot_facts:
         robot_notes = ["dataset has no robot: none in the document"]
-    notes = [*scene.notes, *robot_notes]
-    if scene.unmapped:
-        notes.append(f"not represented in MuJoCo: {', '.join(scene.unmapped)}")
+    notes = [*scene.notes, *robot_notes, *effect_notes]
+    if unmapped:
+        notes.append(f"not represented in MuJoCo: {', '.join(unmapped)}")
     return ExportReport(
         out=out,
         files=files,
@@ -210,7 +373,8 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
             "pusher": scene.pusher,
             "pairs": [list(p) for p in scene.pairs],
             "hulled_meshes": sorted(meshes),
-            "unmapped": scene.unmapped,
+            "unmapped": unmapped,
+            "effects": effects,
             "physics_revision": physics.get("revision"),
             **robot_facts,
         },

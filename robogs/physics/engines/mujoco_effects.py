@@ -19,8 +19,9 @@ translated, so a user-written effect works on both engines without MuJoCo code:
 Built-in effects with a native MuJoCo counterpart bypass the generic path (:data:`NATIVE`):
 viscous damping is the DOF damping of the object's translational free-joint DOFs
 (``c m`` N s/m), the table tilt is the gravity vector ``(g_x, g_y, -g)`` (the pusher body is
-gravity compensated, so only the objects feel it). The full table is :data:`MAPPING` (and
-``docs/physics.md``, section "Engines").
+gravity compensated, so only the objects feel it); both maps are
+:data:`robogs.format.mjcf.NATIVE_EFFECTS`, shared with ``robogs export mjcf``. The full table is
+:data:`MAPPING` (and ``docs/physics.md``, section "Engines").
 
 Why not MuJoCo's fluid model for quadratic drag: its inertia-box drag is quadratic per body
 axis (``|v_i| v_i``), not ``|v| v`` along the velocity; they agree only along body axes, so the
@@ -43,7 +44,7 @@ import mujoco
 import numpy as np
 import torch
 
-from robogs.format.mjcf import ballast_contact
+from robogs.format.mjcf import NATIVE_EFFECTS, ballast_contact
 from robogs.physics.effects import Effect, overrides
 from robogs.physics.model import Body, FreeState, Slip
 
@@ -151,22 +152,11 @@ def restitution_damping_ratio(e: float) -> float:
     return -le / math.sqrt(math.pi**2 + le * le)
 
 
-def _tilt(model: mujoco.MjModel, th: dict[str, float], slots: ObjectSlots) -> None:
-    model.opt.gravity[0] += th["g_x"]
-    model.opt.gravity[1] += th["g_y"]
-
-
-def _viscous(model: mujoco.MjModel, th: dict[str, float], slots: ObjectSlots) -> None:
-    c = th["c"] * float(model.body_mass[slots.body])
-    model.dof_damping[slots.dof : slots.dof + 3] += c * np.array([1.0, 1.0, 1.0 + slots.ballast])
-
-
-NATIVE: dict[str, Callable[[mujoco.MjModel, dict[str, float], ObjectSlots], None]] = {
-    "table_tilt": _tilt,
-    "viscous_damping": _viscous,
-}
+NATIVE: dict[str, Callable[[mujoco.MjModel, dict[str, float], ObjectSlots], None]] = NATIVE_EFFECTS
 """Built-in ``accel`` effects mapped onto model parameters instead of per-step forces (applied
-after the body, so viscous damping uses the set's mass)."""
+after the body, so viscous damping uses the set's mass). The table and its functions live in
+:data:`robogs.format.mjcf.NATIVE_EFFECTS`, which ``robogs export mjcf`` applies to the exported
+scene too: one mapping for the fitted model and the exported file."""
 
 
 def classify(effects: Sequence[Effect]) -> tuple[list[Effect], list[Effect], list[Effect]]:
