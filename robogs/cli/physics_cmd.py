@@ -841,7 +841,7 @@ _REFITTED = "base parameters, present effects and each trajectory's initial pose
 def _engine(args: argparse.Namespace) -> str:
     """The object-model engine of ``--engine`` (``auto`` resolved; the choice and the reason
     printed, on stderr with ``--json``, and the objects simulated as their mesh's convex hull
-    with the hull substitutions, :mod:`robogs.physics.shapes`)."""
+    with the hull substitutions, :mod:`robogs.format.shapes`)."""
     from robogs.format import Dataset
 
     name = getattr(args, "engine", "planar")
@@ -855,12 +855,12 @@ def _engine(args: argparse.Namespace) -> str:
         print(f"engine: {name} (auto: {why})", file=out)
         notes = rec.shapes().notes
     else:
-        from robogs.physics.shapes import BOX_BUDGET, load_object_meshes, object_shapes
+        from robogs.format.shapes import BOX_BUDGET, load_object_meshes, object_shapes
 
         ds = Dataset.open(args.dataset)
         meshes = load_object_meshes(ds)
         notes = object_shapes(ds.physics(), meshes, ds.budgets[BOX_BUDGET]).notes if meshes else []
-    for line in notes:  # objects simulated as their mesh's hull (robogs.physics.shapes)
+    for line in notes:  # objects simulated as their mesh's hull (robogs.format.shapes)
         print(f"  shape: {line}", file=out)
     return name
 

@@ -451,7 +451,7 @@ def simulate_objects(
             f"--simulate starts {obj!r} from its recorded pose; episode {ep.id!r} has none",
             where=f"episodes/{ep.id}",
         )
-    from robogs.physics.shapes import BOX_BUDGET, load_object_meshes, object_shapes
+    from robogs.format.shapes import BOX_BUDGET, load_object_meshes, object_shapes
 
     shapes = object_shapes(physics, load_object_meshes(src), float(src.budgets[BOX_BUDGET]))
     name = engine

@@ -243,7 +243,7 @@ class FitResult:
             that object), ``noise_floor_mm`` and ``heldout_rms_before_mm`` /
             ``heldout_rms_after_mm`` (:func:`_object_rms`); empty for a camera-only fit.
         shape_notes: the objects simulated as their mesh's convex hull instead of a box, and
-            the hull substitutions (:class:`robogs.physics.shapes.Shapes`); appended to the
+            the hull substitutions (:class:`robogs.format.shapes.Shapes`); appended to the
             revision note.
     """
 
@@ -619,7 +619,7 @@ def fit(
     written and :class:`InputError` says why (the CLI prints one line and exits 2); otherwise it
     is listed in ``not_written``. Base parameters found unidentifiable are listed in
     ``unidentifiable`` and keep their stored values. Objects simulated as their mesh's convex
-    hull (:mod:`robogs.physics.shapes`) are said so in ``shape_notes`` and in the revision note.
+    hull (:mod:`robogs.format.shapes`) are said so in ``shape_notes`` and in the revision note.
 
     ``camera_intrinsics`` is fitted from the camera masks instead (``mask_frames`` frames per
     camera stream): the corrected ``cameras/<cam>.json`` is written in the same edit as the

@@ -11,7 +11,7 @@ Rollouts come from one of two backends (``backend``): ``planar``, the batched to
 :mod:`robogs.physics.engines.mujoco_effects`). ``auto`` picks with
 :func:`robogs.physics.engines.choose_engine` (planar when it can represent the scene) and keeps
 the reason in :attr:`Engine.backend_reason`. Object meshes of the dataset that are not their
-``size_m`` box (:mod:`robogs.physics.shapes`) are passed to ``can_represent`` and to MuJoCo.
+``size_m`` box (:mod:`robogs.format.shapes`) are passed to ``can_represent`` and to MuJoCo.
 """
 
 from __future__ import annotations
@@ -125,7 +125,7 @@ class Engine:
 
     Attributes:
         shapes: the recording's object meshes that are not their ``size_m`` box
-            (:class:`robogs.physics.shapes.Shapes`): they make the planar engine refuse the
+            (:class:`robogs.format.shapes.Shapes`): they make the planar engine refuse the
             scene and reach MuJoCo as convex hulls; ``shapes.notes`` says so, one line each.
     """
 

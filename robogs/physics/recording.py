@@ -85,7 +85,7 @@ class Recording:
         object_name: the free object (the one the pusher drives; effects act on it).
         meta: free-form information (e.g. the scenario's hidden effect, for benches only).
         meshes: rigid object name -> ``trimesh.Trimesh`` (object frame, m) from the dataset's
-            assets (:func:`robogs.physics.shapes.load_object_meshes`); empty for recordings
+            assets (:func:`robogs.format.shapes.load_object_meshes`); empty for recordings
             without assets. Which of them reach the engines: :meth:`shapes`.
         box_budget_mm: the dataset's ``geometry.box3d_mm``, within which a mesh is its box.
     """
@@ -99,8 +99,8 @@ class Recording:
 
     def shapes(self) -> Any:
         """The object meshes that are not their ``size_m`` box, with the notes to print
-        (:func:`robogs.physics.shapes.object_shapes`)."""
-        from robogs.physics.shapes import object_shapes
+        (:func:`robogs.format.shapes.object_shapes`)."""
+        from robogs.format.shapes import object_shapes
 
         return object_shapes(self.physics, self.meshes, self.box_budget_mm)
 
@@ -542,7 +542,7 @@ def load_recording(
         )
         trajs += [_clip_others(p) for p in parts]
         pieces += rows
-    from robogs.physics.shapes import BOX_BUDGET, load_object_meshes
+    from robogs.format.shapes import BOX_BUDGET, load_object_meshes
 
     rec = Recording(
         trajectories=trajs,

@@ -263,7 +263,9 @@ def test_the_export_is_the_engines_model_and_replays_its_rollout(pushes, tmp_pat
 
 def test_a_tilted_table_or_a_mesh_keeps_the_free_joint_as_the_engine_does(tmp_path) -> None:
     """A tilted support plane and a mesh object: the engine keeps the free joint and the 3-D
-    contact settings, and so does the export (same joints, options and pairs)."""
+    contact settings, and so does the export (same joints, options and pairs). A mesh that is
+    its size_m box (within the dataset's geometry.box3d_mm) stays the box on the planar joint
+    set, as the fitting engine has it (robogs.format.shapes), and the export says so."""
     import trimesh
 
     from robogs.format.dataset import Dataset
@@ -273,7 +275,7 @@ def test_a_tilted_table_or_a_mesh_keeps_the_free_joint_as_the_engine_does(tmp_pa
     box = {"equation": "rigid", "mass_kg": 0.4, "size_m": size, "friction_dynamic": 0.35}
     tilted = {"equation": "static", "plane_z_m": 0.0, "normal": [0.1, 0.0, 1.0]}
     flat = {"equation": "static", "plane_z_m": 0.0}
-    mesh = trimesh.creation.box(extents=size)
+    mesh = trimesh.creation.cylinder(radius=0.035, height=0.05)  # 15+ mm off the box
     for name, table, with_mesh in (("tilted", tilted, False), ("mesh", flat, True)):
         w = Dataset.create(tmp_path / name, name=name)
         if with_mesh:
@@ -287,6 +289,17 @@ def test_a_tilted_table_or_a_mesh_keeps_the_free_joint_as_the_engine_does(tmp_pa
         assert not eng.planar, name
         assert _joints(model) == [("box", int(mujoco.mjtJoint.mjJNT_FREE))], name
         _same_contacts(model, eng.model)
+    w = Dataset.create(tmp_path / "boxmesh", name="boxmesh")
+    w.write_bytes("assets/box.stl", trimesh.creation.box(extents=size).export(file_type="stl"))
+    w.set_asset("box", kind="object", mesh="assets/box.stl")
+    w.set_physics({"objects": {"box": box, "table": flat}})
+    ds = w.commit()
+    rep = export("mjcf", ds.root, tmp_path / "boxmesh_mjcf")
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "boxmesh_mjcf" / "scene.xml"))
+    eng = MujocoEngine(ds.physics())  # the box: what the fit builds for this dataset
+    assert eng.planar and int(mujoco.mjtJoint.mjJNT_FREE) not in [t for _, t in _joints(model)]
+    _same_contacts(model, eng.model)
+    assert any("its mesh is its size_m box" in n for n in rep.notes), rep.notes
 
 
 def test_scene_mjcf_refuses_an_unknown_or_unfit_joint_set() -> None:

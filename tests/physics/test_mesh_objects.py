@@ -27,9 +27,9 @@ import trimesh
 from robogs.format.dataset import Dataset
 from robogs.format.errors import InputError, PathEscapeError
 from robogs.format.mjcf import MAX_HULL_VERTICES
+from robogs.format.shapes import box_distance_m, object_shapes
 from robogs.physics.engine import Engine, recording_backend
 from robogs.physics.recording import load_recording
-from robogs.physics.shapes import box_distance_m, object_shapes
 
 SIZE = (0.1, 0.08, 0.06)  # the synthetic scene's box (checked against physics.json below)
 

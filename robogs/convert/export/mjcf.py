@@ -57,6 +57,7 @@ import numpy as np
 from robogs.format import Dataset
 from robogs.format.errors import FormatError, InputError, PathEscapeError
 from robogs.format.mjcf import NATIVE_EFFECTS, NATIVE_FIELDS, EffectSlots, MjcfScene, scene_mjcf
+from robogs.format.shapes import BOX_BUDGET, object_shapes
 
 from . import ExportReport, register_exporter
 from .urdf_scene import scene_state
@@ -275,6 +276,14 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
             continue
         if "mesh" in (ds.assets.get(name) or {}):
             meshes[name] = ds.mesh(name)
+    # a rigid object's mesh that is its size_m box stays the box, as the fitting engine has it
+    shapes = object_shapes(physics, meshes, float(ds.budgets[BOX_BUDGET]))
+    kept_as_box = [
+        f"object {n!r}: its mesh is its size_m box within {d * 1e3:.2g} mm "
+        f"({BOX_BUDGET} {float(ds.budgets[BOX_BUDGET]):g} mm): written as the box"
+        for n, d in sorted(shapes.boxes.items())
+    ]
+    meshes = {n: m for n, m in meshes.items() if n not in shapes.boxes}
     state = scene_state(ds, [n for n in objects if n not in ("table", "pusher")])
     poses = {n: p.pose for n, p in state.objects.items()}
     scene = scene_mjcf(
@@ -340,6 +349,7 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
             }
         }
     remarks = [
+        *kept_as_box,
         *scene.notes,
         *robot_notes,
         *effect_notes,
@@ -361,7 +371,7 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
         files.append(rel)
     if not robot_facts:
         robot_notes = ["dataset has no robot: none in the document"]
-    notes = [*scene.notes, *robot_notes, *effect_notes]
+    notes = [*kept_as_box, *scene.notes, *robot_notes, *effect_notes]
     if unmapped:
         notes.append(f"not represented in MuJoCo: {', '.join(unmapped)}")
     return ExportReport(
