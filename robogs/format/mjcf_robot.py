@@ -64,7 +64,7 @@ from typing import Any
 
 import numpy as np
 
-from robogs.format.errors import FormatError, RobogsError
+from robogs.format.errors import FormatError
 
 __all__ = [
     "FRAME_MASS_KG",
@@ -313,7 +313,7 @@ def _prepared_urdf(
     element, floating/planar joints fixed, frame inertials added."""
     from lxml import etree
 
-    from robogs.format.urdf import parse_urdf_xml, resolve_mesh_uri
+    from robogs.format.urdf import parse_urdf_xml, resolve_mesh_file
 
     xml = parse_urdf_xml(path)
     for old in xml.findall("mujoco"):
@@ -338,17 +338,15 @@ def _prepared_urdf(
                     continue
                 uri = mesh.get("filename", "")
                 where = f"link '{link.get('name')}' {kind} mesh '{uri}'"
-                try:
-                    src = resolve_mesh_uri(uri, path, root, package_roots, _cache=cache)
-                except RobogsError as exc:
-                    raise type(exc)(exc.message, path=path, where=where, hint=exc.hint) from None
-                if not src.is_file():
-                    raise FormatError(
-                        f"mesh file not found (resolved to {src})",
-                        path=path,
-                        where=where,
-                        hint="check the dataset's robot folder (or package_roots/root)",
-                    )
+                src = resolve_mesh_file(
+                    uri,
+                    path,
+                    root,
+                    package_roots,
+                    where=where,
+                    missing_hint="check the dataset's robot folder (or package_roots/root)",
+                    cache=cache,
+                )
                 conv = writer.add(src, where)
                 by_uri[uri] = conv
                 if conv.file is None:

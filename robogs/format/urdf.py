@@ -41,6 +41,7 @@ __all__ = [
     "load_urdf",
     "parse_urdf_robot",
     "parse_urdf_xml",
+    "resolve_mesh_file",
     "resolve_mesh_uri",
     "mesh_refs",
     "default_allowed_root",
@@ -461,6 +462,32 @@ def _find_package_root(name: str, root: Path) -> Path:
     return found
 
 
+def resolve_mesh_file(
+    uri: str,
+    urdf_path: str | os.PathLike[str],
+    root: str | os.PathLike[str] | None,
+    package_roots: Mapping[str, str | os.PathLike[str]] | None,
+    *,
+    where: str,
+    missing_hint: str,
+    cache: dict[str, Path] | None = None,
+) -> Path:
+    """:func:`resolve_mesh_uri` for a mesh that must exist: errors name the URDF and ``where``
+    (the link and the URI); a missing file says ``missing_hint``."""
+    try:
+        resolved = resolve_mesh_uri(uri, urdf_path, root, package_roots, _cache=cache)
+    except RobogsError as exc:
+        raise type(exc)(exc.message, path=urdf_path, where=where, hint=exc.hint) from None
+    if not resolved.is_file():
+        raise FormatError(
+            f"mesh file not found (resolved to {resolved})",
+            path=urdf_path,
+            where=where,
+            hint=missing_hint,
+        )
+    return resolved
+
+
 def resolve_mesh_uri(
     uri: str,
     urdf_path: str | os.PathLike[str],
@@ -641,17 +668,15 @@ def load_urdf(
         cache: dict[str, Path] = {}
         for ref in mesh_refs(robot):
             where = f"link '{ref.link}' {ref.kind} mesh '{ref.uri}'"
-            try:
-                resolved = resolve_mesh_uri(ref.uri, path, root, package_roots, _cache=cache)
-            except RobogsError as exc:
-                raise type(exc)(exc.message, path=path, where=where, hint=exc.hint) from None
-            if not resolved.is_file():
-                raise FormatError(
-                    f"mesh file not found (resolved to {resolved})",
-                    path=path,
-                    where=where,
-                    hint="check package_roots/root, or pass load_meshes=False to skip meshes",
-                )
+            resolved = resolve_mesh_file(
+                ref.uri,
+                path,
+                root,
+                package_roots,
+                where=where,
+                missing_hint="check package_roots/root, or pass load_meshes=False to skip meshes",
+                cache=cache,
+            )
             if resolved.suffix.lower() not in MESH_SUFFIXES:
                 raise FormatError(
                     f"unsupported mesh type '{resolved.suffix}'",

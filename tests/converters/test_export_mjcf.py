@@ -22,6 +22,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from mjcf_replay import drive_pusher
 from scipy.signal import savgol_filter
 
 from robogs.convert.export import export, get_exporter
@@ -47,20 +48,6 @@ def _yaw(q: np.ndarray) -> np.ndarray:
         2 * (q[..., 0] * q[..., 3] + q[..., 1] * q[..., 2]),
         1 - 2 * (q[..., 2] ** 2 + q[..., 3] ** 2),
     )
-
-
-def _drive_pusher(model, data, qb: int, p: np.ndarray, yaw: np.ndarray, dt: float) -> np.ndarray:
-    """Drive the pusher along ``p`` [N, 3] m / ``yaw`` [N] rad (position + velocity controls,
-    step ``dt`` s) and return the box's slide positions [N, 3] m (qpos from index ``qb``)."""
-    pos = np.empty((len(p), 3))
-    pos[0] = data.qpos[qb : qb + 3]
-    for k in range(len(p) - 1):
-        data.ctrl[:4] = (*p[k], yaw[k])
-        data.ctrl[4:7] = (p[k + 1] - p[k]) / dt
-        data.ctrl[7] = (yaw[k + 1] - yaw[k]) / dt
-        mujoco.mj_step(model, data)
-        pos[k + 1] = data.qpos[qb : qb + 3]
-    return pos
 
 
 def _set_box(model: mujoco.MjModel, data: mujoco.MjData, pos: np.ndarray, yaw: float) -> int:
@@ -91,7 +78,7 @@ def _replay(model: mujoco.MjModel, tr, hz: float) -> np.ndarray:
     yaw0 = float(np.median(_yaw(tr.object_quat[:5])))
     qb = _set_box(model, data, np.array([pos0[0], pos0[1], hz]), yaw0)
     data.qpos[qp : qp + 3], data.qpos[qp + 3] = p[0], yaw[0]
-    pos = _drive_pusher(model, data, qb, p, yaw, dt)
+    pos = drive_pusher(model, data, qb, p, yaw, dt)
     ts = (tr.t_ns - t0) * 1e-9
     return np.stack([np.interp(ts, grid, pos[:, a]) for a in range(3)], -1)
 
@@ -255,7 +242,7 @@ def test_the_export_is_the_engines_model_and_replays_its_rollout(pushes, tmp_pat
     qp, vp = model.joint("pusher_x").qposadr[0], model.joint("pusher_x").dofadr[0]
     data.qpos[qp : qp + 3], data.qpos[qp + 3] = p[0], yaw[0]
     data.qvel[vp : vp + 3], data.qvel[vp + 3] = (p[1] - p[0]) / dt, (yaw[1] - yaw[0]) / dt
-    got = _drive_pusher(model, data, qb, p, yaw, dt)
+    got = drive_pusher(model, data, qb, p, yaw, dt)
     assert np.linalg.norm(want[-1] - want[0]) > 0.03  # the push moved the box (50 mm)
     gap_mm = 1e3 * float(np.abs(got - want).max())
     assert gap_mm < 1e-6, gap_mm

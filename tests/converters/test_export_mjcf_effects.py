@@ -27,6 +27,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from mjcf_replay import drive_pusher
 
 from robogs.convert.export import export
 from robogs.convert.export.mjcf import FORCE_NOTE
@@ -107,14 +108,7 @@ def _replay_rms(model: mujoco.MjModel, eng, local: np.ndarray, hz: float) -> flo
         data.qpos[qb : qb + 4] = (x0[0] + local[t, 0], x0[1] + local[t, 1], hz, yaw0 + local[t, 2])
         data.qpos[qp : qp + 3], data.qpos[qp + 3] = p[0], yaw[0]
         data.qvel[vp : vp + 3], data.qvel[vp + 3] = (p[1] - p[0]) / dt, (yaw[1] - yaw[0]) / dt
-        pos = np.empty((len(p), 3))
-        pos[0] = data.qpos[qb : qb + 3]
-        for k in range(len(p) - 1):
-            data.ctrl[:4] = (*p[k], yaw[k])
-            data.ctrl[4:7] = (p[k + 1] - p[k]) / dt
-            data.ctrl[7] = (yaw[k + 1] - yaw[k]) / dt
-            mujoco.mj_step(model, data)
-            pos[k + 1] = data.qpos[qb : qb + 3]
+        pos = drive_pusher(model, data, qb, p, yaw, dt)
         grid = np.arange(len(p)) * dt
         ts = d.obs_t[t].numpy()
         sim = np.stack([np.interp(ts, grid, pos[:, a]) for a in range(3)], -1)

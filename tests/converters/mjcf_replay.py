@@ -1,0 +1,20 @@
+"""Replaying an exported scene in plain MuJoCo: the pusher driven by its servos (test helper)."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+
+def drive_pusher(model, data, qb: int, p: np.ndarray, yaw: np.ndarray, dt: float) -> np.ndarray:
+    """Drive the pusher along ``p`` [N, 3] m / ``yaw`` [N] rad (position + velocity controls,
+    step ``dt`` s) and return the box's slide positions [N, 3] m (qpos from index ``qb``)."""
+    pos = np.empty((len(p), 3))
+    pos[0] = data.qpos[qb : qb + 3]
+    for k in range(len(p) - 1):
+        data.ctrl[:4] = (*p[k], yaw[k])
+        data.ctrl[4:7] = (p[k + 1] - p[k]) / dt
+        data.ctrl[7] = (yaw[k + 1] - yaw[k]) / dt
+        mujoco.mj_step(model, data)
+        pos[k + 1] = data.qpos[qb : qb + 3]
+    return pos
