@@ -27,6 +27,7 @@ import resource
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -68,7 +69,8 @@ class Verdict:
         stdout, stderr: captured text.
         cpu_s: CPU seconds used (user + system).
         wall_s: wall seconds.
-        peak_rss: peak resident memory, bytes (for in-process runs, of the whole process).
+        peak_rss: peak resident memory, bytes (subprocess runs: the child's own ``VmHWM``;
+            in-process runs: of the whole process).
         problem: None when the contract holds, else what broke it ("traceback", "exit code",
             "hang", "memory", "check crash", "unclear error").
         detail: a short description of the problem (exception text, X001 message ...).
@@ -193,12 +195,25 @@ def run_inprocess(
 
 
 _BOOT = """
-import resource, sys
-cpu = int(sys.argv[1])
+import atexit, resource, sys
+cpu, hwm_path = int(sys.argv[1]), sys.argv[2]
+def _hwm():
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            kib = next(int(ln.split()[1]) for ln in fh if ln.startswith("VmHWM:"))
+        with open(hwm_path, "w", encoding="ascii") as out:
+            out.write(str(kib * 1024))
+    except Exception:
+        pass
+atexit.register(_hwm)
 resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 2))
 from robogs.cli.main import main
-sys.exit(main(sys.argv[2:]))
+sys.exit(main(sys.argv[3:]))
 """
+"""The child reports its own peak (``VmHWM``, the high-water mark of its address space) at
+exit. ``wait4``'s ``ru_maxrss`` is not the child's: Linux carries the parent's high-water mark
+across fork/vfork + exec (``exec_mmap`` keeps the old mm's peak in the process's ``maxrss``),
+so a pytest worker grown to 1.4 GB made every child it started read at least 1.4 GB."""
 
 
 def _rss(pid: int) -> int:
@@ -228,9 +243,13 @@ def run_subprocess(
     argv = [str(a) for a in argv]
     wall_limit_s = wall_limit_s or max(60.0, 6 * cpu_limit_s)
     env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
+    fd, hwm_name = tempfile.mkstemp(prefix="robogs-hwm-")
+    os.close(fd)
+    hwm_file = Path(hwm_name)
+    sampled: list[int] = [0]
     t0 = time.perf_counter()
     proc = subprocess.Popen(
-        [sys.executable, "-c", _BOOT, str(int(cpu_limit_s)), *argv],
+        [sys.executable, "-c", _BOOT, str(int(cpu_limit_s)), hwm_name, *argv],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         cwd=cwd or REPO,
@@ -241,7 +260,9 @@ def run_subprocess(
 
     def watch() -> None:
         while not done.wait(0.02):
-            if _rss(proc.pid) > mem_limit:
+            rss = _rss(proc.pid)
+            sampled[0] = max(sampled[0], rss)
+            if rss > mem_limit:
                 killed.append("memory")
                 proc.kill()
                 return
@@ -271,6 +292,11 @@ def run_subprocess(
     w.join()
     wall = time.perf_counter() - t0
     rc = proc.returncode
+    try:  # the child's own peak; killed before exit: the watchdog's largest sample
+        peak = int(hwm_file.read_text(encoding="ascii") or 0) or sampled[0]
+    except (OSError, ValueError):
+        peak = sampled[0]
+    hwm_file.unlink(missing_ok=True)
     v = Verdict(
         argv,
         rc,
@@ -278,7 +304,7 @@ def run_subprocess(
         chunks.get("err", b"").decode("utf-8", "replace"),
         usage.ru_utime + usage.ru_stime,
         wall,
-        usage.ru_maxrss * 1024,
+        peak,
     )
     if killed:
         v.problem = killed[0]

@@ -59,3 +59,14 @@ def test_subprocess_limits(seeds: Seeds) -> None:
     assert hang.problem == "hang" and hang.rc is not None and hang.rc < 0, hang.describe()
     mem = run_subprocess(["validate", seeds.dataset, "--json", "--quick"], mem_limit=30 * 2**20)
     assert mem.problem == "memory", mem.describe()
+
+
+def test_a_subprocess_peak_is_its_own_not_the_parents(seeds: Seeds) -> None:
+    """A parent grown to 1.5 GB must not lend its peak to the child it starts (Linux keeps the
+    parent's high-water mark across vfork + exec in ``wait4``'s ``ru_maxrss``)."""
+    import numpy as np
+
+    ballast = np.ones(1536 * 2**20 // 8)  # touched: 1.5 GB resident in this process
+    v = run_subprocess(["validate", seeds.dataset, "--json", "--quick"])
+    assert v.ok and 20e6 < v.peak_rss < 1e9, v.describe()
+    assert ballast[-1] == 1.0
