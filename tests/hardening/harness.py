@@ -70,7 +70,8 @@ class Verdict:
         cpu_s: CPU seconds used (user + system).
         wall_s: wall seconds.
         peak_rss: peak resident memory, bytes (subprocess runs: the child's own ``VmHWM``;
-            in-process runs: of the whole process).
+            in-process runs: this process's peak during the run, ``VmHWM`` reset at its start
+            where Linux allows, else the whole process's).
         problem: None when the contract holds, else what broke it ("traceback", "exit code",
             "hang", "memory", "check crash", "unclear error").
         detail: a short description of the problem (exception text, X001 message ...).
@@ -134,8 +135,33 @@ def _x001(v: Verdict) -> str:
     return crashed[0] if crashed else ""
 
 
-def _peak_rss_self() -> int:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux: KiB
+def _status_kib(field: str) -> int | None:
+    """A ``/proc/self/status`` field in KiB (None off Linux)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            return next(int(ln.split()[1]) for ln in fh if ln.startswith(field + ":"))
+    except (OSError, StopIteration, ValueError):
+        return None
+
+
+def _reset_peak_self() -> bool:
+    """Reset this process's peak RSS (``VmHWM``) to its current RSS: writing 5 to
+    ``/proc/self/clear_refs`` (Linux >= 4.0). False where that is not possible."""
+    try:
+        with open("/proc/self/clear_refs", "w", encoding="ascii") as fh:
+            fh.write("5")
+        return _status_kib("VmHWM") is not None
+    except OSError:
+        return False
+
+
+def _peak_rss_self(reset: bool) -> int:
+    """Peak RSS [bytes] since :func:`_reset_peak_self` (``reset``), else of the whole process
+    (``ru_maxrss``, which a pytest worker's earlier tests may have raised)."""
+    kib = _status_kib("VmHWM") if reset else None
+    if kib is None:
+        kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # Linux: KiB
+    return kib * 1024
 
 
 def run_inprocess(
@@ -156,6 +182,7 @@ def run_inprocess(
         raise _CpuAlarm()
 
     old = signal.signal(signal.SIGPROF, _on_alarm) if alarm else None
+    reset = _reset_peak_self()  # the run's own peak, not the worker's history
     r0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -186,7 +213,7 @@ def run_inprocess(
         err.getvalue(),
         cpu,
         wall,
-        _peak_rss_self(),
+        _peak_rss_self(reset),
         problem,
         detail,
         [f"{w.category.__name__}: {w.message}" for w in caught],

@@ -89,3 +89,33 @@ def test_a_subprocess_peak_is_its_own_not_the_parents(seeds: Seeds) -> None:
     assert out.returncode == 0, out.stderr[-2000:]
     ok, peak, last = out.stdout.split()
     assert ok == "True" and 20e6 < int(peak) < 1e9 and last == "1.0", out.stdout
+
+
+def test_an_inprocess_peak_is_the_runs_own(seeds: Seeds) -> None:
+    """A process that once held 1.5 GB (freed since) must not charge it to a later in-process
+    run: the peak is reset at the run's start (``/proc/self/clear_refs``). Checked in its own
+    interpreter, so this pytest worker stays small."""
+    import subprocess
+    import sys
+    import textwrap
+
+    from . import harness
+
+    code = textwrap.dedent(
+        f"""
+        import importlib.util, sys
+        import numpy as np
+        spec = importlib.util.spec_from_file_location("harness", {harness.__file__!r})
+        h = importlib.util.module_from_spec(spec)
+        sys.modules["harness"] = h
+        spec.loader.exec_module(h)
+        ballast = np.ones(1536 * 2**20 // 8)  # touched: 1.5 GB resident, then freed
+        del ballast
+        v = h.run_inprocess(["validate", {str(seeds.dataset)!r}, "--json", "--quick"])
+        print(v.ok, v.peak_rss)
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    ok, peak = out.stdout.split()[-2:]
+    assert ok == "True" and 20e6 < int(peak) < 1e9, out.stdout[-500:]
