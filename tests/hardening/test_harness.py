@@ -61,11 +61,10 @@ def test_subprocess_limits(seeds: Seeds) -> None:
     assert mem.problem == "memory", mem.describe()
 
 
-def test_a_subprocess_peak_is_its_own_not_the_parents(seeds: Seeds) -> None:
-    """A parent grown to 1.5 GB must not lend its peak to the child it starts (Linux keeps the
-    parent's high-water mark across vfork + exec in ``wait4``'s ``ru_maxrss``). The big parent
-    is its own interpreter: this pytest worker must stay small, since in-process runs measure
-    the whole worker."""
+def _in_a_grown_process(seeds: Seeds, run: str) -> tuple[bool, int]:
+    """``h.<run>(["validate", DATASET, "--json", "--quick"])`` in a fresh interpreter that first
+    holds 1.5 GB resident (then frees it): ``(ok, peak_rss)``. The big process is its own, so
+    this pytest worker stays small (in-process runs measure the worker)."""
     import subprocess
     import sys
     import textwrap
@@ -80,42 +79,28 @@ def test_a_subprocess_peak_is_its_own_not_the_parents(seeds: Seeds) -> None:
         h = importlib.util.module_from_spec(spec)
         sys.modules["harness"] = h
         spec.loader.exec_module(h)
-        ballast = np.ones(1536 * 2**20 // 8)  # touched: 1.5 GB resident in this parent
-        v = h.run_subprocess(["validate", {str(seeds.dataset)!r}, "--json", "--quick"])
-        print(v.ok, v.peak_rss, ballast[-1])
-        """
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr[-2000:]
-    ok, peak, last = out.stdout.split()
-    assert ok == "True" and 20e6 < int(peak) < 1e9 and last == "1.0", out.stdout
-
-
-def test_an_inprocess_peak_is_the_runs_own(seeds: Seeds) -> None:
-    """A process that once held 1.5 GB (freed since) must not charge it to a later in-process
-    run: the peak is reset at the run's start (``/proc/self/clear_refs``). Checked in its own
-    interpreter, so this pytest worker stays small."""
-    import subprocess
-    import sys
-    import textwrap
-
-    from . import harness
-
-    code = textwrap.dedent(
-        f"""
-        import importlib.util, sys
-        import numpy as np
-        spec = importlib.util.spec_from_file_location("harness", {harness.__file__!r})
-        h = importlib.util.module_from_spec(spec)
-        sys.modules["harness"] = h
-        spec.loader.exec_module(h)
-        ballast = np.ones(1536 * 2**20 // 8)  # touched: 1.5 GB resident, then freed
+        ballast = np.ones(1536 * 2**20 // 8)  # touched: 1.5 GB resident
+        assert ballast[-1] == 1.0
         del ballast
-        v = h.run_inprocess(["validate", {str(seeds.dataset)!r}, "--json", "--quick"])
+        v = h.{run}(["validate", {str(seeds.dataset)!r}, "--json", "--quick"])
         print(v.ok, v.peak_rss)
         """
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-2000:]
     ok, peak = out.stdout.split()[-2:]
-    assert ok == "True" and 20e6 < int(peak) < 1e9, out.stdout[-500:]
+    return ok == "True", int(peak)
+
+
+def test_a_subprocess_peak_is_its_own_not_the_parents(seeds: Seeds) -> None:
+    """A parent that held 1.5 GB must not lend its peak to the child it starts (Linux keeps the
+    parent's high-water mark across vfork + exec in ``wait4``'s ``ru_maxrss``)."""
+    ok, peak = _in_a_grown_process(seeds, "run_subprocess")
+    assert ok and 20e6 < peak < 1e9, peak
+
+
+def test_an_inprocess_peak_is_the_runs_own(seeds: Seeds) -> None:
+    """A process that once held 1.5 GB (freed since) must not charge it to a later in-process
+    run: the peak is reset at the run's start (``/proc/self/clear_refs``)."""
+    ok, peak = _in_a_grown_process(seeds, "run_inprocess")
+    assert ok and 20e6 < peak < 1e9, peak

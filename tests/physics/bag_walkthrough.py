@@ -5,20 +5,25 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["DOC_PHYSICS", "WALKTHROUGH", "walkthrough_lines", "run_walkthrough"]
+__all__ = ["DOC_PHYSICS", "WALKTHROUGH", "doc_bash_lines", "walkthrough_lines", "run_walkthrough"]
 
 
 DOC_PHYSICS = Path(__file__).resolve().parents[2] / "docs" / "physics.md"
 WALKTHROUGH = "## From your bag to a diagnosis: a worked example"
 
 
-def walkthrough_lines() -> list[str]:
-    """The command lines of docs/physics.md's bag walkthrough (its first bash block)."""
+def doc_bash_lines(heading: str) -> list[str]:
+    """The command lines of the first bash block after ``heading`` in docs/physics.md."""
     import re
 
     text = DOC_PHYSICS.read_text(encoding="utf-8")
-    block = re.search(r"```bash\n(.*?)```", text[text.index(WALKTHROUGH) :], re.S).group(1)
+    block = re.search(r"```bash\n(.*?)```", text[text.index(heading) :], re.S).group(1)
     return [ln.strip() for ln in block.splitlines() if ln.strip()]
+
+
+def walkthrough_lines() -> list[str]:
+    """The command lines of docs/physics.md's bag walkthrough (its first bash block)."""
+    return doc_bash_lines(WALKTHROUGH)
 
 
 def run_walkthrough(folder: Path) -> list[dict]:

@@ -11,15 +11,13 @@ import sys
 from pathlib import Path
 
 import pytest
+from bag_walkthrough import DOC_PHYSICS, doc_bash_lines
 
-DOCS = Path(__file__).resolve().parents[2] / "docs" / "physics.md"
 SECTION = "### 5.3 Held-out choice"
 
 
 def _doc_lines() -> list[str]:
-    text = DOCS.read_text(encoding="utf-8")
-    block = re.search(r"```bash\n(.*?)```", text[text.index(SECTION) :], re.S).group(1)
-    return [ln.strip() for ln in block.splitlines() if ln.strip()]
+    return doc_bash_lines(SECTION)
 
 
 @pytest.mark.slow
@@ -40,7 +38,7 @@ def test_docs_holdout_lines(tmp_path):
         outs[1],
     )
     assert m is not None, outs[1]
-    text = DOCS.read_text(encoding="utf-8")
+    text = DOC_PHYSICS.read_text(encoding="utf-8")
     assert f"held-out position RMS: {m.group(1)} → {m.group(2)} mm" in text  # the docs' figures
     assert float(m.group(2)) < float(m.group(1))
     assert "--holdout-column segment in {push_d2_v1}: episodes push_d2_v1" in outs[2]
