@@ -56,14 +56,20 @@ import math
 import re
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from robogs.format.errors import FormatError, RobogsError
+from robogs.format.frames import matrix_to_quat_np, quat_to_matrix_np
 
 __all__ = [
+    "BODY_EFFECTS",
+    "BODY_FIELDS",
+    "BOUNCE_SOLIMP",
+    "BOUNCE_TIMECONST",
+    "BodyValues",
     "JOINTS",
     "MAX_HULL_VERTICES",
     "OBJECT_PAIR_DAMPRATIO",
@@ -76,14 +82,19 @@ __all__ = [
     "NATIVE_EFFECTS",
     "NATIVE_FIELDS",
     "ballast_contact",
+    "body_values",
+    "inertia_tensor",
     "MjcfScene",
     "collision_hull",
     "footprint_points",
     "planar_joints_fit",
+    "principal",
     "pusher_onset_solimp",
+    "restitution_damping_ratio",
     "use_planar_joints",
     "scene_mjcf",
     "torsion_radius",
+    "write_body",
 ]
 
 MAX_HULL_VERTICES = 256
@@ -294,12 +305,24 @@ def ballast_contact(
 class EffectSlots:
     """Where an effect's object lives in a compiled ``MjModel``: ``body`` its body id, ``dof``
     the first DOF address of its joints (free joint or planar joint set: x, y, z first) and
-    ``ballast`` its z ballast factor k (:attr:`ContactSettings.z_ballast`; 0: none).
-    ``robogs.physics.engines.mujoco_effects.ObjectSlots`` has the same three attributes."""
+    ``ballast`` its z ballast factor k (:attr:`ContactSettings.z_ballast`; 0: none); for
+    :func:`write_body` also ``table_pairs`` (compiled rows of its support pairs),
+    ``table_torsion`` (their torsional friction radii [m], 0: none), ``nominal_mass`` [kg],
+    ``nominal_inertia`` [3] kg m^2 and ``nominal_iquat`` (w, x, y, z) (the compiled body's
+    principal moments and their rotation), ``tilt_inertia_scale`` (factor on the roll and pitch
+    inertia) and ``ballast_actuator`` (id of its ``<obj>_ballast`` actuator, -1: none).
+    ``robogs.physics.engines.mujoco_effects.ObjectSlots`` has the same attributes."""
 
     body: int
     dof: int
     ballast: float = 0.0
+    table_pairs: tuple[int, ...] = ()
+    table_torsion: tuple[float, ...] = ()
+    nominal_mass: float = 0.0
+    nominal_inertia: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    nominal_iquat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    tilt_inertia_scale: float = 1.0
+    ballast_actuator: int = -1
 
 
 def _native_tilt(model: Any, th: Mapping[str, float], slots: Any) -> None:
@@ -329,6 +352,175 @@ to the exported scene's, writing back the fields of :data:`NATIVE_FIELDS`: one m
 NATIVE_FIELDS = ("opt.gravity", "dof_damping")
 """The ``MjModel`` fields that :data:`NATIVE_EFFECTS` change (the exporter writes these back as
 ``<option gravity>`` and per-joint ``damping``; it refuses to export a change of any other)."""
+
+
+@dataclass(frozen=True)
+class BodyValues:
+    """One object's body as the rigid-object model has it (plain floats, SI): ``mass`` [kg],
+    ``inertia_z`` [kg m^2] (the body-z moment about the CoM), ``com`` (x, y) [m] in the object
+    frame, ``mu_d`` (object-table Coulomb coefficient), ``restitution`` (object-table, 0-1) and
+    ``damping`` [1/s] (linear damping ``a = -c v``). ``robogs.physics.model.Body`` holds the
+    same quantities as [M, 1] tensors, one row per parameter set."""
+
+    mass: float
+    inertia_z: float
+    com: tuple[float, float]
+    mu_d: float
+    restitution: float
+    damping: float
+
+
+def body_values(entry: Mapping[str, Any], where: str = "objects") -> BodyValues:
+    """The nominal :class:`BodyValues` of a rigid object's physics.json entry (``mass_kg``,
+    ``inertia_kgm2``'s zz or the ``size_m`` box formula, ``com_m``, ``friction_dynamic``
+    (default 0.4), ``restitution``, ``damping_linear``), as ``robogs.physics.scene`` reads them.
+
+    Raises:
+        FormatError: a value is missing or malformed (the key is named).
+    """
+    mass = _number(entry, "mass_kg", 0.0, where)
+    com = _floats(entry, "com_m", 3, where) if "com_m" in entry else [0.0, 0.0, 0.0]
+    return BodyValues(
+        mass=mass,
+        inertia_z=float(_inertia_tensor(entry, mass, where)[2, 2]),
+        com=(com[0], com[1]),
+        mu_d=_number(entry, "friction_dynamic", 0.4, where),
+        restitution=_number(entry, "restitution", 0.0, where),
+        damping=_number(entry, "damping_linear", 0.0, where),
+    )
+
+
+def _body_mass(body: BodyValues, th: Mapping[str, float]) -> BodyValues:
+    """``mass``: ``m (1 + dm)``, the yaw moment scaled with it (uniform density)."""
+    s = 1.0 + float(th.get("dm", 0.0))
+    return replace(body, mass=body.mass * s, inertia_z=body.inertia_z * s)
+
+
+def _body_com(body: BodyValues, th: Mapping[str, float]) -> BodyValues:
+    """``com_offset``: the CoM moved by ``(dx, dy)`` in the object frame."""
+    return replace(
+        body, com=(body.com[0] + float(th.get("dx", 0.0)), body.com[1] + float(th.get("dy", 0.0)))
+    )
+
+
+def _body_restitution(body: BodyValues, th: Mapping[str, float]) -> BodyValues:
+    """``restitution``: ``e + e_delta``, clamped to 0-0.98."""
+    return replace(
+        body, restitution=min(max(body.restitution + float(th.get("e_delta", 0.0)), 0.0), 0.98)
+    )
+
+
+BODY_EFFECTS: dict[str, Any] = {
+    "mass": _body_mass,
+    "com_offset": _body_com,
+    "restitution": _body_restitution,
+}
+"""Catalogue effects that change an object's body -> ``f(body, params) -> body``
+(:class:`BodyValues`; a missing parameter is the effect's zero, as the engine starts it; the
+catalogue's ``body`` hooks in ``robogs.physics.catalogue`` do the same
+on [M, 1] tensors, and ``tests/converters/test_mjcf_export_body_effects.py`` checks that the
+exported model equals the engine's). :func:`write_body` writes the body into a compiled model:
+the ``mujoco`` engine for every parameter set, ``robogs export mjcf`` for the exported scene."""
+
+BODY_FIELDS = (
+    "body_mass",
+    "body_inertia",
+    "body_iquat",
+    "body_ipos",
+    "pair_friction",
+    "pair_solref",
+    "pair_solimp",
+    "dof_damping",
+    "dof_armature",
+    "actuator_biasprm",
+)
+"""The ``MjModel`` fields that :func:`write_body` changes (the exporter writes them back as the
+body's ``<inertial>``, the support pairs' ``friction``/``solref``/``solimp``, the slides'
+``damping``/``armature`` and the ballast actuator's ``biasprm``)."""
+
+BOUNCE_TIMECONST = 0.02
+"""Contact time constant [s] of an underdamped (bouncing) object-table pair: with the 4 ms of
+the plastic contacts, damping ratios below about 0.2 (e > 0.5) made the semi-implicit Euler
+contact unstable (a 5 cm drop at e = 0.7 rose 11 cm); at 20 ms the bounce follows the
+closed-form ratio within 0.03 (drops of 2 and 5 cm, e = 0.3-0.7)."""
+
+BOUNCE_SOLIMP = (0.9, 0.9, 0.001, 0.5, 2.0)
+"""solimp of a bouncing pair: a constant impedance, so the contact is the linear spring-damper
+whose damping ratio the closed form assumes (the plastic pairs' impedance rises from 0.95 to
+0.99 within 1 mm, which made the bounce depend on the drop height)."""
+
+
+def restitution_damping_ratio(e: float) -> float:
+    """Damping ratio of a linear spring-damper whose impact restitution is ``e`` (0 -> 1):
+    ``zeta = -ln e / sqrt(pi^2 + ln^2 e)`` (e clamped to 0-0.98; 1 for e = 0)."""
+    e = min(max(float(e), 0.0), 0.98)
+    if e <= 1e-6:
+        return 1.0
+    le = math.log(e)
+    return -le / math.sqrt(math.pi**2 + le * le)
+
+
+def inertia_tensor(moments: Sequence[float], iquat: Sequence[float] | None) -> np.ndarray:
+    """[3, 3] inertia tensor in the body frame [kg m^2] of MuJoCo's principal ``moments`` [3]
+    rotated by ``iquat`` (w, x, y, z; None: identity): ``R diag(moments) R^T``."""
+    r = quat_to_matrix_np(np.array([1.0, 0, 0, 0]) if iquat is None else np.asarray(iquat, float))
+    return r @ np.diag(np.asarray(moments, float)) @ r.T
+
+
+def principal(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(principal moments [3], ``iquat`` (w, x, y, z)) of a symmetric [3, 3] inertia tensor:
+    the body_inertia / body_iquat pair MuJoCo stores (moments ascending, a proper rotation)."""
+    vals, vecs = np.linalg.eigh(0.5 * (tensor + tensor.T))
+    if np.linalg.det(vecs) < 0:
+        vecs[:, 0] *= -1.0
+    return vals, matrix_to_quat_np(vecs)
+
+
+def write_body(model: Any, body: BodyValues, slots: Any, *, timeconst: float) -> None:
+    """Write ``body`` into a compiled ``MjModel`` in place (``slots``: :class:`EffectSlots`).
+
+    * ``body_mass``; the inertia tensor of the nominal body (``slots.nominal_*``) scaled with
+      the mass, its body-z moment set to ``inertia_z``, roll and pitch scaled by
+      ``slots.tilt_inertia_scale`` (congruence ``diag(k, k, 1)^1/2``, positive definite) and
+      re-diagonalised into ``body_inertia`` / ``body_iquat`` (:func:`principal`);
+    * ``body_ipos`` (x, y) = ``com``;
+    * the support pairs' friction ``mu_d / (1 + k)`` (torsional ``* radius``), and for
+      ``restitution > 0`` their ``solref`` ``(max(timeconst, BOUNCE_TIMECONST), zeta)`` with
+      :func:`restitution_damping_ratio` and :data:`BOUNCE_SOLIMP` (corrected by
+      :func:`ballast_contact`); ``timeconst`` [s] is the pairs' solref time constant;
+    * ``dof_damping`` of the x, y, z DOFs ``damping m`` (``(1 + k)`` on z); with a z ballast
+      ``k`` (``slots.ballast``) the z armature ``k m`` and the ballast force ``k m g_z``.
+    """
+    b = slots.body
+    mass = float(body.mass)
+    # the tensor in the body frame: scaled with the mass, the yaw moment set, roll and pitch
+    # scaled (congruence diag(k, k, 1)^1/2 keeps it positive definite), re-diagonalised
+    tensor = inertia_tensor(slots.nominal_inertia, slots.nominal_iquat)
+    tensor = tensor * (mass / slots.nominal_mass)
+    tensor[2, 2] = float(body.inertia_z)
+    k = np.sqrt([slots.tilt_inertia_scale, slots.tilt_inertia_scale, 1.0])
+    tensor = tensor * np.outer(k, k)
+    model.body_mass[b] = mass
+    model.body_inertia[b], model.body_iquat[b] = principal(tensor)
+    model.body_ipos[b, :2] = body.com
+    kb = float(slots.ballast)
+    mu = max(float(body.mu_d), 1e-5) / (1.0 + kb)
+    zeta = restitution_damping_ratio(body.restitution)
+    rho = slots.table_torsion or [0.0] * len(slots.table_pairs)
+    for row, r in zip(slots.table_pairs, rho, strict=True):
+        model.pair_friction[row, :2] = mu
+        if r > 0:
+            model.pair_friction[row, 2] = mu * r
+        if zeta < 1.0:
+            sr, si, _ = ballast_contact(
+                (max(timeconst, BOUNCE_TIMECONST), zeta), BOUNCE_SOLIMP, kb, vertical=True
+            )
+            model.pair_solref[row], model.pair_solimp[row] = sr, si
+    z = np.array([1.0, 1.0, 1.0 + kb])  # the z DOF's inertia is (1 + k) m
+    model.dof_damping[slots.dof : slots.dof + 3] = float(body.damping) * mass * z
+    if kb > 0:
+        model.dof_armature[slots.dof + 2] = kb * mass
+        model.actuator_biasprm[slots.ballast_actuator, 0] = kb * mass * model.opt.gravity[2]
 
 
 def planar_joints_fit(
@@ -539,11 +731,19 @@ def _quat_from_z(normal: np.ndarray) -> np.ndarray:
 
 def _inertial(body: ET.Element, entry: Mapping[str, Any], where: str) -> float:
     mass = _number(entry, "mass_kg", 0.0, where)
+    J = _inertia_tensor(entry, mass, where)
+    com = _floats(entry, "com_m", 3, where) if "com_m" in entry else [0.0, 0.0, 0.0]
+    full = [J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2]]
+    ET.SubElement(body, "inertial", pos=_vec(com), mass=_f(mass), fullinertia=_vec(full))
+    return mass
+
+
+def _inertia_tensor(entry: Mapping[str, Any], mass: float, where: str) -> np.ndarray:
+    """[3, 3] inertia about the CoM [kg m^2]: ``inertia_kgm2``, else the ``size_m`` box's."""
     if mass <= 0:
         raise FormatError(
             "a rigid object needs mass_kg > 0", path="physics.json", where=f"{where}/mass_kg"
         )
-    com = _floats(entry, "com_m", 3, where) if "com_m" in entry else [0.0, 0.0, 0.0]
     if "inertia_kgm2" in entry:
         rows = entry["inertia_kgm2"]
         J = np.array([_floats({"r": r}, "r", 3, f"{where}/inertia_kgm2") for r in rows])
@@ -562,9 +762,7 @@ def _inertial(body: ET.Element, entry: Mapping[str, Any], where: str) -> float:
             path="physics.json",
             where=where,
         )
-    full = [J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2]]
-    ET.SubElement(body, "inertial", pos=_vec(com), mass=_f(mass), fullinertia=_vec(full))
-    return mass
+    return J
 
 
 FOOTPRINT_RADIUS = 1e-3

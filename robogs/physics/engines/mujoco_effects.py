@@ -6,7 +6,9 @@ translated, so a user-written effect works on both engines without MuJoCo code:
 
 * ``body`` hooks -> **model parameters** of each parameter set: the changed
   :class:`~robogs.physics.model.Body` (mass, yaw inertia, CoM, dynamic friction, restitution,
-  linear damping) is written into a copy of the ``MjModel`` (:func:`apply_body`);
+  linear damping) is written into a copy of the ``MjModel`` (:func:`apply_body`, by
+  :func:`robogs.format.mjcf.write_body`: ``robogs export mjcf`` writes the exported object's
+  body, its fitted mass, CoM offset and restitution included, with the same function);
 * ``accel`` hooks -> **per-step applied forces**: the hook is called on the MuJoCo state of
   every rollout each step and its acceleration enters as ``xfrc_applied`` = m a (force at the
   CoM) and I_z alpha (torque about world z) (:func:`step_forces`);
@@ -36,7 +38,6 @@ pair (:data:`BOUNCE_SOLIMP`, :data:`BOUNCE_TIMECONST`; the test drops check the 
 from __future__ import annotations
 
 import copy
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -44,7 +45,16 @@ import mujoco
 import numpy as np
 import torch
 
-from robogs.format.mjcf import NATIVE_EFFECTS, ballast_contact
+from robogs.format.mjcf import (  # one map for the engine and `robogs export mjcf`
+    BOUNCE_SOLIMP,
+    BOUNCE_TIMECONST,
+    NATIVE_EFFECTS,
+    BodyValues,
+    inertia_tensor,
+    principal,
+    restitution_damping_ratio,
+    write_body,
+)
 from robogs.physics.effects import Effect, overrides
 from robogs.physics.model import Body, FreeState, Slip
 
@@ -113,43 +123,7 @@ class ObjectSlots:
 
     def body_tensor(self) -> np.ndarray:
         """[3, 3] nominal inertia tensor about the CoM in the body frame [kg m^2]."""
-        q = np.array([1.0, 0, 0, 0]) if self.nominal_iquat is None else self.nominal_iquat
-        r = np.empty(9)
-        mujoco.mju_quat2Mat(r, np.asarray(q, dtype=float))
-        r = r.reshape(3, 3)
-        return r @ np.diag(self.nominal_inertia) @ r.T
-
-
-def principal(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(principal moments [3], ``iquat`` (w, x, y, z)) of a symmetric [3, 3] inertia tensor:
-    the body_inertia / body_iquat pair MuJoCo stores."""
-    vals, vecs = np.linalg.eigh(0.5 * (tensor + tensor.T))
-    if np.linalg.det(vecs) < 0:
-        vecs[:, 0] *= -1.0
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, np.ascontiguousarray(vecs).ravel())
-    return vals, q / np.linalg.norm(q)
-
-
-BOUNCE_TIMECONST = 0.02
-"""Contact time constant [s] of an underdamped (bouncing) object-table pair: with the 4 ms of
-the plastic contacts, damping ratios below about 0.2 (e > 0.5) made the semi-implicit Euler
-contact unstable (a 5 cm drop at e = 0.7 rose 11 cm); at 20 ms the bounce follows the
-closed-form ratio within 0.03 (drops of 2 and 5 cm, e = 0.3-0.7)."""
-
-BOUNCE_SOLIMP = (0.9, 0.9, 0.001, 0.5, 2.0)
-"""solimp of a bouncing pair: a constant impedance, so the contact is the linear spring-damper
-whose damping ratio the closed form assumes (the plastic pairs' impedance rises from 0.95 to
-0.99 within 1 mm, which made the bounce depend on the drop height)."""
-
-
-def restitution_damping_ratio(e: float) -> float:
-    """Damping ratio of a linear spring-damper whose impact restitution is ``e`` (0 -> 1)."""
-    e = min(max(float(e), 0.0), 0.98)
-    if e <= 1e-6:
-        return 1.0
-    le = math.log(e)
-    return -le / math.sqrt(math.pi**2 + le * le)
+        return inertia_tensor(self.nominal_inertia, self.nominal_iquat)
 
 
 NATIVE: dict[str, Callable[[mujoco.MjModel, dict[str, float], ObjectSlots], None]] = NATIVE_EFFECTS
@@ -183,42 +157,19 @@ def apply_body(
     timeconst: float,
 ) -> mujoco.MjModel:
     """A copy of ``base`` carrying row ``m`` of ``body`` (mass, inertia, CoM, mu_d,
-    restitution, linear damping); ``timeconst`` [s] is the contact pairs' solref time constant
-    (a bouncing pair gets :data:`BOUNCE_TIMECONST` and :data:`BOUNCE_SOLIMP`). With a z ballast
-    (``slots.ballast``) its armature and weight follow the set's mass, and the support pairs'
-    coefficients are mu_d / (1 + k) (a bouncing pair's solref and
-    solimp corrected by :func:`robogs.format.mjcf.ballast_contact`)."""
+    restitution, linear damping), written by :func:`robogs.format.mjcf.write_body` (the
+    function ``robogs export mjcf`` writes the exported body with); ``timeconst`` [s] is the
+    contact pairs' solref time constant."""
     model = copy.copy(base)
-    b = slots.body
-    mass = float(body.mass[m, 0])
-    # the tensor in the body frame: scaled with the mass, the yaw moment set, roll and pitch
-    # scaled (congruence diag(k, k, 1)^1/2 keeps it positive definite), re-diagonalised
-    tensor = slots.body_tensor() * (mass / slots.nominal_mass)
-    tensor[2, 2] = float(body.inertia_z[m, 0])
-    k = np.sqrt([slots.tilt_inertia_scale, slots.tilt_inertia_scale, 1.0])
-    tensor = tensor * np.outer(k, k)
-    model.body_mass[b] = mass
-    model.body_inertia[b], model.body_iquat[b] = principal(tensor)
-    model.body_ipos[b, :2] = body.com[m, 0].numpy()
-    kb = slots.ballast
-    mu = max(float(body.mu_d[m, 0]), 1e-5) / (1.0 + kb)
-    e = float(body.restitution[m, 0])
-    zeta = restitution_damping_ratio(e)
-    rho = slots.table_torsion or [0.0] * len(slots.table_pairs)
-    for k, r in zip(slots.table_pairs, rho, strict=True):
-        model.pair_friction[k, :2] = mu
-        if r > 0:
-            model.pair_friction[k, 2] = mu * r
-        if zeta < 1.0:
-            sr, si, _ = ballast_contact(
-                (max(timeconst, BOUNCE_TIMECONST), zeta), BOUNCE_SOLIMP, kb, vertical=True
-            )
-            model.pair_solref[k], model.pair_solimp[k] = sr, si
-    z = np.array([1.0, 1.0, 1.0 + kb])  # the z DOF's inertia is (1 + k) m
-    model.dof_damping[slots.dof : slots.dof + 3] = float(body.damping[m, 0]) * mass * z
-    if kb > 0:
-        model.dof_armature[slots.dof + 2] = kb * mass
-        model.actuator_biasprm[slots.ballast_actuator, 0] = kb * mass * model.opt.gravity[2]
+    values = BodyValues(
+        mass=float(body.mass[m, 0]),
+        inertia_z=float(body.inertia_z[m, 0]),
+        com=(float(body.com[m, 0, 0]), float(body.com[m, 0, 1])),
+        mu_d=float(body.mu_d[m, 0]),
+        restitution=float(body.restitution[m, 0]),
+        damping=float(body.damping[m, 0]),
+    )
+    write_body(model, values, slots, timeconst=timeconst)
     return model
 
 
