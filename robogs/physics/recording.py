@@ -88,6 +88,9 @@ class Recording:
             assets (:func:`robogs.format.shapes.load_object_meshes`); empty for recordings
             without assets. Which of them reach the engines: :meth:`shapes`.
         box_budget_mm: the dataset's ``geometry.box3d_mm``, within which a mesh is its box.
+        robot_pusher: with ``objects.pusher.geometry = "robot"``, the robot's pusher links
+            (:class:`robogs.physics.engines.mujoco_robot.RobotPusher`: the URDF and each link's
+            pose in the pusher frame, measured over the recording); None otherwise.
     """
 
     trajectories: list[Trajectory]
@@ -96,13 +99,24 @@ class Recording:
     meta: dict[str, Any] = field(default_factory=dict)
     meshes: dict[str, Any] = field(default_factory=dict)
     box_budget_mm: float = DEFAULT_BUDGETS["geometry.box3d_mm"].value
+    robot_pusher: Any = None
 
     def shapes(self) -> Any:
         """The object meshes that are not their ``size_m`` box, with the notes to print
-        (:func:`robogs.format.shapes.object_shapes`)."""
+        (:func:`robogs.format.shapes.object_shapes`); with a robot pusher also
+        ``meshes["pusher"]``, the :attr:`robot_pusher` (the MuJoCo engine takes it from there)."""
         from robogs.format.shapes import object_shapes
 
-        return object_shapes(self.physics, self.meshes, self.box_budget_mm)
+        out = object_shapes(self.physics, self.meshes, self.box_budget_mm)
+        rp = self.robot_pusher
+        if rp is not None:
+            out.meshes["pusher"] = rp
+            out.notes.append(
+                f"pusher: the robot's links {', '.join(rp.frames)} (objects.pusher.geometry "
+                f"robot; they move in the pusher frame by {rp.spread_m * 1e3:.3g} mm, "
+                f"{np.degrees(rp.spread_rad):.3g} deg over the recording)"
+            )
+        return out
 
     @property
     def tracked(self) -> list[str]:
@@ -195,6 +209,7 @@ def as_recording(obj: Any) -> Recording:
             box_budget_mm=float(
                 getattr(obj, "box_budget_mm", DEFAULT_BUDGETS["geometry.box3d_mm"].value)
             ),
+            robot_pusher=getattr(obj, "robot_pusher", None),
         )
     for t in rec.trajectories:
         t.t_ns = np.asarray(t.t_ns, dtype=np.int64)
@@ -484,6 +499,7 @@ def load_recording(
     trajs: list[Trajectory] = []
     pieces: list[Any] = []
     chain = None
+    robot_links = _RobotLinks.of(ds, physics, ee_link)  # objects.pusher.geometry = "robot"
     for ep in ds.episodes:
         _require_stream(
             ds,
@@ -502,6 +518,8 @@ def load_recording(
             if chain is None:
                 chain = _robot_chain(ds, physics, ee_link, ep.id)
             et_ns, epos, equat = _ee_from_joints(ds, ep, chain, str(ee_link))
+        if robot_links is not None:
+            robot_links.add(ds, ep, equat)
         if offset is not None:
             from robogs.format.frames import quat_to_matrix
 
@@ -551,12 +569,89 @@ def load_recording(
         meta={"split": pieces},
         meshes=load_object_meshes(ds),
         box_budget_mm=float(ds.budgets[BOX_BUDGET]),
+        robot_pusher=None if robot_links is None else robot_links.pusher(ds, offset),
     )
     rec = as_recording(rec)
     if log is not None:
         log.pieces += pieces
         log.recordings.append(rec)
     return rec
+
+
+class _RobotLinks:
+    """What ``objects.pusher.geometry = "robot"`` needs from a dataset: the robot chain, the
+    pusher link and the links below it, and, per episode, the end effector's orientations and
+    the links' poses relative to it (forward kinematics of ``joint_states``; without them the
+    links below the pusher link must hang from it by fixed joints)."""
+
+    def __init__(self, chain: Any, link: str, urdf: Path) -> None:
+        from robogs.physics.engines.mujoco_robot import distal_links
+
+        self.chain, self.link, self.urdf = chain, link, urdf
+        self.links = distal_links(chain, link)
+        self.ee_rot: list[np.ndarray] = []
+        self.rel: dict[str, list[np.ndarray]] = {n: [] for n in self.links}
+
+    @classmethod
+    def of(cls, ds: Any, physics: dict[str, Any], ee_link: Any) -> _RobotLinks | None:
+        from robogs.physics.engines.mujoco_robot import pusher_geometry
+
+        if pusher_geometry(physics) != "robot":
+            return None
+        robot = ds.manifest.get("robot") or {}
+        if not isinstance(robot.get("urdf"), str):
+            raise FormatError(
+                "objects.pusher.geometry is 'robot' but the dataset has no robot URDF",
+                path=ds.manifest_path,
+                where="robot/urdf",
+                hint="declare robot.urdf, or use the primitive pusher "
+                "(robogs physics set DATASET objects.pusher.geometry=primitive)",
+            )
+        chain = _robot_chain(ds, physics, ee_link, "(objects.pusher.geometry robot)")
+        return cls(chain, str(ee_link), Path(ds.urdf_path))
+
+    def add(self, ds: Any, ep: Any, ee_quat: np.ndarray) -> None:
+        import torch
+
+        from robogs.format.frames import quat_to_matrix
+
+        self.ee_rot.append(np.asarray(quat_to_matrix(ee_quat), dtype=float))
+        idx = [self.chain.link_index(n) for n in self.links]
+        if ep.has("joint_states"):
+            _, T = link_frames(ds, ep, self.chain)
+        else:
+            moving = [
+                self.chain.link_names[k]
+                for k in idx[1:]
+                if self.chain.joint_types[k - 1] != "fixed"
+            ]
+            if moving:
+                raise FormatError(
+                    f"episode {ep.id!r} has no joint_states, and links {', '.join(moving)} "
+                    f"below the pusher link {self.link!r} hang from moving joints",
+                    path=ds.manifest_path,
+                    where=f"episodes/{ep.id}",
+                    hint="record joint_states, or use the primitive pusher "
+                    "(objects.pusher.geometry=primitive)",
+                )
+            q = torch.zeros((1, self.chain.num_joints), dtype=torch.float64)
+            T = self.chain.forward(q).numpy()
+        inv = np.linalg.inv(T[:, self.chain.link_index(self.link)])
+        for n, k in zip(self.links, idx, strict=True):
+            self.rel[n].append(inv @ T[:, k])
+
+    def pusher(self, ds: Any, offset: Any) -> Any:
+        from robogs.physics.engines.mujoco_robot import RobotPusher, pusher_frames
+
+        frames, dist, ang = pusher_frames(
+            np.concatenate(self.ee_rot),
+            offset,
+            {n: np.concatenate(v) for n, v in self.rel.items()},
+            where=f"dataset {ds.root}",
+        )
+        return RobotPusher(
+            self.urdf, self.link, frames, root=Path(ds.root), spread_m=dist, spread_rad=ang
+        )
 
 
 def _pushed_object(tracks: dict[str, ObjectTrack], ee_t: np.ndarray, ee_pos: np.ndarray) -> str:

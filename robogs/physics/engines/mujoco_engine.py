@@ -236,7 +236,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from robogs.format.errors import InputError
+from robogs.format.errors import FormatError, InputError
 from robogs.format.mjcf import (  # one source for the engine and `robogs export mjcf`
     JOINTS,
     OBJECT_PAIR_DAMPRATIO,
@@ -250,6 +250,7 @@ from robogs.format.mjcf import (  # one source for the engine and `robogs export
     use_planar_joints,
 )
 from robogs.physics.engines.base import ObjectState, Predicted, quat_yaw, yaw_quat
+from robogs.physics.engines.mujoco_robot import pusher_geometry
 from robogs.physics.model import Drive
 
 __all__ = [
@@ -403,6 +404,8 @@ class MujocoEngine:
         joints: str = "auto",
         pusher_speed: float | None = None,
     ) -> None:
+        meshes = dict(meshes or {})
+        robot = meshes.pop("pusher", None)  # the robot pusher's geometry (mujoco_robot)
         ok, why = self.can_represent(physics, meshes)
         if not ok:
             raise InputError(f"the mujoco engine cannot represent this scene: {why}")
@@ -421,6 +424,10 @@ class MujocoEngine:
             settings=self.settings,
             joints="planar" if self.planar else "free",
         )
+        #: the pusher's geom names (their object pairs are the pusher pairs)
+        self.pusher_geoms: list[str] = ["pusher", "pusher_end"]
+        if pusher_geometry(physics) == "robot":
+            self.scene, self.pusher_geoms = _robot_scene(self.scene, robot)
         self.model = mujoco.MjModel.from_xml_string(self.scene.xml, assets=self.scene.assets)
         _align_pairs(self.model, self.scene)
         self.dt = float(dt)
@@ -478,6 +485,11 @@ class MujocoEngine:
                 rigid.append(name)
         if not rigid:
             return False, "physics.json has no rigid object"
+        try:
+            if pusher_geometry(physics) == "robot":
+                return True, f"{len(rigid)} rigid object(s), plane support, the robot's links push"
+        except FormatError as exc:
+            return False, str(exc)
         shape = (objects.get("pusher") or {}).get("shape")
         if shape not in (None, "sphere", "capsule", "box"):
             return False, f"pusher shape {shape!r} is not sphere, capsule or box"
@@ -495,7 +507,7 @@ class MujocoEngine:
             obj, what = parts[1], parts[2]
             if obj == "pusher" and what == "friction_dynamic":
                 for k, (a, b) in enumerate(self.scene.pairs):
-                    if {"pusher", "pusher_end"} & {a, b}:
+                    if set(self.pusher_geoms) & {a, b}:
                         m.pair_friction[k, :2] = max(v, 1e-5)
             elif obj in self._bid and what == "friction_dynamic":
                 v /= 1.0 + self.scene.ballast  # the support carries (1 + k) m g (z ballast)
@@ -731,6 +743,20 @@ def _align_pairs(model: mujoco.MjModel, scene: MjcfScene) -> None:
     scene.pairs = [scene.pairs[i] for i in order]
     scene.pair_torsion = [scene.pair_torsion[i] for i in order]
     scene.table_pairs = {o: [new[i] for i in rows] for o, rows in scene.table_pairs.items()}
+
+
+def _robot_scene(scene: MjcfScene, robot: Any) -> tuple[MjcfScene, list[str]]:
+    """The scene with the robot's links as its pusher (:mod:`.mujoco_robot`)."""
+    from robogs.physics.engines.mujoco_robot import RobotPusher, robot_pusher_scene
+
+    if not isinstance(robot, RobotPusher):
+        raise InputError(
+            "objects.pusher.geometry is 'robot' but the engine got no robot geometry",
+            where="meshes['pusher']",
+            hint="load the recording from a dataset with a robot URDF (load_recording), whose "
+            "shapes() carry it, or pass meshes={'pusher': RobotPusher(...)}",
+        )
+    return robot_pusher_scene(scene, robot)
 
 
 def _sample(dense: np.ndarray, obs_t: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:

@@ -225,7 +225,7 @@ class MujocoFit:
             else [self.pq, self.pq + 1, self.pq + 2, self.pv, self.pv + 1, self.pv + 2]
         )
         self.pusher_pairs = [
-            k for k, pr in enumerate(self.eng.scene.pairs) if {"pusher", "pusher_end"} & set(pr)
+            k for k, pr in enumerate(self.eng.scene.pairs) if set(self.eng.pusher_geoms) & set(pr)
         ]
         self.gravity = float(-m.opt.gravity[2])
         self.nbody = m.nbody

@@ -77,6 +77,11 @@ class PlanarEngine:
         if tilt > MAX_TILT_DEG:
             return False, f"support plane tilted {tilt:.1f} deg (> {MAX_TILT_DEG} deg)"
         pusher = objects.get("pusher") or {}
+        if pusher.get("geometry", "primitive") != "primitive":
+            return False, (
+                f"objects.pusher.geometry is {pusher.get('geometry')!r} (the planar model "
+                "pushes with a sphere or capsule; the robot's links need the mujoco engine)"
+            )
         if pusher.get("shape") not in (None, "sphere", "capsule"):
             return False, f"pusher shape {pusher.get('shape')!r} (sphere or capsule only)"
         if float(pusher.get("friction_dynamic") or 0.0) > 0.0:

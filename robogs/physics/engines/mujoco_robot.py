@@ -1,0 +1,357 @@
+"""The robot's own links as the MuJoCo pusher (``objects.pusher.geometry = "robot"``).
+
+By default the MuJoCo engine pushes with a primitive (a sphere, capsule or box of
+``objects.pusher``'s sizes at the end-effector pose). With ``objects.pusher.geometry = "robot"``
+the pusher is the URDF's collision geometry of the pusher link (``objects.pusher.link``, else
+the manifest's ``robot.ee_link``) and of every link below it in the chain (fingers, flange tool).
+
+What does what:
+
+* **The geometry** comes from :func:`robogs.format.mjcf_robot.robot_mjcf`: MuJoCo's URDF compiler
+  reads the URDF, every mesh goes through its rule (an STL copied, other formats converted to
+  OBJ; a mesh MuJoCo refuses kept with ``inertia="shell"``, else hulled, else dropped, each said
+  in the notes). Only the collision geoms (URDF ``<collision>``) are used.
+* **The pose**: the geoms are carried by the engine's pusher body, the heavy servo-driven body
+  on slide x, y, z and a yaw hinge that follows the drive (the measured end effector resampled
+  on the step grid as for the primitive: :func:`robogs.physics.prepare.build_drive`). Each link
+  sits in the pusher frame (origin at the pusher point ``p = x_ee + R_ee offset_m``, axes the
+  end effector's yaw) at ``T_pusher_link``, measured by forward kinematics of the recorded
+  joints (:func:`robogs.physics.recording.load_recording`; with ``ee_poses`` only, the links
+  below the pusher link must hang from it by fixed joints). So a link's pose at each step is
+  the primitive's pose at that step composed with a constant transform, which is the forward
+  kinematics pose exactly when that transform is constant over the recording: the end effector
+  only yaws (its roll and pitch keep the value they had) and the joints below the pusher link do
+  not move. The recording is checked (:func:`pusher_frames`, spreads within
+  :data:`RIGID_TOL_M` and :data:`RIGID_TOL_RAD`); a recording that moves them is refused with
+  the reason (the primitive pusher is the fallback). Moving fingers are not modelled yet.
+* **Why not mocap bodies**: MuJoCo gives a mocap body zero velocity in the contact solver, so
+  the contact damping and the pusher friction would act against the object's motion instead of
+  the relative sliding, and the pusher's strike and pushes would differ from the primitive's
+  (the engine's docstring, :mod:`robogs.physics.engines.mujoco_engine`). Carried by the pusher
+  body, a URDF sphere of the primitive's radius at the pusher point is the primitive:
+  ``tests/physics/test_mujoco_robot_pusher.py`` checks the box trajectories agree within 1e-6 m.
+* **Contacts**: robot geoms have ``contype = conaffinity = 0``; they touch only the objects,
+  through one ``<pair>`` per (object, robot geom) with the primitive's settings (the primitive's
+  pair copied: friction ``objects.pusher.friction_dynamic``, ``solref``, ``solimp``, onset
+  ramp). No contact with the table, the other links or itself.
+
+The engine receives the geometry as ``meshes["pusher"]`` (a :class:`RobotPusher`:
+:meth:`robogs.physics.recording.Recording.shapes` puts it there, so every caller that passes
+the shapes to the engine passes the robot too).
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robogs.format.errors import FormatError, InputError
+
+__all__ = [
+    "PUSHER_GEOMETRIES",
+    "RIGID_TOL_M",
+    "RIGID_TOL_RAD",
+    "RobotPusher",
+    "distal_links",
+    "pusher_frames",
+    "pusher_geometry",
+    "robot_pusher_scene",
+]
+
+PUSHER_GEOMETRIES = ("primitive", "robot")
+"""Values of ``objects.pusher.geometry`` (default ``primitive``)."""
+
+RIGID_TOL_M = 2e-4
+"""m: largest spread of a link's position in the pusher frame over a recording."""
+
+RIGID_TOL_RAD = 4e-3
+"""rad: largest spread of a link's orientation in the pusher frame (0.23 deg: 0.4 mm at 0.1 m)."""
+
+PREFIX = "robot/"
+"""Name prefix of the robot's meshes in the scene document."""
+
+
+@dataclass
+class RobotPusher:
+    """The robot's pusher geometry for the MuJoCo engine.
+
+    Attributes:
+        urdf: the URDF file; root: allowed root of its meshes (the dataset root);
+        package_roots: ``{package: folder}`` for ``package://`` URIs (None: the default search).
+        link: the pusher link.
+        frames: link name -> ``T_pusher_link`` [4, 4] (m), the pusher link and the links below
+            it, in the pusher frame (origin the pusher point, axes the end effector's yaw).
+        spread_m, spread_rad: the largest spread of those frames over the recording.
+        notes: what was said about the geometry (hulled meshes, which links).
+    """
+
+    urdf: Path
+    link: str
+    frames: dict[str, np.ndarray]
+    root: Path | None = None
+    package_roots: Mapping[str, Any] | None = None
+    spread_m: float = 0.0
+    spread_rad: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+
+def pusher_geometry(physics: Mapping[str, Any]) -> str:
+    """``objects.pusher.geometry`` of a physics.json document (``primitive`` when absent).
+
+    Raises:
+        FormatError: another value.
+    """
+    pusher = (physics.get("objects") or {}).get("pusher") or {}
+    value = pusher.get("geometry", "primitive") if isinstance(pusher, Mapping) else "primitive"
+    if value not in PUSHER_GEOMETRIES:
+        raise FormatError(
+            f"objects.pusher.geometry is {value!r}",
+            path="physics.json",
+            where="objects/pusher/geometry",
+            hint=f"one of {', '.join(PUSHER_GEOMETRIES)} (robot: the URDF's links push)",
+        )
+    return str(value)
+
+
+def distal_links(chain: Any, link: str) -> list[str]:
+    """``link`` and every link below it in ``chain`` (a
+    :class:`robogs.format.kinematics.Chain`), in the chain's order."""
+    k0 = chain.link_index(link)
+    below = {k0}
+    for k in range(k0 + 1, chain.num_links):
+        if chain.parents[k] in below:
+            below.add(k)
+    return [chain.link_names[k] for k in sorted(below)]
+
+
+def _spread(T: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Mean pose of poses ``T`` [N, 4, 4] (rotation: the mean projected onto SO(3)) and the
+    largest distance [m] and angle [rad] of a pose from it."""
+    t = T[:, :3, 3].mean(0)
+    u, _, vt = np.linalg.svd(T[:, :3, :3].mean(0))
+    r = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+    mean = np.eye(4)
+    mean[:3, :3], mean[:3, 3] = r, t
+    dist = float(np.linalg.norm(T[:, :3, 3] - t, axis=1).max())
+    cos = (np.einsum("nij,ij->n", T[:, :3, :3], r) - 1.0) / 2.0
+    ang = float(np.arccos(np.clip(cos, -1.0, 1.0)).max())
+    return mean, dist, ang
+
+
+def _yaw_rot(yaw: np.ndarray) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = np.zeros((*np.shape(yaw), 3, 3))
+    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = c, -s, s, c
+    out[..., 2, 2] = 1.0
+    return out
+
+
+def pusher_frames(
+    ee_rot: np.ndarray,
+    offset: Sequence[float] | None,
+    links_in_ee: Mapping[str, np.ndarray],
+    *,
+    where: str = "recording",
+) -> tuple[dict[str, np.ndarray], float, float]:
+    """The links' constant poses in the pusher frame, checked against a recording.
+
+    Args:
+        ee_rot: [N, 3, 3] the end effector's orientations ``R_world_ee`` over the recording.
+        offset: the pusher point in the end-effector frame [m] (``objects.pusher.offset_m``).
+        links_in_ee: link name -> ``T_ee_link`` [K, 4, 4] (m) over the recording (K >= 1).
+        where: what the recording is, for the error.
+
+    Returns:
+        (link -> mean ``T_pusher_link`` [4, 4], largest position spread [m], largest angle
+        spread [rad]).
+
+    Raises:
+        InputError: a spread exceeds :data:`RIGID_TOL_M` or :data:`RIGID_TOL_RAD` (the end
+            effector rolls or pitches, or a joint below the pusher link moves).
+    """
+    from robogs.physics.recording import yaw_of
+
+    rot = np.asarray(ee_rot, dtype=float)
+    quat = _quat(rot)
+    off = np.zeros(3) if offset is None else np.asarray(offset, dtype=float)
+    r_yaw_t = np.swapaxes(_yaw_rot(yaw_of(quat)), -1, -2)
+    t_pe = np.zeros((len(rot), 4, 4))  # T_pusher_ee = Rz(-yaw) [R_ee | -R_ee off]
+    t_pe[:, :3, :3] = r_yaw_t @ rot
+    t_pe[:, :3, 3] = -(t_pe[:, :3, :3] @ off)
+    t_pe[:, 3, 3] = 1.0
+    mean_pe, d_pe, a_pe = _spread(t_pe)
+    frames, dist, ang = {}, d_pe, a_pe
+    worst = "the end effector's roll and pitch"
+    for name, rel in links_in_ee.items():
+        mean_el, d, a = _spread(np.asarray(rel, dtype=float).reshape(-1, 4, 4))
+        frames[name] = mean_pe @ mean_el
+        if d > dist or a > ang:
+            worst = f"link {name!r} relative to the end effector (a joint below it moves)"
+        dist, ang = max(dist, d), max(ang, a)
+    if dist > RIGID_TOL_M or ang > RIGID_TOL_RAD:
+        raise InputError(
+            f"objects.pusher.geometry 'robot': the robot links move in the pusher frame over "
+            f"the {where} by {dist * 1e3:.3g} mm / {np.degrees(ang):.3g} deg (allowed "
+            f"{RIGID_TOL_M * 1e3:g} mm / {np.degrees(RIGID_TOL_RAD):.3g} deg); largest: {worst}",
+            where="objects/pusher/geometry",
+            hint="the robot pusher follows the end effector's position and yaw with fixed links "
+            "below it; use the primitive pusher (robogs physics set DATASET "
+            "objects.pusher.geometry=primitive)",
+        )
+    return frames, dist, ang
+
+
+def _quat(rot: np.ndarray) -> np.ndarray:
+    """(w, x, y, z) unit quaternions of rotation matrices [..., 3, 3]."""
+    from robogs.format.frames import matrix_to_quat_np
+
+    return np.asarray(matrix_to_quat_np(rot), dtype=float)
+
+
+def _find_body(bodies: Sequence[ET.Element], name: str) -> ET.Element | None:
+    for b in bodies:
+        for el in b.iter("body"):
+            if el.get("name") == name:
+                return el
+    return None
+
+
+def _pose_matrix(el: ET.Element) -> np.ndarray:
+    """``T_body_geom`` of a geom element with ``pos`` and ``quat`` (w x y z)."""
+    import mujoco
+
+    pos = [float(v) for v in (el.get("pos") or "0 0 0").split()]
+    q = np.array([float(v) for v in (el.get("quat") or "1 0 0 0").split()])
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, q / np.linalg.norm(q))
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = mat.reshape(3, 3), pos
+    return out
+
+
+def _vec(vs: Sequence[float]) -> str:
+    return " ".join(repr(float(v)) for v in vs)
+
+
+def robot_pusher_scene(scene: Any, rp: RobotPusher) -> tuple[Any, list[str]]:
+    """Replace the primitive pusher of a scene document by the robot's collision geometry.
+
+    Args:
+        scene: a :class:`robogs.format.mjcf.MjcfScene` with a pusher.
+        rp: the robot pusher.
+
+    Returns:
+        (a new scene: pusher body geoms, mesh assets, contact pairs, ``pairs``,
+        ``pair_torsion``, ``table_pairs`` and notes rewritten; the names of the robot's pusher
+        geoms, ``pusher/<link>/<k>``).
+
+    Raises:
+        InputError: the scene has no pusher, or the links carry no collision geometry.
+        FormatError: from :func:`robogs.format.mjcf_robot.robot_mjcf` (URDF or mesh refused).
+    """
+    import mujoco
+
+    from robogs.format.mjcf_robot import robot_mjcf
+
+    if scene.pusher is None:
+        raise InputError(
+            "objects.pusher.geometry is 'robot' but the scene has no pusher",
+            where="objects/pusher",
+            hint="declare objects.pusher (link, friction_dynamic)",
+        )
+    robot = robot_mjcf(rp.urdf, root=rp.root, package_roots=rp.package_roots, prefix=PREFIX)
+    root = ET.fromstring(scene.xml)
+    world = root.find("worldbody")
+    body = next(b for b in world.iter("body") if b.get("name") == scene.pusher)
+    old = [g for g in body.findall("geom") if (g.get("name") or "").startswith("pusher")]
+    for g in old:
+        body.remove(g)
+    names: list[str] = []
+    meshes: set[str] = set()
+    for link, t_pl in rp.frames.items():
+        lb = _find_body(robot.bodies, robot.links.get(link, ""))
+        if lb is None:
+            continue
+        for k, g in enumerate(el for el in lb.findall("geom") if el.get("group") == "3"):
+            t = t_pl @ _pose_matrix(g)
+            q = np.zeros(4)
+            mujoco.mju_mat2Quat(q, t[:3, :3].reshape(-1).copy())
+            attrs = {a: v for a, v in g.attrib.items() if a not in ("pos", "quat", "rgba")}
+            name = f"pusher/{link}/{k}"
+            attrs.update(name=name, pos=_vec(t[:3, 3]), quat=_vec(q), contype="0")
+            attrs.update(conaffinity="0", group="1")
+            ET.SubElement(body, "geom", **attrs)
+            names.append(name)
+            if g.get("mesh"):
+                meshes.add(g.get("mesh"))
+    if not names:
+        raise InputError(
+            f"objects.pusher.geometry is 'robot' but links {', '.join(rp.frames)} have no "
+            "collision geometry in the URDF",
+            path=rp.urdf,
+            where="objects/pusher/geometry",
+            hint="give the pusher link a <collision>, or use the primitive pusher "
+            "(objects.pusher.geometry=primitive)",
+        )
+    assets = dict(scene.assets)
+    if meshes:
+        asset = root.find("asset")
+        if asset is None:
+            asset = ET.Element("asset")
+            root.insert(list(root).index(world), asset)
+        for m in robot.meshes:
+            if m.get("name") in meshes:
+                asset.append(m)
+                assets[m.get("file")] = robot.files[m.get("file")]
+    pairs, torsion, moved = _pusher_pairs(root, scene, names)
+    table = {o: [moved[i] for i in rows] for o, rows in scene.table_pairs.items()}
+    used = [c for c in robot.conversions if c.file is None or c.file in assets]
+    notes = [n for n in robot.notes if any(c.source.name in n for c in used)]
+    notes.append(
+        f"pusher: the robot's collision geometry of {', '.join(rp.frames)} ({len(names)} "
+        f"geoms), carried by the pusher body (spread over the recording "
+        f"{rp.spread_m * 1e3:.3g} mm, {np.degrees(rp.spread_rad):.3g} deg)"
+    )
+    ET.indent(root)
+    out = replace(
+        scene,
+        xml=ET.tostring(root, encoding="unicode") + "\n",
+        assets=assets,
+        pairs=pairs,
+        pair_torsion=torsion,
+        table_pairs=table,
+        notes=[*scene.notes, *rp.notes, *notes],
+    )
+    return out, names
+
+
+def _pusher_pairs(
+    root: ET.Element, scene: Any, names: list[str]
+) -> tuple[list[tuple[str, str]], list[float], dict[int, int]]:
+    """Each object-pusher ``<pair>`` becomes one pair per robot geom (same attributes, appended
+    after the other pairs); a capsule's second end (``pusher_end``) goes. Returns the new
+    ``pairs`` and ``pair_torsion`` (document order) and old row -> new row of the pairs kept."""
+    contact = root.find("contact")
+    kept: list[tuple[tuple[str, str], float]] = []
+    added: list[tuple[tuple[str, str], float]] = []
+    moved: dict[int, int] = {}
+    for i, el in enumerate(list(contact) if contact is not None else []):
+        ends = [a for a in ("geom1", "geom2") if el.get(a) in ("pusher", "pusher_end")]
+        if not ends:
+            moved[i] = len(kept)
+            kept.append((scene.pairs[i], scene.pair_torsion[i]))
+            continue
+        contact.remove(el)
+        if el.get(ends[0]) == "pusher_end":
+            continue
+        for n in names:
+            new = ET.SubElement(contact, "pair", dict(el.attrib))
+            new.set(ends[0], n)
+            added.append(((new.get("geom1"), new.get("geom2")), scene.pair_torsion[i]))
+    rows = kept + added
+    return [p for p, _ in rows], [t for _, t in rows], moved
