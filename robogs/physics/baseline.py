@@ -133,6 +133,11 @@ def _fingerprint(rec: Recording) -> str:
         h.update(name.encode())
         for a in (mesh.vertices, mesh.faces):
             h.update(np.ascontiguousarray(a).tobytes())
+    rp = getattr(rec, "robot_pusher", None)  # the robot's collision links (geometry "robot")
+    if rp is not None:
+        h.update(Path(rp.urdf).read_bytes() + rp.link.encode())
+        for name, T in sorted(rp.frames.items()):
+            h.update(name.encode() + np.ascontiguousarray(T).tobytes())
     return h.hexdigest()
 
 
