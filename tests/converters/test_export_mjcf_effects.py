@@ -2,7 +2,8 @@
 
 An effect with an MJCF-native form (:data:`robogs.format.mjcf.NATIVE_EFFECTS`: ``table_tilt`` ->
 gravity, ``viscous_damping`` -> the slide joints' damping) is in the exported model as the
-``mujoco`` engine compiles it (the same function writes both); every other fitted effect is a
+``mujoco`` engine compiles it (the same function writes both); so are the body effects (mass,
+CoM offset, restitution: ``test_mjcf_export_body_effects.py``); every other fitted effect is a
 ``<custom>`` record with its parameters and a note that a plain MuJoCo load does not simulate it.
 
 The replay test: 9 pushes with a hidden table tilt (seed 1, nominal noise: 1 mm per axis),
@@ -46,10 +47,22 @@ BOX = {
 }
 
 
-@pytest.fixture(scope="module")
-def tilted(tmp_path_factory) -> dict:
-    """A fitted ``table_tilt`` on 9 pushes (the mujoco engine), its baseline (what compare
-    reports) and prepared engine, and the exports with and without the effect."""
+def revision(src: Path, dst: Path, effects: list[dict]) -> Path:
+    """A copy of dataset ``src`` whose physics.json revision has ``effects`` instead."""
+    shutil.copytree(src, dst)
+    ds = Dataset.open(dst)
+    drop = ("effects", "revision", "parent_revision", "fit", "note")
+    doc = {k: v for k, v in ds.physics().items() if k not in drop}
+    w = ds.edit()
+    w.set_physics({**doc, "effects": effects})
+    w.commit()
+    return dst
+
+
+def fit_and_export(base: Path, effect: str, seed: int) -> dict:
+    """``effect`` fitted on 9 pushes with it hidden (seed, nominal noise; the mujoco engine),
+    its baseline (what compare reports) and prepared engine, and the exports of the fitted
+    revision (``with``) and of the same revision without the effect (``without``)."""
     import torch
 
     from robogs.physics import api
@@ -59,36 +72,33 @@ def tilted(tmp_path_factory) -> dict:
     from robogs.synth.scenarios import make_scenario, write_scenario
 
     torch.set_num_threads(1)
-    base = tmp_path_factory.mktemp("mjcf_fx")
-    rec = make_scenario("table_tilt", seed=1, kinds=("push",), noise="nominal", check=False)
-    path = base / "tilt"
+    rec = make_scenario(effect, seed=seed, kinds=("push",), noise="nominal", check=False)
+    path = base / effect
     write_scenario(rec, path)
-    fit = api.fit(path, ["table_tilt"], engine="mujoco", mask_frames=0)
-    ds = Dataset.open(path)
-    physics = ds.physics()
-    assert [e["name"] for e in physics["effects"]] == ["table_tilt"]
+    fit = api.fit(path, [effect], engine="mujoco", mask_frames=0)
+    physics = Dataset.open(path).physics()
+    assert [e["name"] for e in physics["effects"]] == [effect]
     # the counterfactual: the same revision without the effect (a copy of the dataset)
-    bare = base / "bare"
-    shutil.copytree(path, bare)
-    doc = {k: v for k, v in physics.items() if k not in ("effects", "revision", "fit", "note")}
-    doc.pop("parent_revision", None)
-    w = Dataset.open(bare).edit()
-    w.set_physics(doc)
-    w.commit()
+    bare = revision(path, base / "bare", [])
     report = export("mjcf", path, base / "with")
     export("mjcf", bare, base / "without")
     recording, _ = _open(path)
-    bl = baseline(recording, backend="mujoco")
-    eng = Engine(recording, dt=1e-3, backend="mujoco")
     return {
+        "path": path,
         "fit": fit,
         "physics": physics,
         "report": report,
         "with": base / "with" / "scene.xml",
         "without": base / "without" / "scene.xml",
-        "baseline": bl,
-        "engine": eng,
+        "baseline": baseline(recording, backend="mujoco"),
+        "engine": Engine(recording, dt=1e-3, backend="mujoco"),
     }
+
+
+@pytest.fixture(scope="module")
+def tilted(tmp_path_factory) -> dict:
+    """A fitted ``table_tilt`` (seed 1): :func:`fit_and_export`."""
+    return fit_and_export(tmp_path_factory.mktemp("mjcf_fx"), "table_tilt", seed=1)
 
 
 def _replay_rms(model: mujoco.MjModel, eng, local: np.ndarray, hz: float) -> float:
@@ -118,16 +128,26 @@ def _replay_rms(model: mujoco.MjModel, eng, local: np.ndarray, hz: float) -> flo
     return 1e3 * math.sqrt(sq / n)
 
 
-def test_a_fitted_tilt_replays_within_the_fits_reported_residual(tilted) -> None:
-    bl, eng = tilted["baseline"], tilted["engine"]
-    assert tilted["fit"].rms_after == pytest.approx(bl.rms_mm, rel=1e-9)  # what compare reports
-    hz = 0.5 * tilted["physics"]["objects"]["box"]["size_m"][2]
+def replays(fitted: dict) -> tuple[float, float, float]:
+    """(replay RMS of the export ``fitted["with"]``, of ``fitted["without"]``, compare's RMS)
+    [mm] for a fixture like :func:`tilted` (keys fit, baseline, engine, physics, with,
+    without): both files driven from the engine's fitted starts of the fitted revision."""
+    bl, eng = fitted["baseline"], fitted["engine"]
+    assert fitted["fit"].rms_after == pytest.approx(bl.rms_mm, rel=1e-9)  # what compare reports
+    hz = 0.5 * fitted["physics"]["objects"]["box"]["size_m"][2]
     local = np.asarray(bl.outcome.local)
-    got = _replay_rms(mujoco.MjModel.from_xml_path(str(tilted["with"])), eng, local, hz)
-    assert got == pytest.approx(bl.rms_mm, rel=TOLERANCE), (got, bl.rms_mm)
+    got, bare = (
+        _replay_rms(mujoco.MjModel.from_xml_path(str(fitted[k])), eng, local, hz)
+        for k in ("with", "without")
+    )
+    return got, bare, bl.rms_mm
+
+
+def test_a_fitted_tilt_replays_within_the_fits_reported_residual(tilted) -> None:
+    got, bare, rms = replays(tilted)
+    assert got == pytest.approx(rms, rel=TOLERANCE), (got, rms)
     # counterfactual: without the effect the file replays worse by more than the tolerance
-    bare = _replay_rms(mujoco.MjModel.from_xml_path(str(tilted["without"])), eng, local, hz)
-    assert bare > (1.0 + 5 * TOLERANCE) * bl.rms_mm, (bare, bl.rms_mm)
+    assert bare > (1.0 + 5 * TOLERANCE) * rms, (bare, rms)
 
 
 def test_the_exported_tilt_is_the_engines_compiled_model(tilted) -> None:
@@ -153,12 +173,22 @@ def test_the_exported_tilt_is_the_engines_compiled_model(tilted) -> None:
     assert any("table_tilt on box" in n for n in report.notes)
 
 
-def _dataset(tmp_path: Path, name: str, effects: list[dict], table: dict | None = None) -> Path:
+def _dataset(
+    tmp_path: Path,
+    name: str,
+    effects: list[dict],
+    table: dict | None = None,
+    box: dict | None = None,
+) -> Path:
+    """A dataset with physics.json only: ``box`` (default :data:`BOX`) on ``table``."""
     w = Dataset.create(tmp_path / name, name=name)
     w.set_physics(
         {
             "gravity_mps2": [0.0, 0.0, -9.81],
-            "objects": {"box": BOX, "table": table or {"equation": "static", "plane_z_m": 0.0}},
+            "objects": {
+                "box": box or BOX,
+                "table": table or {"equation": "static", "plane_z_m": 0.0},
+            },
             "effects": effects,
         }
     )
@@ -180,15 +210,15 @@ def test_viscous_damping_is_the_slide_joints_damping(tmp_path) -> None:
     assert report.facts["effects"][0]["written"]
 
 
-def test_force_and_body_effects_are_custom_records_with_a_clear_note(tmp_path) -> None:
-    """Stribeck and quadratic drag (per-step forces on the engine), mass (a body change) and
+def test_force_effects_are_custom_records_with_a_clear_note(tmp_path) -> None:
+    """Stribeck, quadratic drag and anisotropic friction (per-step forces on the engine) and
     viscous damping on a free joint (a tilted table): no model change, each parameter a
     ``<numeric>`` at full precision, a note per effect saying a plain load does not simulate
     it; a non-finite parameter is refused naming its place."""
     fx = [
         {"name": "stribeck", "target": "box", "params": {"dmu": 0.7123456789, "v_s": 0.21}},
         {"name": "quadratic_drag", "target": "box", "params": {"k": 2.5}},
-        {"name": "mass", "target": "box", "params": {"dm": 0.3}},
+        {"name": "anisotropic_friction", "target": "box", "params": {"a_c": 0.2, "a_s": -0.1}},
         {"name": "viscous_damping", "target": "box", "params": {"c": 1.5}},
     ]
     tilted_table = {"equation": "static", "plane_z_m": 0.0, "normal": [0.1, 0.0, 1.0]}
@@ -207,9 +237,9 @@ def test_force_and_body_effects_are_custom_records_with_a_clear_note(tmp_path) -
             assert model.numeric(f"robogs_effect/{e['name']}/{k}").data[0] == v
     assert not any(r["written"] for r in report.facts["effects"])
     notes = " ".join(report.notes)
-    for name in ("stribeck", "quadratic_drag"):
+    for name in ("stribeck", "quadratic_drag", "anisotropic_friction"):
         assert f"fitted effect {name} on box" in notes
-    assert notes.count(FORCE_NOTE) == 2
+    assert notes.count(FORCE_NOTE) == 3
     assert notes.count("not simulated by a plain MuJoCo load") == 4
     tid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, "robogs")
     adr, size = model.text_adr[tid], model.text_size[tid]
@@ -225,9 +255,10 @@ def test_force_and_body_effects_are_custom_records_with_a_clear_note(tmp_path) -
 
 
 def test_the_docs_state_the_mapping_and_the_tolerance() -> None:
-    """docs/exports.md's MJCF section names every native effect and what it becomes, quotes the
-    note a user sees for a per-step force effect, and states this module's tolerance."""
-    from robogs.format.mjcf import NATIVE_EFFECTS
+    """docs/exports.md's MJCF section names every native and body effect and what it becomes,
+    quotes the note a user sees for a per-step force effect, and states this module's
+    tolerance."""
+    from robogs.format.mjcf import BODY_EFFECTS, NATIVE_EFFECTS
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "exports.md").read_text()
     section = doc[doc.index("## MJCF") :]
@@ -236,7 +267,13 @@ def test_the_docs_state_the_mapping_and_the_tolerance() -> None:
         "table_tilt": "`<option gravity>`",
         "viscous_damping": "`damping` of the object's x, y, z slides",
     }
-    assert set(rows) == set(NATIVE_EFFECTS)
+    body = {
+        "mass": "`<inertial>` mass and inertia",
+        "com_offset": "`<inertial>` `pos`",
+        "restitution": "`solref`/`solimp` of the object's support pairs",
+    }
+    assert set(rows) == set(NATIVE_EFFECTS) and set(body) == set(BODY_EFFECTS)
+    rows.update(body)
     for name, written in rows.items():
         assert f"| `{name}` | {written}" in section, name
     assert FORCE_NOTE in section

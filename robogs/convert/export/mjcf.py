@@ -30,16 +30,24 @@ Meshes replaced by their convex hulls and physics.json keys MuJoCo does not repr
 in the report notes and in a ``<custom>`` text element of the document.
 
 Fitted effects (physics.json ``effects``): those with an MJCF-native form are in the model as
-the ``mujoco`` engine compiles them - the one map :data:`robogs.format.mjcf.NATIVE_EFFECTS` (the
-engine's ``mujoco_effects.NATIVE``) is applied to the compiled scene and the fields it changed
-(:data:`robogs.format.mjcf.NATIVE_FIELDS`: gravity for ``table_tilt``, the slide joints' damping
-for ``viscous_damping`` on the planar joint set) are written back at full precision; any other
-change refuses the export. Every other effect (per-step forces on the engine: quadratic drag,
-Stribeck, anisotropic friction, user effects; body changes: mass, CoM offset, restitution;
-sensor effects; viscous damping on a free joint, whose MJCF damping would also damp rotation)
-is a ``<numeric name="robogs_effect/<effect>/<param>">`` per fitted parameter, and a note
-(:data:`FORCE_NOTE` for the force effects) in the report and the ``<text>``: a plain MuJoCo
-load does not simulate it. ``facts["effects"]``: name, target, params, ``written``.
+the ``mujoco`` engine compiles them, in the engine's order. First the body effects
+(:data:`robogs.format.mjcf.BODY_EFFECTS`: ``mass``, ``com_offset``, ``restitution``) change the
+target object's physics.json body, which :func:`robogs.format.mjcf.write_body` - the function
+the engine writes each parameter set's body with - writes into the compiled scene (mass and
+inertia, CoM, the support pairs' friction and restitution ``solref``/``solimp``, the linear
+damping on the planar joint set, the z ballast); then the map
+:data:`robogs.format.mjcf.NATIVE_EFFECTS` (the engine's ``mujoco_effects.NATIVE``: gravity for
+``table_tilt``, the slide joints' damping for ``viscous_damping`` on the planar joint set). The
+fields they changed (:data:`robogs.format.mjcf.NATIVE_FIELDS`,
+:data:`~robogs.format.mjcf.BODY_FIELDS`) are written back at full precision (a body's
+``<inertial>`` as ``diaginertia`` + ``quat``, the compiled principal form); any other change
+refuses the export. Every other effect (per-step
+forces on the engine: quadratic drag, Stribeck, anisotropic friction, user effects; sensor
+effects; viscous damping on a free joint, whose MJCF damping would also damp rotation) is a
+``<numeric name="robogs_effect/<effect>/<param>">`` per fitted parameter, and a note
+(:data:`FORCE_NOTE` for the force effects) in the report and the ``<text>``: a plain MuJoCo load
+does not simulate it. The notes list the effects in the model and those only as records;
+``facts["effects"]``: name, target, params, ``written``.
 
 Dependency note: this module imports only ``robogs.format`` (the builder is format-level), so
 the rule that ``robogs.convert`` never imports ``robogs.physics`` holds without an exception.
@@ -48,6 +56,7 @@ the rule that ``robogs.convert`` never imports ``robogs.physics`` holds without 
 from __future__ import annotations
 
 import io
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import quoteattr
@@ -56,7 +65,17 @@ import numpy as np
 
 from robogs.format import Dataset
 from robogs.format.errors import FormatError, InputError, PathEscapeError
-from robogs.format.mjcf import NATIVE_EFFECTS, NATIVE_FIELDS, EffectSlots, MjcfScene, scene_mjcf
+from robogs.format.mjcf import (
+    BODY_EFFECTS,
+    BODY_FIELDS,
+    NATIVE_EFFECTS,
+    NATIVE_FIELDS,
+    EffectSlots,
+    MjcfScene,
+    body_values,
+    scene_mjcf,
+    write_body,
+)
 from robogs.format.shapes import BOX_BUDGET, object_shapes
 
 from . import ExportReport, register_exporter
@@ -108,43 +127,49 @@ _NOT_NATIVE = {
     "force": FORCE_NOTE,
     "free": "viscous damping on a free joint: MJCF joint damping is one value for all six "
     "DOFs, the engine damps x, y, z only; not simulated by a plain MuJoCo load",
-    "body": "applied by robogs as a change of the object's body (mass, CoM or contact); not "
-    "written into the model, not simulated by a plain MuJoCo load",
     "sensor": "a sensor effect (applied by robogs to the sampled poses, not to the dynamics)",
 }
-_BODY = ("mass", "com_offset", "restitution")
 _SENSOR = ("time_offset", "camera_extrinsics")
+_WRITTEN = ("native", "body")
 
 
 def _kind(name: str) -> str:
-    """How a plain MuJoCo load sees a fitted effect: ``native`` (in the model), ``body``,
-    ``sensor`` or ``force`` (every other, built-in or a user's, runs as per-step forces)."""
+    """How a plain MuJoCo load sees a fitted effect: ``native`` (:data:`NATIVE_EFFECTS`) or
+    ``body`` (:data:`BODY_EFFECTS`), both in the model; ``sensor``; or ``force`` (every other,
+    built-in or a user's, runs as per-step forces)."""
     if name in NATIVE_EFFECTS:
         return "native"
-    return "body" if name in _BODY else "sensor" if name in _SENSOR else "force"
+    if name in BODY_EFFECTS:
+        return "body"
+    return "sensor" if name in _SENSOR else "force"
 
 
 def _effects(
     xml: str, scene: MjcfScene, physics: dict[str, Any], where: Path
-) -> tuple[str, list[dict[str, Any]]]:
+) -> tuple[str, list[dict[str, Any]], list[str]]:
     """The document with every fitted effect of ``physics["effects"]`` that has an MJCF-native
-    form (:data:`robogs.format.mjcf.NATIVE_EFFECTS`, the map the ``mujoco`` engine applies),
-    and one record per effect (name, target, params, how it is written).
+    form, one record per effect (name, target, params, how it is written), and the
+    ``scene.unmapped`` keys the written bodies now represent.
 
-    The map is applied to the compiled scene (the engine's own path) and the fields it changed
-    (:data:`NATIVE_FIELDS`) are written back at full precision: ``<option gravity>`` and the
-    ``damping`` of each slide joint of the object's planar joint set."""
+    The maps the ``mujoco`` engine applies are applied to the compiled scene in the engine's
+    order: first each body effect's target body (its physics.json values with
+    :data:`BODY_EFFECTS` applied in order, written by :func:`robogs.format.mjcf.write_body`: mass,
+    inertia, CoM, the support pairs' restitution; the nominal ``restitution`` and, on the planar
+    joint set, ``damping_linear`` with them), then :data:`NATIVE_EFFECTS`. The fields they changed
+    (:data:`NATIVE_FIELDS`, :data:`BODY_FIELDS`) are written back at full precision; a change of
+    any other field refuses the export."""
     import xml.etree.ElementTree as ET
 
     import mujoco
 
     entries = [e for e in physics.get("effects") or [] if isinstance(e, dict)]
     if not entries:
-        return xml, []
+        return xml, [], []
     model = mujoco.MjModel.from_xml_string(xml, assets=scene.assets)
-    grav0, damp0 = model.opt.gravity.copy(), model.dof_damping.copy()
-    watched = {f: np.array(getattr(model, f)).copy() for f in _other_fields(model)}
-    records = []
+    rows = _pair_rows(model, scene)
+    before = {f: np.array(_field(model, f)).copy() for f in _WATCHED}
+    objects = physics.get("objects") or {}
+    records, bodies, native = [], {}, []
     for i, entry in enumerate(entries):
         name = str(entry.get("name"))
         target = str(entry.get("target") or (scene.objects[0] if scene.objects else ""))
@@ -158,70 +183,173 @@ def _effects(
                 where=f"effects[{i}].params",
                 hint="refit the effect (robogs fit --add) or revert the revision",
             )
+        params = {k: float(v) for k, v in params.items()}
         kind = _kind(name)
-        if kind == "native" and target not in scene.objects:
+        if kind in _WRITTEN and target not in scene.objects:
             raise FormatError(
                 f"effect {name!r} targets {target!r}, not a rigid object of the scene",
                 path=where,
                 where=f"effects[{i}].target",
                 hint=f"rigid objects: {', '.join(scene.objects)}",
             )
-        if kind == "native":
-            jid = model.joint(target).id
-            if name == "viscous_damping" and model.jnt_type[jid] == mujoco.mjtJoint.mjJNT_FREE:
-                kind = "free"
-            else:
-                slots = EffectSlots(
-                    body=model.body(target).id,
-                    dof=int(model.jnt_dofadr[jid]),
-                    ballast=float(scene.ballast),
-                )
-                NATIVE_EFFECTS[name](model, {k: float(v) for k, v in params.items()}, slots)
+        free = kind in _WRITTEN and _free(model, target)
+        if kind == "native" and name == "viscous_damping" and free:
+            kind = "free"
+        elif kind == "native":
+            native.append((name, params, target))
+        elif kind == "body":
+            if target not in bodies:  # free joint: MJCF cannot damp x, y, z alone
+                nominal = body_values(objects[target], f"objects/{target}")
+                bodies[target] = replace(nominal, damping=0.0) if free else nominal
+            bodies[target] = BODY_EFFECTS[name](bodies[target], params)
         records.append(
             {
                 "name": name,
                 "target": target,
-                "params": {k: float(v) for k, v in params.items()},
-                "written": kind == "native",
-                **({"why": _NOT_NATIVE[kind]} if kind != "native" else {}),
+                "params": params,
+                "written": kind in _WRITTEN,
+                **({"why": _NOT_NATIVE[kind]} if kind not in _WRITTEN else {}),
             }
         )
-    for f, before in watched.items():  # the map may change NATIVE_FIELDS only
-        if not np.array_equal(np.array(getattr(model, f)), before):
+    covered = []
+    for target, values in bodies.items():  # the engine's order: the body, then the maps
+        slots = _slots(model, scene, target, rows)
+        write_body(model, values, slots, timeconst=float(scene.settings.solref[0]))
+        covered.append(f"objects.{target}.restitution")
+        if not _free(model, target):
+            covered.append(f"objects.{target}.damping_linear")
+    for name, params, target in native:
+        NATIVE_EFFECTS[name](model, params, _slots(model, scene, target, rows))
+    changed = {
+        f: np.flatnonzero(np.any(np.array(_field(model, f)) != b, axis=1))
+        for f, b in before.items()
+    }
+    for f, idx in changed.items():  # the maps may change NATIVE_FIELDS and BODY_FIELDS only
+        if len(idx) and f not in NATIVE_FIELDS + BODY_FIELDS:
             raise FormatError(
                 f"an effect map changed MjModel.{f}, which the export cannot write",
                 path=where,
                 where="effects",
-                hint=f"robogs.format.mjcf.NATIVE_EFFECTS may change {', '.join(NATIVE_FIELDS)}",
+                hint=f"robogs.format.mjcf.NATIVE_EFFECTS may change {', '.join(NATIVE_FIELDS)}, "
+                f"write_body {', '.join(BODY_FIELDS)}",
             )
     root = ET.fromstring(xml)
-    if not np.array_equal(model.opt.gravity, grav0):
-        root.find("option").set("gravity", " ".join(repr(float(g)) for g in model.opt.gravity))
-    for d in np.flatnonzero(model.dof_damping != damp0):
-        jname = model.joint(int(model.dof_jntid[d])).name
-        joint = root.find(f".//joint[@name='{jname}']")
-        joint.set("damping", repr(float(model.dof_damping[d])))
+    _write_back(root, model, changed, rows, where)
     ET.indent(root)
-    return ET.tostring(root, encoding="unicode") + "\n", records
+    return ET.tostring(root, encoding="unicode") + "\n", records, covered
 
 
-def _other_fields(model: Any) -> list[str]:
-    """Model arrays an effect map could plausibly touch besides :data:`NATIVE_FIELDS`."""
-    return [
-        f
-        for f in (
-            "body_mass",
-            "body_inertia",
-            "body_ipos",
-            "dof_armature",
-            "pair_friction",
-            "pair_solref",
-            "pair_solimp",
-            "actuator_biasprm",
-            "geom_friction",
-        )
-        if hasattr(model, f)
+_WATCHED = (
+    "opt.gravity",
+    *BODY_FIELDS,
+    "body_pos",
+    "body_quat",
+    "geom_friction",
+    "geom_solref",
+    "geom_solimp",
+    "pair_margin",
+    "actuator_gainprm",
+)
+"""Model fields compared before and after the maps: those of :data:`NATIVE_FIELDS` and
+:data:`BODY_FIELDS` are written back, a change of another refuses the export."""
+
+
+def _free(model: Any, name: str) -> bool:
+    """Whether the object ``name`` moves on a free joint (else on the planar joint set)."""
+    import mujoco
+
+    return int(model.jnt_type[model.joint(name).id]) == mujoco.mjtJoint.mjJNT_FREE
+
+
+def _field(model: Any, name: str) -> np.ndarray:
+    """``MjModel`` field ``name`` (``opt.gravity`` reaches into ``opt``) as [rows, columns]."""
+    obj = model
+    for part in name.split("."):
+        obj = getattr(obj, part)
+    return np.atleast_2d(np.asarray(obj).T).T if np.ndim(obj) == 1 else np.asarray(obj)
+
+
+def _pair_rows(model: Any, scene: MjcfScene) -> list[int]:
+    """Compiled row of each ``scene.pairs`` entry (XML order): MuJoCo sorts the pairs when it
+    compiles, so the two orders differ with several objects."""
+    import mujoco
+
+    def name(g: int) -> str:
+        return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, int(g)) or ""
+
+    compiled = [
+        frozenset((name(model.pair_geom1[j]), name(model.pair_geom2[j])))
+        for j in range(model.npair)
     ]
+    return [compiled.index(frozenset(p)) for p in scene.pairs]
+
+
+def _slots(model: Any, scene: MjcfScene, target: str, rows: list[int]) -> EffectSlots:
+    """Where ``target`` lives in the compiled scene (:class:`robogs.format.mjcf.EffectSlots`)."""
+    import mujoco
+
+    b = model.body(target).id
+    table = scene.table_pairs.get(target, [])
+    return EffectSlots(
+        body=b,
+        dof=int(model.jnt_dofadr[model.joint(target).id]),
+        ballast=float(scene.ballast),
+        table_pairs=tuple(rows[k] for k in table),
+        table_torsion=tuple(float(scene.pair_torsion[k]) for k in table),
+        nominal_mass=float(model.body_mass[b]),
+        nominal_inertia=tuple(float(v) for v in model.body_inertia[b]),
+        nominal_iquat=tuple(float(v) for v in model.body_iquat[b]),
+        ballast_actuator=mujoco.mj_name2id(
+            model, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{target}_ballast"
+        ),
+    )
+
+
+def _reals(values: Any) -> str:
+    return " ".join(repr(float(v)) for v in np.ravel(values))
+
+
+def _write_back(
+    root: Any, model: Any, changed: dict[str, np.ndarray], rows: list[int], where: Path
+) -> None:
+    """Write the changed rows of :data:`NATIVE_FIELDS` and :data:`BODY_FIELDS` into the
+    document ``root`` at full precision: ``<option gravity>``, a body's ``<inertial>`` (mass,
+    pos, diaginertia, quat: the compiled principal form), a joint's ``damping`` / ``armature``,
+    a pair's ``friction`` / ``solref`` / ``solimp``, an actuator's ``biasprm``."""
+    if len(changed["opt.gravity"]):
+        root.find("option").set("gravity", _reals(model.opt.gravity))
+    inertial_fields = ("body_mass", "body_inertia", "body_iquat", "body_ipos")
+    body_rows = {int(b) for f in inertial_fields for b in changed[f]}
+    for b in sorted(body_rows):
+        inertial = root.find(f".//body[@name='{model.body(b).name}']/inertial")
+        inertial.attrib.pop("fullinertia", None)
+        inertial.set("pos", _reals(model.body_ipos[b]))
+        inertial.set("mass", _reals(model.body_mass[b]))
+        inertial.set("diaginertia", _reals(model.body_inertia[b]))
+        inertial.set("quat", _reals(model.body_iquat[b]))
+    for f, attr in (("dof_damping", "damping"), ("dof_armature", "armature")):
+        for d in changed[f]:
+            jname = model.joint(int(model.dof_jntid[d])).name
+            joint = root.find(f".//joint[@name='{jname}']")
+            if joint is None:  # a free joint: one value for its six DOFs
+                raise FormatError(
+                    f"an effect map changed {f} of the free joint {jname!r}, which MJCF cannot "
+                    "write per DOF",
+                    path=where,
+                    where="effects",
+                )
+            joint.set(attr, _reals(getattr(model, f)[d]))
+    pairs = root.find("contact").findall("pair") if model.npair else []
+    xml_of = {j: i for i, j in enumerate(rows)}
+    pair_fields = ("pair_friction", "pair_solref", "pair_solimp")
+    for j in sorted({int(j) for f in pair_fields for j in changed[f]}):
+        pair = pairs[xml_of[j]]
+        pair.set("friction", _reals(model.pair_friction[j]))
+        pair.set("solref", _reals(model.pair_solref[j]))
+        pair.set("solimp", _reals(model.pair_solimp[j]))
+    for a in changed["actuator_biasprm"]:
+        act = root.find(f"actuator/*[@name='{model.actuator(int(a)).name}']")
+        act.set("biasprm", _reals(model.actuator_biasprm[a]))
 
 
 def _custom(records: list[dict[str, Any]]) -> tuple[str, list[str]]:
@@ -289,15 +417,18 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
     scene = scene_mjcf(
         physics, meshes=meshes, poses=poses, model_name=f"{ds.name}_scene", meshdir="meshes/"
     )
-    xml, effects = _effects(scene.xml, scene, physics, ds.resolve("physics.json"))
+    xml, effects, covered = _effects(scene.xml, scene, physics, ds.resolve("physics.json"))
     numeric, effect_notes = _custom(effects)
     written = [f"{r['name']} on {r['target']}" for r in effects if r["written"]]
+    as_custom = [f"{r['name']} on {r['target']}" for r in effects if not r["written"]]
+    if as_custom:
+        effect_notes.insert(0, f"fitted effects as <custom> records only: {', '.join(as_custom)}")
     if written:
         effect_notes.insert(
             0,
             f"fitted effects in the model as the mujoco engine compiles them: {', '.join(written)}",
         )
-    unmapped = [k for k in scene.unmapped if not k.startswith("effects.")]
+    unmapped = [k for k in scene.unmapped if not k.startswith("effects.") and k not in covered]
     robot_notes: list[str] = []
     robot_facts: dict[str, Any] = {}
     robot_files: dict[str, bytes] = {}
