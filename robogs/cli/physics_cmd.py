@@ -55,14 +55,15 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
             help="camera frames per stream re-rendered for the mask-boundary stream and "
             "camera_intrinsics (default 30; 0: none)",
         )
-    if verb in ("compare", "diagnose", "fit"):
+    if verb in ("compare", "diagnose", "fit", "report"):
         hold = p.add_mutually_exclusive_group()
         hold.add_argument(
             "--holdout",
             default=None,
             metavar="TRAJ[,TRAJ...]",
             help="trajectories held out together as one fold for the held-out error (and, in "
-            "diagnose, the gate's statistic and null); an episode cut into <episode>#<k> holds "
+            "diagnose and report, the gate's statistic and null; report names the split in the "
+            "HTML); an episode cut into <episode>#<k> holds "
             "out all its pieces (default folds: object model 5 of whole trajectories; arm: "
             "leave one trajectory out, 5 groups above five)",
         )
@@ -123,6 +124,12 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
             metavar="EFFECT",
             help="effect(s) whose refit is shown as 'after' (default: when the current revision "
             "was written by fit, that fit; otherwise the first effect diagnose reports)",
+        )
+        p.add_argument(
+            "--effects",
+            default=None,
+            help="without --add: comma-separated candidates of the diagnosis that picks 'after' "
+            "(default: all); the HTML shows that diagnosis on the held-out split",
         )
         p.add_argument(
             "--out", type=Path, default=None, help="HTML file (default: <dataset>.physics.html)"
@@ -810,11 +817,22 @@ def _report(args: argparse.Namespace, model: str) -> int:
 
     add = list(args.add)
     engine = _engine(args)
+    holdout = _holdout(args)  # checked by diagnose and report_baselines before any fit
+    diag = None
     if not add and not _written_by_fit(args.dataset):
-        add = [r.name for r in diagnose(args.dataset, engine=engine).reported][:1]
+        effects = [e.strip() for e in args.effects.split(",")] if args.effects else None
+        diag = diagnose(args.dataset, effects=effects, engine=engine, holdout=holdout)
+        add = [r.name for r in diag.reported][:1]
+    elif args.effects:
+        raise InputError(
+            "--effects picks the candidates of the diagnosis that chooses 'after'; none runs "
+            "here (--add is given, or the current revision was written by fit)",
+            where="--effects",
+            hint="leave --effects out, or --add out on a revision not written by fit",
+        )
     out = args.out or args.dataset.with_name(args.dataset.name + ".physics.html")
-    pair = report_baselines(args.dataset, add=add, engine=engine)
-    path = report(args.dataset, out, pair=pair)
+    pair = report_baselines(args.dataset, add=add, engine=engine, holdout=holdout)
+    path = report(args.dataset, out, pair=pair, diagnosis=diag)
     if args.json:
         _print_json({"html": str(path), **pair.to_dict()})
         return 0
@@ -823,8 +841,8 @@ def _report(args: argparse.Namespace, model: str) -> int:
         f"(before: {pair.before_label}; after: {pair.after_label})"
     )
     print(
-        f"held-out position RMS: {pair.heldout_rms_before:.2f} → {pair.heldout_rms_after:.2f} mm "
-        "(folds of whole trajectories, as diagnose)"
+        f"held-out position RMS: {pair.heldout_rms_before:.3f} → {pair.heldout_rms_after:.3f} mm "
+        f"({pair.heldout_split}, as diagnose)"
     )
     for name, text in pair.notes.items():
         print(f"  {name}: {text}")

@@ -738,6 +738,9 @@ class ReportPair:
         before_revision / after_revision: revision numbers (None: not written).
         heldout_rms_before / heldout_rms_after: held-out position RMS [mm] by diagnose's
             procedure (:func:`_heldout_resid`) of the two models.
+        heldout_split: how the trajectories were held out (``"5 folds of whole
+            trajectories"`` or ``"held out: a, b (2 of 6 trajectories)"``).
+        holdout: the trajectories a held-out choice held out (empty: the default folds).
         notes: per effect of the "after" model not fully determined, what is (partly
             identified: the undetermined parameters, the determined combination, the experiment
             that would determine the rest; :func:`_identification`).
@@ -754,6 +757,8 @@ class ReportPair:
     heldout_rms_before: float = float("nan")
     heldout_rms_after: float = float("nan")
     notes: dict[str, str] = field(default_factory=dict)
+    heldout_split: str = ""
+    holdout: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -763,6 +768,8 @@ class ReportPair:
             "rms_after_mm": self.after.rms_mm,
             "heldout_rms_before_mm": _fin(self.heldout_rms_before),
             "heldout_rms_after_mm": _fin(self.heldout_rms_after),
+            "heldout_split": self.heldout_split,
+            "holdout": self.holdout,
             "added": self.added,
             "notes": self.notes,
         }
@@ -784,7 +791,12 @@ def _label(bl: Baseline) -> str:
 
 
 def report_baselines(
-    dataset: Any, *, add: Sequence[str] = (), dt: float = 1e-3, engine: str = "planar"
+    dataset: Any,
+    *,
+    add: Sequence[str] = (),
+    dt: float = 1e-3,
+    engine: str = "planar",
+    holdout: Sequence[str] | None = None,
 ) -> ReportPair:
     """What :func:`report` compares; every value comes from :func:`baseline`.
 
@@ -793,18 +805,35 @@ def report_baselines(
     * else, when the current revision was written by :func:`fit`: before = the revision it was
       fitted from (``physics/history``), after = the current revision;
     * else before = after = the current revision.
+
+    ``holdout``: the trajectories the held-out error is measured on, held out as one fold
+    (:func:`robogs.physics.heldout.holdout_folds`; None: the default folds), as ``compare``,
+    ``diagnose`` and ``fit`` take it; a bad choice raises before anything is fitted.
     """
     rec, ds = _open(dataset)
-    return _report_pair(rec, ds, add, dt, engine)
+    return _report_pair(rec, ds, add, dt, engine, holdout)
 
 
 def _report_pair(
-    rec: Recording, ds: Any, add: Sequence[str], dt: float, engine: str = "planar"
+    rec: Recording,
+    ds: Any,
+    add: Sequence[str],
+    dt: float,
+    engine: str = "planar",
+    holdout: Sequence[str] | None = None,
 ) -> ReportPair:
+    names = [t.name for t in rec.trajectories]
+    folds = holdout_folds(names, holdout)  # a bad choice fails before fitting
+    split = split_label(names, folds)
+    held_names = (
+        [n for n, m in zip(names, held_mask(folds, len(names)), strict=True) if m]
+        if holdout
+        else []
+    )
     rigid = [a for a in add if a not in _camera_effects()]
     backend = recording_backend(rec, engine)[0]
     if rigid:
-        res = _fit_engine(Engine(rec, dt=dt, backend=backend), rigid)
+        res = _fit_engine(Engine(rec, dt=dt, backend=backend), rigid, None, holdout)
         if res.compare_before is None or res.compare_after is None:  # pragma: no cover
             raise RuntimeError("comparison missing")
         rev = "unwritten revision" if res.from_revision is None else f"revision {res.from_revision}"
@@ -820,13 +849,19 @@ def _report_pair(
             res.heldout_rms_before,
             res.heldout_rms_after,
             res.notes,
+            res.heldout_split,
+            held_names,
         )
     after = baseline(rec, dt=dt, backend=backend)
     parent = _fitted_from(rec, ds)
     before = after if parent is None else baseline(rec, parent, dt=dt, backend=backend)
     added = list((rec.physics.get("fit") or {}).get("added") or []) if parent is not None else []
-    held = [_baseline_heldout(rec, after, dt, backend)]
-    held = held * 2 if parent is None else [_baseline_heldout(rec, before, dt, backend), *held]
+    held = [_baseline_heldout(rec, after, dt, backend, holdout)]
+    held = (
+        held * 2
+        if parent is None
+        else [_baseline_heldout(rec, before, dt, backend, holdout), *held]
+    )
     return ReportPair(
         before.result,
         after.result,
@@ -839,13 +874,22 @@ def _report_pair(
         held[0],
         held[1],
         _identification(after.space, after.outcome, after.free, set())[3],
+        split,
+        held_names,
     )
 
 
-def _baseline_heldout(rec: Recording, bl: Baseline, dt: float, backend: str) -> float:
-    """Held-out position RMS [mm] of a baseline (:func:`_heldout_resid`, on its own document)."""
+def _baseline_heldout(
+    rec: Recording,
+    bl: Baseline,
+    dt: float,
+    backend: str,
+    holdout: Sequence[str] | None = None,
+) -> float:
+    """Held-out position RMS [mm] of a baseline (:func:`_heldout_resid`, on its own document;
+    ``holdout``: the held-out fold, None for the default folds)."""
     eng = Engine(replace(rec, physics=bl.physics), dt=dt, backend=backend)
-    (r,), _, hm = _heldout_resid(eng, bl.space, [bl.outcome], [bl.free])
+    (r,), _, hm = _heldout_resid(eng, bl.space, [bl.outcome], [bl.free], holdout)
     return rms_mm(eng.raw(r), hm)
 
 
@@ -857,15 +901,20 @@ def report(
     dt: float = 1e-3,
     pair: ReportPair | None = None,
     engine: str = "planar",
+    holdout: Sequence[str] | None = None,
+    diagnosis: DiagnoseResult | None = None,
 ) -> Path:
     """Write an HTML report of residuals before and after (see :func:`report_baselines`;
-    ``pair``: one it already returned for this dataset, instead of ``add`` and ``dt``).
+    ``pair``: one it already returned for this dataset, instead of ``add``, ``dt`` and
+    ``holdout``). The report states the held-out split (the trajectories ``holdout`` held out,
+    or the default folds). ``diagnosis``: the diagnosis the "after" effect was chosen from (on
+    the same split), shown as a table of held-out errors, gains and the gate's null quantiles.
 
     Plots are inline SVG (matplotlib is not required).
     """
     if pair is None:
         rec, ds = _open(dataset)
-        pair = _report_pair(rec, ds, add, dt, engine)
+        pair = _report_pair(rec, ds, add, dt, engine, holdout)
     else:
         ds = _as_dataset(dataset)
     before = copy.copy(pair.before)  # the memoised table stays without masks
@@ -881,6 +930,20 @@ def report(
         labels=(pair.before_label, pair.after_label),
         heldout=(pair.heldout_rms_before, pair.heldout_rms_after),
         notes=[f"{k}: {v}" for k, v in pair.notes.items()],
+        split=pair.heldout_split,
+        holdout=pair.holdout,
+        diagnosis=[
+            (
+                r.name,
+                r.heldout_rms_before,
+                r.heldout_rms_after,
+                r.unit,
+                r.heldout_gain_sigma2,
+                r.null_threshold_sigma2,
+                r.verdict or ("missing" if r.reported else "not supported"),
+            )
+            for r in (diagnosis.rows if diagnosis is not None else [])
+        ],
     )
 
 

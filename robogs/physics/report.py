@@ -96,6 +96,10 @@ def format_span(t0: float, t1: float, *, min_digits: int = 2, sep: str = "–") 
     return f"{t0:.6f}{sep}{t1:.6f} s"
 
 
+def _num(x: float, spec: str) -> str:
+    return format(float(x), spec) if np.isfinite(x) else "—"
+
+
 def _table(rows: list[list[str]], header: list[str]) -> str:
     head = "".join(f"<th>{html.escape(c)}</th>" for c in header)
     body = "".join(
@@ -115,12 +119,20 @@ def render_report(
     labels: tuple[str, str] = ("stored physics", "refitted"),
     heldout: tuple[float, float] | None = None,
     notes: Sequence[str] = (),
+    split: str = "",
+    holdout: Sequence[str] = (),
+    diagnosis: Sequence[tuple[str, float, float, str, float, float, str]] = (),
 ) -> Path:
     """Write the report (atomically); ``params`` rows are (name, value, low, high, unit), an
     infinite interval end printed as unbounded; ``labels`` say which models "before" and
     "after" are (e.g. "revision 1, refitted"); ``heldout``: held-out position RMS [mm] before
-    and after (diagnose's folds of whole trajectories); ``notes``: one line per effect not fully
-    determined (e.g. partly identified: which parameters, what is determined)."""
+    and after, by diagnose's procedure on the split ``split`` describes
+    (:func:`robogs.physics.heldout.split_label`) with ``holdout`` the trajectories a held-out
+    choice held out (empty: the default folds); ``notes``: one line per effect not fully
+    determined (e.g. partly identified: which parameters, what is determined); ``diagnosis``:
+    the diagnosis the "after" effect was chosen from, on the same split, one row per effect:
+    (name, held-out RMS before, after, their unit (mm, or px for an effect seen in mask
+    boundaries), held-out gain [sigma^2], the gate's null quantile [sigma^2], verdict)."""
     out = Path(out_html)
     phase_rows = [
         [
@@ -140,10 +152,28 @@ def render_report(
         for n, v, lo, hi, u in params
     ]
     held = ""
+    if holdout:  # one fold: the named trajectories held out, the others train it
+        which = split or f"held out: {', '.join(holdout)}"
+    else:
+        which = "default folds" + (f" ({split})" if split else "")
     if heldout is not None and np.isfinite(heldout).all():
         held = (
-            f"<p>Held-out RMS position error (folds of whole trajectories, as diagnose): "
-            f"{heldout[0]:.2f} mm &rarr; {heldout[1]:.2f} mm.</p>"
+            f"<p>Held-out RMS position error (as diagnose, on this split): "
+            f"{heldout[0]:.3f} mm &rarr; {heldout[1]:.3f} mm.</p>"
+        )
+    held = (
+        f'<p class="split">Split of the held-out error and the gate: {html.escape(which)}.</p>'
+        + held
+    )
+    diag = ""
+    if diagnosis:
+        diag_rows = [
+            [n, f"{_num(b, '.3f')} → {_num(a, '.3f')} {u}", _num(g, ".3g"), _num(q, ".3g"), v]
+            for n, b, a, u, g, q, v in diagnosis
+        ]
+        diag = f"<h2>Diagnosis on the same split ({html.escape(which)})</h2>" + _table(
+            diag_rows,
+            ["effect", "held-out RMS", "held-out gain σ²", "null quantile σ²", "verdict"],
         )
     note_html = (
         "<h2>Not fully determined by this data</h2><ul>"
@@ -185,6 +215,7 @@ Both refit the base parameters, the effects present and each trajectory's initia
 Dashed red: noise floor estimated from the data ({after.noise_floor_mm:.2f} mm; source {html.escape(str(after.noise.get("source")))}).</p>
 <p>RMS position error: {before.rms_mm:.2f} mm &rarr; {after.rms_mm:.2f} mm; yaw {before.rms_deg:.2f}&deg; &rarr; {after.rms_deg:.2f}&deg;.</p>
 {held}
+{diag}
 <h2>Per phase (RMS, mm)</h2>{_table(phase_rows, ["phase", "before", "after"])}
 <h2>Mask boundary of the stored model (mean symmetric distance)</h2>{masks}
 <h2>Worst segments before</h2>{_table(worst, ["trajectory", "phase", "time", "RMS mm"])}
