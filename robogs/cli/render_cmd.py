@@ -28,12 +28,21 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["add_arguments", "run", "simulate_objects", "write_video_folder", "VIDEO_FORMAT"]
+__all__ = [
+    "add_arguments",
+    "run",
+    "SimulationSetup",
+    "simulation_setup",
+    "simulate_objects",
+    "write_video_folder",
+    "VIDEO_FORMAT",
+]
 
 #: ``format`` of ``video.json``: marks a folder written by ``robogs render --format video``
 VIDEO_FORMAT = "robogs-render-video"
@@ -390,27 +399,45 @@ def _pq_read(path: Path) -> Any:
     return pq.read_table(path)
 
 
-def simulate_objects(
-    src: Any,
-    ep: Any,
-    traj: Any,
-    *,
-    engine: str = "auto",
-    dt: float = 1e-3,
-) -> tuple[dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]], str, list[str]]:
-    """Object poses rolled out by a physics engine from the pusher motion of ``traj``.
+@dataclass
+class SimulationSetup:
+    """What ``robogs render --simulate`` rolls out (:func:`simulation_setup`).
+
+    Attributes:
+        engine: the engine's name; reason: why ``auto`` chose it ("" when named).
+        physics: the dataset's physics.json; obj: the free object; link: the pusher link.
+        dt: the step [s]; drive: the pusher on the step grid, poses wanted at the trajectory's
+            stamps; start: ``{obj: ObjectState}`` at rest at the recorded pose.
+        shapes: the object shapes and, with ``objects.pusher.geometry = "robot"``, the robot
+            pusher measured over the commanded trajectory (``meshes["pusher"]``).
+    """
+
+    engine: str
+    reason: str
+    physics: dict[str, Any]
+    obj: str
+    link: str
+    dt: float
+    drive: Any
+    start: dict[str, Any]
+    shapes: Any
+
+
+def simulation_setup(
+    src: Any, ep: Any, traj: Any, *, engine: str = "auto", dt: float = 1e-3
+) -> SimulationSetup:
+    """The engine, drive, start and shapes :func:`simulate_objects` rolls out.
 
     The pusher is ``objects.pusher.link`` of physics.json (default ``robot.ee_link``), moved by
     ``objects.pusher.offset_m`` (m, link frame) as :func:`robogs.physics.recording.
     load_recording` reads it; its pose is forward kinematics of the commanded joints (with the
     physics revision's fitted joint offsets), linearly interpolated onto a grid of step ``dt``
-    (s). The free object (the only ``rigid`` one) starts at rest at its recorded pose in ``ep``
-    at the trajectory's first stamp (clamped); the engine uses the dataset's physics.json
-    parameters as they are (``robogs physics fit`` writes fitted ones there).
-
-    Returns:
-        ``{object: (t_ns [N], position [N, 3] m, quaternion [N, 4] wxyz)}`` at the trajectory's
-        stamps, a one-line description for the provenance, and notes from the engine.
+    (s). With ``objects.pusher.geometry = "robot"`` the robot's links push, measured over the
+    commanded trajectory's forward kinematics and checked (links fixed in the pusher frame
+    within the dataset's derived budget) by the code that does it for ``compare``
+    (:func:`robogs.physics.recording.commanded_robot_pusher`). The free object (the only
+    ``rigid`` one) starts at rest at its recorded pose in ``ep`` at the trajectory's first stamp
+    (clamped).
 
     Raises:
         InputError: no physics.json, no single rigid object, no pusher link, no engine able to
@@ -422,8 +449,9 @@ def simulate_objects(
     from robogs.format.frames import matrix_to_quat, quat_to_matrix
     from robogs.format.interp import interp_pose
     from robogs.format.kinematics import Chain, dataset_fitted_chain
-    from robogs.physics.engines import ObjectState, choose_engine, get_engine, make_drive
+    from robogs.physics.engines import ObjectState, choose_engine, make_drive
     from robogs.physics.engines.base import quat_yaw
+    from robogs.physics.recording import commanded_robot_pusher, with_robot_pusher
 
     if not isinstance(src.manifest.get("physics"), str):
         raise InputError("--simulate needs physics.json", path=src.manifest_path, where="physics")
@@ -451,18 +479,22 @@ def simulate_objects(
             f"--simulate starts {obj!r} from its recorded pose; episode {ep.id!r} has none",
             where=f"episodes/{ep.id}",
         )
-    from robogs.format.shapes import BOX_BUDGET, load_object_meshes, object_shapes
-
-    shapes = object_shapes(physics, load_object_meshes(src), float(src.budgets[BOX_BUDGET]))
-    name = engine
-    if engine == "auto":  # the shapes as the fit sees them (a box-shaped mesh is its box)
-        name, _ = choose_engine(physics, shapes.meshes)
     with torch.no_grad():
         T = chain.forward(torch.as_tensor(traj.q, dtype=torch.float64))
         base = (src.manifest.get("robot") or {}).get("base_link")
         if isinstance(base, str) and base in chain.link_names and base != chain.link_names[0]:
             T = torch.linalg.inv(T[:, chain.link_index(base)]).unsqueeze(1) @ T
         Te = T[:, chain.link_index(link)]
+    from robogs.format.shapes import BOX_BUDGET, load_object_meshes, object_shapes
+
+    shapes = with_robot_pusher(
+        object_shapes(physics, load_object_meshes(src), float(src.budgets[BOX_BUDGET])),
+        commanded_robot_pusher(src, chain, T.numpy()),
+        "commanded trajectory",
+    )
+    name, reason = engine, ""
+    if engine == "auto":  # the shapes as the fit sees them (a box-shaped mesh is its box)
+        name, reason = choose_engine(physics, shapes.meshes)
     pos = Te[:, :3, 3].numpy().copy()
     quat = matrix_to_quat(Te[:, :3, :3]).numpy()
     if pusher.get("offset_m") is not None:
@@ -485,12 +517,42 @@ def simulate_objects(
         outside="clamp",
     )
     drive = make_drive(dt, p_grid[None], yaw_grid[None], t_s[None], p0, quat_yaw(q0))
-    sim = get_engine(name)(physics, object_name=obj, meshes=shapes.meshes, dt=dt, threads=1)
-    pred = sim.rollout(drive, {obj: ObjectState(p0, q0)})
-    out = {obj: (traj.t_ns.copy(), pred.pos[obj][0, 0], pred.quat[obj][0, 0])}
-    rev = physics.get("revision")
-    desc = (
-        f"simulated by the {name} engine from the commanded pusher motion ({link}; physics "
-        f"revision {rev}, dt {dt:g} s, start at rest at the recorded pose)"
+    return SimulationSetup(
+        name, reason, physics, obj, link, dt, drive, {obj: ObjectState(p0, q0)}, shapes
     )
-    return out, desc, [*shapes.notes, *pred.notes]
+
+
+def simulate_objects(
+    src: Any,
+    ep: Any,
+    traj: Any,
+    *,
+    engine: str = "auto",
+    dt: float = 1e-3,
+) -> tuple[dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]], str, list[str]]:
+    """Object poses rolled out by a physics engine from the pusher motion of ``traj``
+    (:func:`simulation_setup` says what moves and how the object starts); the engine uses the
+    dataset's physics.json parameters as they are (``robogs physics fit`` writes fitted ones
+    there).
+
+    Returns:
+        ``{object: (t_ns [N], position [N, 3] m, quaternion [N, 4] wxyz)}`` at the trajectory's
+        stamps, a one-line description for the provenance, and notes from the engine.
+
+    Raises:
+        InputError: as :func:`simulation_setup`.
+    """
+    from robogs.physics.engines import get_engine
+
+    st = simulation_setup(src, ep, traj, engine=engine, dt=dt)
+    sim = get_engine(st.engine)(
+        st.physics, object_name=st.obj, meshes=st.shapes.meshes, dt=st.dt, threads=1
+    )
+    pred = sim.rollout(st.drive, st.start)
+    out = {st.obj: (traj.t_ns.copy(), pred.pos[st.obj][0, 0], pred.quat[st.obj][0, 0])}
+    rev = st.physics.get("revision")
+    desc = (
+        f"simulated by the {st.engine} engine from the commanded pusher motion ({st.link}; "
+        f"physics revision {rev}, dt {dt:g} s, start at rest at the recorded pose)"
+    )
+    return out, desc, [*st.shapes.notes, *pred.notes]

@@ -26,6 +26,8 @@ __all__ = [
     "check_finite",
     "yaw_of",
     "link_frames",
+    "with_robot_pusher",
+    "commanded_robot_pusher",
 ]
 
 
@@ -108,15 +110,7 @@ class Recording:
         from robogs.format.shapes import object_shapes
 
         out = object_shapes(self.physics, self.meshes, self.box_budget_mm)
-        rp = self.robot_pusher
-        if rp is not None:
-            out.meshes["pusher"] = rp
-            out.notes.append(
-                f"pusher: the robot's links {', '.join(rp.frames)} (objects.pusher.geometry "
-                f"robot; they move in the pusher frame by {rp.spread_m * 1e3:.3g} mm, "
-                f"{np.degrees(rp.spread_rad):.3g} deg over the recording)"
-            )
-        return out
+        return with_robot_pusher(out, self.robot_pusher)
 
     @property
     def tracked(self) -> list[str]:
@@ -439,6 +433,47 @@ def _wrench_world(
     return t, f
 
 
+def with_robot_pusher(shapes: Any, rp: Any, where: str = "recording") -> Any:
+    """``shapes`` (:class:`robogs.format.shapes.Shapes`) with the robot pusher ``rp`` (a
+    :class:`robogs.physics.engines.mujoco_robot.RobotPusher`, or None: unchanged) as
+    ``meshes["pusher"]`` and a note; the one place every engine caller gets it from."""
+    if rp is not None:
+        shapes.meshes["pusher"] = rp
+        shapes.notes.append(
+            f"pusher: the robot's links {', '.join(rp.frames)} (objects.pusher.geometry robot; "
+            f"they stray from their constant pose in the pusher frame by up to "
+            f"{rp.moved_m * 1e3:.2f} mm over the {where}, budget {rp.budget_m * 1e3:.2f} mm)"
+        )
+    return shapes
+
+
+def commanded_robot_pusher(
+    ds: Any, chain: Any, T: np.ndarray, *, where: str = "commanded trajectory"
+) -> Any:
+    """The robot pusher (``objects.pusher.geometry = "robot"``) for a commanded joint
+    trajectory, measured and checked over it as :func:`load_recording` does over a recording
+    (``robogs render --simulate``; the same :class:`_RobotLinks` code).
+
+    Args:
+        ds: the dataset (its physics.json, URDF and budgets).
+        chain: the robot chain the trajectory's forward kinematics used.
+        T: [N, L, 4, 4] every link's pose in the world (robot base) frame over the trajectory.
+
+    Returns:
+        a :class:`robogs.physics.engines.mujoco_robot.RobotPusher`, or None with the primitive
+        pusher.
+    """
+    physics = ds.physics()
+    pusher = (physics.get("objects") or {}).get("pusher") or {}
+    ee_link = pusher.get("link") or (ds.manifest.get("robot") or {}).get("ee_link")
+    links = _RobotLinks.of(ds, physics, ee_link, chain=chain)
+    if links is None:
+        return None
+    T = np.asarray(T, dtype=float)
+    links.add_frames(T[:, chain.link_index(links.link), :3, :3], T)
+    return links.pusher(ds, pusher, where=where)
+
+
 def load_recording(
     dataset: Any, *, object_name: str | None = None, split: str | None = None
 ) -> Recording:
@@ -569,7 +604,7 @@ def load_recording(
         meta={"split": pieces},
         meshes=load_object_meshes(ds),
         box_budget_mm=float(ds.budgets[BOX_BUDGET]),
-        robot_pusher=None if robot_links is None else robot_links.pusher(ds, offset),
+        robot_pusher=None if robot_links is None else robot_links.pusher(ds, pusher),
     )
     rec = as_recording(rec)
     if log is not None:
@@ -580,9 +615,10 @@ def load_recording(
 
 class _RobotLinks:
     """What ``objects.pusher.geometry = "robot"`` needs from a dataset: the robot chain, the
-    pusher link and the links below it, and, per episode, the end effector's orientations and
-    the links' poses relative to it (forward kinematics of ``joint_states``; without them the
-    links below the pusher link must hang from it by fixed joints)."""
+    pusher link and the links below it, and, per episode (or commanded trajectory), the end
+    effector's orientations and the links' poses relative to it (forward kinematics of
+    ``joint_states``; without them the links below the pusher link must hang from it by fixed
+    joints)."""
 
     def __init__(self, chain: Any, link: str, urdf: Path) -> None:
         from robogs.physics.engines.mujoco_robot import distal_links
@@ -593,7 +629,11 @@ class _RobotLinks:
         self.rel: dict[str, list[np.ndarray]] = {n: [] for n in self.links}
 
     @classmethod
-    def of(cls, ds: Any, physics: dict[str, Any], ee_link: Any) -> _RobotLinks | None:
+    def of(
+        cls, ds: Any, physics: dict[str, Any], ee_link: Any, chain: Any = None
+    ) -> _RobotLinks | None:
+        """None with the primitive pusher; ``chain``: the robot chain (default: the dataset's
+        with the fitted joint offsets, as the end effector is driven)."""
         from robogs.physics.engines.mujoco_robot import pusher_geometry
 
         if pusher_geometry(physics) != "robot":
@@ -607,19 +647,29 @@ class _RobotLinks:
                 hint="declare robot.urdf, or use the primitive pusher "
                 "(robogs physics set DATASET objects.pusher.geometry=primitive)",
             )
-        chain = _robot_chain(ds, physics, ee_link, "(objects.pusher.geometry robot)")
+        if chain is None:
+            chain = _robot_chain(ds, physics, ee_link, "(objects.pusher.geometry robot)")
+        elif not isinstance(ee_link, str) or ee_link not in chain.link_names:
+            raise FormatError(
+                f"objects.pusher.geometry is 'robot' but the pusher link {ee_link!r} is not a "
+                "link of the robot URDF",
+                path=ds.manifest_path,
+                where="objects/pusher/link",
+                hint=f"links: {', '.join(chain.link_names[:12])}",
+            )
         return cls(chain, str(ee_link), Path(ds.urdf_path))
 
     def add(self, ds: Any, ep: Any, ee_quat: np.ndarray) -> None:
+        """One episode: its end-effector orientations and its links (``joint_states``)."""
         import torch
 
         from robogs.format.frames import quat_to_matrix
 
-        self.ee_rot.append(np.asarray(quat_to_matrix(ee_quat), dtype=float))
-        idx = [self.chain.link_index(n) for n in self.links]
+        ee_rot = np.asarray(quat_to_matrix(ee_quat), dtype=float)
         if ep.has("joint_states"):
             _, T = link_frames(ds, ep, self.chain)
         else:
+            idx = [self.chain.link_index(n) for n in self.links]
             moving = [
                 self.chain.link_names[k]
                 for k in idx[1:]
@@ -636,21 +686,40 @@ class _RobotLinks:
                 )
             q = torch.zeros((1, self.chain.num_joints), dtype=torch.float64)
             T = self.chain.forward(q).numpy()
+        self.add_frames(ee_rot, T)
+
+    def add_frames(self, ee_rot: np.ndarray, T: np.ndarray) -> None:
+        """End-effector orientations ``ee_rot`` [N, 3, 3] and every link's pose ``T``
+        [K, L, 4, 4] (any common frame) over one stretch of motion."""
+        self.ee_rot.append(np.asarray(ee_rot, dtype=float))
         inv = np.linalg.inv(T[:, self.chain.link_index(self.link)])
-        for n, k in zip(self.links, idx, strict=True):
-            self.rel[n].append(inv @ T[:, k])
+        for n in self.links:
+            self.rel[n].append(inv @ T[:, self.chain.link_index(n)])
 
-    def pusher(self, ds: Any, offset: Any) -> Any:
-        from robogs.physics.engines.mujoco_robot import RobotPusher, pusher_frames
+    def pusher(self, ds: Any, pusher: Any, where: str | None = None) -> Any:
+        """The :class:`RobotPusher` over everything added, checked against the dataset's
+        ``geometry.box3d_mm`` and the motion's own noise
+        (:func:`robogs.physics.engines.mujoco_robot.pusher_frames`)."""
+        from robogs.format.shapes import BOX_BUDGET
+        from robogs.physics.engines.mujoco_robot import RobotPusher, pusher_frames, pusher_reach
 
-        frames, dist, ang = pusher_frames(
+        frames, rig = pusher_frames(
             np.concatenate(self.ee_rot),
-            offset,
+            pusher.get("offset_m"),
             {n: np.concatenate(v) for n, v in self.rel.items()},
-            where=f"dataset {ds.root}",
+            budget_mm=float(ds.budgets[BOX_BUDGET]),
+            reach_m=pusher_reach(pusher),
+            where=where or f"dataset {ds.root}",
         )
         return RobotPusher(
-            self.urdf, self.link, frames, root=Path(ds.root), spread_m=dist, spread_rad=ang
+            self.urdf,
+            self.link,
+            frames,
+            root=Path(ds.root),
+            spread_m=rig.spread_m,
+            spread_rad=rig.spread_rad,
+            moved_m=rig.moved_m,
+            budget_m=rig.budget_m,
         )
 
 

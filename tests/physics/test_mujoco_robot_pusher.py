@@ -123,8 +123,10 @@ def _motion(x0: float, v: float, n: int, y: float, yaw: float, offset: np.ndarra
 
 
 def _robot(urdf: Path, rot: np.ndarray, offset) -> RobotPusher:
-    frames, dist, ang = pusher_frames(rot, offset, {"tool": np.eye(4)[None]})
-    return RobotPusher(urdf, "tool", frames, root=urdf.parents[1], spread_m=dist, spread_rad=ang)
+    frames, rig = pusher_frames(rot, offset, {"tool": np.eye(4)[None]})
+    return RobotPusher(
+        urdf, "tool", frames, root=urdf.parents[1], spread_m=rig.spread_m, spread_rad=rig.spread_rad
+    )
 
 
 def _box_path(eng: MujocoEngine, drive) -> tuple[np.ndarray, np.ndarray]:
@@ -238,22 +240,21 @@ def test_links_below_the_pusher_link_and_the_rigidity_check(tmp_path: Path) -> N
     # yaw alone, and a fixed offset: rigid (spread 0); the pusher-frame pose is closed form
     off = np.array([0.01, 0.02, -0.03])
     yaws = np.linspace(-2.0, 2.5, 7)
-    frames, dist, ang = pusher_frames(
-        np.stack([_rz(y) for y in yaws]), off, {"tool": np.eye(4)[None]}
-    )
-    assert dist < 1e-12 and ang < 1e-7
+    frames, rig = pusher_frames(np.stack([_rz(y) for y in yaws]), off, {"tool": np.eye(4)[None]})
+    assert rig.spread_m < 1e-12 and rig.spread_rad < 1e-7
     assert np.abs(frames["tool"][:3, 3] + off).max() < 1e-12
-    # the tool pitched by 1 deg half the time: refused, naming the option and the fallback
-    c, s = math.cos(math.radians(1)), math.sin(math.radians(1))
+    # the tool pitched by 10 deg half the time (5 deg from the mean pose, at a 50 mm reach:
+    # 4.4 mm > the 2 mm budget, no noise in two samples): refused, naming the fallback
+    c, s = math.cos(math.radians(10)), math.sin(math.radians(10))
     pitch = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-    with pytest.raises(InputError, match="objects.pusher.geometry") as err:
-        pusher_frames(np.stack([np.eye(3), pitch]), None, {"tool": np.eye(4)[None]})
-    assert "primitive" in (err.value.hint or "")
-    # a finger that moves 1 mm relative to the tool: refused, naming the link
-    moved = np.repeat(np.eye(4)[None], 2, 0)
-    moved[1, 0, 3] = 1e-3
-    with pytest.raises(InputError, match="link 'finger'"):
-        pusher_frames(np.stack([np.eye(3)] * 2), None, {"tool": np.eye(4)[None], "finger": moved})
+    with pytest.raises(InputError, match="rolls or pitches") as err:
+        pusher_frames(np.stack([np.eye(3), pitch]), None, {"tool": np.eye(4)[None]}, reach_m=0.05)
+    assert "primitive" in (err.value.hint or "") and "by 4.36 mm" in str(err.value)
+    # at a 10 mm reach the same pitch moves the geometry 0.87 mm: accepted
+    _, rig = pusher_frames(
+        np.stack([np.eye(3), pitch]), None, {"tool": np.eye(4)[None]}, reach_m=0.01
+    )
+    assert rig.moved_m == pytest.approx(0.01 * math.radians(5), rel=1e-9)
 
 
 def test_planar_refuses_the_robot_pusher_and_auto_picks_mujoco() -> None:
@@ -300,7 +301,8 @@ def test_a_dataset_with_the_robot_pusher_reaches_the_engine(tmp_path: Path) -> N
     r_yaw = _rz(0.3)  # the tool's yaw: the tool frame's axes in the pusher frame are identity
     assert np.abs(frame[:3, :3] - np.eye(3)).max() < 1e-9
     assert np.abs(frame[:3, 3] + r_yaw.T @ (r_yaw @ offset)).max() < 1e-9
-    assert rp.spread_m < 1e-9 and rp.spread_rad < 1e-6
+    assert rp.spread_m < 1e-9 and rp.spread_rad < 1e-6 and rp.moved_m < 1e-7
+    assert rp.budget_m == pytest.approx(2e-3, abs=1e-9)  # geometry.box3d_mm, noise-free joints
     shapes = rec.shapes()
     assert shapes.meshes["pusher"] is rp and any(
         "objects.pusher.geometry" in n for n in shapes.notes

@@ -21,9 +21,12 @@ What does what:
   the primitive's pose at that step composed with a constant transform, which is the forward
   kinematics pose exactly when that transform is constant over the recording: the end effector
   only yaws (its roll and pitch keep the value they had) and the joints below the pusher link do
-  not move. The recording is checked (:func:`pusher_frames`, spreads within
-  :data:`RIGID_TOL_M` and :data:`RIGID_TOL_RAD`); a recording that moves them is refused with
-  the reason (the primitive pusher is the fallback). Moving fingers are not modelled yet.
+  not move. The recording is checked (:func:`pusher_frames`): each link's largest displacement
+  from its constant pose must stay within a budget derived from the dataset, its
+  ``geometry.box3d_mm`` (the shape error it already accepts when a mesh is modelled as its box)
+  plus three times the recording's own pose noise at that link; a
+  recording that moves them more is refused naming the link, the amount and the budget (the
+  primitive pusher is the fallback). Moving fingers are not modelled yet.
 * **Why not mocap bodies**: MuJoCo gives a mocap body zero velocity in the contact solver, so
   the contact damping and the pusher friction would act against the object's motion instead of
   the relative sliding, and the pusher's strike and pushes would differ from the primitive's
@@ -50,30 +53,57 @@ from typing import Any
 
 import numpy as np
 
+from robogs.format.budgets import DEFAULT_BUDGETS
 from robogs.format.errors import FormatError, InputError
+from robogs.format.shapes import BOX_BUDGET
 
 __all__ = [
+    "NOISE_FACTOR",
     "PUSHER_GEOMETRIES",
-    "RIGID_TOL_M",
-    "RIGID_TOL_RAD",
+    "Rigidity",
     "RobotPusher",
     "distal_links",
+    "pose_noise",
     "pusher_frames",
     "pusher_geometry",
+    "pusher_reach",
     "robot_pusher_scene",
 ]
 
 PUSHER_GEOMETRIES = ("primitive", "robot")
 """Values of ``objects.pusher.geometry`` (default ``primitive``)."""
 
-RIGID_TOL_M = 2e-4
-"""m: largest spread of a link's position in the pusher frame over a recording."""
-
-RIGID_TOL_RAD = 4e-3
-"""rad: largest spread of a link's orientation in the pusher frame (0.23 deg: 0.4 mm at 0.1 m)."""
+NOISE_FACTOR = 3.0
+"""The rigidity budget's noise allowance, in units of the recording's pose noise (the RMS norm
+of the per-component noise: with two or three noisy components 4.2 or 5.2 standard deviations
+of one, about the largest distance noise alone reaches over thousands of samples)."""
 
 PREFIX = "robot/"
 """Name prefix of the robot's meshes in the scene document."""
+
+
+@dataclass
+class Rigidity:
+    """How far the worst link strays from its constant pose in the pusher frame.
+
+    Attributes:
+        link: the link with the least margin (displacement minus budget).
+        moved_m: its largest displacement [m]: position spread plus angle spread times the lever.
+        budget_m: its budget [m]: ``geometry.box3d_mm`` plus :data:`NOISE_FACTOR` times the noise.
+        spread_m, spread_rad: its largest position and angle distance from the constant pose.
+        lever_m: the lever that turns the angle into a displacement [m].
+        noise_m: the recording's pose noise at that link [m].
+        cause: what moves it (the end effector's roll and pitch, or a joint below the link).
+    """
+
+    link: str
+    moved_m: float
+    budget_m: float
+    spread_m: float
+    spread_rad: float
+    lever_m: float
+    noise_m: float
+    cause: str
 
 
 @dataclass
@@ -87,6 +117,7 @@ class RobotPusher:
         frames: link name -> ``T_pusher_link`` [4, 4] (m), the pusher link and the links below
             it, in the pusher frame (origin the pusher point, axes the end effector's yaw).
         spread_m, spread_rad: the largest spread of those frames over the recording.
+        moved_m, budget_m: the worst link's displacement and its budget (:class:`Rigidity`).
         notes: what was said about the geometry (hulled meshes, which links).
     """
 
@@ -98,6 +129,8 @@ class RobotPusher:
     spread_m: float = 0.0
     spread_rad: float = 0.0
     notes: list[str] = field(default_factory=list)
+    moved_m: float = 0.0
+    budget_m: float = 0.0
 
 
 def pusher_geometry(physics: Mapping[str, Any]) -> str:
@@ -129,18 +162,49 @@ def distal_links(chain: Any, link: str) -> list[str]:
     return [chain.link_names[k] for k in sorted(below)]
 
 
-def _spread(T: np.ndarray) -> tuple[np.ndarray, float, float]:
-    """Mean pose of poses ``T`` [N, 4, 4] (rotation: the mean projected onto SO(3)) and the
-    largest distance [m] and angle [rad] of a pose from it."""
+def _spread(T: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean pose of poses ``T`` [N, 4, 4] (rotation: the mean projected onto SO(3)) and each
+    pose's deviation from it: position [N, 3] m and rotation vector [N, 3] rad (axis times
+    angle of ``R_mean^T R``)."""
     t = T[:, :3, 3].mean(0)
     u, _, vt = np.linalg.svd(T[:, :3, :3].mean(0))
     r = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
     mean = np.eye(4)
     mean[:3, :3], mean[:3, 3] = r, t
-    dist = float(np.linalg.norm(T[:, :3, 3] - t, axis=1).max())
-    cos = (np.einsum("nij,ij->n", T[:, :3, :3], r) - 1.0) / 2.0
-    ang = float(np.arccos(np.clip(cos, -1.0, 1.0)).max())
-    return mean, dist, ang
+    rel = r.T @ T[:, :3, :3]
+    axis = np.stack(
+        [rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0], rel[:, 1, 0] - rel[:, 0, 1]], -1
+    )
+    norm = np.linalg.norm(axis, axis=1, keepdims=True)  # 2 sin(angle)
+    ang = np.arctan2(norm[:, 0] / 2.0, (np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0)
+    rotvec = np.where(norm > 1e-300, axis / np.maximum(norm, 1e-300), 0.0) * ang[:, None]
+    return mean, T[:, :3, 3] - t, rotvec
+
+
+def pose_noise(x: np.ndarray) -> float:
+    """The white noise in a sampled series ``x`` [N, 3] about a smooth path: RMS norm of the
+    per-component standard deviation estimated from second differences (``x[i+1] - 2 x[i] +
+    x[i-1]`` has variance 6 sigma^2 for white noise, while a smooth path's second difference is
+    its curvature times the step squared; the median absolute value, scaled by 1.4826, keeps a
+    few jumps, such as the seams between concatenated episodes, out). Zero for fewer than three
+    samples."""
+    x = np.asarray(x, dtype=float).reshape(len(x), -1)
+    if len(x) < 3:
+        return 0.0
+    d2 = x[2:] - 2.0 * x[1:-1] + x[:-2]
+    sigma = 1.4826 * np.median(np.abs(d2), axis=0) / np.sqrt(6.0)
+    return float(np.sqrt(np.sum(sigma**2)))
+
+
+def pusher_reach(pusher: Mapping[str, Any]) -> float:
+    """Half extent [m] of the primitive ``objects.pusher`` (physics init fits it to the pusher
+    links' collision geometry): ``radius_m + length_m / 2`` for a sphere or capsule, the half
+    diagonal for a box of half size ``radius_m`` (long side ``length_m``)."""
+    r = float(pusher.get("radius_m") or 0.0)
+    half = 0.5 * float(pusher.get("length_m") or 0.0)
+    if pusher.get("shape") == "box":
+        return float(np.sqrt(2.0 * r * r + max(half, r) ** 2))
+    return r + half
 
 
 def _yaw_rot(yaw: np.ndarray) -> np.ndarray:
@@ -156,23 +220,46 @@ def pusher_frames(
     offset: Sequence[float] | None,
     links_in_ee: Mapping[str, np.ndarray],
     *,
+    budget_mm: float = DEFAULT_BUDGETS[BOX_BUDGET].value,
+    reach_m: float = 0.0,
     where: str = "recording",
-) -> tuple[dict[str, np.ndarray], float, float]:
+) -> tuple[dict[str, np.ndarray], Rigidity]:
     """The links' constant poses in the pusher frame, checked against a recording.
+
+    The engine carries each link at one pose in the pusher frame (the mean over the recording);
+    the recorded forward-kinematics poses stray from it where the end effector rolls or pitches
+    (``T_pusher_ee`` changes) or a joint below the pusher link moves (``T_ee_link`` changes).
+    For each link the largest displacement of its geometry from the constant pose is bounded by
+
+        moved = (d_ee + d_link) + (a_ee + a_link) * lever,
+
+    with ``d`` the largest position distance and ``a`` the largest angle [rad] of a pose from
+    its mean (of ``T_pusher_ee`` and of ``T_ee_link``), and ``lever`` the link origin's distance
+    from the pusher point plus ``reach_m`` (the pusher geometry's half extent,
+    :func:`pusher_reach`). The rule: ``moved <= budget`` where
+
+        budget = geometry.box3d_mm + NOISE_FACTOR * noise,
+
+    ``geometry.box3d_mm`` the dataset's budget for modelling a shape by a simpler one (the same
+    that lets an object's mesh be its box, :mod:`robogs.format.shapes`), and ``noise`` the
+    recording's own pose noise at the link (:func:`pose_noise` of both poses' position and, times
+    the lever, rotation deviations), so that a rigid robot recorded with a noisy end-effector
+    orientation is not refused for its noise.
 
     Args:
         ee_rot: [N, 3, 3] the end effector's orientations ``R_world_ee`` over the recording.
         offset: the pusher point in the end-effector frame [m] (``objects.pusher.offset_m``).
         links_in_ee: link name -> ``T_ee_link`` [K, 4, 4] (m) over the recording (K >= 1).
+        budget_mm: the dataset's ``geometry.box3d_mm`` [mm].
+        reach_m: the pusher geometry's half extent [m].
         where: what the recording is, for the error.
 
     Returns:
-        (link -> mean ``T_pusher_link`` [4, 4], largest position spread [m], largest angle
-        spread [rad]).
+        (link -> mean ``T_pusher_link`` [4, 4], the worst link's :class:`Rigidity`).
 
     Raises:
-        InputError: a spread exceeds :data:`RIGID_TOL_M` or :data:`RIGID_TOL_RAD` (the end
-            effector rolls or pitches, or a joint below the pusher link moves).
+        InputError: a link's displacement exceeds its budget (the message names the link, the
+            displacement, its parts and the budget; the hint the fixes).
     """
     from robogs.physics.recording import yaw_of
 
@@ -184,26 +271,59 @@ def pusher_frames(
     t_pe[:, :3, :3] = r_yaw_t @ rot
     t_pe[:, :3, 3] = -(t_pe[:, :3, :3] @ off)
     t_pe[:, 3, 3] = 1.0
-    mean_pe, d_pe, a_pe = _spread(t_pe)
-    frames, dist, ang = {}, d_pe, a_pe
-    worst = "the end effector's roll and pitch"
+    mean_pe, dp_pe, dr_pe = _spread(t_pe)
+    d_pe = float(np.linalg.norm(dp_pe, axis=1).max())
+    a_pe = float(np.linalg.norm(dr_pe, axis=1).max())
+    n_pos_pe, n_rot_pe = pose_noise(dp_pe), pose_noise(dr_pe)
+    frames: dict[str, np.ndarray] = {}
+    worst: Rigidity | None = None
     for name, rel in links_in_ee.items():
-        mean_el, d, a = _spread(np.asarray(rel, dtype=float).reshape(-1, 4, 4))
+        mean_el, dp, dr = _spread(np.asarray(rel, dtype=float).reshape(-1, 4, 4))
         frames[name] = mean_pe @ mean_el
-        if d > dist or a > ang:
-            worst = f"link {name!r} relative to the end effector (a joint below it moves)"
-        dist, ang = max(dist, d), max(ang, a)
-    if dist > RIGID_TOL_M or ang > RIGID_TOL_RAD:
-        raise InputError(
-            f"objects.pusher.geometry 'robot': the robot links move in the pusher frame over "
-            f"the {where} by {dist * 1e3:.3g} mm / {np.degrees(ang):.3g} deg (allowed "
-            f"{RIGID_TOL_M * 1e3:g} mm / {np.degrees(RIGID_TOL_RAD):.3g} deg); largest: {worst}",
-            where="objects/pusher/geometry",
-            hint="the robot pusher follows the end effector's position and yaw with fixed links "
-            "below it; use the primitive pusher (robogs physics set DATASET "
-            "objects.pusher.geometry=primitive)",
+        d = float(np.linalg.norm(dp, axis=1).max())
+        a = float(np.linalg.norm(dr, axis=1).max())
+        lever = float(np.linalg.norm(frames[name][:3, 3])) + float(reach_m)
+        noise = float(
+            np.hypot(n_pos_pe, pose_noise(dp)) + lever * np.hypot(n_rot_pe, pose_noise(dr))
         )
-    return frames, dist, ang
+        own = d + a * lever
+        cause = (
+            "a joint below the pusher link moves"
+            if own > d_pe + a_pe * lever
+            else "the end effector rolls or pitches"
+        )
+        rig = Rigidity(
+            name,
+            moved_m=d_pe + d + (a_pe + a) * lever,
+            budget_m=budget_mm * 1e-3 + NOISE_FACTOR * noise,
+            spread_m=d_pe + d,
+            spread_rad=a_pe + a,
+            lever_m=lever,
+            noise_m=noise,
+            cause=cause,
+        )
+        if worst is None or rig.moved_m - rig.budget_m > worst.moved_m - worst.budget_m:
+            worst = rig
+    if worst is None:
+        raise InputError(
+            "objects.pusher.geometry 'robot': no pusher link", where="objects/pusher/link"
+        )
+    if worst.moved_m > worst.budget_m:
+        w = worst
+        raise InputError(
+            f"objects.pusher.geometry 'robot': link {w.link!r} strays over the {where} by "
+            f"{w.moved_m * 1e3:.2f} mm from its constant pose in the pusher frame "
+            f"({w.spread_m * 1e3:.2f} mm and {np.degrees(w.spread_rad):.2f} deg at a "
+            f"{w.lever_m * 1e3:.1f} mm lever; {w.cause}), over its budget "
+            f"{w.budget_m * 1e3:.2f} mm ({BOX_BUDGET} {budget_mm:g} mm + {NOISE_FACTOR:g} x "
+            f"the recording's pose noise {w.noise_m * 1e3:.2f} mm)",
+            where="objects/pusher/geometry",
+            hint="the robot pusher follows the end effector's position and yaw with the links "
+            "below it fixed: hold those joints and the end effector's roll and pitch still, "
+            f"accept a coarser pusher (a larger {BOX_BUDGET} in the manifest's budgets), or use "
+            "the primitive pusher (robogs physics set DATASET objects.pusher.geometry=primitive)",
+        )
+    return frames, worst
 
 
 def _quat(rot: np.ndarray) -> np.ndarray:
@@ -291,8 +411,13 @@ def robot_pusher_scene(scene: Any, rp: RobotPusher) -> tuple[Any, list[str]]:
                 meshes.add(g.get("mesh"))
     if not names:
         raise InputError(
-            f"objects.pusher.geometry is 'robot' but links {', '.join(rp.frames)} have no "
-            "collision geometry in the URDF",
+            "objects.pusher.geometry is 'robot' but the pusher "
+            + (
+                f"link {next(iter(rp.frames))!r} has"
+                if len(rp.frames) == 1
+                else f"links {', '.join(map(repr, rp.frames))} have"
+            )
+            + " no collision geometry in the URDF",
             path=rp.urdf,
             where="objects/pusher/geometry",
             hint="give the pusher link a <collision>, or use the primitive pusher "
