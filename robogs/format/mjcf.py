@@ -31,8 +31,10 @@ What the document holds (world frame = the dataset world, z up, metres):
 * ``gravity_mps2`` as the gravity vector;
 * the objects' joint set (``joints``, :data:`JOINTS`): a free joint each, or, for boxes on a
   horizontal support (:func:`planar_joints_fit`, the ``auto`` default there), the planar joint
-  set - slide x, y, z and a hinge about z, one central footprint contact with torsional friction
-  and a 10 ms friction reference (:data:`PLANAR_SETTINGS`). The ``mujoco`` engine and
+  set - slide x, y, z and a hinge about z, one footprint contact with torsional friction under
+  the CoM (``com_m`` x, y: the friction centre, as in the planar model and the generator; a
+  fitted ``com_offset`` moves it with the CoM, :func:`write_body`) and a 10 ms friction
+  reference (:data:`PLANAR_SETTINGS`). The ``mujoco`` engine and
   ``robogs export mjcf`` both take this choice from here, so an exported scene is the model
   that was fitted (the reasons are in ``robogs.physics.engines.mujoco_engine``, "Planar joint
   set"). Planar bodies sit at the world origin (qpos is the pose ``T_world_object``: x, y, z m,
@@ -86,6 +88,7 @@ __all__ = [
     "inertia_tensor",
     "MjcfScene",
     "collision_hull",
+    "com_feet",
     "footprint_points",
     "planar_joints_fit",
     "principal",
@@ -310,8 +313,11 @@ class EffectSlots:
     ``table_torsion`` (their torsional friction radii [m], 0: none), ``nominal_mass`` [kg],
     ``nominal_inertia`` [3] kg m^2 and ``nominal_iquat`` (w, x, y, z) (the compiled body's
     principal moments and their rotation), ``tilt_inertia_scale`` (factor on the roll and pitch
-    inertia) and ``ballast_actuator`` (id of its ``<obj>_ballast`` actuator, -1: none).
-    ``robogs.physics.engines.mujoco_effects.ObjectSlots`` has the same attributes."""
+    inertia), ``ballast_actuator`` (id of its ``<obj>_ballast`` actuator, -1: none) and
+    ``com_feet`` (footprint geoms that follow the CoM: ``(geom id, x, y)`` with x, y [m] the
+    geom's place relative to the CoM; the planar joint set's footprint, see
+    :func:`com_feet`). ``robogs.physics.engines.mujoco_effects.ObjectSlots`` has the same
+    attributes."""
 
     body: int
     dof: int
@@ -323,6 +329,7 @@ class EffectSlots:
     nominal_iquat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
     tilt_inertia_scale: float = 1.0
     ballast_actuator: int = -1
+    com_feet: tuple[tuple[int, float, float], ...] = ()
 
 
 def _native_tilt(model: Any, th: Mapping[str, float], slots: Any) -> None:
@@ -427,6 +434,7 @@ BODY_FIELDS = (
     "body_inertia",
     "body_iquat",
     "body_ipos",
+    "geom_pos",
     "pair_friction",
     "pair_solref",
     "pair_solimp",
@@ -435,7 +443,8 @@ BODY_FIELDS = (
     "actuator_biasprm",
 )
 """The ``MjModel`` fields that :func:`write_body` changes (the exporter writes them back as the
-body's ``<inertial>``, the support pairs' ``friction``/``solref``/``solimp``, the slides'
+body's ``<inertial>``, the footprint geoms' ``pos``, the support pairs'
+``friction``/``solref``/``solimp``, the slides'
 ``damping``/``armature`` and the ballast actuator's ``biasprm``)."""
 
 BOUNCE_TIMECONST = 0.02
@@ -483,7 +492,11 @@ def write_body(model: Any, body: BodyValues, slots: Any, *, timeconst: float) ->
       the mass, its body-z moment set to ``inertia_z``, roll and pitch scaled by
       ``slots.tilt_inertia_scale`` (congruence ``diag(k, k, 1)^1/2``, positive definite) and
       re-diagonalised into ``body_inertia`` / ``body_iquat`` (:func:`principal`);
-    * ``body_ipos`` (x, y) = ``com``;
+    * ``body_ipos`` (x, y) = ``com``, and the footprint geoms of ``slots.com_feet`` (the planar
+      joint set's central footprint) at ``com`` plus their offset: the support's friction
+      centre is the CoM, as in the planar model and the generator (a footprint left at the
+      face centre does not feel the CoM: a box with its CoM 8 mm off the line of a central
+      push turned 0.12 deg instead of 10.2, ``tests/physics/test_mujoco_com_offset.py``);
     * the support pairs' friction ``mu_d / (1 + k)`` (torsional ``* radius``), and for
       ``restitution > 0`` their ``solref`` ``(max(timeconst, BOUNCE_TIMECONST), zeta)`` with
       :func:`restitution_damping_ratio` and :data:`BOUNCE_SOLIMP` (corrected by
@@ -503,6 +516,9 @@ def write_body(model: Any, body: BodyValues, slots: Any, *, timeconst: float) ->
     model.body_mass[b] = mass
     model.body_inertia[b], model.body_iquat[b] = principal(tensor)
     model.body_ipos[b, :2] = body.com
+    for g, ox, oy in slots.com_feet or ():
+        model.geom_pos[g, 0] = body.com[0] + ox
+        model.geom_pos[g, 1] = body.com[1] + oy
     kb = float(slots.ballast)
     mu = max(float(body.mu_d), 1e-5) / (1.0 + kb)
     zeta = restitution_damping_ratio(body.restitution)
@@ -521,6 +537,22 @@ def write_body(model: Any, body: BodyValues, slots: Any, *, timeconst: float) ->
     if kb > 0:
         model.dof_armature[slots.dof + 2] = kb * mass
         model.actuator_biasprm[slots.ballast_actuator, 0] = kb * mass * model.opt.gravity[2]
+
+
+def com_feet(model: Any, scene: MjcfScene, name: str) -> tuple[tuple[int, float, float], ...]:
+    """``(geom id, x, y)`` of object ``name``'s footprint spheres in the compiled ``model``,
+    x, y [m] relative to its compiled CoM (``body_ipos``), on the planar joint set
+    (:attr:`EffectSlots.com_feet`: :func:`write_body` keeps them there when the CoM moves);
+    empty on free joints, whose footprint's normal loads follow the CoM through roll and
+    pitch. ``model`` is an ``MjModel`` (no MuJoCo import here)."""
+    if not scene.planar:
+        return ()
+    c = model.body_ipos[model.body(name).id]
+    out = []
+    for foot in scene.feet.get(name, []):
+        g = int(model.geom(foot).id)
+        out.append((g, float(model.geom_pos[g, 0] - c[0]), float(model.geom_pos[g, 1] - c[1])))
+    return tuple(out)
 
 
 def planar_joints_fit(
@@ -838,9 +870,11 @@ def _shape_geom(
     footprint: int = 0,
     spread: float = 1.0,
     torsion: bool = False,
+    centre: Sequence[float] = (0.0, 0.0),
 ) -> None:
-    """A box of ``size_m`` (with ``footprint`` x ``footprint`` support spheres) or the
-    collision hull of ``mesh`` (object frame)."""
+    """A box of ``size_m`` (with ``footprint`` x ``footprint`` support spheres about
+    ``centre`` (x, y) [m] of the bottom face) or the collision hull of ``mesh`` (object
+    frame)."""
     attrs = {"name": name, "contype": "0", "conaffinity": "0", "group": "1"}
     if mesh is not None:
         hull, note = collision_hull(mesh, name)
@@ -867,7 +901,7 @@ def _shape_geom(
             face = [2 * half[0], 2 * half[1]]
             pts = footprint_points(face, footprint, spread)
             scene.torsion[name] = torsion_radius(face, pts) if torsion else 0.0
-            for i, (x, y) in enumerate(pts):
+            for i, (x, y) in enumerate(pts + np.asarray(centre, float)[:2]):
                 ET.SubElement(
                     parent,
                     "geom",
@@ -1081,6 +1115,9 @@ def scene_mjcf(
                 settings.footprint_grid,
                 settings.footprint_spread,
                 settings.footprint_torsion,
+                # planar joint set: the footprint under the CoM (the friction centre; no roll
+                # or pitch to shift its load; see write_body)
+                _floats(entry, "com_m", 3, where)[:2] if planar and "com_m" in entry else (0, 0),
             )
             free[name] = _number(entry, "friction_dynamic", 0.4, where)
             for key in ("restitution", "damping_linear", "damping_angular"):

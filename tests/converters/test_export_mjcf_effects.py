@@ -59,10 +59,11 @@ def revision(src: Path, dst: Path, effects: list[dict]) -> Path:
     return dst
 
 
-def fit_and_export(base: Path, effect: str, seed: int) -> dict:
-    """``effect`` fitted on 9 pushes with it hidden (seed, nominal noise; the mujoco engine),
-    its baseline (what compare reports) and prepared engine, and the exports of the fitted
-    revision (``with``) and of the same revision without the effect (``without``)."""
+def fit_and_export(base: Path, effect: str, seed: int, kinds: tuple[str, ...] = ("push",)) -> dict:
+    """``effect`` fitted on the generator's ``kinds`` of motion (default its 9 centred pushes)
+    with it hidden (seed, nominal noise; the mujoco engine), its baseline (what compare
+    reports) and prepared engine, and the exports of the fitted revision (``with``) and of the
+    same revision without the effect (``without``)."""
     import torch
 
     from robogs.physics import api
@@ -72,7 +73,7 @@ def fit_and_export(base: Path, effect: str, seed: int) -> dict:
     from robogs.synth.scenarios import make_scenario, write_scenario
 
     torch.set_num_threads(1)
-    rec = make_scenario(effect, seed=seed, kinds=("push",), noise="nominal", check=False)
+    rec = make_scenario(effect, seed=seed, kinds=kinds, noise="nominal", check=False)
     path = base / effect
     write_scenario(rec, path)
     fit = api.fit(path, [effect], engine="mujoco", mask_frames=0)

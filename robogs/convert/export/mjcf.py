@@ -73,6 +73,7 @@ from robogs.format.mjcf import (
     EffectSlots,
     MjcfScene,
     body_values,
+    com_feet,
     scene_mjcf,
     write_body,
 )
@@ -302,6 +303,7 @@ def _slots(model: Any, scene: MjcfScene, target: str, rows: list[int]) -> Effect
         ballast_actuator=mujoco.mj_name2id(
             model, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{target}_ballast"
         ),
+        com_feet=com_feet(model, scene, target),
     )
 
 
@@ -314,7 +316,7 @@ def _write_back(
 ) -> None:
     """Write the changed rows of :data:`NATIVE_FIELDS` and :data:`BODY_FIELDS` into the
     document ``root`` at full precision: ``<option gravity>``, a body's ``<inertial>`` (mass,
-    pos, diaginertia, quat: the compiled principal form), a joint's ``damping`` / ``armature``,
+    pos, diaginertia, quat: the compiled principal form), a geom's ``pos``, a joint's ``damping`` / ``armature``,
     a pair's ``friction`` / ``solref`` / ``solimp``, an actuator's ``biasprm``."""
     if len(changed["opt.gravity"]):
         root.find("option").set("gravity", _reals(model.opt.gravity))
@@ -327,6 +329,9 @@ def _write_back(
         inertial.set("mass", _reals(model.body_mass[b]))
         inertial.set("diaginertia", _reals(model.body_inertia[b]))
         inertial.set("quat", _reals(model.body_iquat[b]))
+    for g in changed["geom_pos"]:  # footprint geoms that follow the CoM (write_body)
+        geom = root.find(f".//geom[@name='{model.geom(int(g)).name}']")
+        geom.set("pos", _reals(model.geom_pos[g]))
     for f, attr in (("dof_damping", "damping"), ("dof_armature", "armature")):
         for d in changed[f]:
             jname = model.joint(int(model.dof_jntid[d])).name

@@ -81,7 +81,10 @@ MAPPING: dict[str, tuple[str, str]] = {
         "xfrc_applied = -(mu(phi) - mu_d) m g v/|v| on the table, each step",
     ),
     "restitution": ("model", "object-table pair solref damping ratio from e"),
-    "com_offset": ("model", "body_ipos (x, y) of the object"),
+    "com_offset": (
+        "model",
+        "body_ipos (x, y) of the object and its planar footprint (the friction centre) with it",
+    ),
     "mass": ("model", "body_mass, body_inertia scaled with it"),
     "time_offset": ("sensor", "sample times shifted (as on the planar engine)"),
     "camera_extrinsics": ("sensor", "sampled poses mapped into the camera frame"),
@@ -107,6 +110,8 @@ class ObjectSlots:
         ballast: the z ballast factor k (``robogs.format.mjcf.ContactSettings.z_ballast``;
         0: none) and ballast_actuator its bias actuator's id: the z DOF (``dof + 2``) carries
         armature k m and the force k m g_z, the support pairs mu_d / (1 + k).
+        com_feet: ``(geom id, x, y)`` of the footprint geoms that follow the CoM, x, y [m]
+        relative to it (the planar joint set's; :func:`robogs.format.mjcf.com_feet`).
     """
 
     body: int
@@ -120,6 +125,7 @@ class ObjectSlots:
     table_torsion: list[float] | None = None
     ballast: float = 0.0
     ballast_actuator: int = -1
+    com_feet: tuple[tuple[int, float, float], ...] = ()
 
     def body_tensor(self) -> np.ndarray:
         """[3, 3] nominal inertia tensor about the CoM in the body frame [kg m^2]."""

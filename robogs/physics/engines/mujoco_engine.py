@@ -27,9 +27,13 @@ the box at 1 m/s). Semi-implicit Euler keeps the solver's view and the update th
 Planar joint set (``joints="auto"``, the default where :func:`planar_joints_fit` allows: boxes
 on a horizontal support). Each object moves on slide x, y, z and a hinge about z, no roll or
 pitch, as in the planar model (whose box "stays flat on one face"), and rests on **one** contact
-sphere at the centre of its bottom face with torsional friction ``mu r_mean`` (``condim 4``,
-``r_mean`` the face's mean radius: the ellipsoidal limit surface of Howe & Cutkosky 1996 that
-the planar model and the generator use), friction reference ``solreffriction = (10 ms, 1)``
+sphere on its bottom face under the CoM (the friction centre of the planar model and the
+generator; a fitted ``com_offset`` moves it with the CoM, :func:`robogs.format.mjcf.write_body`;
+h72, ``tests/physics/test_mujoco_com_offset.py``: at the face centre a central push of a box with
+its CoM 8 mm off the push line turned it 0.12 deg instead of 10.2) with torsional friction
+``mu r_mean`` (``condim 4``, ``r_mean`` the face's mean radius about the face centre: the
+ellipsoidal limit surface of Howe & Cutkosky 1996 that the planar model and the generator use),
+friction reference ``solreffriction = (10 ms, 1)``
 (:data:`PLANAR_SETTINGS`). Why: MuJoCo's soft elliptic cone couples slip into the normal
 (MuJoCo documentation, "Computation": soft contact model; Todorov 2014; MuJoCo's
 ``engine_core_constraint.c``, ``mj_constraintUpdate``: in the elliptic cone's middle zone, the

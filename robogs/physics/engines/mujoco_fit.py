@@ -56,6 +56,7 @@ import numpy as np
 import torch
 
 from robogs.format.errors import InputError
+from robogs.format.mjcf import com_feet
 from robogs.physics.effects import Param, overrides
 from robogs.physics.engines.base import quat_yaw
 from robogs.physics.engines.mujoco_effects import (
@@ -213,6 +214,7 @@ class MujocoFit:
             ballast_actuator=mujoco.mj_name2id(
                 m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{object_name}_ballast"
             ),
+            com_feet=com_feet(m, self.eng.scene, object_name),
         )
         self.lay = self.eng.layout[object_name]  # free joint or planar joint set
         self.qa, self.va = self.lay.q, self.lay.v  # state columns of its qpos and DOFs
