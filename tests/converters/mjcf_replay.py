@@ -8,7 +8,13 @@ import numpy as np
 
 def drive_pusher(model, data, qb: int, p: np.ndarray, yaw: np.ndarray, dt: float) -> np.ndarray:
     """Drive the pusher along ``p`` [N, 3] m / ``yaw`` [N] rad (position + velocity controls,
-    step ``dt`` s) and return the box's slide positions [N, 3] m (qpos from index ``qb``)."""
+    step ``dt`` s) and return the box's slide positions [N, 3] m (qpos from index ``qb``). The
+    servos get the path the engine gives them (``mujoco_engine.servo_targets``: smoothed over
+    the drive's knots)."""
+    from robogs.physics.engines.mujoco_engine import servo_targets
+
+    sp, sy = servo_targets(p[None], yaw[None])
+    p, yaw = sp[0], sy[0]
     pos = np.empty((len(p), 3))
     pos[0] = data.qpos[qb : qb + 3]
     for k in range(len(p) - 1):

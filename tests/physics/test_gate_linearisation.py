@@ -271,9 +271,11 @@ def test_mujoco_null_threshold_near_planar_on_design_b_null_seed_1(shared_fits):
     engines represent it). Before any check MuJoCo's tilt threshold was 29.2 sigma^2 against
     planar's 51.8 (ratio 0.56) and the tilt was reported (held-out 31.2): its fit gains 28.3
     sigma^2 where its 1 % forward-difference Jacobian accounts for 20.1 (planar: 28.9 / 30.1).
-    With the check on draws (the tilt's gain is at its threshold's scale, so ``lambda = 1``):
-    ratio >= 0.7, no report, the first draw gives the data's own ratio back, and planar's
-    nulls unscaled (factor <= 1.1)."""
+    With the check on draws: ratio >= 0.7, no report, MuJoCo's tilt null scaled up (factor >
+    1.2) and planar's nulls unscaled (factor <= 1.1). Where the tilt's gain is at its
+    threshold's scale (``lambda = 1``, before the engine smoothed its servo targets over the
+    drive's knots, h67) the first draw gives the data's own ratio back; since h67 its gain is
+    above it (``lambda`` 0.853, factor 1.88, threshold ratio 0.71) and the change is shrunk."""
     pytest.importorskip("mujoco")
     from robogs.physics.diagnose import diagnose_recording
     from robogs.physics.engine import Engine
@@ -288,8 +290,9 @@ def test_mujoco_null_threshold_near_planar_on_design_b_null_seed_1(shared_fits):
     assert not [r.name for r in res["mujoco"].rows if r.reported]
     assert max((res["planar"].gate["inflation"] or {"-": 1.0}).values()) <= 1.1
     chk = res["mujoco"].gate["linearisation_check"]["candidates"]["table_tilt"]
-    assert chk["factor"] > 1.2 and chk["scale"] == 1.0
-    assert chk["draw_ratios"][0] == pytest.approx(chk["data_ratio"], rel=1e-3)
+    assert chk["factor"] > 1.2 and 0.5 <= chk["scale"] <= 1.0
+    if chk["scale"] == 1.0:  # the unshrunk first draw is the data's own fitted change
+        assert chk["draw_ratios"][0] == pytest.approx(chk["data_ratio"], rel=1e-3)
 
 
 @pytest.mark.slow

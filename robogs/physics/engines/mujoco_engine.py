@@ -5,7 +5,8 @@ boxes or convex hulls with the physics.json mass, CoM and inertia, the pusher sh
 contact pair per object pair with its own friction). The pusher is a heavy body (1000 kg,
 gravity compensated) on four joints (x, y, z slides, yaw hinge) driven by servos that follow
 the measured pusher: per step ``k -> k+1`` the velocity servo's target is
-``(p[k+1] - p[k]) / dt`` with gain ``kv = m / dt`` (dead-beat: with explicit actuator forces
+``(p[k+1] - p[k]) / dt`` (``p`` the drive through :func:`smooth_knots`, see "Drive knots"
+below) with gain ``kv = m / dt`` (dead-beat: with explicit actuator forces
 the velocity after the step is the target) and the position servo's target ``p[k]`` with
 ``kp = 0.3 m / dt^2`` (drift shrinks by 30 % per step). Contact forces of a few newtons move
 a 1000 kg pusher by micrometres per second, corrected at the next step, so the pusher moves
@@ -23,6 +24,40 @@ stiff implicit velocity servo, the constraint solver sees the servo's explicit f
 ``kv (v* - v)``, ``kv dt / m`` (= 100) times larger than the acceleration the implicit
 update then applies; a step in the target velocity became a blow to the object (0.3 m/s pushes launched
 the box at 1 m/s). Semi-implicit Euler keeps the solver's view and the update the same.
+
+Drive knots (h67; ``tests/physics/test_mujoco_friction_bias.py``). ``prepare`` interpolates
+the measured path linearly onto the step grid, so with a 500 Hz encoder and 1 ms steps the
+drive's velocity is a staircase: all of each 2 ms sample's velocity change falls on one step
+and none on the next. A dead-beat servo follows it, so a braking pusher decelerates at twice
+the path's deceleration on every other step and not at all in between. The rigid contact of
+the planar model and the generator's smooth path do not care; MuJoCo's soft pusher contact
+does. Once twice the brake's deceleration passes mu g, the box cannot follow the pusher on the
+jump steps (the table limits it to -mu g), while on the flat steps the pair's stored compression
+(about 15 um) pushes it at up to mu m g, so it hardly slows. So it leaves the pusher faster
+than the generator's box, which follows the pusher until the path's own deceleration reaches
+mu g. On the noise-free 9-push scene this adds +3.7 / +3.4 / +2.6 mm/s at 0.3 / 0.425 /
+0.55 m/s to the release speed (z ballast 99), 1.8 % of the slide. A 0.5 ms step (knots every
+4 steps) makes it larger (+5.1 / +5.3 / +3.6 mm/s).
+The servo targets therefore follow the drive through the zero-phase triangle of two moving
+averages as long as the knot spacing (:func:`smooth_knots`; spacing from the drive's own
+second differences, :func:`drive_knot_steps`; n = 2 at 1 ms and 500 Hz: weights 1/4, 1/2,
+1/4). It turns each velocity step into a ramp and moves a position by at most
+``a (n dt)^2 / 4``, which is 10 um at 10 m/s^2. Measured (``bench/RESULTS.md``, "issue 16 (h67)"):
+
+* brake gain +0.19 / -0.29 / -0.91 mm/s (B 99; planar's rigid contact +0.33 / +0.32 /
+  +0.13);
+* the same at 0.5 ms (n = 4);
+* best friction +2.79 % -> +1.83 % (default B 9) and +2.56 -> +1.20 % (B 99).
+
+What is left is the strike's remnant (below). Solver-side switches left the gain where it was:
+
+* 1000 solver iterations at tolerance 1e-15, ``noslip_iterations`` 10 / 100, ``impratio``
+  1 / 100, a 1e6 kg pusher, one capsule geom instead of the end spheres: bit-identical or
+  within 0.02 mm/s;
+* a pyramidal cone or one centred sphere: larger;
+* ``implicitfast``: hid it through the solver's wrong view of the servo (above).
+
+``DRIVE_KNOT_SMOOTHING = False`` restores the raw targets.
 
 Planar joint set (``joints="auto"``, the default where :func:`planar_joints_fit` allows: boxes
 on a horizontal support). Each object moves on slide x, y, z and a hinge about z, no roll or
@@ -265,8 +300,11 @@ __all__ = [
     "OBJECT_PAIR_DAMPRATIO",
     "PUSHER_SOLREFFRICTION_STEPS",
     "SUPPORTED_PARAMS",
+    "drive_knot_steps",
     "drive_pusher_speed",
     "planar_joints_fit",
+    "servo_targets",
+    "smooth_knots",
 ]
 
 SUPPORTED_PARAMS = (
@@ -275,6 +313,13 @@ SUPPORTED_PARAMS = (
     "objects.pusher.friction_dynamic",
 )
 """physics.json keys a parameter set may change (mass scales the inertia with it)."""
+
+DRIVE_KNOT_SMOOTHING = True
+"""The servo targets follow the drive through :func:`smooth_knots` at the drive's own knot
+spacing (:func:`drive_knot_steps`); see the module docstring, "Drive knots"."""
+
+_KNOT_TOL_M = 1e-13  # |second difference| of a drive position above float rounding [m]
+_MAX_KNOT_STEPS = 64
 
 _STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
 _CHUNK = 64  # rollouts per mujoco.rollout call: bounds the state buffer (64 x S x nstate)
@@ -591,8 +636,7 @@ class MujocoEngine:
         n_t, n_s = drive.n_traj, drive.n_steps
         if self._pusher_q is None:
             return np.zeros((n_t, n_s - 1, 0))
-        p = drive.pusher.numpy()
-        y = drive.ee_yaw.numpy()
+        p, y = servo_targets(drive.pusher.numpy(), drive.ee_yaw.numpy())
         k = len(PUSHER_ACTUATORS)
         ctrl = np.zeros((n_t, n_s - 1, self.model.nu))  # z-ballast actuators follow: ctrl 0
         ctrl[..., :3] = p[:, :-1]
@@ -761,6 +805,54 @@ def _robot_scene(scene: MjcfScene, robot: Any) -> tuple[MjcfScene, list[str]]:
             "shapes() carry it, or pass meshes={'pusher': RobotPusher(...)}",
         )
     return robot_pusher_scene(scene, robot)
+
+
+def servo_targets(p: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pusher path the servos follow: the drive's positions ``p`` [T, S, 3] m and yaw
+    [T, S] rad through :func:`smooth_knots` at the drive's own knot spacing
+    (:func:`drive_knot_steps`), or unchanged with :data:`DRIVE_KNOT_SMOOTHING` off. A replay of
+    an exported scene feeds these to reproduce the engine's rollout step for step."""
+    p, yaw = np.asarray(p, dtype=float), np.asarray(yaw, dtype=float)
+    if not DRIVE_KNOT_SMOOTHING:
+        return p, yaw
+    n = drive_knot_steps(p)
+    return smooth_knots(p, n), smooth_knots(yaw, n)
+
+
+def drive_knot_steps(p: np.ndarray) -> int:
+    """The spacing in steps of a drive's knots: ``p`` [T, S, ...] is a path linearly
+    interpolated onto the step grid from samples (encoder stamps) every ``n`` steps, so its
+    velocity is constant between knots and its second difference is nonzero only at them.
+    Returns the most common spacing of consecutive steps with a nonzero second difference
+    (above float rounding) within a trajectory, 1 where there is none or above 64."""
+    p = np.asarray(p, dtype=float)
+    if p.ndim < 2 or p.shape[1] < 3:
+        return 1
+    acc = np.abs(np.diff(p, 2, axis=1))
+    acc = acc.reshape(acc.shape[0], acc.shape[1], -1).max(axis=-1)  # [T, S - 2]
+    gaps = [np.diff(np.flatnonzero(row > _KNOT_TOL_M)) for row in acc]
+    gaps = np.concatenate(gaps) if gaps else np.zeros(0, dtype=int)
+    gaps = gaps[(gaps >= 1) & (gaps <= _MAX_KNOT_STEPS)]
+    return int(np.bincount(gaps).argmax()) if gaps.size else 1
+
+
+def smooth_knots(x: np.ndarray, n: int) -> np.ndarray:
+    """``x`` [T, S, ...] along its step axis through the zero-phase triangle of two ``n``-step
+    moving averages (``2n - 1`` taps; ``n = 2``: 1/4, 1/2, 1/4); the first and last ``n - 1``
+    steps are kept. A path linear between knots every ``n`` steps keeps its straight pieces
+    away from the knots and gets its velocity steps turned into ramps over ``2n - 2`` steps;
+    a position moves by at most ``a (n dt)^2 / 4`` (``a`` the path's acceleration).
+    ``n <= 1`` returns ``x``."""
+    x = np.asarray(x, dtype=float)
+    n = int(n)
+    h = n - 1
+    if h < 1 or x.shape[1] <= 2 * h:
+        return x
+    w = np.convolve(np.ones(n), np.ones(n)) / float(n * n)
+    out = x.copy()
+    s = x.shape[1]
+    out[:, h : s - h] = sum(w[j] * x[:, j : s - 2 * h + j] for j in range(2 * h + 1))
+    return out
 
 
 def _sample(dense: np.ndarray, obs_t: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
