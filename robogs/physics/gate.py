@@ -588,13 +588,15 @@ def _t(s: np.ndarray, se: np.ndarray) -> np.ndarray:
 
 @functools.lru_cache(maxsize=1)
 def code_hash() -> str:
-    """Hash of the physics package's Python sources: a changed model or gate never reads a
-    calibration or baseline cached by another version."""
+    """Hash of the Python sources of the physics package and of ``robogs.format``, which
+    builds its MuJoCo scenes, shapes and kinematics (``mjcf``, ``shapes``, ``kinematics``): a
+    changed model or gate never reads a calibration or baseline cached by another version."""
     h = hashlib.blake2b(digest_size=16)
-    root = Path(__file__).resolve().parent
-    for f in sorted(root.rglob("*.py")):
-        h.update(f.relative_to(root).as_posix().encode())
-        h.update(f.read_bytes())
+    here = Path(__file__).resolve().parent
+    for root in (here, here.parent / "format"):
+        for f in sorted(root.rglob("*.py")):
+            h.update(f"{root.name}/{f.relative_to(root).as_posix()}".encode())
+            h.update(f.read_bytes())
     return h.hexdigest()
 
 
