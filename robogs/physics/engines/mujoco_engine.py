@@ -289,7 +289,11 @@ from robogs.format.mjcf import (  # one source for the engine and `robogs export
     use_planar_joints,
 )
 from robogs.physics.engines.base import ObjectState, Predicted, quat_yaw, yaw_quat
-from robogs.physics.engines.mujoco_robot import pusher_geometry
+from robogs.physics.engines.mujoco_robot import (
+    RobotPusher,
+    pusher_geometry,
+    robot_pusher_scene,
+)
 from robogs.physics.model import Drive
 
 __all__ = [
@@ -795,8 +799,6 @@ def _align_pairs(model: mujoco.MjModel, scene: MjcfScene) -> None:
 
 def _robot_scene(scene: MjcfScene, robot: Any) -> tuple[MjcfScene, list[str]]:
     """The scene with the robot's links as its pusher (:mod:`.mujoco_robot`)."""
-    from robogs.physics.engines.mujoco_robot import RobotPusher, robot_pusher_scene
-
     if not isinstance(robot, RobotPusher):
         raise InputError(
             "objects.pusher.geometry is 'robot' but the engine got no robot geometry",

@@ -187,13 +187,11 @@ def pose_noise(x: np.ndarray) -> float:
     x[i-1]`` has variance 6 sigma^2 for white noise, while a smooth path's second difference is
     its curvature times the step squared; the median absolute value, scaled by 1.4826, keeps a
     few jumps, such as the seams between concatenated episodes, out). Zero for fewer than three
-    samples."""
+    samples (:func:`robogs.physics.noise.second_difference_sigma` per component)."""
+    from robogs.physics.noise import second_difference_sigma
+
     x = np.asarray(x, dtype=float).reshape(len(x), -1)
-    if len(x) < 3:
-        return 0.0
-    d2 = x[2:] - 2.0 * x[1:-1] + x[:-2]
-    sigma = 1.4826 * np.median(np.abs(d2), axis=0) / np.sqrt(6.0)
-    return float(np.sqrt(np.sum(sigma**2)))
+    return float(np.sqrt(sum(second_difference_sigma(c) ** 2 for c in x.T)))
 
 
 def pusher_reach(pusher: Mapping[str, Any]) -> float:
@@ -343,14 +341,12 @@ def _find_body(bodies: Sequence[ET.Element], name: str) -> ET.Element | None:
 
 def _pose_matrix(el: ET.Element) -> np.ndarray:
     """``T_body_geom`` of a geom element with ``pos`` and ``quat`` (w x y z)."""
-    import mujoco
+    from robogs.format.frames import quat_to_matrix_np
 
     pos = [float(v) for v in (el.get("pos") or "0 0 0").split()]
     q = np.array([float(v) for v in (el.get("quat") or "1 0 0 0").split()])
-    mat = np.zeros(9)
-    mujoco.mju_quat2Mat(mat, q / np.linalg.norm(q))
     out = np.eye(4)
-    out[:3, :3], out[:3, 3] = mat.reshape(3, 3), pos
+    out[:3, :3], out[:3, 3] = quat_to_matrix_np(q), pos
     return out
 
 
