@@ -432,9 +432,11 @@ def simulation_setup(
     ``objects.pusher.offset_m`` (m, link frame) as :func:`robogs.physics.recording.
     load_recording` reads it; its pose is forward kinematics of the commanded joints (with the
     physics revision's fitted joint offsets), linearly interpolated onto a grid of step ``dt``
-    (s). With ``objects.pusher.geometry = "robot"`` the robot's links push, measured over the
-    commanded trajectory's forward kinematics and checked (links fixed in the pusher frame
-    within the dataset's derived budget) by the code that does it for ``compare``
+    (s); the drive carries the median spacing of those stamps (``Drive.sample_dt``), over
+    which the MuJoCo engine smooths its servo targets. With ``objects.pusher.geometry =
+    "robot"`` the robot's links push, measured over the commanded trajectory's forward
+    kinematics and checked (links fixed in the pusher frame within the dataset's derived
+    budget) by the code that does it for ``compare``
     (:func:`robogs.physics.recording.commanded_robot_pusher`). The free object (the only
     ``rigid`` one) starts at rest at its recorded pose in ``ep`` at the trajectory's first stamp
     (clamped).
@@ -516,7 +518,15 @@ def simulation_setup(
         np.stack([tab.column(c).to_numpy()[m] for c in ("qw", "qx", "qy", "qz")], -1),
         outside="clamp",
     )
-    drive = make_drive(dt, p_grid[None], yaw_grid[None], t_s[None], p0, quat_yaw(q0))
+    drive = make_drive(  # the servos are smoothed over the stamps' own interval
+        dt,
+        p_grid[None],
+        yaw_grid[None],
+        t_s[None],
+        p0,
+        quat_yaw(q0),
+        sample_dt=float(np.median(np.diff(t_s))) if len(t_s) > 1 else np.nan,
+    )
     return SimulationSetup(
         name, reason, physics, obj, link, dt, drive, {obj: ObjectState(p0, q0)}, shapes
     )

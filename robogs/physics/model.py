@@ -148,6 +148,11 @@ class Drive:
         wrench_bin: optional [T, S] int64: the wrench sample whose averaging window holds each
             step (-1: none); with it :func:`simulate` returns the pusher's contact force.
         wrench_width: [T, W] duration of each wrench sample's window [s].
+        sample_dt: optional [T] s: the sample interval of the stream each trajectory's pusher
+            path was linearly interpolated from (the median spacing of its stamps, e.g. 0.002
+            for a 500 Hz encoder; NaN where unknown). The MuJoCo engine smooths its servo
+            targets over it (``mujoco_engine.sample_steps``); None: not known (a path handed
+            in on the grid), the engine then reads the spacing from the path itself.
     """
 
     dt: float
@@ -164,6 +169,7 @@ class Drive:
     carry_vel: torch.Tensor | None = None
     wrench_bin: torch.Tensor | None = None
     wrench_width: torch.Tensor | None = None
+    sample_dt: torch.Tensor | None = None
 
     @property
     def n_traj(self) -> int:
@@ -187,6 +193,7 @@ class Drive:
             None if self.carry_vel is None else self.carry_vel[ii],
             None if self.wrench_bin is None else self.wrench_bin[ii],
             None if self.wrench_width is None else self.wrench_width[ii],
+            None if self.sample_dt is None else self.sample_dt[ii],
         )
 
 

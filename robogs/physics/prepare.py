@@ -219,6 +219,11 @@ def build_drive(
     The initial object pose is the median of the first static samples; a start height within
     ``z_snap`` of the resting height is snapped onto the table.
 
+    The drive records each trajectory's EE sample interval (``Drive.sample_dt`` [T] s: the
+    median spacing of its ``ee_t_ns``; NaN with fewer than two samples): the linear
+    interpolation puts a velocity step at every sample, wherever the stamps fall on the grid,
+    and the MuJoCo engine smooths its servo targets over that interval.
+
     Returns:
         the drive and the start stamps [T] (int64 ns).
     """
@@ -239,6 +244,9 @@ def build_drive(
     obs_mask = np.zeros((n_t, n_obs), dtype=bool)
     ipos = np.zeros((n_t, 3))
     iyaw = np.zeros(n_t)
+    sample_dt = np.array(
+        [np.median(np.diff(t.ee_t_ns)) * 1e-9 if len(t.ee_t_ns) > 1 else np.nan for t in trs]
+    )
     if pos_window is None or ee_window is None:
         w_pos, w_ee, s, rate = drive_windows(
             [((t.ee_t_ns - t.ee_t_ns[0]) * 1e-9, t.ee_pos) for t in trs]
@@ -288,6 +296,7 @@ def build_drive(
         obs_t=torch.as_tensor(obs_t, dtype=f),
         obs_mask=torch.as_tensor(obs_mask),
         carry_vel=torch.as_tensor(carry, dtype=f),
+        sample_dt=torch.as_tensor(sample_dt, dtype=f),
     )
     return drive, t0
 

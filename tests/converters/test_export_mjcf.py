@@ -78,7 +78,7 @@ def _replay(model: mujoco.MjModel, tr, hz: float) -> np.ndarray:
     yaw0 = float(np.median(_yaw(tr.object_quat[:5])))
     qb = _set_box(model, data, np.array([pos0[0], pos0[1], hz]), yaw0)
     data.qpos[qp : qp + 3], data.qpos[qp + 3] = p[0], yaw[0]
-    pos = drive_pusher(model, data, qb, p, yaw, dt)
+    pos = drive_pusher(model, data, qb, p, yaw, dt, np.median(np.diff(te)) / dt)
     ts = (tr.t_ns - t0) * 1e-9
     return np.stack([np.interp(ts, grid, pos[:, a]) for a in range(3)], -1)
 
@@ -235,14 +235,15 @@ def test_the_export_is_the_engines_model_and_replays_its_rollout(pushes, tmp_pat
         [*np.median(tr.object_pos[:5], axis=0)[:2], 0.5 * physics["objects"]["box"]["size_m"][2]]
     )
     yaw0 = float(np.median(_yaw(tr.object_quat[:5])))
-    drive = make_drive(dt, p[None], yaw[None], grid[None], pos0[None], np.array([yaw0]))
+    every = float(np.median(np.diff(te)))  # the encoder's sample interval [s]
+    drive = make_drive(dt, p[None], yaw[None], grid[None], pos0[None], np.array([yaw0]), every)
     want = eng.rollout(drive).pos["box"][0, 0]
 
     qb = _set_box(model, data, pos0, yaw0)
     qp, vp = model.joint("pusher_x").qposadr[0], model.joint("pusher_x").dofadr[0]
     data.qpos[qp : qp + 3], data.qpos[qp + 3] = p[0], yaw[0]
     data.qvel[vp : vp + 3], data.qvel[vp + 3] = (p[1] - p[0]) / dt, (yaw[1] - yaw[0]) / dt
-    got = drive_pusher(model, data, qb, p, yaw, dt)
+    got = drive_pusher(model, data, qb, p, yaw, dt, every / dt)
     assert np.linalg.norm(want[-1] - want[0]) > 0.03  # the push moved the box (50 mm)
     gap_mm = 1e3 * float(np.abs(got - want).max())
     assert gap_mm < 1e-6, gap_mm

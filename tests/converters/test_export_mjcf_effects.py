@@ -35,6 +35,7 @@ from robogs.convert.export.mjcf import FORCE_NOTE
 from robogs.format.dataset import Dataset
 from robogs.format.errors import FormatError
 from robogs.format.mjcf import PLANAR_SETTINGS
+from robogs.physics.engines.mujoco_engine import sample_steps
 
 TOLERANCE = 0.01
 """Replay RMS vs compare's RMS, relative (module docstring)."""
@@ -119,7 +120,7 @@ def _replay_rms(model: mujoco.MjModel, eng, local: np.ndarray, hz: float) -> flo
         data.qpos[qb : qb + 4] = (x0[0] + local[t, 0], x0[1] + local[t, 1], hz, yaw0 + local[t, 2])
         data.qpos[qp : qp + 3], data.qpos[qp + 3] = p[0], yaw[0]
         data.qvel[vp : vp + 3], data.qvel[vp + 3] = (p[1] - p[0]) / dt, (yaw[1] - yaw[0]) / dt
-        pos = drive_pusher(model, data, qb, p, yaw, dt)
+        pos = drive_pusher(model, data, qb, p, yaw, dt, sample_steps(d)[t])
         grid = np.arange(len(p)) * dt
         ts = d.obs_t[t].numpy()
         sim = np.stack([np.interp(ts, grid, pos[:, a]) for a in range(3)], -1)

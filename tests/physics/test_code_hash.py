@@ -32,4 +32,6 @@ def test_code_hash_follows_the_physics_and_format_sources(monkeypatch):
     assert _hash_with_edit(monkeypatch, "robogs/format/mjcf.py") != base
     assert _hash_with_edit(monkeypatch, "robogs/format/shapes.py") != base
     assert _hash_with_edit(monkeypatch, "robogs/physics/fit.py") != base
+    # the engines' subfolder too: the servo smoothing (mujoco_engine) moves MuJoCo's fits (h75)
+    assert _hash_with_edit(monkeypatch, "robogs/physics/engines/mujoco_engine.py") != base
     assert _hash_with_edit(monkeypatch, "robogs/cli/main.py") == base  # not model code

@@ -112,6 +112,7 @@ def make_drive(
     obs_t: np.ndarray,
     init_pos: np.ndarray,
     init_yaw: np.ndarray,
+    sample_dt: float | np.ndarray | None = None,
 ) -> Drive:
     """A :class:`~robogs.physics.model.Drive` from arrays (no grasp, object at rest).
 
@@ -121,6 +122,10 @@ def make_drive(
         pusher_yaw: [T, S] pusher yaw [rad].
         obs_t: [T, N] stamps [s] from the trajectory start at which poses are wanted.
         init_pos: [T, 3] initial object position [m]; init_yaw: [T] [rad].
+        sample_dt: the sample interval [s] of the stamped stream ``pusher`` was linearly
+            interpolated from (one for all trajectories or [T]; e.g. the median spacing of
+            the encoder stamps); None when unknown or the path is given per step
+            (``Drive.sample_dt``).
     """
     pusher = np.asarray(pusher, dtype=float)
     pusher_yaw = np.asarray(pusher_yaw, dtype=float)
@@ -141,4 +146,9 @@ def make_drive(
         init_yaw=torch.as_tensor(np.asarray(init_yaw, dtype=float), dtype=f),
         obs_t=torch.as_tensor(obs_t, dtype=f),
         obs_mask=torch.ones(obs_t.shape, dtype=torch.bool),
+        sample_dt=None
+        if sample_dt is None
+        else torch.as_tensor(
+            np.broadcast_to(np.asarray(sample_dt, dtype=float), pusher.shape[:1]).copy(), dtype=f
+        ),
     )

@@ -39,10 +39,18 @@ mu g. On the noise-free 9-push scene this adds +3.7 / +3.4 / +2.6 mm/s at 0.3 / 
 0.55 m/s to the release speed (z ballast 99), 1.8 % of the slide. A 0.5 ms step (knots every
 4 steps) makes it larger (+5.1 / +5.3 / +3.6 mm/s).
 The servo targets therefore follow the drive through the zero-phase triangle of two moving
-averages as long as the knot spacing (:func:`smooth_knots`; spacing from the drive's own
-second differences, :func:`drive_knot_steps`; n = 2 at 1 ms and 500 Hz: weights 1/4, 1/2,
-1/4). It turns each velocity step into a ramp and moves a position by at most
-``a (n dt)^2 / 4``, which is 10 um at 10 m/s^2. Measured (``bench/RESULTS.md``, "issue 16 (h67)"):
+averages as long as the knot spacing (:func:`smooth_knots`; n = 2 at 1 ms and 500 Hz: weights
+1/4, 1/2, 1/4). The spacing is the sample interval of the stream the path was interpolated
+from, which the drive carries (``Drive.sample_dt``, the median spacing of the EE stamps, set
+by ``prepare``; :func:`sample_steps`); a drive without one (a path handed in on the grid) has
+it read from its own second differences (:func:`drive_knot_steps`), which works only where
+the samples fall on the steps: a stamp between steps bends both, so a 500 Hz clock offset by
+0.3 ms, a jittered one or a 120 Hz one read 1 and were left raw (h75). A spacing that is not
+a whole number of steps (333 Hz: 3.003, 120 Hz: 8.33) gets a fractional last tap; the
+step-to-step servo deceleration of a constant brake then ripples by 2.7 % at 120 Hz instead
+of the raw 733 % (:func:`smooth_knots`). It turns each velocity step into a ramp and moves a
+position by at most ``a (n dt)^2 / 4``, which is 10 um at 10 m/s^2. Measured
+(``bench/RESULTS.md``, "issue 16 (h67)" and "(h75)"):
 
 * brake gain +0.19 / -0.29 / -0.91 mm/s (B 99; planar's rigid contact +0.33 / +0.32 /
   +0.13);
@@ -307,6 +315,7 @@ __all__ = [
     "drive_knot_steps",
     "drive_pusher_speed",
     "planar_joints_fit",
+    "sample_steps",
     "servo_targets",
     "smooth_knots",
 ]
@@ -319,10 +328,12 @@ SUPPORTED_PARAMS = (
 """physics.json keys a parameter set may change (mass scales the inertia with it)."""
 
 DRIVE_KNOT_SMOOTHING = True
-"""The servo targets follow the drive through :func:`smooth_knots` at the drive's own knot
-spacing (:func:`drive_knot_steps`); see the module docstring, "Drive knots"."""
+"""The servo targets follow the drive through :func:`smooth_knots` at the drive's sample
+spacing (:func:`sample_steps`, else :func:`drive_knot_steps`); see the module docstring,
+"Drive knots"."""
 
 _KNOT_TOL_M = 1e-13  # |second difference| of a drive position above float rounding [m]
+_KNOT_SNAP = 1e-6  # a sample spacing [steps] this close to a whole number is that number
 _MAX_KNOT_STEPS = 64
 
 _STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -640,7 +651,7 @@ class MujocoEngine:
         n_t, n_s = drive.n_traj, drive.n_steps
         if self._pusher_q is None:
             return np.zeros((n_t, n_s - 1, 0))
-        p, y = servo_targets(drive.pusher.numpy(), drive.ee_yaw.numpy())
+        p, y = servo_targets(drive.pusher.numpy(), drive.ee_yaw.numpy(), sample_steps(drive))
         k = len(PUSHER_ACTUATORS)
         ctrl = np.zeros((n_t, n_s - 1, self.model.nu))  # z-ballast actuators follow: ctrl 0
         ctrl[..., :3] = p[:, :-1]
@@ -809,16 +820,64 @@ def _robot_scene(scene: MjcfScene, robot: Any) -> tuple[MjcfScene, list[str]]:
     return robot_pusher_scene(scene, robot)
 
 
-def servo_targets(p: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def servo_targets(
+    p: np.ndarray, yaw: np.ndarray, knot_steps: float | np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """The pusher path the servos follow: the drive's positions ``p`` [T, S, 3] m and yaw
-    [T, S] rad through :func:`smooth_knots` at the drive's own knot spacing
-    (:func:`drive_knot_steps`), or unchanged with :data:`DRIVE_KNOT_SMOOTHING` off. A replay of
-    an exported scene feeds these to reproduce the engine's rollout step for step."""
+    [T, S] rad through :func:`smooth_knots` at the spacing of the samples the path was
+    interpolated from, or unchanged with :data:`DRIVE_KNOT_SMOOTHING` off.
+
+    ``knot_steps``: that spacing in steps, one for all trajectories or [T] (NaN: unknown), as
+    :func:`sample_steps` gives it for a drive (its ``sample_dt`` over its step); None, and the
+    NaN rows, read it from the path's own second differences (:func:`drive_knot_steps`, which
+    finds it only where the samples fall on the steps). A replay of an exported scene feeds
+    these to reproduce the engine's rollout step for step: pass
+    ``sample_steps(drive)`` for an engine's drive, or the median spacing of the stamps the
+    path was interpolated from over the step."""
     p, yaw = np.asarray(p, dtype=float), np.asarray(yaw, dtype=float)
     if not DRIVE_KNOT_SMOOTHING:
         return p, yaw
-    n = drive_knot_steps(p)
-    return smooth_knots(p, n), smooth_knots(yaw, n)
+    if knot_steps is None:
+        n = drive_knot_steps(p)
+        return smooth_knots(p, n), smooth_knots(yaw, n)
+    n_t = p.shape[0]
+    steps = np.broadcast_to(np.asarray(knot_steps, dtype=float), (n_t,)).copy()
+    unknown = ~np.isfinite(steps)
+    if unknown.any():
+        steps[unknown] = drive_knot_steps(p[unknown])
+    out_p, out_y = p.copy(), yaw.copy()
+    for n in np.unique(steps):
+        rows = steps == n
+        out_p[rows], out_y[rows] = smooth_knots(p[rows], n), smooth_knots(yaw[rows], n)
+    return out_p, out_y
+
+
+def sample_steps(drive: Drive) -> np.ndarray | None:
+    """The spacing [T] in steps of the samples each trajectory's pusher path was interpolated
+    from: ``drive.sample_dt / drive.dt``, clamped to 1 .. 64 and snapped to a whole number
+    within 1e-6 (NaN where the interval is not known); None when the drive carries none.
+
+    Raises:
+        InputError: an interval is zero or negative.
+    """
+    if drive.sample_dt is None:
+        return None
+    s = drive.sample_dt.detach().cpu().numpy().astype(float) / drive.dt
+    if np.any(s <= 0):
+        raise InputError(
+            f"drive sample interval {float(np.nanmin(drive.sample_dt))} s is not positive",
+            where="drive.sample_dt",
+            hint="give the median spacing of the stamps the pusher path was interpolated "
+            "from, NaN where unknown",
+        )
+    return np.where(np.isfinite(s), _snap(np.clip(s, 1.0, _MAX_KNOT_STEPS)), np.nan)
+
+
+def _snap(n: np.ndarray | float) -> np.ndarray | float:
+    """A knot spacing [steps] within :data:`_KNOT_SNAP` of a whole number set to it (a float
+    quotient of whole ms stamps is 2.0000000000000004, not 2)."""
+    r = np.round(n)
+    return np.where(np.abs(n - r) < _KNOT_SNAP, r, n)
 
 
 def drive_knot_steps(p: np.ndarray) -> int:
@@ -826,7 +885,12 @@ def drive_knot_steps(p: np.ndarray) -> int:
     interpolated onto the step grid from samples (encoder stamps) every ``n`` steps, so its
     velocity is constant between knots and its second difference is nonzero only at them.
     Returns the most common spacing of consecutive steps with a nonzero second difference
-    (above float rounding) within a trajectory, 1 where there is none or above 64."""
+    (above float rounding) within a trajectory, 1 where there is none or above 64.
+
+    Only samples on the steps leave steps between knots straight: a stamp between two steps
+    bends both, so an offset, jittered or non-integer clock reads 1 (no smoothing). A drive
+    built from stamps carries their interval instead (``Drive.sample_dt``,
+    :func:`sample_steps`); this is the fallback for a path handed in without one."""
     p = np.asarray(p, dtype=float)
     if p.ndim < 2 or p.shape[1] < 3:
         return 1
@@ -838,19 +902,30 @@ def drive_knot_steps(p: np.ndarray) -> int:
     return int(np.bincount(gaps).argmax()) if gaps.size else 1
 
 
-def smooth_knots(x: np.ndarray, n: int) -> np.ndarray:
-    """``x`` [T, S, ...] along its step axis through the zero-phase triangle of two ``n``-step
-    moving averages (``2n - 1`` taps; ``n = 2``: 1/4, 1/2, 1/4); the first and last ``n - 1``
-    steps are kept. A path linear between knots every ``n`` steps keeps its straight pieces
-    away from the knots and gets its velocity steps turned into ramps over ``2n - 2`` steps;
-    a position moves by at most ``a (n dt)^2 / 4`` (``a`` the path's acceleration).
-    ``n <= 1`` returns ``x``."""
+def smooth_knots(x: np.ndarray, n: float) -> np.ndarray:
+    """``x`` [T, S, ...] along its step axis through the zero-phase triangle of a moving
+    average over ``n`` steps and its mirror image: ``b = (1, ..., 1, f)`` with ``ceil(n)``
+    taps, the last one the fraction ``f = n - ceil(n) + 1`` (1 for a whole ``n``), and the
+    weights ``b * reversed(b) / n^2`` (``2 ceil(n) - 1`` taps; ``n = 2``: 1/4, 1/2, 1/4). The
+    first and last ``ceil(n) - 1`` steps are kept; ``n <= 1`` returns ``x``.
+
+    A path linear between samples every ``n`` steps keeps its straight pieces away from the
+    samples and gets its velocity steps turned into ramps; a position moves by at most
+    ``a (n dt)^2 / 4`` (``a`` the path's acceleration). For a whole ``n`` the step-to-step
+    acceleration of a constant deceleration sampled at any phase is the deceleration exactly;
+    for a fractional ``n`` it ripples by at most 17 % of it at n = 1.4, 10 % at 2.5, 2.7 % at
+    8.33 (120 Hz on 1 ms) and 1.2 % at 20.5 (raw linear interpolation: ``n - 1`` times it;
+    the nearest whole ``n`` of the same triangle: 25 % at 2.5, 4.2 % at 8.33;
+    ``tests/physics/test_drive_knots.py``)."""
     x = np.asarray(x, dtype=float)
-    n = int(n)
-    h = n - 1
-    if h < 1 or x.shape[1] <= 2 * h:
+    n = float(_snap(float(n)))
+    k = int(np.ceil(n))
+    h = k - 1
+    if n <= 1.0 or h < 1 or x.shape[1] <= 2 * h:
         return x
-    w = np.convolve(np.ones(n), np.ones(n)) / float(n * n)
+    b = np.ones(k)
+    b[-1] = n - h
+    w = np.convolve(b, b[::-1]) / (n * n)
     out = x.copy()
     s = x.shape[1]
     out[:, h : s - h] = sum(w[j] * x[:, j : s - 2 * h + j] for j in range(2 * h + 1))
