@@ -314,8 +314,21 @@ def main() -> None:
         default="planar",
         help="rollout engine of the fits (use a separate --out per engine)",
     )
+    ap.add_argument(
+        "--gate-method",
+        default=None,
+        help="opt-in null of the evidence gate (robogs.physics.gate.METHODS, e.g. parametric); "
+        "sets $ROBOGS_GATE_METHOD for the workers (use a separate --out per method)",
+    )
     a = ap.parse_args()
     from robogs.synth.scenarios import TRUE_PARAMS
+
+    if a.gate_method is not None:
+        from robogs.physics.gate import METHODS
+
+        if a.gate_method not in METHODS:
+            ap.error(f"--gate-method must be one of {', '.join(METHODS)}")
+        os.environ["ROBOGS_GATE_METHOD"] = a.gate_method
 
     effects = a.effects or sorted(TRUE_PARAMS)
     seeds = range(a.first_seed, a.first_seed + a.seeds)

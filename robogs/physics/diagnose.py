@@ -68,6 +68,7 @@ and the experiment that would reveal them.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
@@ -887,6 +888,77 @@ def sign_flip_floor(method: str, carrying: int) -> float | None:
     return 2.0 ** -(max(carrying, 1) - 1)
 
 
+GATE_METHOD_ENV = "ROBOGS_GATE_METHOD"
+"""Environment variable that picks the gate's null (:data:`robogs.physics.gate.METHODS`;
+unset: ``"both"``, the default). ``parametric`` (opt-in, h76) simulates the drive's own
+measurement error instead of sign-flipping the base residual (:func:`_drive_inputs`)."""
+
+
+PARAMETRIC_DRAWS = 1000
+"""Draws of the parametric null (a continuous null: its 1 - 0.0075 quantile is then the 8th
+largest draw, where 400 give the 3rd)."""
+
+
+def gate_method() -> str:
+    """The gate's null construction: ``$ROBOGS_GATE_METHOD`` or ``"both"``.
+
+    Raises:
+        InputError: an unknown method (names the variable and the choices)."""
+    from robogs.format.errors import InputError
+
+    m = os.environ.get(GATE_METHOD_ENV, "").strip() or "both"
+    if m not in gate_mod.METHODS:
+        raise InputError(
+            f"unknown gate method {m!r}",
+            where=f"${GATE_METHOD_ENV}",
+            hint=f"use one of {', '.join(gate_mod.METHODS)}, or unset it for the default",
+        )
+    return m
+
+
+def _drive_inputs(
+    eng: Engine, space: ParamSpace, base: FitOutcome, valid: np.ndarray, key: str
+) -> np.ndarray:
+    """The parametric null's input columns [T, K, M]: the base fit's whitened residual's
+    response to ``M`` draws of the drive's own measurement error
+    (:mod:`robogs.physics.drive_noise`; draws seeded from the data fingerprint ``key``)."""
+    import hashlib
+
+    import torch
+
+    from robogs.physics import drive_noise as dn
+    from robogs.physics.residuals import weighted_residuals
+
+    prep = eng.prep
+    seed = int.from_bytes(hashlib.sha256(key.encode()).digest()[:8], "big")
+    n_s = int(prep.drive.pusher.shape[1])
+    dpos, dcar, _ = dn.drive_error_draws(
+        prep.rec, prep.t0_ns, prep.drive.dt, n_s, dn.N_INPUT_DRAWS, seed
+    )
+    evaluate = (
+        None if eng._mujoco is not None else dn.tiled_evaluator(prep, space, base.theta, base.local)
+    )
+    if evaluate is None:  # MuJoCo, or blocks the tiling does not cover: one rollout a draw
+        th = torch.as_tensor(base.theta)[None]
+        lo = torch.as_tensor(base.local)[None]
+
+        def evaluate(drives):
+            out = []
+            for d in drives:
+                with torch.no_grad():
+                    if eng._mujoco is None:
+                        from robogs.physics.residuals import residual_fn
+
+                        r = residual_fn(replace(prep, drive=d), space)(th, lo)
+                    else:
+                        sim = eng._mujoco.simulate(th, space, d, prep.scene, init_offset=lo)
+                        r = weighted_residuals(sim, prep)
+                out.append(r.numpy()[0])
+            return np.stack(out)
+
+    return dn.drive_response(evaluate, prep.drive, dpos, dcar) * valid[..., None]
+
+
 def _calibrate(
     eng: Engine,
     space: ParamSpace,
@@ -938,7 +1010,22 @@ def _calibrate(
         gate_mod.LinearCandidate(e.name, o.jac, nuisance(o, base.resid, e.name), n_base)
         for e, o in zip(cands, outs[1:], strict=True)
     ]
-    cal = gate_mod.calibrate(lin, base.resid, valid, folds, fingerprint=fp)
+    method = gate_method()
+    if method == "both":  # the default: called exactly as before
+        cal = gate_mod.calibrate(lin, base.resid, valid, folds, fingerprint=fp)
+    else:
+        inputs = _drive_inputs(eng, space, base, valid, fp) if method == "parametric" else None
+        draws = PARAMETRIC_DRAWS if method == "parametric" else gate_mod.N_DRAWS
+        cal = gate_mod.calibrate(
+            lin,
+            base.resid,
+            valid,
+            folds,
+            fingerprint=fp,
+            method=method,
+            inputs=inputs,
+            draws=draws,
+        )
     if cal.statistic != "fall":
         return cal
     signs = gate_mod.check_signs(eng.prep.n_traj, fp)

@@ -56,6 +56,18 @@ trajectories, so the held-out fall over it over-rejects; studentised (``statisti
 keeps the size (tests/physics/test_gate.py) and passes a six-trajectory camera offset, and
 never an effect on one trajectory (``t = +-1``).
 
+``method="parametric"`` (opt-in, h76) simulates the errors a trajectory's samples share from a
+model of their source instead of resampling the data's residual, so it has no sign-flip floor:
+each draw is Gaussian white noise at each trajectory's difference-based scale plus the
+linearised response to the trajectory's own input error, ``e_t = s_t z_t + J_in,t delta_t``,
+``delta_t ~ N(0, Sigma_in,t)`` (a parametric bootstrap of the fitted base model, linearised like
+the rest of the gate). The diagnosis (``$ROBOGS_GATE_METHOD=parametric``) takes ``J_in`` from
+:mod:`robogs.physics.drive_noise`: the base fit's residual's responses to draws of the drive's
+own measurement error (the recorded pusher path's white noise, estimated from that path, put
+through the drive's smoother), one rollout per draw at the base fit, ``Sigma_in = I / M``. On
+design-B null data that error is nearly rank one per trajectory (a release speed that shifts
+the slide: 3-25 sigma^2 a trajectory; bench/RESULTS.md, issue 17, h76).
+
 Family-wise level: single-step min-P over the candidates (Westfall & Young 1993, "Resampling-
 Based Multiple Testing", alg. 2.8): every candidate is fitted to the same draws; ``alpha'`` is
 the ``alpha`` quantile of the smallest per-candidate null p-value over the draws, and each
@@ -179,7 +191,7 @@ ALPHA = 0.05
 """Family-wise false-positive rate of the gate."""
 N_DRAWS = 400
 """Null draws (min-P resolution 1/N_DRAWS; 20 draws beyond the 5 % quantile at 400)."""
-METHODS = ("both", "wild", "white", "wcu")
+METHODS = ("both", "wild", "white", "wcu", "parametric")
 """The gate's null constructions (:func:`calibrate`)."""
 MIN_PATTERNS = 128
 """Fewest distinct sign patterns (``2^(T-1)``) for a Rademacher wild null (T >= 8 trajectories);
@@ -742,6 +754,35 @@ def wild_weights(t_n: int, draws: int, rng: np.random.Generator) -> tuple[np.nda
     return rng.choice(WEBB, size=(draws, t_n)), note
 
 
+def _input_chol(
+    inputs: np.ndarray, input_cov: np.ndarray | None, shape: tuple[int, ...]
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(inputs [T, K, M], L [T, M, M])`` with ``L L^T`` the input coefficients' covariance
+    (``I / M`` when None; a symmetric square root, so a semi-definite one is accepted)."""
+    j_in = np.asarray(inputs, dtype=float)
+    if j_in.ndim != 3 or j_in.shape[:2] != tuple(shape):
+        raise ValueError(
+            f"inputs must be [T, K, M] with [T, K] = {tuple(shape)} (the residual's), "
+            f"got shape {j_in.shape}"
+        )
+    t_n, _, m = j_in.shape
+    if input_cov is None:
+        cov = np.broadcast_to(np.eye(m) / max(m, 1), (t_n, m, m))
+    else:
+        cov = np.asarray(input_cov, dtype=float)
+        if cov.shape == (m, m):
+            cov = np.broadcast_to(cov, (t_n, m, m))
+        if cov.shape != (t_n, m, m):
+            raise ValueError(
+                f"input_cov must be [M, M] or [T, M, M] with T = {t_n}, M = {m}, got {cov.shape}"
+            )
+    w, v = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    if np.any(w < -1e-9 * np.maximum(np.abs(w).max(axis=-1, keepdims=True), 1e-300)):
+        raise ValueError("input_cov must be positive semi-definite")
+    low = v * np.sqrt(np.clip(w, 0.0, None))[..., None, :]
+    return j_in, low
+
+
 def unrestricted_resid(cand: LinearCandidate, resid: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """The candidate's own fit residual [T, K], linearised: ``resid`` (the base fit's whitened
     residual) with the candidate's columns and each trajectory's nuisance columns fitted out by
@@ -1092,6 +1133,8 @@ def calibrate(
     alpha: float = ALPHA,
     method: str = "both",
     statistic: str | None = None,
+    inputs: np.ndarray | None = None,
+    input_cov: np.ndarray | None = None,
 ) -> Calibration:
     """Simulate the held-out statistic's null for every candidate on the same draws.
 
@@ -1125,6 +1168,20 @@ def calibrate(
             "The wild bootstrap for few (treated) clusters", Econometrics J. 21); use it with
             ``statistic="t"``, whose ``t = +-1`` on one trajectory cannot pass (a drop's
             restitution is then never reported). Sizes and power: bench/RESULTS.md (h29).
+            ``"parametric"`` (opt-in, h76): no resampling of the data's residual, so no
+            ``2^-(m-1)`` floor. A draw is Gaussian white noise at each trajectory's
+            difference-based scale plus the linearised response to the trajectory's own input
+            error, ``e_t = s_t z_t + J_in,t delta_t``, ``delta_t ~ N(0, input_cov_t)``
+            independently per trajectory (a parametric bootstrap of the fitted base model,
+            linearised; the errors the white noise lacks come from a model of their source:
+            :mod:`robogs.physics.drive_noise` gives ``inputs`` as the responses to draws of
+            the drive's own measurement error). The threshold is this null's alone.
+        inputs: ``"parametric"`` only: [T, K, M] whitened residual's response to each of
+            ``M`` input-error directions per trajectory (zero where a trajectory has fewer);
+            None: white noise alone.
+        input_cov: [M, M] or [T, M, M] covariance of the input error's coefficients
+            ``delta_t``; None: ``I / M`` (``inputs`` are responses to ``M`` draws of the
+            input error itself, whose ``1/M`` outer products estimate its covariance).
         statistic: ``"fall"`` (None, the default), ``"t"``, ``"gain"`` or ``"tn"``
             (:func:`normaliser`):
             the null is of that statistic (with ``method="both"`` under 8 trajectories from
@@ -1146,8 +1203,15 @@ def calibrate(
     per_draw = float(sum(c.jac.shape[0] * c.jac.shape[1] * c.jac.shape[2] for c in cands))
     draws = int(max(100, min(draws, MAX_CELLS // max(per_draw, 1.0))))
     path = None
+    if method != "parametric" and (inputs is not None or input_cov is not None):
+        raise ValueError(f"inputs and input_cov are for method='parametric', not {method!r}")
+    chol = None
+    if method == "parametric" and inputs is not None:
+        chol = _input_chol(inputs, input_cov, base_resid.shape)
     if fingerprint is not None:
         tag = fingerprint + method + ("|" + stat_kind if stud else "")
+        if chol is not None:  # the input model is part of the null
+            tag += "|" + hashlib.sha256(np.ascontiguousarray(chol[0]).tobytes()).hexdigest()[:16]
         path = cache_dir() / f"{_key(tag, names, draws, seed)}.json"
         hit = _read(path)
         if hit is not None and set(hit.thresholds) == set(names):
@@ -1194,6 +1258,26 @@ def calibrate(
         nulls["wild"] = _simulate(
             cands, valid, folds, len(weights), wcu, pos, stat_kind, per_candidate=True
         )
+    if method == "parametric":
+        scale = diff_scale(base_resid, valid)
+
+        def parametric(n: int) -> np.ndarray:
+            e = rng.standard_normal((n, *base_resid.shape)) * scale[None, :, None]
+            if chol is not None:
+                j_in, low = chol
+                z = rng.standard_normal((n, *low.shape[:2]))  # [n, T, M]
+                delta = (low[None] @ z[..., None])[..., 0]  # [n, T, M], cov low low^T
+                e = e + (j_in[None] @ delta[..., None])[..., 0]
+            return e * valid[None]
+
+        nulls["parametric"] = _simulate(
+            cands, valid, folds, draws, lambda n, c: parametric(n), None, stat_kind
+        )
+        note = "white noise" + (
+            f" + {chol[1].shape[-1]} input-error directions per trajectory"
+            if chol is not None
+            else " only (no input model)"
+        )
     thr: dict[str, float] = {n: 1e-6 for n in names}
     q95: dict[str, float] = {n: 0.0 for n in names}
     if stud:
@@ -1205,7 +1289,7 @@ def calibrate(
         for n in names:
             thr[n] = max(thr[n], t_k[n])
             q95[n] = max(q95[n], q_k[n])
-    null = nulls.get("wild", nulls.get("white"))
+    null = nulls.get("wild", nulls.get("white", nulls.get("parametric")))
     cal = Calibration(
         thresholds=thr,
         q95=q95,

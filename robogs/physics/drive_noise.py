@@ -1,0 +1,188 @@
+"""The drive's own measurement error, as the gate's parametric null simulates it (issue 17).
+
+The pusher path the model is driven by is measured (encoders through the arm's kinematics, or a
+tracked tool) and smoothed (:func:`robogs.physics.prepare.build_drive`: a degree-4 tricube local
+polynomial over the position window, its derivative over the carry window). What the smoother
+keeps of the path's white noise is a smooth error of the whole push: a release speed off by a
+few mm/s shifts a whole slide, an error shared by every pose sample of one trajectory that the
+camera's white noise does not have.
+
+This module draws that error from a model of its source, with nothing tuned on a generator:
+
+- the path's noise ``s`` per axis and its rate come from the recording's own path
+  (:func:`robogs.physics.smoothing.drive_windows`: the MAD of second divided differences,
+  :func:`robogs.physics.smoothing.path_noise`), and so do the two windows;
+- a draw is white noise of deviation ``s`` at each trajectory's own path stamps, put through
+  the same smoother and the same resampling onto the simulation grid as the measured path
+  (linear in the noise, so the draw is exactly the drive error that noise makes);
+- :func:`drive_response` turns ``M`` such draws into the whitened residual's response to each
+  (one rollout per draw, every trajectory at once: a trajectory's residual depends only on its
+  own drive). Their ``1/M`` weighted outer products are a Monte Carlo estimate of the
+  residual's covariance from the drive error, ``G Cov(dp) G^T`` (``G`` the residual's
+  Jacobian with respect to the drive), without forming ``G`` (``S x 3`` columns a trajectory).
+
+The gate draws ``e = white + J_in delta``, ``delta ~ N(0, I / M)`` per trajectory
+(:func:`robogs.physics.gate.calibrate`, ``method="parametric"``): a parametric bootstrap of the
+fitted base model with this dataset's design, noise, jitter and drops, linearised like the rest
+of the gate (Efron & Tibshirani 1993, "An Introduction to the Bootstrap", ch. 6; the drive
+error's propagation is the errors-in-variables term of a linearised model, e.g. Carroll,
+Ruppert, Stefanski & Crainiceanu 2006, "Measurement Error in Nonlinear Models", ch. 4).
+
+Not modelled: the EE yaw's noise (the scenarios' tool yaw is noise-free; a round pusher does
+not see it), and anything shared by one trajectory's samples that does not come from the drive
+(the simulator's own misfit of a contact, a camera error that changes between trajectories).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import fields, replace
+
+import numpy as np
+import torch
+
+from robogs.physics.model import Drive
+from robogs.physics.smoothing import drive_windows, local_polynomial
+
+__all__ = [
+    "N_INPUT_DRAWS",
+    "BATCH",
+    "drive_error_draws",
+    "perturbed_drive",
+    "drive_response",
+    "stack_drives",
+    "tiled_evaluator",
+]
+
+N_INPUT_DRAWS = 48
+"""Drive-error draws whose responses make the parametric null's input columns (one rollout
+each). The variance along a direction the responses share is estimated to ``sqrt(2 / M)``
+(20 % at 48)."""
+BATCH = 16
+"""Draws evaluated in one rollout by :func:`tiled_evaluator` (the planar engine steps every
+trajectory of a batch together, so 16 draws cost about one rollout)."""
+
+
+def drive_error_draws(
+    rec: object, t0_ns: np.ndarray, dt: float, n_steps: int, n: int, seed: int
+) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+    """``n`` draws of the drive's position and carried-velocity errors on the simulation grid.
+
+    Args:
+        rec: the recording (its trajectories' ``ee_t_ns`` [E] and ``ee_pos`` [E, 3] m).
+        t0_ns: each trajectory's model time 0 [T] (``Prepared.t0_ns``).
+        dt: simulation step [s]; n_steps: grid length ``S``.
+        n: draws; seed: their random seed.
+
+    Returns:
+        ``(dpos [n, T, S, 3] m, dcarry [n, T, S, 3] m/s, info)``, ``info`` the path noise
+        ``s`` [m] per axis, its rate [Hz] and the two windows [s] the draws were smoothed with.
+    """
+    trs = rec.trajectories
+    paths = [((t.ee_t_ns - t.ee_t_ns[0]) * 1e-9, t.ee_pos) for t in trs]
+    w_pos, w_ee, s, rate = drive_windows(paths)
+    grid = np.arange(n_steps) * dt
+    rng = np.random.default_rng(seed)
+    dpos = np.zeros((n, len(trs), n_steps, 3))
+    dcar = np.zeros((n, len(trs), n_steps, 3))
+    for i, tr in enumerate(trs):
+        te = (tr.ee_t_ns - int(t0_ns[i])) * 1e-9
+        w = rng.standard_normal((len(te), n * 3)) * s  # the smoother is linear: all at once
+        p = local_polynomial(te, w, w_pos).reshape(len(te), n, 3)
+        v = local_polynomial(te, w, w_ee, deriv=1).reshape(len(te), n, 3)
+        for j in range(n):
+            for a in range(3):
+                dpos[j, i, :, a] = np.interp(grid, te, p[:, j, a])
+                dcar[j, i, :, a] = np.interp(grid, te, v[:, j, a])
+    info = {"path_noise_m": s, "rate_hz": rate, "window_s": w_pos, "carry_window_s": w_ee}
+    return dpos, dcar, info
+
+
+def perturbed_drive(drive: Drive, dpos: np.ndarray, dcarry: np.ndarray) -> Drive:
+    """``drive`` with its pusher path moved by ``dpos`` [T, S, 3] m (its forward-difference
+    velocity with it, as :func:`robogs.physics.prepare.build_drive` makes it) and its carried
+    velocity by ``dcarry`` [T, S, 3] m/s."""
+    dp = torch.as_tensor(dpos, dtype=drive.pusher.dtype)
+    dv = torch.zeros_like(dp)
+    dv[:, :-1] = (dp[:, 1:] - dp[:, :-1]) / drive.dt
+    carry = drive.pusher_vel if drive.carry_vel is None else drive.carry_vel
+    return replace(
+        drive,
+        pusher=drive.pusher + dp,
+        pusher_vel=drive.pusher_vel + dv,
+        carry_vel=carry + torch.as_tensor(dcarry, dtype=carry.dtype),
+    )
+
+
+def drive_response(
+    evaluate: Callable[[Sequence[Drive]], np.ndarray],
+    drive: Drive,
+    dpos: np.ndarray,
+    dcarry: np.ndarray,
+    batch: int = BATCH,
+) -> np.ndarray:
+    """The whitened residual's response to each drive-error draw, [T, K, n].
+
+    ``evaluate(drives) -> [B, T, K]`` the weighted residual at the base fit's parameters
+    (nuisance included) driven by each of ``drives``; column ``j`` is ``evaluate(drive + draw
+    j) - evaluate(drive)`` (the draws are at the noise's own size, so this is the response the
+    data's own drive error makes, contact events included). ``batch`` draws per call."""
+    r0 = np.asarray(evaluate([drive]))[0]
+    cols = []
+    for a in range(0, len(dpos), batch):
+        ds = [
+            perturbed_drive(drive, dpos[j], dcarry[j]) for j in range(a, min(a + batch, len(dpos)))
+        ]
+        cols.extend(np.asarray(evaluate(ds)) - r0[None])
+    return np.stack(cols, axis=-1)
+
+
+def stack_drives(drives: Sequence[Drive]) -> Drive:
+    """``B`` drives of the same ``T`` trajectories as one drive of ``B T`` (draw-major)."""
+    first = drives[0]
+    out = {}
+    for f in fields(first):
+        x = getattr(first, f.name)
+        if isinstance(x, torch.Tensor):
+            out[f.name] = torch.cat([getattr(d, f.name) for d in drives], dim=0)
+    return replace(first, **out)
+
+
+def tiled_evaluator(prep: object, space: object, theta: np.ndarray, local: np.ndarray):
+    """``evaluate(drives) -> [B, T, K]`` for :func:`drive_response` on the planar engine: the
+    ``B`` drives run as one rollout of ``B T`` trajectories (the recording's measurements
+    tiled), at parameters ``theta`` [Q] and nuisance ``local`` [T, 3]. None where the
+    recording has other tracked objects or a wrench (their blocks are not tiled here)."""
+    from robogs.physics.residuals import residual_fn
+
+    if getattr(prep, "tracked", None) or getattr(prep, "wrench", None) is not None:
+        return None
+    n_t = int(prep.mask.shape[0])
+
+    def evaluate(drives: Sequence[Drive]) -> np.ndarray:
+        b = len(drives)
+
+        def tile(x):
+            if isinstance(x, torch.Tensor):
+                return x.repeat(b, *([1] * (x.dim() - 1)))
+            return np.concatenate([x] * b, axis=0)
+
+        big = replace(
+            prep,
+            drive=stack_drives(drives),
+            t0_ns=tile(prep.t0_ns),
+            meas_pos=tile(prep.meas_pos),
+            meas_yaw=tile(prep.meas_yaw),
+            sig_pos=tile(prep.sig_pos),
+            sig_yaw=tile(prep.sig_yaw),
+            mask=tile(prep.mask),
+            phase=tile(prep.phase),
+            labels=list(prep.labels) * b,
+        )
+        fn = residual_fn(big, space)
+        lo = torch.as_tensor(np.concatenate([local] * b, axis=0))[None]
+        with torch.no_grad():
+            r = fn(torch.as_tensor(theta)[None], lo).numpy()[0]
+        return r.reshape(b, n_t, -1)
+
+    return evaluate
