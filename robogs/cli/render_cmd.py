@@ -436,7 +436,8 @@ def simulation_setup(
     which the MuJoCo engine smooths its servo targets. With ``objects.pusher.geometry =
     "robot"`` the robot's links push, measured over the commanded trajectory's forward
     kinematics and checked (links fixed in the pusher frame within the dataset's derived
-    budget) by the code that does it for ``compare``
+    budget, else the end effector's tilt and the moving joints below the pusher link become
+    servo DOFs, ``Drive.pusher_dofs``) by the code that does it for ``compare``
     (:func:`robogs.physics.recording.commanded_robot_pusher`). The free object (the only
     ``rigid`` one) starts at rest at its recorded pose in ``ep`` at the trajectory's first stamp
     (clamped).
@@ -489,9 +490,10 @@ def simulation_setup(
         Te = T[:, chain.link_index(link)]
     from robogs.format.shapes import BOX_BUDGET, load_object_meshes, object_shapes
 
+    rp = commanded_robot_pusher(src, chain, T.numpy())
     shapes = with_robot_pusher(
         object_shapes(physics, load_object_meshes(src), float(src.budgets[BOX_BUDGET])),
-        commanded_robot_pusher(src, chain, T.numpy()),
+        rp,
         "commanded trajectory",
     )
     name, reason = engine, ""
@@ -507,6 +509,17 @@ def simulation_setup(
     grid = np.arange(int(np.ceil(t_s[-1] / dt)) + 2) * dt
     p_grid = np.stack([np.interp(grid, t_s, pos[:, a]) for a in range(3)], -1)
     yaw_grid = np.interp(grid, t_s, np.unwrap(quat_yaw(quat)))
+    dofs = None  # the robot pusher's moving joints and tilt, as load_recording gives them
+    if rp is not None and rp.dofs:
+        from robogs.physics.engines.mujoco_robot import dof_values
+
+        Tn = T.numpy()
+        vals = dof_values(
+            rp,
+            Tn[:, chain.link_index(link), :3, :3],
+            {n: Tn[:, chain.link_index(n)] for n in rp.frames},
+        )
+        dofs = np.stack([np.interp(grid, t_s, v) for v in vals.T], -1)[None]
     tab = ep.table("object_poses")
     m = np.asarray(tab.column("object").to_pylist()) == obj
     if m.sum() == 0:
@@ -526,6 +539,7 @@ def simulation_setup(
         p0,
         quat_yaw(q0),
         sample_dt=float(np.median(np.diff(t_s))) if len(t_s) > 1 else np.nan,
+        pusher_dofs=dofs,
     )
     return SimulationSetup(
         name, reason, physics, obj, link, dt, drive, {obj: ObjectState(p0, q0)}, shapes

@@ -138,6 +138,11 @@ def _fingerprint(rec: Recording) -> str:
         h.update(Path(rp.urdf).read_bytes() + rp.link.encode())
         for name, T in sorted(rp.frames.items()):
             h.update(name.encode() + np.ascontiguousarray(T).tobytes())
+        # its servo DOFs (moving fingers, tilt) and their recorded values; nothing without them
+        h.update(",".join(getattr(rp, "dofs", [])).encode())
+        for tr in rec.trajectories:
+            if getattr(tr, "pusher_dofs", None) is not None:
+                h.update(np.ascontiguousarray(tr.pusher_dofs).tobytes())
     return h.hexdigest()
 
 

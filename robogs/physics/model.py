@@ -153,6 +153,11 @@ class Drive:
             for a 500 Hz encoder; NaN where unknown). The MuJoCo engine smooths its servo
             targets over it (``mujoco_engine.sample_steps``); None: not known (a path handed
             in on the grid), the engine then reads the spacing from the path itself.
+        pusher_dofs: optional [T, S, J] rad or m: the robot pusher's servo DOFs beyond the
+            pusher's position and yaw (``objects.pusher.geometry = "robot"``: the end
+            effector's pitch and roll, the joints below the pusher link that move; names
+            ``RobotPusher.dofs`` of :mod:`robogs.physics.engines.mujoco_robot`), linearly
+            interpolated on the grid as ``ee_yaw``; None: none move.
     """
 
     dt: float
@@ -170,6 +175,7 @@ class Drive:
     wrench_bin: torch.Tensor | None = None
     wrench_width: torch.Tensor | None = None
     sample_dt: torch.Tensor | None = None
+    pusher_dofs: torch.Tensor | None = None
 
     @property
     def n_traj(self) -> int:
@@ -194,6 +200,7 @@ class Drive:
             None if self.wrench_bin is None else self.wrench_bin[ii],
             None if self.wrench_width is None else self.wrench_width[ii],
             None if self.sample_dt is None else self.sample_dt[ii],
+            pusher_dofs=None if self.pusher_dofs is None else self.pusher_dofs[ii],
         )
 
 

@@ -219,6 +219,10 @@ def build_drive(
     The initial object pose is the median of the first static samples; a start height within
     ``z_snap`` of the resting height is snapped onto the table.
 
+    The robot pusher's other servo DOFs (``Trajectory.pusher_dofs``: the end effector's pitch
+    and roll, the joints below the pusher link that move) are interpolated linearly onto the
+    grid as the yaw is (``Drive.pusher_dofs``).
+
     The drive records each trajectory's EE sample interval (``Drive.sample_dt`` [T] s: the
     median spacing of its ``ee_t_ns``; NaN with fewer than two samples): the linear
     interpolation puts a velocity step at every sample, wherever the stamps fall on the grid,
@@ -279,6 +283,7 @@ def build_drive(
         z_rest = scene.table_z + 0.5 * scene.size[2]
         if abs(ipos[i, 2] - z_rest) < z_snap:
             ipos[i, 2] = z_rest  # resting on the table: the measured height is noise
+    dofs = _grid_dofs(trs, t0, grid)
     pvel = np.zeros_like(pusher)
     pvel[:, :-1] = np.diff(pusher, axis=1) / dt
     yrate = np.zeros_like(eyaw)
@@ -297,8 +302,38 @@ def build_drive(
         obs_mask=torch.as_tensor(obs_mask),
         carry_vel=torch.as_tensor(carry, dtype=f),
         sample_dt=torch.as_tensor(sample_dt, dtype=f),
+        pusher_dofs=None if dofs is None else torch.as_tensor(dofs, dtype=f),
     )
     return drive, t0
+
+
+def _grid_dofs(trs: list[Trajectory], t0: np.ndarray, grid: np.ndarray) -> np.ndarray | None:
+    """[T, S, J] the trajectories' ``pusher_dofs`` [E, J] (at their EE stamps) linearly
+    interpolated on ``grid`` [S] s from each start ``t0`` [T] ns; None when none has them.
+
+    Raises:
+        InputError: some trajectories have them and others not, or not as many.
+    """
+    vals = [getattr(t, "pusher_dofs", None) for t in trs]
+    if all(v is None for v in vals):
+        return None
+    widths = {None if v is None else np.shape(v)[-1] for v in vals}
+    if len(widths) != 1 or None in widths:
+        from robogs.format.errors import InputError
+
+        raise InputError(
+            "some trajectories carry the robot pusher's DOFs (pusher_dofs) and others do not, "
+            "or not as many",
+            where="Trajectory.pusher_dofs",
+            hint="load every trajectory with the same robot pusher (load_recording)",
+        )
+    out = np.zeros((len(trs), len(grid), widths.pop()))
+    for i, (tr, v) in enumerate(zip(trs, vals, strict=True)):
+        te = (tr.ee_t_ns - t0[i]) * 1e-9
+        v = np.asarray(v, dtype=float)
+        for j in range(v.shape[1]):
+            out[i, :, j] = np.interp(grid, te, v[:, j])
+    return out
 
 
 def _interp_rows(t: np.ndarray, tp: np.ndarray, xp: np.ndarray) -> np.ndarray:

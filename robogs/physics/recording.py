@@ -60,6 +60,9 @@ class Trajectory:
             removes it using the samples out of contact).
         others: the poses of the other tracked objects of the scene, by physics.json name
             (e.g. a box the pushed one strikes); empty for a one-object scene.
+        pusher_dofs: optional [E, J] at ``ee_t_ns`` (rad or m): the robot pusher's servo DOFs
+            beyond position and yaw (``Recording.robot_pusher.dofs``: the end effector's pitch
+            and roll, the joints below the pusher link that move); None: none move.
     """
 
     name: str
@@ -74,6 +77,7 @@ class Trajectory:
     wrench_t_ns: np.ndarray | None = None
     wrench_force: np.ndarray | None = None
     others: dict[str, ObjectTrack] = field(default_factory=dict)
+    pusher_dofs: np.ndarray | None = None
 
 
 @dataclass
@@ -192,6 +196,7 @@ def as_recording(obj: Any) -> Recording:
                     wrench_t_ns=getattr(t, "wrench_t_ns", None),
                     wrench_force=getattr(t, "wrench_force", None),
                     others=dict(getattr(t, "others", None) or {}),
+                    pusher_dofs=getattr(t, "pusher_dofs", None),
                 )
             )
         rec = Recording(
@@ -439,10 +444,13 @@ def with_robot_pusher(shapes: Any, rp: Any, where: str = "recording") -> Any:
     ``meshes["pusher"]`` and a note; the one place every engine caller gets it from."""
     if rp is not None:
         shapes.meshes["pusher"] = rp
+        moving = getattr(rp, "dofs", [])
         shapes.notes.append(
             f"pusher: the robot's links {', '.join(rp.frames)} (objects.pusher.geometry robot; "
-            f"they stray from their constant pose in the pusher frame by up to "
-            f"{rp.moved_m * 1e3:.2f} mm over the {where}, budget {rp.budget_m * 1e3:.2f} mm)"
+            + (f"servo-driven DOFs {', '.join(moving)}; " if moving else "")
+            + f"they stray from their constant pose in {'their bodies' if moving else 'the pusher frame'} "
+            f"by up to {rp.moved_m * 1e3:.2f} mm over the {where}, budget "
+            f"{rp.budget_m * 1e3:.2f} mm)"
         )
     return shapes
 
@@ -461,7 +469,8 @@ def commanded_robot_pusher(
 
     Returns:
         a :class:`robogs.physics.engines.mujoco_robot.RobotPusher`, or None with the primitive
-        pusher.
+        pusher. Its servo DOFs over the trajectory (``Drive.pusher_dofs`` before the grid):
+        :func:`robogs.physics.engines.mujoco_robot.dof_values` of the same ``T``.
     """
     physics = ds.physics()
     pusher = (physics.get("objects") or {}).get("pusher") or {}
@@ -535,6 +544,7 @@ def load_recording(
     pieces: list[Any] = []
     chain = None
     robot_links = _RobotLinks.of(ds, physics, ee_link)  # objects.pusher.geometry = "robot"
+    robot_eps: list[tuple[Any, np.ndarray, np.ndarray, int]] = []  # its episodes' EE motion
     for ep in ds.episodes:
         _require_stream(
             ds,
@@ -555,6 +565,7 @@ def load_recording(
             et_ns, epos, equat = _ee_from_joints(ds, ep, chain, str(ee_link))
         if robot_links is not None:
             robot_links.add(ds, ep, equat)
+            robot_eps.append((ep, et_ns, equat, len(trajs)))
         if offset is not None:
             from robogs.format.frames import quat_to_matrix
 
@@ -597,6 +608,13 @@ def load_recording(
         pieces += rows
     from robogs.format.shapes import BOX_BUDGET, load_object_meshes
 
+    rp = None if robot_links is None else robot_links.pusher(ds, pusher)
+    if rp is not None and rp.dofs:  # what moves in the robot pusher, on each trajectory
+        ends = [i for *_, i in robot_eps[1:]] + [len(trajs)]
+        for (ep, et_ns, equat, first), end in zip(robot_eps, ends, strict=True):
+            vals = robot_links.dof_values(ds, ep, rp, et_ns, equat)
+            for tr in trajs[first:end]:
+                tr.pusher_dofs = vals[np.searchsorted(et_ns, tr.ee_t_ns)]
     rec = Recording(
         trajectories=trajs,
         physics=physics,
@@ -604,7 +622,7 @@ def load_recording(
         meta={"split": pieces},
         meshes=load_object_meshes(ds),
         box_budget_mm=float(ds.budgets[BOX_BUDGET]),
-        robot_pusher=None if robot_links is None else robot_links.pusher(ds, pusher),
+        robot_pusher=rp,
     )
     rec = as_recording(rec)
     if log is not None:
@@ -621,10 +639,11 @@ class _RobotLinks:
     joints)."""
 
     def __init__(self, chain: Any, link: str, urdf: Path) -> None:
-        from robogs.physics.engines.mujoco_robot import distal_links
+        from robogs.physics.engines.mujoco_robot import distal_joints, distal_links
 
         self.chain, self.link, self.urdf = chain, link, urdf
         self.links = distal_links(chain, link)
+        self.joints = distal_joints(chain, link)
         self.ee_rot: list[np.ndarray] = []
         self.rel: dict[str, list[np.ndarray]] = {n: [] for n in self.links}
 
@@ -698,15 +717,17 @@ class _RobotLinks:
 
     def pusher(self, ds: Any, pusher: Any, where: str | None = None) -> Any:
         """The :class:`RobotPusher` over everything added, checked against the dataset's
-        ``geometry.box3d_mm`` and the motion's own noise
-        (:func:`robogs.physics.engines.mujoco_robot.pusher_frames`)."""
+        ``geometry.box3d_mm`` and the motion's own noise; what strays over it (the end
+        effector's roll and pitch, joints below the pusher link) becomes servo DOFs
+        (:func:`robogs.physics.engines.mujoco_robot.pusher_model`)."""
         from robogs.format.shapes import BOX_BUDGET
-        from robogs.physics.engines.mujoco_robot import RobotPusher, pusher_frames, pusher_reach
+        from robogs.physics.engines.mujoco_robot import RobotPusher, pusher_model, pusher_reach
 
-        frames, rig = pusher_frames(
+        frames, bodies, tilt, joints, rig = pusher_model(
             np.concatenate(self.ee_rot),
             pusher.get("offset_m"),
             {n: np.concatenate(v) for n, v in self.rel.items()},
+            self.joints,
             budget_mm=float(ds.budgets[BOX_BUDGET]),
             reach_m=pusher_reach(pusher),
             where=where or f"dataset {ds.root}",
@@ -720,7 +741,25 @@ class _RobotLinks:
             spread_rad=rig.spread_rad,
             moved_m=rig.moved_m,
             budget_m=rig.budget_m,
+            tilt=tilt,
+            joints=joints,
+            bodies=bodies,
         )
+
+    def dof_values(
+        self, ds: Any, ep: Any, rp: Any, ee_t_ns: np.ndarray, ee_quat: np.ndarray
+    ) -> np.ndarray:
+        """An episode's robot-pusher servo DOFs [E, J] at its EE stamps ``ee_t_ns``
+        (:func:`robogs.physics.engines.mujoco_robot.dof_values`; the joints interpolated
+        linearly at those stamps, :func:`link_frames`)."""
+        from robogs.format.frames import quat_to_matrix
+        from robogs.physics.engines.mujoco_robot import dof_values
+
+        links = None
+        if rp.joints:
+            _, T = link_frames(ds, ep, self.chain, t_query=ee_t_ns)
+            links = {n: T[:, self.chain.link_index(n)] for n in self.links}
+        return dof_values(rp, np.asarray(quat_to_matrix(ee_quat), dtype=float), links)
 
 
 def _pushed_object(tracks: dict[str, ObjectTrack], ee_t: np.ndarray, ee_pos: np.ndarray) -> str:

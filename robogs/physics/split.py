@@ -255,6 +255,8 @@ def split_trajectory(tr: Any, cuts: list[Cut], pad_s: float | None = 0.6) -> lis
         if wt is not None and wf is not None:
             mw = (wt >= a) & (wt < b)
             extra = {"wrench_t_ns": wt[mw], "wrench_force": wf[mw]}
+        if getattr(tr, "pusher_dofs", None) is not None:  # the robot pusher's, at ee_t_ns
+            extra["pusher_dofs"] = tr.pusher_dofs[me]
         out.append(
             replace(
                 tr,

@@ -217,10 +217,21 @@ def _with_urdf(ds_root: Path, edit, finger: np.ndarray | None = None) -> None:
         w.commit()
 
 
-def test_a_moving_finger_is_refused_naming_it_and_the_amount(
+def test_a_moving_finger_is_modelled_on_every_path(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """The finger sweeping 10 mm (5 mm from its mean, over the 2 mm budget) is a servo DOF
+    (h78; h71 refused it): ``load_recording`` gives the joint its own body and each
+    trajectory the joint's values at its EE stamps (the recorded ones: the EE comes from the
+    same joint_states), ``prepare`` puts them on the grid, ``auto`` picks MuJoCo saying so and
+    planar refuses naming the joint, ``compare`` runs, and ``render --simulate`` drives the
+    finger with the commanded values."""
     from robogs.cli.main import main
+    from robogs.cli.render_cmd import simulation_setup
+    from robogs.format.kinematics import Chain
+    from robogs.format.render_trajectory import episode_trajectory
+    from robogs.physics.engine import recording_backend
+    from robogs.physics.prepare import prepare
     from robogs.physics.recording import load_recording
 
     root = _gantry(tmp_path / "ds")
@@ -230,17 +241,36 @@ def test_a_moving_finger_is_refused_naming_it_and_the_amount(
         return text.replace("</robot>", FINGER + "</robot>")
 
     _with_urdf(root, add_finger, sweep)
-    with pytest.raises(InputError) as err:
-        load_recording(root)
-    msg = str(err.value)
-    assert "link 'finger'" in msg and "by 5.00 mm" in msg and "a joint below" in msg
-    assert "budget 2.00 mm (geometry.box3d_mm 2 mm + 3 x the recording" in msg
-    assert "geometry=primitive" in (err.value.hint or "")
+    rec = load_recording(root)
+    rp = rec.robot_pusher
+    assert rp.dofs == ["jf"] and [j.name for j in rp.joints] == ["jf"] and not rp.tilt
+    assert rp.bodies == {"tool": "", "finger": "jf"} and rp.moved_m < 1e-9
+    assert np.abs(rp.frames["finger"] - np.eye(4)).max() < 1e-12  # its own body's frame
+    ds = Dataset.open(root)
+    stamps = {e.id: e.table("joint_states").column("t_ns").to_numpy() for e in ds.episodes}
+    for tr in rec.trajectories:
+        t = stamps[tr.name.split("#")[0]]
+        want = np.interp(tr.ee_t_ns, t, sweep[: len(t)])
+        assert tr.pusher_dofs.shape == (len(tr.ee_t_ns), 1)
+        assert np.abs(tr.pusher_dofs[:, 0] - want).max() < 1e-12
+    prep = prepare(rec, dt=DT)
+    assert prep.drive.pusher_dofs.shape == (*prep.drive.pusher.shape[:2], 1)
+    name, why = recording_backend(rec, "auto")
+    assert name == "mujoco" and "servo-driven: jf" in why
+    with pytest.raises(InputError, match="moves jf") as err:
+        recording_backend(rec, "planar")
+    assert "grasp by contact" in str(err.value)
     capsys.readouterr()
-    assert main(["compare", str(root), "--engine", "mujoco"]) == 2
-    lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and "link 'finger'" in lines[0] and "by 5.00 mm" in lines[0]
-    # counterfactual: the finger held still is accepted (both links reach the engine)
+    assert main(["compare", str(root), "--engine", "mujoco"]) == 0
+    ep = ds.episode("push0")
+    traj = episode_trajectory(ep, Chain.from_urdf(ds.urdf(load_meshes=False)), {})
+    st = simulation_setup(ds, ep, traj)
+    assert st.shapes.meshes["pusher"].dofs == ["jf"]
+    grid = np.arange(st.drive.n_steps) * DT
+    t_s = (traj.t_ns - traj.t_ns[0]) * 1e-9
+    want = np.interp(grid, t_s, traj.q[:, traj.joint_names.index("jf")])
+    assert np.abs(st.drive.pusher_dofs[0, :, 0].numpy() - want).max() < 1e-12
+    # counterfactual: the finger held still is the one-body path (both links on the pusher)
     _with_urdf(root, lambda text: text)
     ds = Dataset.open(root)
     with ds.edit() as w:
@@ -250,9 +280,11 @@ def test_a_moving_finger_is_refused_naming_it_and_the_amount(
             js = js.set_column(js.column_names.index("position.jf"), "position.jf", held)
             w.write_table(ep.streams["joint_states"]["path"], js, kind="joint_states")
         w.commit()
-    rp = load_recording(root).robot_pusher
-    assert list(rp.frames) == ["tool", "finger"] and rp.moved_m < 1e-9
+    rec = load_recording(root)
+    rp = rec.robot_pusher
+    assert list(rp.frames) == ["tool", "finger"] and rp.moved_m < 1e-9 and rp.dofs == []
     assert np.abs(rp.frames["finger"][:3, 3] - [0.0, 0.005, 0.04]).max() < 1e-12
+    assert all(tr.pusher_dofs is None for tr in rec.trajectories)
 
 
 def test_pusher_links_without_collision_geometry_are_one_clear_error(

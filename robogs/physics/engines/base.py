@@ -113,6 +113,7 @@ def make_drive(
     init_pos: np.ndarray,
     init_yaw: np.ndarray,
     sample_dt: float | np.ndarray | None = None,
+    pusher_dofs: np.ndarray | None = None,
 ) -> Drive:
     """A :class:`~robogs.physics.model.Drive` from arrays (no grasp, object at rest).
 
@@ -126,6 +127,8 @@ def make_drive(
             interpolated from (one for all trajectories or [T]; e.g. the median spacing of
             the encoder stamps); None when unknown or the path is given per step
             (``Drive.sample_dt``).
+        pusher_dofs: [T, S, J] the robot pusher's other servo DOFs on the grid (rad or m,
+            ``Drive.pusher_dofs``); None: none.
     """
     pusher = np.asarray(pusher, dtype=float)
     pusher_yaw = np.asarray(pusher_yaw, dtype=float)
@@ -151,4 +154,7 @@ def make_drive(
         else torch.as_tensor(
             np.broadcast_to(np.asarray(sample_dt, dtype=float), pusher.shape[:1]).copy(), dtype=f
         ),
+        pusher_dofs=None
+        if pusher_dofs is None
+        else torch.as_tensor(np.asarray(pusher_dofs, dtype=float), dtype=f),
     )

@@ -65,6 +65,10 @@ What is left is the strike's remnant (below). Solver-side switches left the gain
 * a pyramidal cone or one centred sphere: larger;
 * ``implicitfast``: hid it through the solver's wrong view of the servo (above).
 
+The robot pusher's other servo DOFs (``Drive.pusher_dofs``: the end effector's pitch and
+roll, moving joints below the pusher link; :mod:`.mujoco_robot`) go through the same
+smoothing at the same spacing (:func:`servo_dof_targets`).
+
 ``DRIVE_KNOT_SMOOTHING = False`` restores the raw targets.
 
 Planar joint set (``joints="auto"``, the default where :func:`planar_joints_fit` allows: boxes
@@ -316,6 +320,7 @@ __all__ = [
     "drive_pusher_speed",
     "planar_joints_fit",
     "sample_steps",
+    "servo_dof_targets",
     "servo_targets",
     "smooth_knots",
 ]
@@ -522,6 +527,21 @@ class MujocoEngine:
         if self.scene.pusher is not None:
             j0 = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, "pusher_x")
             self._pusher_q = (int(self.model.jnt_qposadr[j0]), int(self.model.jnt_dofadr[j0]))
+        #: the robot pusher's servo DOFs beyond x, y, z, yaw (``Drive.pusher_dofs``' columns:
+        #: the end effector's pitch and roll, moving joints below the pusher link; mujoco_robot)
+        self.pusher_dofs: list[str] = []
+        self._dof_servos: list[tuple[int, int, int, int]] = []  # qpos, dof, position, velocity
+        if isinstance(robot, RobotPusher) and pusher_geometry(physics) == "robot":
+            self.pusher_dofs = list(robot.dofs)
+            for joint, pos, vel in robot.servos:
+                j = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint)
+                a, b = (
+                    mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, n)
+                    for n in (pos, vel)
+                )
+                self._dof_servos.append(
+                    (int(self.model.jnt_qposadr[j]), int(self.model.jnt_dofadr[j]), a, b)
+                )
         self.nstate = mujoco.mj_stateSize(self.model, _STATE)
         self._pool: mj_rollout.Rollout | None = None
 
@@ -551,7 +571,12 @@ class MujocoEngine:
             return False, "physics.json has no rigid object"
         try:
             if pusher_geometry(physics) == "robot":
-                return True, f"{len(rigid)} rigid object(s), plane support, the robot's links push"
+                moving = getattr(meshes.get("pusher"), "dofs", None)
+                how = f" (servo-driven: {', '.join(moving)})" if moving else ""
+                return (
+                    True,
+                    f"{len(rigid)} rigid object(s), plane support, the robot's links push{how}",
+                )
         except FormatError as exc:
             return False, str(exc)
         shape = (objects.get("pusher") or {}).get("shape")
@@ -643,6 +668,12 @@ class MujocoEngine:
                 if len(p) > 1:
                     data.qvel[va : va + 3] = (p[1] - p[0]) / self.dt
                     data.qvel[va + 3] = (y[1] - y[0]) / self.dt
+                if self._dof_servos:  # the robot pusher's tilt and moving joints, likewise
+                    d = drive.pusher_dofs[t].detach().cpu().numpy()
+                    for i, (q, v, _, _) in enumerate(self._dof_servos):
+                        data.qpos[q] = d[0, i]
+                        if len(d) > 1:
+                            data.qvel[v] = (d[1, i] - d[0, i]) / self.dt
             mujoco.mj_getState(self.model, data, out[t], _STATE)
         return out
 
@@ -651,13 +682,21 @@ class MujocoEngine:
         n_t, n_s = drive.n_traj, drive.n_steps
         if self._pusher_q is None:
             return np.zeros((n_t, n_s - 1, 0))
-        p, y = servo_targets(drive.pusher.numpy(), drive.ee_yaw.numpy(), sample_steps(drive))
+        steps = sample_steps(drive)
+        p, y = servo_targets(drive.pusher.numpy(), drive.ee_yaw.numpy(), steps)
         k = len(PUSHER_ACTUATORS)
         ctrl = np.zeros((n_t, n_s - 1, self.model.nu))  # z-ballast actuators follow: ctrl 0
         ctrl[..., :3] = p[:, :-1]
         ctrl[..., 3] = y[:, :-1]
         ctrl[..., k : k + 3] = np.diff(p, axis=1) / self.dt
         ctrl[..., k + 3] = np.diff(y, axis=1) / self.dt
+        if self._dof_servos:  # the robot pusher's other DOFs, smoothed over the same knots
+            d = servo_dof_targets(
+                drive.pusher.numpy(), drive.pusher_dofs.detach().cpu().numpy(), steps
+            )
+            for i, (_, _, a, b) in enumerate(self._dof_servos):
+                ctrl[..., a] = d[:, :-1, i]
+                ctrl[..., b] = np.diff(d[..., i], axis=1) / self.dt
         return ctrl
 
     def step_states(
@@ -706,11 +745,27 @@ class MujocoEngine:
             raise InputError(
                 "the drive grasps the object; the mujoco engine models pushing only so far",
                 where="drive.grasp",
-                hint="use the planar engine for grasp-and-place episodes",
+                hint="the robot pusher's fingers grasp by contact (objects.pusher.geometry "
+                "robot): drop objects.pusher.grasp_joint, the kinematic attachment"
+                if self.pusher_dofs
+                else "use the planar engine for grasp-and-place episodes",
             )
         if abs(drive.dt - self.dt) > 1e-12:
             raise InputError(
                 f"drive step {drive.dt} s differs from the engine's {self.dt} s", where="drive.dt"
+            )
+        got = drive.pusher_dofs
+        if self.pusher_dofs and (
+            got is None or tuple(got.shape) != (drive.n_traj, drive.n_steps, len(self.pusher_dofs))
+        ):
+            raise InputError(
+                f"the robot pusher moves {', '.join(self.pusher_dofs)} but the drive carries "
+                + (
+                    "no targets for them" if got is None else f"targets of shape {tuple(got.shape)}"
+                ),
+                where="drive.pusher_dofs",
+                hint="build the drive from the recording (prepare, or make_drive with "
+                f"pusher_dofs [T, S, {len(self.pusher_dofs)}] in the order of RobotPusher.dofs)",
             )
 
     def _param_sets(self, params: Mapping[str, Sequence[float]] | None) -> list[mujoco.MjModel]:
@@ -837,19 +892,42 @@ def servo_targets(
     p, yaw = np.asarray(p, dtype=float), np.asarray(yaw, dtype=float)
     if not DRIVE_KNOT_SMOOTHING:
         return p, yaw
+    out_p, out_y = p.copy(), yaw.copy()
+    for rows, n in _knot_rows(p, knot_steps):
+        out_p[rows], out_y[rows] = smooth_knots(p[rows], n), smooth_knots(yaw[rows], n)
+    return out_p, out_y
+
+
+def servo_dof_targets(
+    p: np.ndarray, dofs: np.ndarray, knot_steps: float | np.ndarray | None = None
+) -> np.ndarray:
+    """The robot pusher's other servo DOFs (``Drive.pusher_dofs`` [T, S, J], rad or m: the end
+    effector's pitch and roll, moving joints) through the same :func:`smooth_knots` as the
+    pusher path ``p`` [T, S, 3] of :func:`servo_targets` (each trajectory at the spacing that
+    function gives it: ``knot_steps``, else read from ``p``); unchanged with
+    :data:`DRIVE_KNOT_SMOOTHING` off. They are sampled with the end effector (one encoder)."""
+    p, dofs = np.asarray(p, dtype=float), np.asarray(dofs, dtype=float)
+    if not DRIVE_KNOT_SMOOTHING:
+        return dofs
+    out = dofs.copy()
+    for rows, n in _knot_rows(p, knot_steps):
+        out[rows] = smooth_knots(dofs[rows], n)
+    return out
+
+
+def _knot_rows(
+    p: np.ndarray, knot_steps: float | np.ndarray | None
+) -> list[tuple[slice | np.ndarray, float]]:
+    """(trajectory rows, knot spacing) of :func:`servo_targets`: all rows at the spacing read
+    from ``p`` without ``knot_steps``, else the rows of each given spacing (NaN rows read)."""
     if knot_steps is None:
-        n = drive_knot_steps(p)
-        return smooth_knots(p, n), smooth_knots(yaw, n)
+        return [(slice(None), drive_knot_steps(p))]
     n_t = p.shape[0]
     steps = np.broadcast_to(np.asarray(knot_steps, dtype=float), (n_t,)).copy()
     unknown = ~np.isfinite(steps)
     if unknown.any():
         steps[unknown] = drive_knot_steps(p[unknown])
-    out_p, out_y = p.copy(), yaw.copy()
-    for n in np.unique(steps):
-        rows = steps == n
-        out_p[rows], out_y[rows] = smooth_knots(p[rows], n), smooth_knots(yaw[rows], n)
-    return out_p, out_y
+    return [(steps == n, n) for n in np.unique(steps)]
 
 
 def sample_steps(drive: Drive) -> np.ndarray | None:

@@ -787,7 +787,7 @@ class MujocoFit:
         object (layout, half sizes of the collision box [m], settled height [m], velocity
         columns) and the pusher geoms' centres (pusher frame) and bounding radii [m] for
         :meth:`_gaps` and :meth:`_apart`."""
-        if self.pq is None:
+        if self.pq is None or self.eng.pusher_dofs:  # geoms off the pusher body: no cut
             return False
         names = [self.obj] + [o.name for o in self.tracked]
         settled = [self.settled_z] + [self._rest[o.name][1] for o in self.tracked]

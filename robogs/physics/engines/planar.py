@@ -77,6 +77,13 @@ class PlanarEngine:
         if tilt > MAX_TILT_DEG:
             return False, f"support plane tilted {tilt:.1f} deg (> {MAX_TILT_DEG} deg)"
         pusher = objects.get("pusher") or {}
+        moving = getattr((meshes or {}).get("pusher"), "dofs", None)
+        if pusher.get("geometry", "primitive") == "robot" and moving:
+            return False, (
+                f"the robot pusher moves {', '.join(moving)} (moving fingers touch the objects: "
+                "grasp by contact; the planar model pushes with one rigid sphere or capsule, "
+                "the mujoco engine drives each moving link with its own servo)"
+            )
         if pusher.get("geometry", "primitive") != "primitive":
             return False, (
                 f"objects.pusher.geometry is {pusher.get('geometry')!r} (the planar model "
