@@ -25,6 +25,13 @@ Oracles:
   has collision geometry too) stays where the drive holds it, within 1 um. (Pushed 10 mm
   off-centre by the 20 mm wide finger the box turns 0.29 deg and drifts 0.18 mm sideways:
   not a closed form, so not asserted);
+* nested joints: a hinge (``wrist``, URDF origin with a 0.3 rad roll) below the pusher link
+  and a prismatic ``tip`` below it, with a ``pad`` fixed to the tip, under a moving, yawing
+  end effector: each link's geom in MuJoCo is at its closed-form forward-kinematics pose
+  (``[Rz(yaw) | p] T(o) Rx(0.3) Rz(q1) T(0.05, 0, 0) T(q2 x) ...``) at every step within
+  1e-9 (float error of the dead-beat servos: 1.5e-10 measured), the joints' values read back
+  from the links' poses (``dof_values``) are q1 and q2 within 1e-12, and the pad rides on the
+  tip's body;
 * the finger's servo targets go through the pusher's knot smoothing: on a 500 Hz path
   (``sample_dt`` 2 ms, 1 ms steps) the finger's position targets are ``smooth_knots(q, 2)``
   of the drive (the pusher's spacing) and its velocity targets have no staircase.
@@ -44,7 +51,12 @@ from robogs.format.kinematics import Chain
 from robogs.format.urdf import load_urdf
 from robogs.physics.engines.base import make_drive
 from robogs.physics.engines.mujoco_engine import MujocoEngine, smooth_knots
-from robogs.physics.engines.mujoco_robot import RobotPusher, distal_joints, pusher_model
+from robogs.physics.engines.mujoco_robot import (
+    RobotPusher,
+    distal_joints,
+    dof_values,
+    pusher_model,
+)
 
 torch.set_num_threads(1)
 
@@ -257,3 +269,72 @@ def test_finger_targets_share_the_pushers_knot_smoothing(tmp_path: Path) -> None
     assert np.abs(acc - 2.0).max() < 1e-6  # smoothed: 2 m/s^2 every step
     raw = np.diff(np.diff(q[10:-10]) / DT) / DT
     assert raw.max() > 3.9 and raw.min() < 0.1  # the staircase it replaces
+
+
+def _rot(axis: int, a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    i, j = [k for k in range(3) if k != axis]
+    out = np.eye(4)
+    out[i, i], out[i, j], out[j, i], out[j, j] = c, -s, s, c
+    return out
+
+
+def _move(xyz) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, 3] = xyz
+    return out
+
+
+def test_nested_joint_bodies_follow_the_forward_kinematics(tmp_path: Path) -> None:
+    wrist_origin = _move([0.02, 0.0, -0.03]) @ _rot(0, 0.3)  # xyz + rpy (0.3, 0, 0)
+    urdf = _write(
+        tmp_path,
+        f'<link name="hand">{INERT}</link><link name="wrist">{INERT}</link>'
+        f'<link name="tip">{INERT}{_box(FINGER)}</link>'
+        f'<link name="pad">{INERT}{_box((0.006, 0.006, 0.003), "0.01 0 0")}</link>'
+        '<joint name="jw" type="revolute"><parent link="hand"/><child link="wrist"/>'
+        '<origin xyz="0.02 0 -0.03" rpy="0.3 0 0"/><axis xyz="0 0 1"/>'
+        '<limit lower="-3" upper="3" effort="1" velocity="1"/></joint>'
+        '<joint name="jt" type="prismatic"><parent link="wrist"/><child link="tip"/>'
+        '<origin xyz="0.05 0 0"/><axis xyz="1 0 0"/>'
+        '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+        '<joint name="jp" type="fixed"><parent link="tip"/><child link="pad"/>'
+        '<origin xyz="0 0 -0.01"/></joint>',
+    )
+    n = 700
+    t = np.arange(n) * DT
+    q1, q2 = 1.2 * np.sin(3.0 * t), 0.02 * (1 - np.cos(4.0 * t))
+    wrist = np.stack([wrist_origin @ _rot(2, a) for a in q1])
+    tip = wrist @ _move([0.05, 0.0, 0.0]) @ _shift(q2, 0)
+    pad = tip @ _move([0.0, 0.0, -0.01])
+    links = {"hand": np.repeat(np.eye(4)[None], n, 0), "wrist": wrist, "tip": tip, "pad": pad}
+    rp = _robot(urdf, links)
+    assert rp.dofs == ["jw", "jt"]
+    assert rp.bodies == {"hand": "", "wrist": "jw", "tip": "jt", "pad": "jt"}
+    rot = np.repeat(np.eye(3)[None], n, 0)
+    got = dof_values(rp, rot, links)
+    assert np.abs(got - np.stack([q1, q2], -1)).max() < 1e-12
+    yaw = 0.4 + 0.5 * t
+    hand = np.stack([0.3 + 0.1 * t, -0.2 + 0.05 * np.sin(t), 0.2 + 0 * t], -1)  # off the box
+    eng = MujocoEngine(_physics(0.4), dt=DT, meshes={"pusher": rp})
+    drive = make_drive(
+        DT,
+        hand[None],
+        yaw[None],
+        t[None],
+        np.array([[0.0, 0.0, HALF]]),
+        np.zeros(1),
+        pusher_dofs=got[None],
+    )
+    geoms = {
+        n: (_geom(eng, f"pusher/{n}/0"), g) for n, g in (("tip", (0, 0, 0)), ("pad", (0.01, 0, 0)))
+    }
+    err = 0.0
+    for k, m, d in eng.step_states(drive):
+        mujoco.mj_kinematics(m, d)  # the state after step k
+        world = _move(hand[k + 1]) @ _rot(2, yaw[k + 1])
+        for name, (g, off) in geoms.items():
+            want = world @ links[name][k + 1] @ _move(off)
+            err = max(err, float(np.abs(d.geom_xpos[g] - want[:3, 3]).max()))
+            err = max(err, float(np.abs(d.geom_xmat[g].reshape(3, 3) - want[:3, :3]).max()))
+    assert err < 1e-9
