@@ -89,14 +89,23 @@ from robogs.format.errors import FormatError, InputError
 from robogs.format.shapes import BOX_BUDGET
 
 __all__ = [
+    "CHILD_MASS",
+    "GIMBAL_DEG",
     "NOISE_FACTOR",
     "PUSHER_GEOMETRIES",
+    "TILT_DOFS",
+    "PusherJoint",
     "Rigidity",
     "RobotPusher",
+    "distal_joints",
     "distal_links",
+    "dof_values",
+    "ee_tilt",
+    "joint_value",
     "pose_noise",
     "pusher_frames",
     "pusher_geometry",
+    "pusher_model",
     "pusher_reach",
     "robot_pusher_scene",
 ]
@@ -519,7 +528,8 @@ def pusher_frames(
     reach_m: float = 0.0,
     where: str = "recording",
 ) -> tuple[dict[str, np.ndarray], Rigidity]:
-    """The links' constant poses in the pusher frame, checked against a recording.
+    """The links' constant poses in the pusher frame, checked against a recording (the rigid
+    check alone; :func:`pusher_model` models what strays instead of refusing it).
 
     The engine carries each link at one pose in the pusher frame (the mean over the recording);
     the recorded forward-kinematics poses stray from it where the end effector rolls or pitches
