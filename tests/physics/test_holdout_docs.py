@@ -1,5 +1,7 @@
 """docs/physics.md §5.3 (held-out choice) runs as written: the fit prints the held-out RMS of
-the two named pushes, and diagnose names the segment it held out and judges on it."""
+the two named pushes, diagnose names the segment it held out and judges on it, and the report
+prints the figures the docs quote (this check was test_report_holdout's, which ran the same
+report line again on its own copy of the scenario)."""
 
 from __future__ import annotations
 
@@ -24,8 +26,15 @@ def _doc_lines() -> list[str]:
 def test_docs_holdout_lines(tmp_path):
     env = {**os.environ, "OMP_NUM_THREADS": "1", "ROBOGS_CACHE_DIR": str(tmp_path / "cache")}
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}"
+    lines = _doc_lines()
+    assert [shlex.split(ln)[:2] for ln in lines[1:]] == [
+        ["robogs", "fit"],
+        ["robogs", "diagnose"],
+        ["robogs", "report"],
+    ]
+    assert "--holdout" in shlex.split(lines[3])
     outs = []
-    for line in _doc_lines():
+    for line in lines:
         args = shlex.split(line)
         if args[0] == "python":
             args[0] = sys.executable
@@ -43,3 +52,7 @@ def test_docs_holdout_lines(tmp_path):
     assert float(m.group(2)) < float(m.group(1))
     assert "--holdout-column segment in {push_d2_v1}: episodes push_d2_v1" in outs[2]
     assert "held-out error and gate: held out: push_d2_v1 (1 of 6 trajectories)" in outs[2]
+    # the report line prints the docs' figures (the docs wrap the line: compare unwrapped)
+    said = next(ln for ln in outs[3].splitlines() if ln.startswith("held-out position RMS"))
+    assert said in " ".join(text.split())
+    assert "held out: push_d0_v0, push_d1_v1 (2 of 6 trajectories)" in said
