@@ -26,6 +26,19 @@ samples; a keyframe holds the whole scene's state): ``joint_names`` [J] (the ser
 URDF order), ``episodes`` [E], and per episode ``k`` ``t_ns_<k>`` [N] int64 (dataset clock) and
 ``q_<k>`` [N, J] float64 (rad or m; NaN where ``joint_states`` has no column for a joint).
 
+With ``objects.pusher.geometry = "robot"`` the pusher is the engine's robot pusher instead of
+the primitive: the URDF collision geoms of the pusher link and the links below it, one pair per
+geom and object, and the servo DOFs the recording moves (the end effector's pitch and roll,
+moving joints below the pusher link), written by
+:func:`robogs.format.mjcf_pusher.robot_pusher_scene`, the function the ``mujoco`` engine
+compiles. What it places is measured from the recording by the physics side, which this module
+may not import: the ``robot_pusher`` option
+(:func:`robogs.physics.export_pusher.robot_pusher_paths`) carries it, and the export refuses
+the dataset without it. Its meshes go to ``OUT/meshes/robot/`` (mesh names ``robot/<mesh>``;
+the kinematic robot is then prefixed ``arm/`` when it needs a prefix), and
+``robot_trajectory.npz`` gets the pusher's path and DOFs per episode (``pusher_*``, see
+:func:`_pusher_arrays` and ``docs/exports.md``). A primitive-pusher export is unchanged.
+
 Meshes replaced by their convex hulls and physics.json keys MuJoCo does not represent are listed
 in the report notes and in a ``<custom>`` text element of the document.
 
@@ -77,6 +90,7 @@ from robogs.format.mjcf import (
     scene_mjcf,
     write_body,
 )
+from robogs.format.mjcf_pusher import PusherPaths, pusher_geometry, robot_pusher_scene
 from robogs.format.shapes import BOX_BUDGET, object_shapes
 
 from . import ExportReport, register_exporter
@@ -88,8 +102,11 @@ TRAJECTORY_FILE = "robot_trajectory.npz"
 """The companion file of the recorded joint trajectory (see the module docstring)."""
 
 
-def _trajectory(ds: Dataset, joints: list[str]) -> tuple[bytes, dict[str, Any], list[str]]:
-    """``robot_trajectory.npz`` bytes, its facts, and notes (joints without a column)."""
+def _trajectory(
+    ds: Dataset, joints: list[str], pusher: PusherPaths | None = None
+) -> tuple[bytes, dict[str, Any], list[str]]:
+    """``robot_trajectory.npz`` bytes, its facts, and notes (joints without a column); with a
+    robot pusher also its paths (:func:`_pusher_arrays`)."""
     arrays: dict[str, np.ndarray] = {"joint_names": np.array(joints, dtype=str)}
     ids, counts, missing = [], [], set()
     for ep in ds.episodes:
@@ -108,6 +125,8 @@ def _trajectory(ds: Dataset, joints: list[str]) -> tuple[bytes, dict[str, Any], 
         ids.append(ep.id)
         counts.append(tab.num_rows)
     arrays["episodes"] = np.array(ids, dtype=str)
+    if pusher is not None:
+        arrays.update(_pusher_arrays(pusher))
     buf = io.BytesIO()
     np.savez_compressed(buf, **arrays)
     notes = []
@@ -119,6 +138,83 @@ def _trajectory(ds: Dataset, joints: list[str]) -> tuple[bytes, dict[str, Any], 
     if not ids:
         notes.append(f"no episode has joint_states: {TRAJECTORY_FILE} holds no episode")
     return buf.getvalue(), {"episodes": ids, "samples": counts}, notes
+
+
+def _pusher_arrays(pusher: PusherPaths) -> dict[str, np.ndarray]:
+    """The robot pusher's part of ``robot_trajectory.npz``: ``pusher_dof_names`` [J],
+    ``pusher_servos`` [J, 3] (MuJoCo joint, position servo, velocity servo of each DOF),
+    ``pusher_episodes`` [E] and per episode ``k`` ``pusher_t_ns_<k>`` [N] int64 (the end
+    effector's stamps), ``pusher_p_<k>`` [N, 3] m (the pusher point), ``pusher_yaw_<k>`` [N]
+    rad (unwrapped) and ``pusher_q_<k>`` [N, J] (rad or m), the recording the engine fits with."""
+    rp = pusher.pusher
+    out: dict[str, np.ndarray] = {
+        "pusher_dof_names": np.array(list(rp.dofs), dtype=str),
+        "pusher_servos": np.array(rp.servos, dtype=str).reshape(len(rp.dofs), 3),
+        "pusher_episodes": np.array(pusher.episodes, dtype=str),
+    }
+    for k in range(len(pusher.episodes)):
+        out[f"pusher_t_ns_{k}"] = np.asarray(pusher.t_ns[k], dtype=np.int64)
+        out[f"pusher_p_{k}"] = np.asarray(pusher.point[k], dtype=np.float64)
+        out[f"pusher_yaw_{k}"] = np.asarray(pusher.yaw[k], dtype=np.float64)
+        out[f"pusher_q_{k}"] = np.asarray(pusher.dofs[k], dtype=np.float64)
+    return out
+
+
+def _robot_pusher(
+    ds: Dataset, physics: dict[str, Any], scene: MjcfScene, given: PusherPaths | None
+) -> tuple[MjcfScene, dict[str, bytes], dict[str, Any], list[str]]:
+    """With ``objects.pusher.geometry = "robot"``: the scene with the engine's robot pusher
+    (:func:`robogs.format.mjcf_pusher.robot_pusher_scene`, the function the ``mujoco`` engine
+    compiles), its mesh files (``meshes/robot/...``, paths relative to the document), its facts
+    and notes. With the primitive pusher the scene unchanged.
+
+    Raises:
+        InputError: geometry ``robot`` without ``given`` (the measurement is the physics
+            side's), or ``given`` with the primitive pusher.
+    """
+    where = ds.resolve("physics.json")
+    if pusher_geometry(physics) != "robot":
+        if given is not None:
+            raise InputError(
+                "a robot pusher was given but physics.json's pusher is the primitive",
+                path=where,
+                where="objects/pusher/geometry",
+                hint="leave robot_pusher out, or set objects.pusher.geometry=robot",
+            )
+        return scene, {}, {}, []
+    if given is None:
+        raise InputError(
+            "physics.json's pusher is the robot (objects.pusher.geometry robot), measured from "
+            "the recording by robogs.physics, and the export was not given it",
+            path=where,
+            where="objects/pusher/geometry",
+            hint="pass robot_pusher=robogs.physics.export_pusher.robot_pusher_paths(dataset) "
+            "to the mjcf export",
+        )
+    before = set(scene.assets)
+    scene, geoms = robot_pusher_scene(scene, given.pusher)
+    files = {k: v for k, v in scene.assets.items() if k not in before}
+    rp = given.pusher
+    facts = {
+        "link": rp.link,
+        "links": list(rp.frames),
+        "bodies": {n: rp.bodies.get(n, "") for n in rp.frames},
+        "geoms": geoms,
+        "dofs": list(rp.dofs),
+        "servos": [list(s) for s in rp.servos],
+        "tilt": bool(rp.tilt),
+        "moved_mm": rp.moved_m * 1e3,
+        "budget_mm": rp.budget_m * 1e3,
+        "meshes": sorted(files),
+        "trajectory": {"file": TRAJECTORY_FILE, "episodes": list(given.episodes)},
+    }
+    notes = [
+        f"pusher: the robot's links {', '.join(rp.frames)} as the mujoco engine fits with "
+        "(objects.pusher.geometry robot)"
+        + (f", servo-driven DOFs {', '.join(rp.dofs)}" if rp.dofs else "")
+        + f"; its path and DOFs per episode in {TRAJECTORY_FILE} (pusher_*)"
+    ]
+    return scene, files, facts, notes
 
 
 FORCE_NOTE = "applied by robogs as per-step forces; not simulated by a plain MuJoCo load"
@@ -381,11 +477,17 @@ def _write_inside(out: Path, rel: str, data: bytes) -> None:
     target.write_bytes(data)
 
 
-def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
+def export_mjcf(ds: Dataset, out: Path, *, robot_pusher: PusherPaths | None = None) -> ExportReport:
     """Write ``OUT/scene.xml`` and ``OUT/meshes/`` from the dataset's physics.json.
 
+    Args:
+        robot_pusher: with ``objects.pusher.geometry = "robot"``, the robot pusher measured
+            from the recording (:func:`robogs.physics.export_pusher.robot_pusher_paths`;
+            required then, refused otherwise).
+
     Raises:
-        InputError: the dataset has no physics.json or no rigid object in it.
+        InputError: the dataset has no physics.json or no rigid object in it; the robot
+            pusher missing or not the dataset's.
         FormatError: a physics.json value the scene needs is missing or malformed.
     """
     if not ds.manifest.get("physics"):
@@ -422,6 +524,9 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
     scene = scene_mjcf(
         physics, meshes=meshes, poses=poses, model_name=f"{ds.name}_scene", meshdir="meshes/"
     )
+    scene, pusher_files, pusher_facts, pusher_notes = _robot_pusher(
+        ds, physics, scene, robot_pusher
+    )
     xml, effects, covered = _effects(scene.xml, scene, physics, ds.resolve("physics.json"))
     numeric, effect_notes = _custom(effects)
     written = [f"{r['name']} on {r['target']}" for r in effects if r["written"]]
@@ -443,17 +548,25 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
         tree = ds.urdf(load_meshes=False).robot
         urdf_names = {lk.name for lk in tree.links} | {j.name for j in tree.joints}
         clash = sorted(urdf_names & document_names(xml))
-        prefix = "robot/" if clash else ""
+        # the robot pusher's meshes are robot/<mesh>: the kinematic robot then takes arm/
+        prefix = ("arm/" if pusher_files else "robot/") if clash else ""
         rob = robot_mjcf(ds.urdf_path, root=ds.root, meshdir="meshes/robot/", prefix=prefix)
         if clash:
             robot_notes.append(
-                f"robot names prefixed 'robot/' (the scene already has {', '.join(clash[:5])})"
+                f"robot names prefixed {prefix!r} (the scene already has {', '.join(clash[:5])})"
             )
         q_first = state.joint_positions
         q0 = [float(q_first.get(j, 0.0)) for j in rob.actuated]
         xml, servos = add_robot(xml, rob, q0)
-        traj, traj_facts, traj_notes = _trajectory(ds, rob.actuated)
-        robot_files = {**rob.files, TRAJECTORY_FILE: traj}
+        traj, traj_facts, traj_notes = _trajectory(ds, rob.actuated, robot_pusher)
+        for rel, data in pusher_files.items():  # the same URDF mesh converted the same way
+            if rob.files.get(rel, data) != data:
+                raise FormatError(
+                    f"the robot pusher's mesh {rel} differs from the robot's file of that name",
+                    path=ds.urdf_path,
+                    where=rel,
+                )
+        robot_files = {**pusher_files, **rob.files, TRAJECTORY_FILE: traj}
         robot_notes += [
             f"robot {rob.name!r}: {len(rob.links)} links, {len(rob.joints)} joints, kinematic "
             "(no contact, gravity compensated, servos robot_JOINT / robot_v_JOINT)",
@@ -487,6 +600,7 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
     remarks = [
         *kept_as_box,
         *scene.notes,
+        *pusher_notes,
         *robot_notes,
         *effect_notes,
         *(f"not represented: {k}" for k in unmapped),
@@ -497,9 +611,10 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
     xml = xml.replace("</mujoco>", f"  <custom>\n{custom}\n  </custom>\n</mujoco>")
     (out / "scene.xml").write_text(xml, encoding="utf-8")
     files = ["scene.xml"]
-    if scene.assets:
+    hulls = {f: d for f, d in scene.assets.items() if f not in pusher_files}
+    if hulls:
         (out / "meshes").mkdir()
-        for fname, data in sorted(scene.assets.items()):
+        for fname, data in sorted(hulls.items()):
             (out / "meshes" / fname).write_bytes(data)
             files.append(f"meshes/{fname}")
     for rel, data in sorted(robot_files.items()):
@@ -507,7 +622,7 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
         files.append(rel)
     if not robot_facts:
         robot_notes = ["dataset has no robot: none in the document"]
-    notes = [*kept_as_box, *scene.notes, *robot_notes, *effect_notes]
+    notes = [*kept_as_box, *scene.notes, *pusher_notes, *robot_notes, *effect_notes]
     if unmapped:
         notes.append(f"not represented in MuJoCo: {', '.join(unmapped)}")
     return ExportReport(
@@ -523,6 +638,7 @@ def export_mjcf(ds: Dataset, out: Path) -> ExportReport:
             "effects": effects,
             "physics_revision": physics.get("revision"),
             **robot_facts,
+            **({"robot_pusher": pusher_facts} if pusher_facts else {}),
         },
     )
 
