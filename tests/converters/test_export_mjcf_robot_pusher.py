@@ -53,9 +53,12 @@ FINGERS = "".join(
 )
 
 
-def _gantry(root: Path, edit, joints: dict[str, np.ndarray] | None = None) -> Path:
+def _gantry(
+    root: Path, edit, joints: dict[str, np.ndarray] | None = None, files: dict | None = None
+) -> Path:
     """The gantry dataset with the robot pusher, its URDF rewritten by ``edit`` and, with
-    ``joints`` (name -> values at the 200 Hz joint stamps), those joints in joint_states."""
+    ``joints`` (name -> values at the 200 Hz joint stamps), those joints in joint_states;
+    ``files``: more files beside the URDF (name -> bytes)."""
     from init_scene import write_scene
 
     from robogs.physics.init import init_physics, set_physics_values
@@ -67,6 +70,8 @@ def _gantry(root: Path, edit, joints: dict[str, np.ndarray] | None = None) -> Pa
     with ds.edit() as w:
         urdf = ds.urdf_path
         w.write_text(urdf.relative_to(ds.root).as_posix(), edit(urdf.read_text()))
+        for name, data in (files or {}).items():
+            w.write_bytes((urdf.parent / name).relative_to(ds.root).as_posix(), data)
         for ep in ds.episodes if joints else []:
             js = ep.table("joint_states")
             for name, v in joints.items():
@@ -104,10 +109,20 @@ def gripper(tmp_path_factory: pytest.TempPathFactory):
     )
 
 
-def _case(tmp: Path, edit, joints):
+@pytest.fixture(scope="module")
+def mesh_paddle(tmp_path_factory: pytest.TempPathFactory):
+    """The paddle as an STL mesh (a box of the paddle's size, 12 triangles)."""
+    import trimesh
+
+    stl = trimesh.creation.box(extents=(0.008, 0.1, 0.04)).export(file_type="stl")
+    edit = lambda t: _paddle(t).replace(PADDLE, '<mesh filename="paddle.stl"/>')  # noqa: E731
+    return _case(tmp_path_factory.mktemp("h80_mesh"), edit, None, {"paddle.stl": stl})
+
+
+def _case(tmp: Path, edit, joints, files=None):
     from robogs.physics.export_pusher import robot_pusher_paths
 
-    root = _gantry(tmp / "ds", edit, joints)
+    root = _gantry(tmp / "ds", edit, joints, files)
     ds = Dataset.open(root)
     paths = robot_pusher_paths(ds)
     out = tmp / "scene_mjcf"
@@ -341,3 +356,23 @@ def test_the_docs_robot_pusher_replay_block_runs(gripper, tmp_path, monkeypatch)
     print("docs block: worst DOF tracking", ns["worst"])
     assert len(ns["grid"]) > 500 and ns["servos"][0][0] == "pusher/jl"
     assert ns["worst"] < 1e-4
+
+
+def test_a_mesh_paddle_goes_under_meshes_robot_once(mesh_paddle) -> None:
+    """The pusher's mesh is written where the robot's meshes go (``meshes/robot/``), one file
+    for the pusher geom and the kinematic robot's link (the same conversion of the same URDF
+    mesh), under two mesh names (``robot/<mesh>`` for the pusher); the file replays the
+    engine's rollout as the primitive paddle does."""
+    root, out, report, model, paths = mesh_paddle
+    facts = report.facts["robot_pusher"]
+    (rel,) = facts["meshes"]
+    assert rel.startswith("meshes/robot/") and (out / rel).is_file()
+    assert report.files.count(rel) == 1
+    assert any(m["file"] == rel for m in report.facts["robot"]["meshes"])
+    g = model.geom("pusher/tool/0")
+    assert g.type[0] == mujoco.mjtGeom.mjGEOM_MESH
+    mesh = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_MESH, int(g.dataid[0]))
+    assert mesh.startswith("robot/")
+    r = _check_case(mesh_paddle, 0)
+    print(r)
+    assert r["gap"] < 1e-9 and r["gap_file"] < 1e-9 and r["primitive"] > 1e-3
