@@ -426,3 +426,29 @@ def test_a_pitching_paddle_exports_the_tilt_hinges(tilting) -> None:
     print(r)
     assert r["gap"] < 1e-9 and r["gap_file"] < 1e-9
     assert r["held_open"] > 1e-4  # the pitch moves the box (1.0 mm measured)
+
+
+def test_a_robot_that_needs_a_prefix_beside_the_robot_pusher_takes_arm(tmp_path) -> None:
+    """A URDF link named as a scene joint (``pusher_x``) makes the kinematic robot need a
+    prefix; beside the robot pusher, whose meshes are ``robot/<mesh>``, it is ``arm/``: the
+    document compiles, with the pusher's mesh and the robot's under two names and one file."""
+    import trimesh
+
+    from robogs.physics.export_pusher import robot_pusher_paths
+
+    stl = trimesh.creation.box(extents=(0.008, 0.1, 0.04)).export(file_type="stl")
+
+    def edit(text: str) -> str:
+        text = _paddle(text).replace(PADDLE, '<mesh filename="paddle.stl"/>')
+        return text.replace('"carriage_x"', '"pusher_x"')
+
+    root = _gantry(tmp_path / "ds", edit, None, {"paddle.stl": stl})
+    ds = Dataset.open(root)
+    out = tmp_path / "scene_mjcf"
+    report = export("mjcf", ds, out, robot_pusher=robot_pusher_paths(ds))
+    assert report.facts["robot"]["prefix"] == "arm/"
+    model = mujoco.MjModel.from_xml_path(str(out / "scene.xml"))
+    meshes = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_MESH, i) for i in range(model.nmesh)}
+    assert {m.split("/")[0] for m in meshes} == {"robot", "arm"}
+    assert model.joint("arm/jx").id > model.joint("pusher_yaw").id
+    assert model.body("arm/pusher_x").id > model.body("pusher").id
