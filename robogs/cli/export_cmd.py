@@ -166,6 +166,12 @@ def run(args: argparse.Namespace) -> int:
             f"{', '.join(unknown)} does not apply to the {args.format} export",
             hint=f"{args.format} takes {', '.join(_OPTION_FLAGS[k] for k in sorted(accepted) if k in _OPTION_FLAGS) or 'no options'}",
         )
+    if args.format == "mjcf":  # the robot pusher is measured by the physics (h80)
+        from robogs.physics.export_pusher import robot_pusher_paths
+
+        paths = robot_pusher_paths(args.dataset)
+        if paths is not None:
+            options["robot_pusher"] = paths
     report = export(args.format, args.dataset, args.out, force=args.force, **options)
     print_report(report, as_json=args.json)
     return 0

@@ -452,3 +452,18 @@ def test_a_robot_that_needs_a_prefix_beside_the_robot_pusher_takes_arm(tmp_path)
     assert {m.split("/")[0] for m in meshes} == {"robot", "arm"}
     assert model.joint("arm/jx").id > model.joint("pusher_yaw").id
     assert model.body("arm/pusher_x").id > model.body("pusher").id
+
+
+def test_the_cli_export_measures_the_robot_pusher_itself(gripper, tmp_path) -> None:
+    """``robogs export mjcf`` on a robot-pusher dataset writes the scene the API writes with
+    :func:`robot_pusher_paths` (same scene.xml bytes and pusher trajectory), not a refusal."""
+    from robogs.cli.main import main
+
+    root, out_api = gripper[0], gripper[1]
+    out = tmp_path / "cli_mjcf"
+    assert main(["export", "mjcf", str(root), str(out)]) == 0
+    assert (out / "scene.xml").read_bytes() == (out_api / "scene.xml").read_bytes()
+    a, b = np.load(out / "robot_trajectory.npz"), np.load(out_api / "robot_trajectory.npz")
+    assert sorted(a.files) == sorted(b.files) and any(k.startswith("pusher_q") for k in a.files)
+    for k in a.files:
+        np.testing.assert_array_equal(a[k], b[k])
