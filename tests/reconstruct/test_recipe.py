@@ -33,6 +33,14 @@ SMALL = "--iterations 150 --lr-scale 3 --scale 0.5 --force --threads 2 --no-prog
 IOU_MIN = 0.8
 #: reconstructed table plane vs the true top, mm (measured 7.2 at the test's size; see the doc)
 TABLE_TOP_MM = 12.0
+#: SfM pre-alignment residual, mm RMS: two voxels of the labelled hull it fits. The hull (160
+#: voxels along the workspace) is 8.4-11.2 mm a voxel in the robot's world, and the fit reads
+#: about one voxel: 7.16-7.65 mm over 10 SfM runs of the sample before they repeated (h74: 7 with
+#: 2 threads, 3 of them beside a busy process, and 3 with 1), 7.42 mm since with any thread
+#: count, 6.8-8.0 mm with the SfM frame turned by 5 random rotations (the grid is axis-aligned in
+#: that frame). Beyond two voxels the hull is not what was fitted: the depth-reversed SfM basin
+#: reads 284 mm. CI read 32.1 mm once before h74 (not reproduced here).
+PREALIGN_RMS_MM = 20.0
 
 
 def recipe_lines() -> list[str]:
@@ -108,7 +116,9 @@ def _errors(stdout: str) -> list[str]:
 
 @pytest.mark.slow
 def test_recipe_recovers_the_cameras_and_rerenders_an_episode(tmp_path: Path):
-    """110 s of CPU (2026-11-26; ~90 s wall on 2 idle cores, estimated; docs/reconstruct.md)."""
+    """110 s of CPU (2026-11-26; ~90 s wall on 2 idle cores, estimated; docs/reconstruct.md);
+    129-134 s of CPU, 376-475 s wall, 3 runs in a row at load 7-8 beside a busy process
+    (2026-11-28, h74; the SfM step's CPU the same before and after h74: 34.5-36.8 s)."""
     pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
     from robogs.format.dataset import Dataset, read_parquet
     from robogs.format.frames import quat_to_matrix_np
@@ -126,7 +136,7 @@ def test_recipe_recovers_the_cameras_and_rerenders_an_episode(tmp_path: Path):
     ds = Dataset.open(tmp_path / "scan-posed")
     sfm = ds.manifest["provenance"]["sfm"]
     assert sfm["registered"] == sfm["images"] == 60
-    assert sfm["frame"].startswith("robot") and sfm["prealign"]["rms_mm"] < 20.0
+    assert sfm["frame"].startswith("robot"), sfm
     tab = read_parquet(ds.resolve("episodes/static/cameras/orbit/extrinsics.parquet"))
     p = np.stack([tab.column(c).to_numpy() for c in "xyz"], -1)
     q = np.stack([tab.column(c).to_numpy() for c in ("qw", "qx", "qy", "qz")], -1)
@@ -134,11 +144,16 @@ def test_recipe_recovers_the_cameras_and_rerenders_an_episode(tmp_path: Path):
     Tt = np.asarray(truth["T_world_cam"])
     err = np.linalg.norm(p - Tt[:, :3, 3], axis=1)
     print(f"margins: camera centres {err.max() * 1e3:.1f} mm of {10 * truth['scene_size_m']:.1f}")
-    assert err.max() < 0.01 * truth["scene_size_m"], err.max()
     d = np.einsum("nji,njk->nik", quat_to_matrix_np(q), Tt[:, :3, :3])
     ang = np.degrees(np.arccos(np.clip((np.trace(d, axis1=1, axis2=2) - 1) / 2, -1, 1)))
     print(f"margins: camera rotations {ang.max():.2f} deg of 1")
-    assert ang.max() < 1.0
+    # the cameras are the oracle; the pre-alignment's residual only says whether its hull fit
+    # held, so each failure message carries the other figures (which one broke, and the SfM)
+    seen = json.dumps({"centre_mm": err.max() * 1e3, "rot_deg": ang.max(), "sfm": sfm})
+    assert err.max() < 0.01 * truth["scene_size_m"], seen
+    assert ang.max() < 1.0, seen
+    print(f"margins: SfM pre-alignment {sfm['prealign']['rms_mm']:.2f} mm RMS of {PREALIGN_RMS_MM}")
+    assert sfm["prealign"]["rms_mm"] < PREALIGN_RMS_MM, seen
     report = ds.manifest["provenance"]["reconstruction"]["report"]
     align = report["alignment"]
     print(f"margins: URDF residual {align['rms_mm']:.2f} mm RMS of 5")
