@@ -83,10 +83,18 @@ def test_binding_round_trip_is_exact_and_uses_the_nearest_face():
     ).all()
 
 
-def test_an_excluded_blob_neither_biases_the_fit_nor_the_rms_but_is_reported():
+@pytest.mark.parametrize("seed_offset", [0, 100, 200, 300])
+def test_an_excluded_blob_neither_biases_the_fit_nor_the_rms_but_is_reported(seed_offset):
     """Three boxes seen exactly (moved by a known similarity) and a fourth reconstructed as a
     blob 1.5x its size: with it the RMS is the blob's; left out, the transform is recovered,
-    the RMS is the true surfaces' and the blob's median residual is still reported."""
+    the RMS is the true surfaces' and the blob's median residual is still reported.
+
+    Several sample seeds: offset 100 once put the clean fit 6 mm (1000 points) to 985 mm (3000
+    points) off, because the refinement's Tukey scale collapsed on these exact samples (h82).
+    The points are exact surface samples, so the oracle (identity after undoing the similarity,
+    zero residual on the true surfaces, the blob's ~20 mm) does not depend on their number:
+    1000 per box keeps four seeds at about the cost of the former single seed at 3000.
+    """
     meshes = {
         f"l{i}": trimesh.creation.box((0.1, 0.08, 0.06)).apply_translation(c)
         for i, c in enumerate([(0, 0, 0), (0.4, 0, 0), (0, 0.3, 0.1), (0.2, 0.2, 0.4)])
@@ -95,7 +103,7 @@ def test_an_excluded_blob_neither_biases_the_fit_nor_the_rms_but_is_reported():
     inv = Similarity(1 / S.scale, S.R.T, -(S.R.T @ S.t) / S.scale)
     pts = {}
     for i, (n, m) in enumerate(meshes.items()):
-        p, _ = trimesh.sample.sample_surface(m, 3000, seed=10 + i)
+        p, _ = trimesh.sample.sample_surface(m, 1000, seed=10 + i + seed_offset)
         if n == "l3":  # the blob: 1.5x about its centre
             c = m.centroid
             p = c + 1.5 * (p - c)
@@ -103,6 +111,10 @@ def test_an_excluded_blob_neither_biases_the_fit_nor_the_rms_but_is_reported():
     biased = align_to_meshes(pts, meshes)
     clean = align_to_meshes(pts, meshes, exclude={"l3"})
     assert clean.excluded == ["l3"] and biased.excluded == []
-    assert clean.rms_mm < 1.0 < biased.rms_mm
-    assert abs(clean.transform.scale - S.scale) < 1e-3
-    assert clean.per_target_mm["l3"] > 5.0 and set(clean.per_target_mm) == set(meshes)
+    assert clean.rms_mm < 0.1 and biased.rms_mm > 1.0  # the blob in the fit: the counterfactual
+    back = clean.transform.compose(inv)  # the identity when the similarity is recovered
+    assert abs(back.scale - 1.0) < 1e-4 and back.rotation_deg < 1e-2
+    assert np.linalg.norm(back.t) < 1e-4
+    # the blob's faces lie 15-25 mm outside the box's (half its 30-50 mm half-sizes), more by
+    # its edges
+    assert 10.0 < clean.per_target_mm["l3"] < 30.0 and set(clean.per_target_mm) == set(meshes)
