@@ -148,11 +148,59 @@ def _capture(root: Path, seed: int, hfov: float):
     return truth, img
 
 
+@pytest.fixture(scope="module")
+def video_sfm(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """``robogs convert walk.mkv out --sfm --sfm-threads 2`` run once per module (and worker):
+    the 60-view 320x240 static capture of seed 3 (the ``seed3-guess`` capture), every view twice
+    in a lossless FFV1 video. Returns the truth, the exit code, the output folder, the
+    :class:`SfmResult` of the convert's one ``run_sfm`` call (recorded by a pass-through wrapper)
+    and whether the keyframe images it was given equal the capture's views pixel for pixel.
+
+    ``test_sfm_recovers_the_static_capture[seed3-guess]`` and
+    ``test_convert_sfm_on_a_video_keeps_one_keyframe_per_view`` both read this run: SfM on those
+    keyframes is SfM on the capture's own images (same pixels, same name order, the same
+    ``run_sfm`` options: COLMAP's guess, 2 threads), so it ran twice before (h77)."""
+    pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
+    from robogs.cli.main import main
+    from robogs.convert.ingest import sfm
+    from robogs.synth.multiview import synthesize_multiview
+
+    root = tmp_path_factory.mktemp("video_sfm")
+    truth = synthesize_multiview(
+        root / "cap", robot="ur5", n_views=60, width=320, height=240, seed=3, poses=False
+    )
+    video = root / "walk.mkv"
+    vw = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"FFV1"), 10.0, (320, 240))
+    for im in truth.images:
+        for _ in range(2):
+            vw.write(cv2.cvtColor(im, cv2.COLOR_RGB2BGR))
+    vw.release()
+    seen: dict = {}
+    real = sfm.run_sfm
+
+    def recorded(image_dir, work, **kw):
+        files = sorted(Path(image_dir).glob("*.png"))
+        got = [cv2.cvtColor(cv2.imread(str(f)), cv2.COLOR_BGR2RGB) for f in files]
+        seen["same_pixels"] = len(got) == len(truth.images) and all(
+            np.array_equal(a, b) for a, b in zip(got, truth.images, strict=False)
+        )
+        seen["kw"] = kw
+        seen["res"] = real(image_dir, work, **kw)
+        return seen["res"]
+
+    argv = ["convert", str(video), str(root / "out"), "--sfm", "--sfm-threads", "2"]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(sfm, "run_sfm", recorded)
+        rc = main(argv)
+    return {"truth": truth, "rc": rc, "out": root / "out", **seen}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("seed", "hfov", "focal"),
     [
-        # the test's capture from COLMAP's guess: 147.7 px on CI and on the shared machine once
+        # the test's capture from COLMAP's guess: 147.7 px on CI and on the shared machine once;
+        # its SfM is the video test's run (fixture video_sfm: the same images)
         pytest.param(3, 50.0, None, id="seed3-guess"),
         # other views from COLMAP's guess: fx 144.6, fy 128.9 px before
         pytest.param(5, 50.0, None, id="seed5-guess"),
@@ -161,9 +209,11 @@ def _capture(root: Path, seed: int, hfov: float):
         pytest.param(11, 40.0, 0.5, id="seed11-40deg-half-focal"),
     ],
 )
-def test_sfm_recovers_the_static_capture(tmp_path: Path, seed, hfov, focal):
+def test_sfm_recovers_the_static_capture(tmp_path: Path, request, seed, hfov, focal):
     """38-63 s each at load 3-4 on 2 cores (2026-11-27): 60 images, 2000 SIFT features each,
-    exhaustive matching, two mapper runs (one in the reversed basin costs ~50 s more)."""
+    exhaustive matching, two mapper runs (one in the reversed basin costs ~50 s more). Seed 3
+    from COLMAP's guess reads the video test's run (fixture ``video_sfm``), whose keyframes are
+    checked here to be this capture's images pixel for pixel, given with the same options."""
     pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
     import json
     import warnings
@@ -171,12 +221,20 @@ def test_sfm_recovers_the_static_capture(tmp_path: Path, seed, hfov, focal):
     from robogs.convert.ingest.sfm import FOCAL_STARTS, SfmBasinWarning, run_sfm
     from robogs.reconstruct.align import umeyama
 
-    truth, img = _capture(tmp_path, seed, hfov)
+    if (seed, hfov, focal) == (3, 50.0, None):
+        run = request.getfixturevalue("video_sfm")
+        assert run["same_pixels"] and run["kw"] == {"threads": 2}, run.get("kw")
+        truth, res = run["truth"], run["res"]
+        view = [int(Path(n).stem) // 2 for n in res.names]  # frame 2v is view v
+    else:
+        truth, img = _capture(tmp_path, seed, hfov)
+        K = truth.K
+        intr = None if focal is None else (focal * K[0, 0], focal * K[1, 1], K[0, 2], K[1, 2])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SfmBasinWarning)  # the choice is what is tested here
+            res = run_sfm(img, tmp_path / "work", intrinsics=intr, threads=2)
+        view = [int(n[:3]) for n in res.names]
     K = truth.K
-    intr = None if focal is None else (focal * K[0, 0], focal * K[1, 1], K[0, 2], K[1, 2])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", SfmBasinWarning)  # the choice is what is tested here
-        res = run_sfm(img, tmp_path / "work", intrinsics=intr, threads=2)
     starts = json.dumps([vars(s) for s in res.starts])
     assert res.registered >= 57 and res.total == 60, starts
     assert res.size == (320, 240)
@@ -184,7 +242,7 @@ def test_sfm_recovers_the_static_capture(tmp_path: Path, seed, hfov, focal):
     assert abs(res.K[0, 0] / K[0, 0] - 1) < 0.01, starts  # focal length refined from a start
     assert res.K[1, 1] == res.K[0, 0]  # square pixels: one focal length
     assert sum(s.chosen for s in res.starts) == 1 and len(res.starts) == len(FOCAL_STARTS)
-    Tt = truth.T_world_cam[[int(n[:3]) for n in res.names]]
+    Tt = truth.T_world_cam[view]
     S = umeyama(res.T_world_cam[:, :3, 3], Tt[:, :3, 3])
     size = float(np.linalg.norm(np.ptp(truth.scene_mesh.vertices, axis=0)))
     err = np.linalg.norm(S.apply(res.T_world_cam[:, :3, 3]) - Tt[:, :3, 3], axis=1)
@@ -221,31 +279,20 @@ def test_convert_sfm_on_a_posed_dataset_is_refused(tmp_path: Path, capsys):
 
 
 @pytest.mark.slow
-def test_convert_sfm_on_a_video_keeps_one_keyframe_per_view(tmp_path: Path):
-    """~70 s on a loaded 2-core machine: every view of the static sample twice in a lossless video; the duplicates are
-    dropped as keyframes and the 60 views become a posed COLMAP-route dataset that validates."""
-    pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
-    from robogs.cli.main import main
+def test_convert_sfm_on_a_video_keeps_one_keyframe_per_view(video_sfm: dict):
+    """~70 s on a loaded 2-core machine (the run is shared with the seed-3 accuracy case):
+    every view of the static sample twice in a lossless video; the duplicates are dropped as
+    keyframes and the 60 views become a posed COLMAP-route dataset that validates."""
     from robogs.format.dataset import Dataset
     from robogs.format.validate import validate
-    from robogs.synth.multiview import synthesize_multiview
 
-    truth = synthesize_multiview(
-        tmp_path / "cap", robot="ur5", n_views=60, width=320, height=240, seed=3, poses=False
-    )
-    video = tmp_path / "walk.mkv"
-    vw = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"FFV1"), 10.0, (320, 240))
-    for im in truth.images:
-        for _ in range(2):
-            vw.write(cv2.cvtColor(im, cv2.COLOR_RGB2BGR))
-    vw.release()
-    argv = ["convert", str(video), str(tmp_path / "out"), "--sfm", "--sfm-threads", "2"]
-    assert main(argv) == 0
-    ds = Dataset.open(tmp_path / "out")
+    assert video_sfm["rc"] == 0
+    out = video_sfm["out"]
+    ds = Dataset.open(out)
     sfm = ds.manifest["provenance"]["sfm"]
     assert sfm["images"] == 60 and sfm["registered"] >= 57
     assert sfm["frame"].startswith("arbitrary")
-    assert [f for f in validate(tmp_path / "out").findings if f.severity == "error"] == []
+    assert [f for f in validate(out).findings if f.severity == "error"] == []
 
 
 def _db_state(work: Path) -> tuple[list[str], dict[tuple[str, str], bytes]]:
