@@ -16,6 +16,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from test_gate import _stats  # the held-out statistic of each candidate on draws [D, T, K]
 
 from robogs.physics import gate
 from robogs.physics.gate import LinearCandidate, calibrate
@@ -56,18 +57,6 @@ def _data(j_in, cov, sigma, n, rng):
     low = np.linalg.cholesky(cov)
     delta = (low[None] @ rng.normal(size=(n, T_N, cov.shape[-1], 1)))[..., 0]
     return rng.normal(0, sigma, (n, T_N, K)) + (j_in[None] @ delta[..., None])[..., 0]
-
-
-def _stats(cands, folds, e):
-    """The held-out statistic of each candidate on datasets ``e`` [D, T, K]."""
-    valid = np.ones(e.shape[1:], bool)
-    out = []
-    for c in cands:
-        q = gate._profile(c.jac_local, valid)
-        r_b, h_b = gate._linear_heldout(c.jac[..., : c.n_base], q, e, folds)
-        r_c, h_c = gate._linear_heldout(c.jac, q, e, folds)
-        out.append(gate.heldout_statistic(h_b, h_c, r_b - r_c))
-    return np.stack(out, axis=1)
 
 
 def test_parametric_null_keeps_five_percent_where_white_noise_over_rejects(tmp_path, monkeypatch):
