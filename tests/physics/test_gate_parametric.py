@@ -40,7 +40,7 @@ def _toy(seed: int = 0):
     a = rng.normal(size=(T_N, 2, 2))
     cov = 6.0 * (a @ np.swapaxes(a, 1, 2) + 0.5 * np.eye(2))  # [T, 2, 2], tens of sigma^2
     extra = {
-        "shared": (shift + 0.5 * bump)[..., None],
+        "common": (shift + 0.5 * bump)[..., None],
         "wavy": np.stack([np.sin(7 * s + t) for t in range(T_N)])[..., None],
         "random": rng.normal(size=(T_N, K, 2)),
     }
@@ -79,10 +79,10 @@ def test_parametric_null_keeps_five_percent_where_white_noise_over_rejects(tmp_p
 
     # binomial band of 5 % over 3000 fresh datasets (+-3 sd) plus the calibration's own error
     assert 0.025 <= fwer(par) <= 0.075, fwer(par)
-    # the mutated fixture: white noise alone has no shared error, and the shared candidate
+    # the mutated fixture: white noise alone has no shared error, and the common-mode candidate
     # fits the input error as if it were an effect
     assert fwer(white) > 0.3, fwer(white)
-    assert par.thresholds["shared"] > 5 * white.thresholds["shared"]
+    assert par.thresholds["common"] > 5 * white.thresholds["common"]
 
 
 def test_parametric_without_an_input_model_is_the_white_null_draw_for_draw():
