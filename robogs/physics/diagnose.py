@@ -891,7 +891,7 @@ def sign_flip_floor(method: str, carrying: int) -> float | None:
 GATE_METHOD_ENV = "ROBOGS_GATE_METHOD"
 """Environment variable that picks the gate's null (:data:`robogs.physics.gate.METHODS`;
 unset: ``"both"``, the default). ``parametric`` (opt-in, h76) simulates the drive's own
-measurement error instead of sign-flipping the base residual (:func:`_drive_inputs`)."""
+measurement error instead of sign-flipping the base residual (:func:`robogs.physics.drive_noise.drive_inputs`)."""
 
 
 PARAMETRIC_DRAWS = 1000
@@ -914,49 +914,6 @@ def gate_method() -> str:
             hint=f"use one of {', '.join(gate_mod.METHODS)}, or unset it for the default",
         )
     return m
-
-
-def _drive_inputs(
-    eng: Engine, space: ParamSpace, base: FitOutcome, valid: np.ndarray, key: str
-) -> np.ndarray:
-    """The parametric null's input columns [T, K, M]: the base fit's whitened residual's
-    response to ``M`` draws of the drive's own measurement error
-    (:mod:`robogs.physics.drive_noise`; draws seeded from the data fingerprint ``key``)."""
-    import hashlib
-
-    import torch
-
-    from robogs.physics import drive_noise as dn
-    from robogs.physics.residuals import weighted_residuals
-
-    prep = eng.prep
-    seed = int.from_bytes(hashlib.sha256(key.encode()).digest()[:8], "big")
-    n_s = int(prep.drive.pusher.shape[1])
-    dpos, dcar, _ = dn.drive_error_draws(
-        prep.rec, prep.t0_ns, prep.drive.dt, n_s, dn.N_INPUT_DRAWS, seed
-    )
-    evaluate = (
-        None if eng._mujoco is not None else dn.tiled_evaluator(prep, space, base.theta, base.local)
-    )
-    if evaluate is None:  # MuJoCo, or blocks the tiling does not cover: one rollout a draw
-        th = torch.as_tensor(base.theta)[None]
-        lo = torch.as_tensor(base.local)[None]
-
-        def evaluate(drives):
-            out = []
-            for d in drives:
-                with torch.no_grad():
-                    if eng._mujoco is None:
-                        from robogs.physics.residuals import residual_fn
-
-                        r = residual_fn(replace(prep, drive=d), space)(th, lo)
-                    else:
-                        sim = eng._mujoco.simulate(th, space, d, prep.scene, init_offset=lo)
-                        r = weighted_residuals(sim, prep)
-                out.append(r.numpy()[0])
-            return np.stack(out)
-
-    return dn.drive_response(evaluate, prep.drive, dpos, dcar) * valid[..., None]
 
 
 def _calibrate(
@@ -1014,7 +971,11 @@ def _calibrate(
     if method == "both":  # the default: called exactly as before
         cal = gate_mod.calibrate(lin, base.resid, valid, folds, fingerprint=fp)
     else:
-        inputs = _drive_inputs(eng, space, base, valid, fp) if method == "parametric" else None
+        inputs = None
+        if method == "parametric":
+            from robogs.physics.drive_noise import drive_inputs
+
+            inputs = drive_inputs(eng, space, base, valid, fp)
         draws = PARAMETRIC_DRAWS if method == "parametric" else gate_mod.N_DRAWS
         cal = gate_mod.calibrate(
             lin,

@@ -35,8 +35,10 @@ not see it), and anything shared by one trajectory's samples that does not come 
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable, Sequence
 from dataclasses import fields, replace
+from typing import Any
 
 import numpy as np
 import torch
@@ -186,3 +188,39 @@ def tiled_evaluator(prep: object, space: object, theta: np.ndarray, local: np.nd
         return r.reshape(b, n_t, -1)
 
     return evaluate
+
+
+def drive_inputs(eng: Any, space: Any, base: Any, valid: np.ndarray, key: str) -> np.ndarray:
+    """The parametric null's input columns [T, K, M]: the base fit's whitened residual's
+    response to ``M`` draws of the drive's own measurement error
+    (:func:`drive_error_draws`; draws seeded from the data fingerprint ``key``). ``eng`` is
+    the diagnosis's engine (its ``prep``; MuJoCo runs one rollout a draw), ``base`` the base
+    fit (``theta``, ``local``), ``valid`` [T, K] the samples kept."""
+    from robogs.physics.residuals import weighted_residuals
+
+    prep = eng.prep
+    seed = int.from_bytes(hashlib.sha256(key.encode()).digest()[:8], "big")
+    n_s = int(prep.drive.pusher.shape[1])
+    dpos, dcar, _ = drive_error_draws(prep.rec, prep.t0_ns, prep.drive.dt, n_s, N_INPUT_DRAWS, seed)
+    evaluate = (
+        None if eng._mujoco is not None else tiled_evaluator(prep, space, base.theta, base.local)
+    )
+    if evaluate is None:  # MuJoCo, or blocks the tiling does not cover: one rollout a draw
+        th = torch.as_tensor(base.theta)[None]
+        lo = torch.as_tensor(base.local)[None]
+
+        def evaluate(drives):
+            out = []
+            for d in drives:
+                with torch.no_grad():
+                    if eng._mujoco is None:
+                        from robogs.physics.residuals import residual_fn
+
+                        r = residual_fn(replace(prep, drive=d), space)(th, lo)
+                    else:
+                        sim = eng._mujoco.simulate(th, space, d, prep.scene, init_offset=lo)
+                        r = weighted_residuals(sim, prep)
+                out.append(r.numpy()[0])
+            return np.stack(out)
+
+    return drive_response(evaluate, prep.drive, dpos, dcar) * valid[..., None]
