@@ -37,7 +37,7 @@ if [[ $stage == *r* ]]; then
     --json "$OUT/render.json" 2>&1 | tee "$OUT/render.log"
 fi
 if [[ $stage == *s* ]]; then
-  timeout 150 python3 bench/triton_sweep.py --repeats 20 --fused-projection --triton-binning --fused-finish \
+  timeout 150 python3 bench/triton_sweep.py --repeats 20 --triton-binning --fused-finish \
     --defaults-only --profile \
     --json "$OUT/sweep.json" 2>&1 \
     | tee "$OUT/sweep.log"

@@ -280,7 +280,10 @@ def test_the_pipeline_and_cli_pass_device_and_backend_through(
     args += ["--work-dir", str(tmp_path / "w2"), "--backend", "torch", "--log-every", "9"]
     with pytest.raises(_Seen):
         main(args)
-    assert seen == {"backend": "torch", "log_every": 9, "device": torch.device("cpu")}
+    # the CLI's --device defaults to auto: the GPU where there is one (the API's default is the CPU)
+    auto = "cuda" if torch.cuda.is_available() else "cpu"
+    assert seen.pop("device").type == auto
+    assert seen == {"backend": "torch", "log_every": 9}
     # an unknown backend: one clear line and exit code 2, before any training
     seen.clear()
     code = main([*args[:-4], "--backend", "no-such-backend"])

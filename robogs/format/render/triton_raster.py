@@ -72,11 +72,13 @@ _THRESHOLD_EPS = tl.constexpr(-1e-30)
 #: and their autograd bound the step there (fwd + bwd 20k at 320x240: 12.0 -> 3.95 ms)
 _FUSED_PROJECTION = True
 #: bin with the two Triton kernels of ``triton_binning.py`` (the same lists as ``bin_tiles`` in
-#: about 14 launches instead of about 70); off until timed on a GPU
-_TRITON_BINNING = False
+#: about 14 launches instead of about 70). On since timed on an H200 (issue 23, bench/RESULTS.md
+#: 2026-11-28): 3DGS fwd + bwd 20k at 320x240 5.07 -> 3.51 ms, forward 100k 3.05 -> 2.00 ms
+_TRITON_BINNING = True
 #: turn the tile rows into the output images with ``triton_finish.FinishImages`` (one kernel each
-#: way instead of about 35 torch ops each way); off until timed on a GPU
-_FUSED_FINISH = False
+#: way instead of about 35 torch ops each way). On since timed on an H200 (same run): 3DGS fwd +
+#: bwd 20k 5.07 -> 3.63 ms, forward 100k 3.05 -> 2.58 ms
+_FUSED_FINISH = True
 #: the shared constants, as compile-time values (Triton reads no other globals in kernels)
 _MAX_ALPHA = tl.constexpr(MAX_ALPHA)
 _T_MIN = tl.constexpr(TRANSMITTANCE_THRESHOLD)
