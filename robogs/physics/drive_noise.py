@@ -28,6 +28,15 @@ of the gate (Efron & Tibshirani 1993, "An Introduction to the Bootstrap", ch. 6;
 error's propagation is the errors-in-variables term of a linearised model, e.g. Carroll,
 Ruppert, Stefanski & Crainiceanu 2006, "Measurement Error in Nonlinear Models", ch. 4).
 
+Checked against the truth (h85, bench/RESULTS.md, issue 17): on design-B null seeds 0-7 the
+one-sided responses' trace is 1.03 +- 0.03 of the actual drive error's expectation (96 fresh
+realisations of the generator's path noise a trajectory, around the noise-free drive); central
+differences ``(r(+d) - r(-d)) / 2`` give 0.91 (they drop the contact's rectification, which the
+actual error has) and a quarter-size step scaled up 1.45 (the rollout is rough at that scale).
+The single realisation a recording holds is skewed (a trajectory's median is about half its
+mean), so one recording's drive error often reads well under the model (0.69 on seeds 0-7,
+0.95 on seeds 8-23).
+
 Not modelled: the EE yaw's noise (the scenarios' tool yaw is noise-free; a round pusher does
 not see it), and anything shared by one trajectory's samples that does not come from the drive
 (the simulator's own misfit of a contact, a camera error that changes between trajectories).
@@ -49,6 +58,8 @@ from robogs.physics.smoothing import drive_windows, local_polynomial
 __all__ = [
     "N_INPUT_DRAWS",
     "BATCH",
+    "InputColumns",
+    "describe_path_noise",
     "drive_error_draws",
     "perturbed_drive",
     "drive_response",
@@ -65,6 +76,38 @@ BATCH = 16
 trajectory of a batch together, so 16 draws cost about one rollout)."""
 
 
+class InputColumns(np.ndarray):
+    """The parametric null's input columns [T, K, M] (a plain array to every numpy operation)
+    with ``note``: what made them, for the calibration's method line
+    (:func:`robogs.physics.gate.calibrate` reads it; :func:`describe_path_noise`)."""
+
+    note: str = ""
+
+    def __array_finalize__(self, obj: object) -> None:
+        self.note = getattr(obj, "note", "")
+
+
+def describe_path_noise(info: dict[str, Any]) -> str:
+    """The drive error model in words, from :func:`drive_error_draws`'s ``info``: the path noise
+    (value, unit, how it was estimated, its rate) and the smoother's windows. A noise-free path
+    says so: its draws are zero and the parametric null is white noise alone."""
+    s = float(info["path_noise_m"])
+    how = (
+        "1.4826 MAD of the recorded EE path's second differences, largest axis"
+        if info.get("estimated", True)
+        else "the reference value: no trajectory has 3 EE samples to estimate it from"
+    )
+    if s <= 0.0:
+        return (
+            f"drive path noise 0 um ({how}): the recorded EE path is noise-free, so there is no "
+            "drive error to simulate and the null is white noise only"
+        )
+    return (
+        f"drive path noise {s * 1e6:.0f} um per axis at {info['rate_hz']:.0f} Hz ({how}), "
+        f"smoothed over {info['window_s'] * 1e3:.0f} / {info['carry_window_s'] * 1e3:.0f} ms"
+    )
+
+
 def drive_error_draws(
     rec: object, t0_ns: np.ndarray, dt: float, n_steps: int, n: int, seed: int
 ) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
@@ -78,7 +121,9 @@ def drive_error_draws(
 
     Returns:
         ``(dpos [n, T, S, 3] m, dcarry [n, T, S, 3] m/s, info)``, ``info`` the path noise
-        ``s`` [m] per axis, its rate [Hz] and the two windows [s] the draws were smoothed with.
+        ``s`` [m] per axis, its rate [Hz], the two windows [s] the draws were smoothed with, and
+        ``estimated`` (False where no trajectory has the 3 samples :func:`drive_windows` needs:
+        ``s`` is then its reference value). :func:`describe_path_noise` puts it in words.
     """
     trs = rec.trajectories
     paths = [((t.ee_t_ns - t.ee_t_ns[0]) * 1e-9, t.ee_pos) for t in trs]
@@ -96,7 +141,13 @@ def drive_error_draws(
             for a in range(3):
                 dpos[j, i, :, a] = np.interp(grid, te, p[:, j, a])
                 dcar[j, i, :, a] = np.interp(grid, te, v[:, j, a])
-    info = {"path_noise_m": s, "rate_hz": rate, "window_s": w_pos, "carry_window_s": w_ee}
+    info = {
+        "path_noise_m": s,
+        "rate_hz": rate,
+        "window_s": w_pos,
+        "carry_window_s": w_ee,
+        "estimated": any(len(t.ee_t_ns) >= 3 for t in trs),
+    }
     return dpos, dcar, info
 
 
@@ -195,13 +246,25 @@ def drive_inputs(eng: Any, space: Any, base: Any, valid: np.ndarray, key: str) -
     response to ``M`` draws of the drive's own measurement error
     (:func:`drive_error_draws`; draws seeded from the data fingerprint ``key``). ``eng`` is
     the diagnosis's engine (its ``prep``; MuJoCo runs one rollout a draw), ``base`` the base
-    fit (``theta``, ``local``), ``valid`` [T, K] the samples kept."""
+    fit (``theta``, ``local``), ``valid`` [T, K] the samples kept.
+
+    Returns an :class:`InputColumns` whose ``note`` gives the path noise the draws used
+    (:func:`describe_path_noise`; the gate puts it in its method line). A noise-free path
+    (noise 0) costs no rollout: its columns are zero, and the gate warns that its null is then
+    white noise only."""
     from robogs.physics.residuals import weighted_residuals
 
     prep = eng.prep
     seed = int.from_bytes(hashlib.sha256(key.encode()).digest()[:8], "big")
     n_s = int(prep.drive.pusher.shape[1])
-    dpos, dcar, _ = drive_error_draws(prep.rec, prep.t0_ns, prep.drive.dt, n_s, N_INPUT_DRAWS, seed)
+    dpos, dcar, info = drive_error_draws(
+        prep.rec, prep.t0_ns, prep.drive.dt, n_s, N_INPUT_DRAWS, seed
+    )
+    note = describe_path_noise(info)
+    if not info["path_noise_m"] > 0.0:
+        cols = np.zeros((*np.shape(valid), N_INPUT_DRAWS)).view(InputColumns)
+        cols.note = note
+        return cols
     evaluate = (
         None if eng._mujoco is not None else tiled_evaluator(prep, space, base.theta, base.local)
     )
@@ -223,4 +286,6 @@ def drive_inputs(eng: Any, space: Any, base: Any, valid: np.ndarray, key: str) -
                 out.append(r.numpy()[0])
             return np.stack(out)
 
-    return drive_response(evaluate, prep.drive, dpos, dcar) * valid[..., None]
+    cols = (drive_response(evaluate, prep.drive, dpos, dcar) * valid[..., None]).view(InputColumns)
+    cols.note = note
+    return cols

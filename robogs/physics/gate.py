@@ -141,6 +141,7 @@ import hashlib
 import json
 import os
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -159,6 +160,7 @@ __all__ = [
     "Calibration",
     "LinearCandidate",
     "calibrate",
+    "ParametricNullWarning",
     "heldout_statistic",
     "studentised_statistic",
     "normaliser",
@@ -754,6 +756,33 @@ def wild_weights(t_n: int, draws: int, rng: np.random.Generator) -> tuple[np.nda
     return rng.choice(WEBB, size=(draws, t_n)), note
 
 
+class ParametricNullWarning(UserWarning):
+    """The parametric null has no input error to simulate (its input columns are all zero, e.g.
+    a noise-free drive path): it is the white-noise null, which lacks the errors a trajectory's
+    samples share."""
+
+
+def _parametric_note(chol: tuple[np.ndarray, np.ndarray] | None, source: str) -> str:
+    """The parametric null's method note: its input directions and what made them (``source``,
+    e.g. the drive's path noise), and a :class:`ParametricNullWarning` where they are all zero
+    (the null is then white noise only, which must not pass silently)."""
+    if chol is None:
+        return "white noise only (no input model)"
+    src = f"; {source}" if source else ""
+    if not np.any(chol[0]):
+        warnings.warn(
+            "parametric null: every input-error column is zero"
+            + (f" ({source})" if source else "")
+            + ", so the null is white noise only and lacks the errors a trajectory's samples "
+            "share; check the recorded EE path (a noise-free or reference path) or use the "
+            "default gate method",
+            ParametricNullWarning,
+            stacklevel=3,
+        )
+        return f"white noise only: all {chol[1].shape[-1]} input-error columns are zero{src}"
+    return f"white noise + {chol[1].shape[-1]} input-error directions per trajectory{src}"
+
+
 def _input_chol(
     inputs: np.ndarray, input_cov: np.ndarray | None, shape: tuple[int, ...]
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -1135,6 +1164,7 @@ def calibrate(
     statistic: str | None = None,
     inputs: np.ndarray | None = None,
     input_cov: np.ndarray | None = None,
+    input_note: str | None = None,
 ) -> Calibration:
     """Simulate the held-out statistic's null for every candidate on the same draws.
 
@@ -1182,6 +1212,11 @@ def calibrate(
         input_cov: [M, M] or [T, M, M] covariance of the input error's coefficients
             ``delta_t``; None: ``I / M`` (``inputs`` are responses to ``M`` draws of the
             input error itself, whose ``1/M`` outer products estimate its covariance).
+        input_note: ``"parametric"`` only: what made ``inputs`` (the drive's path noise: its
+            value, unit and estimate), put in the calibration's method line; None: ``inputs``'
+            own ``note`` (:class:`robogs.physics.drive_noise.InputColumns`) where it has one.
+            Input columns that are all zero (a noise-free path) leave white noise alone: the
+            method line says so and a :class:`ParametricNullWarning` is issued.
         statistic: ``"fall"`` (None, the default), ``"t"``, ``"gain"`` or ``"tn"``
             (:func:`normaliser`):
             the null is of that statistic (with ``method="both"`` under 8 trajectories from
@@ -1203,15 +1238,22 @@ def calibrate(
     per_draw = float(sum(c.jac.shape[0] * c.jac.shape[1] * c.jac.shape[2] for c in cands))
     draws = int(max(100, min(draws, MAX_CELLS // max(per_draw, 1.0))))
     path = None
-    if method != "parametric" and (inputs is not None or input_cov is not None):
-        raise ValueError(f"inputs and input_cov are for method='parametric', not {method!r}")
+    if method != "parametric" and (inputs is not None or input_cov is not None or input_note):
+        raise ValueError(
+            f"inputs, input_cov and input_note are for method='parametric', not {method!r}"
+        )
     chol = None
-    if method == "parametric" and inputs is not None:
-        chol = _input_chol(inputs, input_cov, base_resid.shape)
+    p_note = ""
+    if method == "parametric":
+        if inputs is not None:
+            chol = _input_chol(inputs, input_cov, base_resid.shape)
+        # before the cache: a cached null of zero input columns warns as well
+        p_note = _parametric_note(chol, input_note or getattr(inputs, "note", "") or "")
     if fingerprint is not None:
         tag = fingerprint + method + ("|" + stat_kind if stud else "")
-        if chol is not None:  # the input model is part of the null
+        if chol is not None:  # the input model is part of the null, and its description
             tag += "|" + hashlib.sha256(np.ascontiguousarray(chol[0]).tobytes()).hexdigest()[:16]
+            tag += "|" + p_note
         path = cache_dir() / f"{_key(tag, names, draws, seed)}.json"
         hit = _read(path)
         if hit is not None and set(hit.thresholds) == set(names):
@@ -1273,11 +1315,7 @@ def calibrate(
         nulls["parametric"] = _simulate(
             cands, valid, folds, draws, lambda n, c: parametric(n), None, stat_kind
         )
-        note = "white noise" + (
-            f" + {chol[1].shape[-1]} input-error directions per trajectory"
-            if chol is not None
-            else " only (no input model)"
-        )
+        note = p_note
     thr: dict[str, float] = {n: 1e-6 for n in names}
     q95: dict[str, float] = {n: 0.0 for n in names}
     if stud:

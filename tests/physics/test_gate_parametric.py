@@ -217,3 +217,75 @@ def test_gate_method_from_the_environment(monkeypatch):
     monkeypatch.setenv(GATE_METHOD_ENV, "bootstrap")
     with pytest.raises(InputError, match="unknown gate method"):
         gate_method()
+
+
+def test_method_line_says_the_drive_path_noise_it_used(tmp_path, monkeypatch):
+    """The calibration's method line (and the diagnosis report's ``gate.method``) gives the
+    path noise the drive model drew: value, unit, how estimated, rate and windows."""
+    from robogs.physics import drive_noise as dn
+
+    monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path))
+    s_true = 1.2e-4
+    rec = _fake_rec(s_true)
+    t0 = np.array([int(tr.ee_t_ns[0]) for tr in rec.trajectories])
+    _, _, info = dn.drive_error_draws(rec, t0, 1e-3, 1300, 2, seed=0)
+    # the brute-force oracle: the noise put on the path; 1.4826 MAD of ~600 deviates a path
+    assert abs(info["path_noise_m"] / s_true - 1) < 0.1
+    note = dn.describe_path_noise(info)
+    um = round(info["path_noise_m"] * 1e6)
+    assert f"drive path noise {um} um per axis at 250 Hz" in note
+    assert "MAD" in note and "second differences" in note
+    cands, folds, j_in, cov = _toy()
+    cols = j_in.view(dn.InputColumns)
+    cols.note = note
+    r = np.random.default_rng(2).normal(size=(T_N, K))
+    valid = np.ones((T_N, K), bool)
+    kw = dict(method="parametric", draws=100, seed=1, fingerprint="toy")
+    cal = calibrate(cands, r, valid, folds, inputs=cols, input_cov=cov, **kw)
+    assert cal.method.endswith(f"input-error directions per trajectory; {note})")
+    assert note in cal.to_dict()["method"]
+    again = calibrate(cands, r, valid, folds, inputs=cols, input_cov=cov, **kw)
+    assert again.cached and again.method == cal.method  # the cache keeps the line
+    # an explicit note wins over the columns' own; a plain array carries none
+    other = calibrate(cands, r, valid, folds, inputs=cols, input_note="tool path 5 um", **kw)
+    assert other.method.endswith("per trajectory; tool path 5 um)")
+    plain = calibrate(cands, r, valid, folds, inputs=np.asarray(j_in), **kw)
+    assert plain.method.endswith("input-error directions per trajectory)")
+    with pytest.raises(ValueError, match="method='parametric'"):
+        calibrate(cands, r, valid, folds, method="white", input_note=note)
+
+
+def test_noise_free_path_is_not_a_silent_white_null(tmp_path, monkeypatch):
+    """A noise-free EE path: zero drive error, no rollout, and the parametric null (white noise
+    only) says so in its method line and warns, from the cache as well."""
+    from robogs.physics import drive_noise as dn
+    from robogs.physics.diagnose import sign_flip_floor
+
+    monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path))
+    rec = _fake_rec(0.0)
+    t0 = np.array([int(tr.ee_t_ns[0]) for tr in rec.trajectories])
+    # no rollout may run: the engine's residual pieces are absent, so one would raise
+    prep = SimpleNamespace(
+        rec=rec, t0_ns=t0, drive=SimpleNamespace(dt=1e-3, pusher=np.zeros((2, 1300, 3)))
+    )
+    eng = SimpleNamespace(prep=prep, _mujoco=None)
+    valid = np.ones((2, 40), bool)
+    cols = dn.drive_inputs(eng, None, None, valid, "fp")
+    assert isinstance(cols, dn.InputColumns) and cols.shape == (2, 40, dn.N_INPUT_DRAWS)
+    assert not np.any(cols)
+    assert "drive path noise 0 um" in cols.note and "noise-free" in cols.note
+    cands, folds, _, _ = _toy()
+    r = np.random.default_rng(5).normal(size=(T_N, K))
+    zero = np.zeros((T_N, K, 4)).view(dn.InputColumns)
+    zero.note = cols.note
+    kw = dict(method="parametric", draws=100, seed=1, fingerprint="clean", inputs=zero)
+    for cached in (False, True):
+        with pytest.warns(gate.ParametricNullWarning, match="white noise only") as rec_w:
+            cal = calibrate(cands, r, np.ones((T_N, K), bool), folds, **kw)
+        assert cal.cached == cached
+        assert "drive path noise 0 um" in str(rec_w[0].message)
+        assert "white noise only: all 4 input-error columns are zero" in cal.method
+        assert "noise-free" in cal.to_dict()["method"]
+        # not mistaken for the few-trajectory white null, nor for a sign-flip null
+        assert "white-noise null only" not in cal.method
+        assert sign_flip_floor(cal.method, 6) is None
