@@ -22,7 +22,11 @@ places it. The document it writes:
 * with the tilt, hinges ``pusher_pitch`` and ``pusher_roll`` after the pusher's yaw hinge;
   each modelled joint its body ``pusher/<joint>`` (slide or hinge about the URDF axis,
   :data:`CHILD_MASS`); each such DOF a position servo and a velocity servo
-  (:attr:`RobotPusher.servos`) after the scene's other actuators.
+  (:attr:`RobotPusher.servos`) after the scene's other actuators;
+* each ``<key>``'s ``qpos`` extended by the DOFs' joints at :attr:`RobotPusher.start` (0 when
+  unset, as the engine compiles it) and, with a start, a ``ctrl`` that holds them there (their
+  position servos at the start, velocity servos and the rest 0): ``robogs export mjcf`` starts
+  them at the first recorded values (:func:`robogs.physics.export_pusher.robot_pusher_paths`).
 """
 
 from __future__ import annotations
@@ -108,6 +112,10 @@ class RobotPusher:
         bodies: link -> the body that carries it: ``""`` the pusher body, else the name of
             the nearest modelled joint above it; ``frames`` is then ``T_body_link`` (the joint
             body's frame is its child link's frame). Absent links: the pusher body.
+        start: [J] the values of :attr:`dofs` (rad or m) the document's keyframes start them
+            at (the recording's first values, set for the export by
+            :func:`robogs.physics.export_pusher.robot_pusher_paths`); None: 0, their qpos0
+            (the engine sets the state itself and never reads a keyframe).
     """
 
     urdf: Path
@@ -123,6 +131,7 @@ class RobotPusher:
     tilt: bool = False
     joints: list[PusherJoint] = field(default_factory=list)
     bodies: dict[str, str] = field(default_factory=dict)
+    start: list[float] | None = None
 
     @property
     def dofs(self) -> list[str]:
@@ -220,11 +229,13 @@ def robot_pusher_scene(scene: Any, rp: RobotPusher) -> tuple[Any, list[str]]:
     Returns:
         (a new scene: pusher body geoms, mesh assets, contact pairs, ``pairs``,
         ``pair_torsion``, ``table_pairs`` and notes rewritten, each ``<key>``'s qpos extended by the
-        servo DOFs at 0; the names of the robot's pusher
-        geoms, ``pusher/<link>/<k>``).
+        servo DOFs at :attr:`RobotPusher.start` (0 without one) and, with a start, its ctrl
+        holding them there (:func:`_keys`); the names of the robot's pusher geoms,
+        ``pusher/<link>/<k>``).
 
     Raises:
-        InputError: the scene has no pusher, or the links carry no collision geometry.
+        InputError: the scene has no pusher, the links carry no collision geometry, or
+            :attr:`RobotPusher.start` is not one finite value per DOF.
         FormatError: from :func:`robogs.format.mjcf_robot.robot_mjcf` (URDF or mesh refused).
     """
     import mujoco
@@ -309,9 +320,7 @@ def robot_pusher_scene(scene: Any, rp: RobotPusher) -> tuple[Any, list[str]]:
                 ]
             )
         )
-    for key in root.iter("key") if rp.dofs else ():  # the DOFs' joints follow the pusher's
-        if key.get("qpos"):  # (the pusher body is the last one): at 0, their qpos0
-            key.set("qpos", key.get("qpos") + " 0.0" * len(rp.dofs))
+    _keys(root, body, rp)
     ET.indent(root)
     out = replace(
         scene,
@@ -323,6 +332,48 @@ def robot_pusher_scene(scene: Any, rp: RobotPusher) -> tuple[Any, list[str]]:
         notes=[*scene.notes, *rp.notes, *notes],
     )
     return out, names
+
+
+def _keys(root: ET.Element, body: ET.Element, rp: RobotPusher) -> None:
+    """Extend each ``<key>`` by the servo DOFs of ``rp``: ``qpos`` by their joints at
+    :attr:`RobotPusher.start` (0 without one), and with a start a ``ctrl`` (the key's own, else
+    zeros for the scene's actuators) whose DOF position servos hold that start (velocity servos
+    0), so a scene reset to the key stays there. The DOFs' joints are the last of the document
+    (the pusher body is the last body, its joint bodies below it), in MuJoCo's qpos order: the
+    document order of the pusher body's subtree (bodies depth first, each body's joints in
+    order), which need not be :attr:`RobotPusher.dofs`' order when joint bodies nest."""
+    if not rp.dofs:
+        return
+    start = _start(rp)
+    value = {j: float(v) for (j, _, _), v in zip(rp.servos, start, strict=True)}
+    order = [el.get("name") for el in body.iter("joint") if el.get("name") in value]
+    held = {pos: value[j] for j, pos, _ in rp.servos}
+    for key in root.iter("key"):
+        if key.get("qpos"):
+            key.set("qpos", key.get("qpos") + "".join(f" {value[j]!r}" for j in order))
+        if rp.start is not None:
+            act = root.find("actuator")
+            names = [a.get("name") for a in act] if act is not None else []
+            ctrl = [float(v) for v in (key.get("ctrl") or "").split()]
+            ctrl += [held.get(n, 0.0) for n in names[len(ctrl) :]]
+            key.set("ctrl", _vec(ctrl))
+
+
+def _start(rp: RobotPusher) -> list[float]:
+    """:attr:`RobotPusher.start` checked (zeros without one)."""
+    if rp.start is None:
+        return [0.0] * len(rp.dofs)
+    start = np.asarray(rp.start, dtype=float).reshape(-1)
+    if len(start) != len(rp.dofs) or not np.isfinite(start).all():
+        raise InputError(
+            f"the robot pusher's start {list(start)} is not one finite value per servo DOF "
+            f"({', '.join(rp.dofs)})",
+            path=rp.urdf,
+            where="objects/pusher/geometry",
+            hint="give RobotPusher.start the recording's first value of each DOF in the order "
+            "of RobotPusher.dofs, or leave it None (0)",
+        )
+    return [float(v) for v in start]
 
 
 def _servo_bodies(root: ET.Element, body: ET.Element, rp: RobotPusher) -> dict[str, ET.Element]:

@@ -20,6 +20,12 @@ Oracles:
 * the recording: the finger DOFs in ``robot_trajectory.npz`` are the recorded joint values
   (closed form, 1e-12), and the box replayed from the file alone is within the residual the
   engine reports on compare's drive (RMS within 5 % + 0.05 mm);
+* the ``start`` keyframe (h86): each servo DOF's joint at its first recorded value (closed
+  form: the recorded joint at the first end-effector stamp of the dataset's first episode,
+  0.03 m for the fingers, 0 for the pitch and roll; 1e-12), its position servo there and its
+  velocity servo at 0, so the scene reset to the key and stepped 50 steps holds the DOFs
+  (measured: they do not move, 0.0); replayed from the keyframe (as docs/exports.md's block
+  starts) the file gives the engine's box path as from qpos0 (the same gaps);
 * counterfactuals: the primitive pusher's rollout (6 mm sphere) leaves the box > 1 mm away,
   the DOFs held at their first value (fingers open, paddle unpitched) > 0.1 mm; the export
   refuses a robot-pusher dataset without the measured pusher.
@@ -191,11 +197,14 @@ def _one(drive, t: int):
     )
 
 
-def _replay(model, drive, servos) -> np.ndarray:
-    """The exported file driven by ``drive`` (one trajectory): box positions [S, 3] m."""
+def _replay(model, drive, servos, key: bool = False) -> np.ndarray:
+    """The exported file driven by ``drive`` (one trajectory): box positions [S, 3] m; with
+    ``key`` from the ``start`` keyframe (as docs/exports.md's block), else from qpos0."""
     from robogs.physics.engines.mujoco_engine import sample_steps
 
     data = mujoco.MjData(model)
+    if key:
+        mujoco.mj_resetDataKeyframe(model, data, model.key("start").id)
     box = model.joint("box")
     qb = int(box.qposadr[0])
     y0 = float(drive.init_yaw[0])
@@ -241,6 +250,35 @@ def _box(eng, drive) -> np.ndarray:
     return eng.rollout(drive).pos["box"][0, 0]
 
 
+def _check_start_key(case, ds: Dataset, recorded: dict[str, np.ndarray]) -> None:
+    """The ``start`` keyframe holds each servo DOF at its first recorded value (closed form:
+    the recorded joint at the first end-effector stamp of the scene's episode, the dataset's
+    first), its position servo there and its velocity servo at 0."""
+    root, out, report, model, paths = case
+    f = np.load(out / TRAJECTORY_FILE)
+    ep = ds.episodes[0].id
+    k = list(f["pusher_episodes"]).index(ep)
+    t = ds.episode(ep).table("joint_states").column("t_ns").to_numpy()
+    key = model.key("start")
+    for (joint, pos, vel), name in zip(f["pusher_servos"], f["pusher_dof_names"], strict=True):
+        want = float(np.interp(f[f"pusher_t_ns_{k}"][0], t, recorded[str(name)][: len(t)]))
+        got = key.qpos[model.joint(str(joint)).qposadr[0]]
+        assert abs(got - want) < 1e-12
+        assert key.ctrl[model.actuator(str(pos)).id] == got
+        assert key.ctrl[model.actuator(str(vel)).id] == 0.0
+    assert paths.pusher.start == list(f[f"pusher_q_{k}"][0])
+    # a scene reset to the keyframe and stepped with the keyframe's controls holds the DOFs
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, key.id)
+    adr = [model.joint(str(s[0])).qposadr[0] for s in f["pusher_servos"]]
+    q0 = data.qpos[adr].copy()
+    for _ in range(50):
+        mujoco.mj_step(model, data)
+    held = float(np.abs(data.qpos[adr] - q0).max())
+    print("DOFs held from the keyframe within", held)
+    assert held < 1e-9
+
+
 def _check_case(case, n_dofs: int) -> dict[str, float]:
     root, out, report, model, paths = case
     eng, rec, prep = _engine(root)
@@ -265,6 +303,7 @@ def _check_case(case, n_dofs: int) -> dict[str, float]:
     want = _box(eng, d1)
     got = _replay(model, d1, servos)
     gap = float(np.abs(got - want).max())
+    gap_key = float(np.abs(_replay(model, d1, servos, key=True) - want).max())
     moved = float(np.linalg.norm(want[-1] - want[0]))
     # from the file alone (the episode of trajectory t)
     ep = rec.trajectories[t].name.split("#")[0]
@@ -297,6 +336,7 @@ def _check_case(case, n_dofs: int) -> dict[str, float]:
     return {
         "held_open": held,
         "gap": gap,
+        "gap_key": gap_key,
         "gap_file": gap_f,
         "moved": moved,
         "rms_engine": rms(want, grid),
@@ -345,13 +385,13 @@ def test_gripper_export_drives_the_fingers(gripper) -> None:
         q = f[f"pusher_q_{k}"]
         assert q.shape == (len(want), 2)
         assert np.abs(q - want[:, None]).max() < 1e-12
-    key = model.key("start").qpos  # the robot at its first joint_states row, the DOFs at 0
+    key = model.key("start").qpos  # the robot at its first joint_states row
     for j, v in report.facts["robot"]["start_q"].items():
         assert key[model.joint(j).qposadr[0]] == v
-    assert key[model.joint("pusher/jl").qposadr[0]] == key[model.joint("pusher/jr").qposadr[0]] == 0
+    _check_start_key(gripper, ds, {"jl": close, "jr": close})
     r = _check_case(gripper, 2)
     print(r)
-    assert r["gap"] < 1e-9 and r["gap_file"] < 1e-9
+    assert r["gap"] < 1e-9 and r["gap_file"] < 1e-9 and r["gap_key"] < 1e-9
     assert r["held_open"] > 1e-4  # the closing fingers move the box (0.58 mm measured)
     assert r["rms_file"] < 1.05 * r["rms_engine"] + 5e-5
 
@@ -422,9 +462,10 @@ def test_a_pitching_paddle_exports_the_tilt_hinges(tilting) -> None:
         want = np.interp(f[f"pusher_t_ns_{k}"], t, PITCH[: len(t)])
         q = f[f"pusher_q_{k}"]
         assert np.abs(q[:, 0] - want).max() < 1e-12 and np.abs(q[:, 1]).max() < 1e-12
+    _check_start_key(tilting, ds, {"pitch": PITCH, "roll": np.zeros_like(PITCH)})
     r = _check_case(tilting, 2)
     print(r)
-    assert r["gap"] < 1e-9 and r["gap_file"] < 1e-9
+    assert r["gap"] < 1e-9 and r["gap_file"] < 1e-9 and r["gap_key"] < 1e-9
     assert r["held_open"] > 1e-4  # the pitch moves the box (1.0 mm measured)
 
 
@@ -467,3 +508,14 @@ def test_the_cli_export_measures_the_robot_pusher_itself(gripper, tmp_path) -> N
     assert sorted(a.files) == sorted(b.files) and any(k.startswith("pusher_q") for k in a.files)
     for k in a.files:
         np.testing.assert_array_equal(a[k], b[k])
+
+
+def test_a_start_that_is_not_one_value_per_dof_is_refused(gripper, tmp_path) -> None:
+    """``RobotPusher.start`` (the keyframe's DOF values) must be one finite value per DOF."""
+    from dataclasses import replace
+
+    root, _, _, _, paths = gripper
+    for bad in ([0.03], [0.03, float("nan")]):
+        given = replace(paths, pusher=replace(paths.pusher, start=bad))
+        with pytest.raises(InputError, match=r"one finite value per servo DOF \(jl, jr\)"):
+            export("mjcf", Dataset.open(root), tmp_path / f"x{len(bad)}", robot_pusher=given)

@@ -38,8 +38,11 @@ What does what:
     effector's full orientation at the pusher point (each pusher-body link at ``[I | -offset]
     T_ee_link``). Past :data:`GIMBAL_DEG` of pitch it is refused (gimbal lock);
   - a joint below the pusher link whose value varies (:func:`joint_value`, from the links'
-    forward-kinematics poses, so a ``<mimic>`` is its own joint): its own body ``pusher/<joint>``,
-    a child of the body that carries its parent link, placed at that link's pose times the
+    forward-kinematics poses, so a ``<mimic>`` is its own joint whose recorded value is its
+    leader's through the URDF, ``multiplier q + offset`` as
+    :class:`robogs.format.kinematics.Chain` applies it; the Franka Panda's fingers,
+    ``tests/physics/test_mujoco_robot_panda.py``): its own body ``pusher/<joint>``, a child of
+    the body that carries its parent link, placed at that link's pose times the
     joint origin, on a slide or hinge joint about the URDF axis (value 0 at the origin, as in
     :class:`robogs.format.kinematics.Chain`): the links below it that no other modelled joint
     moves ride on it. The simplest sound construction: MuJoCo's own joint tree reproduces the
