@@ -314,18 +314,21 @@ def _db_state(work: Path) -> tuple[list[str], dict[tuple[str, str], bytes]]:
 
 @pytest.mark.slow
 def test_sfm_repeats_exactly_with_two_threads_and_with_one(tmp_path: Path):
-    """Mutation of the thread count (h74): the same 20 images through ``run_sfm`` twice with 2
-    threads and once with 1 give the same database (image ids in name order, the same verified
+    """Mutation of the thread count (h74): the same 16 images through ``run_sfm`` with 2 threads
+    and with 1 give the same database (image ids in name order, the same verified
     inliers for every pair) and the same model to the bit. Before, multi-threaded extraction
     numbered the images as their features finished, the verification drew from per-thread
     generators and the mapper summed in thread order: 14 of 60 ids, 29-33 of 1184 pairs and
-    the poses changed between runs of the sample. 51-65 s on 2 cores at load 7-8 (2026-11-28)."""
+    the poses changed between runs of the sample. Was 20 images and three runs (51-65 s on 2
+    cores at load 7-8); 16 images and two runs since 2026-11-28 (suite time, 23 s idle). The
+    unseeded verification (``random_seed = -1``) is caught at this size; the multi-threaded mapper
+    alone (``repeatable=False``) was not caught here, nor by the 20-image three-run version."""
     pytest.importorskip("pycolmap", reason="structure from motion needs the 'sfm' extra")
     from robogs.convert.ingest.sfm import run_sfm
     from robogs.synth.multiview import synthesize_multiview
 
     truth = synthesize_multiview(
-        tmp_path / "cap", robot="ur5", n_views=20, width=320, height=240, seed=3, poses=False
+        tmp_path / "cap", robot="ur5", n_views=16, width=320, height=240, seed=3, poses=False
     )
     img = tmp_path / "img"
     img.mkdir()
@@ -333,12 +336,12 @@ def test_sfm_repeats_exactly_with_two_threads_and_with_one(tmp_path: Path):
         cv2.imwrite(str(img / f"{i:03d}.png"), cv2.cvtColor(im, cv2.COLOR_RGB2BGR))
     runs = [
         (run_sfm(img, tmp_path / f"w{k}", threads=t, focal_starts=(1.0,)), tmp_path / f"w{k}")
-        for k, t in enumerate((2, 2, 1))
+        for k, t in enumerate((2, 1))
     ]
     first, work0 = runs[0]
     names, inliers = _db_state(work0)
-    assert names == sorted(names) and len(names) == 20
-    assert first.registered >= 15, first.starts  # a model to compare, not a wrong one
+    assert names == sorted(names) and len(names) == 16
+    assert first.registered >= 12, first.starts  # a model to compare, not a wrong one
     for res, work in runs[1:]:
         assert _db_state(work) == (names, inliers)
         assert res.names == first.names and res.starts == first.starts
