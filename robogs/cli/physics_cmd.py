@@ -570,7 +570,8 @@ def _object_auto(
         print(f"held-out error and gate: {d['last']['design']['split']}")
     g = d["last"]["gate"]
     print(
-        f"null calibration (linearised held-out null, family-wise 5 %): {p.calibration_seconds:.1f} s "
+        f"null calibration ({g.get('method') or 'linearised held-out null'}, family-wise "
+        f"{g.get('alpha', 0.05):.0%}): {p.calibration_seconds:.1f} s "
         f"in all, {g.get('draws')} draws per step{' (cached)' if g.get('cached') else ''}"
     )
     for s in d["last"]["skipped"]:
