@@ -26,7 +26,8 @@ if [[ $stage == *1* ]]; then
     tests/render/test_triton_project.py tests/render/test_triton_binning.py \
     tests/render/test_triton_finish.py tests/render/test_oracle.py \
     tests/render/test_means2d_grad.py \
-    tests/reconstruct/test_step_loss.py tests/reconstruct/test_model_adam.py 2>&1 | tail -25 \
+    tests/reconstruct/test_step_loss.py tests/reconstruct/test_model_adam.py \
+    tests/reconstruct/test_train_sync.py 2>&1 | tail -25 \
     | tee "$OUT/tests.log"
 fi
 if [[ $stage == *2* ]] && [[ -f bench/device_reconstruct.sh ]]; then
