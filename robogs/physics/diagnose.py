@@ -689,7 +689,7 @@ def diagnose_recording(
         # whose drive model leaves the residual's other shared errors to so few trajectories
         # (a 4-push null reported Stribeck at dBIC -2.3 without it, test_split)
         few = "white-noise null only" in cal.method or (
-            "parametric" in cal.method and 2 ** (prep.n_traj - 1) < gate_mod.MIN_PATTERNS
+            "parametric" in cal.method and gate_mod.few_trajectories(prep.n_traj)
         )
         verdict, gate, blocked = judge(
             stat, thr, q95, dbic, few, ident, partial and part is not None

@@ -155,6 +155,7 @@ __all__ = [
     "N_DRAWS",
     "MAX_CELLS",
     "MIN_PATTERNS",
+    "few_trajectories",
     "METHODS",
     "unrestricted_resid",
     "Calibration",
@@ -198,6 +199,13 @@ METHODS = ("both", "wild", "white", "wcu", "parametric")
 MIN_PATTERNS = 128
 """Fewest distinct sign patterns (``2^(T-1)``) for a Rademacher wild null (T >= 8 trajectories);
 under it Webb's six-point weights are used (:func:`wild_weights`)."""
+
+
+def few_trajectories(t_n: int) -> bool:
+    """Too few trajectories (``t_n`` < 8) for a Rademacher wild null: ``2^(T-1) < MIN_PATTERNS``."""
+    return 2 ** (t_n - 1) < MIN_PATTERNS
+
+
 MAX_CELLS = 4.0e8
 """Bound on the calibration's work: draws x residuals x parameters summed over candidates;
 the draw count is cut (never below 100) to stay under it."""
@@ -1230,7 +1238,7 @@ def calibrate(
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     names = [c.name for c in cands]
     t_n = base_resid.shape[0]
-    few = 2 ** (t_n - 1) < MIN_PATTERNS
+    few = few_trajectories(t_n)
     stat_kind = "fall" if statistic is None else statistic
     if stat_kind not in STATISTICS:
         raise ValueError(f"statistic must be one of {sorted(STATISTICS)}, got {statistic!r}")
