@@ -694,6 +694,25 @@ def diagnose_recording(
         verdict, gate, blocked = judge(
             stat, thr, q95, dbic, few, ident, partial and part is not None
         )
+        in_only = ""  # h94, opt-in: passes on the in-sample statistic alone
+        if not gate and e.name in cal.insample and e.name in cal.insample_data:
+            s_in = cal.insample_data[e.name]
+            t_in, q_in, _ = cal.judge_insample(e.name, s_in)
+            v_in, g_in, _ = judge(s_in, t_in, q_in, dbic, few, ident, partial and part is not None)
+            if g_in:
+                verdict, gate, blocked = v_in, True, False
+                carriers = [traj_names[t] for t in np.flatnonzero(z_t >= gate_mod.AFFECTED_Z)]
+                who = (
+                    f"carried by trajectory {carriers[0]} alone"
+                    if len(carriers) == 1
+                    else f"carried by {len(carriers)} trajectories ({', '.join(carriers)})"
+                )
+                in_only = (
+                    f"in-sample evidence only: its in-sample fall {s_in:.1f} sigma^2 passes its "
+                    f"family-wise threshold {t_in:.1f}, its held-out fall {stat:.1f} does not "
+                    f"({thr:.1f}); {who}; held-out confirmation needs another trajectory that "
+                    f"excites it: {e.separate_by}"
+                )
         if ident:
             note = ""
         elif part is None or not partial:
@@ -703,6 +722,8 @@ def diagnose_recording(
                 f"partly identified: {', '.join(undetermined)} not determined ({why}); "
                 f"{part}; to determine {', '.join(undetermined)}: {e.separate_by}"
             )
+        if in_only:
+            note = (note + "; " if note else "") + in_only
         if blocked:
             bar = f"ΔBIC <= {DBIC_MAX:g}" if (few or not ident) else "ΔBIC < 0"
             note = (note + "; " if note else "") + (
@@ -920,6 +941,38 @@ def gate_method() -> str:
     return m
 
 
+GATE_INSAMPLE_ENV = "ROBOGS_GATE_INSAMPLE"
+"""Environment variable (``1``: on; opt-in, h94) that adds the in-sample statistic to the
+parametric null's min-P (:func:`robogs.physics.gate.calibrate`'s ``insample``): a candidate
+whose held-out fall cannot confirm it (an effect one trajectory carries) may pass on its
+in-sample fall, and its note says so."""
+
+
+def gate_insample(method: str) -> bool:
+    """Whether ``$ROBOGS_GATE_INSAMPLE`` asks for the in-sample statistic (``1``, ``true``,
+    ``yes``; unset, empty, ``0``: no).
+
+    Raises:
+        InputError: set with a gate ``method`` other than ``"parametric"``, or an unknown
+            value."""
+    from robogs.format.errors import InputError
+
+    v = os.environ.get(GATE_INSAMPLE_ENV, "").strip().lower()
+    if v in ("", "0", "false", "no"):
+        return False
+    if v not in ("1", "true", "yes"):
+        raise InputError(
+            f"unknown value {v!r}", where=f"${GATE_INSAMPLE_ENV}", hint="use 1 or 0 (or unset it)"
+        )
+    if method != "parametric":
+        raise InputError(
+            f"the in-sample statistic needs the parametric null, not {method!r}",
+            where=f"${GATE_INSAMPLE_ENV}",
+            hint=f"set ${GATE_METHOD_ENV}=parametric as well, or unset ${GATE_INSAMPLE_ENV}",
+        )
+    return True
+
+
 def _calibrate(
     eng: Engine,
     space: ParamSpace,
@@ -972,6 +1025,7 @@ def _calibrate(
         for e, o in zip(cands, outs[1:], strict=True)
     ]
     method = gate_method()
+    insample = gate_insample(method)  # h94, opt-in (False unless $ROBOGS_GATE_INSAMPLE is set)
     if method == "both":  # the default: called exactly as before
         cal = gate_mod.calibrate(lin, base.resid, valid, folds, fingerprint=fp)
     else:
@@ -990,7 +1044,12 @@ def _calibrate(
             method=method,
             inputs=inputs,
             draws=draws,
+            **({"insample": True} if insample else {}),
         )
+        if insample:  # the data's in-sample statistics, judged in diagnose_recording
+            for e, lc, out in zip(cands, lin, outs[1:], strict=True):
+                g = base.cost - out.cost
+                cal.insample_data[e.name] = gate_mod.insample_statistic(lc, base.resid, valid, g)
     if cal.statistic != "fall":
         return cal
     signs = gate_mod.check_signs(eng.prep.n_traj, fp)

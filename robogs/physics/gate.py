@@ -68,6 +68,28 @@ through the drive's smoother), one rollout per draw at the base fit, ``Sigma_in 
 design-B null data that error is nearly rank one per trajectory (a release speed that shifts
 the slide: 3-25 sigma^2 a trajectory; bench/RESULTS.md, issue 17, h76).
 
+An in-sample companion statistic (opt-in, h94: ``calibrate(..., insample=True)``, parametric
+null only; the diagnosis's ``$ROBOGS_GATE_INSAMPLE=1``). An effect carried by one trajectory
+(design B's viscous damping, quadratic drag and restitution: ``z_t >= AFFECTED_Z`` on one of
+nine) has strong in-sample evidence but no held-out test: when its carrier is held out the
+training trajectories hardly determine the parameter. Every candidate then gets a second
+statistic, the in-sample chi^2 fall of the linear model, ``||P_B e||^2 - ||P_C e||^2`` with the
+nuisance columns profiled out as in the held-out procedure, simulated on the *same* draws, and
+the single-step min-P runs over all ``2C`` statistics. Why every candidate and not only those
+carried by under two trajectories: min-P keeps its family-wise level for any fixed set of
+statistics computed on the same draws (Westfall & Young 1993, alg. 2.8), whereas a set chosen
+from the data's own ``z_t`` would have to replay that choice on each draw and mix statistics
+of different scales in one null column. The price is a smaller per-statistic level
+``alpha'`` for the held-out falls (2C tests instead of C; they are strongly correlated where an
+effect spreads over many trajectories). On the data the in-sample statistic is
+``min(gain, linear)`` (:func:`insample_statistic`): the nonlinear fits' chi^2 fall and the
+linear model's :func:`linear_gain` of the base residual; the null is the linear model's, the
+nonlinear fit exploits a rough objective (contact events on whole steps, h34: 28.3 against
+20.1 sigma^2) and the linear one overshoots where the effect is curved, so the smaller of the
+two is a conservative reading of both; the linearisation check's factor is therefore not
+applied to it. The diagnosis reports a candidate that passes only in-sample (ΔBIC < 0 still
+asked) with a note that says so and what would confirm it on held-out data.
+
 Family-wise level: single-step min-P over the candidates (Westfall & Young 1993, "Resampling-
 Based Multiple Testing", alg. 2.8): every candidate is fitted to the same draws; ``alpha'`` is
 the ``alpha`` quantile of the smallest per-candidate null p-value over the draws, and each
@@ -161,6 +183,7 @@ __all__ = [
     "Calibration",
     "LinearCandidate",
     "calibrate",
+    "insample_statistic",
     "ParametricNullWarning",
     "heldout_statistic",
     "studentised_statistic",
@@ -343,6 +366,11 @@ class Calibration:
             check, :meth:`apply_check`); a candidate not checked is absent (factor 1).
             ``thresholds``, ``q95`` and ``null`` stay the linearised null's; :meth:`judge`,
             :meth:`p_value` and :meth:`to_dict` scale them.
+        insample, insample_q95, insample_null: the in-sample statistic's family-wise thresholds
+            and own 95 % quantiles [sigma^2] and its null [D, C] (empty / None unless
+            ``calibrate(insample=True)``, h94; :meth:`judge_insample`).
+        insample_data: candidate -> its in-sample statistic on the data [sigma^2]
+            (:func:`insample_statistic`; filled by the caller, which has the fits).
         checks: candidate -> its :class:`LinearisationCheck`, made here or read from the cache
             (:func:`store_checks`).
     """
@@ -363,6 +391,10 @@ class Calibration:
     judged: dict[str, float] = field(default_factory=dict)
     inflation: dict[str, float] = field(default_factory=dict)
     checks: dict[str, LinearisationCheck] = field(default_factory=dict)
+    insample: dict[str, float] = field(default_factory=dict)
+    insample_q95: dict[str, float] = field(default_factory=dict)
+    insample_null: np.ndarray | None = field(default=None, repr=False)
+    insample_data: dict[str, float] = field(default_factory=dict)
 
     def apply_check(self, name: str, check: LinearisationCheck) -> None:
         """Scale candidate ``name``'s null by ``check.factor`` (``"fall"`` statistic only)."""
@@ -397,6 +429,17 @@ class Calibration:
         self.judged[name] = thr
         p = self.p_value(name, x)
         return float(thr), float(q95), float("nan") if p is None else p
+
+    def judge_insample(self, name: str, stat: float) -> tuple[float, float, float]:
+        """Family-wise threshold and own 95 % quantile [sigma^2] of candidate ``name``'s
+        in-sample statistic, and the null p-value of ``stat`` [sigma^2] (nan when read from
+        the cache). Raises KeyError when the calibration has no in-sample null."""
+        thr, q95 = self.insample[name], self.insample_q95[name]
+        p = float("nan")
+        if self.insample_null is not None:
+            col = self.insample_null[:, list(self.insample).index(name)]
+            p = float((1 + np.sum(col >= stat)) / (col.shape[0] + 1))
+        return float(thr), float(q95), p
 
     def to_dict(self) -> dict[str, Any]:
         st = self.statistic != "fall"
@@ -438,7 +481,20 @@ class Calibration:
             }
             if applied
             else None,
-        }
+        } | (
+            {
+                "insample": {
+                    "method": "in-sample chi^2 fall of the linear model on the same draws "
+                    "(min-P over held-out and in-sample statistics); on the data "
+                    "min(fit gain, linear gain)",
+                    "thresholds_sigma2": dict(self.insample),
+                    "q95_sigma2": dict(self.insample_q95),
+                    "data_sigma2": dict(self.insample_data),
+                }
+            }
+            if self.insample
+            else {}
+        )
 
 
 def cache_dir() -> Path:
@@ -645,6 +701,8 @@ def _read(path: Path) -> Calibration | None:
             cached=True,
             key=path.stem,
             checks={k: LinearisationCheck.from_dict(v) for k, v in (d.get("checks") or {}).items()},
+            insample={k: float(v) for k, v in (d.get("insample") or {}).items()},
+            insample_q95={k: float(v) for k, v in (d.get("insample_q95") or {}).items()},
         )
     except (OSError, ValueError, KeyError, TypeError):
         return None  # a missing or unreadable cache entry is recomputed
@@ -671,6 +729,8 @@ def _write(path: Path, cal: Calibration) -> None:
         "statistic": cal.statistic,
         "checks": {k: c.to_dict() for k, c in cal.checks.items()},
     }
+    if cal.insample:  # h94 (opt-in); absent otherwise, so other entries are unchanged
+        d |= {"insample": cal.insample, "insample_q95": cal.insample_q95}
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
@@ -705,12 +765,15 @@ def _simulate(
     pos: list[int] | None = None,
     statistic: str = "fall",
     per_candidate: bool = False,
+    insample: bool = False,
 ) -> np.ndarray:
     """Null statistics [draws, C]: ``noise(n, c)`` gives the next ``n`` draws [n, T, K] (the
     same draws for every candidate, ``c = -1``; with ``per_candidate`` candidate ``c``'s own,
     e.g. the same weights on its own residual; ``pos[0]`` is advanced past each chunk); the
-    held-out fall [sigma^2], or ``S / D`` for another ``statistic`` (:func:`normaliser`)."""
-    null = np.zeros((draws, len(cands)))
+    held-out fall [sigma^2], or ``S / D`` for another ``statistic`` (:func:`normaliser`).
+    With ``insample`` [draws, 2C]: columns ``C..2C-1`` the in-sample chi^2 fall of the linear
+    model, ``||r_B||^2 - ||r_C||^2`` [sigma^2], on the same draws (h94)."""
+    null = np.zeros((draws, len(cands) * (2 if insample else 1)))
     t_n, k = valid.shape
     chunk = max(1, int(4e6 // max(t_n * k, 1)))
     for s0 in range(0, draws, chunk):
@@ -724,6 +787,10 @@ def _simulate(
             r_c, h_c = _linear_heldout(jac, q, e, folds)
             sc = _diff_scales(r_b, valid) if statistic == "tn" else None
             null[s0 : s0 + n, c] = _t(*normaliser(h_b, h_c, r_b - r_c, statistic, sc))
+            if insample:
+                null[s0 : s0 + n, len(cands) + c] = np.sum(r_b**2, axis=(1, 2)) - np.sum(
+                    r_c**2, axis=(1, 2)
+                )
         if pos is not None:
             pos[0] += n
     return null
@@ -860,6 +927,17 @@ def linear_gain(cand: LinearCandidate, resid: np.ndarray, valid: np.ndarray) -> 
     r_b, _ = _linear_heldout(jac[..., : cand.n_base], q, e, [])
     r_c, _ = _linear_heldout(jac, q, e, [])
     return float(np.sum(r_b**2) - np.sum(r_c**2))
+
+
+def insample_statistic(
+    cand: LinearCandidate, base_resid: np.ndarray, valid: np.ndarray, gain: float
+) -> float:
+    """The in-sample statistic of a candidate on the data [sigma^2]: ``min(gain, linear)``,
+    ``gain`` the nonlinear fits' chi^2 fall from ``B`` to ``B + C`` and ``linear`` its linear
+    model's (:func:`linear_gain` of ``base_resid`` [T, K]). The null is the linear model's; the
+    smaller of the two keeps a rough objective's exploited gain and a curved effect's linear
+    overshoot out of it (module docstring, h94)."""
+    return float(min(float(gain), linear_gain(cand, base_resid, valid)))
 
 
 def linear_ratio(gain: float, linear: float, k: int) -> float:
@@ -1173,6 +1251,7 @@ def calibrate(
     inputs: np.ndarray | None = None,
     input_cov: np.ndarray | None = None,
     input_note: str | None = None,
+    insample: bool = False,
 ) -> Calibration:
     """Simulate the held-out statistic's null for every candidate on the same draws.
 
@@ -1231,6 +1310,11 @@ def calibrate(
             white noise and Webb's weights); judge candidates with :meth:`Calibration.judge`,
             which gives the thresholds in sigma^2 on the data.
 
+        insample: ``"parametric"`` and the held-out fall only (opt-in, h94): every candidate's
+            in-sample chi^2 fall of the linear model is simulated on the same draws and the
+            min-P runs over both statistics of every candidate (module docstring); its
+            thresholds are ``Calibration.insample`` (:meth:`Calibration.judge_insample`).
+
     The linearisation check is not made here: it needs the nonlinear fits
     (:func:`null_draw_factor`, :meth:`Calibration.apply_check`).
     """
@@ -1250,6 +1334,11 @@ def calibrate(
         raise ValueError(
             f"inputs, input_cov and input_note are for method='parametric', not {method!r}"
         )
+    if insample and (method != "parametric" or stud):
+        raise ValueError(
+            "insample=True needs method='parametric' and the held-out fall statistic, got "
+            f"method={method!r}, statistic={stat_kind!r}"
+        )
     chol = None
     p_note = ""
     if method == "parametric":
@@ -1262,9 +1351,14 @@ def calibrate(
         if chol is not None:  # the input model is part of the null, and its description
             tag += "|" + hashlib.sha256(np.ascontiguousarray(chol[0]).tobytes()).hexdigest()[:16]
             tag += "|" + p_note
+        tag += "|insample" if insample else ""
         path = cache_dir() / f"{_key(tag, names, draws, seed)}.json"
         hit = _read(path)
-        if hit is not None and set(hit.thresholds) == set(names):
+        if (
+            hit is not None
+            and set(hit.thresholds) == set(names)
+            and (not insample or set(hit.insample) == set(names))
+        ):
             hit.scale = diff_scale(base_resid, valid)
             return hit
     t0 = time.perf_counter()
@@ -1321,9 +1415,26 @@ def calibrate(
             return e * valid[None]
 
         nulls["parametric"] = _simulate(
-            cands, valid, folds, draws, lambda n, c: parametric(n), None, stat_kind
+            cands,
+            valid,
+            folds,
+            draws,
+            lambda n, c: parametric(n),
+            None,
+            stat_kind,
+            insample=insample,
         )
         note = p_note
+    in_thr: dict[str, float] = {}
+    in_q95: dict[str, float] = {}
+    in_null = None
+    if insample:  # min-P over the 2C statistics of the same draws (Westfall & Young, alg. 2.8)
+        both = nulls["parametric"]
+        in_null = both[:, len(names) :]
+        a_2, t_2, q_2 = _minp(both, [*names, *(f"{n}\x00in" for n in names)], alpha)
+        in_thr = {n: t_2[f"{n}\x00in"] for n in names}
+        in_q95 = {n: q_2[f"{n}\x00in"] for n in names}
+        nulls["parametric"] = both[:, : len(names)]
     thr: dict[str, float] = {n: 1e-6 for n in names}
     q95: dict[str, float] = {n: 0.0 for n in names}
     if stud:
@@ -1331,6 +1442,8 @@ def calibrate(
     alpha_adj = alpha
     for null in nulls.values():
         a_k, t_k, q_k = _minp(null, names, alpha)
+        if insample:  # the held-out thresholds at the level of the 2C-statistic min-P
+            a_k, t_k = a_2, {n: t_2[n] for n in names}
         alpha_adj = min(alpha_adj, a_k)
         for n in names:
             thr[n] = max(thr[n], t_k[n])
@@ -1349,6 +1462,9 @@ def calibrate(
         null=null,
         statistic=stat_kind,
         scale=diff_scale(base_resid, valid),
+        insample=in_thr,
+        insample_q95=in_q95,
+        insample_null=in_null,
     )
     if path is not None:
         _write(path, cal)
