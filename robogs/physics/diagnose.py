@@ -1050,6 +1050,7 @@ def _calibrate(
             for e, lc, out in zip(cands, lin, outs[1:], strict=True):
                 g = base.cost - out.cost
                 cal.insample_data[e.name] = gate_mod.insample_statistic(lc, base.resid, valid, g)
+                cal.insample_parts[e.name] = (g, gate_mod.linear_gain(lc, base.resid, valid))
     if cal.statistic != "fall":
         return cal
     signs = gate_mod.check_signs(eng.prep.n_traj, fp)

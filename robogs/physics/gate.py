@@ -370,7 +370,8 @@ class Calibration:
             and own 95 % quantiles [sigma^2] and its null [D, C] (empty / None unless
             ``calibrate(insample=True)``, h94; :meth:`judge_insample`).
         insample_data: candidate -> its in-sample statistic on the data [sigma^2]
-            (:func:`insample_statistic`; filled by the caller, which has the fits).
+            (:func:`insample_statistic`; filled by the caller, which has the fits);
+            ``insample_parts`` its two readings, (fit gain, linear gain) [sigma^2].
         checks: candidate -> its :class:`LinearisationCheck`, made here or read from the cache
             (:func:`store_checks`).
     """
@@ -395,6 +396,7 @@ class Calibration:
     insample_q95: dict[str, float] = field(default_factory=dict)
     insample_null: np.ndarray | None = field(default=None, repr=False)
     insample_data: dict[str, float] = field(default_factory=dict)
+    insample_parts: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def apply_check(self, name: str, check: LinearisationCheck) -> None:
         """Scale candidate ``name``'s null by ``check.factor`` (``"fall"`` statistic only)."""
@@ -490,6 +492,9 @@ class Calibration:
                     "thresholds_sigma2": dict(self.insample),
                     "q95_sigma2": dict(self.insample_q95),
                     "data_sigma2": dict(self.insample_data),
+                    "fit_and_linear_gain_sigma2": {
+                        n: list(v) for n, v in self.insample_parts.items()
+                    },
                 }
             }
             if self.insample
