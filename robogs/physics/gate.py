@@ -1437,7 +1437,7 @@ def calibrate(
         both = nulls["parametric"]
         in_null = both[:, len(names) :]
         a_2, t_2, q_2 = _minp(both, [*names, *(f"{n}\x00in" for n in names)], alpha)
-        in_thr = {n: t_2[f"{n}\x00in"] for n in names}
+        in_thr = {n: max(1e-6, t_2[f"{n}\x00in"]) for n in names}  # floored as ``thr``
         in_q95 = {n: q_2[f"{n}\x00in"] for n in names}
         nulls["parametric"] = both[:, : len(names)]
     thr: dict[str, float] = {n: 1e-6 for n in names}
