@@ -87,8 +87,10 @@ linear model's :func:`linear_gain` of the base residual; the null is the linear 
 nonlinear fit exploits a rough objective (contact events on whole steps, h34: 28.3 against
 20.1 sigma^2) and the linear one overshoots where the effect is curved, so the smaller of the
 two is a conservative reading of both; the linearisation check's factor is therefore not
-applied to it. The diagnosis reports a candidate that passes only in-sample (ΔBIC < 0 still
-asked) with a note that says so and what would confirm it on held-out data.
+applied to it. The diagnosis lets a candidate pass on the in-sample statistic alone only where
+the folds cannot test it (``z_t >= AFFECTED_Z`` on under 2 trajectories; a condition on the
+data that can only withdraw passes, so the level holds), ΔBIC < 0 still asked, with a note
+that says so and what would confirm it on held-out data.
 
 Family-wise level: single-step min-P over the candidates (Westfall & Young 1993, "Resampling-
 Based Multiple Testing", alg. 2.8): every candidate is fitted to the same draws; ``alpha'`` is
