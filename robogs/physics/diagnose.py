@@ -522,8 +522,11 @@ def _conditional(
     then leaks into a weaker, partly similar one, whose small parametric threshold (tens of
     sigma^2) it passes although the data hold nothing of it beyond the strong effect: a
     hidden table tilt (design A, seeds 3-9) reported Stribeck friction in 6 of 7 cases at
-    15-80x its threshold, at a cosine (0.5-0.6) below the rival cutoff, so :func:`_rivals`
-    never compared them. Here the reported rows, strongest first (lowest Delta BIC, as the
+    15-80x its threshold. They are rivals there (seed 3: cosine 0.54 against a cutoff of
+    0.10), but the projected leakage ``cos^2 S_tilt`` undercounts what a Stribeck fit takes
+    from the tilt's signal (1117 sigma^2 against its 1417), so :func:`_rivals` kept it; given
+    the tilt, its held-out fall is 12.3 sigma^2 against a threshold of 18.7 (Delta BIC +16).
+    Here the reported rows, strongest first (lowest Delta BIC, as the
     report orders them), are judged as forward selection would (Efroymson 1960;
     :func:`auto_loop`): the stronger accepted effects go into the base at their fitted values
     (refitted with it), the candidate is diagnosed alone on that base with a fresh null for
