@@ -349,6 +349,12 @@ class LinearCandidate:
     n_base: int
 
 
+def _null_p(null: np.ndarray, stat: float) -> float:
+    """Monte Carlo p-value of ``stat`` against the null draws ``null`` [D]: ``(1 + #{null >=
+    stat}) / (D + 1)`` (the draw-count-exact form, never 0; Davison & Hinkley 1997, eq. 4.11)."""
+    return float((1 + np.sum(null >= stat)) / (null.shape[0] + 1))
+
+
 @dataclass
 class Calibration:
     """Null quantiles of the held-out statistic for one dataset and candidate list.
@@ -413,8 +419,7 @@ class Calibration:
         if self.null is None:
             return None
         c = list(self.thresholds).index(name)
-        null = self.null[:, c] * self.inflation.get(name, 1.0)
-        return float((1 + np.sum(null >= stat)) / (self.null.shape[0] + 1))
+        return _null_p(self.null[:, c] * self.inflation.get(name, 1.0), stat)
 
     def judge(
         self, name: str, held_base: np.ndarray, held_eff: np.ndarray, delta: np.ndarray
@@ -441,8 +446,7 @@ class Calibration:
         thr, q95 = self.insample[name], self.insample_q95[name]
         p = float("nan")
         if self.insample_null is not None:
-            col = self.insample_null[:, list(self.insample).index(name)]
-            p = float((1 + np.sum(col >= stat)) / (col.shape[0] + 1))
+            p = _null_p(self.insample_null[:, list(self.insample).index(name)], stat)
         return float(thr), float(q95), p
 
     def to_dict(self) -> dict[str, Any]:
