@@ -1,4 +1,4 @@
-"""Hidden-effect scenarios: ground truth with one effect on, measured like a real rig.
+"""Hidden-effect scenarios: ground truth with one effect on (or several), measured like a real rig.
 
 :func:`make_scenario` builds a :class:`ScenarioRecording` (numpy arrays per trajectory, the
 nominal physics.json the tool starts from, and the truth in ``meta``). Measurement model:
@@ -11,6 +11,10 @@ nominal physics.json the tool starts from, and the truth in ``meta``). Measureme
 Every case is checked for detectability when generated (:func:`detectability`): the effect must
 move the noiseless observations, after refitting the friction coefficient without it, by an
 aggregated ``z = sqrt(sum (delta / sigma)^2) >= 8``. Cases that fail raise ``ValueError``.
+
+Several effects may be hidden at once: ``make_scenario("table_tilt+stribeck")`` (distinct
+catalogue names joined by ``+``, in any order). Each must then be detectable on its own (its
+single-effect ``z`` above); whether one is still detectable given the other is not checked.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ __all__ = [
     "FAMILY",
     "make_scenario",
     "detectability",
+    "effect_members",
 ]
 
 FINE_DT = 2.5e-4
@@ -86,6 +91,35 @@ FAMILY = {
     k: ("sensor" if k in ("time_offset", "camera_extrinsics") else "contact") for k in TRUE_PARAMS
 }
 FAMILY["none"] = "none"
+
+
+def effect_members(effect: str) -> tuple[str, ...]:
+    """The catalogue effects a scenario name holds, sorted: ``"table_tilt+stribeck"`` ->
+    ``("stribeck", "table_tilt")``; a single name (or ``"none"``) -> itself.
+
+    Raises:
+        ValueError: an unknown name, a repeated one, or ``"none"`` in a combination.
+    """
+    parts = effect.split("+")
+    bad = [m for m in parts if m not in TRUE_PARAMS]
+    if bad:
+        raise ValueError(f"unknown effect {bad[0]!r}; known: {sorted(TRUE_PARAMS)}")
+    if len(parts) > 1 and ("none" in parts or len(set(parts)) < len(parts)):
+        raise ValueError(f"a combination needs distinct effects other than 'none': {effect!r}")
+    return tuple(sorted(parts)) if len(parts) > 1 else (effect,)
+
+
+def _params(members: tuple[str, ...]) -> dict[str, float]:
+    """The members' true parameters merged (the catalogue's contact effects share no name)."""
+    out: dict[str, float] = {}
+    for m in members:
+        out.update(TRUE_PARAMS[m])
+    return out
+
+
+def _delta(members: tuple[str, ...]) -> float:
+    """The camera's stamp delay [s] of a scenario (``time_offset``'s ``delta``, else 0)."""
+    return TRUE_PARAMS["time_offset"]["delta"] if "time_offset" in members else 0.0
 
 
 @dataclass
@@ -189,8 +223,8 @@ def _truth(effect: str, kinds: tuple[str, ...], n_speeds: int, n_dirs: int, mu_d
     box = TruthBox()
     motions = _motions(box, kinds, n_speeds, n_dirs)
     path = _path(motions)
-    eff = TruthEffect(effect, TRUE_PARAMS[effect]) if effect != "none" else TruthEffect()
-    dyn_eff = eff if FAMILY[effect] == "contact" else TruthEffect()
+    contact = tuple(m for m in effect_members(effect) if FAMILY[m] == "contact")
+    dyn_eff = TruthEffect("+".join(contact), _params(contact)) if contact else TruthEffect()
     pos, yaw = simulate_truth(
         box,
         dyn_eff,
@@ -220,9 +254,9 @@ def _sample(arr: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 def _observe(effect: str, pos: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Apply the camera extrinsics error to true poses (sensor effects only)."""
-    if effect != "camera_extrinsics":
+    if "camera_extrinsics" not in effect.split("+"):
         return pos, yaw
-    p = TRUE_PARAMS[effect]
+    p = TRUE_PARAMS["camera_extrinsics"]
     c, s = np.cos(p["dyaw"]), np.sin(p["dyaw"])
     x = c * pos[..., 0] - s * pos[..., 1] + p["dx"]
     y = s * pos[..., 0] + c * pos[..., 1] + p["dy"]
@@ -238,9 +272,11 @@ def detectability(
 ) -> float:
     """Aggregated effect size ``z`` of a case (noiseless, friction refitted without the effect).
 
-    Samples at 30 fps; per-sample sigma = sqrt(pos^2 + (jitter * speed)^2).
+    Samples at 30 fps; per-sample sigma = sqrt(pos^2 + (jitter * speed)^2). A combination
+    (``"a+b"``): the smallest of its members' own ``z`` (each alone against the plain model).
     """
-    return _detectability(effect, noise, tuple(kinds), n_speeds, n_dirs)
+    members = effect_members(effect)
+    return min(_detectability(m, noise, tuple(kinds), n_speeds, n_dirs) for m in members)
 
 
 def observed_with_sigma(
@@ -281,7 +317,7 @@ def _detectability(
     nz = NOISE_LEVELS[noise]
     box, motions, path, pos, yaw = _truth(effect, kinds, n_speeds, n_dirs, None)
     t = np.arange(0.0, (pos.shape[1] - 1) * FINE_DT - 0.05, 1 / CAMERA_HZ)
-    delta = TRUE_PARAMS[effect].get("delta", 0.0) if effect == "time_offset" else 0.0
+    delta = _delta((effect,))
 
     obs, p_eff, y_eff, sig, sig_y = observed_with_sigma(pos, yaw, t, delta, effect, nz, CAMERA_HZ)
 
@@ -322,28 +358,35 @@ def make_scenario(
     """One hidden-effect scenario, measured with the noise level ``noise``.
 
     Args:
-        effect: a key of :data:`TRUE_PARAMS` (``"none"`` for a null case).
+        effect: a key of :data:`TRUE_PARAMS` (``"none"`` for a null case), or distinct keys
+            joined by ``+`` to hide them together (:func:`effect_members`; ``meta["effect"]``
+            is then the sorted join, ``meta["true_params"]`` maps each member to its values,
+            ``meta["detectability_z_each"]`` holds each member's own ``z``).
         seed: noise, jitter, camera phase and nominal-friction draw.
         noise: ``"nominal"`` or ``"hard"`` (:data:`NOISE_LEVELS`).
         kinds: motions to include (default :data:`KINDS`, the full design). ``push``:
             n_speeds x n_dirs pushes; ``offset_push``: 4 off-centre pushes; ``release_slide``:
             4 slides (:data:`SLIDE_SPEEDS`); ``grasp_place``: 3 drops (:data:`DROP_HEIGHTS`).
-        check: refuse cases whose effect is not detectable by design (z < ``min_z``).
+        check: refuse cases whose effect is not detectable by design (z < ``min_z``; for a
+            combination, any member's own z).
     """
-    if effect not in TRUE_PARAMS:
-        raise ValueError(f"unknown effect {effect!r}; known: {sorted(TRUE_PARAMS)}")
+    members = effect_members(effect)
+    effect = "+".join(members)
     kinds = tuple(kinds)
-    z = detectability(effect, noise, kinds, n_speeds, n_dirs) if effect != "none" else 0.0
-    if check and effect != "none" and z < min_z:
+    z_each = {m: detectability(m, noise, kinds, n_speeds, n_dirs) for m in members if m != "none"}
+    z = min(z_each.values()) if z_each else 0.0
+    low = [m for m in z_each if z_each[m] < min_z]
+    if check and low:
         raise ValueError(
-            f"effect {effect} is not detectable by design with {kinds} at {noise} noise (z={z:.1f})"
+            f"effect {low[0]} is not detectable by design with {kinds} at {noise} noise "
+            f"(z={z_each[low[0]]:.1f})"
         )
     rng = np.random.default_rng(seed)
     nz = NOISE_LEVELS[noise]
     box, motions, path, pos, yaw = _truth(effect, kinds, n_speeds, n_dirs, None)
     n_t, n_fine = pos.shape[:2]
     cam_t = _camera_times(n_fine, n_t, rng)
-    delta = TRUE_PARAMS[effect]["delta"] if effect == "time_offset" else 0.0
+    delta = _delta(members)
     enc_t = np.arange(0.0, (n_fine - 1) * FINE_DT, 1 / ENCODER_HZ)
     t_base = 1_700_000_000_000_000_000
     trajs = []
@@ -410,14 +453,20 @@ def make_scenario(
         "effects": [],
         "sensors": {"camera": {"time_offset_ns": 0}},
     }
+    single = len(members) == 1
     meta = {
         "effect": effect,
-        "family": FAMILY[effect],
-        "true_params": dict(TRUE_PARAMS[effect]),
+        "family": FAMILY[effect] if single else "+".join(FAMILY[m] for m in members),
+        "true_params": dict(TRUE_PARAMS[effect])
+        if single
+        else {m: dict(TRUE_PARAMS[m]) for m in members},
         "true_friction_dynamic": box.mu_d,
         "noise": noise,
         "noise_levels": dict(nz),
         "seed": seed,
         "detectability_z": z,
     }
+    if not single:
+        meta["effects"] = list(members)
+        meta["detectability_z_each"] = z_each
     return ScenarioRecording(trajectories=trajs, physics=physics, object_name="box", meta=meta)

@@ -11,7 +11,8 @@ model-versus-truth errors are realistic:
 * Coulomb friction on the planar twist (vx, vy, c_r w) with the ellipsoidal limit surface
   (Howe & Cutkosky 1996), sticking when the impulse needed to stop lies in the static cone.
 
-Hidden effects are implemented here independently (see ``apply_*`` below).
+Hidden effects are implemented here independently (in :func:`simulate_truth` and
+``_mu_dynamic``); several may act at once (``TruthEffect("a+b", ...)``).
 """
 
 from __future__ import annotations
@@ -60,6 +61,12 @@ class TruthEffect:
     def get(self, key: str, default: float = 0.0) -> float:
         return float(self.params.get(key, default))
 
+    @property
+    def names(self) -> frozenset[str]:
+        """The effects it holds: ``name`` split at ``+`` (two or more hidden at once, their
+        ``params`` merged; the catalogue's contact effects share no parameter name)."""
+        return frozenset(self.name.split("+"))
+
 
 @dataclass
 class EEPath:
@@ -79,9 +86,9 @@ def _rot(x: np.ndarray, y: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.nd
 def _mu_dynamic(box: TruthBox, eff: TruthEffect, vx: np.ndarray, vy: np.ndarray) -> np.ndarray:
     speed = np.hypot(vx, vy)
     mu = np.full_like(speed, box.mu_d)
-    if eff.name == "stribeck":
+    if "stribeck" in eff.names:
         mu = mu * (1.0 + eff.get("dmu") * np.exp(-((speed / eff.get("v_s", 0.1)) ** 2)))
-    if eff.name == "anisotropic_friction":
+    if "anisotropic_friction" in eff.names:
         phi = np.arctan2(vy, vx)
         fac = 1.0 + eff.get("a_c") * np.cos(2 * phi) + eff.get("a_s") * np.sin(2 * phi)
         mu = np.where(speed > 1e-9, mu * fac, mu)
@@ -108,16 +115,16 @@ def simulate_truth(
     dt = path.dt
     n_t, n_k = path.pos.shape[:2]
     mu_dyn = box.mu_d if mu_d is None else mu_d
-    mass = box.mass * (1.0 + eff.get("dm")) if eff.name == "mass" else box.mass
+    mass = box.mass * (1.0 + eff.get("dm")) if "mass" in eff.names else box.mass
     box = TruthBox(**{**box.__dict__, "mu_d": mu_dyn, "mass": mass})
     m, inertia = box.mass, box.inertia_z  # uniform density: the inertia scales with the mass
     hx, hy, hz = (0.5 * s for s in box.size)
     z_rest = box.table_z + hz
     c_r = mean_radius(box.size[0], box.size[1])
     com = np.array(box.com, dtype=float)
-    if eff.name == "com_offset":
+    if "com_offset" in eff.names:
         com = com + np.array([eff.get("dx"), eff.get("dy")])
-    e_rest = box.restitution + (eff.get("e_delta") if eff.name == "restitution" else 0.0)
+    e_rest = box.restitution + (eff.get("e_delta") if "restitution" in eff.names else 0.0)
     k_p = 1e5
     c_p = 600.0
 
@@ -149,11 +156,11 @@ def simulate_truth(
         force = np.zeros((n_t, 3))
         force[:, 2] -= m * box.gravity
         torque = np.zeros(n_t)
-        if eff.name == "viscous_damping":
+        if "viscous_damping" in eff.names:
             force -= m * eff.get("c") * v
-        if eff.name == "quadratic_drag":
+        if "quadratic_drag" in eff.names:
             force -= m * eff.get("k") * np.linalg.norm(v, axis=-1, keepdims=True) * v
-        if eff.name == "table_tilt":
+        if "table_tilt" in eff.names:
             force[:, 0] += m * eff.get("g_x")
             force[:, 1] += m * eff.get("g_y")
         v = v + dt * force / m
