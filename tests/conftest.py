@@ -72,3 +72,12 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
 def real_data() -> Path:
     """The shared real-data folder (tests using it must be marked ``realdata``)."""
     return _require_real_data()
+
+
+@pytest.fixture(scope="session")
+def com_offset_fit(tmp_path_factory: pytest.TempPathFactory, worker_id: str) -> dict:
+    """The hidden CoM offset's scenario fitted on the ``mujoco`` engine, once per session
+    (:mod:`com_offset_fit`): ``{"path": the fitted dataset, read only, "fit": FitResult}``."""
+    from com_offset_fit import com_offset_fit as run
+
+    return run(tmp_path_factory.getbasetemp(), worker_id)

@@ -68,9 +68,6 @@ def fit_and_export(base: Path, effect: str, seed: int, kinds: tuple[str, ...] = 
     import torch
 
     from robogs.physics import api
-    from robogs.physics.api import _open
-    from robogs.physics.baseline import baseline
-    from robogs.physics.engine import Engine
     from robogs.synth.scenarios import make_scenario, write_scenario
 
     torch.set_num_threads(1)
@@ -78,6 +75,16 @@ def fit_and_export(base: Path, effect: str, seed: int, kinds: tuple[str, ...] = 
     path = base / effect
     write_scenario(rec, path)
     fit = api.fit(path, [effect], engine="mujoco", mask_frames=0)
+    return export_fitted(base, path, effect, fit)
+
+
+def export_fitted(base: Path, path: Path, effect: str, fit: object) -> dict:
+    """:func:`fit_and_export` after its fit: the dataset ``path`` with ``effect`` fitted and
+    written (``fit``, its FitResult) exported from ``base``, with and without the effect."""
+    from robogs.physics.api import _open
+    from robogs.physics.baseline import baseline
+    from robogs.physics.engine import Engine
+
     physics = Dataset.open(path).physics()
     assert [e["name"] for e in physics["effects"]] == [effect]
     # the counterfactual: the same revision without the effect (a copy of the dataset)

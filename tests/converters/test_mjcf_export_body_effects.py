@@ -24,12 +24,14 @@ physics.json body and writes it with the same function, so the file is the engin
 from __future__ import annotations
 
 import math
+import shutil
+from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
 from test_export_mjcf_effects import BOX as PLAIN_BOX
-from test_export_mjcf_effects import TOLERANCE, _dataset, fit_and_export, replays, revision
+from test_export_mjcf_effects import TOLERANCE, _dataset, export_fitted, replays, revision
 
 from robogs.convert.export import export
 from robogs.convert.export.mjcf import FORCE_NOTE
@@ -40,15 +42,21 @@ DM, E_DELTA = 0.3, 0.45
 
 
 @pytest.fixture(scope="module")
-def fitted(tmp_path_factory) -> dict:
-    """A fitted ``com_offset`` on 9 pushes (seed 2; ``fit_and_export``: the exports with and
+def fitted(tmp_path_factory, com_offset_fit: dict) -> dict:
+    """A fitted ``com_offset`` on 9 + 4 pushes (seed 2; ``fit_and_export``: the exports with and
     without it, compare's baseline, the engine) and the export of the fitted revision with
-    ``mass`` and ``restitution`` records added (``full``) with that revision's engine."""
+    ``mass`` and ``restitution`` records added (``full``) with that revision's engine. The fit
+    is ``fit_and_export``'s, run once per session (``com_offset_fit``, which the physics test of
+    the fit reads too); its dataset is copied here before the exports read it."""
+    from com_offset_fit import EFFECT, KINDS, SEED
+
     from robogs.physics.api import _open
     from robogs.physics.engine import Engine
 
+    assert (EFFECT, SEED, KINDS) == ("com_offset", 2, ("push", "offset_push"))
     base = tmp_path_factory.mktemp("mjcf_body")
-    out = fit_and_export(base, "com_offset", seed=2, kinds=("push", "offset_push"))
+    path = Path(shutil.copytree(com_offset_fit["path"], base / EFFECT))
+    out = export_fitted(base, path, EFFECT, com_offset_fit["fit"])
     body_fx = [
         out["physics"]["effects"][0],
         {"name": "mass", "target": "box", "params": {"dm": DM}},

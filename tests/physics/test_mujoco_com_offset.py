@@ -134,26 +134,31 @@ def test_a_centred_com_leaves_a_central_push_straight() -> None:
 
 
 def _fit(hidden: str, tmp_path):
+    """``com_offset`` fitted on the scenario with ``hidden`` (unwritten), as the session's
+    :mod:`com_offset_fit` fits it with the offset hidden."""
     import torch
+    from com_offset_fit import KINDS, SEED
 
     from robogs.physics import api
     from robogs.synth.scenarios import make_scenario, write_scenario
 
     torch.set_num_threads(1)
-    kinds = ("push", "offset_push")
-    rec = make_scenario(hidden, seed=2, kinds=kinds, noise="nominal", check=False)
+    rec = make_scenario(hidden, seed=SEED, kinds=KINDS, noise="nominal", check=False)
     write_scenario(rec, tmp_path / hidden)
     out = api.fit(tmp_path / hidden, ["com_offset"], engine="mujoco", mask_frames=0, write=False)
     return {p.name: p for p in out.params}, out
 
 
-def test_com_offset_fitted_on_mujoco_finds_the_hidden_offset(tmp_path) -> None:
+def test_com_offset_fitted_on_mujoco_finds_the_hidden_offset(com_offset_fit: dict) -> None:
     """9 centred + 4 off-centre pushes with the generator's hidden (12, -8) mm: within 10 %
-    per component, the truth inside the 95 % interval, the RMS lower than without it."""
+    per component, the truth inside the 95 % interval, the RMS lower than without it. The fit
+    is ``_fit("com_offset", ...)``, written, run once per session (``com_offset_fit``: the
+    MJCF export's tests read the same one)."""
     from robogs.synth.scenarios.generate import TRUE_PARAMS
 
     truth = TRUE_PARAMS["com_offset"]
-    got, out = _fit("com_offset", tmp_path)
+    out = com_offset_fit["fit"]
+    got = {p.name: p for p in out.params}
     for k in ("dx", "dy"):
         p = got[f"com_offset.{k}"]
         assert p.value == pytest.approx(truth[k], rel=0.10), (k, p)
