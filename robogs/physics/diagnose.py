@@ -1068,7 +1068,8 @@ def _calibrate(
     the linearisation check on null draws of the candidates where it can change a verdict
     (``stats``: their held-out falls [sigma^2]; :func:`gate.needs_check`).
 
-    With :data:`roughness.SMOOTH_NUISANCE` every linearised candidate (the base, the null
+    With :data:`roughness.SMOOTH_NUISANCE`, and always under the parametric null
+    (:func:`roughness.smooth_for`, h99), every linearised candidate (the base, the null
     draws' fits) takes its start-pose columns from :func:`roughness.smooth_nuisance` (one
     rollout each) instead of the fitter's 0.1 mm forward differences, and ``record`` (when
     given) gets the stencils chosen and the fitter's roughness per candidate."""
@@ -1087,7 +1088,9 @@ def _calibrate(
     n_base = len(base_cols)
     valid = (base.resid != 0) | np.any(base.jac != 0, axis=-1)
     fn = eng.residual_fn(space)
-    smooth = rough_mod.SMOOTH_NUISANCE
+    method = gate_method()
+    smooth = rough_mod.smooth_for(method)
+    data_key = fp  # the drive-error draws model the data, not how the gate makes its columns
     fp += "|smooth-nuisance" if smooth else ""
 
     def nuisance(o: FitOutcome, resid: np.ndarray, name: str = "", f=fn) -> np.ndarray:
@@ -1103,7 +1106,6 @@ def _calibrate(
         gate_mod.LinearCandidate(e.name, o.jac, nuisance(o, base.resid, e.name), n_base)
         for e, o in zip(cands, outs[1:], strict=True)
     ]
-    method = gate_method()
     insample = gate_insample(method)  # h94, opt-in (False unless $ROBOGS_GATE_INSAMPLE is set)
     if method == "both":  # the default: called exactly as before
         cal = gate_mod.calibrate(lin, base.resid, valid, folds, fingerprint=fp)
@@ -1112,7 +1114,7 @@ def _calibrate(
         if method == "parametric":
             from robogs.physics.drive_noise import drive_inputs
 
-            inputs = drive_inputs(eng, space, base, valid, fp)
+            inputs = drive_inputs(eng, space, base, valid, data_key)
         draws = PARAMETRIC_DRAWS if method == "parametric" else gate_mod.N_DRAWS
         cal = gate_mod.calibrate(
             lin,

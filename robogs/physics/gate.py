@@ -66,7 +66,13 @@ the rest of the gate). The diagnosis (``$ROBOGS_GATE_METHOD=parametric``) takes 
 own measurement error (the recorded pusher path's white noise, estimated from that path, put
 through the drive's smoother), one rollout per draw at the base fit, ``Sigma_in = I / M``. On
 design-B null data that error is nearly rank one per trajectory (a release speed that shifts
-the slide: 3-25 sigma^2 a trajectory; bench/RESULTS.md, issue 17, h76).
+the slide: 3-25 sigma^2 a trajectory; bench/RESULTS.md, issue 17, h76). About 96 % of its
+response lies in the span of the base and start-pose columns, which are profiled out, so the
+null is set by the remainder and needs start-pose columns resolved to the data's precision:
+under this method the diagnosis always takes them from
+:func:`robogs.physics.roughness.smooth_nuisance` (:func:`robogs.physics.roughness.smooth_for`;
+MuJoCo's 0.1 mm forward differences put its design-B seed-1 tilt threshold at 30.2 against
+planar's 111.4, the smooth ones at 104.2; h92, h99).
 
 An in-sample companion statistic (opt-in, h94: ``calibrate(..., insample=True)``, parametric
 null only; the diagnosis's ``$ROBOGS_GATE_INSAMPLE=1``). An effect carried by one trajectory

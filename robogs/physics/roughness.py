@@ -48,10 +48,23 @@ Central differences of a staircase converge to its mean slope as the stencil wid
 (the smoothing of a noisy function's derivative by a wider difference: Moré & Wild 2012,
 "Estimating derivatives of noisy simulations", ACM TOMS 38).
 
-Behind :data:`SMOOTH_NUISANCE`, off: measured end to end on MuJoCo it lost a found effect
-(design A table tilt seed 0: the unscaled tilt null 2246 -> 4148 sigma^2) and made a design-B
-null report restitution (seed 4), while design A's Stribeck and anisotropic-friction false
-positives stayed (bench/RESULTS.md, issue 16/17, h48).
+Behind :data:`SMOOTH_NUISANCE`, off for the default (wild) gate: measured end to end on
+MuJoCo it lost a found effect (design A table tilt seed 0: the unscaled tilt null 2246 -> 4148
+sigma^2) and made a design-B null report restitution (seed 4), while design A's Stribeck and
+anisotropic-friction false positives stayed (bench/RESULTS.md, issue 16/17, h48).
+
+Always on for the parametric null (:data:`SMOOTH_NUISANCE_METHODS`, :func:`smooth_for`; h99).
+Its input columns are the residual's responses to the drive's own error
+(:mod:`robogs.physics.drive_noise`), and about 96 % of them lies in the span of the base and
+start-pose columns, which the gate profiles out: the null is set by the remainder, and a
+start-pose column turned by an angle ``theta`` moves that remainder by up to ``sin(theta)``
+times the whole response, several times the remainder's own size at MuJoCo's ``sin`` 0.05-0.17.
+Design-B null seed 1, tilt threshold (sigma^2; planar 111.4): MuJoCo with the fitter's columns
+30.2, with central columns at 1, 3, 10, 30, 100 steps 27.5, 96.8, 101.4, 104.3, 101.9, with
+this module's rule 104.2 (bench/RESULTS.md, issue 17, h99). Matching the stencil to the drive
+error's own scale does not work: the start-pose coefficients of its responses are 0.01-0.04 mm
+on the pushes (0.1-0.4 mm on the slides), under the fitter's step, where MuJoCo's columns are
+rough (central 1: 27.5).
 """
 
 from __future__ import annotations
@@ -69,6 +82,8 @@ from robogs.physics.fit import ResidualFn, fit_problems
 
 __all__ = [
     "SMOOTH_NUISANCE",
+    "SMOOTH_NUISANCE_METHODS",
+    "smooth_for",
     "STENCILS",
     "NuisanceColumns",
     "fitter_local_h",
@@ -81,6 +96,18 @@ __all__ = [
 SMOOTH_NUISANCE = False
 """Whether :func:`robogs.physics.diagnose.diagnose_recording`'s gate linearises each
 candidate's start-pose columns with :func:`smooth_nuisance` instead of the fitter's."""
+
+SMOOTH_NUISANCE_METHODS = ("parametric",)
+"""Gate methods (:data:`robogs.physics.gate.METHODS`) whose nuisance columns come from
+:func:`smooth_nuisance` whatever :data:`SMOOTH_NUISANCE` says (module docstring, h99)."""
+
+
+def smooth_for(method: str) -> bool:
+    """Whether the gate of ``method`` linearises the start-pose columns with
+    :func:`smooth_nuisance` (:data:`SMOOTH_NUISANCE` or a method of
+    :data:`SMOOTH_NUISANCE_METHODS`) rather than taking the fitter's."""
+    return bool(SMOOTH_NUISANCE) or method in SMOOTH_NUISANCE_METHODS
+
 
 STENCILS = (1, 3, 10, 30)
 """Central-difference stencils, multiples of the fitter's nuisance step (0.1 mm to 3 mm in

@@ -529,3 +529,80 @@ def test_check_record_round_trips_with_its_rule():
     old = G.LinearisationCheck(1.2, 1.3, [1.2], [5.0], [3.0]).to_dict()
     old.pop("rule")  # a check cached before h46
     assert G.LinearisationCheck.from_dict(old).rule == "draw"
+
+
+# ---- h99: the parametric null's start-pose columns (roughness.smooth_for) -----------------
+def test_smooth_columns_only_for_the_parametric_null(monkeypatch):
+    """The default gate keeps the fitter's start-pose columns (its results unchanged); the
+    parametric null always takes the smooth ones; the h48 flag still turns them on for all."""
+    from robogs.physics import roughness as R
+
+    monkeypatch.setattr(R, "SMOOTH_NUISANCE", False)
+    assert [m for m in G.METHODS if R.smooth_for(m)] == ["parametric"]
+    monkeypatch.setattr(R, "SMOOTH_NUISANCE", True)
+    assert all(R.smooth_for(m) for m in G.METHODS)
+
+
+@pytest.mark.slow
+def test_mujoco_parametric_null_near_planar_on_design_b_null_seed_1(
+    monkeypatch, tmp_path, shared_fits
+):
+    """Oracle: the planar engine on the same design-B null recording; the observed null tilt
+    falls are the same scale on both engines (seeds 1, 6, 14, 18, 30, 39: h92), so the
+    parametric nulls should be too. About 96 % of the drive-error response lies in the span of
+    the base and start-pose columns, so the null hangs on how those columns are made (h92):
+    with the fitter's 0.1 mm forward differences MuJoCo's tilt threshold was 30.2 sigma^2
+    against planar's 111.4 (0.27). With the smooth columns (h99): 104.2 against 110.1.
+    1. MuJoCo's tilt threshold within [0.7, 1.43] of planar's;
+    2. mutation: MuJoCo's own fits with the fitter's columns put back fail it (< 0.7);
+    3. planar's unchecked thresholds move by under 5 % against its fitter's columns (the rule
+       picks central columns where the forward one disagrees over 3 mm: -1.2 % tilt, -2.5 %
+       camera);
+    4. nothing reported on either engine."""
+    pytest.importorskip("mujoco")
+    from dataclasses import replace
+
+    from robogs.physics import diagnose as D
+    from robogs.physics.engine import Engine
+    from robogs.synth.scenarios.design_b import make_design_b
+
+    monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("ROBOGS_GATE_METHOD", "parametric")
+    monkeypatch.delenv("ROBOGS_GATE_INSAMPLE", raising=False)
+    seen: dict[str, dict] = {}
+    real_calibrate, real_inner = G.calibrate, D._calibrate
+    cur = [""]
+
+    def calibrate(cands, resid, valid, folds, **kw):
+        cal = real_calibrate(cands, resid, valid, folds, **kw)
+        seen[cur[0]].setdefault("cal", (list(cands), resid, valid, folds, kw, cal))
+        return cal
+
+    def inner(eng, space, cands, outs, *a, **kw):
+        seen[cur[0]].setdefault("outs", outs)
+        return real_inner(eng, space, cands, outs, *a, **kw)
+
+    monkeypatch.setattr(G, "calibrate", calibrate)
+    monkeypatch.setattr(D, "_calibrate", inner)
+    rec = make_design_b("none", seed=1)
+    res = {}
+    for be in ("planar", "mujoco"):
+        cur[0] = be
+        seen[be] = {}
+        res[be] = D.diagnose_recording(rec, engine=Engine(rec, backend=be))
+    thr = {be: {r.name: r.null_threshold_sigma2 for r in res[be].rows} for be in res}
+    assert 0.7 <= thr["mujoco"]["table_tilt"] / thr["planar"]["table_tilt"] <= 1.43, thr
+
+    def with_fitter_columns(be: str) -> dict[str, float]:
+        cands, resid, valid, folds, kw, _ = seen[be]["cal"]
+        outs = seen[be]["outs"][1:]
+        old = [replace(c, jac_local=o.jac_local) for c, o in zip(cands, outs, strict=True)]
+        return real_calibrate(old, resid, valid, folds, **{**kw, "fingerprint": None}).thresholds
+
+    assert with_fitter_columns("mujoco")["table_tilt"] / thr["planar"]["table_tilt"] < 0.7
+    new, old = seen["planar"]["cal"][-1].thresholds, with_fitter_columns("planar")
+    for n in old:
+        assert new[n] == pytest.approx(old[n], rel=0.05, abs=0.5), n
+    for be in res:
+        assert not [r.name for r in res[be].rows if r.reported], be
+        assert "nuisance_columns" in res[be].gate
