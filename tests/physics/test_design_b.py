@@ -95,14 +95,24 @@ def test_detectability_is_decided_from_the_power_of_the_gate_test():
     assert not detectable_b("none")
     for eff in ("viscous_damping", "table_tilt"):
         d = detectability(eff)
-        assert d["detectable"] and d["power"] >= POWER_DETECTABLE
-        assert d["power"] == pytest.approx(design_power(d["noncentrality"], d["k"], d["level"]))
+        # against white noise alone both are detectable: the closed-form chi^2 power
+        assert d["power_white"] >= POWER_DETECTABLE
+        assert d["power_white"] == pytest.approx(
+            design_power(d["noncentrality"], d["k"], d["level"])
+        )
         assert d["expected_delta_bic"] < 0 and 1 <= d["carrying"] <= 9
+    # against the design's full noise (white + the drive path's, h100) the tilt keeps its power
+    # and viscous damping loses it: the drive error along its direction is ~8 sigma^2
+    tilt, visc = detectability("table_tilt"), detectability("viscous_damping")
+    assert tilt["detectable"] and tilt["power"] >= POWER_DETECTABLE
+    assert not visc["detectable"] and visc["power"] < POWER_DETECTABLE <= visc["power_white"]
+    assert "drive" in visc["verdict"]
     # slow pushes: the box stops at once, how it decelerates is never seen
     qs = detectability("viscous_damping", quasi_static=True)
     assert not qs["detectable"] and qs["power"] < POWER_DETECTABLE
-    meta = make_design_b("viscous_damping", seed=1).meta
+    meta = make_design_b("table_tilt", seed=1).meta
     assert meta["detectable"] is True and meta["power"] >= POWER_DETECTABLE
+    assert make_design_b("viscous_damping", seed=1).meta["detectable"] is False
 
 
 def test_plain_fit_profiles_out_a_known_start_pose_and_friction():
