@@ -91,6 +91,21 @@ def test_a_third_report_is_judged_given_every_stronger_one_that_stayed(monkeypat
     assert [[e["name"] for e in c[1]] for c in calls] == [["a"], ["a"]]  # b withdrawn, not given
 
 
+def test_an_unresolved_pair_is_not_split_by_delta_bic(monkeypatch):
+    """_rivals' "unresolved" (each one's evidence is what the other gives it) is kept: the rule
+    records the conditional numbers but does not withdraw the weaker member by its Delta BIC."""
+    rows = [_row("quadratic_drag", -50.6), _row("viscous_damping", -48.9), _row("c", -40.0)]
+    for a, b in ((rows[0], rows[1]), (rows[1], rows[0])):
+        a.verdict, a.rivals = "unresolved", [b.name]
+    rows[2].verdict, rows[2].rivals = "unresolved", ["x"]  # unresolved with another: judged
+    _fake(monkeypatch, {"viscous_damping": False, "c": False})
+    dg._conditional(rows, SimpleNamespace(physics={}), _eng(), partial=True, holdout=None)
+    v = rows[1]
+    assert v.reported and v.verdict == "unresolved" and v.conditional["reported"] is False
+    assert "unresolved pair" in v.note
+    assert not rows[2].reported and rows[2].verdict == "conditional"
+
+
 @pytest.mark.slow
 def test_design_a_tilt_does_not_also_report_stribeck_under_the_parametric_null(monkeypatch):
     """Design A, seed 3 (h83: Stribeck reported beside the tilt at 53x its threshold)."""
