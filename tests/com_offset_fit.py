@@ -39,26 +39,12 @@ def run_fit(folder: Path) -> Any:
 
 
 def com_offset_fit(basetemp: Path, worker_id: str) -> dict[str, Any]:
-    """``{"path": the fitted dataset (read it, do not change it), "fit": its FitResult}``.
+    """``{"path": the fitted dataset (read it, do not change it), "fit": its FitResult}``, the
+    fit run once per session (:func:`session_once.once_per_session`; the FitResult pickled for
+    the other workers, in this session's own temporary folder)."""
+    from session_once import once_per_session
 
-    Without pytest-xdist (``worker_id == "master"``) the fit runs in ``basetemp``; under it the
-    workers take one run in the session's base folder (``basetemp.parent``) through a file lock
-    (pytest-xdist docs, "Making session-scoped fixtures execute only once"), the FitResult
-    pickled beside it (this session's own temporary folder)."""
-    if worker_id == "master":
-        folder = basetemp / "com_offset_fit"
-        folder.mkdir(exist_ok=True)
-        return {"path": folder / EFFECT, "fit": run_fit(folder)}
-    from filelock import FileLock
-
-    root = basetemp.parent
-    folder, done = root / "com_offset_fit", root / "com_offset_fit.pkl"
-    with FileLock(str(root / "com_offset_fit.lock")):
-        if not done.is_file():
-            folder.mkdir(exist_ok=True)
-            fit = run_fit(folder)
-            tmp = done.with_suffix(".tmp")
-            tmp.write_bytes(pickle.dumps(fit))
-            tmp.replace(done)
-        fit = pickle.loads(done.read_bytes())
+    folder, fit = once_per_session(
+        "com_offset_fit", basetemp, worker_id, run_fit, pickle.dumps, pickle.loads
+    )
     return {"path": folder / EFFECT, "fit": fit}

@@ -26,29 +26,22 @@ def ur5(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def push_walkthrough(tmp_path_factory: pytest.TempPathFactory, worker_id: str) -> dict:
-    """docs/physics.md's bag walkthrough run once per test session: ``{"dir": folder, "runs":
-    [...]}`` (see :func:`bag_walkthrough.run_walkthrough`). Under pytest-xdist the workers share one run in
-    the session's base folder through a file lock (pytest-xdist docs, "Making session-scoped
-    fixtures execute only once"); without xdist it runs in a fresh temporary folder."""
+    """docs/physics.md's bag walkthrough run once per test session, also under pytest-xdist
+    (:func:`session_once.once_per_session`): ``{"dir": folder, "runs": [...]}`` (see
+    :func:`bag_walkthrough.run_walkthrough`)."""
     import json
 
     from bag_walkthrough import run_walkthrough
+    from session_once import once_per_session
 
-    if worker_id == "master":
-        folder = tmp_path_factory.mktemp("push_walkthrough")
-        return {"dir": folder, "runs": run_walkthrough(folder)}
-    from filelock import FileLock
-
-    root = tmp_path_factory.getbasetemp().parent
-    folder, done = root / "push_walkthrough", root / "push_walkthrough.json"
-    with FileLock(str(root / "push_walkthrough.lock")):
-        if not done.is_file():
-            folder.mkdir(exist_ok=True)
-            runs = run_walkthrough(folder)
-            tmp = done.with_suffix(".tmp")
-            tmp.write_text(json.dumps(runs))
-            tmp.replace(done)
-        runs = json.loads(done.read_text())
+    folder, runs = once_per_session(
+        "push_walkthrough",
+        tmp_path_factory.getbasetemp(),
+        worker_id,
+        run_walkthrough,
+        lambda r: json.dumps(r).encode(),
+        json.loads,
+    )
     return {"dir": folder, "runs": runs}
 
 
