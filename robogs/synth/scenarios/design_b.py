@@ -272,10 +272,8 @@ def plain_fit(
     max_iter: int = 6,
 ) -> tuple[float, float, np.ndarray]:
     """:func:`plain_fit_per_trajectory` without the per-trajectory chi^2."""
-    chi2, mu, loc, _ = plain_fit_per_trajectory(
-        pos, yaw, shift, effect, quasi_static, subset, max_iter
-    )
-    return chi2, mu, loc
+    fit = _plain_fit(pos, yaw, shift, effect, quasi_static, subset, max_iter)
+    return fit["chi2"], fit["mu"], fit["loc"]
 
 
 def plain_fit_per_trajectory(
