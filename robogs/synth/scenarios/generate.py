@@ -113,6 +113,9 @@ def _params(members: tuple[str, ...]) -> dict[str, float]:
     """The members' true parameters merged (the catalogue's contact effects share no name)."""
     out: dict[str, float] = {}
     for m in members:
+        clash = sorted(set(out) & set(TRUE_PARAMS[m]))
+        if clash:  # one truth simulator slot cannot hold two effects' values
+            raise ValueError(f"effects {members} share the parameter {clash[0]!r}")
         out.update(TRUE_PARAMS[m])
     return out
 
