@@ -177,6 +177,14 @@ def _fmt(x: Any, spec: str = ".3g") -> str:
     return "—" if x is None else format(float(x), spec)
 
 
+def _param_line(p: dict[str, Any]) -> str:
+    """One estimate as ``fit`` prints it: name, value, 95 % interval, unit."""
+    return (
+        f"  {p['name']:32s} {_fmt(p['value'], '.5g')}  [{_fmt(p['low'])}, {_fmt(p['high'])}] "
+        f"{p.get('unit', '')}"
+    )
+
+
 def _effects_table(effects: list[dict[str, Any]], title: str) -> None:
     from rich.console import Console
     from rich.table import Table
@@ -577,6 +585,12 @@ def _object_auto(
     for s in d["last"]["skipped"]:
         print(f"  skipped {s['name']}: {s['reason']}")
     print(f"accepted: {', '.join(p.accepted) or 'nothing'}; plot: {plot}")
+    if d["model"]:
+        print("model at the end (every effect refitted jointly with the base, all trajectories):")
+        for name, ps in d["model"].items():
+            print(f"{name}:")
+            for q in ps:
+                print(_param_line(q))
     return 0
 
 
@@ -717,10 +731,7 @@ def _fit(args: argparse.Namespace, model: str) -> int:
         for eff, params in d["params"].items():
             print(f"{eff}:")
             for p in _param_rows(params):
-                print(
-                    f"  {p['name']:32s} {_fmt(p['value'], '.5g')}  [{_fmt(p['low'])}, {_fmt(p['high'])}] "
-                    f"{p.get('unit', '')}"
-                )
+                print(_param_line(p))
         if d["clamped"]:
             print("written as 0 (fitted negative): " + ", ".join(d["clamped"]))
         for eff, bad in d.get("unidentifiable", {}).items():
@@ -798,9 +809,7 @@ def _fit(args: argparse.Namespace, model: str) -> int:
         if d["unidentifiable"]:
             print("unidentifiable (not written): " + ", ".join(d["unidentifiable"]))
     for p in d["params"]:
-        print(
-            f"  {p['name']:32s} {_fmt(p['value'], '.5g')}  [{_fmt(p['low'])}, {_fmt(p['high'])}] {p.get('unit', '')}"
-        )
+        print(_param_line(p))
     print(
         "dry run: nothing written"
         if args.dry_run

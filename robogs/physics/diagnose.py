@@ -232,6 +232,9 @@ class DiagnoseResult:
     n_residuals: int
     gate: dict[str, Any]
     design: dict[str, Any] = field(default_factory=dict)
+    present_params: dict[str, list[ParamEstimate]] = field(default_factory=dict)
+    """The effects already in physics.json at their values refitted jointly with the base model on
+    every trajectory (the base fit's, the same fit every candidate was scored against)."""
 
     @property
     def reported(self) -> list[EffectRow]:
@@ -248,6 +251,9 @@ class DiagnoseResult:
             "n_residuals": self.n_residuals,
             "gate": self.gate,
             "design": self.design,
+            "present_params": {
+                n: [_finite_param(p) for p in ps] for n, ps in self.present_params.items()
+            },
         }
 
 
@@ -909,6 +915,10 @@ def diagnose_recording(
         rows=rows,
         skipped=skipped,
         base_params=_estimates(space, base, bcols, frees[0]),
+        present_params={
+            e.name: _estimates(space, base, space.owner_columns(e.name), frees[0])
+            for e, _ in eng.present
+        },
         rms_base=rms_base,
         noise_floor=floor,
         noise={
@@ -1270,6 +1280,9 @@ class AutoPath:
             "accepted": self.accepted,
             "stopped": self.stopped,
             "calibration_seconds": self.calibration_seconds,
+            "model": {
+                n: [_finite_param(p) for p in ps] for n, ps in self.last.present_params.items()
+            },
             "last": self.last.to_dict(),
         }
 
@@ -1285,11 +1298,15 @@ def auto_loop(
 ) -> AutoPath:
     """Forward selection to its end (Efroymson 1960): diagnose, accept the reported effect with
     the lowest ΔBIC into the base model (stored at its fitted values, refitted jointly with the
-    base at the next step), repeat until no candidate passes the gate or ``max_steps``.
+    base at the next step), repeat until no candidate passes the gate or ``max_steps``. An
+    effect that a stronger unmodelled one masks is judged again once that one is in the base
+    (a table tilt beside viscous damping: bench/RESULTS.md, issue 17).
 
     Each step's gate is calibrated afresh on its own base model (the accepted effects included),
     for the split ``holdout`` gives (:func:`diagnose_recording`).
-    Nothing is written: ``AutoPath.physics`` is the document with the accepted effects.
+    Nothing is written: ``AutoPath.physics`` is the document with the accepted effects at their
+    values of the last step's joint refit (``AutoPath.last.present_params``), not at the values
+    each had when it was accepted.
     """
     import copy
 
@@ -1301,6 +1318,10 @@ def auto_loop(
     given: list[str] = [str(e.get("name")) for e in doc.get("effects", []) or []]
     while True:
         res = diagnose_recording(rec, effects=effects, dt=dt, progress=progress, holdout=holdout)
+        for entry in doc.get("effects", []) or []:  # the joint refit replaces each step's value
+            joint = res.present_params.get(str(entry.get("name")))
+            if joint:
+                entry["params"] = {p.name: p.value for p in joint}
         cal_s += float(res.gate.get("seconds", 0.0))
         cal_s += float((res.gate.get("linearisation_check") or {}).get("seconds", 0.0))
         top = next((r for r in res.rows if r.reported), None)

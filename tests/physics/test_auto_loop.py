@@ -21,7 +21,8 @@ from robogs.synth.scenarios.design_b import make_design_b
 def test_auto_loop_cli_accepts_the_hidden_tilt_then_stops(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path / "cache"))
     ds = tmp_path / "b_tilt"
-    write_scenario(make_design_b("table_tilt", seed=3), ds)
+    rec = make_design_b("table_tilt", seed=3)
+    write_scenario(rec, ds)
     png = tmp_path / "path.png"
     args = ["diagnose", str(ds), "--auto", "--effects", "table_tilt,viscous_damping"]
     assert main([*args, "--plot", str(png), "--json"]) == 0
@@ -37,6 +38,17 @@ def test_auto_loop_cli_accepts_the_hidden_tilt_then_stops(tmp_path, monkeypatch,
     # the second step ran with the tilt in the base model: it is no longer a candidate
     assert "table_tilt" not in {e["name"] for e in d["last"]["effects"]}
     assert d["last"]["gate"]["draws"] >= 100
+    # the model at the end is the last step's joint refit of the accepted effects: the same model
+    # (base + tilt) as step 1's candidate fit, so the same values to the fitter's precision, and
+    # the generator's tilt inside its interval
+    model = {p["name"]: p for p in d["model"]["table_tilt"]}
+    assert d["model"]["table_tilt"] == d["last"]["present_params"]["table_tilt"]
+    step1 = {p["name"]: p["value"] for p in path[0]["params"]}
+    truth = rec.meta["true_params"]
+    assert set(model) == set(step1) == set(truth)
+    for k, v in truth.items():
+        assert model[k]["value"] == pytest.approx(step1[k], rel=1e-3, abs=1e-4)
+        assert model[k]["low"] < v < model[k]["high"], (k, model[k], v)
 
 
 @pytest.mark.slow
