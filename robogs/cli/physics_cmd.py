@@ -550,7 +550,7 @@ def _object_auto(
     from robogs.physics.api import diagnose_auto
     from robogs.physics.diagnose import plot_path
 
-    p = diagnose_auto(args.dataset, effects=effects, holdout=holdout)
+    p = diagnose_auto(args.dataset, effects=effects, holdout=holdout, engine=_engine(args))
     rows = [
         {
             "step": s.step if s.verdict.startswith("added") else None,

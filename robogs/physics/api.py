@@ -199,15 +199,22 @@ def diagnose_auto(
     max_steps: int = 5,
     progress: Callable[[int, int], None] | None = None,
     holdout: Sequence[str] | None = None,
+    engine: str = "planar",
 ) -> AutoPath:
     """The object model's selection loop to its end (:func:`robogs.physics.diagnose.auto_loop`);
     camera-mask effects are left out (they are not part of the rigid-object model).
-    ``holdout``: as :func:`diagnose`, for every step."""
+    ``holdout`` and ``engine``: as :func:`diagnose`, for every step."""
     rec, _ = _open(dataset)
     camera = _camera_effects()
     rigid = None if effects is None else [n for n in effects if n not in camera]
     return auto_loop(
-        rec, effects=rigid, dt=dt, max_steps=max_steps, progress=progress, holdout=holdout
+        rec,
+        effects=rigid,
+        dt=dt,
+        max_steps=max_steps,
+        progress=progress,
+        holdout=holdout,
+        engine=engine,
     )
 
 

@@ -1295,6 +1295,7 @@ def auto_loop(
     dt: float = 1e-3,
     progress: Callable[[int, int], None] | None = None,
     holdout: Sequence[str] | None = None,
+    engine: str = "planar",
 ) -> AutoPath:
     """Forward selection to its end (Efroymson 1960): diagnose, accept the reported effect with
     the lowest ΔBIC into the base model (stored at its fitted values, refitted jointly with the
@@ -1303,7 +1304,8 @@ def auto_loop(
     (a table tilt beside viscous damping: bench/RESULTS.md, issue 17).
 
     Each step's gate is calibrated afresh on its own base model (the accepted effects included),
-    for the split ``holdout`` gives (:func:`diagnose_recording`).
+    for the split ``holdout`` gives (:func:`diagnose_recording`), with rollouts on the
+    ``engine`` backend (``planar``, ``mujoco`` or ``auto``; :class:`robogs.physics.engine.Engine`).
     Nothing is written: ``AutoPath.physics`` is the document with the accepted effects at their
     values of the last step's joint refit (``AutoPath.last.present_params``), not at the values
     each had when it was accepted.
@@ -1317,7 +1319,10 @@ def auto_loop(
     cal_s = 0.0
     given: list[str] = [str(e.get("name")) for e in doc.get("effects", []) or []]
     while True:
-        res = diagnose_recording(rec, effects=effects, dt=dt, progress=progress, holdout=holdout)
+        eng = Engine(rec, dt=dt, backend=engine)  # afresh: the document changes each step
+        res = diagnose_recording(
+            rec, effects=effects, dt=dt, progress=progress, holdout=holdout, engine=eng
+        )
         for entry in doc.get("effects", []) or []:  # the joint refit replaces each step's value
             joint = res.present_params.get(str(entry.get("name")))
             if joint:

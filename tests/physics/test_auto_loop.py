@@ -66,3 +66,21 @@ def test_quasi_static_pushes_make_dynamics_unobservable(tmp_path, monkeypatch):
     # the converse: design B's normal pushes slide, so viscous damping is ranked there
     res = diagnose_recording(make_design_b("none", seed=1), effects=["viscous_damping"])
     assert res.design["quasi_static"] is False and [r.name for r in res.rows] == ["viscous_damping"]
+
+
+@pytest.mark.parametrize("backend", ["planar", "mujoco"])
+def test_auto_loop_runs_every_step_on_the_engine_asked_for(monkeypatch, backend):
+    """``diagnose --auto --engine mujoco`` once ran every step on the planar engine: the loop
+    built no engine and the diagnosis fell back to its default."""
+    import robogs.physics.diagnose as dg
+
+    seen: list[str] = []
+
+    def fake(rec, *, engine=None, **kw):
+        seen.append(engine.backend)
+        return dg.DiagnoseResult([], [], [], 1.0, 1.0, {}, 0, {})
+
+    monkeypatch.setattr(dg, "diagnose_recording", fake)
+    path = dg.auto_loop(make_design_b("none", seed=1), engine=backend)
+    assert seen == [backend]
+    assert path.stopped == "no candidate passes the gate on held-out trajectories"
