@@ -679,7 +679,11 @@ def _diagnose(args: argparse.Namespace, model: str) -> int:
     found = [e["name"] for e in d["effects"] if e.get("reported")]
     print("missing effect(s): " + (", ".join(found) if found else none_found_text()))
     if found:
-        print(f"next: robogs fit {args.dataset} --add {found[0]}")
+        print(
+            f"next: robogs fit {args.dataset} --add {found[0]}, then diagnose again: an effect "
+            "a stronger missing one masks is judged only once that one is in the model "
+            f"(robogs diagnose {args.dataset} --auto runs the loop to its end)"
+        )
     return 0
 
 
