@@ -1381,6 +1381,16 @@ def auto_loop(
         given.append(top.name)
 
 
+def path_rms(path: AutoPath) -> list[float]:
+    """Held-out position RMS [mm] of the model at the start and after each step: an accepted
+    effect's "after", and the model unchanged where the loop stopped."""
+    st = path.steps
+    rms = [st[0].heldout_rms_before if st else float("nan")]
+    for s in st:
+        rms.append(s.heldout_rms_after if s.verdict.startswith("added") else rms[-1])
+    return rms
+
+
 def plot_path(path: AutoPath, out: Any) -> Any:
     """Write the selection path as a PNG (atomic): held-out RMS after each step [mm], and each
     step's held-out evidence against the null quantile it was judged against [sigma^2]."""
@@ -1397,8 +1407,7 @@ def plot_path(path: AutoPath, out: Any) -> Any:
     labels = ["base"] + [
         (s.effect or "—") + ("" if s.verdict.startswith("added") else " (stop)") for s in st
     ]
-    rms = [st[0].heldout_rms_before if st else float("nan")]
-    rms += [s.heldout_rms_after if s.verdict.startswith("added") else rms[-1] for s in st]
+    rms = path_rms(path)
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
     a1.plot(range(len(rms)), rms, "o-")
     a1.set_xticks(range(len(rms)), labels, rotation=30, ha="right", fontsize=8)

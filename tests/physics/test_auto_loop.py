@@ -84,3 +84,20 @@ def test_auto_loop_runs_every_step_on_the_engine_asked_for(monkeypatch, backend)
     path = dg.auto_loop(make_design_b("none", seed=1), engine=backend)
     assert seen == [backend]
     assert path.stopped == "no candidate passes the gate on held-out trajectories"
+
+
+def test_the_path_plot_keeps_the_last_model_where_the_loop_stops():
+    """The plotted error after a stop is the last accepted model's, not the base model's (a
+    comprehension once read the list before it grew, so the stop fell back to the start)."""
+    from robogs.physics.diagnose import AutoPath, AutoStep, path_rms
+
+    def step(i, name, before, after, verdict):
+        return AutoStep(i, name, [], before, after, -1.0, 1.0, 1.0, verdict)
+
+    steps = [
+        step(1, "viscous_damping", 2.26, 2.12, "added"),
+        step(2, "table_tilt", 2.12, 1.72, "added"),
+        step(3, "quadratic_drag", 1.72, 1.73, "stop: no candidate passes"),
+    ]
+    assert path_rms(AutoPath(steps, None, {}, "stop", 0.0)) == [2.26, 2.12, 1.72, 1.72]
+    assert path_rms(AutoPath(steps[2:], None, {}, "stop", 0.0)) == [1.72, 1.72]
