@@ -26,6 +26,15 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # r
 # Disk caches (refitted baselines, gate calibrations) go to a fresh folder per worker, never the
 # user's ~/.cache/robogs: a calibration left there by another version must not decide a test.
 os.environ["ROBOGS_CACHE_DIR"] = tempfile.mkdtemp(prefix="robogs-test-cache-")
+# Design B's detectability (robogs.synth.scenarios.design_b: drive draws and plain fits, 10-30 s
+# each) is memoised on disk in one folder per test run, shared by its xdist workers; the memo is
+# keyed by the generator's inputs and source, and a fresh run starts empty.
+_RUN = os.environ.get("PYTEST_XDIST_TESTRUNUID")
+os.environ["ROBOGS_SYNTH_CACHE_DIR"] = (
+    os.path.join(tempfile.gettempdir(), f"robogs-test-synth-{_RUN}")
+    if _RUN
+    else tempfile.mkdtemp(prefix="robogs-test-synth-")
+)
 
 REALDATA_DIR_ENV = "ROBOGS_REALDATA_DIR"
 REQUIRE_REALDATA_ENV = "ROBOGS_REQUIRE_REALDATA"

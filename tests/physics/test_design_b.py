@@ -8,6 +8,8 @@ the hidden effect of each case.
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 import pytest
 
@@ -110,8 +112,18 @@ def test_detectability_is_decided_from_the_power_of_the_gate_test():
     # slow pushes: the box stops at once, how it decelerates is never seen
     qs = detectability("viscous_damping", quasi_static=True)
     assert not qs["detectable"] and qs["power"] < POWER_DETECTABLE
-    meta = make_design_b("table_tilt", seed=1).meta
+    full = make_design_b("table_tilt", seed=1)
+    meta = full.meta
     assert meta["detectable"] is True and meta["power"] >= POWER_DETECTABLE
+    # without the design entries (the diagnosis tests below read none): the same recording
+    bare = make_design_b("table_tilt", seed=1, with_detectability=False)
+    assert "power" not in bare.meta and "detectable" not in bare.meta
+    assert bare.meta == {k: v for k, v in meta.items() if k in bare.meta}
+    assert list(bare.meta) == [k for k in meta if k in bare.meta] and bare.physics == full.physics
+    for a, b in zip(full.trajectories, bare.trajectories, strict=True):
+        for f in fields(a):
+            x, y = getattr(a, f.name), getattr(b, f.name)
+            assert np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y, f.name
     assert make_design_b("viscous_damping", seed=1).meta["detectable"] is False
 
 
@@ -145,7 +157,7 @@ def test_null_reports_nothing_and_a_hidden_tilt_is_found_on_design_b(tmp_path, m
         )
     assert res.gate["alpha"] == 0.05 and res.gate["draws"] >= 100
     assert set(res.gate["thresholds_sigma2"]) == {r.name for r in res.rows}
-    res = diagnose_recording(make_design_b("table_tilt", seed=3))
+    res = diagnose_recording(make_design_b("table_tilt", seed=3, with_detectability=False))
     assert res.reported and res.reported[0].name == "table_tilt"
     tilt = res.reported[0]
     assert tilt.heldout_gain_sigma2 > tilt.null_threshold_sigma2 > 0
@@ -212,7 +224,7 @@ def test_positive_bic_blocks_a_heldout_pass_and_a_stribeck_is_partly_identified(
     drag = next(r for r in res.rows if r.name == "quadratic_drag")
     assert drag.heldout_gain_sigma2 > drag.null_threshold_sigma2 and drag.delta_bic > 0
     assert drag.blocked_by_bic and drag.verdict == "likely" and "ΔBIC < 0" in drag.note
-    res = diagnose_recording(make_design_b("stribeck", seed=15))
+    res = diagnose_recording(make_design_b("stribeck", seed=15, with_detectability=False))
     row = next(r for r in res.rows if r.name == "stribeck")
     assert row.reported and row.verdict == PARTLY and row.undetermined
     assert res.reported[0].family == "contact"
@@ -222,6 +234,57 @@ def test_positive_bic_blocks_a_heldout_pass_and_a_stribeck_is_partly_identified(
     d = row.to_dict()
     assert all(p["low"] is None for p in d["params"] if p["name"] in row.undetermined)
     # without partial identification it is withheld as before (the same fits: shared_fits)
-    res = diagnose_recording(make_design_b("stribeck", seed=15), partial=False)
+    res = diagnose_recording(
+        make_design_b("stribeck", seed=15, with_detectability=False), partial=False
+    )
     row = next(r for r in res.rows if r.name == "stribeck")
     assert not row.reported and row.verdict == "unidentifiable"
+
+
+def test_detectability_disk_memo_returns_the_computed_values_bit_for_bit(tmp_path, monkeypatch):
+    """Oracle: the computation itself (``_detectability``, what a miss returns). The memo
+    writes one file keyed by the inputs and the generator's source, and what a later call
+    reads back (the per-process cache bypassed, the computation made to fail) is identical in
+    every value and type; an unreadable file is recomputed and rewritten; another source key
+    is another file."""
+    import robogs.synth.scenarios.design_b as db
+
+    def same(a: dict, b: dict) -> None:
+        assert list(a) == list(b)
+        for k in a:
+            x, y = a[k], b[k]
+            assert type(x) is type(y), k
+            if isinstance(x, np.ndarray):
+                assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes()
+            else:
+                assert x == y or (x != x and y != y), k  # NaN critical value of "none"
+
+    monkeypatch.setenv(db.SYNTH_CACHE_ENV, str(tmp_path))
+    memo = db.detectability.__wrapped__  # the disk memo without the per-process cache
+    sub = (0, 6)
+    real = db._detectability
+    calls: list[tuple] = []
+
+    def count(*a):
+        calls.append(a)
+        return real(*a)
+
+    monkeypatch.setattr(db, "_detectability", count)
+    want = memo("time_offset", False, sub)  # a miss: the computed dict itself
+    (path,) = tmp_path.glob("detectability-*.json")
+    assert len(calls) == 1 and want["drive_cov"].shape == (1, 1)
+
+    def fail(*a):
+        raise AssertionError("recomputed")
+
+    monkeypatch.setattr(db, "_detectability", fail)
+    same(want, memo("time_offset", False, sub))
+    path.write_text("{not json")
+    monkeypatch.setattr(db, "_detectability", lambda *a: calls.append(a) or want)
+    same(want, memo("time_offset", False, sub))
+    assert len(calls) == 2
+    same(want, db._from_json(path.read_text()))  # rewritten whole
+    none = real("none", False, sub)
+    same(none, db._from_json(db._to_json(none)))
+    monkeypatch.setattr(db, "_source_key", lambda: "another source")
+    assert db._memo_path(str(tmp_path), "time_offset", False, sub) != path

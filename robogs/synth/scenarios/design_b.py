@@ -74,7 +74,11 @@ stop within a sample of losing contact: the data of item 6 of issue 17.
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
+import os
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -673,8 +677,85 @@ def design_power(noncentrality: float, k: int, level: float) -> float:
     return float(ncx2.sf(crit, k, noncentrality))
 
 
+SYNTH_CACHE_ENV = "ROBOGS_SYNTH_CACHE_DIR"
+"""Folder of :func:`detectability`'s disk memo (unset or empty: none, every process computes)."""
+_SOURCES = ("design_b", "generate", "motions", "sim")
+"""The generator's modules (``robogs.synth.scenarios``) whose source keys the disk memo."""
+
+
+@functools.cache
+def _source_key() -> str:
+    """blake2b of the generator's source (:data:`_SOURCES`) and the numpy and scipy versions."""
+    import scipy
+
+    h = hashlib.blake2b(digest_size=20)
+    for name in _SOURCES:
+        h.update(name.encode() + (Path(__file__).with_name(f"{name}.py")).read_bytes())
+    h.update(f"numpy {np.__version__} scipy {scipy.__version__}".encode())
+    return h.hexdigest()
+
+
+def _memo_path(folder: str, effect: str, quasi_static: bool, subset: Subset) -> Path:
+    """The memo file of one :func:`detectability` call: its inputs and :func:`_source_key`."""
+    h = hashlib.blake2b(digest_size=20)
+    h.update(json.dumps([_source_key(), effect, bool(quasi_static), subset]).encode())
+    return Path(folder) / f"detectability-{h.hexdigest()}.json"
+
+
+def _to_json(d: dict[str, Any]) -> str:
+    """``d`` as JSON, arrays as ``{"dtype", "shape", "data"}`` (floats round-trip exactly)."""
+
+    def enc(v: Any) -> Any:
+        if isinstance(v, np.ndarray):
+            return {"dtype": v.dtype.str, "shape": list(v.shape), "data": v.ravel().tolist()}
+        if isinstance(v, np.generic):
+            raise TypeError(f"detectability returned a numpy scalar {v!r}")
+        return v
+
+    return json.dumps({k: enc(v) for k, v in d.items()})
+
+
+def _from_json(text: str) -> dict[str, Any]:
+    """:func:`_to_json`'s inverse."""
+
+    def dec(v: Any) -> Any:
+        if isinstance(v, dict):
+            return np.array(v["data"], dtype=np.dtype(v["dtype"])).reshape(v["shape"])
+        return v
+
+    return {k: dec(v) for k, v in json.loads(text).items()}
+
+
 @functools.lru_cache(maxsize=64)
 def detectability(effect: str, quasi_static: bool = False, subset: Subset = None) -> dict[str, Any]:
+    """:func:`_detectability`, memoised per process and, where ``$ROBOGS_SYNTH_CACHE_DIR`` names
+    a folder, on disk there: one JSON file per call keyed by its inputs and the generator's
+    source (:func:`_source_key`), written whole then renamed; an unreadable file is recomputed
+    and rewritten. The values read back are the computed ones bit for bit (JSON floats
+    round-trip exactly). The tests share one folder between their workers (tests/conftest.py):
+    a design's drive draws and an effect's plain fit cost 10-30 s each."""
+    folder = os.environ.get(SYNTH_CACHE_ENV, "")
+    if not folder:
+        return _detectability(effect, quasi_static, subset)
+    path = _memo_path(folder, effect, quasi_static, subset)
+    try:
+        return _from_json(path.read_text())
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    out = _detectability(effect, quasi_static, subset)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp")
+        tmp.write_text(_to_json(out))
+        os.replace(tmp, path)
+    except OSError:
+        pass
+    return out
+
+
+def _detectability(
+    effect: str, quasi_static: bool = False, subset: Subset = None
+) -> dict[str, Any]:
     """Whether ``effect`` is detectable by design on design B, and why (module docstring).
 
     Returns ``expected_delta_bic``, ``noncentrality`` [sigma^2] (nuisances profiled), ``k``,
@@ -761,12 +842,15 @@ def make_design_b(
     seed: int = 0,
     quasi_static: bool = False,
     trajectories: Sequence[int] | None = None,
+    with_detectability: bool = True,
 ) -> ScenarioRecording:
     """One design-B scenario with ``effect`` hidden (``"none"``: null data).
 
     ``trajectories``: indices of the motions kept (default all nine: pushes 0-5, slides 6-7,
     the drop 8). ``meta`` carries the truth, ``expected_delta_bic``, the ``noncentrality`` and
     ``power`` of the gate's test, ``detectable`` and ``carrying_trajectories`` (:func:`detectability`).
+    ``with_detectability=False`` leaves those design entries out of ``meta`` (10-50 s less where
+    no caller reads them); the recording itself is the same.
     """
     if effect not in TRUE_PARAMS:
         raise ValueError(f"unknown effect {effect!r}; known: {sorted(TRUE_PARAMS)}")
@@ -839,8 +923,7 @@ def make_design_b(
         "effects": [],
         "sensors": {"camera": {"time_offset_ns": 0}},
     }
-    det = detectability(effect, quasi_static, subset)
-    meta = {
+    meta: dict[str, Any] = {
         "design": ("B-quasi-static" if quasi_static else "B")
         + ("" if subset is None else f"-{len(subset)}"),
         "effect": effect,
@@ -849,15 +932,19 @@ def make_design_b(
         "true_friction_dynamic": box.mu_d,
         "noise_levels": dict(NOISE_B),
         "seed": seed,
-        "expected_delta_bic": det["expected_delta_bic"],
-        "noncentrality": det["noncentrality"],
-        "power": det["power"],
-        "power_white": det["power_white"],
-        "drive_variance": det["drive_variance"],
-        "detectable": det["detectable"],
-        "carrying_trajectories": det["carrying"],
-        "cluster_needs": det["cluster_needs"],
-        "detectable_verdict": det["verdict"],
-        "trajectories": None if subset is None else list(subset),
     }
+    if with_detectability:
+        det = detectability(effect, quasi_static, subset)
+        meta |= {
+            "expected_delta_bic": det["expected_delta_bic"],
+            "noncentrality": det["noncentrality"],
+            "power": det["power"],
+            "power_white": det["power_white"],
+            "drive_variance": det["drive_variance"],
+            "detectable": det["detectable"],
+            "carrying_trajectories": det["carrying"],
+            "cluster_needs": det["cluster_needs"],
+            "detectable_verdict": det["verdict"],
+        }
+    meta["trajectories"] = None if subset is None else list(subset)
     return ScenarioRecording(trajectories=trajs, physics=physics, object_name="box", meta=meta)
