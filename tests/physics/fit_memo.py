@@ -11,6 +11,10 @@ that call's result. The key is the engine (backend, the baseline's data fingerpr
 key, time step) and a hash of every array and list the call receives, so a call with any
 different input is computed afresh. Fits of the gate's null draws (``fit_nested`` without
 ``base_fit``: their residual carries an offset the key cannot see) are never memoised.
+The gate's smooth start-pose columns (:func:`robogs.physics.roughness.stencil_columns`, h48/h99:
+one batched rollout per fit, the same for every gate setting that uses them) are memoised the
+same way, keyed by the residual function's engine and space and the point; a null draw's
+residual function (an offset added) is never memoised.
 
 Under pytest-xdist two tests of one module may run in different workers; each then computes
 its own fits, as without the memo (the memo only saves, it never changes what is computed).
@@ -28,6 +32,7 @@ import numpy as np
 import pytest
 
 from robogs.physics import diagnose as D
+from robogs.physics import roughness as R
 from robogs.physics.baseline import _fingerprint, model_key
 
 __all__ = ["memoise_fits"]
@@ -62,6 +67,25 @@ def _digest(*parts: Any) -> str:
     return h.hexdigest()
 
 
+def _residual_key(fn: Any) -> list | None:
+    """The key of a residual function ``Engine.residual_fn`` made (planar: the closure of
+    :func:`robogs.physics.residuals.residual_fn`; MuJoCo: the engine's, holding ``sim``): its
+    recording, model, time step, backend and parameter space. None for any other function,
+    e.g. the gate's null-draw residual (``fn + offset``)."""
+    names = set(inspect.getclosurevars(fn).nonlocals)
+    if getattr(fn, "__qualname__", "") not in (
+        "residual_fn.<locals>.fn",
+        "Engine.residual_fn.<locals>.fn",
+    ):
+        return None
+    if not {"prep", "space"} <= names or names - {"prep", "space", "sim"}:
+        return None
+    free = inspect.getclosurevars(fn).nonlocals
+    prep, backend = free["prep"], type(free.get("sim")).__name__
+    keys = [_fingerprint(prep.rec), model_key(prep.rec.physics), prep.scene.dt, backend]
+    return [*keys, _space_key(free["space"])]
+
+
 def _space_key(space: Any) -> list:
     return [(s.owner, s.param.name) for s in space.slots]
 
@@ -75,7 +99,7 @@ def memoise_fits(monkeypatch: pytest.MonkeyPatch, store: dict[str, Any]) -> dict
 
     Returns a counter ``{"hits": n, "misses": m}`` that the caller may inspect."""
     count = {"hits": 0, "misses": 0}
-    real_nested, real_held = D.fit_nested, D.heldout_rollouts
+    real_nested, real_held, real_stencil = D.fit_nested, D.heldout_rollouts, R.stencil_columns
 
     def cached(key: str, compute: Callable[[], Any]) -> Any:
         if key in store:
@@ -116,6 +140,16 @@ def memoise_fits(monkeypatch: pytest.MonkeyPatch, store: dict[str, Any]) -> dict
         )
         return cached(key, lambda: real_held(eng, space, outs, frees, folds, *args, **kw))
 
+    def stencil_columns(fn, theta, local, *, local_h=None, stencils=R.STENCILS):
+        known = _residual_key(fn)
+        if known is None:  # a null draw's residual (an offset added) or one we do not know
+            return real_stencil(fn, theta, local, local_h=local_h, stencils=stencils)
+        key = _digest("stencil_columns", known, theta, local, local_h, list(stencils))
+        return cached(
+            key, lambda: real_stencil(fn, theta, local, local_h=local_h, stencils=stencils)
+        )
+
     monkeypatch.setattr(D, "fit_nested", fit_nested)
     monkeypatch.setattr(D, "heldout_rollouts", heldout_rollouts)
+    monkeypatch.setattr(R, "stencil_columns", stencil_columns)
     return count
