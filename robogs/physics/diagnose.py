@@ -1209,11 +1209,14 @@ def _calibrate(
 
             t0 = time.perf_counter()
             lam = gate_mod.draw_scale(base.cost - out.cost, cal.thresholds[e.name])
-            if gate_mod.CHECK_RULE in ("antithetic", "auto"):
+            if gate_mod.CHECK_RULE in ("antithetic", "auto", "zauto"):
                 lb = gate_mod.LinearCandidate("base", base.jac, nuisance(base, base.resid), n_base)
                 args = (base.resid, out.resid, valid)
                 rest = (path, lb, lam, cal.thresholds[e.name], ratio, k)
-                if gate_mod.CHECK_RULE == "auto":  # h49: the rule from the measured roughness
+                if gate_mod.CHECK_RULE == "zauto":  # h109: the share only past z's cut
+                    g = base.cost - out.cost
+                    chk = gate_mod.zauto_factor(*args, fit_draw, *rest, signs, g, cal.alpha_adj)
+                elif gate_mod.CHECK_RULE == "auto":  # h49: the rule from the measured roughness
                     chk = gate_mod.auto_factor(*args, fit_draw, *rest, signs)
                 else:
                     chk = gate_mod.antithetic_factor(*args, lambda o, m: fit_draw(o, m)[:4], *rest)

@@ -157,6 +157,11 @@ A third, ``"auto"`` (h49, :func:`auto_factor`), picks between the two from this 
 objective: the antithetic pair's odd part, against the envelope theorem's slope, measures the
 fitted chi^2 values' roughness at no extra fit, and where the share's standard error
 (``sqrt(3)`` times it) exceeds the factor's denominator h38's draw decides instead.
+A fourth, ``"zauto"`` (h109, :func:`zauto_factor`), hands the antithetic share only to a fitted
+change that is clearly larger than a threshold-sized one (:func:`change_z` above
+:func:`z_cut`, the candidate's own level ``alpha'``) and whose pair is smooth (``"auto"``'s
+test); every other candidate keeps h38's draw, which keeps the data's own selection, so a
+noise-sized false positive meets HEAD's check (h49: the MuJoCo nulls that ``"auto"`` let back).
 
 The calibration is cached on disk per revision (``model_key`` of physics.json), data
 fingerprint, candidate list and draw count, with the linearisation checks made on it
@@ -211,6 +216,9 @@ __all__ = [
     "CHECK_RULES",
     "antithetic_factor",
     "auto_factor",
+    "zauto_factor",
+    "change_z",
+    "z_cut",
     "envelope_slope",
     "fit_precision",
     "path_scale",
@@ -271,10 +279,12 @@ class LinearisationCheck:
         rollouts, seconds: what the draws' fits cost (0 when read from the cache).
         rule: the check that made it (:data:`CHECK_RULES`); branch, mu, share, precision:
             :func:`antithetic_factor`'s (``"antithetic"`` and ``"auto"``).
-        roughness, chosen, other: ``"auto"`` only (:func:`auto_factor`): the objective's
-            roughness measured on the ``+-`` draws [sigma^2] (nan where they were not
-            fitted), the rule it chose (``"antithetic"`` or ``"draw"``) and the factor of the
-            rule not chosen (nan where that was not run).
+        roughness, chosen, other: ``"auto"`` and ``"zauto"`` (:func:`auto_factor`,
+            :func:`zauto_factor`): the objective's roughness measured on the ``+-`` draws
+            [sigma^2] (nan where they were not fitted), the rule it chose (``"antithetic"`` or
+            ``"draw"``) and the factor of the rule not chosen (nan where that was not run).
+        z, cut: ``"zauto"`` only: :func:`change_z` of the fitted change and :func:`z_cut` of
+            the candidate's level, which decided between the two rules.
     """
 
     factor: float
@@ -287,12 +297,14 @@ class LinearisationCheck:
     scale: float = 1.0
     rule: str = "draw"
     branch: str = ""
-    mu: float = float("nan")
-    share: float = float("nan")
-    precision: float = float("nan")
+    mu: float = _NOT_MEASURED
+    share: float = _NOT_MEASURED
+    precision: float = _NOT_MEASURED
     roughness: float = _NOT_MEASURED
     chosen: str = ""
     other: float = _NOT_MEASURED
+    z: float = _NOT_MEASURED
+    cut: float = _NOT_MEASURED
 
     def to_dict(self) -> dict[str, Any]:
         d = {
@@ -306,16 +318,18 @@ class LinearisationCheck:
             "seconds": self.seconds,
             "rule": self.rule,
         }
-        if self.rule in ("antithetic", "auto"):  # the share only where the draws were fitted
-            d |= {"branch": self.branch, "mu": self.mu}
+        if self.rule in ("antithetic", "auto", "zauto"):  # the share where the pair was fitted
+            d |= {"branch": self.branch} | ({"mu": self.mu} if np.isfinite(self.mu) else {})
             if np.isfinite(self.share):
                 d |= {"share_sigma2": self.share, "precision_sigma2": self.precision}
-        if self.rule == "auto":  # h49: the roughness measured and the rule it chose
+        if self.rule in ("auto", "zauto"):  # h49: the roughness measured, the rule chosen
             d |= {"chosen_rule": self.chosen}
             if np.isfinite(self.roughness):
                 d |= {"roughness_sigma2": self.roughness}
             if np.isfinite(self.other):
                 d |= {"other_factor": self.other}
+        if self.rule == "zauto":  # h109: the fitted change's z against its level's cut
+            d |= {"z_change": self.z, "z_cut": self.cut}
         return d
 
     @classmethod
@@ -329,12 +343,14 @@ class LinearisationCheck:
             scale=float(d.get("scale", 1.0)),
             rule=str(d.get("rule", "draw")),
             branch=str(d.get("branch", "")),
-            mu=float(d.get("mu", float("nan"))),
-            share=float(d.get("share_sigma2", float("nan"))),
-            precision=float(d.get("precision_sigma2", float("nan"))),
+            mu=float(d.get("mu", _NOT_MEASURED)),
+            share=float(d.get("share_sigma2", _NOT_MEASURED)),
+            precision=float(d.get("precision_sigma2", _NOT_MEASURED)),
             roughness=float(d.get("roughness_sigma2", _NOT_MEASURED)),
             chosen=str(d.get("chosen_rule", "")),
             other=float(d.get("other_factor", _NOT_MEASURED)),
+            z=float(d.get("z_change", _NOT_MEASURED)),
+            cut=float(d.get("z_cut", _NOT_MEASURED)),
         )
 
 
@@ -487,7 +503,12 @@ class Calibration:
                     "share's standard error exceed its linear model"
                     if CHECK_RULE == "auto"
                     else ""
-                ),
+                )
+                if CHECK_RULE != "zauto"
+                else "antithetic noise share over its linearisation where the fitted change "
+                "is clearly above a threshold-sized one (z above its level's normal quantile) "
+                "and the objective is smooth on the pair; else the fit gain over its "
+                "linearisation on 1 null draw (h38)",
                 "candidates": {n: c.to_dict() for n, c in applied.items()},
                 "rollouts": int(sum(c.rollouts for c in applied.values())),
                 "seconds": float(sum(c.seconds for c in applied.values())),
@@ -1057,7 +1078,7 @@ def null_draw_factor(
     return LinearisationCheck(f, float(data_ratio), ratios, gains, lins, scale=float(lam))
 
 
-CHECK_RULES = ("draw", "antithetic", "auto")
+CHECK_RULES = ("draw", "antithetic", "auto", "zauto")
 CHECK_RULE = "draw"
 """The linearisation check the diagnosis runs (:mod:`robogs.physics.diagnose`): ``"draw"``
 (h38: one draw, :func:`null_draw_factor`), ``"antithetic"`` (h46: :func:`antithetic_factor`) or
@@ -1072,7 +1093,8 @@ time offset is found again) and keeps the antithetic share on planar restitution
 0.2-1.4), but the two MuJoCo null false positives stay: null 6's pair is smooth (roughness
 0.22; its false positive is the data's own selection, which any antithetic share cancels) and
 null 4's is just under the bar (sqrt(3) x 7.22 = 12.5 against 13.5; bench/RESULTS.md, issue 17,
-h49)."""
+h49). ``"zauto"`` (h109, :func:`zauto_factor`) keeps both MuJoCo nulls on the draw (their
+fitted changes are threshold-sized) and is kept off too (bench/RESULTS.md, issue 17, h109)."""
 
 
 def fit_precision(cost: float) -> float:
@@ -1593,4 +1615,120 @@ def auto_factor(
     chk.ratios += drew.ratios
     chk.gains += drew.gains
     chk.linears += drew.linears
+    return chk
+
+
+def change_z(gain: float, threshold: float, k: int) -> float:
+    """How far a candidate's in-sample gain ``gain`` [sigma^2] lies above that of a change of the
+    threshold's size, in the null's own standard deviations (h109).
+
+    On the linearised model with unit white noise a change of squared size ``c`` beyond the
+    base [sigma^2] gains a noncentral chi-square with ``k`` degrees of freedom and
+    noncentrality ``c``: mean ``c + k``, variance ``2 k + 4 c`` (its exact moments; ``4 c`` is
+    the cross term ``2 <delta, e>``'s). A *threshold-sized* change is ``c = threshold`` (the
+    unscaled null threshold, on the scale :func:`draw_scale` already equates with the gain), so
+    ``z = (gain - threshold - k) / sqrt(4 threshold + 2 k)``. h49's offline form
+    ``(gain - threshold) / (2 sqrt(gain))`` takes the spread at the fitted change (the
+    alternative's) and drops ``k``; a test of "threshold-sized" takes the null's.
+    """
+    var = 4.0 * max(float(threshold), 0.0) + 2.0 * max(int(k), 0)
+    dev = float(gain) - float(threshold) - max(int(k), 0)
+    if var <= 0.0:
+        return float("inf") if dev > 0.0 else float("-inf")
+    return dev / float(np.sqrt(var))
+
+
+def z_cut(alpha: float) -> float:
+    """The cut on :func:`change_z`: the standard normal ``1 - alpha`` quantile, ``alpha`` the
+    calibration's per-candidate level ``alpha'`` (:attr:`Calibration.alpha_adj`, the level each
+    candidate's own threshold is set at). ``z`` above it rejects "the change is threshold-sized"
+    at the same level the gate rejects "no change" (h109)."""
+    from statistics import NormalDist
+
+    a = float(np.clip(alpha, 1e-12, 1.0 - 1e-12))
+    return float(NormalDist().inv_cdf(1.0 - a))
+
+
+def zauto_factor(
+    base_resid: np.ndarray,
+    cand_resid: np.ndarray,
+    valid: np.ndarray,
+    fit: AutoFit,
+    path: PathFn,
+    base: LinearCandidate,
+    lam: float,
+    threshold: float,
+    data_ratio: float,
+    k: int,
+    signs: np.ndarray,
+    gain: float,
+    alpha: float,
+    both: bool = False,
+) -> LinearisationCheck:
+    """The linearisation check that hands the antithetic share only to a change clearly larger
+    than a threshold-sized one (h109; h49's offline observation with a cut from the test's level).
+
+    The antithetic pair cancels the cross term between the fitted change and the noise (h40);
+    that is right for a real effect's own curvature but wrong for a false positive, whose
+    fitted change *is* noise lined up with the effect (h49: MuJoCo design-B nulls 4 and 6,
+    fitted changes at the threshold's size). So:
+
+    - ``z = change_z(gain, threshold, k) > z_cut(alpha)`` (the change is not threshold-sized
+      at the candidate's own level ``alpha``): :func:`auto_factor`, i.e. the antithetic share
+      where its pair is fitted and smooth, h38's draw where the pair is rough; where
+      :func:`antithetic_factor` falls back (``"data"``, ``"plus"``: no share) h38's draw.
+    - else h38's draw (:func:`null_draw_factor`, exactly the ``"draw"`` rule's fit and factor).
+
+    Args: as :func:`auto_factor`, plus ``gain`` the candidate fit's chi^2 fall on the data
+    [sigma^2] and ``alpha`` the per-candidate level; ``both``: also run the rule not chosen
+    (a measurement: its factor goes to ``other``, the verdict is unchanged).
+
+    Returns:
+        The check, ``rule = "zauto"``, ``z``, ``cut``, ``chosen`` the rule whose factor it
+        carries (``"antithetic"`` or ``"draw"``) and ``other`` the rule not chosen's factor
+        (where run). ``gains`` / ``linears`` / ``ratios``: the fits in the order they ran (the
+        antithetic ``0, +, -`` then the draw above the cut; the draw then the others below).
+    """
+    z, cut = change_z(gain, threshold, k), z_cut(alpha)
+
+    def drawn() -> LinearisationCheck:
+        return null_draw_factor(
+            base_resid, cand_resid, valid, lambda o: fit(o, None)[:4], signs, lam, data_ratio
+        )
+
+    def anti(measure: bool) -> LinearisationCheck:
+        return auto_factor(
+            base_resid,
+            cand_resid,
+            valid,
+            fit,
+            path,
+            base,
+            lam,
+            threshold,
+            data_ratio,
+            k,
+            signs,
+            both=measure,
+        )
+
+    if z > cut:
+        chk = anti(both)
+        if chk.branch != "antithetic":  # a fall-back: no share, so the data's selection
+            drew = drawn()
+            chk.other, chk.factor, chk.chosen = chk.factor, drew.factor, "draw"
+            chk.ratios += drew.ratios
+            chk.gains += drew.gains
+            chk.linears += drew.linears
+    else:
+        chk = drawn()
+        chk.chosen = "draw"
+        if both:
+            a = anti(False)
+            chk.other, chk.roughness, chk.branch = a.factor, a.roughness, a.branch
+            chk.mu, chk.share, chk.precision = a.mu, a.share, a.precision
+            chk.ratios += a.ratios
+            chk.gains += a.gains
+            chk.linears += a.linears
+    chk.rule, chk.z, chk.cut = "zauto", z, cut
     return chk

@@ -287,3 +287,153 @@ def test_rough_toy_measures_its_roughness_and_takes_the_draw_rule():
         assert c.chosen == ("draw" if rough else "antithetic"), c
         assert (len(c.gains) == 4) == rough and (np.isfinite(c.other)) == rough
     assert sum(c.chosen == "draw" for c in chks) >= 2, [c.chosen for c in chks]
+
+
+# ---- h109: the antithetic share only past z's cut (gate.zauto_factor, CHECK_RULE "zauto") ----
+
+
+def _phi(x: float) -> float:
+    """Standard normal CDF from ``math.erf`` (an oracle independent of ``statistics``)."""
+    import math
+
+    return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0)))
+
+
+def _zrun(p: dict, thr: float, alpha: float, both: bool = False) -> G.LinearisationCheck:
+    lam = G.draw_scale(p["gain"], thr)
+    signs = G.check_signs(p["r_b"].shape[0], "h49")
+    args = (p["r_b"], p["r_c"], p["valid"], p["fit"], p["path"], p["base"], lam, thr, 1.5, 2)
+    return G.zauto_factor(*args, signs, p["gain"], alpha, both=both)
+
+
+def _thr_at(gain: float, z: float, k: int = 2) -> float:
+    """The threshold at which a gain ``gain`` sits ``z`` null standard deviations above a
+    threshold-sized change, by bisection on the noncentral chi-square's moments (mean
+    ``thr + k``, variance ``2 k + 4 thr``) written out here."""
+    lo, hi = 0.0, gain
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if (gain - mid - k) / np.sqrt(4 * mid + 2 * k) > z:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def test_change_z_has_the_noncentral_chi2_moments_of_a_threshold_sized_change():
+    """A change of squared size ``thr`` on ``k`` linear columns with unit white noise: its
+    least-squares gain ``||P (delta + e)||^2`` over 40 000 noise draws has mean ``thr + k`` and
+    variance ``2 k + 4 thr`` (Monte Carlo, 3 % / 5 %), and ``change_z`` standardises a gain by
+    exactly those (a spread taken at the fitted gain, h49's offline form, is caught)."""
+    rng = np.random.default_rng(0)
+    n, k, thr = 60, 2, 9.0
+    x = rng.standard_normal((n, k))
+    q, _ = np.linalg.qr(x)
+    delta = q @ np.array([3.0, 0.0])  # ||P delta||^2 = 9
+    e = rng.standard_normal((40_000, n))
+    g = np.sum(((delta + e) @ q) ** 2, axis=1)
+    assert g.mean() == pytest.approx(thr + k, rel=0.03)
+    assert g.var() == pytest.approx(2 * k + 4 * thr, rel=0.05)
+    for gain in (11.0, 25.0, 60.0):
+        z_mc = (gain - g.mean()) / g.std()
+        assert G.change_z(gain, thr, k) == pytest.approx(z_mc, abs=0.05)
+    assert G.change_z(60.0, thr, k) != pytest.approx((60.0 - thr) / (2 * np.sqrt(60.0)), rel=0.1)
+    assert G.change_z(thr + k, thr, k) == 0.0
+
+
+def test_z_cut_is_the_normal_quantile_of_the_candidate_level():
+    """``Phi(z_cut(alpha)) = 1 - alpha`` (erf oracle), and the cut moves with the level:
+    1.645 at 5 %, 2.46 at 0.7 % (design B's ``alpha'``), 3.09 at 0.1 %."""
+    for a in (0.05, 0.007, 0.001):
+        assert _phi(G.z_cut(a)) == pytest.approx(1.0 - a, abs=1e-12)
+    assert G.z_cut(0.05) < G.z_cut(0.007) < G.z_cut(0.001)
+
+
+def test_zauto_keeps_the_antithetic_share_on_a_change_far_above_threshold_size():
+    """Linear model (exact fits, a smooth pair), the threshold 0.2 of the gain: ``z`` is far
+    above the cut at 0.7 %, so the check is ``auto_factor``'s antithetic share (three fits,
+    factor 1) with ``z`` and the cut recorded."""
+    p, calls, _ = _linear(1.0)
+    thr = 0.2 * p["gain"]
+    z = (p["gain"] - thr - 2) / np.sqrt(4 * thr + 4)
+    chk = _zrun(p, thr, 0.007)
+    assert z > 2.0 * G.z_cut(0.007)
+    assert chk.z == pytest.approx(z, rel=1e-12) and chk.cut == G.z_cut(0.007)
+    assert (chk.rule, chk.chosen, chk.branch, len(calls)) == (
+        "zauto",
+        "antithetic",
+        "antithetic",
+        3,
+    )
+    assert chk.factor == pytest.approx(1.0, abs=1e-9) and np.isnan(chk.other)
+
+
+def test_zauto_takes_the_draw_on_a_threshold_sized_change():
+    """The same data with the threshold at 0.95 of the gain (``z`` under 1): exactly h38's draw
+    (one fit, the data's offset shrunk by ``lambda``, no start on the path), its factor that of
+    :func:`gate.null_draw_factor`, no antithetic fit."""
+    p, calls, _ = _linear(1.0)
+    thr = 0.95 * p["gain"]
+    lam = G.draw_scale(p["gain"], thr)
+    signs = G.check_signs(p["r_b"].shape[0], "h49")
+    chk = _zrun(p, thr, 0.007)
+    assert chk.z < 1.0 < G.z_cut(0.007)
+    assert (chk.chosen, len(calls), calls[0][1]) == ("draw", 1, None)
+    np.testing.assert_allclose(calls[0][0], G.draw_offset(p["r_b"], p["r_c"], signs[0], lam))
+    drew = G.null_draw_factor(
+        p["r_b"], p["r_c"], p["valid"], lambda o: p["fit"](o, None)[:4], signs, lam, 1.5
+    )
+    assert chk.factor == drew.factor and chk.gains == drew.gains
+
+
+def test_the_cut_moves_with_the_level():
+    """A threshold set so that ``z = 2.4`` (bisection on the moments): at ``alpha' = 5 %``
+    (cut 1.64) the antithetic share, at 0.1 % (cut 3.09) the draw."""
+    p, _, _ = _linear(1.0)
+    thr = _thr_at(p["gain"], 2.4)
+    assert G.change_z(p["gain"], thr, 2) == pytest.approx(2.4, abs=1e-9)
+    assert _zrun(p, thr, 0.05).chosen == "antithetic"
+    assert _zrun(p, thr, 0.001).chosen == "draw"
+
+
+def test_zauto_takes_the_draw_where_the_antithetic_check_falls_back():
+    """``z`` above the cut but the noise-free draw's gain lowered under half the threshold (the
+    shrunk change absorbed by the base): no share, so h38's draw decides (the ``+`` fall-back's
+    factor kept as ``other``)."""
+    p0, _, _ = _linear(1.0)
+    thr = 0.2 * p0["gain"]
+    g0 = _zrun(p0, thr, 0.007).gains[0]
+    p, calls, bump = _linear(1.0)
+    bump[0] = -(g0 - 0.3 * thr)  # the noise-free draw's candidate fit lands 0.7 thr short
+    chk = _zrun(p, thr, 0.007)
+    assert chk.z > chk.cut and chk.branch == "plus" and chk.chosen == "draw"
+    assert len(calls) == 3 and calls[2][1] is None
+    assert chk.other == pytest.approx(max(1.0, chk.ratios[1]))
+    assert chk.factor == pytest.approx(max(1.0, chk.ratios[2]))
+
+
+def test_zauto_both_measures_the_other_rule():
+    """``both=True`` below the cut: the verdict is the draw's; the antithetic rule also runs
+    (three more fits) and its factor is ``other``, its roughness recorded."""
+    p, calls, _ = _linear(1.0)
+    thr = 0.95 * p["gain"]
+    one = _zrun(p, thr, 0.007)
+    calls.clear()
+    chk = _zrun(p, thr, 0.007, both=True)
+    assert (chk.chosen, chk.factor) == ("draw", one.factor) and len(calls) == 4
+    assert chk.other == pytest.approx(1.0, abs=1e-9) and chk.roughness < 1e-6
+
+
+def test_zauto_record_round_trips():
+    chk = G.LinearisationCheck(
+        4.6, 3.1, [4.6], [9.3], [0.05], scale=0.52, rule="zauto", chosen="draw", z=1.3, cut=2.41
+    )
+    d = chk.to_dict()
+    assert (d["z_change"], d["z_cut"], d["chosen_rule"]) == (1.3, 2.41, "draw")
+    assert "mu" not in d and G.LinearisationCheck.from_dict(d) == chk
+    full = G.LinearisationCheck(
+        1.0, 3.1, [1.0] * 3, [9.0, 12.0, 7.0], [0.5, 3.0, 2.0], scale=0.5, rule="zauto",
+        branch="antithetic", mu=0.6, share=0.4, precision=0.1, roughness=0.2,
+        chosen="antithetic", other=4.6, z=3.0, cut=2.41,
+    )  # fmt: skip
+    assert G.LinearisationCheck.from_dict(full.to_dict()) == full
