@@ -13,8 +13,10 @@ bounds; the Jacobian at an accepted trial point is already computed ("speculativ
 covariance is ``s^2 (J^T J)^-1`` with ``s^2 = chi2 / (n - p)``, each variance raised to the
 cluster-robust sandwich's (trajectories as clusters) where that is larger, marginalised over the
 local parameters; with ``cluster_jackknife`` also to the leave-one-trajectory-out jackknife's
-(CR3), which stays honest when a few trajectories carry most of the information. A parameter the
-data do not pin down is flagged unidentifiable.
+(CR3), which stays honest when a few trajectories carry most of the information. Both
+cluster-robust terms read the residuals of the linearised model at its optimum, where the
+trajectories' scores balance, not at the point where the fit stopped (``_at_stationary``). A
+parameter the data do not pin down is flagged unidentifiable.
 """
 
 from __future__ import annotations
@@ -263,6 +265,8 @@ def _jackknife_cov(st: _State, mask_t: np.ndarray) -> np.ndarray | None:
     """Leave-one-trajectory-out (delete-one-cluster) jackknife covariance of the globals [P, P].
 
     One Gauss-Newton step per left-out trajectory from the optimum: ``d_t = (A - A_t)^+ g_t``
+    (``st`` holds the residuals at the linearised optimum, :func:`_at_stationary`, so that the
+    trajectories' scores ``g_t`` sum to zero)
     with ``A_t``, ``g_t`` the trajectory's information and score after profiling out its own
     local parameters (they leave with it), and ``V = (G-1)/G sum (d_t - mean d)(d_t - mean d)^T``.
     This is the CR3 cluster-robust covariance (for a linear model it equals it exactly;
@@ -296,6 +300,35 @@ def _jackknife_cov(st: _State, mask_t: np.ndarray) -> np.ndarray | None:
     dc = d - d.mean(axis=0)
     n_cl = len(tsel)
     return (n_cl - 1) / n_cl * (dc.T @ dc)
+
+
+def _at_stationary(st: _State, tsel: Sequence[int], n_local: int, step: np.ndarray) -> _State:
+    """A copy of ``st`` whose residuals are those of the linearised model at its optimum.
+
+    ``step`` is ``A^+ g`` over [free globals | locals of the trajectories ``tsel``] (the
+    Gauss-Newton step is its negative); each selected trajectory's residuals become
+    ``r_t - J_t step_globals - J_local,t step_t``, so that the trajectories' scores ``J_t^T r_t``
+    sum to zero (exactly, up to the pseudo-inverse's null space). The sandwich and the jackknife
+    (:func:`_jackknife_cov`) assume that: both are built at the estimate, where the scores
+    balance (Liang & Zeger 1986; the one-step jackknife ``d_t = (A - A_t)^+ g_t`` is the
+    leave-one-out estimate only when the others' score is ``-g_t``). The fit stops where an
+    accepted step gains under ``atol``, and near contact events a forward-difference Jacobian
+    straddles them, so the scores need not balance there: on design B (seed 8) restitution's
+    score summed to 87.7 against 7692 of information (the step one model standard deviation),
+    nearly all of it on the one drop that carries it; leaving the drop out then attributed that
+    unbalanced score to the other trajectories, through their information 54 (leverage 0.993),
+    and the jackknife's standard deviation came out 1.88 against 0.012 (model), wider than the
+    bounds, where a profile of the chi^2 over it gave a 95 % interval [0.47, 0.57] (bench/
+    RESULTS.md, issue 17, h110). For a linear model this is the exact optimum's residuals, so
+    the intervals no longer depend on where the fit stopped."""
+    p = len(st.prob.free)
+    nl = n_local if st.prob.fit_local else 0
+    resid = st.resid.copy()
+    for k, t in enumerate(tsel):
+        resid[t] = resid[t] - st.jac[t] @ step[:p]
+        if nl:
+            resid[t] = resid[t] - st.jac_local[t] @ step[p + nl * k : p + nl * (k + 1)]
+    return _State(st.prob, st.theta, st.local, resid, st.jac, st.jac_local, st.cost)
 
 
 def _step(
@@ -476,7 +509,7 @@ def _finish(
     )
     if p == 0:
         return out
-    a, _, _ = _normal_equations(st, mask_t, n_local)
+    a, grad, tsel = _normal_equations(st, mask_t, n_local)
     dof = max(n - a.shape[0], 1)
     s2 = st.cost / dof
     sc = space.scale[st.prob.free]
@@ -490,12 +523,14 @@ def _finish(
         # speed off by encoder noise shifts a whole slide): take the larger of the model
         # covariance and the cluster-robust sandwich with trajectories as clusters
         # (Liang & Zeger 1986), so the intervals widen when trajectories disagree
-        robust = inv @ _score_outer(st, mask_t, n_local) @ inv
+        # the cluster-robust terms read the residuals at the linearised optimum (_at_stationary)
+        lin = _at_stationary(st, tsel, n_local, inv @ grad)
+        robust = inv @ _score_outer(lin, mask_t, n_local) @ inv
         n_cl = int(np.count_nonzero(mask_t))
         robust = robust[:p, :p] * (n_cl / max(n_cl - 1, 1))
         d_mod = np.sqrt(np.maximum(np.diag(cov), 1e-300))
         var = np.maximum(np.diag(cov), np.diag(robust))
-        jack = _jackknife_cov(st, mask_t) if jackknife else None
+        jack = _jackknife_cov(lin, mask_t) if jackknife else None
         if jack is not None:
             var = np.maximum(var, np.diag(jack))
         d_fin = np.sqrt(var)
