@@ -318,7 +318,7 @@ def _at_stationary(st: _State, tsel: Sequence[int], n_local: int, step: np.ndarr
     nearly all of it on the one drop that carries it; leaving the drop out then attributed that
     unbalanced score to the other trajectories, through their information 54 (leverage 0.993),
     and the jackknife's standard deviation came out 1.88 against 0.012 (model), wider than the
-    bounds, where a profile of the chi^2 over it gave a 95 % interval [0.47, 0.57] (bench/
+    bounds, where a profile of the chi^2 over it gave a 95 % interval [0.48, 0.57] (bench/
     RESULTS.md, issue 17, h110). For a linear model this is the exact optimum's residuals, so
     the intervals no longer depend on where the fit stopped."""
     p = len(st.prob.free)
