@@ -1093,8 +1093,11 @@ time offset is found again) and keeps the antithetic share on planar restitution
 0.2-1.4), but the two MuJoCo null false positives stay: null 6's pair is smooth (roughness
 0.22; its false positive is the data's own selection, which any antithetic share cancels) and
 null 4's is just under the bar (sqrt(3) x 7.22 = 12.5 against 13.5; bench/RESULTS.md, issue 17,
-h49). ``"zauto"`` (h109, :func:`zauto_factor`) keeps both MuJoCo nulls on the draw (their
-fitted changes are threshold-sized) and is kept off too (bench/RESULTS.md, issue 17, h109)."""
+h49). ``"zauto"`` (h109, :func:`zauto_factor`) would keep both of those nulls on the draw (their
+fitted changes are threshold-sized, z 0.005 and < 0 from h49's numbers) but is kept off too: on
+planar design B it changes no verdict measured (restitution s5: z 1.32 under the cut 2.41, the
+draw's x4.59 stays; s17: z 2.63, the share's x1.62 instead of x9.82, threshold 8.0 against a
+held-out fall of 6.9, still lost; bench/RESULTS.md, issue 17, h109)."""
 
 
 def fit_precision(cost: float) -> float:
