@@ -319,7 +319,8 @@ def main() -> None:
     ap.add_argument(
         "--gate-method",
         default=None,
-        help="opt-in null of the evidence gate (robogs.physics.gate.METHODS, e.g. parametric); "
+        help="null of the evidence gate (robogs.physics.gate.METHODS; default: "
+        "$ROBOGS_GATE_METHOD, else parametric; e.g. both for the wild null); "
         "sets $ROBOGS_GATE_METHOD for the workers (use a separate --out per method)",
     )
     a = ap.parse_args()

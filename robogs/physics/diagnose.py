@@ -36,8 +36,10 @@ the held-out test alone (8.2 against 7.9, 48.1 against 47.9, 11.5 against 6.9 si
 in-sample ΔBIC +12.8, -9.2 and +1.2 (bench/RESULTS.md, issue 17). Asking Schwarz's criterion
 (Schwarz 1978, Ann. Statist. 6) to prefer the effect as well is parameter-free: an effect whose
 in-sample fall of chi^2 does not pay its ``k ln n`` is not reported, whatever its held-out fall.
-A row the rule blocked says so in its note. Under 8 trajectories the default null is white
-noise only (``gate.calibrate``) and strong in-sample evidence is asked instead (``DBIC_MAX``).
+A row the rule blocked says so in its note. Under 8 trajectories strong in-sample evidence is
+asked instead (``DBIC_MAX``): the parametric null (the default, :func:`gate_method`) leaves the
+residual's other shared errors to too few trajectories, and the wild null (``both``) is white
+noise only there (``gate.calibrate``).
 
 Partial identification: a fit whose parameters are not all determined
 (:mod:`robogs.physics.fit`: a 95 % interval wider than the bounds, or near-collinear parameters)
@@ -771,9 +773,9 @@ def diagnose_recording(
         # thresholds in sigma^2 on this data (under 8 trajectories those of the studentised
         # held-out fall times its standard error, gate.Calibration.judge)
         thr, q95, p_own = cal.judge(e.name, held_t[0], held_t[i], delta)
-        # under 8 trajectories the default null is white noise only (gate.calibrate): strong
-        # in-sample evidence is required as well; so it is under the opt-in parametric null,
-        # whose drive model leaves the residual's other shared errors to so few trajectories
+        # under 8 trajectories the wild null ("both") is white noise only (gate.calibrate):
+        # strong in-sample evidence is required as well; so it is under the parametric null
+        # (the default), whose drive model leaves the residual's other shared errors to so few trajectories
         # (a 4-push null reported Stribeck at dBIC -2.3 without it, test_split)
         few = "white-noise null only" in cal.method or (
             "parametric" in cal.method and gate_mod.few_trajectories(prep.n_traj)
@@ -1011,8 +1013,10 @@ def sign_flip_floor(method: str, carrying: int) -> float | None:
 
 GATE_METHOD_ENV = "ROBOGS_GATE_METHOD"
 """Environment variable that picks the gate's null (:data:`robogs.physics.gate.METHODS`;
-unset: ``"both"``, the default). ``parametric`` (opt-in, h76) simulates the drive's own
-measurement error instead of sign-flipping the base residual (:func:`robogs.physics.drive_noise.drive_inputs`)."""
+unset: ``"parametric"``, h76, the default since 2026-11-28), which simulates the drive's own
+measurement error (:func:`robogs.physics.drive_noise.drive_inputs`). ``both`` is the earlier
+default: the base residual sign-flipped per trajectory and white noise, the larger of the two
+(it cannot pass an effect that few trajectories carry: :func:`sign_flip_floor`)."""
 
 
 PARAMETRIC_DRAWS = 1000
@@ -1021,13 +1025,13 @@ largest draw, where 400 give the 3rd)."""
 
 
 def gate_method() -> str:
-    """The gate's null construction: ``$ROBOGS_GATE_METHOD`` or ``"both"``.
+    """The gate's null construction: ``$ROBOGS_GATE_METHOD`` or ``"parametric"``.
 
     Raises:
         InputError: an unknown method (names the variable and the choices)."""
     from robogs.format.errors import InputError
 
-    m = os.environ.get(GATE_METHOD_ENV, "").strip() or "both"
+    m = os.environ.get(GATE_METHOD_ENV, "").strip() or "parametric"
     if m not in gate_mod.METHODS:
         raise InputError(
             f"unknown gate method {m!r}",
@@ -1128,7 +1132,7 @@ def _calibrate(
         for e, o in zip(cands, outs[1:], strict=True)
     ]
     insample = gate_insample(method)  # h94, opt-in (False unless $ROBOGS_GATE_INSAMPLE is set)
-    if method == "both":  # the default: called exactly as before
+    if method == "both":  # the wild null, called exactly as before it stopped being the default
         cal = gate_mod.calibrate(lin, base.resid, valid, folds, fingerprint=fp)
     else:
         inputs = None

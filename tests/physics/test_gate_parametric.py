@@ -211,9 +211,11 @@ def test_gate_method_from_the_environment(monkeypatch):
     from robogs.physics.diagnose import GATE_METHOD_ENV, gate_method
 
     monkeypatch.delenv(GATE_METHOD_ENV, raising=False)
-    assert gate_method() == "both"
-    monkeypatch.setenv(GATE_METHOD_ENV, "parametric")
     assert gate_method() == "parametric"
+    monkeypatch.setenv(GATE_METHOD_ENV, " ")
+    assert gate_method() == "parametric"
+    monkeypatch.setenv(GATE_METHOD_ENV, "both")
+    assert gate_method() == "both"
     monkeypatch.setenv(GATE_METHOD_ENV, "bootstrap")
     with pytest.raises(InputError, match="unknown gate method"):
         gate_method()

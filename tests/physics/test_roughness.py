@@ -236,11 +236,14 @@ def test_planar_gate_unchanged_with_smooth_columns(monkeypatch, tmp_path):
     / ||C_30|| <= 0.04``), not to the chi^2 precision of the rule, so some are replaced; the
     thresholds stay within 1 % of the flag-off ones (seed 1 offline: tilt 51.82 -> 51.62) and
     the record says which stencils were taken. (Not every planar design is that smooth: on
-    design A the planar columns of a 6-push scenario turn by 0.1-0.3 rad within 10 steps.)"""
-    from robogs.physics.diagnose import diagnose_recording
+    design A the planar columns of a 6-push scenario turn by 0.1-0.3 rad within 10 steps.)
+    The flag is the wild null's (``both``): the default parametric null always takes the smooth
+    columns (``roughness.smooth_for``, h99)."""
+    from robogs.physics.diagnose import GATE_METHOD_ENV, diagnose_recording
     from robogs.synth.scenarios.design_b import make_design_b
 
     monkeypatch.setenv("ROBOGS_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv(GATE_METHOD_ENV, "both")
     rec = make_design_b("none", seed=1)
     cands = ["table_tilt", "anisotropic_friction", "time_offset"]
     res = {}
