@@ -16,8 +16,11 @@ Exit codes: 0 done, 1 diagnose found no effect while the model does not reproduc
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -74,6 +77,17 @@ def add_arguments_for(verb: str, p: argparse.ArgumentParser) -> None:
             help="hold out the episodes whose segment (a tabular log's segment/episode/"
             "trajectory column) is V1, V2...; without values, those of the last episode's "
             "segment (the data recorded last)",
+        )
+    if verb in ("diagnose", "report"):
+        from robogs.physics.gate import METHODS
+
+        p.add_argument(
+            "--gate-null",
+            choices=METHODS,
+            default=None,
+            help="object model: the evidence gate's null (default parametric: this recording's "
+            "own measurement error simulated; both: the base residual sign-flipped per "
+            "trajectory and white noise); sets $ROBOGS_GATE_METHOD for this run",
         )
     if verb == "compare":
         p.add_argument(
@@ -594,7 +608,30 @@ def _object_auto(
     return 0
 
 
+@contextlib.contextmanager
+def _gate_null(args: argparse.Namespace) -> Iterator[None]:
+    """``--gate-null``: the object model's gate reads it as ``$ROBOGS_GATE_METHOD``, set for
+    this command only (the previous value is restored)."""
+    from robogs.physics.diagnose import GATE_METHOD_ENV
+
+    new, old = getattr(args, "gate_null", None), os.environ.get(GATE_METHOD_ENV)
+    if new:
+        os.environ[GATE_METHOD_ENV] = new
+    try:
+        yield
+    finally:
+        if new and old is None:
+            os.environ.pop(GATE_METHOD_ENV, None)
+        elif new:
+            os.environ[GATE_METHOD_ENV] = old
+
+
 def _diagnose(args: argparse.Namespace, model: str) -> int:
+    with _gate_null(args):
+        return _diagnose_run(args, model)
+
+
+def _diagnose_run(args: argparse.Namespace, model: str) -> int:
     from robogs.physics.sanity import none_found_text, note_diagnosis
 
     effects = [e.strip() for e in args.effects.split(",")] if args.effects else None
@@ -827,6 +864,11 @@ def _report(args: argparse.Namespace, model: str) -> int:
         raise InputError(
             "the HTML report covers the object model", hint="use robogs compare --model arm"
         )
+    with _gate_null(args):
+        return _report_run(args)
+
+
+def _report_run(args: argparse.Namespace) -> int:
     from robogs.physics.api import diagnose, report, report_baselines
 
     add = list(args.add)
