@@ -175,6 +175,23 @@ def test_verdict_rule(stat, thr, q95, dbic, few, ident, partly, want):
     assert judge(stat, thr, q95, dbic, few, ident, partly) == want
 
 
+@pytest.mark.parametrize(
+    "stat,thr,dbic,halved,want",
+    [
+        # design-A null seeds under the parametric null whose held-out step was halved in one
+        # fold (bench/RESULTS.md, issue 17, h114): reported before the rule, blocked now
+        (17.53, 6.52, -8.4, 1, ("likely", False, True)),  # seed 20 restitution
+        (26.18, 18.50, -1.3, 1, ("likely", False, True)),  # seed 48 camera extrinsics
+        (17.53, 6.52, -8.4, 0, ("add", True, False)),  # the same numbers, no halved step
+        # the closest true report it must keep: design B restitution seed 16 (3 folds halved)
+        (21.0, 4.5, -12.3, 3, ("add", True, False)),
+        (2.0, 6.5, -50.0, 2, ("not supported", False, False)),  # below the gate: unchanged
+    ],
+)
+def test_a_halved_heldout_step_asks_strong_insample_evidence(stat, thr, dbic, halved, want):
+    assert judge(stat, thr, 3.0, dbic, False, True, False, halved) == want
+
+
 def test_unbounded_intervals_are_json_null_in_rows_and_auto_steps():
     """A partly identified effect's unbounded interval (and an auto-loop step that accepted it)
     serialises as strict JSON: null, never Infinity."""
