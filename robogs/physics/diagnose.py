@@ -873,30 +873,7 @@ def diagnose_recording(
             )
         )
         chk = cal.checks.get(e.name) if e.name in cal.inflation else None
-        if chk is not None and chk.factor > 1.0 and chk.rule == "auto" and chk.chosen == "draw":
-            rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
-                f"null threshold scaled x{chk.factor:.2f} ({thr / chk.factor:.1f} -> {thr:.1f} "
-                f"sigma^2): the objective is rough here (roughness {chk.roughness:.2f} sigma^2 "
-                f"on the antithetic pair, share {chk.share:.2f} +- "
-                f"{np.sqrt(3.0) * chk.roughness:.2f}), so one draw decides: its fit gained more "
-                "than its linear model by that ratio (the gate's linearisation check)"
-            )
-        elif chk is not None and chk.factor > 1.0 and chk.rule in ("antithetic", "auto"):
-            how = {
-                "data": "its fitted change is no larger than the threshold: the data's own "
-                "ratio of fit gain to linear gain",
-                "plus": f"its fitted change, shrunk x{chk.scale:.2f} along the model's path, "
-                "is absorbed by the base: the fit gain over the linear gain on the data's "
-                "own residual",
-                "antithetic": f"the noise share of three draws on the model's path (change "
-                f"x{chk.scale:.2f}) over its linear model, floored at the fits' precision "
-                f"{chk.precision:.2f} sigma^2",
-            }[chk.branch]
-            rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
-                f"null threshold scaled x{chk.factor:.2f} ({thr / chk.factor:.1f} -> {thr:.1f} "
-                f"sigma^2): {how} (the gate's linearisation check)"
-            )
-        elif chk is not None and chk.factor > 1.0:
+        if chk is not None and chk.factor > 1.0:
             rows[-1].note = (rows[-1].note + "; " if rows[-1].note else "") + (
                 f"null threshold scaled x{chk.factor:.2f} ({thr / chk.factor:.1f} -> {thr:.1f} "
                 f"sigma^2): on {len(chk.ratios)} draws (its fitted change scaled "
@@ -1190,20 +1167,16 @@ def _calibrate(
         if not gate_mod.needs_check(stat, cal.thresholds[e.name], ratio, dbic):
             continue
         chk = cal.checks.get(e.name)
-        if chk is None or chk.rule != gate_mod.CHECK_RULE:
+        if chk is None:
             count = [0]
 
             def fit_draw(
                 offset: np.ndarray,
-                mu: float | None = None,
                 e: Effect = e,
-                out: FitOutcome = out,
                 count: list[int] = count,
             ):
                 off = torch.as_tensor(offset)
                 starts = start_points(space, e, theta0)
-                if mu is not None:  # h46: also start where the draw's change was made
-                    starts = [*starts, (1.0 - mu) * base.theta + mu * out.theta]
 
                 def fn_d(th: torch.Tensor, lo: torch.Tensor) -> torch.Tensor:
                     count[0] += 1
@@ -1221,33 +1194,13 @@ def _calibrate(
                     [(space.owner_columns(e.name), starts)],
                 )
                 lc_d = gate_mod.LinearCandidate(e.name, c.jac, nuisance(c, b.resid, f=fn_d), n_base)
-                return b.cost, c.cost, lc_d, b.resid, c.resid
-
-            def path(mus: np.ndarray, out: FitOutcome = out, count: list[int] = count):
-                m = np.asarray(mus, float)
-                th = (1.0 - m)[:, None] * base.theta[None] + m[:, None] * out.theta[None]
-                lo = (1.0 - m)[:, None, None] * base.local[None] + m[:, None, None] * out.local
-                count[0] += 1
-                with torch.no_grad():
-                    return fn(torch.as_tensor(th), torch.as_tensor(lo)).numpy()
+                return b.cost, c.cost, lc_d, b.resid
 
             t0 = time.perf_counter()
             lam = gate_mod.draw_scale(base.cost - out.cost, cal.thresholds[e.name])
-            if gate_mod.CHECK_RULE in ("antithetic", "auto", "zauto"):
-                lb = gate_mod.LinearCandidate("base", base.jac, nuisance(base, base.resid), n_base)
-                args = (base.resid, out.resid, valid)
-                rest = (path, lb, lam, cal.thresholds[e.name], ratio, k)
-                if gate_mod.CHECK_RULE == "zauto":  # h109: the share only past z's cut
-                    g = base.cost - out.cost
-                    chk = gate_mod.zauto_factor(*args, fit_draw, *rest, signs, g, cal.alpha_adj)
-                elif gate_mod.CHECK_RULE == "auto":  # h49: the rule from the measured roughness
-                    chk = gate_mod.auto_factor(*args, fit_draw, *rest, signs)
-                else:
-                    chk = gate_mod.antithetic_factor(*args, lambda o, m: fit_draw(o, m)[:4], *rest)
-            else:
-                chk = gate_mod.null_draw_factor(
-                    base.resid, out.resid, valid, lambda o: fit_draw(o)[:4], signs, lam, ratio
-                )
+            chk = gate_mod.null_draw_factor(
+                base.resid, out.resid, valid, fit_draw, signs, lam, ratio
+            )
             chk.rollouts, chk.seconds = count[0], time.perf_counter() - t0
             made = True
         cal.apply_check(e.name, chk)

@@ -12,8 +12,10 @@ Jacobian of the candidate's fit (base columns plus the effect's) and ``J_l`` [T,
 each trajectory's nuisance parameters; the full fits of ``B`` (base columns only) and ``B + C``
 are linear least squares (nuisance parameters profiled out per trajectory), the folds' Gauss-
 Newton steps are exact, and the whole procedure above is repeated on simulated noise ``e``, zero
-where the data have no sample (this dataset's drops, rates, jitter and split). Two noises, and
-each candidate's threshold is the larger of the two (:func:`calibrate`): a wild cluster
+where the data have no sample (this dataset's drops, rates, jitter and split). The diagnosis
+simulates this recording's own measurement error (``method="parametric"``, below). The earlier
+construction, :func:`calibrate`'s ``method="both"``, takes two noises, and each candidate's
+threshold is the larger of the two: a wild cluster
 bootstrap, the base fit's residual of each trajectory with a sign per trajectory (Webb's
 six-point weights under 8 trajectories, :func:`wild_weights`), so that
 errors shared by the samples of one trajectory enter the null; and Gaussian white noise at each
@@ -23,7 +25,7 @@ the Jacobians are those the fits already computed (the linearisation of the arm 
 :mod:`robogs.physics.arm.diagnose`; a bootstrap linearised at the estimate, Efron & Tibshirani
 1993, "An Introduction to the Bootstrap", ch. 6).
 
-Under 8 trajectories (fewer than ``MIN_PATTERNS`` sign patterns) the default null is white noise
+Under 8 trajectories (fewer than ``MIN_PATTERNS`` sign patterns) ``method="both"`` is white noise
 alone and the diagnosis asks for strong in-sample evidence as well (``DBIC_MAX``). Webb's wild
 null of the fall (``method="wild"``) keeps its size there but has no power: the base residuals
 carry the effect, and a pattern near ``w`` on every trajectory scales it by ``w^2`` (up to 1.5),
@@ -56,12 +58,14 @@ trajectories, so the held-out fall over it over-rejects; studentised (``statisti
 keeps the size (tests/physics/test_gate.py) and passes a six-trajectory camera offset, and
 never an effect on one trajectory (``t = +-1``).
 
-``method="parametric"`` (opt-in, h76) simulates the errors a trajectory's samples share from a
+``method="parametric"`` (h76; the diagnosis's default since 2026-11-28,
+:func:`robogs.physics.diagnose.gate_method`, after both designs' hidden-effect suites ran under
+it) simulates the errors a trajectory's samples share from a
 model of their source instead of resampling the data's residual, so it has no sign-flip floor:
 each draw is Gaussian white noise at each trajectory's difference-based scale plus the
 linearised response to the trajectory's own input error, ``e_t = s_t z_t + J_in,t delta_t``,
 ``delta_t ~ N(0, Sigma_in,t)`` (a parametric bootstrap of the fitted base model, linearised like
-the rest of the gate). The diagnosis (``$ROBOGS_GATE_METHOD=parametric``) takes ``J_in`` from
+the rest of the gate). The diagnosis takes ``J_in`` from
 :mod:`robogs.physics.drive_noise`: the base fit's residual's responses to draws of the drive's
 own measurement error (the recorded pusher path's white noise, estimated from that path, put
 through the drive's smoother), one rollout per draw at the base fit, ``Sigma_in = I / M``. On
@@ -144,24 +148,10 @@ unscaled threshold, its fit gains more on the data than its linear model
 (``(gain + k) / (linear + k) > 1``) and ΔBIC < 0 (else it is never reported). Every other
 candidate keeps ``f = 1``.
 
-A second check, behind :data:`CHECK_RULE` (``"antithetic"``, h46; off by default): h38's draw
-also holds an effect's own curvature (restitution is flat at ``e = 0``: design A's factors
-1.1-10.5, 4 of 15 seeds lost), so :func:`antithetic_factor` shrinks the change along the
-model's own path (:func:`path_scale`) and takes the noise share of three draws (``+e``, ``-e``,
-none), which for a linear model is ``||P e||^2`` whatever the change, over its linear model,
-with the denominator floored at the share's precision (:func:`fit_precision`, the fitter's
-stopping rule); where the change is no larger than the threshold (``lambda = 1``) or vanishes
-once shrunk (the noise-free draw gains under half the threshold) it falls back to the data's
-own selection, which the antithetic draws cancel (bench/RESULTS.md, issue 17, h40 and h46).
-A third, ``"auto"`` (h49, :func:`auto_factor`), picks between the two from this dataset's
-objective: the antithetic pair's odd part, against the envelope theorem's slope, measures the
-fitted chi^2 values' roughness at no extra fit, and where the share's standard error
-(``sqrt(3)`` times it) exceeds the factor's denominator h38's draw decides instead.
-A fourth, ``"zauto"`` (h109, :func:`zauto_factor`), hands the antithetic share only to a fitted
-change that is clearly larger than a threshold-sized one (:func:`change_z` above
-:func:`z_cut`, the candidate's own level ``alpha'``) and whose pair is smooth (``"auto"``'s
-test); every other candidate keeps h38's draw, which keeps the data's own selection, so a
-noise-sized false positive meets HEAD's check (h49: the MuJoCo nulls that ``"auto"`` let back).
+Three other checks were built and measured on both designs, and not adopted: an antithetic
+noise share along the model's path (h46), a choice between it and the draw from the objective's
+measured roughness (h49), and that share only past a z cut at the candidate's level (h109);
+bench/RESULTS.md, issue 17, records each one's numbers and why.
 
 The calibration is cached on disk per revision (``model_key`` of physics.json), data
 fingerprint, candidate list and draw count, with the linearisation checks made on it
@@ -212,16 +202,6 @@ __all__ = [
     "draw_scale",
     "needs_check",
     "null_draw_factor",
-    "CHECK_RULE",
-    "CHECK_RULES",
-    "antithetic_factor",
-    "auto_factor",
-    "zauto_factor",
-    "change_z",
-    "z_cut",
-    "envelope_slope",
-    "fit_precision",
-    "path_scale",
     "store_checks",
     "cache_dir",
     "code_hash",
@@ -260,11 +240,6 @@ and their spread on a real effect is noise that only raises its bar (MuJoCo desi
 1: 1.67 on the data's signs, 1.62 and 2.28 flipped; with the largest the tilt was lost)."""
 
 
-_NOT_MEASURED = float("nan")
-"""One nan object for the fields a check may leave unmeasured, so that records compare equal
-after a round trip (tuple equality tests identity before ``==``)."""
-
-
 @dataclass
 class LinearisationCheck:
     """One candidate's linearisation check on null draws (:func:`null_draw_factor`).
@@ -277,14 +252,6 @@ class LinearisationCheck:
             chi^2 fall ``gain'`` and the linear model's ``linear'`` [sigma^2].
         scale: ``lambda``, the fitted change's scale in the draws (:func:`draw_scale`).
         rollouts, seconds: what the draws' fits cost (0 when read from the cache).
-        rule: the check that made it (:data:`CHECK_RULES`); branch, mu, share, precision:
-            :func:`antithetic_factor`'s (``"antithetic"`` and ``"auto"``).
-        roughness, chosen, other: ``"auto"`` and ``"zauto"`` (:func:`auto_factor`,
-            :func:`zauto_factor`): the objective's roughness measured on the ``+-`` draws
-            [sigma^2] (nan where they were not fitted), the rule it chose (``"antithetic"`` or
-            ``"draw"``) and the factor of the rule not chosen (nan where that was not run).
-        z, cut: ``"zauto"`` only: :func:`change_z` of the fitted change and :func:`z_cut` of
-            the candidate's level, which decided between the two rules.
     """
 
     factor: float
@@ -295,19 +262,9 @@ class LinearisationCheck:
     rollouts: int = 0
     seconds: float = 0.0
     scale: float = 1.0
-    rule: str = "draw"
-    branch: str = ""
-    mu: float = _NOT_MEASURED
-    share: float = _NOT_MEASURED
-    precision: float = _NOT_MEASURED
-    roughness: float = _NOT_MEASURED
-    chosen: str = ""
-    other: float = _NOT_MEASURED
-    z: float = _NOT_MEASURED
-    cut: float = _NOT_MEASURED
 
     def to_dict(self) -> dict[str, Any]:
-        d = {
+        return {
             "factor": self.factor,
             "data_ratio": self.data_ratio,
             "scale": self.scale,
@@ -316,21 +273,7 @@ class LinearisationCheck:
             "draw_linear_sigma2": list(self.linears),
             "rollouts": self.rollouts,
             "seconds": self.seconds,
-            "rule": self.rule,
         }
-        if self.rule in ("antithetic", "auto", "zauto"):  # the share where the pair was fitted
-            d |= {"branch": self.branch} | ({"mu": self.mu} if np.isfinite(self.mu) else {})
-            if np.isfinite(self.share):
-                d |= {"share_sigma2": self.share, "precision_sigma2": self.precision}
-        if self.rule in ("auto", "zauto"):  # h49: the roughness measured, the rule chosen
-            d |= {"chosen_rule": self.chosen}
-            if np.isfinite(self.roughness):
-                d |= {"roughness_sigma2": self.roughness}
-            if np.isfinite(self.other):
-                d |= {"other_factor": self.other}
-        if self.rule == "zauto":  # h109: the fitted change's z against its level's cut
-            d |= {"z_change": self.z, "z_cut": self.cut}
-        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> LinearisationCheck:
@@ -341,16 +284,6 @@ class LinearisationCheck:
             [float(x) for x in d["draw_gains_sigma2"]],
             [float(x) for x in d["draw_linear_sigma2"]],
             scale=float(d.get("scale", 1.0)),
-            rule=str(d.get("rule", "draw")),
-            branch=str(d.get("branch", "")),
-            mu=float(d.get("mu", _NOT_MEASURED)),
-            share=float(d.get("share_sigma2", _NOT_MEASURED)),
-            precision=float(d.get("precision_sigma2", _NOT_MEASURED)),
-            roughness=float(d.get("roughness_sigma2", _NOT_MEASURED)),
-            chosen=str(d.get("chosen_rule", "")),
-            other=float(d.get("other_factor", _NOT_MEASURED)),
-            z=float(d.get("z_change", _NOT_MEASURED)),
-            cut=float(d.get("z_cut", _NOT_MEASURED)),
         )
 
 
@@ -494,21 +427,7 @@ class Calibration:
             "inflation": dict(self.inflation) or None,
             "linearisation_check": {
                 "method": f"fit gain over its linearisation on {CHECK_DRAWS} null draws "
-                "(the data, its fitted change shrunk to the threshold's scale), largest"
-                if CHECK_RULE == "draw"
-                else "antithetic noise share over its linearisation, floored at the fits' "
-                "precision (draws on the model's path at the threshold's scale)"
-                + (
-                    "; h38's draw instead where the objective's measured roughness makes the "
-                    "share's standard error exceed its linear model"
-                    if CHECK_RULE == "auto"
-                    else ""
-                )
-                if CHECK_RULE != "zauto"
-                else "antithetic noise share over its linearisation where the fitted change "
-                "is clearly above a threshold-sized one (z above its level's normal quantile) "
-                "and the objective is smooth on the pair; else the fit gain over its "
-                "linearisation on 1 null draw (h38)",
+                "(the data, its fitted change shrunk to the threshold's scale), largest",
                 "candidates": {n: c.to_dict() for n, c in applied.items()},
                 "rollouts": int(sum(c.rollouts for c in applied.values())),
                 "seconds": float(sum(c.seconds for c in applied.values())),
@@ -1078,206 +997,6 @@ def null_draw_factor(
     return LinearisationCheck(f, float(data_ratio), ratios, gains, lins, scale=float(lam))
 
 
-CHECK_RULES = ("draw", "antithetic", "auto", "zauto")
-CHECK_RULE = "draw"
-"""The linearisation check the diagnosis runs (:mod:`robogs.physics.diagnose`): ``"draw"``
-(h38: one draw, :func:`null_draw_factor`), ``"antithetic"`` (h46: :func:`antithetic_factor`) or
-``"auto"`` (h49: :func:`auto_factor`, the antithetic share where the objective's measured
-roughness lets it resolve the factor, else the draw). Kept on ``"draw"``: the antithetic check
-finds design A restitution on every seed run (8 of 8, h38's draw 4 of 8) and holds planar
-design A null seeds 4 and 20-23, but lets MuJoCo design B's null seeds 4 (restitution) and 6
-(tilt) back (factor 1 on both) and loses its time offset seed 0 (a share of 9.87 sigma^2 on
-gains of about 680, where the fitter's stopping rule promises 0.2: factor 8.5; bench/RESULTS.md,
-issue 17, h46). ``"auto"`` measures that roughness (5.8 sigma^2: the draw decides, x1.12, the
-time offset is found again) and keeps the antithetic share on planar restitution (roughness
-0.2-1.4), but the two MuJoCo null false positives stay: null 6's pair is smooth (roughness
-0.22; its false positive is the data's own selection, which any antithetic share cancels) and
-null 4's is just under the bar (sqrt(3) x 7.22 = 12.5 against 13.5; bench/RESULTS.md, issue 17,
-h49). ``"zauto"`` (h109, :func:`zauto_factor`) would keep both of those nulls on the draw (their
-fitted changes are threshold-sized, z 0.005 and < 0 from h49's numbers) but is kept off too: on
-planar design B it changes no verdict measured (restitution s5: z 1.32 under the cut 2.41, the
-draw's x4.59 stays; s17: z 2.63, the share's x1.62 instead of x9.82, threshold 8.0 against a
-held-out fall of 6.9, still lost; bench/RESULTS.md, issue 17, h109)."""
-
-
-def fit_precision(cost: float) -> float:
-    """How closely a converged fit's chi^2 ``cost`` [sigma^2] is known: the fitter's own stopping
-    rule (:func:`robogs.physics.fit.fit_problems` stops when an accepted step lowers chi^2 by less
-    than ``max(ftol chi^2, atol)``; its defaults are read, not copied)."""
-    import inspect
-
-    from robogs.physics.fit import fit_problems
-
-    par = inspect.signature(fit_problems).parameters
-    ftol, atol = float(par["ftol"].default), float(par["atol"].default)
-    return max(ftol * abs(float(cost)), atol)
-
-
-PathFn = Callable[[np.ndarray], np.ndarray]
-"""``path(mu [M]) -> [M, T, K]``: the data's weighted residual at the parameters (global and
-nuisance) ``(1 - mu) x_B + mu x_C`` between the base and candidate fits (``mu = 0``: ``r_B``,
-``mu = 1``: ``r_C``)."""
-
-AntiFit = Callable[[np.ndarray, float], tuple[float, float, LinearCandidate, np.ndarray]]
-"""``fit(offset [T, K], mu) -> (chi2 of the base fit, chi2 of the base + candidate fit, the
-candidate linearised at its fit, the base fit's residual [T, K])`` of ``r(theta) + offset``,
-fitted as the diagnosis fits the data plus a candidate start at ``x_C``'s scale ``mu`` along the
-path (:data:`PathFn`)."""
-
-
-def path_scale(
-    path: PathFn,
-    lam: float,
-    base_resid: np.ndarray,
-    cand_resid: np.ndarray,
-    base: LinearCandidate,
-    valid: np.ndarray,
-    grid: int = 9,
-) -> tuple[float, int]:
-    """``mu`` in [0, 1] where the model's own change along the path from the base fit to the
-    candidate fit has ``lam`` of the fitted change's size *beyond what the base model absorbs*:
-    ``||(I - P_B)(r(mu) - r_B)|| = lam ||(I - P_B)(r_C - r_B)||``, ``P_B`` the least-squares
-    projection on the base fit's columns and each trajectory's nuisance columns (``base``, all
-    its columns: the gain is the chi^2 the base cannot take, so the shrunk change's gain is
-    about ``lam^2`` of the fit's; a plain norm is mostly the base's own shift on a change that
-    the base partly absorbs). First crossing on a grid of ``grid`` inner points, then ``grid``
-    more inside the bracket, linear interpolation in the last (two batched rollouts).
-    Returns ``(mu, rows evaluated)``."""
-    if lam >= 1.0:
-        return 1.0, 0
-    jac = base.jac * valid[..., None]
-    q = _profile(base.jac_local, valid)
-
-    def size(x: np.ndarray) -> np.ndarray:
-        r, _ = _linear_heldout(jac, q, x * valid, [])
-        return np.linalg.norm(r.reshape(len(r), -1), axis=1)
-
-    full = float(size((cand_resid - base_resid)[None])[0])
-    target = lam * full
-    lo, hi, d_lo, d_hi, rows = 0.0, 1.0, 0.0, full, 0
-    for _ in range(2):
-        mus = np.linspace(lo, hi, grid + 2)[1:-1]
-        d = size(path(mus) - base_resid[None])
-        rows += len(mus)
-        xs = np.concatenate([[lo], mus, [hi]])
-        ds = np.concatenate([[d_lo], d, [d_hi]])
-        j = max(int(np.argmax(ds >= target)) if np.any(ds >= target) else len(xs) - 1, 1)
-        lo, hi, d_lo, d_hi = xs[j - 1], xs[j], ds[j - 1], ds[j]
-    w = 0.0 if d_hi <= d_lo else float(np.clip((target - d_lo) / (d_hi - d_lo), 0.0, 1.0))
-    return float(lo + w * (hi - lo)), rows
-
-
-def antithetic_factor(
-    base_resid: np.ndarray,
-    cand_resid: np.ndarray,
-    valid: np.ndarray,
-    fit: AntiFit,
-    path: PathFn,
-    base: LinearCandidate,
-    lam: float,
-    threshold: float,
-    data_ratio: float,
-    k: int,
-) -> LinearisationCheck:
-    """The linearisation check without the effect's own curvature (h46; h40's antithetic draws
-    with the share's precision and two fall-backs).
-
-    The fitted change is shrunk *along the model's path* to the threshold's scale
-    (:func:`path_scale`), and three draws
-    ``pred(mu) + s e`` (``e = obs - pred_C``, the candidate fit's residual with the data's own
-    signs, ``s = +1, -1, 0``; offset ``-r(mu) + s r_C``) are fitted as the diagnosis fits the
-    data. For a linear model ``(gain(+) + gain(-)) / 2 - gain(0)`` is ``||P e||^2`` whatever
-    the change (the cross terms cancel: antithetic variates, Hammersley & Morton 1956, Proc.
-    Camb. Phil. Soc. 52), so this *share* measures the fit's capacity on the noise beyond its
-    linear model ``||P_0 e||^2`` (``P_0`` the linear model at the noise-free draw's fit) and not
-    the effect's own curvature along its path. Each ``gain`` is a difference of two converged
-    chi^2 values known to :func:`fit_precision` each, so the share is known to ``delta`` =
-    the sum of the six precisions weighted as in the share; the factor is
-    ``max(1, (max(share, 0) + k) / (max(||P_0 e||^2, delta) + k))``.
-
-    Fall-backs to the data's own selection (the cross term the antithetic draw cancels):
-    ``lam >= 1`` (the fitted change is no larger than the null threshold, so it is itself a
-    noise-sized fit with nothing to separate from the noise: the factor is ``data_ratio``,
-    which h38's draw at ``lam = 1`` refits), and a noise-free draw that gains under half the
-    threshold (the shrunk change is absorbed by the base: the ``+`` draw's own ratio
-    ``(gain(+) + k) / (linear(+) + k)``, h38's).
-
-    Args:
-        base_resid, cand_resid: [T, K] weighted residuals of the base and candidate fits.
-        valid: [T, K] entries that are samples.
-        fit: fits a draw (:data:`AntiFit`); path: the model's path (:data:`PathFn`).
-        base: the base model linearised at its fit (:func:`path_scale`).
-        lam: :func:`draw_scale`; threshold: the unscaled null threshold [sigma^2].
-        data_ratio: the data fit's :func:`linear_ratio`; k: the effect's parameters.
-
-    Returns:
-        The check (``gains`` / ``linears`` per fitted draw in the order ``0, +, -``;
-        ``branch`` ``"data"``, ``"plus"`` or ``"antithetic"``).
-    """
-    rule = "antithetic"
-    if lam >= 1.0:
-        f = max(1.0, float(data_ratio))
-        return LinearisationCheck(
-            f, float(data_ratio), [], [], [], scale=1.0, rule=rule, branch="data", mu=1.0
-        )
-    mu, _ = path_scale(path, lam, base_resid, cand_resid, base, valid)
-    r_mu = path(np.array([mu]))[0]
-    e = cand_resid * valid
-    gains, lins, ratios = [], [], []
-    c_b0, c_c0, cand0, _ = fit(-r_mu, mu)
-    g0 = float(c_b0 - c_c0)
-    lin0 = linear_gain(cand0, e, valid)
-    gains.append(g0)
-    lins.append(lin0)
-    ratios.append(linear_ratio(g0, lin0, k))
-
-    def draw(sign: float) -> tuple[float, float, float]:
-        """Fit the draw ``pred(mu) + sign e``; record its gain, linear gain and ratio."""
-        c_b, c_c, cand, r_b = fit(-r_mu + sign * cand_resid, mu)
-        g = float(c_b - c_c)
-        lin = linear_gain(cand, r_b, valid)
-        gains.append(g)
-        lins.append(lin)
-        ratios.append(linear_ratio(g, lin, k))
-        return g, c_b, c_c
-
-    if g0 < 0.5 * threshold:
-        draw(1.0)
-        f = max(1.0, ratios[-1])
-        return LinearisationCheck(
-            f,
-            float(data_ratio),
-            ratios,
-            gains,
-            lins,
-            scale=float(lam),
-            rule=rule,
-            branch="plus",
-            mu=mu,
-        )
-    prec = fit_precision(c_b0) + fit_precision(c_c0)
-    side = []
-    for s in (1.0, -1.0):
-        g, c_b, c_c = draw(s)
-        side.append(g)
-        prec += 0.5 * (fit_precision(c_b) + fit_precision(c_c))
-    share = 0.5 * (side[0] + side[1]) - g0
-    f = max(1.0, (max(share, 0.0) + k) / (max(lin0, prec) + k)) if k > 0 else 1.0
-    return LinearisationCheck(
-        f,
-        float(data_ratio),
-        ratios,
-        gains,
-        lins,
-        scale=float(lam),
-        rule=rule,
-        branch="antithetic",
-        mu=mu,
-        share=share,
-        precision=prec,
-    )
-
-
 def calibrate(
     cands: Sequence[LinearCandidate],
     base_resid: np.ndarray,
@@ -1511,227 +1230,3 @@ def calibrate(
     if path is not None:
         _write(path, cal)
     return cal
-
-
-AutoFit = Callable[
-    [np.ndarray, float | None], tuple[float, float, LinearCandidate, np.ndarray, np.ndarray]
-]
-"""``fit(offset [T, K], mu) -> (chi2 of the base fit, chi2 of the base + candidate fit, the
-candidate linearised at its fit, the base fit's residual, the candidate fit's residual)``, both
-residuals [T, K] of ``r(theta) + offset`` at the fits' optima (offset included); ``mu`` as
-:data:`AntiFit`, None: no start on the path (h38's draw)."""
-
-
-def envelope_slope(
-    base_resid: np.ndarray, cand_resid: np.ndarray, e: np.ndarray, valid: np.ndarray
-) -> float:
-    """``d gain / d s`` at ``s = 0`` of the draws ``r(theta) + offset + s e`` [sigma^2]: by the
-    envelope theorem each fitted chi^2 moves as ``2 <rho, e>`` with ``rho`` its residual at the
-    optimum (the optimum's own shift is second order), so the gain (base minus candidate)
-    moves as ``2 <rho_B - rho_C, e>``; exact on any model smooth at the two optima, whatever
-    the parameters' curvature (``base_resid``, ``cand_resid``: the fits' residuals [T, K])."""
-    m = np.asarray(valid, bool)
-    return float(2.0 * np.sum(((base_resid - cand_resid) * e)[m]))
-
-
-def auto_factor(
-    base_resid: np.ndarray,
-    cand_resid: np.ndarray,
-    valid: np.ndarray,
-    fit: AutoFit,
-    path: PathFn,
-    base: LinearCandidate,
-    lam: float,
-    threshold: float,
-    data_ratio: float,
-    k: int,
-    signs: np.ndarray,
-    both: bool = False,
-) -> LinearisationCheck:
-    """The linearisation check that picks its rule from this dataset's measured roughness (h49).
-
-    :func:`antithetic_factor` runs first. Where it fits its ``+-`` pair (branch
-    ``"antithetic"``) the pair also measures how rough the objective is, at no extra fit:
-
-    - By the envelope theorem (:func:`envelope_slope`) the gain of the draw ``pred(mu) + s e``
-      is ``g(s) = g(0) + s a + s^2 b + O(s^3)`` with ``a = 2 <rho_B0 - rho_C0, e>`` known from
-      the noise-free draw's two fitted residuals; the share is ``b`` (the even part), and on an
-      objective smooth at the optima the *odd* part of the pair, ``(g(+) - g(-))/2``, equals
-      ``a`` up to third order (exactly on a linear model).
-    - On a rough objective each fitted chi^2 is off its smooth value by an error ``eps`` of
-      some spread ``sigma`` (a fit that finds or misses a contact jump). The odd residual
-      ``u = (g(+) - g(-))/2 - a`` holds four of them, ``(eps_B+ - eps_C+ - eps_B- +
-      eps_C-)/2``, spread ``sigma``; the share holds six, ``(eps_B+ - eps_C+ + eps_B- -
-      eps_C-)/2 - (eps_B0 - eps_C0)``, spread ``sqrt(3) sigma``. The odd residual is the same
-      errors' antisymmetric combination and has no part of ``b``, so ``|u|`` (the
-      ``roughness``, sigma^2) estimates ``sigma`` from the pair itself and the share's
-      standard error is ``sqrt(3) |u|``.
-    - The factor is ``(share + k) / (D + k)``, ``D = max(||P_0 e||^2, precision)``, so its
-      standard error is ``sqrt(3) |u| / (D + k)`` and the scaled threshold's error is that
-      times the linearised threshold. The share is used where that error is at most the
-      linearised threshold itself (the factor's standard error at most 1, the size of the
-      null it corrects): ``sqrt(3) |u| <= D + k``. Beyond it the antithetic share measures the
-      roughness rather than the fit's capacity on the noise, and h38's one draw
-      (:func:`null_draw_factor`, one more fit; it keeps the data's own selection, which the
-      antithetic pair cancels) decides instead.
-
-    The fall-backs of :func:`antithetic_factor` (``"data"``: ``lam >= 1``; ``"plus"``: the
-    shrunk change absorbed by the base) keep its result: neither cancels the data's selection.
-
-    Args: as :func:`antithetic_factor`, with ``fit`` an :data:`AutoFit` and ``signs`` the
-    draw rule's rows (:func:`check_signs`); ``both``: also run the draw rule where the
-    antithetic share is chosen (a measurement: ``other`` then holds its factor, the verdict is
-    unchanged).
-
-    Returns:
-        The check, ``rule = "auto"``, ``chosen`` the rule whose factor it carries,
-        ``roughness = |u|`` and ``other`` the factor of the rule not chosen (where run);
-        ``gains`` / ``linears`` / ``ratios`` are the antithetic draws' (``0, +, -``) followed by
-        the draw rule's where it ran.
-    """
-    resids: list[tuple[np.ndarray, np.ndarray]] = []
-
-    def fit4(offset: np.ndarray, mu: float) -> tuple[float, float, LinearCandidate, np.ndarray]:
-        c_b, c_c, cand, r_b, r_c = fit(offset, mu)
-        resids.append((r_b, r_c))
-        return c_b, c_c, cand, r_b
-
-    chk = antithetic_factor(
-        base_resid, cand_resid, valid, fit4, path, base, lam, threshold, data_ratio, k
-    )
-    chk.rule, chk.chosen = "auto", "antithetic"
-    if chk.branch != "antithetic":
-        return chk
-    e = cand_resid * valid
-    slope = envelope_slope(resids[0][0], resids[0][1], e, valid)
-    chk.roughness = abs(0.5 * (chk.gains[1] - chk.gains[2]) - slope)
-    smooth = k <= 0 or np.sqrt(3.0) * chk.roughness <= max(chk.linears[0], chk.precision) + k
-    if smooth and not both:
-        return chk
-    drew = null_draw_factor(
-        base_resid, cand_resid, valid, lambda o: fit(o, None)[:4], signs, lam, data_ratio
-    )
-    if smooth:
-        chk.other = drew.factor
-    else:
-        chk.other, chk.factor, chk.chosen = chk.factor, drew.factor, "draw"
-    chk.ratios += drew.ratios
-    chk.gains += drew.gains
-    chk.linears += drew.linears
-    return chk
-
-
-def change_z(gain: float, threshold: float, k: int) -> float:
-    """How far a candidate's in-sample gain ``gain`` [sigma^2] lies above that of a change of the
-    threshold's size, in the null's own standard deviations (h109).
-
-    On the linearised model with unit white noise a change of squared size ``c`` beyond the
-    base [sigma^2] gains a noncentral chi-square with ``k`` degrees of freedom and
-    noncentrality ``c``: mean ``c + k``, variance ``2 k + 4 c`` (its exact moments; ``4 c`` is
-    the cross term ``2 <delta, e>``'s). A *threshold-sized* change is ``c = threshold`` (the
-    unscaled null threshold, on the scale :func:`draw_scale` already equates with the gain), so
-    ``z = (gain - threshold - k) / sqrt(4 threshold + 2 k)``. h49's offline form
-    ``(gain - threshold) / (2 sqrt(gain))`` takes the spread at the fitted change (the
-    alternative's) and drops ``k``; a test of "threshold-sized" takes the null's.
-    """
-    var = 4.0 * max(float(threshold), 0.0) + 2.0 * max(int(k), 0)
-    dev = float(gain) - float(threshold) - max(int(k), 0)
-    if var <= 0.0:
-        return float("inf") if dev > 0.0 else float("-inf")
-    return dev / float(np.sqrt(var))
-
-
-def z_cut(alpha: float) -> float:
-    """The cut on :func:`change_z`: the standard normal ``1 - alpha`` quantile, ``alpha`` the
-    calibration's per-candidate level ``alpha'`` (:attr:`Calibration.alpha_adj`, the level each
-    candidate's own threshold is set at). ``z`` above it rejects "the change is threshold-sized"
-    at the same level the gate rejects "no change" (h109)."""
-    from statistics import NormalDist
-
-    a = float(np.clip(alpha, 1e-12, 1.0 - 1e-12))
-    return float(NormalDist().inv_cdf(1.0 - a))
-
-
-def zauto_factor(
-    base_resid: np.ndarray,
-    cand_resid: np.ndarray,
-    valid: np.ndarray,
-    fit: AutoFit,
-    path: PathFn,
-    base: LinearCandidate,
-    lam: float,
-    threshold: float,
-    data_ratio: float,
-    k: int,
-    signs: np.ndarray,
-    gain: float,
-    alpha: float,
-    both: bool = False,
-) -> LinearisationCheck:
-    """The linearisation check that hands the antithetic share only to a change clearly larger
-    than a threshold-sized one (h109; h49's offline observation with a cut from the test's level).
-
-    The antithetic pair cancels the cross term between the fitted change and the noise (h40);
-    that is right for a real effect's own curvature but wrong for a false positive, whose
-    fitted change *is* noise lined up with the effect (h49: MuJoCo design-B nulls 4 and 6,
-    fitted changes at the threshold's size). So:
-
-    - ``z = change_z(gain, threshold, k) > z_cut(alpha)`` (the change is not threshold-sized
-      at the candidate's own level ``alpha``): :func:`auto_factor`, i.e. the antithetic share
-      where its pair is fitted and smooth, h38's draw where the pair is rough; where
-      :func:`antithetic_factor` falls back (``"data"``, ``"plus"``: no share) h38's draw.
-    - else h38's draw (:func:`null_draw_factor`, exactly the ``"draw"`` rule's fit and factor).
-
-    Args: as :func:`auto_factor`, plus ``gain`` the candidate fit's chi^2 fall on the data
-    [sigma^2] and ``alpha`` the per-candidate level; ``both``: also run the rule not chosen
-    (a measurement: its factor goes to ``other``, the verdict is unchanged).
-
-    Returns:
-        The check, ``rule = "zauto"``, ``z``, ``cut``, ``chosen`` the rule whose factor it
-        carries (``"antithetic"`` or ``"draw"``) and ``other`` the rule not chosen's factor
-        (where run). ``gains`` / ``linears`` / ``ratios``: the fits in the order they ran (the
-        antithetic ``0, +, -`` then the draw above the cut; the draw then the others below).
-    """
-    z, cut = change_z(gain, threshold, k), z_cut(alpha)
-
-    def drawn() -> LinearisationCheck:
-        return null_draw_factor(
-            base_resid, cand_resid, valid, lambda o: fit(o, None)[:4], signs, lam, data_ratio
-        )
-
-    def anti(measure: bool) -> LinearisationCheck:
-        return auto_factor(
-            base_resid,
-            cand_resid,
-            valid,
-            fit,
-            path,
-            base,
-            lam,
-            threshold,
-            data_ratio,
-            k,
-            signs,
-            both=measure,
-        )
-
-    if z > cut:
-        chk = anti(both)
-        if chk.branch != "antithetic":  # a fall-back: no share, so the data's selection
-            drew = drawn()
-            chk.other, chk.factor, chk.chosen = chk.factor, drew.factor, "draw"
-            chk.ratios += drew.ratios
-            chk.gains += drew.gains
-            chk.linears += drew.linears
-    else:
-        chk = drawn()
-        chk.chosen = "draw"
-        if both:
-            a = anti(False)
-            chk.other, chk.roughness, chk.branch = a.factor, a.roughness, a.branch
-            chk.mu, chk.share, chk.precision = a.mu, a.share, a.precision
-            chk.ratios += a.ratios
-            chk.gains += a.gains
-            chk.linears += a.linears
-    chk.rule, chk.z, chk.cut = "zauto", z, cut
-    return chk
