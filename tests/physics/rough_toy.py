@@ -1,5 +1,5 @@
-"""The closed-form toy of the linearisation-check tests (numpy, no engine), shared by
-``test_gate_linearisation.py`` and ``test_gate_check_rule.py``.
+"""The closed-form toy of the linearisation-check tests in ``test_gate_linearisation.py``
+(numpy, no engine).
 
 Per trajectory t and sample i: ``pred = beta x + l_t + S sin(a z)`` (+ jumps), ``beta`` the base
 parameter, ``l_t`` a nuisance offset, ``a`` the effect's parameter (zero: no effect); unit noise.
