@@ -657,11 +657,7 @@ def _read(path: Path) -> Calibration | None:
             statistic=str(d.get("statistic", "fall")),
             cached=True,
             key=path.stem,
-            checks={  # a check cached by a removed rule (h46/h49/h109) is made again
-                k: LinearisationCheck.from_dict(v)
-                for k, v in (d.get("checks") or {}).items()
-                if v.get("rule", "draw") == "draw"
-            },
+            checks={k: LinearisationCheck.from_dict(v) for k, v in (d.get("checks") or {}).items()},
             insample={k: float(v) for k, v in (d.get("insample") or {}).items()},
             insample_q95={k: float(v) for k, v in (d.get("insample_q95") or {}).items()},
         )
