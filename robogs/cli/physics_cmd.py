@@ -615,18 +615,26 @@ def _gate_null(args: argparse.Namespace) -> Iterator[None]:
     from robogs.physics.diagnose import GATE_METHOD_ENV
 
     new, old = getattr(args, "gate_null", None), os.environ.get(GATE_METHOD_ENV)
-    if new:
-        os.environ[GATE_METHOD_ENV] = new
+    if not new:
+        yield
+        return
+    os.environ[GATE_METHOD_ENV] = new
     try:
         yield
     finally:
-        if new and old is None:
+        if old is None:
             os.environ.pop(GATE_METHOD_ENV, None)
-        elif new:
+        else:
             os.environ[GATE_METHOD_ENV] = old
 
 
 def _diagnose(args: argparse.Namespace, model: str) -> int:
+    if model == "arm" and getattr(args, "gate_null", None):
+        raise InputError(
+            "--gate-null picks the object model's gate null; the arm model's gate has its own",
+            where="--gate-null",
+            hint="leave --gate-null out with the arm model, or use --model object",
+        )
     with _gate_null(args):
         return _diagnose_run(args, model)
 

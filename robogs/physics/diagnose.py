@@ -303,9 +303,10 @@ def judge(
         identified: every parameter determined; ``partly``: at least one direction of them
             (:func:`~robogs.physics.heldout.determined_direction`); a partly identified effect
             is asked ``dbic <= DBIC_MAX`` too.
-        halved: held-out folds whose step was halved (:func:`~robogs.physics.heldout.
-            heldout_rollouts`); where any was, ``dbic <= DBIC_MAX`` is asked too: the null
-            simulates the linear step, not the halved one.
+        halved: held-out folds whose step was halved
+            (:func:`~robogs.physics.heldout.heldout_rollouts`); where any was,
+            ``dbic <= DBIC_MAX`` is asked too: the null simulates the linear step, not the
+            halved one.
 
     Returns:
         (verdict, reported, blocked): ``blocked`` when the held-out gate passed but ΔBIC did
@@ -788,8 +789,8 @@ def diagnose_recording(
         thr, q95, p_own = cal.judge(e.name, held_t[0], held_t[i], delta)
         # under 8 trajectories the wild null ("both") is white noise only (gate.calibrate):
         # strong in-sample evidence is required as well; so it is under the parametric null
-        # (the default), whose drive model leaves the residual's other shared errors to so few trajectories
-        # (a 4-push null reported Stribeck at dBIC -2.3 without it, test_split)
+        # (the default), whose drive model leaves the residual's other shared errors to so
+        # few trajectories (a 4-push null reported Stribeck at dBIC -2.3 without it, test_split)
         few = "white-noise null only" in cal.method or (
             "parametric" in cal.method and gate_mod.few_trajectories(prep.n_traj)
         )

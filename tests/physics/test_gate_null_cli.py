@@ -57,3 +57,11 @@ def test_unknown_null_is_refused_by_the_parser(dataset, monkeypatch, capsys):
     assert main(["diagnose", str(dataset), "--model", "object", "--gate-null", "bootstrap"]) == 2
     err = capsys.readouterr().err
     assert "--gate-null" in err and "parametric" in err
+
+
+def test_the_arm_model_refuses_the_flag_instead_of_ignoring_it(dataset, monkeypatch, capsys):
+    """The arm model's gate does not read the object null: the flag is an error there, named."""
+    monkeypatch.setattr(api, "diagnose", lambda *a, **k: pytest.fail("must not run"))
+    rc = main(["diagnose", str(dataset), "--model", "arm", "--gate-null", "both"])
+    assert rc != 0
+    assert "--gate-null" in capsys.readouterr().err
