@@ -35,8 +35,10 @@ Measurement effects (time offset, frame error) act on the sampled poses; see
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 import torch
@@ -408,6 +410,44 @@ def _pusher_apart(
     return bool((off_band | (gap_lb > np.maximum(reach, 1e-3))).all())
 
 
+def _contact_steps(dtype: np.dtype) -> tuple[Callable[..., Any], Callable[..., Any]]:
+    """The pusher-contact step functions (:func:`_pusher_impulse`, :func:`_pusher_apart`'s
+    signatures): numba's compiled copies where they load and the state is float64
+    (:mod:`robogs.physics.contact_kernels`; the same results to the bit), else these numpy ones.
+    """
+    from robogs.physics.contact_kernels import kernels
+
+    k = kernels() if dtype == np.float64 else None
+    if k is None:
+        return _pusher_impulse, _pusher_apart
+    impulse_k, apart_k = k
+
+    def impulse(scene: BoxScene, *args: Any) -> tuple[np.ndarray, ...]:
+        hx, hy, hz = (0.5 * s for s in scene.size)
+        return impulse_k(hx, hy, hz, scene.pusher_radius, *args)
+
+    def apart(scene: BoxScene, p, vx, vy, wf, com_r, pts, pts_speed, grasping, dt) -> bool:
+        half_diag = 0.5 * float(np.hypot(scene.size[0], scene.size[1]))
+        return bool(
+            apart_k(
+                half_diag,
+                0.5 * scene.size[2],
+                scene.pusher_radius,
+                p,
+                vx,
+                vy,
+                wf,
+                com_r,
+                pts,
+                pts_speed,
+                grasping,
+                2.0 * dt,
+            )
+        )
+
+    return impulse, apart
+
+
 def _numpy(x: torch.Tensor) -> np.ndarray:
     """A CPU float array of ``x`` (a copy; no autograd)."""
     return x.detach().cpu().numpy().copy()
@@ -562,6 +602,8 @@ def simulate(
     def moving() -> bool:
         return bool(np.abs(v).max() > 0 or np.abs(w).max() > 0)
 
+    push_impulse, push_apart = _contact_steps(p.dtype)
+
     dense_p = np.empty((m_sets, n_t, n_s, 3), dtype=p.dtype)  # CoM, world
     dense_y = np.empty((m_sets, n_t, n_s), dtype=p.dtype)
     dense_p[:, :, 0], dense_y[:, :, 0] = p, yaw
@@ -645,10 +687,10 @@ def simulate(
         wf = wf * f_r
 
         # ---- pusher: frictionless inelastic speculative contact on the box sides ------------
-        if pusher_low[k] and not _pusher_apart(
+        if pusher_low[k] and not push_apart(
             scene, p, vx, vy, wf, com_r, pts_all[:, k], pts_speed[:, k], grasp[:, k], dt
         ):
-            vx, vy, wf, jx, jy = _pusher_impulse(
+            vx, vy, wf, jx, jy = push_impulse(
                 scene,
                 p,
                 np.cos(yaw),

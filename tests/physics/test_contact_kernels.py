@@ -1,0 +1,129 @@
+"""The compiled pusher-contact steps (:mod:`robogs.physics.contact_kernels`) against the numpy
+reference of :mod:`robogs.physics.model`: the same results to the bit.
+
+Oracles: the reference functions on random box/pusher states that cover every branch (outside
+and inside the box, one and two end spheres, each LCP case, a capsule flush with a face, grasped
+trajectories, spheres above the box); and whole rollouts of both scenario designs with the
+kernels switched off.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import robogs.physics.contact_kernels as CK
+import robogs.physics.model as M
+
+pytest.importorskip("numba", reason="the compiled kernels need the optional package numba")
+
+SCENE = SimpleNamespace(size=(0.08, 0.06, 0.05), pusher_radius=0.01)
+
+
+def _states(j_n: int, seed: int, m_n: int = 3, t_n: int = 400):
+    """Random states [M, T] of a box near the pushers [T, J] (positions within 6 cm of the box
+    centre, so that a third to a half of them touch), with a flush capsule on every 10th
+    trajectory."""
+    r = np.random.default_rng(seed)
+    hx, hy, hz = (0.5 * s for s in SCENE.size)
+    p = np.zeros((m_n, t_n, 3))
+    p[..., :2] = r.normal(0.0, 0.01, (m_n, t_n, 2))
+    p[..., 2] = hz + r.normal(0.0, 0.01, (m_n, t_n))
+    yaw = r.uniform(-np.pi, np.pi, (m_n, t_n))
+    pts = np.zeros((t_n, j_n, 3))
+    pts[..., :2] = r.uniform(-0.06, 0.06, (t_n, 1, 2)) + r.normal(0.0, 0.02, (t_n, j_n, 2))
+    pts[..., 2] = hz + r.uniform(-2.0 * hz, 2.0 * hz, (t_n, j_n))
+    if j_n == 2:  # a capsule against the box's +x face (box 0 at the origin, yaw 0), 0.5 mm off
+        flush = np.arange(0, t_n, 10)
+        p[0, flush] = (0.0, 0.0, hz)
+        yaw[0, flush] = 0.0
+        pts[flush, 0] = (hx + SCENE.pusher_radius + 5e-4, -0.02, hz)
+        pts[flush, 1] = (hx + SCENE.pusher_radius + 5e-4, 0.02, hz)
+    pv = r.normal(0.0, 0.3, (t_n, j_n, 3))
+    vx, vy = r.normal(0.0, 0.2, (m_n, t_n)), r.normal(0.0, 0.2, (m_n, t_n))
+    wf = r.normal(0.0, 2.0, (m_n, t_n))
+    com = r.normal(0.0, 0.005, (m_n, 2, 1))
+    mass = r.uniform(0.2, 0.6, (m_n, 1))
+    inertia = mass * (SCENE.size[0] ** 2 + SCENE.size[1] ** 2) / 12.0 * r.uniform(0.8, 1.2)
+    grasp = r.uniform(size=t_n) < 0.05
+    return p, yaw, vx, vy, wf, com[:, 0], com[:, 1], mass, inertia, pts, pv, grasp
+
+
+@pytest.mark.parametrize("j_n", [1, 2])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_impulse_matches_the_numpy_reference_to_the_bit(j_n: int, seed: int) -> None:
+    p, yaw, vx, vy, wf, cx, cy, mass, inertia, pts, pv, grasp = _states(j_n, seed)
+    args = (np.cos(yaw), np.sin(yaw), vx, vy, wf, cx, cy, mass, inertia, pts, pv, grasp, 1e-3)
+    ref = M._pusher_impulse(SCENE, p, *args)
+    impulse, _ = M._contact_steps(np.dtype(np.float64))
+    assert impulse is not M._pusher_impulse  # the compiled one
+    out = impulse(SCENE, p, *args)
+    touched = ref[3] != 0.0
+    assert 0.1 < touched.mean() < 0.9  # the states exercise contact and no contact
+    for a, b in zip(ref, out, strict=True):
+        assert a.shape == b.shape and np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("j_n", [1, 2])
+def test_apart_matches_the_numpy_reference(j_n: int) -> None:
+    """Per trajectory (T = 1, so that both answers are seen) over 2000 random states."""
+    p, _, vx, vy, wf, cx, cy, _, _, pts, _, grasp = _states(j_n, 7, m_n=2, t_n=2000)
+    speed = np.hypot(*np.moveaxis(np.random.default_rng(8).normal(0, 0.3, (2000, j_n, 2)), -1, 0))
+    com_r = np.hypot(cx, cy)
+    _, apart = M._contact_steps(np.dtype(np.float64))
+    got = []
+    for t in range(2000):
+        s = slice(t, t + 1)
+        args = (p[:, s], vx[:, s], vy[:, s], wf[:, s], com_r, pts[s], speed[s], grasp[s], 2e-3)
+        ref = M._pusher_apart(SCENE, *args)
+        assert apart(SCENE, *args) is ref
+        got.append(ref)
+    assert 0.2 < np.mean(got) < 0.8
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("design", ["A", "B"])
+def test_rollouts_are_the_same_with_and_without_the_kernels(monkeypatch, design: str) -> None:
+    """Design A (capsule pusher, 20 trajectories) and design B (sphere, 9): perturbed parameter
+    sets and start poses through ``Engine.evaluate``, kernels on and off."""
+    from robogs.physics.engine import Engine
+
+    if design == "A":
+        from robogs.synth.scenarios import make_scenario
+
+        rec = make_scenario("com_offset+stribeck", seed=1, noise="nominal")
+    else:
+        from robogs.synth.scenarios.design_b import make_design_b
+
+        rec = make_design_b("restitution", seed=3, with_detectability=False)
+    eng = Engine(rec, backend="planar")
+    space = eng.space(eng.check_effects(["table_tilt", "stribeck", "com_offset", "restitution"]))
+    r = np.random.default_rng(0)
+    th = np.repeat(eng.start(space)[None], 4, 0)
+    th[1:] += r.normal(0.0, 0.01, th[1:].shape)
+    loc = r.normal(0.0, 1e-3, (4, eng.prep.n_traj, 3))
+    fast = eng.evaluate(space, th, loc)
+    monkeypatch.setattr(CK, "kernels", lambda: None)
+    assert M._contact_steps(np.dtype(np.float64))[0] is M._pusher_impulse
+    ref = eng.evaluate(space, th, loc)
+    assert np.array_equal(np.isnan(ref), np.isnan(fast))
+    assert np.array_equal(np.nan_to_num(ref), np.nan_to_num(fast))
+
+
+def test_without_numba_the_reference_runs_and_the_reason_is_kept(monkeypatch) -> None:
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "numba" else real(name, *a)
+    )
+    CK.kernels.cache_clear()
+    try:
+        assert CK.kernels() is None
+        assert "numba" in (CK.unavailable_reason() or "")
+        assert M._contact_steps(np.dtype(np.float64)) == (M._pusher_impulse, M._pusher_apart)
+    finally:
+        CK.kernels.cache_clear()
+    assert M._contact_steps(np.dtype(np.float32)) == (M._pusher_impulse, M._pusher_apart)
