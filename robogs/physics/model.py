@@ -38,7 +38,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -410,42 +410,142 @@ def _pusher_apart(
     return bool((off_band | (gap_lb > np.maximum(reach, 1e-3))).all())
 
 
-def _contact_steps(dtype: np.dtype) -> tuple[Callable[..., Any], Callable[..., Any]]:
-    """The pusher-contact step functions (:func:`_pusher_impulse`, :func:`_pusher_apart`'s
-    signatures): numba's compiled copies where they load and the state is float64
-    (:mod:`robogs.physics.contact_kernels`; the same results to the bit), else these numpy ones.
+def _table_normal(
+    v: np.ndarray,
+    w: np.ndarray,
+    acc: np.ndarray,
+    alpha: np.ndarray,
+    gap: np.ndarray,
+    e_rest: np.ndarray,
+    dt: float,
+    g: float,
+    bounce_min: float,
+) -> tuple[np.ndarray, ...]:
+    """One step's free dynamics and the table's normal impulse (per unit mass, m/s).
+
+    Args:
+        v [M, T, 3] m/s, w [M, T] rad/s: velocities at the step's start; acc [M, T, 3] m/s^2,
+            alpha [M, T] rad/s^2: external accelerations (gravity ``g`` m/s^2 apart); gap
+            [M, T] m: CoM height above its resting height; e_rest [M, 1]: restitution.
+
+    Returns:
+        vx, vy, vz, wf after the impulse; lam_n, the impulse; contact, rebound [M, T] bool; the
+        approach speed; speed2 and speed (``sqrt(speed2 + 1e-18)``) of the planar velocity.
     """
-    from robogs.physics.contact_kernels import kernels
+    vx = v[..., 0] + dt * acc[..., 0]
+    vy = v[..., 1] + dt * acc[..., 1]
+    vz = v[..., 2] + dt * (acc[..., 2] - g)
+    wf = w + dt * alpha
+    approach = -vz
+    contact = (gap + dt * vz) <= 0.0
+    bounce = approach > bounce_min
+    target = np.where(bounce, e_rest * approach, -np.maximum(gap, 0.0) / dt)
+    lam_n = np.where(contact, np.maximum(target - vz, 0.0), 0.0)
+    vz = vz + lam_n
+    # a bounce starts at the time of impact inside the step, not at the step's start
+    # (otherwise the box would rebound from up to approach * dt above the table)
+    rebound = contact & bounce & (lam_n > 0)
+    speed2 = vx * vx + vy * vy
+    speed = np.sqrt(speed2 + 1e-18)
+    return vx, vy, vz, wf, lam_n, contact, rebound, approach, speed2, speed
+
+
+def _table_friction(
+    vx: np.ndarray,
+    vy: np.ndarray,
+    wf: np.ndarray,
+    speed2: np.ndarray,
+    lam_n: np.ndarray,
+    contact: np.ndarray,
+    mu_s: np.ndarray,
+    mu_d: np.ndarray,
+    kr: np.ndarray,
+    c_r: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The table's friction on the twist (vx, vy, c_r w) [M, T]: stick when the impulse that
+    stops it is inside the static cone, else shrink it by the dynamic budget (``kr`` [M, 1]:
+    mass c_r^2 / inertia; ``mu_s``, ``mu_d`` broadcast to [M, T])."""
+    cw = c_r * wf
+    stop_norm = np.sqrt(speed2 + (cw / kr) ** 2)
+    xi = np.sqrt(speed2 + cw * cw) + 1e-15
+    stick = stop_norm <= mu_s * lam_n
+    budget = mu_d * lam_n
+    f_t = np.where(stick, 0.0, np.maximum(1.0 - budget / xi, 0.0))
+    f_r = np.where(stick, 0.0, np.maximum(1.0 - budget * kr / xi, 0.0))
+    f_t = np.where(contact, f_t, 1.0)
+    f_r = np.where(contact, f_r, 1.0)
+    return vx * f_t, vy * f_t, wf * f_r
+
+
+def _integrate(
+    p: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    vz: np.ndarray,
+    wf: np.ndarray,
+    yaw: np.ndarray,
+    rebound: np.ndarray,
+    gap: np.ndarray,
+    approach: np.ndarray,
+    dt: float,
+    z_rest: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Semi-implicit Euler: the new CoM [M, T, 3] (a rebound from its time of impact), velocity
+    [M, T, 3] and yaw [M, T]."""
+    v_new = np.stack([vx, vy, vz], axis=-1)
+    p = p + dt * v_new
+    if rebound.any():
+        toi = np.minimum(np.maximum(gap, 0.0) / np.maximum(approach, 1e-9), dt)
+        p[..., 2] = np.where(rebound, z_rest + vz * (dt - toi), p[..., 2])
+    return p, v_new, yaw + dt * wf
+
+
+class _Steps(NamedTuple):
+    """The step functions of :func:`simulate` (numpy here, or numba's copies)."""
+
+    normal: Callable[..., tuple[np.ndarray, ...]]
+    friction: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray]]
+    apart: Callable[..., bool]
+    impulse: Callable[..., tuple[np.ndarray, ...]]
+    integrate: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+REFERENCE_STEPS = _Steps(_table_normal, _table_friction, _pusher_apart, _pusher_impulse, _integrate)
+"""The numpy step functions: the reference the compiled ones match to the bit."""
+
+
+def _mt(mu: np.ndarray, like: np.ndarray) -> np.ndarray:
+    """A friction coefficient as [M, 1] or [M, T] float64 (``like``: [M, T]), broadcast only
+    when it is neither."""
+    mu = np.asarray(mu, dtype=np.float64)
+    if mu.ndim == 2 and mu.shape[0] == like.shape[0] and mu.shape[1] in (1, like.shape[1]):
+        return mu
+    return np.broadcast_to(mu, like.shape)
+
+
+def _steps(dtype: np.dtype) -> _Steps:
+    """The step functions: numba's compiled copies where they load and the state is float64
+    (:mod:`robogs.physics.step_kernels`; the same results to the bit), else the numpy
+    :data:`REFERENCE_STEPS`."""
+    from robogs.physics.step_kernels import kernels
 
     k = kernels() if dtype == np.float64 else None
     if k is None:
-        return _pusher_impulse, _pusher_apart
-    impulse_k, apart_k = k
+        return REFERENCE_STEPS
 
     def impulse(scene: BoxScene, *args: Any) -> tuple[np.ndarray, ...]:
         hx, hy, hz = (0.5 * s for s in scene.size)
-        return impulse_k(hx, hy, hz, scene.pusher_radius, *args)
+        return k.impulse(hx, hy, hz, scene.pusher_radius, *args)
 
     def apart(scene: BoxScene, p, vx, vy, wf, com_r, pts, pts_speed, grasping, dt) -> bool:
         half_diag = 0.5 * float(np.hypot(scene.size[0], scene.size[1]))
-        return bool(
-            apart_k(
-                half_diag,
-                0.5 * scene.size[2],
-                scene.pusher_radius,
-                p,
-                vx,
-                vy,
-                wf,
-                com_r,
-                pts,
-                pts_speed,
-                grasping,
-                2.0 * dt,
-            )
-        )
+        args = (p, vx, vy, wf, com_r, pts, pts_speed, grasping, 2.0 * dt)
+        return bool(k.apart(half_diag, 0.5 * scene.size[2], scene.pusher_radius, *args))
 
-    return impulse, apart
+    def friction(vx, vy, wf, speed2, lam_n, contact, mu_s, mu_d, kr, c_r):
+        return k.friction(vx, vy, wf, speed2, lam_n, contact, _mt(mu_s, vx), _mt(mu_d, vx), kr, c_r)
+
+    return _Steps(k.normal, friction, apart, impulse, k.integrate)
 
 
 def _numpy(x: torch.Tensor) -> np.ndarray:
@@ -602,7 +702,7 @@ def simulate(
     def moving() -> bool:
         return bool(np.abs(v).max() > 0 or np.abs(w).max() > 0)
 
-    push_impulse, push_apart = _contact_steps(p.dtype)
+    steps = _steps(p.dtype)
 
     dense_p = np.empty((m_sets, n_t, n_s, 3), dtype=p.dtype)  # CoM, world
     dense_y = np.empty((m_sets, n_t, n_s), dtype=p.dtype)
@@ -642,25 +742,11 @@ def simulate(
                         acc = acc + _hook_out(a_e)
                     if al_e is not None:
                         alpha = alpha + _hook_out(al_e)
-        vx = v[..., 0] + dt * acc[..., 0]
-        vy = v[..., 1] + dt * acc[..., 1]
-        vz = v[..., 2] + dt * (acc[..., 2] - g)
-        wf = w + dt * alpha
 
-        # ---- table: normal impulse (per unit mass, m/s) -----------------------------------
-        approach = -vz
-        contact = (gap + dt * vz) <= 0.0
-        bounce = approach > scene.bounce_min_speed
-        target = np.where(bounce, e_rest * approach, -np.maximum(gap, 0.0) / dt)
-        lam_n = np.where(contact, np.maximum(target - vz, 0.0), 0.0)
-        vz = vz + lam_n
-        # a bounce starts at the time of impact inside the step, not at the step's start
-        # (otherwise the box would rebound from up to approach * dt above the table)
-        rebound = contact & bounce & (lam_n > 0)
-
-        # ---- table: friction on the twist (vx, vy, c_r w) --------------------------------
-        speed2 = vx * vx + vy * vy
-        speed = np.sqrt(speed2 + 1e-18)
+        # ---- table: normal impulse, then friction on the twist (vx, vy, c_r w) -----------
+        vx, vy, vz, wf, lam_n, contact, rebound, approach, speed2, speed = steps.normal(
+            v, w, acc, alpha, gap, e_rest, dt, g, scene.bounce_min_speed
+        )
         mu_s, mu_d = mu_s0, mu_d0
         if fric_fx:
             slip = Slip(
@@ -673,24 +759,13 @@ def simulate(
             for e, th in fric_fx:
                 mu_s_t, mu_d_t = e.friction(th, mu_s_t, mu_d_t, slip)
             mu_s, mu_d = _hook_out(mu_s_t), _hook_out(mu_d_t)
-        cw = c_r * wf
-        stop_norm = np.sqrt(speed2 + (cw / kr) ** 2)
-        xi = np.sqrt(speed2 + cw * cw) + 1e-15
-        stick = stop_norm <= mu_s * lam_n
-        budget = mu_d * lam_n
-        f_t = np.where(stick, 0.0, np.maximum(1.0 - budget / xi, 0.0))
-        f_r = np.where(stick, 0.0, np.maximum(1.0 - budget * kr / xi, 0.0))
-        f_t = np.where(contact, f_t, 1.0)
-        f_r = np.where(contact, f_r, 1.0)
-        vx = vx * f_t
-        vy = vy * f_t
-        wf = wf * f_r
+        vx, vy, wf = steps.friction(vx, vy, wf, speed2, lam_n, contact, mu_s, mu_d, kr, c_r)
 
         # ---- pusher: frictionless inelastic speculative contact on the box sides ------------
-        if pusher_low[k] and not push_apart(
+        if pusher_low[k] and not steps.apart(
             scene, p, vx, vy, wf, com_r, pts_all[:, k], pts_speed[:, k], grasp[:, k], dt
         ):
-            vx, vy, wf, jx, jy = push_impulse(
+            vx, vy, wf, jx, jy = steps.impulse(
                 scene,
                 p,
                 np.cos(yaw),
@@ -712,13 +787,8 @@ def simulate(
                 ts = np.flatnonzero(b >= 0)
                 impulse[:, ts, b[ts]] += np.stack([jx, jy], -1)[:, ts]
 
-        v_new = np.stack([vx, vy, vz], axis=-1)
-        p = p + dt * v_new
-        if rebound.any():
-            toi = np.minimum(np.maximum(gap, 0.0) / np.maximum(approach, 1e-9), dt)
-            p[..., 2] = np.where(rebound, z_rest + vz * (dt - toi), p[..., 2])
-        yaw = yaw + dt * wf
-        v, w = v_new, wf
+        p, v, yaw = steps.integrate(p, vx, vy, vz, wf, yaw, rebound, gap, approach, dt, z_rest)
+        w = wf
 
         if grasp_any[k + 1]:
             att = grasp[None, :, k + 1]

@@ -1,10 +1,11 @@
-"""The compiled pusher-contact steps (:mod:`robogs.physics.contact_kernels`) against the numpy
-reference of :mod:`robogs.physics.model`: the same results to the bit.
+"""The compiled steps of the planar model (:mod:`robogs.physics.step_kernels`) against the numpy
+reference (:data:`robogs.physics.model.REFERENCE_STEPS`): the same results to the bit.
 
-Oracles: the reference functions on random box/pusher states that cover every branch (outside
-and inside the box, one and two end spheres, each LCP case, a capsule flush with a face, grasped
-trajectories, spheres above the box); and whole rollouts of both scenario designs with the
-kernels switched off.
+Oracles: the reference functions on random states that cover every branch (pusher: outside and
+inside the box, one and two end spheres, each LCP case, a capsule flush with a face, grasped
+trajectories, spheres above the box; table: flight, resting contact, bounces above and below the
+bounce speed, sticking and sliding, per-state friction coefficients as effect hooks return
+them); and whole rollouts of both scenario designs with the kernels switched off.
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-import robogs.physics.contact_kernels as CK
 import robogs.physics.model as M
+import robogs.physics.step_kernels as CK
 
 pytest.importorskip("numba", reason="the compiled kernels need the optional package numba")
 
@@ -57,9 +58,9 @@ def test_impulse_matches_the_numpy_reference_to_the_bit(j_n: int, seed: int) -> 
     p, yaw, vx, vy, wf, cx, cy, mass, inertia, pts, pv, grasp = _states(j_n, seed)
     args = (np.cos(yaw), np.sin(yaw), vx, vy, wf, cx, cy, mass, inertia, pts, pv, grasp, 1e-3)
     ref = M._pusher_impulse(SCENE, p, *args)
-    impulse, _ = M._contact_steps(np.dtype(np.float64))
-    assert impulse is not M._pusher_impulse  # the compiled one
-    out = impulse(SCENE, p, *args)
+    fast = M._steps(np.dtype(np.float64))
+    assert fast.impulse is not M._pusher_impulse  # the compiled one
+    out = fast.impulse(SCENE, p, *args)
     touched = ref[3] != 0.0
     assert 0.1 < touched.mean() < 0.9  # the states exercise contact and no contact
     for a, b in zip(ref, out, strict=True):
@@ -72,7 +73,7 @@ def test_apart_matches_the_numpy_reference(j_n: int) -> None:
     p, _, vx, vy, wf, cx, cy, _, _, pts, _, grasp = _states(j_n, 7, m_n=2, t_n=2000)
     speed = np.hypot(*np.moveaxis(np.random.default_rng(8).normal(0, 0.3, (2000, j_n, 2)), -1, 0))
     com_r = np.hypot(cx, cy)
-    _, apart = M._contact_steps(np.dtype(np.float64))
+    apart = M._steps(np.dtype(np.float64)).apart
     got = []
     for t in range(2000):
         s = slice(t, t + 1)
@@ -81,6 +82,53 @@ def test_apart_matches_the_numpy_reference(j_n: int) -> None:
         assert apart(SCENE, *args) is ref
         got.append(ref)
     assert 0.2 < np.mean(got) < 0.8
+
+
+def _table_states(seed: int, m_n: int = 3, t_n: int = 500):
+    """Random [M, T] states around the table: a third in flight (gap up to 5 mm), the rest
+    touching or just below, falling at 0-1.5 m/s (bounce speed 0.3 m/s) or at rest."""
+    r = np.random.default_rng(seed)
+    v = r.normal(0.0, 0.3, (m_n, t_n, 3))
+    v[..., 2] = np.where(r.uniform(size=(m_n, t_n)) < 0.5, -r.uniform(0, 1.5, (m_n, t_n)), 0.0)
+    v[:, ::7] = 0.0  # at rest
+    w = r.normal(0.0, 3.0, (m_n, t_n))
+    w[:, ::7] = 0.0
+    acc = r.normal(0.0, 0.5, (m_n, t_n, 3))
+    alpha = r.normal(0.0, 5.0, (m_n, t_n))
+    gap = np.where(r.uniform(size=(m_n, t_n)) < 0.33, r.uniform(0, 5e-3, (m_n, t_n)), 0.0)
+    gap -= r.uniform(0.0, 1e-4, (m_n, t_n)) * (r.uniform(size=(m_n, t_n)) < 0.2)
+    e_rest = r.uniform(0.0, 0.6, (m_n, 1))
+    return v, w, acc, alpha, gap, e_rest
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_table_steps_match_the_numpy_reference_to_the_bit(seed: int) -> None:
+    ref, fast = M.REFERENCE_STEPS, M._steps(np.dtype(np.float64))
+    assert fast.normal is not ref.normal
+    v, w, acc, alpha, gap, e_rest = _table_states(seed)
+    args = (v, w, acc, alpha, gap, e_rest, 1e-3, 9.81, 0.3)
+    a, b = ref.normal(*args), fast.normal(*args)
+    for x, y in zip(a, b, strict=True):
+        assert x.dtype == y.dtype and np.array_equal(x, y)
+    vx, vy, vz, wf, lam_n, contact, rebound, approach, speed2, _ = a
+    assert 0.2 < contact.mean() < 0.9 and rebound.any() and (contact & ~rebound).any()
+    r = np.random.default_rng(10 + seed)
+    kr = r.uniform(0.5, 2.0, (3, 1))
+    for mu_s, mu_d in (
+        (np.full((3, 1), 0.4), np.full((3, 1), 0.3)),  # the body's, [M, 1]
+        (r.uniform(0.2, 0.6, vx.shape), r.uniform(0.1, 0.5, vx.shape)),  # a hook's, [M, T]
+    ):
+        fargs = (vx, vy, wf, speed2, lam_n, contact, mu_s, mu_d, kr, 0.03)
+        fa, fb = ref.friction(*fargs), fast.friction(*fargs)
+        for x, y in zip(fa, fb, strict=True):
+            assert np.array_equal(x, y)
+        sticking = contact & (fa[0] == 0.0) & (vx != 0.0)
+        assert sticking.any() and (contact & (fa[0] != 0.0)).any()
+    p = r.normal(0.0, 0.1, vx.shape + (3,))
+    yaw = r.uniform(-3.0, 3.0, vx.shape)
+    iargs = (p, vx, vy, vz, wf, yaw, rebound, gap, approach, 1e-3, 0.025)
+    for x, y in zip(ref.integrate(*iargs), fast.integrate(*iargs), strict=True):
+        assert np.array_equal(x, y)
 
 
 @pytest.mark.slow
@@ -106,7 +154,7 @@ def test_rollouts_are_the_same_with_and_without_the_kernels(monkeypatch, design:
     loc = r.normal(0.0, 1e-3, (4, eng.prep.n_traj, 3))
     fast = eng.evaluate(space, th, loc)
     monkeypatch.setattr(CK, "kernels", lambda: None)
-    assert M._contact_steps(np.dtype(np.float64))[0] is M._pusher_impulse
+    assert M._steps(np.dtype(np.float64)) is M.REFERENCE_STEPS
     ref = eng.evaluate(space, th, loc)
     assert np.array_equal(np.isnan(ref), np.isnan(fast))
     assert np.array_equal(np.nan_to_num(ref), np.nan_to_num(fast))
@@ -123,7 +171,7 @@ def test_without_numba_the_reference_runs_and_the_reason_is_kept(monkeypatch) ->
     try:
         assert CK.kernels() is None
         assert "numba" in (CK.unavailable_reason() or "")
-        assert M._contact_steps(np.dtype(np.float64)) == (M._pusher_impulse, M._pusher_apart)
+        assert M._steps(np.dtype(np.float64)) is M.REFERENCE_STEPS
     finally:
         CK.kernels.cache_clear()
-    assert M._contact_steps(np.dtype(np.float32)) == (M._pusher_impulse, M._pusher_apart)
+    assert M._steps(np.dtype(np.float32)) is M.REFERENCE_STEPS

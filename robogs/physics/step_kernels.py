@@ -1,16 +1,17 @@
-"""Compiled pusher-contact steps of the planar model (optional ``numba``, the ``fast`` extra).
+"""Compiled steps of the planar model (optional ``numba``, the ``fast`` extra).
 
-:func:`robogs.physics.model._pusher_impulse` and :func:`~robogs.physics.model._pusher_apart` are
-the reference: numpy on ``[M, T]`` states, where a few hundred states per step leave the cost in
-numpy's per-operation overhead (about 100 operations a step; 0.26 ms of 0.5 ms a step on design
-A's fits). The functions here are the same arithmetic as one loop per state, in the same order
-and without fused or reassociated operations (``fastmath=False``), so their results are the
-reference's to the bit (tests/physics/test_contact_kernels.py checks it on random states).
+:data:`robogs.physics.model.REFERENCE_STEPS` are the reference: numpy on ``[M, T]`` states
+(M parameter sets x T trajectories), where a few hundred states a step leave the cost in numpy's
+per-operation overhead (about 170 operations a step; 0.45 of the 0.5 ms a step takes on design
+A's fits). The kernels here are the same arithmetic as one loop per state, in the same order and
+without fused or reassociated operations (``fastmath=False``), so their results are the
+reference's to the bit (tests/physics/test_step_kernels.py checks each on random states, and
+whole rollouts). Effect hooks stay in Python between them (:func:`~robogs.physics.model.simulate`).
 
-:func:`kernels` returns them when numba loads, else None with the reason, and
-:func:`robogs.physics.model.simulate` then uses the numpy reference. Serial loops (no
-``prange``): the caller's thread budget is left as set. Compiled once per machine and cached
-next to this file (or in numba's user cache where the package folder is read-only).
+:func:`kernels` returns them when numba loads, else None with the reason
+(:func:`unavailable_reason`); the model then runs the reference. Serial loops (no ``prange``):
+the caller's thread budget is left as set. Compiled once per machine and cached next to this
+file (or in numba's user cache where the package folder is read-only).
 """
 
 from __future__ import annotations
@@ -18,15 +19,127 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["kernels", "unavailable_reason"]
+__all__ = ["Kernels", "kernels", "unavailable_reason"]
 
 
-def _build() -> tuple[Callable[..., Any], Callable[..., Any]]:
+class Kernels(NamedTuple):
+    """The compiled steps (arguments: :data:`robogs.physics.model.REFERENCE_STEPS`' with the
+    scene's scalars first for ``impulse`` and ``apart``; ``friction`` takes ``mu_s``, ``mu_d`` as
+    [M, 1] or [M, T])."""
+
+    normal: Callable[..., Any]
+    friction: Callable[..., Any]
+    apart: Callable[..., Any]
+    impulse: Callable[..., Any]
+    integrate: Callable[..., Any]
+
+
+def _build() -> Kernels:
     import numba
+
+    @numba.njit(cache=True, fastmath=False)
+    def normal(
+        v: np.ndarray,
+        w: np.ndarray,
+        acc: np.ndarray,
+        alpha: np.ndarray,
+        gap: np.ndarray,
+        e_rest: np.ndarray,
+        dt: float,
+        g: float,
+        bounce_min: float,
+    ) -> tuple[np.ndarray, ...]:
+        m_n, t_n = w.shape
+        shape = (m_n, t_n)
+        vx, vy, vz, wf = np.empty(shape), np.empty(shape), np.empty(shape), np.empty(shape)
+        lam_n, approach = np.empty(shape), np.empty(shape)
+        speed2, speed = np.empty(shape), np.empty(shape)
+        contact = np.empty((m_n, t_n), np.bool_)
+        rebound = np.empty((m_n, t_n), np.bool_)
+        for m in range(m_n):
+            e = e_rest[m, 0]
+            for t in range(t_n):
+                x = v[m, t, 0] + dt * acc[m, t, 0]
+                y = v[m, t, 1] + dt * acc[m, t, 1]
+                z = v[m, t, 2] + dt * (acc[m, t, 2] - g)
+                ap = -z
+                c = (gap[m, t] + dt * z) <= 0.0
+                b = ap > bounce_min
+                target = e * ap if b else -max(gap[m, t], 0.0) / dt
+                lam = max(target - z, 0.0) if c else 0.0
+                s2 = x * x + y * y
+                vx[m, t], vy[m, t], vz[m, t] = x, y, z + lam
+                wf[m, t] = w[m, t] + dt * alpha[m, t]
+                lam_n[m, t], approach[m, t] = lam, ap
+                contact[m, t], rebound[m, t] = c, c and b and lam > 0
+                speed2[m, t], speed[m, t] = s2, math.sqrt(s2 + 1e-18)
+        return vx, vy, vz, wf, lam_n, contact, rebound, approach, speed2, speed
+
+    @numba.njit(cache=True, fastmath=False)
+    def friction(
+        vx: np.ndarray,
+        vy: np.ndarray,
+        wf: np.ndarray,
+        speed2: np.ndarray,
+        lam_n: np.ndarray,
+        contact: np.ndarray,
+        mu_s: np.ndarray,
+        mu_d: np.ndarray,
+        kr: np.ndarray,
+        c_r: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        m_n, t_n = vx.shape
+        ovx, ovy, owf = np.empty((m_n, t_n)), np.empty((m_n, t_n)), np.empty((m_n, t_n))
+        per_s, per_d = mu_s.shape[1] > 1, mu_d.shape[1] > 1
+        for m in range(m_n):
+            k = kr[m, 0]
+            for t in range(t_n):
+                f_t, f_r = 1.0, 1.0
+                if contact[m, t]:
+                    cw = c_r * wf[m, t]
+                    q = cw / k
+                    stop_norm = math.sqrt(speed2[m, t] + q * q)
+                    xi = math.sqrt(speed2[m, t] + cw * cw) + 1e-15
+                    if stop_norm <= mu_s[m, t if per_s else 0] * lam_n[m, t]:
+                        f_t, f_r = 0.0, 0.0
+                    else:
+                        budget = mu_d[m, t if per_d else 0] * lam_n[m, t]
+                        f_t = max(1.0 - budget / xi, 0.0)
+                        f_r = max(1.0 - budget * k / xi, 0.0)
+                ovx[m, t], ovy[m, t], owf[m, t] = vx[m, t] * f_t, vy[m, t] * f_t, wf[m, t] * f_r
+        return ovx, ovy, owf
+
+    @numba.njit(cache=True, fastmath=False)
+    def integrate(
+        p: np.ndarray,
+        vx: np.ndarray,
+        vy: np.ndarray,
+        vz: np.ndarray,
+        wf: np.ndarray,
+        yaw: np.ndarray,
+        rebound: np.ndarray,
+        gap: np.ndarray,
+        approach: np.ndarray,
+        dt: float,
+        z_rest: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        m_n, t_n = vx.shape
+        p_new, v_new = np.empty((m_n, t_n, 3)), np.empty((m_n, t_n, 3))
+        y_new = np.empty((m_n, t_n))
+        for m in range(m_n):
+            for t in range(t_n):
+                v_new[m, t, 0], v_new[m, t, 1], v_new[m, t, 2] = vx[m, t], vy[m, t], vz[m, t]
+                for i in range(3):
+                    p_new[m, t, i] = p[m, t, i] + dt * v_new[m, t, i]
+                if rebound[m, t]:
+                    toi = min(max(gap[m, t], 0.0) / max(approach[m, t], 1e-9), dt)
+                    p_new[m, t, 2] = z_rest + vz[m, t] * (dt - toi)
+                y_new[m, t] = yaw[m, t] + dt * wf[m, t]
+        return p_new, v_new, y_new
 
     @numba.njit(cache=True, fastmath=False)
     def impulse(
@@ -159,15 +272,15 @@ def _build() -> tuple[Callable[..., Any], Callable[..., Any]]:
                         return False
         return True
 
-    return impulse, apart
+    return Kernels(normal, friction, apart, impulse, integrate)
 
 
 _REASON: list[str] = []
 
 
 @functools.lru_cache(maxsize=1)
-def kernels() -> tuple[Callable[..., Any], Callable[..., Any]] | None:
-    """The compiled ``(impulse, apart)`` kernels, or None when numba is missing or fails to
+def kernels() -> Kernels | None:
+    """The compiled steps, or None when numba is missing or fails to
     load (:func:`unavailable_reason` says which)."""
     import importlib.util
 
