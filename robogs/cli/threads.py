@@ -55,6 +55,7 @@ __all__ = [
 #: pool sizes read once, when each library loads
 ENV_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 _WAIT = "OMP_WAIT_POLICY"
+_NUMBA = "NUMBA_NUM_THREADS"
 _interop_set: int | None = None
 
 
@@ -111,14 +112,25 @@ def configure_env(n: int) -> dict[str, str | None]:
     """
     old: dict[str, str | None] = {k: os.environ.get(k) for k in (*ENV_VARS, _WAIT)}
     for k in ENV_VARS:
+        if k == _NUMBA and "numba" in sys.modules:
+            continue  # numba rereads it at every compilation: see restore_env
         os.environ[k] = str(n)
     os.environ.setdefault(_WAIT, "PASSIVE")
     return old
 
 
 def restore_env(old: dict[str, str | None]) -> None:
-    """Undo :func:`configure_env`."""
+    """Undo :func:`configure_env`, except ``NUMBA_NUM_THREADS`` once numba is loaded.
+
+    numba reads its variables again before every compilation and raises if
+    ``NUMBA_NUM_THREADS`` differs from the size of a thread pool it has started. So the
+    variable keeps the value numba was loaded with, for the rest of the process, and
+    :func:`configure_env` leaves it alone once numba is loaded (its parallel kernels take
+    ``numba.set_num_threads`` instead: :mod:`robogs.format.render.fused`).
+    """
     for k, v in old.items():
+        if k == _NUMBA and "numba" in sys.modules:
+            continue
         if v is None:
             os.environ.pop(k, None)
         else:

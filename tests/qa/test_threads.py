@@ -144,3 +144,54 @@ def test_in_process_main_puts_the_settings_back(
     seen = json.loads(capsys.readouterr().out)
     assert seen["torch"] == 2 and seen["args_threads"] == 2
     assert torch.get_num_threads() == 1 and os.environ["OMP_NUM_THREADS"] == "1"
+
+
+_NUMBA_CHILD = """
+import os
+import numpy as np
+from robogs.cli import threads
+
+n = threads.available_cores() + 1  # not numba's default, so a restored variable would differ
+old = threads.configure_env(n)
+import numba
+
+@numba.njit(parallel=True)
+def total(x):
+    s = 0.0
+    for i in numba.prange(x.shape[0]):
+        s += x[i]
+    return s
+
+assert total(np.ones(8)) == 8.0  # starts numba's pool, sized n
+threads.restore_env(old)
+
+@numba.njit
+def plus(x):
+    return x + 1.0
+
+assert plus(1.0) == 2.0  # numba rereads its variables before this compilation
+old = threads.configure_env(1)  # a second verb in the same process, another thread count
+
+@numba.njit
+def twice(x):
+    return 2.0 * x
+
+assert twice(1.0) == 2.0
+threads.restore_env(old)
+print(os.environ.get("NUMBA_NUM_THREADS"), numba.config.NUMBA_NUM_THREADS, n)
+"""
+
+
+def test_numba_keeps_its_pool_size_across_verbs_in_one_process() -> None:
+    """Two verbs in one process (``main([...])`` in a notebook or a test): numba, loaded during
+    the first, must not see ``NUMBA_NUM_THREADS`` change afterwards (it raises "Cannot set
+    NUMBA_NUM_THREADS to a different value once the threads have been launched" at the next
+    compilation). Fails if restore_env puts the variable back or configure_env sets it again."""
+    pytest.importorskip("numba")
+    env = {k: v for k, v in os.environ.items() if k not in threads.ENV_VARS}
+    out = subprocess.run(
+        [sys.executable, "-c", _NUMBA_CHILD], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    var, pool, n = out.stdout.split()
+    assert var == pool == n
