@@ -29,6 +29,7 @@ import platform  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
+from contextlib import nullcontext  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -114,25 +115,21 @@ def _diagnose_row() -> str:
     rec = _recording("A")
     out = {}
     for label in ("numpy", "numba"):
-        with tempfile.TemporaryDirectory() as cache:
+        with (
+            tempfile.TemporaryDirectory() as cache,
+            _Switch() if label == "numpy" else nullcontext(),
+        ):
             os.environ["ROBOGS_CACHE_DIR"] = cache
             os.environ["ROBOGS_GATE_METHOD"] = "parametric"
             t0 = time.perf_counter()
-            if label == "numpy":
-                with _Switch():
-                    res = diagnose_recording(
-                        rec, effects=["com_offset", "stribeck"], engine=Engine(rec)
-                    )
-            else:
-                res = diagnose_recording(
-                    rec, effects=["com_offset", "stribeck"], engine=Engine(rec)
-                )
+            res = diagnose_recording(rec, effects=["com_offset", "stribeck"], engine=Engine(rec))
             out[label] = (time.perf_counter() - t0, [(r.name, r.delta_bic) for r in res.rows])
         print(label, f"{out[label][0]:.1f} s", flush=True)
     if out["numpy"][1] != out["numba"][1]:
         raise SystemExit(f"the diagnoses differ: {out['numpy'][1]} vs {out['numba'][1]}")
     a, b = out["numpy"][0], out["numba"][0]
-    return f"| diagnose, design A, 2 candidates (same rows and ΔBIC) | - | {a:.1f} | {b:.1f} | **{a / b:.2f}x** |"
+    name = "diagnose, design A, 2 candidates (same rows and ΔBIC)"
+    return f"| {name} | - | {a:.1f} | {b:.1f} | **{a / b:.2f}x** |"
 
 
 def main() -> None:

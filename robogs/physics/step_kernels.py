@@ -3,10 +3,11 @@
 :data:`robogs.physics.model.REFERENCE_STEPS` are the reference: numpy on ``[M, T]`` states
 (M parameter sets x T trajectories), where a few hundred states a step leave the cost in numpy's
 per-operation overhead (in a profiled design-A diagnosis the model took 144 s on the reference
-and 67 s on these kernels; bench/planar_steps.py times them in one run). The kernels here are the same arithmetic as one loop per state, in the same order and
-without fused or reassociated operations (``fastmath=False``), so their results are the
-reference's to the bit (tests/physics/test_step_kernels.py checks each on random states, and
-whole rollouts). Effect hooks stay in Python between them (:func:`~robogs.physics.model.simulate`).
+and 67 s on these kernels; bench/planar_steps.py times them in one run). The kernels here are
+the same arithmetic as one loop per state, in the same order and without fused or reassociated
+operations (``fastmath=False``), so their results are the reference's to the bit
+(tests/physics/test_step_kernels.py checks each on random states, and whole rollouts). Effect
+hooks stay in Python between them (:func:`~robogs.physics.model.simulate`).
 
 :func:`kernels` returns them when numba loads, else None with the reason
 (:func:`unavailable_reason`); the model then runs the reference. Serial loops (no ``prange``):
