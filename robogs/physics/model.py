@@ -500,6 +500,46 @@ def _integrate(
     return p, v_new, yaw + dt * wf
 
 
+def _grasp_carry(
+    p: np.ndarray,
+    v: np.ndarray,
+    yaw: np.ndarray,
+    w: np.ndarray,
+    att: np.ndarray,
+    c: np.ndarray,
+    s: np.ndarray,
+    ee_yaw: np.ndarray,
+    rel_p: np.ndarray,
+    rel_yaw: np.ndarray,
+    ee_pos: np.ndarray,
+    ee_rate: np.ndarray,
+    ee_vel: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Grasped objects ride the end effector rigidly (yaw-only EE frame).
+
+    p [M, T, 3] m, v [M, T, 3] m/s, yaw [M, T] rad, w [M, T] rad/s: the state after the step;
+    att [T]: grasping; c, s, ee_yaw [T]: cos, sin and the EE yaw (rad, world); rel_p [M, T, 3]
+    m, rel_yaw [M, T] rad: the object in the EE frame at the grasp's onset; ee_pos [T, 3] m,
+    ee_rate [T] rad/s, ee_vel [T, 3] m/s: the EE (carry point) at the step's end. Returns new
+    p, v, yaw, w (the grasped ones replaced)."""
+    rx = c * rel_p[..., 0] - s * rel_p[..., 1]
+    ry = s * rel_p[..., 0] + c * rel_p[..., 1]
+    p_att = np.stack([ee_pos[..., 0] + rx, ee_pos[..., 1] + ry, ee_pos[..., 2] + rel_p[..., 2]], -1)
+    v_att = np.stack(
+        [
+            ee_vel[..., 0] - ee_rate * ry,
+            ee_vel[..., 1] + ee_rate * rx,
+            np.broadcast_to(ee_vel[..., 2], rx.shape),
+        ],
+        -1,
+    )
+    p = np.where(att[..., None], p_att, p)
+    v = np.where(att[..., None], v_att, v)
+    yaw = np.where(att, ee_yaw + rel_yaw, yaw)
+    w = np.where(att, np.broadcast_to(ee_rate, w.shape), w)
+    return p, v, yaw, w
+
+
 class _Steps(NamedTuple):
     """The step functions of :func:`simulate` (numpy here, or numba's copies)."""
 
@@ -508,9 +548,12 @@ class _Steps(NamedTuple):
     apart: Callable[..., bool]
     impulse: Callable[..., tuple[np.ndarray, ...]]
     integrate: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray]]
+    carry: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
 
 
-REFERENCE_STEPS = _Steps(_table_normal, _table_friction, _pusher_apart, _pusher_impulse, _integrate)
+REFERENCE_STEPS = _Steps(
+    _table_normal, _table_friction, _pusher_apart, _pusher_impulse, _integrate, _grasp_carry
+)
 """The numpy step functions: the reference the compiled ones match to the bit."""
 
 
@@ -545,7 +588,7 @@ def _steps(dtype: np.dtype) -> _Steps:
     def friction(vx, vy, wf, speed2, lam_n, contact, mu_s, mu_d, kr, c_r):
         return k.friction(vx, vy, wf, speed2, lam_n, contact, _mt(mu_s, vx), _mt(mu_d, vx), kr, c_r)
 
-    return _Steps(k.normal, friction, apart, impulse, k.integrate)
+    return _Steps(k.normal, friction, apart, impulse, k.integrate, k.carry)
 
 
 def _numpy(x: torch.Tensor) -> np.ndarray:
@@ -703,6 +746,8 @@ def simulate(
         return bool(np.abs(v).max() > 0 or np.abs(w).max() > 0)
 
     steps = _steps(p.dtype)
+    zero_acc, zero_alpha = np.zeros_like(v), np.zeros_like(w)
+    zero_acc.flags.writeable = zero_alpha.flags.writeable = False
 
     dense_p = np.empty((m_sets, n_t, n_s, 3), dtype=p.dtype)  # CoM, world
     dense_y = np.empty((m_sets, n_t, n_s), dtype=p.dtype)
@@ -722,8 +767,7 @@ def simulate(
 
         # ---- free dynamics: external accelerations --------------------------------------
         gap = p[..., 2] - z_rest
-        acc = np.zeros_like(v)
-        alpha = np.zeros_like(w)
+        acc, alpha = zero_acc, zero_alpha  # read only: the terms below make new arrays
         if has_damping:
             acc = acc - damping[..., None] * v
         if accel_fx:
@@ -791,27 +835,11 @@ def simulate(
         w = wf
 
         if grasp_any[k + 1]:
-            att = grasp[None, :, k + 1]
-            ey_ = ee_yaw[None, :, k + 1]
-            c, s = np.cos(ey_), np.sin(ey_)
-            rx = c * rel_p[..., 0] - s * rel_p[..., 1]
-            ry = s * rel_p[..., 0] + c * rel_p[..., 1]
-            cp = pusher[None, :, k + 1]
-            p_att = np.stack([cp[..., 0] + rx, cp[..., 1] + ry, cp[..., 2] + rel_p[..., 2]], -1)
-            rate_ = ee_rate[None, :, k + 1]
-            cv = cvel_all[None, :, k + 1]
-            v_att = np.stack(
-                [
-                    cv[..., 0] - rate_ * ry,
-                    cv[..., 1] + rate_ * rx,
-                    np.broadcast_to(cv[..., 2], rx.shape),
-                ],
-                -1,
-            )
-            p = np.where(att[..., None], p_att, p)
-            v = np.where(att[..., None], v_att, v)
-            yaw = np.where(att, ey_ + rel_yaw, yaw)
-            w = np.where(att, rate_, w)
+            ey_ = ee_yaw[:, k + 1]
+            p, v, yaw, w = steps.carry(
+                p, v, yaw, w, grasp[:, k + 1], np.cos(ey_), np.sin(ey_), ey_, rel_p, rel_yaw,
+                pusher[:, k + 1], ee_rate[:, k + 1], cvel_all[:, k + 1],
+            )  # fmt: skip
         last = k + 1
         dense_p[:, :, last], dense_y[:, :, last] = p, yaw
 

@@ -37,6 +37,7 @@ class Kernels(NamedTuple):
     apart: Callable[..., Any]
     impulse: Callable[..., Any]
     integrate: Callable[..., Any]
+    carry: Callable[..., Any]
 
 
 def _build() -> Kernels:
@@ -141,6 +142,40 @@ def _build() -> Kernels:
                     p_new[m, t, 2] = z_rest + vz[m, t] * (dt - toi)
                 y_new[m, t] = yaw[m, t] + dt * wf[m, t]
         return p_new, v_new, y_new
+
+    @numba.njit(cache=True, fastmath=False)
+    def carry(
+        p: np.ndarray,
+        v: np.ndarray,
+        yaw: np.ndarray,
+        w: np.ndarray,
+        att: np.ndarray,
+        c: np.ndarray,
+        s: np.ndarray,
+        ee_yaw: np.ndarray,
+        rel_p: np.ndarray,
+        rel_yaw: np.ndarray,
+        ee_pos: np.ndarray,
+        ee_rate: np.ndarray,
+        ee_vel: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        p_new, v_new, y_new, w_new = p.copy(), v.copy(), yaw.copy(), w.copy()
+        m_n, t_n = yaw.shape
+        for t in range(t_n):
+            if not att[t]:
+                continue
+            for m in range(m_n):
+                rx = c[t] * rel_p[m, t, 0] - s[t] * rel_p[m, t, 1]
+                ry = s[t] * rel_p[m, t, 0] + c[t] * rel_p[m, t, 1]
+                p_new[m, t, 0] = ee_pos[t, 0] + rx
+                p_new[m, t, 1] = ee_pos[t, 1] + ry
+                p_new[m, t, 2] = ee_pos[t, 2] + rel_p[m, t, 2]
+                v_new[m, t, 0] = ee_vel[t, 0] - ee_rate[t] * ry
+                v_new[m, t, 1] = ee_vel[t, 1] + ee_rate[t] * rx
+                v_new[m, t, 2] = ee_vel[t, 2]
+                y_new[m, t] = ee_yaw[t] + rel_yaw[m, t]
+                w_new[m, t] = ee_rate[t]
+        return p_new, v_new, y_new, w_new
 
     @numba.njit(cache=True, fastmath=False)
     def impulse(
@@ -273,7 +308,7 @@ def _build() -> Kernels:
                         return False
         return True
 
-    return Kernels(normal, friction, apart, impulse, integrate)
+    return Kernels(normal, friction, apart, impulse, integrate, carry)
 
 
 _REASON: list[str] = []

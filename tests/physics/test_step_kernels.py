@@ -5,7 +5,7 @@ Oracles: the reference functions on random states that cover every branch (pushe
 inside the box, one and two end spheres, each LCP case, a capsule flush with a face, grasped
 trajectories, spheres above the box; table: flight, resting contact, bounces above and below the
 bounce speed, sticking and sliding, per-state friction coefficients as effect hooks return
-them); and whole rollouts of both scenario designs with the kernels switched off.
+them; grasped objects against the rigid carry's closed form); and whole rollouts of both scenario designs with the kernels switched off.
 """
 
 from __future__ import annotations
@@ -129,6 +129,47 @@ def test_table_steps_match_the_numpy_reference_to_the_bit(seed: int) -> None:
     iargs = (p, vx, vy, vz, wf, yaw, rebound, gap, approach, 1e-3, 0.025)
     for x, y in zip(ref.integrate(*iargs), fast.integrate(*iargs), strict=True):
         assert np.array_equal(x, y)
+
+
+def _carry_states(seed: int, m_n: int = 3, t_n: int = 300):
+    """Random states [M, T], an EE pose and twist [T] and grasp-frame offsets [M, T]; every
+    third trajectory grasped, and one reads at a non-contiguous column as the model passes."""
+    r = np.random.default_rng(seed)
+    p, v = r.normal(0.0, 0.1, (m_n, t_n, 3)), r.normal(0.0, 0.3, (m_n, t_n, 3))
+    yaw, w = r.uniform(-3.0, 3.0, (m_n, t_n)), r.normal(0.0, 2.0, (m_n, t_n))
+    att = np.arange(t_n) % 3 == 0
+    ee_yaw = r.uniform(-3.0, 3.0, (t_n, 4))[:, 1]
+    rel_p, rel_yaw = r.normal(0.0, 0.03, (m_n, t_n, 3)), r.normal(0.0, 0.5, (m_n, t_n))
+    ee_pos = r.normal(0.0, 0.3, (t_n, 4, 3))[:, 2]
+    ee_rate, ee_vel = r.normal(0.0, 1.0, (t_n, 4))[:, 3], r.normal(0.0, 0.4, (t_n, 4, 3))[:, 0]
+    c, s = np.cos(ee_yaw), np.sin(ee_yaw)
+    return p, v, yaw, w, att, c, s, ee_yaw, rel_p, rel_yaw, ee_pos, ee_rate, ee_vel
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_grasp_carry_matches_the_reference_and_the_rigid_closed_form(seed: int) -> None:
+    """Oracle besides the reference: a grasped point rides the EE rigidly, so its world
+    position is ``ee + R(ee_yaw) rel`` and its velocity ``ee_vel + rate z x (R rel)``; the
+    free trajectories keep their state."""
+    ref, fast = M.REFERENCE_STEPS.carry, M._steps(np.dtype(np.float64)).carry
+    assert fast is not ref
+    args = _carry_states(seed)
+    a, b = ref(*args), fast(*args)
+    for x, y in zip(a, b, strict=True):
+        assert x.shape == y.shape and np.array_equal(x, y)
+    p, v, yaw, w, att, c, s, ee_yaw, rel_p, rel_yaw, ee_pos, ee_rate, ee_vel = args
+    p2, v2, yaw2, w2 = a
+    rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)  # [T, 2, 2]
+    off = np.einsum("tij,mtj->mti", rot, rel_p[..., :2])
+    assert np.allclose(p2[:, att, :2], (ee_pos[:, :2] + off)[:, att], atol=1e-15)
+    assert np.allclose(p2[:, att, 2], (ee_pos[:, 2] + rel_p[..., 2])[:, att], atol=1e-15)
+    swirl = ee_rate[:, None] * np.stack([-off[..., 1], off[..., 0]], -1)
+    assert np.allclose(v2[:, att, :2], (ee_vel[:, :2] + swirl)[:, att], atol=1e-15)
+    assert np.allclose(yaw2[:, att], (ee_yaw + rel_yaw)[:, att])
+    assert (w2[:, att] == ee_rate[att]).all()
+    for new, old in ((p2, p), (v2, v), (yaw2, yaw), (w2, w)):
+        assert np.array_equal(new[:, ~att], old[:, ~att])
+    assert not np.shares_memory(b[0], p)  # the caller's state is not written
 
 
 @pytest.mark.slow
