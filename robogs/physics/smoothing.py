@@ -74,12 +74,23 @@ def local_polynomial(
     s = (t[idx] - t[:, None]) / half  # [E, K] scaled offsets
     u = np.clip(np.abs(s), 0.0, 1.0)
     w = np.where(inside, (1.0 - u**3) ** 3, 0.0)
-    basis = np.stack([s**j for j in range(degree + 1)], axis=-1)  # [E, K, P]
-    a = np.einsum("ek,eki,ekj->eij", w, basis, basis)
-    b = np.einsum("ek,eki,ekd->eid", w, basis, x[idx].reshape(n, 2 * k + 1, -1))
+    basis = s[..., None] ** np.arange(degree + 1)  # [E, K, P]
+    wb = basis * w[..., None]
+    a = np.matmul(wb.swapaxes(1, 2), basis)  # [E, P, P] normal matrices
     ridge = 1e-12 * np.trace(a, axis1=1, axis2=2)[:, None, None] * np.eye(degree + 1)
-    coef = np.linalg.solve(a + ridge, b)  # [E, P, D]
-    out = coef[:, 0] if deriv == 0 else coef[:, 1] / half
+    # the fit is linear in x: the wanted coefficient's row of the hat matrix, [E, K]
+    # weights on each sample's neighbours, so the samples (often many draws at once, D
+    # wide) are only weighted and summed, not solved for
+    unit = np.zeros((n, degree + 1, 1))
+    unit[:, 0 if deriv == 0 else 1] = 1.0
+    g = np.linalg.solve(a + ridge, unit)  # [E, P, 1]: row of a^-1 (a is symmetric)
+    h = np.matmul(wb, g)[..., 0]  # [E, K]
+    if deriv:
+        h = h / half
+    flat = x.reshape(n, -1)
+    out = np.zeros_like(flat)
+    for j in range(2 * k + 1):
+        out += h[:, j, None] * flat[idx[:, j]]
     return out.reshape(x.shape)
 
 
