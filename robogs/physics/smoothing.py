@@ -79,8 +79,9 @@ def local_polynomial(
     a = np.matmul(wb.swapaxes(1, 2), basis)  # [E, P, P] normal matrices
     ridge = 1e-12 * np.trace(a, axis1=1, axis2=2)[:, None, None] * np.eye(degree + 1)
     # the fit is linear in x: the wanted coefficient's row of the hat matrix, [E, K]
-    # weights on each sample's neighbours, so the samples (often many draws at once, D
-    # wide) are only weighted and summed, not solved for
+    # weights on each sample's neighbours (the "equivalent kernel" of local polynomial
+    # fitting, Fan & Gijbels 1996, sec. 3.2.2), so the samples (often many draws at once,
+    # D wide) are only weighted and summed, not solved for
     unit = np.zeros((n, degree + 1, 1))
     unit[:, 0 if deriv == 0 else 1] = 1.0
     g = np.linalg.solve(a + ridge, unit)  # [E, P, 1]: row of a^-1 (a is symmetric)
