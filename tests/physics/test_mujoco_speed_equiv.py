@@ -17,6 +17,8 @@ each distinct rollout once). Oracles:
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 import pytest
@@ -127,7 +129,7 @@ def test_batch_equals_rollout_path_without_single_steps(monkeypatch):
 
 def _mj_step_loop(sim: MujocoFit, args: dict) -> np.ndarray:
     """Dense poses [R, S, 7]: one MjData per rollout, one ``mj_step`` per step, the force
-    effects' wrench computed every step for every rollout, grasps applied as the runner does."""
+    effects' wrench computed every step for every rollout, grasps held by :func:`_carry_ref`."""
     full = mujoco.mjtState.mjSTATE_FULLPHYSICS
     drive, t_of = args["drive"], args["t_of"]
     n_s = drive.n_steps
@@ -167,12 +169,60 @@ def _mj_step_loop(sim: MujocoFit, args: dict) -> np.ndarray:
             if sim.pq is not None:
                 x[0, sim.pq + 2] += park[t, k + 1] - park[t, k]
             if grasp[t, k + 1]:
-                sim._attach(
-                    x, np.array([True]), tt, k + 1, pusher, ee_yaw, cvel, rate, rel_p, rel_q
+                j = k + 1
+                _carry_ref(
+                    sim, x, pusher[t, j], cvel[t, j], ee_yaw[t, j], rate[t, j], rel_p[0], rel_q[0]
                 )
             mujoco.mj_setState(m, d, x[0], full)
             out[r, k + 1] = sim.lay.pose(x)[0]
     return out
+
+
+def _carry_ref(sim: MujocoFit, x: np.ndarray, ee, v_ee, yaw: float, rate: float, rel_p, rel_q):
+    """The rigid carry, one scalar at a time, into state row ``x`` [1, nstate]: the object at
+    ``ee + R(yaw) rel_p`` (not below its resting height), turned ``q(yaw) rel_q``, moving at
+    ``v_ee + rate z x R(yaw) rel_p`` and turning at ``rate`` about z."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    rx, ry = c * rel_p[0] - s * rel_p[1], s * rel_p[0] + c * rel_p[1]
+    pos = [ee[0] + rx, ee[1] + ry, max(ee[2] + rel_p[2], sim.rest_z)]
+    hw, hz = math.cos(yaw / 2), math.sin(yaw / 2)  # q(yaw) = (hw, 0, 0, hz)
+    aw, ax, ay, az = rel_q
+    q = [hw * aw - hz * az, hw * ax - hz * ay, hw * ay + hz * ax, hw * az + hz * aw]
+    sim.lay.set_pose(x, np.array([pos]), np.array([q]))
+    vel = [v_ee[0] - rate * ry, v_ee[1] + rate * rx, v_ee[2]]
+    sim.lay.set_vel(x, np.array([vel]), np.array([[0.0, 0.0, rate]]))
+
+
+@pytest.mark.parametrize("joints", ["planar", "free"])
+def test_the_carried_states_are_the_rigid_carry(joints):
+    """The runners' held states, made for every step of a grasp at its onset, equal the scalar
+    rigid carry (:func:`_carry_ref`) at random EE poses, velocities and grasp poses, on both
+    joint sets (1e-12); a grasp held below the resting height is lifted to it."""
+    sim = MujocoFit(_physics(), "box", dt=DT, joints=joints)
+    assert sim.lay.planar == (joints == "planar")
+    rng = np.random.default_rng(3)
+    t_n, s_n = 3, 40
+    arrays = (
+        rng.normal(size=(t_n, s_n, 3)) * 0.1,
+        rng.uniform(-3.0, 3.0, (t_n, s_n)),
+        rng.normal(size=(t_n, s_n, 3)),
+        rng.normal(size=(t_n, s_n)),
+    )
+    tt, ks = np.array([2, 0, 2]), np.array([0, 7, 39])
+    rel_p = rng.normal(size=(3, 3)) * 0.05
+    rel_q = rng.normal(size=(3, 4))
+    rel_q /= np.linalg.norm(rel_q, axis=1, keepdims=True)
+    got = sim._carried(tt, ks, arrays, rel_p, rel_q)
+    n_x = mujoco.mj_stateSize(sim.eng.model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    lifted = 0
+    for i, t in enumerate(tt):
+        for j, k in enumerate(ks):
+            x = np.zeros((1, n_x))
+            p, y, v, w = (a[t, k] for a in arrays)
+            _carry_ref(sim, x, p, v, y, w, rel_p[i], rel_q[i])
+            np.testing.assert_allclose(got[i, j], x[0, sim.lay.columns()], rtol=0, atol=1e-12)
+            lifted += p[2] + rel_p[i, 2] < sim.rest_z
+    assert lifted > 0
 
 
 def test_batch_with_force_effect_and_grasp_equals_mj_step_loop():

@@ -376,6 +376,18 @@ class JointLayout:
         """State column of the first DOF velocity."""
         return 1 + self.nq + self.dof
 
+    def columns(self) -> np.ndarray:
+        """State columns of the pose (qpos) then the velocity (DOFs): 4 + 4 for a planar set,
+        7 + 6 for a free joint."""
+        n = 4 if self.planar else 7
+        return np.r_[self.q : self.q + n, self.v : self.v + n - (0 if self.planar else 1)]
+
+    def compact(self) -> JointLayout:
+        """The layout of rows that hold only :meth:`columns` (pose at column 0, velocity
+        after it)."""
+        n = 4 if self.planar else 7
+        return JointLayout(qpos=-1, dof=0, nq=n - 1, planar=self.planar)
+
     def pos(self, x: np.ndarray) -> np.ndarray:
         """[..., 3] positions [m] of state rows ``x`` [..., nstate]."""
         return x[..., self.q : self.q + 3]

@@ -604,16 +604,8 @@ class MujocoFit:
         spec = mujoco.mjtState.mjSTATE_CTRL.value
         if force_fx:
             spec |= mujoco.mjtState.mjSTATE_XFRC_APPLIED.value
-        pusher = drive.pusher.numpy()
-        ee_yaw = drive.ee_yaw.numpy()
-        cvel = (drive.pusher_vel if drive.carry_vel is None else drive.carry_vel).numpy()
-        rate = drive.ee_yaw_rate.numpy()
-        rel_p = np.zeros((n_r, 3))
-        rel_q = np.tile([1.0, 0, 0, 0], (n_r, 1))
-        if onset[:, 0].any():
-            rel_p, rel_q = self._grasp_rel(
-                x, pusher[:, 0], ee_yaw[:, 0], t_of, onset[:, 0], rel_p, rel_q
-            )
+        carry = _Carry(self, drive, t_of, grasp)
+        carry.start(x, 0, onset[:, 0], 0)
         k = 0
         while k < n_s - 1:
             if single[k]:
@@ -622,10 +614,7 @@ class MujocoFit:
                 nxt = np.flatnonzero(single[k:])
                 n = int(nxt[0]) if nxt.size else n_s - 1 - k
                 n = max(1, min(n, _MAX_CHUNK, n_s - 1 - k))
-            if onset[:, k + 1].any() if k + 1 < n_s else False:
-                rel_p, rel_q = self._grasp_rel(
-                    x, pusher[:, k], ee_yaw[:, k], t_of, onset[:, k + 1], rel_p, rel_q
-                )
+            carry.start(x, k, onset[:, k + 1], k + 1)
             c = ctrl[t_of, k : k + n]
             if force_fx:
                 xf = self._forces(x, body, force_fx)
@@ -646,7 +635,7 @@ class MujocoFit:
                 x[:, self.pq + 2] += jump
             if g_any[k]:
                 hold = grasp[t_of, k]
-                self._attach(x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q)
+                carry.attach(x, hold, k)
                 dense[hold, k] = self._poses(x[hold])
         return dense
 
@@ -724,13 +713,9 @@ class MujocoFit:
         mine = np.unique(t_of)
         single, _, g_any = _schedule(grasp[mine], park[mine], bool(force_fx))
         _, onset, _ = _schedule(grasp, park, False)
-        pusher, ee_yaw, cvel, rate = _drive_arrays(drive)
-        rel_p = np.zeros((len(ids), 3))
-        rel_q = np.tile([1.0, 0, 0, 0], (len(ids), 1))
-        if onset[:, 0].any():
-            rel_p, rel_q = self._grasp_rel(
-                x, pusher[:, 0], ee_yaw[:, 0], t_of, onset[:, 0], rel_p, rel_q
-            )
+        pusher, ee_yaw, _, _ = _drive_arrays(drive)
+        carry = _Carry(self, drive, t_of, grasp)
+        carry.start(x, 0, onset[:, 0], 0)
         k = 0
         # nothing moves while every object rests, no two are within 2 mm and the pusher is out
         # of reach of all: those steps repeat the rest pose (_first_reach, _still). Not cut:
@@ -750,10 +735,7 @@ class MujocoFit:
             n = _span(single, k, n_s)
             if cut:
                 n = min(n, _REST_CHUNK if k >= _PROBE else _PROBE - k)
-            if onset[:, k + 1].any():
-                rel_p, rel_q = self._grasp_rel(
-                    x, pusher[:, k], ee_yaw[:, k], t_of, onset[:, k + 1], rel_p, rel_q
-                )
+            carry.start(x, k, onset[:, k + 1], k + 1)
             if xfrc is not None:
                 xfrc[ids, self.slots.body] = self._forces(x, body, force_fx)
             c = ctrl[t_of, k : k + n] if ctrl.shape[-1] else None
@@ -770,7 +752,7 @@ class MujocoFit:
                 edit = True
             if g_any[k]:
                 hold = grasp[t_of, k]
-                self._attach(x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q)
+                carry.attach(x, hold, k)
                 raw[hold, k] = x[hold, :w]
                 edit = True
             if edit:
@@ -912,22 +894,36 @@ class MujocoFit:
         rel_q[on] = _qmul(_yaw_quat(-ey), self.lay.quat(x[on]))
         return rel_p, rel_q
 
-    def _attach(self, x, hold, t_of, k, pusher, ee_yaw, cvel, rate, rel_p, rel_q) -> None:
-        """Set held objects on the EE (pose, velocity) at step ``k`` in the state rows."""
-        tt = t_of[hold]
-        ey = ee_yaw[tt, k]
+    def _carried(
+        self,
+        tt: np.ndarray,
+        ks: np.ndarray,
+        arrays: tuple[np.ndarray, ...],
+        rel_p: np.ndarray,
+        rel_q: np.ndarray,
+    ) -> np.ndarray:
+        """The object held on the EE, rigidly in the EE's yaw frame: its state columns
+        (:meth:`~robogs.physics.engines.mujoco_engine.JointLayout.columns`) [n, K, C] for
+        rollouts on trajectories ``tt`` [n] at steps ``ks`` [K]. Position ``ee + R(yaw) rel_p``
+        (never below the resting height), orientation ``q(yaw) rel_q``, velocity ``v_ee + rate
+        z x R(yaw) rel_p`` (world), angular velocity ``rate z``; ``arrays`` as
+        :func:`_drive_arrays` gives them, ``rel_p`` [n, 3] m and ``rel_q`` [n, 4] (w, x, y, z)
+        each grasp's pose in the EE frame (:meth:`_grasp_rel`)."""
+        pusher, ee_yaw, cvel, rate = arrays
+        at = (tt[:, None], ks[None])
+        ey = ee_yaw[at]
         c, s = np.cos(ey), np.sin(ey)
-        rp = rel_p[hold]
-        rx, ry = c * rp[:, 0] - s * rp[:, 1], s * rp[:, 0] + c * rp[:, 1]
-        x[hold, self.qa : self.qa + 3] = pusher[tt, k] + np.stack([rx, ry, rp[:, 2]], -1)
-        x[hold, self.qa + 2] = np.maximum(x[hold, self.qa + 2], self.rest_z)
-        q = _qmul(_yaw_quat(ey), rel_q[hold])
-        xh = x[hold]
-        self.lay.set_pose(xh, quat=q)
-        r = rate[tt, k]
-        v = cvel[tt, k] + np.stack([-r * ry, r * rx, np.zeros_like(r)], -1)
-        self.lay.set_vel(xh, v, np.stack([0 * r, 0 * r, r], -1))
-        x[hold] = xh
+        rp = rel_p[:, None]
+        rx, ry = c * rp[..., 0] - s * rp[..., 1], s * rp[..., 0] + c * rp[..., 1]
+        pos = pusher[at] + np.stack([rx, ry, np.broadcast_to(rp[..., 2], rx.shape)], -1)
+        pos[..., 2] = np.maximum(pos[..., 2], self.rest_z)
+        lay = self.lay.compact()
+        out = np.zeros(ey.shape + (len(self.lay.columns()),))
+        lay.set_pose(out, pos, _qmul(_yaw_quat(ey), rel_q[:, None]))
+        r = rate[at]
+        z = np.zeros_like(r)
+        lay.set_vel(out, cvel[at] + np.stack([-r * ry, r * rx, z], -1), np.stack([z, z, r], -1))
+        return out
 
     def _forces(self, x, body, force_fx) -> np.ndarray:
         """Per-step applied wrench [R, 6] of the force effects from the rollouts' current
@@ -953,6 +949,45 @@ class MujocoFit:
             self.eng.dt,
         )
         return f.reshape(n_r, 6)
+
+
+class _Carry:
+    """Held objects of a runner's rollouts: at each grasp's onset its pose on the EE is frozen
+    (:meth:`MujocoFit._grasp_rel`) and the held state for every later step is made at once
+    (:meth:`MujocoFit._carried`); each held step then writes its row (the same values as
+    computing them step by step, without a dozen small array operations a step)."""
+
+    def __init__(self, sim: MujocoFit, drive: Drive, t_of: np.ndarray, grasp: np.ndarray):
+        self.sim, self.t_of, self.n_s = sim, t_of, drive.n_steps
+        self.arrays = _drive_arrays(drive)
+        self.rel_p = np.zeros((len(t_of), 3))
+        self.rel_q = np.tile([1.0, 0, 0, 0], (len(t_of), 1))
+        self.cols = sim.lay.columns()
+        # a row of the held buffer per rollout whose trajectory grasps, -1 for the others
+        grasps = grasp.any(1)[t_of]
+        self.row = np.cumsum(grasps) - 1
+        self.row[~grasps] = -1
+        self.held = np.zeros((int(grasps.sum()), self.n_s, len(self.cols)))
+
+    def start(self, x: np.ndarray, k_ee: int, on_t: np.ndarray, k: int) -> None:
+        """Grasps that start at step ``k`` (``on_t`` [T] per trajectory): the objects' poses in
+        state rows ``x`` relative to the EE at step ``k_ee``."""
+        if k >= self.n_s or not on_t[self.t_of].any():
+            return
+        pusher, ee_yaw = self.arrays[:2]
+        self.rel_p, self.rel_q = self.sim._grasp_rel(
+            x, pusher[:, k_ee], ee_yaw[:, k_ee], self.t_of, on_t, self.rel_p, self.rel_q
+        )
+        on = np.flatnonzero(on_t[self.t_of])
+        self.held[self.row[on], k:] = self.sim._carried(
+            self.t_of[on], np.arange(k, self.n_s), self.arrays, self.rel_p[on], self.rel_q[on]
+        )
+
+    def attach(self, x: np.ndarray, hold: np.ndarray, k: int) -> None:
+        """Set the held objects of state rows ``x`` (``hold`` [R] bool) where step ``k`` has
+        them."""
+        rows = np.flatnonzero(hold)
+        x[rows[:, None], self.cols] = self.held[self.row[rows], k]
 
 
 def _below(m: mujoco.MjModel, gid: int) -> float:
