@@ -200,35 +200,42 @@ def step_forces(
         gravity: |g| [m/s^2] (the normal force of a resting object is m g).
         dt: step [s] (friction changes are limited to stop the object, not reverse it).
     """
-    f64 = torch.float64
-    vt = torch.as_tensor(v, dtype=f64)
-    wt = torch.as_tensor(w, dtype=f64)
-    yt = torch.as_tensor(yaw, dtype=f64)
-    acc = torch.zeros_like(vt)
-    alpha = torch.zeros_like(wt)
-    state = FreeState(v=vt, w=wt, yaw=yt, on_table=torch.as_tensor(on_table), body=body)
-    speed = torch.sqrt(vt[..., 0] ** 2 + vt[..., 1] ** 2 + 1e-18)
-    slip = Slip(vx=vt[..., 0], vy=vt[..., 1], speed=speed, yaw=yt)
-    dmu = torch.zeros_like(wt)
+    # the hooks get torch tensors (they are the planar model's); the rest is numpy, whose
+    # per-call cost on a few rows is a fraction of torch's (this runs every step)
+    v = np.asarray(v, dtype=np.float64)
+    w = np.asarray(w, dtype=np.float64)
+    on_table = np.asarray(on_table, dtype=bool)
+    vt, wt = torch.from_numpy(v), torch.from_numpy(w)
+    yt = torch.as_tensor(yaw, dtype=torch.float64)
+    speed = np.sqrt(v[..., 0] ** 2 + v[..., 1] ** 2 + 1e-18)
+    acc = np.zeros(v.shape)
+    alpha = np.zeros(w.shape)
+    dmu = np.zeros(w.shape)
+    state = slip = None
     for e, th in effects:
         if overrides(e, "accel"):
+            if state is None:
+                state = FreeState(
+                    v=vt, w=wt, yaw=yt, on_table=torch.from_numpy(on_table), body=body
+                )
             out = e.accel(th, state)
             if out is not None:
                 if out[0] is not None:
-                    acc = acc + out[0]
+                    acc = acc + out[0].detach().numpy()
                 if out[1] is not None:
-                    alpha = alpha + out[1]
+                    alpha = alpha + out[1].detach().numpy()
         if overrides(e, "friction"):
+            if slip is None:
+                slip = Slip(vx=vt[..., 0], vy=vt[..., 1], speed=torch.from_numpy(speed), yaw=yt)
             _, mu_d = e.friction(th, body.mu_s, body.mu_d, slip)
-            dmu = dmu + (mu_d - body.mu_d)
+            dmu = dmu + (mu_d - body.mu_d).detach().numpy()
     # extra Coulomb deceleration, capped at the speed it can remove in one step
     dec = dmu * gravity
-    dec = torch.minimum(dec.abs(), speed / dt) * torch.sign(dec)
-    dec = torch.where(torch.as_tensor(on_table) & (speed > 1e-6), dec, torch.zeros_like(dec))
-    acc = acc.clone()
-    acc[..., 0] = acc[..., 0] - dec * vt[..., 0] / speed
-    acc[..., 1] = acc[..., 1] - dec * vt[..., 1] / speed
+    dec = np.minimum(np.abs(dec), speed / dt) * np.sign(dec)
+    dec = np.where(on_table & (speed > 1e-6), dec, 0.0)
+    acc[..., 0] = acc[..., 0] - dec * v[..., 0] / speed
+    acc[..., 1] = acc[..., 1] - dec * v[..., 1] / speed
     out = np.zeros(v.shape[:2] + (6,))
-    out[..., :3] = (body.mass.unsqueeze(-1) * acc).numpy()
-    out[..., 5] = (body.inertia_z * alpha).numpy()
+    out[..., :3] = body.mass.unsqueeze(-1).numpy() * acc
+    out[..., 5] = body.inertia_z.numpy() * alpha
     return out

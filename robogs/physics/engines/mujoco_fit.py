@@ -929,14 +929,22 @@ class MujocoFit:
         """Per-step applied wrench [R, 6] of the force effects from the rollouts' current
         states ``x`` [R, nstate] (``body`` and the effects' parameters one row per rollout)."""
         n_r = x.shape[0]
-        q = self.lay.quat(x)
         v = x[:, self.va : self.va + 3]
-        w_world = self.lay.omega(x)
-        w = w_world[:, 2]
+        com = body.com.numpy()[:, 0]  # body frame [m]
         # velocity of the CoM = origin velocity + omega x (R ipos)
-        com = _rot(q, np.asarray(body.com.numpy())[:, 0])
-        vc = v + _cross(w_world, com)
-        yaw = quat_yaw(q)
+        if self.lay.planar:  # yaw and yaw rate are state columns: the same in 2-D
+            c, s = np.cos(x[:, self.qa + 3]), np.sin(x[:, self.qa + 3])
+            w = x[:, self.va + 3]
+            vc = v.copy()
+            vc[:, 0] -= w * (s * com[:, 0] + c * com[:, 1])
+            vc[:, 1] += w * (c * com[:, 0] - s * com[:, 1])
+            yaw = np.arctan2(s, c)  # in (-pi, pi], as quat_yaw gives it
+        else:
+            q = self.lay.quat(x)
+            w_world = self.lay.omega(x)
+            w = w_world[:, 2]
+            vc = v + _cross(w_world, _rot(q, com))
+            yaw = quat_yaw(q)
         gap = x[:, self.qa + 2] - (self.table_z + self.half_z)
         f = step_forces(
             force_fx,
