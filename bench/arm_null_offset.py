@@ -9,7 +9,7 @@ figures against the null quantile, then the count of runs that selected anything
 
 from __future__ import annotations
 
-import sys
+import argparse
 import tempfile
 import time
 from pathlib import Path
@@ -55,4 +55,6 @@ def main(seeds: int) -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 20)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("seeds", nargs="?", type=int, default=20, help="null seeds per noise level")
+    main(ap.parse_args().seeds)

@@ -8,6 +8,7 @@ once (a forward-difference Jacobian of 12 backlash widths plus the base point), 
 
 from __future__ import annotations
 
+import argparse
 import os
 import platform
 import sys
@@ -30,7 +31,8 @@ def _loop(x0: torch.Tensor, q: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
     return out
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args(argv)
     torch.set_num_threads(1)
     from robogs.physics.arm.kinematic_model import play_scan
 

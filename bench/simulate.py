@@ -29,6 +29,7 @@ its wall time, the process's CPU time (all its threads) and the 1-minute load av
 
 from __future__ import annotations
 
+import argparse
 import datetime
 import os
 import platform
@@ -139,7 +140,11 @@ def _jacobian(rec, stepper: str) -> tuple[dict[str, float], int, int]:
     return r, len(cols) + 4, eng._mujoco.last_rollouts
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--no-write", action="store_true", help="print only, no bench/RESULTS.md")
+    ap.add_argument("--no-single", action="store_true", help="skip the 64 single planar rollouts")
+    args = ap.parse_args(argv)
     torch.set_num_threads(1)  # small tensors: one thread is fastest (and fair on a shared machine)
     import mujoco
 
@@ -151,7 +156,7 @@ def main() -> None:
     n_t, n_s = prep.drive.n_traj, prep.drive.n_steps
     steps = n_t * n_s
     load0 = os.getloadavg()
-    planar = _planar(rec, "--no-single" not in sys.argv)
+    planar = _planar(rec, not args.no_single)
     mj = {k: _interface(rec, prep, k) for k in (1, 2)}
     lines = [
         "### rollout throughput, planar and mujoco engines (bench/simulate.py)",
@@ -222,7 +227,7 @@ def main() -> None:
         f"{jb['cpu']:.2f} s CPU = {jr['cpu'] / jb['cpu']:.2f}x (CPU), load {jb['load']:.1f}",
     ]
     print("\n".join(lines))
-    if "--no-write" not in sys.argv:
+    if not args.no_write:
         with (ROOT / "bench" / "RESULTS.md").open("a") as fh:
             fh.write(
                 f"## simulate.py: engine throughput ({datetime.date.today().isoformat()})\n\n"
