@@ -225,12 +225,18 @@ def test_the_carried_states_are_the_rigid_carry(joints):
     assert lifted > 0
 
 
-def test_batch_with_force_effect_and_grasp_equals_mj_step_loop():
-    """Quadratic drag on in set 1 (off in set 0), a push beside a carry-and-release: the batch
-    runner equals a plain mj_step loop (1e-9 m) and the old rollout path within
-    OLD_PATH_BOUND_M."""
+@pytest.mark.parametrize("windows", [((0, 200),), ((0, 120), (200, 300))], ids=["one", "regrasp"])
+def test_batch_with_force_effect_and_grasp_equals_mj_step_loop(windows):
+    """Quadratic drag on in set 1 (off in set 0), a push beside a carry-and-release (or a carry,
+    a release and a second grasp where the box lies): the batch runner equals a plain mj_step
+    loop (1e-9 m) and the old rollout path within OLD_PATH_BOUND_M; its held states made in
+    blocks of 7 steps (a block straddles the release and the second grasp) give the same
+    poses."""
     phys, scene, space = _setup(["quadratic_drag"])
     drive = _drive(grasp=True)
+    drive.grasp[1] = False
+    for a, b in windows:
+        drive.grasp[1, a:b] = True
     th = _sets(space)
     th[1, space.owner_columns("quadratic_drag")[0]] = 2.0
     sim = MujocoFit(phys, "box", dt=DT, stepper="batch")
@@ -253,6 +259,10 @@ def test_batch_with_force_effect_and_grasp_equals_mj_step_loop():
     assert np.abs(seen["dense"] - ref).max() <= 1e-9, np.abs(seen["dense"] - ref).max()
     b = _dense(MujocoFit(phys, "box", dt=DT, stepper="rollout"), th, space, drive, scene)
     assert np.abs(a - b).max() <= OLD_PATH_BOUND_M, np.abs(a - b).max()
+    with pytest.MonkeyPatch.context() as mp:  # held states made 7 steps at a time: the same
+        mp.setattr(mujoco_fit, "_CARRY_BLOCK", 7)
+        sim7 = MujocoFit(phys, "box", dt=DT, stepper="batch")
+        assert np.array_equal(a, _dense(sim7, th, space, drive, scene))
 
 
 def test_repeated_rollouts_run_once_and_agree_with_their_own_call():

@@ -125,6 +125,7 @@ PUSHER_PARK_M = 10.0
 
 _MAX_CHUNK = 256  # steps per multi-step rollout call (bounds the state buffer)
 _REST_CHUNK = 50  # steps per call where a rollout may come to rest (the rest check's stride)
+_CARRY_BLOCK = 256  # steps of held states made at once (_Carry)
 _PROBE = 2  # steps taken before the start of the rest cut: a box that starts to move is seen
 REST_SPEED = 1e-5
 """Speed [m/s, rad/s] under which every DOF of a resting object counts as still (the batch
@@ -961,9 +962,10 @@ class MujocoFit:
 
 class _Carry:
     """Held objects of a runner's rollouts: at each grasp's onset its pose on the EE is frozen
-    (:meth:`MujocoFit._grasp_rel`) and the held state for every later step is made at once
-    (:meth:`MujocoFit._carried`); each held step then writes its row (the same values as
-    computing them step by step, without a dozen small array operations a step)."""
+    (:meth:`MujocoFit._grasp_rel`); the held states of every grasping rollout are then made
+    for ``_CARRY_BLOCK`` steps at once (:meth:`MujocoFit._carried`) and each held step writes
+    its rows (the same values as computing them step by step, without a dozen small array
+    operations a step; memory bounded by the block, not the trajectory's length)."""
 
     def __init__(self, sim: MujocoFit, drive: Drive, t_of: np.ndarray, grasp: np.ndarray):
         self.sim, self.t_of, self.n_s = sim, t_of, drive.n_steps
@@ -971,11 +973,13 @@ class _Carry:
         self.rel_p = np.zeros((len(t_of), 3))
         self.rel_q = np.tile([1.0, 0, 0, 0], (len(t_of), 1))
         self.cols = sim.lay.columns()
-        # a row of the held buffer per rollout whose trajectory grasps, -1 for the others
+        # the rollouts whose trajectory grasps, and each one's row of the block (-1: none)
         grasps = grasp.any(1)[t_of]
+        self.grasping = np.flatnonzero(grasps)
         self.row = np.cumsum(grasps) - 1
         self.row[~grasps] = -1
-        self.held = np.zeros((int(grasps.sum()), self.n_s, len(self.cols)))
+        self.k0 = -1  # first step of the block; -1: none made since the last onset
+        self.block = np.zeros((0, 0, len(self.cols)))
 
     def start(self, x: np.ndarray, k_ee: int, on_t: np.ndarray, k: int) -> None:
         """Grasps that start at step ``k`` (``on_t`` [T] per trajectory): the objects' poses in
@@ -986,16 +990,20 @@ class _Carry:
         self.rel_p, self.rel_q = self.sim._grasp_rel(
             x, pusher[:, k_ee], ee_yaw[:, k_ee], self.t_of, on_t, self.rel_p, self.rel_q
         )
-        on = np.flatnonzero(on_t[self.t_of])
-        self.held[self.row[on], k:] = self.sim._carried(
-            self.t_of[on], np.arange(k, self.n_s), self.arrays, self.rel_p[on], self.rel_q[on]
-        )
+        self.k0 = -1  # the block was made with the old grasp poses
 
     def attach(self, x: np.ndarray, hold: np.ndarray, k: int) -> None:
         """Set the held objects of state rows ``x`` (``hold`` [R] bool) where step ``k`` has
         them."""
+        if self.k0 < 0 or not 0 <= k - self.k0 < self.block.shape[1]:
+            g = self.grasping
+            ks = np.arange(k, min(k + _CARRY_BLOCK, self.n_s))
+            self.block = self.sim._carried(
+                self.t_of[g], ks, self.arrays, self.rel_p[g], self.rel_q[g]
+            )
+            self.k0 = k
         rows = np.flatnonzero(hold)
-        x[rows[:, None], self.cols] = self.held[self.row[rows], k]
+        x[rows[:, None], self.cols] = self.block[self.row[rows], k - self.k0]
 
 
 def _below(m: mujoco.MjModel, gid: int) -> float:
