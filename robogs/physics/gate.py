@@ -151,7 +151,12 @@ candidate keeps ``f = 1``.
 Three other checks were built and measured on both designs, and not adopted: an antithetic
 noise share along the model's path (h46), a choice between it and the draw from the objective's
 measured roughness (h49), and that share only past a z cut at the candidate's level (h109);
-bench/RESULTS.md, issue 17, records each one's numbers and why.
+bench/RESULTS.md, issue 17, records each one's numbers and why. A fourth was measured without
+being built (stop 48): the effect's chord from its zero to the fit as a linear column beside
+its tangent, in the check alone or in the null as well. It explains restitution's curved path
+(design B s17: 9.75 of a draw's 9.34 sigma^2 fit gain, the tangent 0.05) and not MuJoCo's
+rough tilt (8.0 of 19.1), but it would also pass restitution on design A null seed 4, where
+the inflation is earned.
 
 The calibration is cached on disk per revision (``model_key`` of physics.json), data
 fingerprint, candidate list and draw count, with the linearisation checks made on it
