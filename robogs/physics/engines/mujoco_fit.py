@@ -714,8 +714,8 @@ class MujocoFit:
         mine = np.unique(t_of)
         single, _, g_any = _schedule(grasp[mine], park[mine], bool(force_fx))
         _, onset, _ = _schedule(grasp, park, False)
-        pusher, ee_yaw, _, _ = _drive_arrays(drive)
         carry = _Carry(self, drive, t_of, grasp)
+        pusher, ee_yaw = carry.arrays[:2]  # the drive's arrays, read once
         carry.start(x, 0, onset[:, 0], 0)
         k = 0
         # nothing moves while every object rests, no two are within 2 mm and the pusher is out
