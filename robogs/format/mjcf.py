@@ -229,7 +229,8 @@ PLANAR_SETTINGS = ContactSettings(
 ``dmax tc zeta (zeta + sqrt(zeta^2 - 1))`` = 13 ms): a struck box leaves at the pusher's speed
 within 0.11 % at 0.55 m/s, where ``solref``'s 4 ms x 2 of before (slow mode 30 ms) let it ride
 0.86 % faster, a strike bias that the fit read as 0.4-0.9 % more friction and that the diagnosis
-reported as Stribeck on 4 of 15 design-A nulls on MuJoCo. Why not stiffer: at 2 steps x 1.5
+reported as Stribeck on 4 of 15 design-A nulls on MuJoCo (0 of the same 15 with this pair).
+Why not stiffer: at 2 steps x 1.5
 (MuJoCo's shortest time constant) every strike is within 0.01 %, but the capsule ends' contact
 onsets, which fall on whole steps, make the CoM offset's objective rough and its fits fail
 (``tests/physics/test_mujoco_com_offset.py``); 2.5 x 1.7 passes them. Measured in

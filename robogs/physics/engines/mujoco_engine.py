@@ -156,8 +156,9 @@ tilt null threshold under the wild null 0.32x planar's, bound 0.7; h42, h44). Si
 parametric null with smooth start-pose columns became the default (h99) that oracle is the
 smooth-column one, which stiffer pairs pass. The default pair is now 2.5 steps x 1.7 (slow mode
 13 ms; stop 49, ``bench/RESULTS.md``, "issue 16 (lead, stop 49)"): struck boxes within +0.02 /
-+0.11 % of the pusher at 0.45 / 0.55 m/s, design A nulls seeds 13 and 15 (Stribeck reported
-with 4 ms x 2) clean with the base friction within 0.06 %; 2 steps x 1.5 removes the bias
++0.11 % of the pusher at 0.45 / 0.55 m/s; design A nulls seeds 1-15 report nothing (4 ms x 2:
+Stribeck on 4) and their base friction is +0.17 % off in the median (4 ms x 2: +0.49 %); 2
+steps x 1.5 removes the bias
 entirely on the closed-form strikes but makes the CoM offset's fits fail (its onsets fall on
 whole steps and jump).
 
