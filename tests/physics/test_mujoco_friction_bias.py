@@ -1,7 +1,8 @@
 """Where MuJoCo's +2.8 % friction bias on centred pushes comes from (issue 16, h42).
 
-On the 9-push timing scene (``make_scenario("none", seed=0, kinds=("push",))``) MuJoCo fits the
-table friction 0.3597 against the generator's 0.35 (planar 0.3482). Closed-form cases, one
+On the 9-push timing scene (``make_scenario("none", seed=0, kinds=("push",))``) MuJoCo fitted the
+table friction 0.3597 against the generator's 0.35 (planar 0.3482) with the 4 ms x 2 pusher
+pair of before, and fits 0.35024 with today's 2.5 steps x 1.7. Closed-form cases, one
 mechanism at a time, on the planar joint set (:data:`~robogs.format.mjcf.PLANAR_SETTINGS`):
 
 * the table friction is Coulomb's: a box given v0 decelerates at mu g (within 0.05 % at 0.3 and

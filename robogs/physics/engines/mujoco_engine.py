@@ -130,10 +130,12 @@ are 1.01-1.04x planar's and smooth on four scenarios (``bench/RESULTS.md``, issu
 push is mu m g within 0.5 % (it read +6.6-11.9 % high: the coupling loaded the table).
 
 Friction bias of centred pushes (h42; ``tests/physics/test_mujoco_friction_bias.py``). On the
-9-push timing scene MuJoCo fits the table friction 2.8 % high (0.3597 for 0.35; noise-free
-data: 0.3597 too, planar 0.3485). Not the table friction: a slide decelerates at mu g within
-0.05 % and stops at semi-implicit Euler's ``v0^2 / (2 mu g) - v0 dt / 2``; not the steady push:
-the pusher force is mu m g within 0.4 %. It is the strike: with ``solref`` (tc, zeta) MuJoCo's
+9-push timing scene MuJoCo fitted the table friction 2.8 % high with the 4 ms x 2 pusher pair
+(0.3597 for 0.35; noise-free data: 0.3597 too, planar 0.3485); with today's 2.5 steps x 1.7
+it fits 0.35024 (planar 0.34822; stop 49, the base model alone, ``Engine.fit``). Not the
+table friction: a slide decelerates at mu g within 0.05 % and stops at semi-implicit Euler's
+``v0^2 / (2 mu g) - v0 dt / 2``; not the steady push: the pusher force is mu m g within 0.4 %.
+It is the strike: with ``solref`` (tc, zeta) MuJoCo's
 reference acceleration is ``-b v - k r`` with ``b = 2 / (dmax tc)``, ``k = 1 / (dmax tc zeta)^2``
 (MuJoCo documentation, "Computation", soft constraints), so the overdamped pusher pair relaxes
 on its slow mode ``dmax tc zeta (zeta + sqrt(zeta^2 - 1))``: 30 ms at (4 ms, 2). A 0.55 m/s strike
