@@ -230,11 +230,10 @@ PLANAR_SETTINGS = ContactSettings(
 within 0.11 % at 0.55 m/s, where ``solref``'s 4 ms x 2 of before (slow mode 30 ms) let it ride
 0.86 % faster, a strike bias that the fit read as 0.4-0.9 % more friction and that the diagnosis
 reported as Stribeck on 4 of 15 design-A nulls on MuJoCo (0 of the same 15 with this pair).
-Why not stiffer: at 2 steps x 1.5
-(MuJoCo's shortest time constant) every strike is within 0.01 %, but the capsule ends' contact
-onsets, which fall on whole steps, make the CoM offset's objective rough and its fits fail
-(``tests/physics/test_mujoco_com_offset.py``); 2.5 x 1.7 passes them. Measured in
-``bench/RESULTS.md``, "issue 16 (h42)" and "(lead, stop 49)"."""
+Why not stiffer: at 2 steps x 1.5 (MuJoCo's shortest time constant) every strike is within
+0.01 %, but the capsule ends' contact onsets, which fall on whole steps, make the CoM offset's
+objective rough and its fits fail (``tests/physics/test_mujoco_com_offset.py``); 2.5 x 1.7
+passes them. Measured in ``bench/RESULTS.md``, "issue 16 (h42)" and "(lead, stop 49)"."""
 
 
 PUSHER_ONSET_D0 = 1e-4

@@ -1,4 +1,4 @@
-"""Where MuJoCo's +2.8 % friction bias on centred pushes comes from (issue 16, h42).
+"""Where MuJoCo's +2.8 % friction bias on centred pushes came from (issue 16, h42).
 
 On the 9-push timing scene (``make_scenario("none", seed=0, kinds=("push",))``) MuJoCo fitted the
 table friction 0.3597 against the generator's 0.35 (planar 0.3482) with the 4 ms x 2 pusher
@@ -257,8 +257,8 @@ def test_a_braking_pusher_releases_the_box_at_the_rigid_speed(knot: float) -> No
     follows the pusher until the ramp reaches mu g (8.6 ms) and leaves at 0.2853 m/s. MuJoCo
     (z ballast 99) releases it within :data:`RELEASE_BOUND` of the rigid oracle, with a knot
     every step (measured +0.09 mm/s; the 4 ms x 2 pusher pair of before: +0.14) and through 2 ms
-    knots with the servo targets smoothed over them (-0.11 mm/s; before: -0.06). The rigid oracle itself on the 2 ms knots: +0.03 mm/s, so an excess is
-    MuJoCo's, not the drive's."""
+    knots with the servo targets smoothed over them (-0.11 mm/s; before: -0.06). The rigid
+    oracle itself on the 2 ms knots: +0.03 mm/s, so an excess is MuJoCo's, not the drive's."""
     excess = _release_excess(0.35, 0.3, knot)
     assert abs(excess) < RELEASE_BOUND, excess
 
