@@ -367,6 +367,21 @@ def _step(
     return theta, local
 
 
+def _predicted_gain(
+    st: _State, mask_t: np.ndarray, n_local: int, theta: np.ndarray, local: np.ndarray
+) -> float:
+    """The chi^2 fall ``-(2 g.d + d' A d)`` that the linear model at ``st`` (``A = J'J``,
+    ``g = J'r``) predicts for the step ``d`` to (``theta``, ``local``)."""
+    a, g, tsel = _normal_equations(st, mask_t, n_local)
+    p = len(st.prob.free)
+    d = np.zeros(len(g))
+    d[:p] = theta[list(st.prob.free)] - st.theta[list(st.prob.free)]
+    nl = len(g) - p
+    if nl:
+        d[p:] = (local[tsel] - st.local[tsel]).reshape(-1)
+    return float(-(2.0 * g @ d + d @ a @ d))
+
+
 def _cost(resid: np.ndarray, mask_t: np.ndarray) -> float:
     return float(np.sum(resid[mask_t] ** 2))
 
@@ -404,7 +419,13 @@ def fit_problems(
             ``max(ftol * chi^2, atol)`` (``atol`` = 0.05: the optimum is then closer than about
             0.2 standard deviations), or when three steps in a row are rejected after an
             accepted one that gained less than 1 (contact kinks make the finite-difference
-            model inexact near the optimum; more damping only shortens the step).
+            model inexact near the optimum; more damping only shortens the step). After a
+            rejected step, a more damped one whose gain the linear model predicts under that
+            same bound is not rolled out: accepted, it would end the fit. MuJoCo's 1 ms
+            contact events make the Jacobian promise gains of 8-10 chi^2 that no step
+            realises, and from a nested start already at its optimum the damping then rose
+            from 1e-3 past 1e6 in ten rejected rollouts (design B null seed 1, a third of
+            the diagnosis' rollouts; bench/RESULTS.md, "rejected steps").
         progress: called with (iteration, unfinished problems).
         cluster_jackknife: also raise each variance to the leave-one-trajectory-out jackknife's
             (:func:`_jackknife_cov`, CR3) where that is larger.
@@ -477,6 +498,10 @@ def fit_problems(
                     if not (
                         np.allclose(th_n, st.theta, rtol=0, atol=1e-12)
                         and np.allclose(lo_n, st.local, rtol=0, atol=1e-12)
+                    ) and not (
+                        st.rejects
+                        and _predicted_gain(st, masks[i], n_local, th_n, lo_n)
+                        < max(ftol * st.cost, atol)
                     ):
                         nt.append((th_n, lo_n, st.lam * f))
                 if nt:
