@@ -421,11 +421,12 @@ def fit_problems(
             accepted one that gained less than 1 (contact kinks make the finite-difference
             model inexact near the optimum; more damping only shortens the step). After a
             rejected step, a more damped one whose gain the linear model predicts under that
-            same bound is not rolled out: accepted, it would end the fit. MuJoCo's 1 ms
-            contact events make the Jacobian promise gains of 8-10 chi^2 that no step
-            realises, and from a nested start already at its optimum the damping then rose
-            from 1e-3 past 1e6 in ten rejected rollouts (design B null seed 1: the rule
-            saves a fifth of the diagnosis' rollouts; bench/RESULTS.md, "rejected steps").
+            same bound is not rolled out (accepted with that gain, it would end the fit), and
+            the problem ends as converged where it is. MuJoCo's 1 ms contact events make the
+            Jacobian promise gains of 8-10 chi^2 that no step realises, and from a nested
+            start already at its optimum the damping then rose from 1e-3 past 1e6 in ten
+            rejected rollouts (design B null seed 1: the rule saves a fifth of the
+            diagnosis' rollouts; bench/RESULTS.md, "rejected steps").
         progress: called with (iteration, unfinished problems).
         cluster_jackknife: also raise each variance to the leave-one-trajectory-out jackknife's
             (:func:`_jackknife_cov`, CR3) where that is larger.
