@@ -145,6 +145,7 @@ class Drive:
         init_yaw: measured initial object yaw [T] rad (sensor frame).
         obs_t: object-pose stamps [T, N] s from the trajectory start; obs_mask [T, N] valid.
         init_vel: optional initial CoM velocity [T, 3] m/s (default: at rest).
+        init_rate: optional initial yaw rate [T] rad/s about world z (default: 0).
         carry_vel: optional smoothed EE velocity [T, S, 3] m/s given to a carried object
             (default: ``pusher_vel``).
         wrench_bin: optional [T, S] int64: the wrench sample whose averaging window holds each
@@ -178,6 +179,7 @@ class Drive:
     wrench_width: torch.Tensor | None = None
     sample_dt: torch.Tensor | None = None
     pusher_dofs: torch.Tensor | None = None
+    init_rate: torch.Tensor | None = None
 
     @property
     def n_traj(self) -> int:
@@ -203,6 +205,7 @@ class Drive:
             None if self.wrench_width is None else self.wrench_width[ii],
             None if self.sample_dt is None else self.sample_dt[ii],
             pusher_dofs=None if self.pusher_dofs is None else self.pusher_dofs[ii],
+            init_rate=None if self.init_rate is None else self.init_rate[ii],
         )
 
 
@@ -697,6 +700,8 @@ def simulate(
     if drive.init_vel is not None:
         v = v + drive_array(drive.init_vel).numpy()[None]
     w = np.zeros_like(yaw)
+    if drive.init_rate is not None:
+        w = w + drive_array(drive.init_rate).numpy()[None]
     rel_p = np.zeros_like(p)
     rel_yaw = np.zeros_like(yaw)
     g = scene.gravity

@@ -236,6 +236,7 @@ class MujocoFit:
         half = np.array(m.geom_size[gid])
         half[2] += m.geom_pos[gid][2]  # the top face: a footprint box's collision face is raised
         self.z_rest_gap = 1e-3  # [m] above the resting height still counts as on the table
+        self.c_r = 0.0  # [m] the footprint's mean radius, from the scene each simulate
         self.table_z = float(physics.get("objects", {}).get("table", {}).get("plane_z_m", 0.0))
         self.half_z = float(half[2]) if half.shape[0] >= 3 else 0.0
         # lowest height of the object frame that does not penetrate a horizontal table: a
@@ -436,6 +437,9 @@ class MujocoFit:
         self.lay.set_vel(x, np.zeros((n_r, 3)), np.zeros((n_r, 3)))
         if drive.init_vel is not None:
             x[:, self.va : self.va + 3] = np.tile(drive.init_vel.numpy(), (m_sets, 1))
+        if drive.init_rate is not None:
+            rate = np.tile(drive.init_rate.numpy(), m_sets)
+            self.lay.set_vel(x, omega=np.stack([0.0 * rate, 0.0 * rate, rate], -1))
         self._place_tracked(x, m_sets, n_t, sensor_fx)
         ctrl = self.eng._controls(drive)  # [T, S-1, nu]
         grasp = drive.grasp.numpy()
@@ -462,6 +466,7 @@ class MujocoFit:
         sets, set_of = np.unique(rows // n_t, return_inverse=True)
         models, _, _ = self.models(theta[sets], space, scene)
         body, _, _, force_fx = self._physics(theta[rows // n_t], space, scene)
+        self.c_r = float(scene.friction_radius)  # friction hooks' torque arm (step_forces)
         self.last_rollouts = len(rows)
         want_force = drive.wrench_bin is not None and self.pv is not None
         pstate = np.zeros((len(rows), n_s, 6)) if want_force else None
@@ -956,6 +961,7 @@ class MujocoFit:
             (gap < self.z_rest_gap).reshape(n_r, 1),
             self.gravity,
             self.eng.dt,
+            self.c_r,
         )
         return f.reshape(n_r, 6)
 

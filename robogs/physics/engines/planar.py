@@ -101,8 +101,9 @@ class PlanarEngine:
         initial: Mapping[str, ObjectState] | None = None,
         params: Mapping[str, Sequence[float]] | None = None,
     ) -> Predicted:
-        """Poses of the box at ``drive.obs_t`` (its initial pose and velocity from ``initial``
-        when given: the quaternion's yaw is used, roll and pitch are not modelled)."""
+        """Poses of the box at ``drive.obs_t`` (its initial pose, velocity and yaw rate from
+        ``initial`` when given: the quaternion's yaw and omega's z are used, roll and pitch are
+        not modelled)."""
         key = f"objects.{self.object_name}.friction_dynamic"
         unknown = set(params or {}) - {key}
         if unknown:
@@ -123,6 +124,8 @@ class PlanarEngine:
             drive.init_yaw = torch.as_tensor(quat_yaw(np.asarray(st.quat, float)))
             if st.vel is not None:
                 drive.init_vel = torch.as_tensor(np.asarray(st.vel, float))
+            if st.omega is not None:  # the yaw rate; roll and pitch rates are not modelled
+                drive.init_rate = torch.as_tensor(np.asarray(st.omega, float)[:, 2])
         with torch.no_grad():
             res = simulate(theta, self.space, drive, self.scene)
         pos = res.pos.numpy()
