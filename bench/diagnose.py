@@ -130,6 +130,9 @@ def _one(args: tuple[str, str, int, str]) -> dict:
             bool(p.low <= truth[p.name] <= p.high) for p in fitted if p.name in truth
         ]
         out["undetermined_true"] = list(getattr(true_row, "undetermined", []))
+        # signed values (value, low, high) and the truth: biases, not only error sizes
+        out["params_fit"] = {p.name: [p.value, p.low, p.high] for p in true_row.params}
+        out["params_truth"] = dict(truth)
         out["true_verdict"] = true_row.verdict
         out["rms_after_true"] = true_row.rms_after
         if effect == "time_offset":

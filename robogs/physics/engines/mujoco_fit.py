@@ -730,6 +730,10 @@ class MujocoFit:
         # every step; a cut would leave its states out and re-place the pusher with the
         # servo's ideal velocity, a jump in the force of the first stepped bin)
         cut = pstate is None and not grasp[mine].any() and self._cut_ok()
+        # the "rests for good" check looks at every step left (_gaps): it runs every
+        # _REST_CHUNK steps, also where a force effect steps the group one step at a time
+        # (checked every step, it cost a Stribeck set 60 % of its rollout time)
+        next_still = 0
         while k < n_s - 1:
             if cut and k == _PROBE:  # still at rest: on to the step before the pusher's reach
                 k0 = self._first_reach(x, t_of, k, pusher, ee_yaw, body, force_fx)
@@ -763,9 +767,11 @@ class MujocoFit:
                 edit = True
             if edit:
                 b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
-            if cut and k < n_s - 1 and self._still(x, t_of, k, pusher, ee_yaw, body, force_fx):
-                raw[:, k + 1 :] = x[:, None, :w]  # at rest for good: the rest pose repeats
-                break
+            if cut and k < n_s - 1 and k >= next_still:
+                if self._still(x, t_of, k, pusher, ee_yaw, body, force_fx):
+                    raw[:, k + 1 :] = x[:, None, :w]  # at rest for good: the rest pose repeats
+                    break
+                next_still = k + _REST_CHUNK
         dense[ids] = self._poses(raw)
 
     # ------------------------------------------------------------------ rest cut
