@@ -612,6 +612,7 @@ class MujocoFit:
             spec |= mujoco.mjtState.mjSTATE_XFRC_APPLIED.value
         carry = _Carry(self, drive, t_of, grasp)
         carry.start(x, 0, onset[:, 0], 0)
+        vz_prev = x[:, self.va + 2].copy()  # the force effects' normal force (_forces)
         k = 0
         while k < n_s - 1:
             if single[k]:
@@ -623,7 +624,8 @@ class MujocoFit:
             carry.start(x, k, onset[:, k + 1], k + 1)
             c = ctrl[t_of, k : k + n]
             if force_fx:
-                xf = self._forces(x, body, force_fx)
+                xf = self._forces(x, body, force_fx, vz_prev)
+                vz_prev = x[:, self.va + 2].copy()
                 full = np.zeros((n_r, n, nu + 6 * self.nbody))
                 full[..., :nu] = c
                 full[:, 0, nu + 6 * self.slots.body : nu + 6 * self.slots.body + 6] = xf
@@ -734,6 +736,7 @@ class MujocoFit:
         # _REST_CHUNK steps, also where a force effect steps the group one step at a time
         # (checked every step, it cost a Stribeck set 60 % of its rollout time)
         next_still = 0
+        vz_prev = x[:, self.va + 2].copy()  # the force effects' normal force (_forces)
         while k < n_s - 1:
             if cut and k == _PROBE:  # still at rest: on to the step before the pusher's reach
                 k0 = self._first_reach(x, t_of, k, pusher, ee_yaw, body, force_fx)
@@ -747,7 +750,8 @@ class MujocoFit:
                 n = min(n, _REST_CHUNK if k >= _PROBE else _PROBE - k)
             carry.start(x, k, onset[:, k + 1], k + 1)
             if xfrc is not None:
-                xfrc[ids, self.slots.body] = self._forces(x, body, force_fx)
+                xfrc[ids, self.slots.body] = self._forces(x, body, force_fx, vz_prev)
+                vz_prev = x[:, self.va + 2].copy()
             c = ctrl[t_of, k : k + n] if ctrl.shape[-1] else None
             state = b.rollout(n, control=c, record=(full,), ids=ids)[full]
             self.last_steps += n * len(ids)
@@ -937,9 +941,11 @@ class MujocoFit:
         lay.set_vel(out, cvel[at] + np.stack([-r * ry, r * rx, z], -1), np.stack([z, z, r], -1))
         return out
 
-    def _forces(self, x, body, force_fx) -> np.ndarray:
+    def _forces(self, x, body, force_fx, vz_prev=None) -> np.ndarray:
         """Per-step applied wrench [R, 6] of the force effects from the rollouts' current
-        states ``x`` [R, nstate] (``body`` and the effects' parameters one row per rollout)."""
+        states ``x`` [R, nstate] (``body`` and the effects' parameters one row per rollout);
+        ``vz_prev`` [R]: the object's vertical velocity a step before [m/s], which gives the
+        table's normal force (:func:`step_forces` ``az``); None: the object's weight."""
         n_r = x.shape[0]
         v = x[:, self.va : self.va + 3]
         com = body.com.numpy()[:, 0]  # body frame [m]
@@ -968,6 +974,7 @@ class MujocoFit:
             self.gravity,
             self.eng.dt,
             self.c_r,
+            None if vz_prev is None else ((v[:, 2] - vz_prev) / self.eng.dt).reshape(n_r, 1),
         )
         return f.reshape(n_r, 6)
 
