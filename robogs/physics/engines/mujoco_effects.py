@@ -21,10 +21,10 @@ translated, so a user-written effect works on both engines without MuJoCo code:
   it cannot reverse its velocity within a step; ``m g`` stands for the table's normal force,
   taken from the object's vertical acceleration over the last step, ``m (g + a_z)``, so that a
   landing's friction impulse changes with the coefficient as well (a box carried 2.6 mm up
-  and dropped at 0.95 m/s loses 0.1 m/s to its landing's friction). The torque matters: a friction change applied
-  as a force alone leaves a turning box spinning on at the unchanged rate, which on design A's
-  hidden Stribeck (seed 0) multiplied the yaw misfit at the planar engine's fit by 28 (30260
-  against 1086 sigma^2; with the torque 1102);
+  and dropped at 0.95 m/s loses 0.1 m/s to its landing's friction). The torque matters: a
+  friction change applied as a force alone leaves a turning box spinning on at the unchanged
+  rate, which on design A's hidden Stribeck (seed 0) multiplied the yaw misfit at the planar
+  engine's fit by 28 (30260 against 1086 sigma^2; with the torque 1102);
 * sensor hooks (``sample_times``, ``to_sensor``, ``from_sensor``) act on the sampled poses, as on
   the planar engine.
 
