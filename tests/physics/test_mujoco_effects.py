@@ -47,8 +47,9 @@ def _slide(seconds: float = 0.8, n_obs: int = 9):
     return drive, obs[0]
 
 
-def _run(effect: Effect, values: dict[str, float], backend: str) -> np.ndarray:
-    """x [m] of the box at the drive's stamps on ``backend``, ``effect`` at ``values``."""
+def _sim(effect: Effect, values: dict[str, float], backend: str, rate: float | None = None):
+    """The box's simulation on ``backend``, ``effect`` at ``values``, released at V0 along x
+    (and turning at ``rate`` rad/s when given)."""
     phys = _physics()
     scene = scene_from_physics(phys, "box", dt=DT)
     space = ParamSpace(base_params(scene), [effect])
@@ -56,11 +57,16 @@ def _run(effect: Effect, values: dict[str, float], backend: str) -> np.ndarray:
     for k, v in values.items():
         th[0, space.index(effect.name, k)] = v
     drive, _ = _slide()
+    if rate is not None:
+        drive.init_rate = torch.tensor([rate], dtype=torch.float64)
     if backend == "mujoco":
-        sim = MujocoFit(phys, "box", dt=DT).simulate(th, space, drive, scene)
-    else:
-        sim = simulate(th, space, drive, scene)
-    return sim.pos[0, 0, :, 0].numpy()
+        return MujocoFit(phys, "box", dt=DT).simulate(th, space, drive, scene)
+    return simulate(th, space, drive, scene)
+
+
+def _run(effect: Effect, values: dict[str, float], backend: str) -> np.ndarray:
+    """x [m] of the box at the drive's stamps on ``backend``, ``effect`` at ``values``."""
+    return _sim(effect, values, backend).pos[0, 0, :, 0].numpy()
 
 
 def _coulomb_viscous(t: np.ndarray, c: float) -> np.ndarray:
@@ -227,18 +233,7 @@ def _turning_ode(t: np.ndarray, mu_of_v) -> tuple[np.ndarray, np.ndarray]:
 
 def _run_turning(effect: Effect, values: dict[str, float], backend: str):
     """(x [m], yaw [rad]) of the box at the drive's stamps, released at (V0, W0)."""
-    phys = _physics()
-    scene = scene_from_physics(phys, "box", dt=DT)
-    space = ParamSpace(base_params(scene), [effect])
-    th = torch.as_tensor(space.zero[None].copy())
-    for k, v in values.items():
-        th[0, space.index(effect.name, k)] = v
-    drive, _ = _slide()
-    drive.init_rate = torch.tensor([W0], dtype=torch.float64)
-    if backend == "mujoco":
-        sim = MujocoFit(phys, "box", dt=DT).simulate(th, space, drive, scene)
-    else:
-        sim = simulate(th, space, drive, scene)
+    sim = _sim(effect, values, backend, rate=W0)
     return sim.pos[0, 0, :, 0].numpy(), sim.yaw[0, 0].numpy()
 
 
