@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One lent-GPU session for issue 23, prepared and tried on the CPU first (see bench/RESULTS.md).
-# Carry .whl (the project's missing dependencies and a robogs wheel for its metadata, built with
-# `pip download ... -d .whl` and `pip wheel --no-deps . -w .whl`); the working tree comes first
+# Carry .whl (the project's missing dependencies and a robogs wheel for its metadata, filled by
+# bench/device_wheels.sh here); the working tree comes first
 # on PYTHONPATH. Stages, run in this order: 1 = CUDA render and training-step tests; 2 = the reconstruct
 # bench (bench/device_reconstruct.sh; PROJ=fused|torch picks the triton projection); r = the render
 # bench against the CPU; s = sweep of
