@@ -166,17 +166,6 @@ class ComOffset(Effect):
     needs: tuple[str, ...] = ("object_poses", "contact")
     separate_by: str = "pushes at several offsets from the box centre line"
     description: str = "wrong mass distribution (push rotation)"
-    # one prior scale (1 cm) into each quadrant besides the zero start: the base fit's start
-    # offsets absorb part of a missing turn, so at the zero start the offset's first steps
-    # can look worse than none. MuJoCo, design A seed 0 (dx 12, dy -8 mm): with the zero
-    # start alone the fit stayed at dx 7 um and nothing was reported; with these it is
-    # reported first (bench/RESULTS.md, issue 16, stop 52)
-    starts: tuple[dict[str, float], ...] = (
-        {"dx": 0.01, "dy": 0.01},
-        {"dx": 0.01, "dy": -0.01},
-        {"dx": -0.01, "dy": 0.01},
-        {"dx": -0.01, "dy": -0.01},
-    )
 
     def body(self, th, body: Body) -> Body:
         off = torch.cat([th["dx"], th["dy"]], dim=-1).unsqueeze(1)
