@@ -675,7 +675,7 @@ def fit_nested(
                 todo_left.discard(i)
         done = [o for o in outs if o is not None]
         proj = b.cost - nested_gap(evaluate, space, b, done, extra, base.traj)
-        beat = [int(i) for i in np.argsort(proj) if b.cost - proj[i] > tol] if n else []
+        beat = [int(i) for i in np.argsort(proj) if b.cost - proj[i] > tol]
         if not beat or rnd == rounds:
             break
         # the base refitted from every switched-back point that beats it, together, the lowest
