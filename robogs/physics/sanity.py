@@ -15,6 +15,14 @@ model's residuals and names the likely cause when it does not:
 
 Every physics command prints these findings (:func:`finish_command`); ``diagnose`` that finds
 no effect while the model fails says so instead of "none above the noise" and exits 1.
+
+Apart from those, a trajectory the base model follows much worse than the others is named
+(``outliers``, printed by every command, exit code unchanged): its position RMS lies more than
+``z_out`` (5) robust standard deviations (1.4826 x the median absolute deviation across this
+recording's trajectories) above their median. The spread comes from the recording itself, and
+a bias of the noise floor estimate, common to all trajectories, cancels. Such a trajectory pulls
+every fitted parameter, and no catalogue effect may explain it: a strike whose outcome the
+engine models differently, a tracking glitch, a mislabelled episode.
 """
 
 from __future__ import annotations
@@ -31,6 +39,7 @@ __all__ = [
     "Finding",
     "Sanity",
     "assess",
+    "trajectory_outliers",
     "bound_notes",
     "note_diagnosis",
     "none_found_text",
@@ -56,6 +65,7 @@ class Sanity:
     rms_mm: float
     noise_floor_mm: float
     ratio: float
+    outliers: list[Finding] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -72,6 +82,10 @@ class Sanity:
         out += [f"  {f.trajectory}: {f.message}" for f in self.findings]
         return out
 
+    def outlier_lines(self) -> list[str]:
+        """One line per trajectory the model follows far worse than the others (may be empty)."""
+        return [f"{f.trajectory}: {f.message}" for f in self.outliers]
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "reproduces_data": self.ok,
@@ -79,7 +93,40 @@ class Sanity:
             "noise_floor_mm": self.noise_floor_mm,
             "ratio_limit": self.ratio,
             "findings": [asdict(f) for f in self.findings],
+            "outliers": [asdict(f) for f in self.outliers],
         }
+
+
+def trajectory_outliers(per_traj: dict[str, float], z_out: float = 5.0) -> list[Finding]:
+    """Trajectories whose base-model position RMS [mm] lies more than ``z_out`` robust standard
+    deviations above the median across trajectories (fewer than 5 trajectories, or no spread:
+    none). The spread is 1.4826 x the median absolute deviation, taken on this recording."""
+    if len(per_traj) < 5:
+        return []
+    names = list(per_traj)
+    r = np.array([per_traj[n] for n in names], float)
+    med = float(np.median(r))
+    spread = 1.4826 * float(np.median(np.abs(r - med)))
+    if not spread > 0:
+        return []
+    out = []
+    for name, x in zip(names, r, strict=True):
+        z = (x - med) / spread
+        if z > z_out:
+            out.append(
+                Finding(
+                    name,
+                    "trajectory_not_reproduced",
+                    f"the base model's residual {x:.2f} mm is {x / med:.1f}x the median "
+                    f"trajectory's {med:.2f} mm ({z:.0f} robust sd above it, limit {z_out:g}); "
+                    "this trajectory pulls every fitted parameter and may hold what no "
+                    "catalogue effect explains (a strike the engine models differently, a "
+                    "tracking glitch); look at it (robogs report), and where its data "
+                    "are at fault leave the episode out of the dataset",
+                    {"rms_mm": float(x), "median_mm": med, "robust_sd_mm": spread, "z": float(z)},
+                )
+            )
+    return out
 
 
 def assess(
@@ -194,7 +241,7 @@ def assess(
                 {"rms_mm": rms, "noise_floor_mm": floor},
             )
         )
-    return Sanity(findings, rms, floor, ratio)
+    return Sanity(findings, rms, floor, ratio, trajectory_outliers(per_traj))
 
 
 def _backend(rec: Any) -> str:
@@ -302,6 +349,12 @@ def finish_command(args: argparse.Namespace, rc: int) -> int:
         for s in bad:
             for line in s.lines():
                 print(line)
+        for s in sanities:
+            lines = s.outlier_lines()
+            if lines:
+                print("trajectories the model follows far worse than the others:")
+            for line in lines:
+                print(f"  {line}")
         for line in log.notes.get("at_bound", []):
             print(line)
     if bad and log.notes.get("diagnose_found") is False and rc == 0:
