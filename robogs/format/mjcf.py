@@ -220,20 +220,25 @@ PLANAR_SETTINGS = ContactSettings(
     footprint_torsion=True,
     solreffriction=(0.01, 1.0),
     z_ballast=9.0,
-    pusher_dampratio=1.7,
-    pusher_timeconst_steps=2.5,
+    pusher_dampratio=1.2,
+    pusher_timeconst_steps=5.0,
 )
 """Contact settings of the planar joint set (see ``robogs.physics.engines.mujoco_engine``,
-"Planar joint set", "Strike launch" and "Friction bias of centred pushes"). The pusher pair is
-2.5 steps x damping ratio 1.7 (``pusher_timeconst_steps``, ``pusher_dampratio``; slow mode
-``dmax tc zeta (zeta + sqrt(zeta^2 - 1))`` = 13 ms): a struck box leaves at the pusher's speed
-within 0.11 % at 0.55 m/s, where ``solref``'s 4 ms x 2 of before (slow mode 30 ms) let it ride
-0.86 % faster, a strike bias that the fit read as 0.4-0.9 % more friction and that the diagnosis
-reported as Stribeck on 4 of 15 design-A nulls on MuJoCo (0 of the same 15 with this pair).
-Why not stiffer: at 2 steps x 1.5 (MuJoCo's shortest time constant) every strike is within
-0.01 %, but the capsule ends' contact onsets, which fall on whole steps, make the CoM offset's
-objective rough and its fits fail (``tests/physics/test_mujoco_com_offset.py``); 2.5 x 1.7
-passes them. Measured in ``bench/RESULTS.md``, "issue 16 (h42)" and "(lead, stop 49)"."""
+"Planar joint set", "Strike launch", "Friction bias of centred pushes" and "Flush strikes").
+The pusher pair is 5 steps x damping ratio 1.2 (``pusher_timeconst_steps``,
+``pusher_dampratio``; slow mode ``dmax tc zeta (zeta + sqrt(zeta^2 - 1))`` = 11 ms): a struck
+box rides the pusher within 0.16 % of its speed at 0.55 m/s, and a fast flush strike of the
+capsule's two ends ends flush whatever a sub-degree start tilt (stop 53). The pair before, 2.5
+steps x 1.7 (13 ms, stops 49-52), struck within 0.11 % but let a 0.1 deg tilt decide whether a
+box with an off-centre CoM ended flush or spun 2-12 deg away at 0.425-0.55 m/s, which made the
+CoM offset's fits on design A jump between the two (``tests/physics/test_mujoco_flush_strike.py``).
+The trade: the softer pair's strike is less plastic (a struck box peaks at 1.07-1.09x the
+pusher's speed at 0.3-0.55 m/s, against 1.02-1.04x; it stops within 0.06 mm of the rigid closed
+form, against 0.15 mm). Stiffer still (2 steps x 1.5, MuJoCo's shortest) the capsule ends'
+onsets fall on whole steps and the CoM offset's objective is rough; the slower 4 ms x 2 of
+before stop 49 (slow mode 30 ms) let a struck box ride 0.86 % fast, which the fit read as
+more friction. Measured in ``bench/RESULTS.md``, "issue 16 (h42)", "(lead, stop 49)" and
+"(lead, stop 53)"."""
 
 
 PUSHER_ONSET_D0 = 1e-4

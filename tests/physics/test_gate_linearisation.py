@@ -276,12 +276,16 @@ def test_mujoco_null_threshold_near_planar_on_design_b_null_seed_1(shared_fits):
     threshold's scale (``lambda = 1``, before the engine smoothed its servo targets over the
     drive's knots, h67) the first draw gives the data's own ratio back; since h67 its gain is
     above it and the change is shrunk (4 ms x 2: ``lambda`` 0.853, factor 1.88, threshold ratio
-    0.71; the 2.5 ms x 1.7 pair of stop 49: held-out 22.4 against 29.86 after factor 1.46,
+    0.71; the 2.5 ms x 1.7 pair of stops 49-52: held-out 22.4 against 29.86 after factor 1.46,
     ``lambda`` 0.959, ratio 0.58). The ratio is one seed's wild tail, which h47 traced to this
     seed's noise meeting MuJoCo's strike error on the two fastest pushes, so its bound is 0.5
     (it was 0.7, met by the old pair only through the check's factor); where the engines must
     agree is asserted by :func:`test_mujoco_linearisation_agrees_with_planar_with_smooth_columns`.
-    Under the wild null (``both``); the default parametric null's thresholds on this seed
+    Stop 53's pusher pair (5 steps x 1.2, whose fast flush strikes no longer hang on sub-degree
+    start yaws) brings MuJoCo's tilt fit in line with planar's: held-out fall 28.6 against
+    planar's 26.7 sigma^2 (within [0.8, 1.25] asserted), below its unscaled threshold 33.7
+    (planar 51.8; ratio 0.65), so no check is needed and none is made (asserted). Under the wild
+    null (``both``); the default parametric null's thresholds on this seed
     (planar 110.1, MuJoCo 104.2 sigma^2) leave the tilt's fall far below them, so no check is
     made: :func:`test_mujoco_parametric_null_near_planar_on_design_b_null_seed_1`."""
     pytest.importorskip("mujoco")
@@ -300,10 +304,10 @@ def test_mujoco_null_threshold_near_planar_on_design_b_null_seed_1(shared_fits):
     assert thr["mujoco"]["table_tilt"] / thr["planar"]["table_tilt"] >= 0.5
     assert not [r.name for r in res["mujoco"].rows if r.reported]
     assert max((res["planar"].gate["inflation"] or {"-": 1.0}).values()) <= 1.1
-    chk = res["mujoco"].gate["linearisation_check"]["candidates"]["table_tilt"]
-    assert chk["factor"] > 1.2 and 0.5 <= chk["scale"] <= 1.0
-    if chk["scale"] == 1.0:  # the unshrunk first draw is the data's own fitted change
-        assert chk["draw_ratios"][0] == pytest.approx(chk["data_ratio"], rel=1e-3)
+    fall = {be: {r.name: r.heldout_gain_sigma2 for r in res[be].rows} for be in res}
+    assert 0.8 <= fall["mujoco"]["table_tilt"] / fall["planar"]["table_tilt"] <= 1.25, fall
+    assert fall["mujoco"]["table_tilt"] < thr["mujoco"]["table_tilt"]
+    assert res["mujoco"].gate["linearisation_check"] is None  # nothing near its gate to check
 
 
 @pytest.mark.slow
@@ -317,8 +321,11 @@ def test_mujoco_linearisation_agrees_with_planar_with_smooth_columns(
     1. the linearisations on a common residual: planar's base residual with MuJoCo's linearised
        candidates gives the tilt's wild-null threshold within 0.7 of planar's own (offline on
        h47's fits: 39.5 vs 51.8 on this pair, 51.6 with 3 x 1.7; the rest of the gap is MuJoCo's
-       1 % friction column, h47's swaps). With the fitter's 0.1 mm start-pose columns it is
-       23.5 (0.45): the oracle fails on rough columns;
+       1 % friction column, h47's swaps). With the fitter's 0.1 mm start-pose columns it was
+       23.5 (0.45) on the pusher pair of stops 49-52: the oracle failed on rough columns. Stop
+       53's pair (5 steps x 1.2) no longer hangs fast strikes on sub-degree start yaws
+       (``test_mujoco_flush_strike.py``), and the fitter's own columns now pass too (45.3
+       against 51.6, 0.88): asserted, so that a rougher engine fails here again;
     2. the tilt's white-noise nulls within 30 % (planar 8.8, MuJoCo 9.4);
     3. nothing reported on MuJoCo."""
     pytest.importorskip("mujoco")
@@ -359,7 +366,7 @@ def test_mujoco_linearisation_agrees_with_planar_with_smooth_columns(
         G.LinearCandidate(c.name, c.jac, o.jac_local, c.n_base)
         for c, o in zip(lm, seen["outs"][1][1:], strict=True)
     ]
-    assert tilt(fitter, rp, "wild") / own < 0.7
+    assert tilt(fitter, rp, "wild") / own >= 0.7
     assert 0.7 <= tilt(lm, rm, "white") / tilt(lp, rp, "white") <= 1.3
     assert not [r.name for r in res["mujoco"].rows if r.reported]
     assert "nuisance_columns" in res["mujoco"].gate
@@ -400,7 +407,10 @@ def test_mujoco_parametric_null_near_planar_on_design_b_null_seed_1(
     with the fitter's 0.1 mm forward differences MuJoCo's tilt threshold was 30.2 sigma^2
     against planar's 111.4 (0.27). With the smooth columns (h99): 104.2 against 110.1.
     1. MuJoCo's tilt threshold within [0.7, 1.43] of planar's;
-    2. mutation: MuJoCo's own fits with the fitter's columns put back fail it (< 0.7);
+    2. MuJoCo's own fits with the fitter's columns put back: they failed it (< 0.7) on the
+       pusher pair of stops 49-52; on stop 53's (5 steps x 1.2, whose fast strikes no longer
+       hang on sub-degree start yaws) they pass (87.1 against 110.1, 0.79): asserted, so that
+       a rougher engine fails here again;
     3. planar's unchecked thresholds move by under 5 % against its fitter's columns (the rule
        picks central columns where the forward one disagrees over 3 mm: -1.2 % tilt, -2.5 %
        camera);
@@ -445,7 +455,7 @@ def test_mujoco_parametric_null_near_planar_on_design_b_null_seed_1(
         old = [replace(c, jac_local=o.jac_local) for c, o in zip(cands, outs, strict=True)]
         return real_calibrate(old, resid, valid, folds, **{**kw, "fingerprint": None}).thresholds
 
-    assert with_fitter_columns("mujoco")["table_tilt"] / thr["planar"]["table_tilt"] < 0.7
+    assert with_fitter_columns("mujoco")["table_tilt"] / thr["planar"]["table_tilt"] >= 0.7
     new, old = seen["planar"]["cal"][-1].thresholds, with_fitter_columns("planar")
     for n in old:
         assert new[n] == pytest.approx(old[n], rel=0.05, abs=0.5), n

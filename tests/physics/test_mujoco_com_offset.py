@@ -18,7 +18,10 @@ Howe & Cutkosky 1996) and the planar model put the friction centre at the CoM.
   footprint left at the face centre (HEAD before h72): 0.120 / 0.108 deg;
 * fit: 9 centred pushes and 4 off-centre pushes (seed 2, nominal noise) with the generator's
   hidden offset (12, -8) mm: fitted (12.45, -7.99) mm, RMS 2.998 -> 1.824 mm (planar engine:
-  (12.49, -7.94)); with the footprint left at the face centre (0, 0) +- (24, 1.9) mm (measured
+  (12.49, -7.94)); with stop 53's pusher pair (5 steps x 1.2) (12.56, -8.22) mm, RMS 3.191 ->
+  1.794 mm. With the pair before it (2.5 steps x 1.7) other start points of the same fit read
+  dy -6.46 mm: the fastest centred push (0.55 m/s) struck flush and its outcome flipped with a
+  tenth of a degree of start yaw (``test_mujoco_flush_strike.py``); with the footprint left at the face centre (0, 0) +- (24, 1.9) mm (measured
   before h67's drive-knot smoothing, when the fix gave (12.47, -7.99), 3.471 -> 1.789 mm).
   Nothing hidden: the fit stays within 1 mm of 0. On the 9 centred pushes alone (h66's scene) the
   offset along the push (dx) leaves every push unchanged, in the generator too (the flat
