@@ -123,7 +123,7 @@ def test_the_outlier_rule_against_a_brute_force_count():
     assert trajectory_outliers({k: 1.0 for k in "abcdef"}) == []  # no spread
 
 
-def test_every_command_prints_the_named_trajectory(ten, tmp_path, capsys):
+def test_every_command_prints_the_named_trajectory(tmp_path, capsys):
     from robogs.cli.main import main
     from robogs.synth.scenarios import make_scenario
 
