@@ -23,6 +23,8 @@ pair leaves the box 6.97 deg off at 0.425 m/s.
 from __future__ import annotations
 
 import dataclasses
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,68 +32,26 @@ import pytest
 pytest.importorskip("mujoco")
 
 from robogs.format.mjcf import PLANAR_SETTINGS  # noqa: E402
-from robogs.physics.engines import get_engine, make_drive  # noqa: E402
-from robogs.physics.engines.mujoco_engine import MujocoEngine  # noqa: E402
 
-SIZE, R, L, DT = (0.08, 0.06, 0.05), 0.01, 0.04, 1e-3
-COM = (0.012, -0.008)
-TILTS = np.radians(np.linspace(-0.8, 0.8, 9))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
+from strike_sensitivity import COM, _engine_yaw  # noqa: E402  (the bench's strike scene)
+
 OLD_PAIR = dataclasses.replace(PLANAR_SETTINGS, pusher_timeconst_steps=2.5, pusher_dampratio=1.7)
 """The pusher pair of stops 49-52."""
 
 
-def _physics() -> dict:
-    box = {
-        "equation": "rigid",
-        "mass_kg": 0.4,
-        "size_m": list(SIZE),
-        "friction_dynamic": 0.35,
-        "com_m": [COM[0], COM[1], 0.0],
-    }
-    return {
-        "gravity_mps2": [0.0, 0.0, -9.81],
-        "objects": {
-            "box": box,
-            "table": {"equation": "static", "plane_z_m": 0.0},
-            "pusher": {"equation": "kinematic", "shape": "capsule", "radius_m": R, "length_m": L},
-        },
-    }
-
-
-def _final_yaw_deg(v: float, settings=None, backend: str = "mujoco") -> np.ndarray:
-    """Final yaw [deg] against the capsule's heading, one per start tilt: the capsule (axis
-    along y, 2 mm off the centre line) runs 3 mm to the face and 45 mm on at ``v``, stops,
-    and the box is read 0.4 s later."""
-    gap, contact = 0.003, 0.045
-    n = int(round((gap + contact) / v / DT)) + 400
-    start = np.array([-SIZE[0] / 2 - R - gap, 0.002, SIZE[2] / 2])
-    s = np.minimum(np.arange(n) * v * DT, gap + contact)
-    path = start[None] + s[:, None] * np.array([1.0, 0.0, 0.0])[None]
-    t = len(TILTS)
-    drive = make_drive(
-        DT,
-        np.repeat(path[None], t, 0),
-        np.zeros((t, n)),
-        np.repeat((np.arange(0, n, 10) * DT)[None], t, 0),
-        np.repeat(np.array([[0.0, 0.0, SIZE[2] / 2]]), t, 0),
-        TILTS,
-    )
-    if backend == "mujoco":
-        eng = MujocoEngine(_physics(), settings=settings, pusher_speed=v)
-    else:
-        eng = get_engine(backend)(_physics())
-    return np.degrees(eng.rollout(drive).yaw("box")[0][:, -1])
-
-
 @pytest.mark.parametrize("v", [0.3, 0.425, 0.55])
 def test_a_fast_flush_strike_ends_flush_whatever_the_start_tilt(v: float) -> None:
-    planar = _final_yaw_deg(v, backend="planar")
+    """Final yaw [deg] against the capsule's heading, one per start tilt in [-0.8, 0.8] deg
+    (``bench/strike_sensitivity.py``'s scene: the capsule 2 mm off the centre line, 3 mm to
+    the face and 45 mm on at ``v``, read 0.4 s after it stops)."""
+    planar = _engine_yaw("planar", v, COM)
     assert np.max(np.abs(planar)) < 0.01, planar  # the closed form: flush
-    got = _final_yaw_deg(v)
+    got = _engine_yaw("mujoco", v, COM)
     assert np.max(np.abs(got)) < 0.5, got
 
 
 def test_the_old_pusher_pair_flips_with_a_tenth_of_a_degree() -> None:
     """Counterfactual: the pair of stops 49-52 fails the bound (so the test can fail)."""
-    got = _final_yaw_deg(0.425, OLD_PAIR)
+    got = _engine_yaw("mujoco", 0.425, COM, OLD_PAIR)
     assert np.max(np.abs(got)) > 5.0, got
