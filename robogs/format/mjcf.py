@@ -450,7 +450,8 @@ body's ``<inertial>``, the footprint geoms' ``pos``, the support pairs'
 ``damping``/``armature`` and the ballast actuator's ``biasprm``)."""
 
 BOUNCE_TIMECONST = 0.02
-"""Contact time constant [s] of an underdamped (bouncing) object-table pair: with the 4 ms of
+"""Contact time constant [s] of an underdamped (bouncing) object-table pair (the export and free
+joints; the fitting engine bounces a flat box by impact events instead): with the 4 ms of
 the plastic contacts, damping ratios below about 0.2 (e > 0.5) made the semi-implicit Euler
 contact unstable (a 5 cm drop at e = 0.7 rose 11 cm); at 20 ms the bounce follows the
 closed-form ratio within 0.03 (drops of 2 and 5 cm, e = 0.3-0.7)."""
@@ -487,7 +488,9 @@ def principal(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return vals, matrix_to_quat_np(vecs)
 
 
-def write_body(model: Any, body: BodyValues, slots: Any, *, timeconst: float) -> None:
+def write_body(
+    model: Any, body: BodyValues, slots: Any, *, timeconst: float, bounce_solref: bool = True
+) -> None:
     """Write ``body`` into a compiled ``MjModel`` in place (``slots``: :class:`EffectSlots`).
 
     * ``body_mass``; the inertia tensor of the nominal body (``slots.nominal_*``) scaled with
@@ -502,7 +505,11 @@ def write_body(model: Any, body: BodyValues, slots: Any, *, timeconst: float) ->
     * the support pairs' friction ``mu_d / (1 + k)`` (torsional ``* radius``), and for
       ``restitution > 0`` their ``solref`` ``(max(timeconst, BOUNCE_TIMECONST), zeta)`` with
       :func:`restitution_damping_ratio` and :data:`BOUNCE_SOLIMP` (corrected by
-      :func:`ballast_contact`); ``timeconst`` [s] is the pairs' solref time constant;
+      :func:`ballast_contact`); ``timeconst`` [s] is the pairs' solref time constant. With
+      ``bounce_solref=False`` the pairs stay plastic whatever the restitution: the fitting
+      engine bounces a flat box by impact events instead (``robogs.physics.engines.
+      mujoco_fit``, "Restitution"), because the soft bounce lasts 10-14 ms and delays the
+      rebound; the export keeps the solref, the bounce plain MuJoCo can play;
     * ``dof_damping`` of the x, y, z DOFs ``damping m`` (``(1 + k)`` on z); with a z ballast
       ``k`` (``slots.ballast``) the z armature ``k m`` and the ballast force ``k m g_z``.
     """
@@ -529,7 +536,7 @@ def write_body(model: Any, body: BodyValues, slots: Any, *, timeconst: float) ->
         model.pair_friction[row, :2] = mu
         if r > 0:
             model.pair_friction[row, 2] = mu * r
-        if zeta < 1.0:
+        if zeta < 1.0 and bounce_solref:
             sr, si, _ = ballast_contact(
                 (max(timeconst, BOUNCE_TIMECONST), zeta), BOUNCE_SOLIMP, kb, vertical=True
             )

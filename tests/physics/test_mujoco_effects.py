@@ -172,29 +172,107 @@ def test_user_plugin_effect_runs_on_both_engines():
         assert np.max(np.abs(x - want)) < 1.5e-3, (backend, x - want)
 
 
-@pytest.mark.parametrize("height", [0.02, 0.05])
-def test_restitution_bounce_on_mujoco(height):
-    """A flat box dropped ``height`` m bounces to e^2 height (e within 0.03 of the requested
-    restitution; plastic at e = 0)."""
-    phys = _physics()
+def _newton_drop(h: float, e: float, vx0: float, mu: float, t: np.ndarray) -> np.ndarray:
+    """[N, 2] x, z [m] (z above the resting height) at times ``t`` of a box dropped from ``h``
+    moving at ``vx0`` along x over a mu table, closed form: parabolic flights; Newton impacts
+    (rebound ``e`` times the approach speed above 5 cm/s, else plastic) whose normal impulse
+    ``(1 + e)`` times the approach speed takes ``mu`` times it off the sliding speed; once
+    plastic, a Coulomb slide to rest."""
+    ts, z, vz, x, vx = 0.0, h, 0.0, 0.0, vx0
+    segs = []  # (start time, x, vx, z, vz, resting)
+    while True:
+        ap = math.sqrt(vz * vz + 2.0 * G * z)
+        t_hit = ts + (vz + ap) / G
+        segs.append((ts, x, vx, z, vz, False))
+        x += vx * (t_hit - ts)
+        up = e * ap if ap > 0.05 else 0.0
+        vx = max(vx - mu * (ap + up), 0.0)
+        ts, z, vz = t_hit, 0.0, up
+        if up == 0.0:
+            segs.append((ts, x, vx, 0.0, 0.0, True))
+            break
+    out = np.zeros((len(t), 2))
+    for i, tq in enumerate(t):
+        t0, x0, u, z0, w, rest = [sg for sg in segs if sg[0] <= tq][-1]
+        d = tq - t0
+        if rest:
+            d = min(d, u / (mu * G)) if mu > 0 else d
+            out[i] = x0 + u * d - 0.5 * mu * G * d * d, 0.0
+        else:
+            out[i] = x0 + u * d, z0 + w * d - 0.5 * G * d * d
+    return out
+
+
+def _drop(h: float, e: float, vx0: float, mu: float, backend: str, events: bool = True):
+    """(t [s], [N, 2] x, z [m] above the resting height) of the box dropped ``h`` moving at
+    ``vx0``, restitution ``e``, 0.6 s at 1 ms; ``events=False``: MuJoCo's soft bounce (the
+    support pairs' solref) instead of the impact events."""
+    phys = box_on_table(mu)
     scene = scene_from_physics(phys, "box", dt=DT)
     eff = get_effect("restitution")
     space = ParamSpace(base_params(scene), [eff])
-    s = 501
+    s = 601
     pusher = np.zeros((1, s, 3))
     pusher[..., 2] = 1.0
     obs = np.arange(s)[None] * DT
     drive = make_drive(
-        DT, pusher, np.zeros((1, s)), obs, np.array([[0.0, 0.0, HZ + height]]), np.zeros(1)
+        DT, pusher, np.zeros((1, s)), obs, np.array([[0.0, 0.0, HZ + h]]), np.zeros(1)
     )
-    sim = MujocoFit(phys, "box", dt=DT)
-    for e in (0.0, 0.3, 0.5, 0.7):
-        th = torch.as_tensor(space.zero[None].copy())
-        th[0, space.index("restitution", "e_delta")] = e
-        z = sim.simulate(th, space, drive, scene).pos[0, 0, :, 2].numpy() - HZ
-        i = int(np.argmin(z[:250]))
-        e_eff = math.sqrt(max(float(z[i:].max()), 0.0) / height)
-        assert abs(e_eff - e) < 0.03 if e > 0 else e_eff < 0.03, (e, e_eff)
+    drive.init_vel = torch.tensor([[vx0, 0.0, 0.0]], dtype=torch.float64)
+    th = torch.as_tensor(space.zero[None].copy())
+    th[0, space.index("restitution", "e_delta")] = e
+    if backend == "mujoco":
+        sim = MujocoFit(phys, "box", dt=DT)
+        sim.bounce_events = events
+        out = sim.simulate(th, space, drive, scene)
+    else:
+        out = simulate(th, space, drive, scene)
+    p = out.pos[0, 0].numpy()
+    return obs[0], np.stack([p[:, 0], p[:, 2] - HZ], -1)
+
+
+@pytest.mark.parametrize("height", [0.02, 0.05])
+def test_restitution_bounce_on_mujoco(height):
+    """A flat box dropped ``height`` m bounces as Newton's impacts say: the first rebound's apex
+    is e^2 height (e within 0.02) and the height over 0.6 s follows the closed form within
+    0.5 mm RMS, 1.5 mm at most for e <= 0.7 (the 1 ms semi-implicit Euler's own free fall is
+    0.5 mm low after 0.1 s; measured 0.06-0.33 / 0.31-0.94 mm); at e = 0.9 the many small
+    bounces on 1 ms steps drift further (0.65 / 2.6 mm), and there it is held to the planar
+    model's rigid contact, which takes its impacts the same way (MuJoCo within 0.1 mm of it
+    at every e; measured 0-0.054 mm, the last plastic landing on MuJoCo's soft support).
+    MuJoCo's soft bounce
+    (the support pairs' solref, 20 ms) keeps the apex within 0.03 but stays 10-14 ms in
+    contact, 2-3 mm deep: 4-7 mm off the closed form for e = 0.3-0.7, which fitted e 0.31 for
+    0.5 on design A seed 0 (bench/RESULTS.md, stop 54)."""
+    for e in (0.0, 0.3, 0.5, 0.7, 0.9):
+        t, got = _drop(height, e, 0.0, 0.3, "mujoco")
+        want = _newton_drop(height, e, 0.0, 0.3, t)
+        dz = got[:, 1] - want[:, 1]
+        if e <= 0.7:
+            assert np.sqrt(np.mean(dz**2)) < 5e-4 and np.max(np.abs(dz)) < 1.5e-3, (e, dz)
+        _, rigid = _drop(height, e, 0.0, 0.3, "planar")
+        assert np.max(np.abs(got - rigid)) < 1e-4, e
+        up = np.diff(got[:, 1]) > 0  # the first impact: where z first turns up
+        apex = got[int(np.argmax(up)) :, 1].max() if up.any() else 0.0
+        assert abs(math.sqrt(max(apex, 0.0) / height) - e) < 0.02, (e, apex)
+        if 0.3 <= e <= 0.7:  # the soft bounce misses the closed form (the mutation)
+            _, soft = _drop(height, e, 0.0, 0.3, "mujoco", events=False)
+            assert np.max(np.abs(soft[:, 1] - want[:, 1])) > 3e-3, e
+
+
+@pytest.mark.parametrize("backend", ["mujoco", "planar"])
+@pytest.mark.parametrize(("e", "vx0", "h"), [(0.0, 0.6, 0.05), (0.5, 0.6, 0.05), (0.7, 0.8, 0.02)])
+def test_a_bouncing_landing_takes_the_rigid_friction_impulse(e, vx0, h, backend):
+    """A box dropped ``h`` while sliding at ``vx0`` on a mu = 0.3 table: each impact's friction
+    impulse is mu times its normal impulse (1 + e) times the approach speed, so x(t) follows
+    the closed form within 1 mm on both engines (measured 0.43-0.78 mm at most, the 1 ms
+    steps). MuJoCo's soft plastic landing (no events) stops 3.9 mm long at e = 0."""
+    t, got = _drop(h, e, vx0, 0.3, backend)
+    want = _newton_drop(h, e, vx0, 0.3, t)
+    assert np.max(np.abs(got[:, 0] - want[:, 0])) < 1e-3, (got[-1], want[-1])
+    if backend == "mujoco" and e == 0.0:
+        _, soft = _drop(h, e, vx0, 0.3, "mujoco", events=False)
+        assert abs(soft[-1, 0] - want[-1, 0]) > 2e-3
 
 
 W0 = 12.0  # [rad/s] yaw rate at release of the turning slides

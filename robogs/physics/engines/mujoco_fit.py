@@ -42,6 +42,24 @@ the fitted object), its poses are returned at its own stamps
 (:class:`~robogs.physics.residuals.SceneSimResult`, no sensor effects: those model the fitted
 object's tracker), and :meth:`MujocoFit.extra_params` gives its table friction as a base slot.
 
+Restitution (planar joint set, a flat box: :attr:`MujocoFit.bounce_events`): the object-table
+pairs stay plastic whatever ``e``, and impacts are events between steps (:meth:`MujocoFit.
+_bounce`), the rule of the planar model's table contact and of the generator: an approach faster
+than the scene's ``bounce_min_speed`` (5 cm/s) that would close the gap within the step leaves at
+``e`` times it, from the time of impact in the step, and the normal impulse ``(1 + e)`` times the
+approach speed takes ``mu_d`` times it off the CoM's planar twist (force effects see that impulse
+through the vertical acceleration their normal force is computed from). ``e = 0`` is the same
+event, so a landing's friction impulse is the rigid one and the objective is continuous at zero.
+While an object is off the table (not resting within 0.1 mm, or moving vertically) its rollouts
+step one at a time. Why not MuJoCo's soft bounce (a ``solref`` damping ratio from ``e``, kept for
+free joints and for ``robogs export mjcf``): at a 1 ms step it needs a 20 ms time constant to be
+stable below damping ratio 0.2, so a 5 cm drop stays 13 ms in contact and 3 mm deep and its
+rebound runs 6 mm behind the rigid one; on design A seed 0 it fitted e 0.31 for 0.5 (the
+underdamped support also moved the other trajectories' chi^2 over a range of 57 with e), with
+events 0.502 (planar 0.502; ``bench/RESULTS.md``, stop 54). A plastic landing on the soft
+support took 3.9 mm less friction at 5 cm / 0.6 m/s; as an event it is within 0.43 mm of the
+closed form (``tests/physics/test_mujoco_effects.py``).
+
 Not modelled here: ``friction_static`` (MuJoCo has one Coulomb coefficient).
 """
 
@@ -248,6 +266,11 @@ class MujocoFit:
             self.half_z = _below(m, gid)  # -inf where unknown
         self.rest_z = self.table_z + self.half_z
         self.settled_z = self._settle() if np.isfinite(self.rest_z) else -np.inf
+        # restitution by impact events (module docstring, "Restitution"): a flat box
+        self.bounce_events = bool(
+            self.lay.planar and box == mujoco.mjtGeom.mjGEOM_BOX and np.isfinite(self.rest_z)
+        )
+        self.bounce_min = 0.05  # [m/s] the scene's bounce_min_speed, each simulate
         self._full_cols, self._int_cols = _state_map(m)
         self.physics = physics
         self.track(tracked)
@@ -364,7 +387,14 @@ class MujocoFit:
         rows = {k: self._other_rows(k) for k in others}
         out = []
         for i in range(theta.shape[0]):
-            mi = apply_body(self.eng.model, body, i, self.slots, timeconst=tc)
+            mi = apply_body(
+                self.eng.model,
+                body,
+                i,
+                self.slots,
+                timeconst=tc,
+                bounce_solref=not self.bounce_events,
+            )
             if mu_p is not None:
                 mi.pair_friction[self.pusher_pairs, :2] = max(float(mu_p[i, 0]), 1e-5)
             for k, v in others.items():  # another object's table friction (and torsion)
@@ -467,6 +497,7 @@ class MujocoFit:
         models, _, _ = self.models(theta[sets], space, scene)
         body, _, _, force_fx = self._physics(theta[rows // n_t], space, scene)
         self.c_r = float(scene.friction_radius)  # friction hooks' torque arm (step_forces)
+        self.bounce_min = float(getattr(scene, "bounce_min_speed", 0.05))
         self.last_rollouts = len(rows)
         want_force = drive.wrench_bin is not None and self.pv is not None
         pstate = np.zeros((len(rows), n_s, 6)) if want_force else None
@@ -604,6 +635,7 @@ class MujocoFit:
         # or the park jump happens at k+1)
         single = np.zeros(n_s, bool)
         single[:-1] = g_any[1:] | (np.diff(park, axis=1) != 0).any(0)
+        bounce = self._bounce_rows(body)
         if force_fx:
             single[:] = True
         nu = ctrl.shape[-1]
@@ -621,8 +653,12 @@ class MujocoFit:
                 nxt = np.flatnonzero(single[k:])
                 n = int(nxt[0]) if nxt.size else n_s - 1 - k
                 n = max(1, min(n, _MAX_CHUNK, n_s - 1 - k))
+            if bounce is not None and n > 1 and self._airborne(x).any():
+                n = 1  # an impact event may come at any step
             carry.start(x, k, onset[:, k + 1], k + 1)
             c = ctrl[t_of, k : k + n]
+            if bounce is not None:
+                self._bounce(x, bounce, body, grasp[t_of, k])
             if force_fx:
                 xf = self._forces(x, body, force_fx, vz_prev)
                 vz_prev = x[:, self.va + 2].copy()
@@ -680,6 +716,7 @@ class MujocoFit:
         b.state[:, self._int_cols] = x[:, self._full_cols]
         dense = np.empty((n_r, drive.n_steps, 7 * (1 + len(self.tracked))))
         force = _active_rows(force_fx, n_r)
+        bounce = self._bounce_rows(body)
         held = grasp.any(1)[t_of]  # grasping trajectories apart: they take no rest cut
         for on, hold in ((True, True), (True, False), (False, True), (False, False)):
             ids = np.flatnonzero((force == on) & (held == hold))
@@ -699,14 +736,16 @@ class MujocoFit:
                 park,
                 dense,
                 pstate,
+                None if bounce is None else bounce[ids],
             )
         return dense
 
     def _batch_group(
-        self, b, ids, x, ctrl, t_of, drive, body, force_fx, grasp, park, dense, pstate
+        self, b, ids, x, ctrl, t_of, drive, body, force_fx, grasp, park, dense, pstate, bounce
     ):
         """Run rollouts ``ids`` of batch ``b`` (start states ``x``, trajectories ``t_of``) on
-        their common schedule; fills ``dense`` and ``pstate`` rows ``ids``."""
+        their common schedule; fills ``dense`` and ``pstate`` rows ``ids``; ``bounce``: the
+        rows' restitution for the impact events (:meth:`_bounce`; None: no events)."""
         n_s = drive.n_steps
         full = mujoco.mjtState.mjSTATE_FULLPHYSICS
         xfrc = b.bind("xfrc_applied") if force_fx else None
@@ -748,7 +787,11 @@ class MujocoFit:
             n = _span(single, k, n_s)
             if cut:
                 n = min(n, _REST_CHUNK if k >= _PROBE else _PROBE - k)
+            if bounce is not None and n > 1 and self._airborne(x).any():
+                n = 1  # an impact event may come at any step
             carry.start(x, k, onset[:, k + 1], k + 1)
+            if bounce is not None and self._bounce(x, bounce, body, grasp[t_of, k]).any():
+                b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
             if xfrc is not None:
                 xfrc[ids, self.slots.body] = self._forces(x, body, force_fx, vz_prev)
                 vz_prev = x[:, self.va + 2].copy()
@@ -940,6 +983,74 @@ class MujocoFit:
         z = np.zeros_like(r)
         lay.set_vel(out, cvel[at] + np.stack([-r * ry, r * rx, z], -1), np.stack([z, z, r], -1))
         return out
+
+    # ------------------------------------------------------------------ impacts
+    def _bounce_rows(self, body) -> np.ndarray | None:
+        """[R] restitution of the rollouts' object (``body`` rows) for the impact events of
+        :meth:`_bounce`, clipped to 0-0.98; None where the engine has none (not a flat box on
+        the planar joint set, :attr:`bounce_events`: the support pairs' solref bounces it)."""
+        if not self.bounce_events:
+            return None
+        return np.clip(body.restitution.detach().numpy()[:, 0].astype(float), 0.0, 0.98)
+
+    def _airborne(self, x) -> np.ndarray:
+        """[R] bool: state rows whose object is off its resting height by more than 0.1 mm or
+        moves vertically faster than 1 cm/s (held ones too: a release may come at the next
+        step): an impact may come within the next steps, so they are stepped one at a time (a
+        box resting or sliding on the table stays on it on the planar joint set)."""
+        return (x[:, self.qa + 2] - self.rest_z > 1e-4) | (np.abs(x[:, self.va + 2]) > 1e-2)
+
+    def _bounce(self, x, e, body, held) -> np.ndarray:
+        """Newton impacts of the object with the table in the step about to be taken from
+        state rows ``x`` [R, nstate] (changed in place), as the planar model's table contact
+        (:mod:`robogs.physics.model`) and the generator take them: where the step's velocity
+        before contact, ``v_z - g dt``, approaches faster than the scene's
+        ``bounce_min_speed`` and would close the gap within the step, the box leaves the table
+        at ``e`` times the approach speed, the rebound starting at the time of impact in the
+        step, and the normal impulse ``(1 + e)`` times the approach speed (per unit mass)
+        takes the Coulomb friction impulse ``mu_d`` times it off the CoM's planar twist
+        ``(v_x, v_y, c_r w)`` (ellipsoidal limit surface, sticking when that stops it; MuJoCo
+        has no static coefficient). The support pair is plastic (:func:`~robogs.format.mjcf.
+        write_body` with ``bounce_solref=False``) and sees no penetration at these steps.
+        ``e`` [R]: restitution per row (0: a plastic impact, the same event: the landing's
+        friction impulse is the rigid one, and the objective is continuous at ``e = 0``);
+        ``held`` [R]: rows held by a grasp (no events). Returns [R] bool, the rows hit."""
+        dt, g = self.eng.dt, self.gravity
+        qz, vz = self.qa + 2, self.va + 2
+        v1 = x[:, vz] - g * dt
+        gap = x[:, qz] - self.rest_z
+        hit = ~held & (-v1 > self.bounce_min) & (gap + dt * v1 <= 0.0)
+        if not hit.any():
+            return hit
+        h = np.flatnonzero(hit)
+        ap = -v1[h]
+        lam = (1.0 + e[h]) * ap  # normal impulse per unit mass [m/s]
+        # friction on the CoM twist (the velocity columns are the body origin's)
+        com = body.com.detach().numpy()[h, 0]
+        yaw = x[h, self.qa + 3]
+        c, s = np.cos(yaw), np.sin(yaw)
+        rx, ry = c * com[:, 0] - s * com[:, 1], s * com[:, 0] + c * com[:, 1]  # R com, world
+        w = x[h, self.va + 3]
+        vcx, vcy = x[h, self.va] - w * ry, x[h, self.va + 1] + w * rx
+        kr = body.mass.detach().numpy()[h, 0] * self.c_r**2 / body.inertia_z.detach().numpy()[h, 0]
+        cw = self.c_r * w
+        sp2 = vcx * vcx + vcy * vcy
+        stop = np.sqrt(sp2 + np.where(kr > 0, cw / np.where(kr > 0, kr, 1.0), 0.0) ** 2)
+        xi = np.sqrt(sp2 + cw * cw) + 1e-15
+        budget = body.mu_d.detach().numpy()[h, 0] * lam
+        stick = stop <= budget
+        f_t = np.where(stick, 0.0, np.clip(1.0 - budget / xi, 0.0, None))
+        f_r = np.where(stick, 0.0, np.clip(1.0 - budget * kr / xi, 0.0, None))
+        w = w * f_r
+        x[h, self.va + 3] = w
+        x[h, self.va] = vcx * f_t + w * ry
+        x[h, self.va + 1] = vcy * f_t - w * rx
+        # the rebound from the time of impact tau = gap / ap in the step: after MuJoCo's step
+        # (gravity, then position) the box is e ap (dt - tau) above the contact height, moving
+        # up at e ap
+        x[h, vz] = e[h] * ap + g * dt
+        x[h, qz] = self.rest_z - e[h] * np.maximum(gap[h], 0.0)
+        return hit
 
     def _forces(self, x, body, force_fx, vz_prev=None) -> np.ndarray:
         """Per-step applied wrench [R, 6] of the force effects from the rollouts' current
