@@ -155,14 +155,15 @@ def test_mujoco_fits_both_table_frictions(monkeypatch, sigma_ee: float, bound: f
     The pusher's path measured with the generator's 60 um noise (``ee-60um-default``):
     ``prepare`` smooths it over 80 ms (the reference window, which that noise needs), which
     rounds the generator's sharp 10 m/s^2 brake; the generator's own rigid rules on that drive
-    fit mu_a 6-12 % low (h42). Measured mu_a -7.5 %, mu_b -3.5 % on the default pusher pair
-    (2.5 ms x 1.7; strict xfail; the 4 ms x 2 pair of before: -6.8 %, and -4.7 % before the
-    engine smoothed the servo targets over the drive's 2 ms knots, h67: the old pair's strike
-    bias offset part of the drive's). The same recording with a noise-free pusher path
-    (``ee-clean-*``: no smoothing, the brake as measured) isolates the contact model: pair 3 ms
-    x 1.7 mu_a -2.9 %, mu_b +0.7 %, force +1.2 %; the default pair mu_a -2.1 %, mu_b -0.7 %,
-    force +0.5 % (the 4 ms x 2 pair: -2.0 %, -0.3 %, +3.8 %; h67; the 80 ms smoothing there:
-    mu_a -6.3 %, which fails).
+    fit mu_a 6-12 % low (h42). Measured mu_a -6.9 %, mu_b -3.3 % on the default pusher pair
+    (5 steps x 1.2 since stop 54's check; strict xfail; the 2.5 ms x 1.7 pair of stops 49-52:
+    -7.5 / -3.5 %; the 4 ms x 2 pair before: -6.8 %, and -4.7 % before the engine smoothed the
+    servo targets over the drive's 2 ms knots, h67: the old pair's strike bias offset part of
+    the drive's). The same recording with a noise-free pusher path (``ee-clean-*``: no
+    smoothing, the brake as measured) isolates the contact model: pair 3 ms x 1.7 mu_a -2.9 %,
+    mu_b +0.7 %, force +1.2 %; the default pair mu_a -2.5 %, mu_b -0.6 %, force +1.2 % (the
+    2.5 ms x 1.7 pair: -2.1 %, -0.7 %, +0.5 %; the 4 ms x 2 pair: -2.0 %, -0.3 %, +3.8 %;
+    h67; the 80 ms smoothing there: mu_a -6.3 %, which fails).
 
     Finite-difference step 10 % of each scale: the contact chain makes the objective rough at
     a finer scale (steps of 1 % and 3 % stopped at (0.405, 0.290) and (0.421, 0.267))."""
