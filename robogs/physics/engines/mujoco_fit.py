@@ -1011,7 +1011,9 @@ class MujocoFit:
         takes the Coulomb friction impulse ``mu_d`` times it off the CoM's planar twist
         ``(v_x, v_y, c_r w)`` (ellipsoidal limit surface, sticking when that stops it; MuJoCo
         has no static coefficient). The support pair is plastic (:func:`~robogs.format.mjcf.
-        write_body` with ``bounce_solref=False``) and sees no penetration at these steps.
+        write_body` with ``bounce_solref=False``) and pushes nothing at these steps: the box
+        starts them at most ``e`` times the gap (under 1 mm) deep, leaving at ``e`` times the
+        approach speed, where the soft contact's reference acceleration pulls.
         ``e`` [R]: restitution per row (0: a plastic impact, the same event: the landing's
         friction impulse is the rigid one, and the objective is continuous at ``e = 0``);
         ``held`` [R]: rows held by a grasp (no events). Returns [R] bool, the rows hit."""
