@@ -139,7 +139,7 @@ def test_mujoco_simulates_a_box_pushed_into_another():
             marks=pytest.mark.xfail(
                 strict=True,
                 raises=AssertionError,
-                reason="prepare's 80 ms smoothing of the noisy pusher path: mu_a -7.5 %",
+                reason="prepare's 80 ms smoothing of the noisy pusher path: mu_a -6.9 %",
             ),
         ),
         pytest.param(0.0, 0.03, (3.0, 1.7), id="ee-clean-tc3-zeta1.7"),
