@@ -85,7 +85,7 @@ from robogs.physics.engines.mujoco_effects import (
     step_forces,
 )
 from robogs.physics.engines.mujoco_engine import MujocoEngine
-from robogs.physics.model import Drive, SimResult, _base_body, _lift
+from robogs.physics.model import Drive, SimResult, _base_body, _lift, _steps
 from robogs.physics.residuals import SceneSimResult
 from robogs.physics.space import BASE, ParamSpace
 
@@ -497,7 +497,7 @@ class MujocoFit:
         models, _, _ = self.models(theta[sets], space, scene)
         body, _, _, force_fx = self._physics(theta[rows // n_t], space, scene)
         self.c_r = float(scene.friction_radius)  # friction hooks' torque arm (step_forces)
-        self.bounce_min = float(getattr(scene, "bounce_min_speed", 0.05))
+        self.bounce_min = float(scene.bounce_min_speed)
         self.last_rollouts = len(rows)
         want_force = drive.wrench_bin is not None and self.pv is not None
         pstate = np.zeros((len(rows), n_s, 6)) if want_force else None
@@ -1030,26 +1030,33 @@ class MujocoFit:
         h = np.flatnonzero(hit)
         ap = -v1[h]
         lam = (1.0 + e[h]) * ap  # normal impulse per unit mass [m/s]
-        # friction on the CoM twist (the velocity columns are the body origin's)
+        # friction on the CoM twist (the velocity columns are the body origin's), by the
+        # planar model's own table-friction step
         com = body.com.detach().numpy()[h, 0]
         yaw = x[h, self.qa + 3]
         c, s = np.cos(yaw), np.sin(yaw)
         rx, ry = c * com[:, 0] - s * com[:, 1], s * com[:, 0] + c * com[:, 1]  # R com, world
         w = x[h, self.va + 3]
         vcx, vcy = x[h, self.va] - w * ry, x[h, self.va + 1] + w * rx
-        kr = body.mass.detach().numpy()[h, 0] * self.c_r**2 / body.inertia_z.detach().numpy()[h, 0]
-        cw = self.c_r * w
-        sp2 = vcx * vcx + vcy * vcy
-        stop = np.sqrt(sp2 + np.where(kr > 0, cw / np.where(kr > 0, kr, 1.0), 0.0) ** 2)
-        xi = np.sqrt(sp2 + cw * cw) + 1e-15
-        budget = body.mu_d.detach().numpy()[h, 0] * lam
-        stick = stop <= budget
-        f_t = np.where(stick, 0.0, np.clip(1.0 - budget / xi, 0.0, None))
-        f_r = np.where(stick, 0.0, np.clip(1.0 - budget * kr / xi, 0.0, None))
-        w = w * f_r
+        kr = body.mass.detach().numpy()[h] * self.c_r**2 / body.inertia_z.detach().numpy()[h]
+        mu = body.mu_d.detach().numpy()[h]  # [H, 1]; static = dynamic on MuJoCo
+        col = (vcx[:, None], vcy[:, None], w[:, None])  # [H, 1]: the planar step's layout
+        vcx, vcy, w = (
+            a[:, 0]
+            for a in _steps(np.dtype(np.float64)).friction(
+                *col,
+                col[0] ** 2 + col[1] ** 2,
+                lam[:, None],
+                np.ones((len(h), 1), bool),
+                mu,
+                mu,
+                kr,
+                self.c_r,
+            )
+        )
         x[h, self.va + 3] = w
-        x[h, self.va] = vcx * f_t + w * ry
-        x[h, self.va + 1] = vcy * f_t - w * rx
+        x[h, self.va] = vcx + w * ry
+        x[h, self.va + 1] = vcy - w * rx
         # the rebound from the time of impact tau = gap / ap in the step: after MuJoCo's step
         # (gravity, then position) the box is e ap (dt - tau) above the contact height, moving
         # up at e ap
