@@ -285,7 +285,22 @@ def _pusher_points(
     return (c.unsqueeze(-2) + off).numpy(), (cv.unsqueeze(-2) + voff).numpy()
 
 
-def _pusher_impulse(
+class PusherContacts(NamedTuple):
+    """The pusher's end spheres against the box sides in one step (:func:`pusher_contacts`),
+    each [M, T, J]: world contact normal ``nx, ny`` (box -> sphere), ``rxn`` [m] (the contact
+    lever, ``r x n`` about the CoM), ``gap`` [m] (negative: penetration), ``rate_n`` [m/s]
+    (the sphere's normal speed relative to the box point, negative: closing) and ``active``
+    (the sphere is within the box's height band and not grasping)."""
+
+    nx: np.ndarray
+    ny: np.ndarray
+    rxn: np.ndarray
+    gap: np.ndarray
+    rate_n: np.ndarray
+    active: np.ndarray
+
+
+def pusher_contacts(
     scene: BoxScene,
     p: np.ndarray,
     cos_y: np.ndarray,
@@ -295,28 +310,12 @@ def _pusher_impulse(
     wf: np.ndarray,
     com_x: np.ndarray,
     com_y: np.ndarray,
-    mass: np.ndarray,
-    inertia: np.ndarray,
     pts: np.ndarray,
     pv: np.ndarray,
     grasping: np.ndarray,
-    dt: float,
-) -> tuple[np.ndarray, ...]:
-    """Frictionless, inelastic, speculative contact of the pusher's end spheres with the box.
-
-    With two end spheres the 2x2 linear complementarity problem is solved exactly by
-    enumerating its four cases (Cottle, Pang & Stone 1992); one sphere is the scalar case.
-
-    Args:
-        p: CoM [M, T, 3] m; cos_y, sin_y: of the box yaw [M, T]; vx, vy [M, T] m/s and wf
-            [M, T] rad/s: the box's velocities before the contact; com_x, com_y, mass,
-            inertia: [M, 1]; pts, pv: end-sphere centres [m] and velocities [m/s] [T, J, 3];
-            grasping: [T] bool (no pusher contact while grasped).
-
-    Returns:
-        the box's vx, vy, yaw rate after the contact, and the impulse [N s] the box gives the
-        pusher in this step (x, y, world; the reaction of the one the pusher gives the box).
-    """
+) -> PusherContacts:
+    """Closest points of the pusher's end spheres on the box sides (arguments as
+    :func:`_pusher_impulse`'s; ``com_x``, ``com_y`` [M, 1] or [M, T])."""
     hx, hy, hz = (0.5 * s for s in scene.size)
     pts, pv = pts[None], pv[None]  # [1, T, J, 3]
     c_, s_ = cos_y[..., None], sin_y[..., None]  # [M, T, 1]
@@ -342,8 +341,45 @@ def _pusher_impulse(
     w_ = wf[..., None]
     vptx, vpty = vx[..., None] - w_ * rcy, vy[..., None] + w_ * rcx
     rate_n = (pv[..., 0] - vptx) * nx + (pv[..., 1] - vpty) * ny
-    rxn = rcx * ny - rcy * nx  # [M, T, J]
     active = (np.abs(dz) <= hz) & ~grasping[None, :, None]
+    return PusherContacts(nx, ny, rcx * ny - rcy * nx, gap, rate_n, active)
+
+
+def _pusher_impulse(
+    scene: BoxScene,
+    p: np.ndarray,
+    cos_y: np.ndarray,
+    sin_y: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    wf: np.ndarray,
+    com_x: np.ndarray,
+    com_y: np.ndarray,
+    mass: np.ndarray,
+    inertia: np.ndarray,
+    pts: np.ndarray,
+    pv: np.ndarray,
+    grasping: np.ndarray,
+    dt: float,
+) -> tuple[np.ndarray, ...]:
+    """Frictionless, inelastic, speculative contact of the pusher's end spheres with the box.
+
+    With two end spheres the 2x2 linear complementarity problem is solved exactly by
+    enumerating its four cases (Cottle, Pang & Stone 1992); one sphere is the scalar case.
+
+    Args:
+        p: CoM [M, T, 3] m; cos_y, sin_y: of the box yaw [M, T]; vx, vy [M, T] m/s and wf
+            [M, T] rad/s: the box's velocities before the contact; com_x, com_y, mass,
+            inertia: [M, 1] (or [M, T]); pts, pv: end-sphere centres [m] and velocities [m/s]
+            [T, J, 3]; grasping: [T] bool (no pusher contact while grasped).
+
+    Returns:
+        the box's vx, vy, yaw rate after the contact, and the impulse [N s] the box gives the
+        pusher in this step (x, y, world; the reaction of the one the pusher gives the box).
+    """
+    nx, ny, rxn, gap, rate_n, active = pusher_contacts(
+        scene, p, cos_y, sin_y, vx, vy, wf, com_x, com_y, pts, pv, grasping
+    )
     # speculative for open gaps, soft (Baumgarte 0.2) push-out of penetrations
     target = np.where(gap > 0, -gap, -0.2 * gap) / dt
     b = np.where(active, target - rate_n, -1.0)

@@ -106,9 +106,10 @@ def _dense(sim: MujocoFit, th, space, drive, scene, local=None) -> np.ndarray:
 
 
 def test_batch_equals_rollout_path_without_single_steps(monkeypatch):
-    """Two friction values x two pushes: the batch and the old rollout path agree within 1e-9 m
-    when the old path runs each rollout in one call; with its 256-step calls (each restarting
-    the solver cold: 3e-9 m here) within OLD_PATH_BOUND_M."""
+    """Two friction values x two pushes: the batch and the old rollout path agree within
+    OLD_PATH_BOUND_M (the old path's calls, 256 steps at most and split at the strike events,
+    each restart the solver cold: 2e-8 m here); without strike events, and the old path running
+    each rollout in one call, within 1e-9 m."""
     phys, scene, space = _setup([])
     drive = _drive(grasp=False)
     th = _sets(space)
@@ -118,18 +119,24 @@ def test_batch_equals_rollout_path_without_single_steps(monkeypatch):
     assert np.ptp(a[..., 0], axis=-1).min() > 0.02  # the boxes were pushed
     assert np.abs(a[0] - a[1]).max() > 1e-4  # the friction change shows
     assert np.abs(a - b).max() <= OLD_PATH_BOUND_M, np.abs(a - b).max()
+    new = MujocoFit(phys, "box", dt=DT, stepper="batch")
+    new.strike_events = old.strike_events = False
+    a = _dense(new, th, space, drive, scene)
     monkeypatch.setattr(mujoco_fit, "_MAX_CHUNK", drive.n_steps)
     b = _dense(old, th, space, drive, scene)
     assert np.abs(a - b).max() <= 1e-9, np.abs(a - b).max()
-    c = _dense(MujocoFit(phys, "box", dt=DT, stepper="batch"), th, space, drive, scene)
+    c = _dense(new, th, space, drive, scene)
     assert np.array_equal(a, c)  # the batch does not depend on its call lengths
     two = MujocoFit(phys, "box", dt=DT, threads=2, stepper="batch")
+    two.strike_events = False
     assert np.array_equal(a, _dense(two, th, space, drive, scene))  # nor on its threads
 
 
-def _mj_step_loop(sim: MujocoFit, args: dict) -> np.ndarray:
+def _mj_step_loop(sim: MujocoFit, args: dict, scene) -> tuple[np.ndarray, int]:
     """Dense poses [R, S, 7]: one MjData per rollout, one ``mj_step`` per step, the force
-    effects' wrench computed every step for every rollout, grasps held by :func:`_carry_ref`."""
+    effects' wrench computed every step for every rollout, grasps held by :func:`_carry_ref`,
+    the pusher's strike events (``MujocoFit._strike``) checked at every step (the runners check
+    only from each strike horizon on); and the number of steps with a strike."""
     full = mujoco.mjtState.mjSTATE_FULLPHYSICS
     drive, t_of = args["drive"], args["t_of"]
     n_s = drive.n_steps
@@ -140,6 +147,8 @@ def _mj_step_loop(sim: MujocoFit, args: dict) -> np.ndarray:
     rate = drive.ee_yaw_rate.numpy()
     onset = grasp & ~np.pad(grasp, ((0, 0), (1, 0)))[:, :-1]
     out = np.empty((len(t_of), n_s, 7))
+    sim._strike_begin(drive, scene, len(t_of), False)
+    strikes = 0
     for r, t in enumerate(t_of):
         m = args["models_r"][r]
         d = mujoco.MjData(m)
@@ -160,6 +169,9 @@ def _mj_step_loop(sim: MujocoFit, args: dict) -> np.ndarray:
                 rel_p, rel_q = sim._grasp_rel(
                     x, pusher[:, k], ee_yaw[:, k], tt, onset[:, k + 1], rel_p, rel_q
                 )
+            if sim._strike(x, k, tt, body_r, grasp[tt, k]).any():
+                mujoco.mj_setState(m, d, x[0], full)
+                strikes += 1
             if fx_r:
                 d.xfrc_applied[:] = 0.0
                 d.xfrc_applied[sim.slots.body] = sim._forces(x, body_r, fx_r)[0]
@@ -175,7 +187,8 @@ def _mj_step_loop(sim: MujocoFit, args: dict) -> np.ndarray:
                 )
             mujoco.mj_setState(m, d, x[0], full)
             out[r, k + 1] = sim.lay.pose(x)[0]
-    return out
+    sim._strike_ctx = None
+    return out, strikes
 
 
 def _carry_ref(sim: MujocoFit, x: np.ndarray, ee, v_ee, yaw: float, rate: float, rel_p, rel_q):
@@ -255,7 +268,8 @@ def test_batch_with_force_effect_and_grasp_equals_mj_step_loop(windows):
     assert sim.last_rollouts == 4
     assert np.ptp(a[:, 1, :, 0], axis=-1).min() > 0.05  # carried and slid
     assert np.abs(a[0] - a[1]).max() > 1e-4  # drag and friction show
-    ref = _mj_step_loop(sim, seen)
+    ref, strikes = _mj_step_loop(sim, seen, scene)
+    assert strikes >= 2  # the push starts with a strike event (one per set)
     assert np.abs(seen["dense"] - ref).max() <= 1e-9, np.abs(seen["dense"] - ref).max()
     b = _dense(MujocoFit(phys, "box", dt=DT, stepper="rollout"), th, space, drive, scene)
     assert np.abs(a - b).max() <= OLD_PATH_BOUND_M, np.abs(a - b).max()

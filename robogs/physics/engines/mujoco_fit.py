@@ -75,6 +75,7 @@ import torch
 
 from robogs.format.errors import InputError
 from robogs.format.mjcf import com_feet
+from robogs.format.mjcf_pusher import pusher_geometry
 from robogs.physics.effects import Param, overrides
 from robogs.physics.engines.base import quat_yaw
 from robogs.physics.engines.mujoco_effects import (
@@ -85,7 +86,16 @@ from robogs.physics.engines.mujoco_effects import (
     step_forces,
 )
 from robogs.physics.engines.mujoco_engine import MujocoEngine
-from robogs.physics.model import Drive, SimResult, _base_body, _lift, _steps
+from robogs.physics.model import (
+    Drive,
+    SimResult,
+    _base_body,
+    _lift,
+    _pusher_impulse,
+    _pusher_points,
+    _steps,
+    pusher_contacts,
+)
 from robogs.physics.residuals import SceneSimResult
 from robogs.physics.space import BASE, ParamSpace
 
@@ -148,6 +158,12 @@ _PROBE = 2  # steps taken before the start of the rest cut: a box that starts to
 REST_SPEED = 1e-5
 """Speed [m/s, rad/s] under which every DOF of a resting object counts as still (the batch
 runner's rest cut, :meth:`MujocoFit._still`)."""
+
+STRIKE_MIN_SPEED = 0.05
+"""Closing speed [m/s] of a pusher end sphere on the box above which its contact is a strike
+event (:meth:`MujocoFit._strike`); slower approaches are left to the soft pusher pair."""
+_BOX_ACCEL = 2.0  # [m/s^2] bound on what accelerates a box other than friction (_strike_horizon)
+_STRIKE_WINDOW = 64  # steps a strike horizon looks ahead
 
 STEPPERS = ("batch", "rollout")
 """Rollout runners: ``mujoco.batch`` (persistent states; MuJoCo >= 3.17) or ``mujoco.rollout``."""
@@ -271,6 +287,16 @@ class MujocoFit:
             self.lay.planar and box == mujoco.mjtGeom.mjGEOM_BOX and np.isfinite(self.rest_z)
         )
         self.bounce_min = 0.05  # [m/s] the scene's bounce_min_speed, each simulate
+        # pusher strikes by events (module docstring, "Strikes"): a flat box and a pusher
+        self.strike_events = bool(
+            self.bounce_events
+            and self.pq is not None
+            and pusher_geometry(physics) == "primitive"
+            and self.eng.settings.capsule_ends
+        )
+        self._strike_ctx: tuple | None = None  # per simulate: (scene, points, velocities, impulses)
+        # [m] the farthest box point from the body origin (box point speeds, _strike_horizon)
+        self._lever = float(np.linalg.norm(half[:2])) if half.shape[0] >= 2 else 0.0
         self._full_cols, self._int_cols = _state_map(m)
         self.physics = physics
         self.track(tracked)
@@ -501,6 +527,7 @@ class MujocoFit:
         self.last_rollouts = len(rows)
         want_force = drive.wrench_bin is not None and self.pv is not None
         pstate = np.zeros((len(rows), n_s, 6)) if want_force else None
+        self._strike_begin(drive, scene, len(rows), want_force)
         run = self._run_batch if self.stepper == "batch" else self._run
         dense = run(
             [models[j] for j in set_of.reshape(-1)],
@@ -531,7 +558,9 @@ class MujocoFit:
                 **{f.name: getattr(res, f.name) for f in fields(res)}, others=others
             )
         if pstate is not None:
-            res.force = self._pusher_force(pstate, ctrl, drive, m_sets)
+            imp = None if self._strike_ctx is None else self._strike_ctx[3][which]
+            res.force = self._pusher_force(pstate, ctrl, drive, m_sets, imp)
+        self._strike_ctx = None
         return res
 
     def _place_tracked(
@@ -566,11 +595,17 @@ class MujocoFit:
             lay.set_vel(x, np.zeros((len(x), 3)), np.zeros((len(x), 3)))
 
     def _pusher_force(
-        self, pstate: np.ndarray, ctrl: np.ndarray, drive: Drive, m_sets: int
+        self,
+        pstate: np.ndarray,
+        ctrl: np.ndarray,
+        drive: Drive,
+        m_sets: int,
+        strikes: np.ndarray | None = None,
     ) -> torch.Tensor:
         """Force the objects exert on the pusher [M, T, W, 3] N (world), averaged per wrench
         bin, from the pusher's dense positions and velocities ``pstate`` [M*T, S, 6]: contact =
-        mass x acceleration - servo force (the servos' gain and bias from the model).
+        mass x acceleration - servo force (the servos' gain and bias from the model), plus the
+        strike events' impulses ``strikes`` [M*T, S, 2] N s (:meth:`_strike`) over the step.
 
         The vertical component is left at 0, as in the planar model: with pusher friction it is
         the share of the object's weight that the sticking vertical friction of the pusher
@@ -592,6 +627,8 @@ class MujocoFit:
             f_servo[..., axis] += g * u + b[0] + b[1] * p[..., axis] + b[2] * v[..., axis]
         mass = float(m.body_mass[m.dof_bodyid[dof0]])
         f_c = mass * np.diff(pstate[:, :, 3:], axis=1) / dt - f_servo  # [M*T, S-1, 3]
+        if strikes is not None:
+            f_c[..., :2] += strikes[:, :-1] / dt
         f_c = f_c.reshape(m_sets, n_t, n_s - 1, 3)
         f_c[..., 2] = 0.0  # the planar model's force: in the table plane (see the docstring)
         bins = drive.wrench_bin.numpy()[:, : n_s - 1]
@@ -645,6 +682,7 @@ class MujocoFit:
         carry = _Carry(self, drive, t_of, grasp)
         carry.start(x, 0, onset[:, 0], 0)
         vz_prev = x[:, self.va + 2].copy()  # the force effects' normal force (_forces)
+        next_strike = 0  # no strike can fire before this step (_strike_horizon)
         k = 0
         while k < n_s - 1:
             if single[k]:
@@ -657,8 +695,14 @@ class MujocoFit:
                 n = 1  # an impact event may come at any step
             carry.start(x, k, onset[:, k + 1], k + 1)
             c = ctrl[t_of, k : k + n]
-            if bounce is not None:
-                self._bounce(x, bounce, body, grasp[t_of, k])
+            if bounce is not None and self._bounce(x, bounce, body, grasp[t_of, k]).any():
+                next_strike = k  # a landing's friction impulse changes the closing speeds
+            if self._strike_ctx is not None:
+                if k >= next_strike:
+                    self._strike(x, k, t_of, body, grasp[t_of, k])
+                    next_strike = self._strike_horizon(x, k, t_of, body, grasp[t_of, k])
+                n = min(n, next_strike - k)
+                c = ctrl[t_of, k : k + n]
             if force_fx:
                 xf = self._forces(x, body, force_fx, vz_prev)
                 vz_prev = x[:, self.va + 2].copy()
@@ -681,6 +725,8 @@ class MujocoFit:
                 hold = grasp[t_of, k]
                 carry.attach(x, hold, k)
                 dense[hold, k] = self._poses(x[hold])
+                if (grasp[:, k] != grasp[:, k - 1]).any():
+                    next_strike = k  # a grasp starts or ends: its pusher comes or goes
         return dense
 
     def _run_batch(
@@ -775,6 +821,7 @@ class MujocoFit:
         # _REST_CHUNK steps, also where a force effect steps the group one step at a time
         # (checked every step, it cost a Stribeck set 60 % of its rollout time)
         next_still = 0
+        next_strike = 0  # no strike can fire before this step (_strike_horizon)
         vz_prev = x[:, self.va + 2].copy()  # the force effects' normal force (_forces)
         while k < n_s - 1:
             if cut and k == _PROBE:  # still at rest: on to the step before the pusher's reach
@@ -792,6 +839,14 @@ class MujocoFit:
             carry.start(x, k, onset[:, k + 1], k + 1)
             if bounce is not None and self._bounce(x, bounce, body, grasp[t_of, k]).any():
                 b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
+                next_strike = k  # a landing's friction impulse changes the closing speeds
+            if self._strike_ctx is not None:
+                if k >= next_strike:
+                    held_k = grasp[t_of, k]
+                    if self._strike(x, k, t_of, body, held_k, ids).any():
+                        b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
+                    next_strike = self._strike_horizon(x, k, t_of, body, held_k)
+                n = min(n, next_strike - k)
             if xfrc is not None:
                 xfrc[ids, self.slots.body] = self._forces(x, body, force_fx, vz_prev)
                 vz_prev = x[:, self.va + 2].copy()
@@ -812,6 +867,8 @@ class MujocoFit:
                 carry.attach(x, hold, k)
                 raw[hold, k] = x[hold, :w]
                 edit = True
+                if (grasp[:, k] != grasp[:, k - 1]).any():
+                    next_strike = k  # a grasp starts or ends: its pusher comes or goes
             if edit:
                 b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
             if cut and k < n_s - 1 and k >= next_still:
@@ -1062,6 +1119,121 @@ class MujocoFit:
         # up at e ap
         x[h, vz] = e[h] * ap + g * dt
         x[h, qz] = self.rest_z - e[h] * np.maximum(gap[h], 0.0)
+        return hit
+
+    # ------------------------------------------------------------------ strikes
+    def _strike_begin(self, drive: Drive, scene: Any, n_rows: int, want_force: bool) -> None:
+        """Set up :meth:`_strike` for one :meth:`simulate`: the drive's end-sphere centres and
+        velocities [T, S, J, 3] (the planar model's, :func:`~robogs.physics.model.
+        _pusher_points`) and, where the pusher force is wanted, the events' impulses [R, S, 2]."""
+        if not self.strike_events:
+            self._strike_ctx = None
+            return
+        f64 = torch.float64
+        pts, pv = _pusher_points(
+            scene,
+            drive.pusher.to(f64),
+            drive.pusher_vel.to(f64),
+            drive.ee_yaw.to(f64),
+            drive.ee_yaw_rate.to(f64),
+        )
+        imp = np.zeros((n_rows, drive.n_steps, 2)) if want_force else None
+        self._strike_ctx = (scene, pts, pv, imp)
+
+    def _contacts(self, x, k: int, t_of, body, grasping):
+        """:func:`~robogs.physics.model.pusher_contacts` of state rows ``x`` [R, nstate] at
+        step ``k`` (rows as the model's T axis), with the CoM (world), yaw and CoM velocity."""
+        scene, pts_all, pv_all, _ = self._strike_ctx
+        com = body.com.detach().numpy()[:, 0]  # [R, 2] body frame (x, y)
+        yaw = x[:, self.qa + 3]
+        c, s = np.cos(yaw), np.sin(yaw)
+        rx, ry = c * com[:, 0] - s * com[:, 1], s * com[:, 0] + c * com[:, 1]
+        p = x[:, self.qa : self.qa + 3] + np.stack([rx, ry, 0.0 * rx], -1)
+        w = x[:, self.va + 3]
+        vcx, vcy = x[:, self.va] - w * ry, x[:, self.va + 1] + w * rx
+        args = (p[None], c[None], s[None], vcx[None], vcy[None], w[None])
+        coms = (com[None, :, 0], com[None, :, 1])
+        pts, pv = pts_all[t_of, k], pv_all[t_of, k]
+        geo = pusher_contacts(scene, *args, *coms, pts, pv, grasping)
+        return geo, args, coms, (pts, pv), (rx, ry)
+
+    def _strike_horizon(self, x, k: int, t_of, body, grasping) -> int:
+        """The first step after ``k`` (at most :data:`_STRIKE_WINDOW` on) at which a strike
+        (:meth:`_strike`) could fire in state rows ``x``: the runners check for strikes only
+        from there (and again after an impact event or a grasp change). A sphere's closing
+        speed ``i`` steps on is at most its speed now, plus the change ``dv_i`` of the drive's
+        sphere velocity since, plus the box point's speed now (friction can stop it, not
+        reverse it), plus :data:`_BOX_ACCEL` ``i dt`` (what else may push the box: a tilted
+        table, force effects); a sphere off the box (gap over 0.1 mm) cannot strike before
+        that bound, summed over the steps, has covered its gap. A sphere that touches the box
+        and closes slower than half :data:`STRIKE_MIN_SPEED` is the soft pair's: it strikes
+        again only after the pusher has braked away and come back, so not before ``dv_i``
+        exceeds half :data:`STRIKE_MIN_SPEED`. A strike the bound misses is taken by the soft
+        pair, as without events."""
+        dt = self.eng.dt
+        geo = self._contacts(x, k, t_of, body, grasping)[0]
+        close = np.maximum(-geo.rate_n[0], 0.0)  # [R, J]
+        act = geo.active[0]
+        touch = act & (geo.gap[0] <= 1e-4) & (close < 0.5 * STRIKE_MIN_SPEED)
+        win = self._strike_ctx[2][t_of, k : k + _STRIKE_WINDOW + 1, :, :2]  # [R, W, J, 2]
+        dv = np.linalg.norm(win - win[:, :1], axis=-1)  # [R, W, J]
+        i = np.arange(dv.shape[1])[None, :, None]
+        v_pt = np.hypot(x[:, self.va], x[:, self.va + 1]) + np.abs(x[:, self.va + 3]) * self._lever
+        bound = (close + v_pt[:, None])[:, None] + dv + _BOX_ACCEL * i * dt  # at step k + i
+        reach = np.cumsum(bound, axis=1) * dt  # distance closed by the end of step k + i
+        gap = np.maximum(geo.gap[0], 0.0)[:, None]
+        soft = dv >= 0.5 * STRIKE_MIN_SPEED
+        could = np.where(touch[:, None], soft, (bound > STRIKE_MIN_SPEED) & (reach >= gap))
+        could = (could & act[:, None]).any(axis=(0, 2))
+        could[0] = False  # step k: checked already
+        return k + (int(np.argmax(could)) if could.any() else len(could))
+
+    def _strike(self, x, k: int, t_of, body, grasping, rows=None) -> np.ndarray:
+        """Pusher strikes in the step about to be taken from state rows ``x`` [R, nstate]
+        (changed in place) as the planar model and the generator take them: where an end
+        sphere of the drive's pusher (at step ``k``) closes on the box faster than
+        :data:`STRIKE_MIN_SPEED` and would reach it within the step, the box takes the planar
+        model's frictionless inelastic contact impulse (:func:`~robogs.physics.model.
+        _pusher_impulse`: both end spheres at once, speculative, so it touches at the end of
+        the step), on its CoM twist. Slower approaches, and the steady push that follows, are
+        the soft pusher pair's. ``grasping`` [R]: rows held by a grasp (no strikes); ``rows``
+        [R]: the rows' indices into the impulse record (pusher force). Returns [R] bool."""
+        hit = np.zeros(len(x), bool)
+        if self._strike_ctx is None:
+            return hit
+        dt = self.eng.dt
+        geo, args, coms, (pts, pv), (rx, ry) = self._contacts(x, k, t_of, body, grasping)
+        close = -geo.rate_n[0]
+        fire = geo.active[0] & (close > STRIKE_MIN_SPEED) & (geo.gap[0] - close * dt <= 0.0)
+        hit = fire.any(-1)
+        if not hit.any():
+            return hit
+        h = np.flatnonzero(hit)
+        mass = body.mass.detach().numpy()[h, 0][None]
+        inertia = body.inertia_z.detach().numpy()[h, 0][None]
+        sub = [a[:, h] for a in args]
+        vcx, vcy, w, jx, jy = (
+            a[0]
+            for a in _pusher_impulse(
+                self._strike_ctx[0],
+                *sub,
+                coms[0][:, h],
+                coms[1][:, h],
+                mass,
+                inertia,
+                pts[h],
+                pv[h],
+                grasping[h],
+                dt,
+            )
+        )
+        x[h, self.va + 3] = w
+        x[h, self.va] = vcx + w * ry[h]
+        x[h, self.va + 1] = vcy - w * rx[h]
+        imp = self._strike_ctx[3]
+        if imp is not None:
+            r = h if rows is None else np.asarray(rows)[h]
+            imp[r, k] += np.stack([jx, jy], -1)
         return hit
 
     def _forces(self, x, body, force_fx, vz_prev=None) -> np.ndarray:
