@@ -224,7 +224,10 @@ PLANAR_SETTINGS = ContactSettings(
     pusher_timeconst_steps=5.0,
 )
 """Contact settings of the planar joint set (see ``robogs.physics.engines.mujoco_engine``,
-"Planar joint set", "Strike launch", "Friction bias of centred pushes" and "Flush strikes").
+"Planar joint set", "Strike events", "Strike launch", "Friction bias of centred pushes" and
+"Flush strikes"). On the fitting path strikes faster than 5 cm/s are events since stop 55, so the
+pusher pair below sets the slower approaches and the steady push there, and every contact of a
+plain MuJoCo model (``robogs export mjcf``).
 The pusher pair is 5 steps x damping ratio 1.2 (``pusher_timeconst_steps``,
 ``pusher_dampratio``; slow mode ``dmax tc zeta (zeta + sqrt(zeta^2 - 1))`` = 11 ms): a struck
 box rides the pusher within 0.16 % of its speed at 0.55 m/s, and a fast flush strike of the

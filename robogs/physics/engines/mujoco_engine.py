@@ -102,6 +102,12 @@ stiffer or direct (negative) normal ``solref``, ``impratio`` 1 or 100 and a soft
 did not reduce the lift (the stiffer normal raised it). Scenes that need 3-D (meshes, tilted
 supports) keep the free joint and the 3-D settings below (``joints="free"`` forces them).
 
+Strike events (planar joint set, stop 55): on the fitting path (:class:`~robogs.physics.engines.
+mujoco_fit.MujocoFit`) a pusher sphere closing on a flat box faster than 5 cm/s is an event, the
+planar model's rigid inelastic impulse (``MujocoFit._strike``); the pusher pair below then takes
+only slower approaches and the steady push. What follows describes the pair, which is all that
+``MujocoEngine.rollout`` and ``robogs export mjcf`` have.
+
 Strike launch (planar joint set). A pusher striking a resting box accelerates it at 100-350
 m/s^2 for a few steps; the coupling above then raised the table normal force to ~12 m g and
 launched the box 0.1-0.45 mm, and the soft pusher contact gave it back 8-14 % more speed than

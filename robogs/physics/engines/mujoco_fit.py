@@ -60,6 +60,25 @@ events 0.502 (planar 0.502; ``bench/RESULTS.md``, stop 54). A plastic landing on
 support took 3.9 mm less friction at 5 cm / 0.6 m/s; as an event it is within 0.43 mm of the
 closed form (``tests/physics/test_mujoco_effects.py``).
 
+Strikes (planar joint set, a flat box, a sphere or capsule pusher: :attr:`MujocoFit.
+strike_events`): where an end sphere of the pusher closes on the box faster than
+:data:`STRIKE_MIN_SPEED` (5 cm/s) and would reach it within the step, the box takes the planar
+model's contact impulse as an event before the step (:meth:`MujocoFit._strike`:
+:func:`~robogs.physics.model._pusher_impulse`, frictionless, inelastic and speculative, both end
+spheres at once), so a strike is rigid and plastic as in the planar model and the generator; the
+soft pusher pair takes the slower approaches and the steady push that follows. The runners check
+for strikes only from a horizon on (:meth:`MujocoFit._strike_horizon`, a bound on how fast each
+sphere can close its gap), and give the same poses as a check at every step
+(``tests/physics/test_mujoco_speed_equiv.py``); the events' impulses enter the pusher force.
+Why: the soft pair (5 steps x 1.2) threw a struck box at 1.07-1.09x the pusher's speed, and a
+short tap left it with 7-39 % of the rigid impulse's speed (``tests/physics/
+test_mujoco_strike.py``: within 1 % with events); on design A's off-centre pushes the box turned
+0.25-0.31 deg more than the planar model's (0.11-0.15 deg with events) and the pushes alone
+fitted friction 1.7 % high (0.3558 for 0.35; 0.3519 with events), which the table tilt's
+fit read as 8 % more tilt (``bench/RESULTS.md``, stops 54-55). The pusher's friction does not
+act in the event (the planar model's contact is frictionless); it acts through the soft pair
+from the next step on.
+
 Not modelled here: ``friction_static`` (MuJoCo has one Coulomb coefficient).
 """
 
