@@ -249,9 +249,11 @@ class FitResult:
             tracked one): ``rms_before_mm`` / ``rms_after_mm`` (``compare``'s position RMS of
             that object), ``noise_floor_mm`` and ``heldout_rms_before_mm`` /
             ``heldout_rms_after_mm`` (:func:`_object_rms`); empty for a camera-only fit.
-        shape_notes: the objects simulated as their mesh's convex hull instead of a box, and
-            the hull substitutions (:class:`robogs.format.shapes.Shapes`); appended to the
-            revision note.
+        shape_notes: what the engine simulated instead of what the dataset says
+            (:meth:`~robogs.physics.engine.Engine.notes`): the objects simulated as their mesh's
+            convex hull instead of a box, the hull substitutions
+            (:class:`robogs.format.shapes.Shapes`), effects MuJoCo plays another way (a soft
+            bounce for restitution on a free joint); appended to the revision note.
     """
 
     params: list[ParamEstimate]
@@ -651,7 +653,7 @@ def fit(
         rec, ds = _open(dataset)
         eng = Engine(rec, dt=dt, backend=engine)
         res = _fit_engine(eng, rigid_add, progress, holdout)
-        res.shape_notes = list(eng.shapes.notes)
+        res.shape_notes = eng.notes(rigid_add)
     if ds is not None and write and (err := res.refusal(ds.root)) is not None:
         raise err
     new_cams = []
@@ -664,7 +666,7 @@ def fit(
         for name, params in res.undetermined.items():
             text += f"; {', '.join(f'{name}.{n}' for n in params)} {UNDETERMINED}"
             text += get_effect(name).separate_by
-        if res.shape_notes:  # what the engine simulated instead of the dataset's meshes
+        if res.shape_notes:  # what the engine simulated instead of what the dataset says
             text += "; " + "; ".join(res.shape_notes)
         with ds.edit() as w:
             for cam in new_cams:

@@ -170,6 +170,16 @@ class Engine:
         sig = torch.cat([self.prep.sig_pos, self.prep.sig_yaw.unsqueeze(-1)], dim=-1)
         self.sig = sig.numpy().reshape(self.prep.n_traj, -1)  # [T, N*4]
 
+    def notes(self, effects: Sequence[str] = ()) -> list[str]:
+        """What the engine simulates instead of what the dataset says, one line each: object
+        meshes taken as convex hulls (``shapes.notes``) and, on MuJoCo, effects among
+        ``effects`` and those already in physics.json that it plays another way
+        (:meth:`~robogs.physics.engines.mujoco_fit.MujocoFit.notes`)."""
+        out = list(self.shapes.notes)
+        if self._mujoco is not None:
+            out += self._mujoco.notes({e.name for e, _ in self.present} | set(effects))
+        return out
+
     # ---- spaces ---------------------------------------------------------------------------
     def space(self, candidates: Sequence[Effect]) -> ParamSpace:
         """Base parameters (on MuJoCo with the other tracked objects' table frictions) +

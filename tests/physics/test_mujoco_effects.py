@@ -231,6 +231,20 @@ def _drop(h: float, e: float, vx0: float, mu: float, backend: str, events: bool 
     return obs[0], np.stack([p[:, 0], p[:, 2] - HZ], -1)
 
 
+def test_restitution_without_impact_events_is_said_to_be_a_soft_bounce():
+    """A flat box on the planar joint set takes impacts as events and needs no note; on a free
+    joint (a tipping box, a mesh) restitution is MuJoCo's soft bounce, and ``notes`` (which a
+    fit writes into its revision note) says so, for restitution only."""
+    phys = _physics()
+    planar = MujocoFit(phys, "box", dt=DT)
+    free = MujocoFit(phys, "box", dt=DT, joints="free")
+    assert planar.bounce_events and not free.bounce_events
+    assert planar.notes({"restitution", "viscous_damping"}) == []
+    assert free.notes({"viscous_damping", "table_tilt"}) == []
+    (line,) = free.notes({"restitution", "viscous_damping"})
+    assert "'box'" in line and "soft bounce" in line and "4-7 mm" in line
+
+
 @pytest.mark.parametrize("height", [0.02, 0.05])
 def test_restitution_bounce_on_mujoco(height):
     """A flat box dropped ``height`` m bounces as Newton's impacts say: the first rebound's apex

@@ -320,6 +320,19 @@ class MujocoFit:
         self.physics = physics
         self.track(tracked)
 
+    def notes(self, effects: Sequence[str]) -> list[str]:
+        """What this engine plays another way than the rigid rule for the named effects, one
+        line each (said in the fit's revision note): restitution where a box's impacts are not
+        events (:attr:`bounce_events`: a free joint, a mesh), MuJoCo's soft bounce."""
+        out = []
+        if "restitution" in effects and not self.bounce_events:
+            out.append(
+                f"restitution of {self.obj!r} by MuJoCo's soft bounce (the support pairs' solref; "
+                "a free joint or a mesh has no impact events): its rebound runs 4-7 mm behind a "
+                "rigid impact's (docs/exports.md)"
+            )
+        return out
+
     def track(self, tracked: Sequence[Any]) -> None:
         """Set the other tracked objects (module docstring): their layouts, starts and resting
         heights; :meth:`simulate` then also returns their poses.
