@@ -134,3 +134,33 @@ def test_the_pusher_force_carries_the_strike_impulse() -> None:
         _, _, f0 = _simulate(mu, x, 0.0, True, bins=10)
     miss = float(f0[: k_brake // 10, 0].sum() * 10 * DT)
     assert abs(miss / want - 1.0) > 0.2, (miss, want)
+
+
+def test_no_strike_from_a_pusher_parked_after_a_grasp() -> None:
+    """A box carried at 0.3 m/s and released at step 150; the end effector backs off 81 mm and
+    comes forward at 0.4 m/s, reaching the resting box's -x face (as the drive has it) near
+    step 570. MuJoCo parks the pusher away from the grasp onset on (``PUSHER_PARK_M``), so no
+    strike event may act either: the poses equal those without strike events, bit for bit
+    (without the parked rows left out the events shoved the box up to 127 mm away)."""
+    n = 700
+    v = np.zeros(n)
+    v[:150] = np.clip(np.arange(150) / 60.0, 0.0, 1.0) * 0.3
+    v[150:420] = -0.3
+    v[450:] = 0.4
+    x = np.concatenate([[0.0], np.cumsum(v[:-1]) * DT])
+    p = np.stack([x, np.zeros(n), np.full(n, SIZE[2] / 2)], -1)[None]
+    obs = (np.arange(n) * DT)[None]
+    start = np.array([[0.0, 0.0, SIZE[2] / 2]])
+    drive = make_drive(DT, p, np.zeros((1, n)), obs, start, np.zeros(1))
+    drive.grasp[0, :150] = True
+    doc = _doc(0.3)
+    scene = scene_from_physics(doc, "box", dt=DT)
+    space = ParamSpace(base_params(scene), [])
+    out = {}
+    for events in (True, False):
+        sim = MujocoFit(doc, "box", dt=DT)
+        sim.strike_events = events
+        res = sim.simulate(torch.as_tensor(space.zero[None]), space, drive, scene)
+        out[events] = res.dense_pos[0, 0].numpy()
+    assert out[True][-1, 0] > 0.03  # carried and slid
+    np.testing.assert_array_equal(out[True], out[False])

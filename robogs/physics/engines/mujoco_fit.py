@@ -731,8 +731,9 @@ class MujocoFit:
                 next_strike = k  # a landing's friction impulse changes the closing speeds
             if self._strike_ctx is not None:
                 if k >= next_strike:
-                    self._strike(x, k, t_of, body, grasp[t_of, k])
-                    next_strike = self._strike_horizon(x, k, t_of, body, grasp[t_of, k])
+                    off = grasp[t_of, k] | (park[t_of, k] != 0)  # held, or the pusher parked
+                    self._strike(x, k, t_of, body, off)
+                    next_strike = self._strike_horizon(x, k, t_of, body, off)
                 n = min(n, next_strike - k)
                 c = ctrl[t_of, k : k + n]
             if force_fx:
@@ -874,10 +875,10 @@ class MujocoFit:
                 next_strike = k  # a landing's friction impulse changes the closing speeds
             if self._strike_ctx is not None:
                 if k >= next_strike:
-                    held_k = grasp[t_of, k]
-                    if self._strike(x, k, t_of, body, held_k, ids).any():
+                    off = grasp[t_of, k] | (park[t_of, k] != 0)  # held, or the pusher parked
+                    if self._strike(x, k, t_of, body, off, ids).any():
                         b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
-                    next_strike = self._strike_horizon(x, k, t_of, body, held_k)
+                    next_strike = self._strike_horizon(x, k, t_of, body, off)
                 n = min(n, next_strike - k)
             if xfrc is not None:
                 xfrc[ids, self.slots.body] = self._forces(x, body, force_fx, vz_prev)
@@ -1228,7 +1229,8 @@ class MujocoFit:
         model's frictionless inelastic contact impulse (:func:`~robogs.physics.model.
         _pusher_impulse`: both end spheres at once, speculative, so it touches at the end of
         the step), on its CoM twist. Slower approaches, and the steady push that follows, are
-        the soft pusher pair's. ``grasping`` [R]: rows held by a grasp (no strikes); ``rows``
+        the soft pusher pair's. ``grasping`` [R]: rows held by a grasp or whose pusher is parked
+        after one (:data:`PUSHER_PARK_M`; no strikes); ``rows``
         [R]: the rows' indices into the impulse record (pusher force). Returns [R] bool."""
         hit = np.zeros(len(x), bool)
         if self._strike_ctx is None:
