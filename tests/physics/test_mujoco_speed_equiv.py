@@ -169,7 +169,7 @@ def _mj_step_loop(sim: MujocoFit, args: dict, scene) -> tuple[np.ndarray, int]:
                 rel_p, rel_q = sim._grasp_rel(
                     x, pusher[:, k], ee_yaw[:, k], tt, onset[:, k + 1], rel_p, rel_q
                 )
-            if sim._strike(x, k, tt, body_r, grasp[tt, k] | (park[tt, k] != 0)).any():
+            if sim._strike(x, k, tt, body_r, grasp[tt, k] | (park[tt, k] != 0), [r]).any():
                 mujoco.mj_setState(m, d, x[0], full)
                 strikes += 1
             if fx_r:
