@@ -65,7 +65,8 @@ strike_events`): where an end sphere of the pusher closes on the box faster than
 :data:`STRIKE_MIN_SPEED` (5 cm/s) and would reach it within the step, the box takes the planar
 model's contact impulse as an event before the step (:meth:`MujocoFit._strike`:
 :func:`~robogs.physics.model._pusher_impulse`, frictionless, inelastic and speculative, both end
-spheres at once), so a strike is rigid and plastic as in the planar model and the generator; the
+spheres at once; the next step's event closes what the speculative step left, whatever its
+speed), so a strike is rigid and plastic as in the planar model and the generator; the
 soft pusher pair takes the slower approaches and the steady push that follows. The runners check
 for strikes only from a horizon on (:meth:`MujocoFit._strike_horizon`, a bound on how fast each
 sphere can close its gap), and give the same poses as a check at every step
