@@ -65,8 +65,7 @@ strike_events`): where an end sphere of the pusher closes on the box faster than
 :data:`STRIKE_MIN_SPEED` (5 cm/s) and would reach it within the step, the box takes the planar
 model's contact impulse as an event before the step (:meth:`MujocoFit._strike`:
 :func:`~robogs.physics.model._pusher_impulse`, frictionless, inelastic and speculative, both end
-spheres at once; the next step's event closes what the speculative step left, whatever its
-speed), so a strike is rigid and plastic as in the planar model and the generator; the
+spheres at once), so a strike is rigid and plastic as in the planar model and the generator; the
 soft pusher pair takes the slower approaches and the steady push that follows. The runners check
 for strikes only from a horizon on (:meth:`MujocoFit._strike_horizon`, a bound on how fast each
 sphere can close its gap), and give the same poses as a check at every step
@@ -879,7 +878,7 @@ class MujocoFit:
                     off = grasp[t_of, k] | (park[t_of, k] != 0)  # held, or the pusher parked
                     if self._strike(x, k, t_of, body, off, ids).any():
                         b.state[np.ix_(ids, self._int_cols)] = x[:, self._full_cols]
-                    next_strike = self._strike_horizon(x, k, t_of, body, off, ids)
+                    next_strike = self._strike_horizon(x, k, t_of, body, off)
                 n = min(n, next_strike - k)
             if xfrc is not None:
                 xfrc[ids, self.slots.body] = self._forces(x, body, force_fx, vz_prev)
@@ -1172,8 +1171,6 @@ class MujocoFit:
             drive.ee_yaw_rate.to(f64),
         )
         imp = np.zeros((n_rows, drive.n_steps, 2)) if want_force else None
-        # rows whose strike began in the step before: its second step completes it (_strike)
-        self._follow = np.zeros(n_rows, bool)
         self._strike_ctx = (scene, pts, pv, imp)
 
     def _contacts(self, x, k: int, t_of, body, grasping):
@@ -1193,7 +1190,7 @@ class MujocoFit:
         geo = pusher_contacts(scene, *args, *coms, pts, pv, grasping)
         return geo, args, coms, (pts, pv), (rx, ry)
 
-    def _strike_horizon(self, x, k: int, t_of, body, grasping, rows=None) -> int:
+    def _strike_horizon(self, x, k: int, t_of, body, grasping) -> int:
         """The first step after ``k`` (at most :data:`_STRIKE_WINDOW` on) at which a strike
         (:meth:`_strike`) could fire in state rows ``x``: the runners check for strikes only
         from there (and again after an impact event or a grasp change). A sphere's closing
@@ -1222,8 +1219,6 @@ class MujocoFit:
         could = np.where(touch[:, None], soft, (bound > STRIKE_MIN_SPEED) & (reach >= gap))
         could = (could & act[:, None]).any(axis=(0, 2))
         could[0] = False  # step k: checked already
-        if self._follow[np.arange(len(x)) if rows is None else np.asarray(rows)].any():
-            could[1:2] = True  # a strike's second step
         return k + (int(np.argmax(could)) if could.any() else len(could))
 
     def _strike(self, x, k: int, t_of, body, grasping, rows=None) -> np.ndarray:
@@ -1233,10 +1228,8 @@ class MujocoFit:
         :data:`STRIKE_MIN_SPEED` and would reach it within the step, the box takes the planar
         model's frictionless inelastic contact impulse (:func:`~robogs.physics.model.
         _pusher_impulse`: both end spheres at once, speculative, so it touches at the end of
-        the step), on its CoM twist; the next step's event closes what is left whatever its
-        speed (else the threshold would decide, in the parameters, whether the soft pair took
-        that rest: a jump that stalled fits). Slower approaches, and the steady push that
-        follows, are the soft pusher pair's. ``grasping`` [R]: rows held by a grasp or whose pusher is parked
+        the step), on its CoM twist. Slower approaches, and the steady push that follows, are
+        the soft pusher pair's. ``grasping`` [R]: rows held by a grasp or whose pusher is parked
         after one (:data:`PUSHER_PARK_M`; no strikes); ``rows``
         [R]: the rows' indices into the impulse record (pusher force). Returns [R] bool."""
         hit = np.zeros(len(x), bool)
@@ -1245,15 +1238,8 @@ class MujocoFit:
         dt = self.eng.dt
         geo, args, coms, (pts, pv), (rx, ry) = self._contacts(x, k, t_of, body, grasping)
         close = -geo.rate_n[0]
-        ids = np.arange(len(x)) if rows is None else np.asarray(rows)
-        follow = self._follow[ids][:, None]
-        reach = geo.active[0] & (geo.gap[0] - close * dt <= 0.0)
-        first = reach & (close > STRIKE_MIN_SPEED)
-        # a strike takes two steps (speculative: it touches at the end of the first): the second
-        # step closes the rest whatever its speed, so no threshold decides it
-        fire = first | (reach & follow & (close > 0.0))
+        fire = geo.active[0] & (close > STRIKE_MIN_SPEED) & (geo.gap[0] - close * dt <= 0.0)
         hit = fire.any(-1)
-        self._follow[ids] = first.any(-1)
         if not hit.any():
             return hit
         h = np.flatnonzero(hit)
