@@ -22,6 +22,8 @@ import torch
 
 pytest.importorskip("mujoco")
 
+from box_scene import box_on_table  # noqa: E402
+
 from robogs.physics.engines.base import make_drive  # noqa: E402
 from robogs.physics.engines.mujoco_fit import MujocoFit  # noqa: E402
 from robogs.physics.scene import base_params, scene_from_physics  # noqa: E402
@@ -32,19 +34,10 @@ MASS, G, DT, R = 0.4, 9.81, 1e-3, 0.01
 
 
 def _doc(mu: float) -> dict:
-    return {
-        "gravity_mps2": [0.0, 0.0, -G],
-        "objects": {
-            "table": {"equation": "static", "plane_z_m": 0.0},
-            "box": {
-                "equation": "rigid",
-                "mass_kg": MASS,
-                "size_m": list(SIZE),
-                "friction_dynamic": mu,
-            },
-            "pusher": {"equation": "kinematic", "shape": "sphere", "radius_m": R},
-        },
-    }
+    """The shared box scene (``box_scene.box_on_table``) with a 1 cm sphere pusher."""
+    doc = box_on_table(mu)
+    doc["objects"]["pusher"] = {"equation": "kinematic", "shape": "sphere", "radius_m": R}
+    return doc
 
 
 def _push(v: float, d: float, gap: float, hold: float, brake: float, tail: float):
